@@ -1,0 +1,148 @@
+//! Integration tests of the classic fire: golden images, properties, thread independence.
+
+use ignis_classic::{ClassicFire, ClassicParams, Kernel, SourceEdge, SourceMode, Sparkle};
+use ignis_core::Size;
+use proptest::prelude::*;
+
+fn run(params: &ClassicParams, frames: usize, par: bool) -> ClassicFire {
+    let mut f = ClassicFire::new(params.clone()).unwrap();
+    for _ in 0..frames {
+        if par {
+            f.step_par()
+        } else {
+            f.step()
+        }
+    }
+    f
+}
+
+mod golden {
+    use super::*;
+    use std::path::PathBuf;
+
+    /// Compares the 8-bit buffer exactly against `tests/golden/<name>`; a missing golden is
+    /// written and the test fails; `UPDATE_GOLDEN=1` regenerates.
+    fn check(name: &str, fire: &ClassicFire) {
+        let p = fire.params();
+        let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/golden");
+        let path = dir.join(name);
+        let img = image::GrayImage::from_raw(p.size.width, p.size.height, fire.buffer().to_vec()).unwrap();
+        if std::env::var_os("UPDATE_GOLDEN").is_some() || !path.exists() {
+            std::fs::create_dir_all(&dir).unwrap();
+            img.save(&path).unwrap();
+            if std::env::var_os("UPDATE_GOLDEN").is_none() {
+                panic!("golden {name} was missing and has been written; check it and re-run");
+            }
+        }
+        let golden = image::open(&path).unwrap().to_luma8();
+        assert_eq!(golden.dimensions(), img.dimensions());
+        let diff = golden.as_raw().iter().zip(img.as_raw()).filter(|(a, b)| a != b).count();
+        assert_eq!(diff, 0, "{diff} pixels differ from {name}");
+    }
+
+    #[test]
+    fn classic_64x48_fade3_seed7() {
+        let p = ClassicParams { size: Size::new(64, 48).unwrap(), fade: 3, seed: 7, ..Default::default() };
+        check("classic-64x48-fade3-seed7.png", &run(&p, 40, false));
+    }
+
+    #[test]
+    fn classic_64x48_fade1_perlin_buffered_seed7() {
+        let p = ClassicParams {
+            size: Size::new(64, 48).unwrap(),
+            fade: 1,
+            seed: 7,
+            source: SourceMode::Perlin { scale: 16.0, speed: 0.1 },
+            kernel: Kernel::Buffered,
+            sparkle: None,
+            ..Default::default()
+        };
+        check("classic-64x48-fade1-perlin-buffered-seed7.png", &run(&p, 40, false));
+    }
+}
+
+mod properties {
+    use super::*;
+
+    #[test]
+    fn fade_255_blanks_everything_above_the_source_line_in_one_frame() {
+        for kernel in [Kernel::Article, Kernel::Buffered] {
+            let p = ClassicParams { size: Size::new(48, 40).unwrap(), fade: 255, sparkle: None, kernel, seed: 1, ..Default::default() };
+            // warm up with a gentle fade so the buffer is full of fire, then switch to 255
+            let mut f = ClassicFire::new(ClassicParams { fade: 1, ..p.clone() }).unwrap();
+            for _ in 0..60 {
+                f.step();
+            }
+            assert!(f.buffer().iter().filter(|&&v| v > 0).count() > 200);
+            f.set_fade(255);
+            f.step();
+            let hot = f;
+            let w = 48;
+            let src_row = 40 - 2; // height - 1 - edge
+            for (i, &v) in hot.buffer()[..src_row * w].iter().enumerate() {
+                assert_eq!(v, 0, "pixel {i} above the source line is {v}");
+            }
+        }
+    }
+
+    #[test]
+    fn same_seed_same_bytes_different_seed_different_bytes() {
+        let p = ClassicParams { size: Size::new(40, 30).unwrap(), seed: 11, ..Default::default() };
+        assert_eq!(run(&p, 20, false).buffer(), run(&p, 20, false).buffer());
+        let q = ClassicParams { seed: 12, ..p.clone() };
+        assert_ne!(run(&p, 20, false).buffer(), run(&q, 20, false).buffer());
+    }
+
+    #[test]
+    fn top_source_mirrors_the_bottom_one() {
+        let p = ClassicParams { size: Size::new(30, 20).unwrap(), seed: 5, ..Default::default() };
+        let a = run(&p, 10, false).gray();
+        let b = run(&ClassicParams { source_edge: SourceEdge::Top, ..p }, 10, false).gray();
+        for y in 0..20 {
+            assert_eq!(a.row(y), b.row(19 - y));
+        }
+    }
+
+    #[test]
+    fn identical_output_for_any_thread_count() {
+        let p = ClassicParams { size: Size::new(97, 181).unwrap(), seed: 9, fade: 1, ..Default::default() };
+        let reference = run(&p, 30, false);
+        for kernel in [Kernel::Article, Kernel::Buffered] {
+            let p = ClassicParams { kernel, ..p.clone() };
+            let single = run(&p, 30, false);
+            if kernel == Kernel::Article {
+                assert_eq!(single.buffer(), reference.buffer());
+            }
+            for threads in [1, 2, 3, 8] {
+                let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+                let par = pool.install(|| run(&p, 30, true));
+                assert_eq!(par.buffer(), single.buffer(), "{kernel:?} with {threads} threads");
+            }
+        }
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(24))]
+        #[test]
+        fn no_value_exceeds_the_source_lines_maximum(
+            w in 8u32..60, h in 8u32..50, fade in 0u8..8, heat in 1u8..=255,
+            seed in any::<u64>(), perlin in any::<bool>(), buffered in any::<bool>(),
+            threshold in 0u8..=255, boost in 0u8..=255,
+        ) {
+            let p = ClassicParams {
+                size: Size::new(w, h).unwrap(), fade, heat, seed,
+                source: if perlin { SourceMode::Perlin { scale: 7.0, speed: 0.2 } } else { SourceMode::Random { drift: 60 } },
+                kernel: if buffered { Kernel::Buffered } else { Kernel::Article },
+                sparkle: Some(Sparkle { threshold, boost }),
+                ..Default::default()
+            };
+            let mut f = ClassicFire::new(p).unwrap();
+            for _ in 0..25 {
+                f.step();
+                let max = *f.buffer().iter().max().unwrap();
+                prop_assert!(max <= heat, "value {} above heat {}", max, heat);
+            }
+            prop_assert_eq!(f.gray().size(), Size::new(w, h).unwrap());
+        }
+    }
+}

@@ -1,0 +1,101 @@
+//! `ignis convert`: any source Ignis reads to any output it writes (footage to a flipbook,
+//! an MP4 to an EXR sequence, ...), with the readers' range, crop and scale options.
+
+use crate::global::Global;
+use crate::output::OutputArgs;
+use anyhow::{Context, Result};
+use ignis_core::Size;
+use ignis_media::{FrameRange, ReadOptions, Rect};
+use std::path::PathBuf;
+
+#[derive(clap::Args, Debug)]
+#[command(after_help = "Examples:\n  ignis convert candle.mp4 --range 100..160 --scale 128x128 -o candle.png   # flipbook\n  \
+ignis convert campfire.mp4 --seconds 2..4 -o frames/%04d.exr\n  ignis convert 'frames/%04d.png' --fps 24 -o clip.mp4")]
+pub struct Args {
+    /// A video, an image, a directory of frames or a printf pattern.
+    pub input: PathBuf,
+    /// Frame range START..END (END exclusive; either may be omitted).
+    #[arg(long, conflicts_with = "seconds")]
+    pub range: Option<String>,
+    /// Time range in seconds START..END.
+    #[arg(long)]
+    pub seconds: Option<String>,
+    /// Crop X,Y,WIDTH,HEIGHT (before scaling).
+    #[arg(long)]
+    pub crop: Option<String>,
+    /// Resize to WIDTHxHEIGHT (after cropping).
+    #[arg(long)]
+    pub scale: Option<Size>,
+    #[command(flatten)]
+    pub out: OutputArgs,
+}
+
+/// Parses `A..B`, `A..` or `..B`.
+pub fn parse_range(s: &str) -> Result<(f64, Option<f64>)> {
+    let (a, b) = s.split_once("..").with_context(|| format!("range `{s}` is not START..END, e.g. 100..220"))?;
+    let num = |v: &str, what: &str| -> Result<Option<f64>> {
+        if v.trim().is_empty() {
+            return Ok(None);
+        }
+        let x: f64 = v.trim().parse().with_context(|| format!("range `{s}`: {what} `{v}` is not a number"))?;
+        anyhow::ensure!(x >= 0.0 && x.is_finite(), "range `{s}`: {what} must be ≥ 0");
+        Ok(Some(x))
+    };
+    let start = num(a, "start")?.unwrap_or(0.0);
+    let end = num(b, "end")?;
+    if let Some(e) = end {
+        anyhow::ensure!(e > start, "range `{s}` is empty: END must be greater than START");
+    }
+    Ok((start, end))
+}
+
+impl Args {
+    pub fn read_options(&self) -> Result<ReadOptions> {
+        let range = match (&self.range, &self.seconds) {
+            (Some(r), _) => {
+                let (a, b) = parse_range(r)?;
+                Some(FrameRange::frames(a as u64, b.map(|e| e as u64)))
+            }
+            (None, Some(r)) => {
+                let (a, b) = parse_range(r)?;
+                Some(FrameRange::seconds(a, b))
+            }
+            _ => None,
+        };
+        let crop = match &self.crop {
+            Some(c) => {
+                let v: Vec<u32> = c
+                    .split(',')
+                    .map(|x| x.trim().parse::<u32>())
+                    .collect::<Result<_, _>>()
+                    .with_context(|| format!("--crop `{c}` is not X,Y,WIDTH,HEIGHT"))?;
+                anyhow::ensure!(v.len() == 4, "--crop `{c}` is not X,Y,WIDTH,HEIGHT");
+                Some(Rect { x: v[0], y: v[1], width: v[2], height: v[3] })
+            }
+            None => None,
+        };
+        Ok(ReadOptions { range, crop, scale: self.scale })
+    }
+}
+
+pub fn run(args: &Args, g: &Global) -> Result<Vec<PathBuf>> {
+    let input = &args.input;
+    let mut reader = ignis_media::open(input, &args.read_options()?).with_context(|| format!("reading {}", input.display()))?;
+    let info = reader.info().clone();
+    let first = reader.next().with_context(|| format!("{}: no frames in the requested range", input.display()))?;
+    let first = first.with_context(|| format!("decoding {}", input.display()))?;
+    let mut writer = args.out.create(first.size())?;
+    let pb = g.progress(info.frame_count.unwrap_or(0), "converting");
+    writer.push(&first)?;
+    for frame in reader {
+        let frame = frame.with_context(|| format!("decoding {}", input.display()))?;
+        writer.push(&frame).with_context(|| format!("writing {}", args.out.output.display()))?;
+        pb.inc(1);
+    }
+    pb.finish_and_clear();
+    let files = writer.finish().with_context(|| format!("finishing {}", args.out.output.display()))?;
+    for f in &files {
+        g.say(format!("wrote {}", f.display()));
+    }
+    Ok(files)
+}

@@ -1,0 +1,501 @@
+//! `ignis eigen`: Eigenfires I (eigenfires thesis ch. 3–4) — train a database from fire
+//! footage, inspect it, plot it, reconstruct frames, and show what pre-processing does.
+//! A thin layer over `ignis_eigen` (the library) and `ignis_media` (decoding, PNG output).
+
+use crate::global::Global;
+use anyhow::{bail, Context, Result};
+use ignis_core::Size;
+use ignis_eigen::analysis::{self, ESelect};
+use ignis_eigen::train::{ClipInput, ClipSource, ClipSpec, FrameIter, Progress, TrainConfig, TrainParams};
+use ignis_eigen::{plot, EigenfireDb, PreprocessParams};
+use std::path::{Path, PathBuf};
+
+/// `ignis eigen ...`
+#[derive(clap::Subcommand, Debug)]
+pub enum Command {
+    /// Train an Eigenfire database from videos (default settings) or from a clips.toml.
+    #[command(after_help = "Examples:\n  ignis eigen train candle.mp4 campfire.mp4 -o fire.db\n  ignis eigen train clips.toml -o fire.db\n  ignis eigen train candle.mp4 --stride 2 --train-size 82x134 --keep 99% -o fire.db\n\nclips.toml:\n  [[clip]]\n  name = \"candle\"\n  path = \"candle.mp4\"\n  start = 0\n  end = 400\n  stride = 2\n  [preprocess]\n  train_size = \"102x168\"\n  [train]\n  pack_size = 100\n  e_detect = \"95%\"")]
+    Train(TrainArgs),
+    /// Describe a database: clips, frames, resolution, E, spectrum, thresholds, size.
+    #[command(after_help = "Example:\n  ignis eigen info fire.db --json")]
+    Info(InfoArgs),
+    /// Draw the analysis figures (3-D scatter with paths, weight charts, spectrum,
+    /// Eigenfire contact sheet, compression report) into a directory.
+    #[command(after_help = "Example:\n  ignis eigen plot fire.db -o plots/")]
+    Plot(PlotArgs),
+    /// Reconstruct one training frame with E Eigenfires (eq. 22).
+    #[command(after_help = "Example:\n  ignis eigen reconstruct fire.db --clip candle --frame 120 --eigenfires 50 -o f.png")]
+    Reconstruct(ReconstructArgs),
+    /// Run pre-processing on a clip and write every stage's image, so you can see what
+    /// each step does.
+    #[command(after_help = "Example:\n  ignis eigen preprocess candle.mp4 --config pre.toml -o stages/\n  ignis eigen preprocess candle.mp4 --print-config > pre.toml")]
+    Preprocess(PreprocessArgs),
+}
+
+#[derive(clap::Args, Debug)]
+pub struct TrainArgs {
+    /// Videos / image sequences (each becomes a clip named after the file), or one .toml
+    /// training configuration.
+    #[arg(required = true)]
+    pub inputs: Vec<PathBuf>,
+    /// Output database directory (replaced atomically).
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Pre-processing settings (TOML) for video inputs; see `ignis eigen preprocess --print-config`.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// First source frame of every video input.
+    #[arg(long, default_value_t = 0)]
+    pub start: usize,
+    /// One past the last source frame of every video input (default: to the end).
+    #[arg(long)]
+    pub end: Option<usize>,
+    /// Use every N-th frame.
+    #[arg(long, default_value_t = 1)]
+    pub stride: usize,
+    /// Size of the training frames, e.g. 102x168 (overrides the config).
+    #[arg(long)]
+    pub train_size: Option<Size>,
+    /// Common pre-processed frame size, e.g. 410x670 (overrides the config).
+    #[arg(long)]
+    pub frame_size: Option<Size>,
+    /// Eigenfires to keep: a count (200) or retained variance (99%); default all (M-1).
+    #[arg(long)]
+    pub keep: Option<ESelect>,
+    /// E for recognition: a count or retained variance.
+    #[arg(long)]
+    pub e_detect: Option<ESelect>,
+    /// E for rendering: a count or retained variance.
+    #[arg(long)]
+    pub e_render: Option<ESelect>,
+    /// Eigenfires per pack file.
+    #[arg(long)]
+    pub pack_size: Option<usize>,
+    /// Store the full-resolution pre-processed frames in the database (§7.1.2).
+    #[arg(long)]
+    pub store_frames: bool,
+    /// Keep the data matrix on disk and use the streaming (randomized) PCA.
+    #[arg(long)]
+    pub streaming: bool,
+    /// Memory budget in MB for the data matrix and PCA (default: available memory).
+    #[arg(long)]
+    pub memory_limit_mb: Option<u64>,
+}
+
+#[derive(clap::Args, Debug)]
+pub struct InfoArgs {
+    /// Database directory.
+    pub db: PathBuf,
+    /// Print JSON instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(clap::Args, Debug)]
+pub struct PlotArgs {
+    /// Database directory.
+    pub db: PathBuf,
+    /// Output directory.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Eigenfires on the contact sheet.
+    #[arg(long, default_value_t = 16)]
+    pub eigenfires: usize,
+    /// Skip the compression report (slow on large databases).
+    #[arg(long)]
+    pub no_compression: bool,
+}
+
+#[derive(clap::Args, Debug)]
+pub struct ReconstructArgs {
+    /// Database directory.
+    pub db: PathBuf,
+    /// Clip name (see `ignis eigen info`).
+    #[arg(long)]
+    pub clip: String,
+    /// Source frame number (must be one of the training frames).
+    #[arg(long)]
+    pub frame: usize,
+    /// E, the number of Eigenfires (default: the database's E for rendering).
+    #[arg(long)]
+    pub eigenfires: Option<usize>,
+    /// Apply Hermite background removal after reconstruction (§4.8).
+    #[arg(long)]
+    pub hermite: bool,
+    /// Output PNG.
+    #[arg(short, long)]
+    pub output: PathBuf,
+}
+
+#[derive(clap::Args, Debug)]
+pub struct PreprocessArgs {
+    /// Video or image sequence.
+    #[arg(required_unless_present = "print_config")]
+    pub input: Option<PathBuf>,
+    /// Pre-processing settings (TOML).
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Output directory for the stage images.
+    #[arg(short, long, required_unless_present = "print_config")]
+    pub output: Option<PathBuf>,
+    /// Training-frame indices to show (default: first, middle, last).
+    #[arg(long, value_delimiter = ',')]
+    pub frames: Vec<usize>,
+    #[arg(long, default_value_t = 0)]
+    pub start: usize,
+    #[arg(long)]
+    pub end: Option<usize>,
+    #[arg(long, default_value_t = 1)]
+    pub stride: usize,
+    /// Print the default settings as TOML and exit.
+    #[arg(long)]
+    pub print_config: bool,
+}
+
+/// Runs `ignis eigen <cmd>`.
+pub fn run(cmd: Command, g: &Global) -> Result<()> {
+    match cmd {
+        Command::Train(a) => train(a, g),
+        Command::Info(a) => info(a, g),
+        Command::Plot(a) => plot_cmd(a, g),
+        Command::Reconstruct(a) => reconstruct(a, g),
+        Command::Preprocess(a) => preprocess(a, g),
+    }
+}
+
+/// indicatif bars for the library's progress stages.
+struct Bars<'g> {
+    g: &'g Global,
+    bar: Option<indicatif::ProgressBar>,
+}
+
+impl Progress for Bars<'_> {
+    fn stage(&mut self, name: &str, len: u64) {
+        self.finish_stage();
+        self.bar = Some(if len == 0 { self.g.spinner(name) } else { self.g.progress(len, name) });
+    }
+    fn inc(&mut self, n: u64) {
+        if let Some(b) = &self.bar {
+            b.inc(n);
+        }
+    }
+    fn finish_stage(&mut self) {
+        if let Some(b) = self.bar.take() {
+            b.finish_and_clear();
+        }
+    }
+}
+
+/// A clip source over `ignis_media`.
+fn media_source(path: &Path) -> Result<ClipSource<'static>> {
+    let info = ignis_media::probe(path).with_context(|| format!("reading {}", path.display()))?;
+    let p = path.to_path_buf();
+    Ok(ClipSource {
+        source: path.display().to_string(),
+        fps: info.fps,
+        size: info.size,
+        frame_count: info.frame_count.map(|n| n as usize),
+        open: Box::new(move |start| {
+            let opts = ignis_media::ReadOptions { range: Some(ignis_media::FrameRange::frames(start as u64, None)), ..Default::default() };
+            let r = ignis_media::open(&p, &opts).map_err(|e| e.to_string())?;
+            Ok(Box::new(r.map(|f| f.map_err(|e| e.to_string()))) as FrameIter<'static>)
+        }),
+    })
+}
+
+fn clip_name(path: &Path, taken: &[String]) -> String {
+    let stem: String = path
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "clip".into())
+        .chars()
+        .map(|c| if c.is_ascii_alphanumeric() || c == '-' || c == '_' { c } else { '_' })
+        .collect();
+    let mut name = if stem.is_empty() { "clip".to_string() } else { stem };
+    let base = name.clone();
+    let mut i = 2;
+    while taken.contains(&name) {
+        name = format!("{base}-{i}");
+        i += 1;
+    }
+    name
+}
+
+fn read_preprocess(config: Option<&Path>) -> Result<PreprocessParams> {
+    match config {
+        None => Ok(PreprocessParams::default()),
+        Some(p) => {
+            let text = std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?;
+            PreprocessParams::from_toml(&text).with_context(|| format!("reading {}", p.display()))
+        }
+    }
+}
+
+fn train(a: TrainArgs, g: &Global) -> Result<()> {
+    let is_toml = a.inputs.len() == 1 && a.inputs[0].extension().is_some_and(|e| e == "toml");
+    let (specs, mut pre, mut tp) = if is_toml {
+        let p = &a.inputs[0];
+        let text = std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?;
+        let base = p.parent().unwrap_or(Path::new("."));
+        let c = TrainConfig::from_toml(&text, base).with_context(|| format!("reading {}", p.display()))?;
+        (c.clips, c.preprocess, c.train)
+    } else {
+        let mut specs: Vec<ClipSpec> = Vec::new();
+        for p in &a.inputs {
+            let taken: Vec<String> = specs.iter().map(|s| s.name.clone()).collect();
+            let mut s = ClipSpec::new(&clip_name(p, &taken));
+            s.path = Some(p.clone());
+            s.start = a.start;
+            s.end = a.end;
+            s.stride = a.stride;
+            specs.push(s);
+        }
+        (specs, read_preprocess(a.config.as_deref())?, TrainParams::default())
+    };
+    if let Some(s) = a.train_size {
+        pre.train_size = Some(s);
+    }
+    if let Some(s) = a.frame_size {
+        pre.pose.frame_size = s;
+    }
+    if a.keep.is_some() {
+        tp.keep = a.keep;
+    }
+    if let Some(e) = a.e_detect {
+        tp.e_detect = e;
+    }
+    if let Some(e) = a.e_render {
+        tp.e_render = e;
+    }
+    if let Some(p) = a.pack_size {
+        tp.pack_size = p;
+    }
+    tp.store_frames |= a.store_frames;
+    tp.streaming |= a.streaming;
+    if let Some(mb) = a.memory_limit_mb {
+        tp.memory_limit = Some(mb.saturating_mul(1 << 20));
+    }
+    let mut clips = Vec::new();
+    for s in specs {
+        let source = match (&s.path, s.synthetic) {
+            (Some(p), _) => media_source(p).with_context(|| format!("clip `{}`", s.name))?,
+            (None, Some(style)) => ClipSource::synthetic(ignis_eigen::synthetic::SyntheticParams { style, frames: s.end.unwrap_or(120), ..Default::default() }, 30.0),
+            (None, None) => bail!("clip `{}` has neither a path nor `synthetic`", s.name),
+        };
+        clips.push(ClipInput { spec: s, source });
+    }
+    let mut bars = Bars { g, bar: None };
+    let r = ignis_eigen::train(&clips, &pre, &tp, &a.output, &mut bars).with_context(|| format!("training {}", a.output.display()))?;
+    bars.finish_stage();
+    let m = &r.manifest;
+    g.say(format!(
+        "wrote {}: {} clips, {} frames at {}, {} Eigenfires in {} packs, E detect {} / render {}",
+        r.path.display(),
+        m.clips.len(),
+        m.frames,
+        m.train_size,
+        m.components,
+        m.packs.len(),
+        m.e_detect,
+        m.e_render
+    ));
+    Ok(())
+}
+
+fn open_db(p: &Path) -> Result<EigenfireDb> {
+    EigenfireDb::open(p).with_context(|| format!("opening {}", p.display()))
+}
+
+fn info(a: InfoArgs, g: &Global) -> Result<()> {
+    let db = open_db(&a.db)?;
+    let m = db.manifest();
+    let problems = db.verify();
+    let ev = db.eigenvalues();
+    let total = m.total_variance.max(f64::MIN_POSITIVE);
+    let for_var = |f: f64| ESelect::Variance(f).resolve(ev, total);
+    let retained = ev.iter().sum::<f64>() / total;
+    if a.json {
+        let v = serde_json::json!({
+            "path": a.db,
+            "format_version": m.version,
+            "frames": m.frames,
+            "train_size": m.train_size.to_string(),
+            "frame_size": m.frame_size.to_string(),
+            "components": m.components,
+            "usable_components": db.usable_components(),
+            "e_detect": m.e_detect,
+            "e_render": m.e_render,
+            "pack_size": m.pack_size,
+            "packs": m.packs.len(),
+            "eigenvalues_top": ev.iter().take(10).collect::<Vec<_>>(),
+            "components_for_variance": {"90%": for_var(0.9), "95%": for_var(0.95), "99%": for_var(0.99)},
+            "retained_variance": retained,
+            "bytes_on_disk": db.bytes_on_disk(),
+            "clips": m.clips,
+            "problems": problems.iter().map(|(f, r)| serde_json::json!({"file": f, "reason": r})).collect::<Vec<_>>(),
+        });
+        println!("{}", serde_json::to_string_pretty(&v)?);
+        return Ok(());
+    }
+    let _ = g;
+    println!("{}", a.db.display());
+    println!("  frames       {} (training size {}, pre-processed size {})", m.frames, m.train_size, m.frame_size);
+    println!("  Eigenfires   {} stored in {} packs of {}, {} usable", m.components, m.packs.len(), m.pack_size, db.usable_components());
+    println!("  E            detection {}, rendering {}", m.e_detect, m.e_render);
+    println!(
+        "  spectrum     λ1..3 = {}; 90% variance at E={}, 95% at {}, 99% at {}; stored Eigenfires retain {:.2}%",
+        ev.iter().take(3).map(|v| format!("{v:.4}")).collect::<Vec<_>>().join(", "),
+        for_var(0.9),
+        for_var(0.95),
+        for_var(0.99),
+        retained * 100.0
+    );
+    println!("  size on disk {:.2} MB", db.bytes_on_disk() as f64 / 1e6);
+    for c in &m.clips {
+        println!(
+            "  clip {:<12} {} frames {}..{} step {} @ {:.2} fps, {} → scale {:.3}; θ_min {:.4}, θ_average {:.4} (E={}, {} peaks)",
+            c.name,
+            c.frames,
+            c.start,
+            c.end,
+            c.stride,
+            c.fps,
+            c.source_size,
+            c.pose.scale,
+            c.thresholds.theta_min,
+            c.thresholds.theta_average,
+            c.thresholds.e,
+            c.thresholds.peaks.len()
+        );
+    }
+    for (f, r) in &problems {
+        println!("  PROBLEM {f}: {r}");
+    }
+    Ok(())
+}
+
+fn write_gray(path: &Path, f: &ignis_core::GrayFrame) -> Result<()> {
+    ignis_media::write_png(path, &f.to_rgba()).with_context(|| format!("writing {}", path.display()))
+}
+
+/// Writes every analysis figure of `db` into `dir`; returns `(file name, caption)`.
+pub fn write_plots(db: &EigenfireDb, dir: &Path, sheet: usize, compression: bool) -> Result<Vec<(String, String)>> {
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let mut out = Vec::new();
+    let p = dir.join("scatter3d.png");
+    plot::scatter_3d(db, &p, (900, 700))?;
+    out.push(("scatter3d.png".to_string(), "Training frames on Eigenfires 1-3, coloured by clip, consecutive frames joined (Figure 24)".to_string()));
+    for c in db.clips() {
+        let f = format!("weights-{}.png", c.name);
+        plot::weight_clusters(db, &c.name, 0, 31, 10, &dir.join(&f), (900, 450))?;
+        out.push((f, format!("Clip {}: weights of Eigenfires 1-10 over 31 consecutive frames (Figure 27)", c.name)));
+        let f = format!("frame-weights-{}.png", c.name);
+        plot::frame_weights(db, c.first_row, 100, &dir.join(&f), (900, 400))?;
+        out.push((f, format!("Clip {}: the first 100 weights of one frame (Figure 28)", c.name)));
+    }
+    plot::spectrum(db, &dir.join("spectrum.png"), (800, 450))?;
+    out.push(("spectrum.png".into(), "Eigenvalue spectrum and retained variance".into()));
+    let s = analysis::eigenfire_sheet(db, sheet, 8)?;
+    write_gray(&dir.join("eigenfires.png"), &s)?;
+    out.push(("eigenfires.png".into(), format!("The first {sheet} Eigenfires scaled by eq. 19-20")));
+    if compression {
+        let k = db.usable_components();
+        let mut es: Vec<usize> = [1, 2, 5, 10, 20, 50, 100, 200, 500, 1000].iter().copied().filter(|&e| e < k).collect();
+        es.push(k);
+        let rep = analysis::compression_report(db, &es, 8, &db.manifest().preprocess.hermite)?;
+        plot::compression_chart(&rep, &dir.join("compression.png"), (800, 450))?;
+        let json = serde_json::to_string_pretty(&rep)?;
+        std::fs::write(dir.join("compression.json"), json).with_context(|| format!("writing {}", dir.join("compression.json").display()))?;
+        out.push(("compression.png".into(), "PSNR against E, with and without Hermite clean-up (data in compression.json)".into()));
+    }
+    Ok(out)
+}
+
+fn plot_cmd(a: PlotArgs, g: &Global) -> Result<()> {
+    let db = open_db(&a.db)?;
+    let sp = g.spinner("plotting");
+    let files = write_plots(&db, &a.output, a.eigenfires, !a.no_compression)?;
+    sp.finish_and_clear();
+    for (f, c) in files {
+        g.say(format!("wrote {} — {c}", a.output.join(f).display()));
+    }
+    Ok(())
+}
+
+fn reconstruct(a: ReconstructArgs, g: &Global) -> Result<()> {
+    let db = open_db(&a.db)?;
+    let row = db.frame_index(&a.clip, a.frame)?;
+    let e = a.eigenfires.unwrap_or(db.manifest().e_render);
+    let herm = db.manifest().preprocess.hermite.clone();
+    let f = analysis::reconstruct_row(&db, row, e, a.hermite.then_some(&herm))?;
+    write_gray(&a.output, &f)?;
+    g.say(format!("wrote {} ({} frame {} with E = {})", a.output.display(), a.clip, a.frame, e.min(db.usable_components())));
+    Ok(())
+}
+
+fn preprocess(a: PreprocessArgs, g: &Global) -> Result<()> {
+    let pre = read_preprocess(a.config.as_deref())?;
+    if a.print_config {
+        print!("{}", pre.to_toml());
+        return Ok(());
+    }
+    let (Some(input), Some(out)) = (a.input, a.output) else { bail!("give an input and -o DIR") };
+    let mut spec = ClipSpec::new(&clip_name(&input, &[]));
+    spec.start = a.start;
+    spec.end = a.end;
+    spec.stride = a.stride;
+    let clip = ClipInput { source: media_source(&input)?, spec };
+    let mut bars = Bars { g, bar: None };
+    let stages = ignis_eigen::train::preprocess_clip(&clip, &pre, &a.frames, &mut bars).with_context(|| format!("pre-processing {}", input.display()))?;
+    bars.finish_stage();
+    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+    for (frame, st) in &stages {
+        for (name, img) in &st.images {
+            let p = out.join(format!("frame{frame:05}-{name}.png"));
+            ignis_media::write_png(&p, img).with_context(|| format!("writing {}", p.display()))?;
+        }
+    }
+    g.say(format!("wrote {} stage images for {} frames to {}", stages.iter().map(|s| s.1.images.len()).sum::<usize>(), stages.len(), out.display()));
+    Ok(())
+}
+
+/// The Eigenfire section of `ignis demo`: trains a database on two synthetic clips (so
+/// nothing external is needed) and adds its figures to the gallery.
+pub fn demo(ctx: &mut crate::demo::Demo) -> Result<()> {
+    use ignis_eigen::synthetic::{FlameStyle, SyntheticParams};
+    ctx.section(
+        "Eigenfires I (eigenfires thesis ch. 3-4)",
+        "Two synthetic flame clips rendered by Ignis are pre-processed (HSV mask, contours, Hermite background removal, pose normalisation), a PCA gives the Eigenfires, and every frame becomes a vector of weights.",
+    );
+    let (size, frames, train) = if ctx.quick { (Size { width: 48, height: 64 }, 10, Size { width: 24, height: 32 }) } else { (Size { width: 96, height: 128 }, 60, Size { width: 60, height: 96 }) };
+    let clips: Vec<ClipInput> = [("candle", FlameStyle::Candle), ("campfire", FlameStyle::Campfire)]
+        .into_iter()
+        .map(|(name, style)| ClipInput { spec: ClipSpec::new(name), source: ClipSource::synthetic(SyntheticParams { size, frames, style, seed: ctx.seed }, 30.0) })
+        .collect();
+    let mut pre = PreprocessParams::with_sizes(Size { width: train.width * 2, height: train.height * 2 }, Some(train));
+    pre.pose_samples = 8;
+    let tp = TrainParams { pack_size: 16, store_frames: true, ..Default::default() };
+    let dbp = ctx.path("eigen/fire.db/x")?.parent().map(Path::to_path_buf).context("demo path")?;
+    let mut bars = Bars { g: &ctx.global, bar: None };
+    let r = ignis_eigen::train(&clips, &pre, &tp, &dbp, &mut bars).context("training the demo Eigenfire database")?;
+    bars.finish_stage();
+    let db = open_db(&dbp)?;
+    let settings = format!("2 synthetic clips × {frames} frames at {size}, seed {}, training size {train}, {} Eigenfires", ctx.seed, r.manifest.components);
+    let plots = ctx.path("eigen/plots/x")?.parent().map(Path::to_path_buf).context("demo path")?;
+    let files = write_plots(&db, &plots, 16, true)?;
+    for (f, caption) in files {
+        ctx.item(&format!("eigen/plots/{f}"), &caption, &settings);
+    }
+    // Reconstructions with increasing E, side by side with the pre-processed frame.
+    let row = db.clip("campfire")?.first_row + frames / 2;
+    let k = db.usable_components();
+    let mut strip = Vec::new();
+    for e in [1, 3, 10, k] {
+        strip.push(analysis::reconstruct_row(&db, row, e.min(k), None)?);
+    }
+    let sheet = analysis::contact_sheet(&strip, 4, 2)?;
+    let p = ctx.path("eigen/reconstruct.png")?;
+    write_gray(&p, &sheet)?;
+    ctx.item("eigen/reconstruct.png", &format!("A campfire frame reconstructed with E = 1, 3, 10 and {k} (eq. 22)"), &settings);
+    Ok(())
+}

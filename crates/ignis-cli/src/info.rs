@@ -1,0 +1,41 @@
+//! `ignis info`: what a source is and which decoder will read it.
+
+use anyhow::{Context, Result};
+use std::path::PathBuf;
+
+#[derive(clap::Args, Debug)]
+#[command(after_help = "Examples:\n  ignis info candle.mp4\n  ignis info campfire.mp4 --json\n  ignis info 'frames/%04d.png'")]
+pub struct Args {
+    /// A video, an image, a directory of frames or a printf pattern.
+    pub input: PathBuf,
+    /// Print one JSON object (for scripts).
+    #[arg(long)]
+    pub json: bool,
+}
+
+pub fn run(args: &Args) -> Result<()> {
+    let info = ignis_media::probe(&args.input).with_context(|| format!("reading {}", args.input.display()))?;
+    if args.json {
+        let v = serde_json::json!({
+            "path": info.path,
+            "frames": info.frame_count,
+            "fps": info.fps,
+            "width": info.size.width,
+            "height": info.size.height,
+            "codec": info.codec,
+            "decoder": info.decoder.to_string(),
+        });
+        println!("{}", serde_json::to_string_pretty(&v)?);
+    } else {
+        println!("file:    {}", info.path.display());
+        println!(
+            "frames:  {}",
+            info.frame_count.map(|n| n.to_string()).unwrap_or_else(|| "unknown (container does not say)".into())
+        );
+        println!("fps:     {}", info.fps);
+        println!("size:    {}", info.size);
+        println!("codec:   {}", info.codec);
+        println!("decoder: {}", info.decoder);
+    }
+    Ok(())
+}

@@ -1,0 +1,127 @@
+//! `ignis`: controllable fire animations from the command line.
+//!
+//! A thin layer over the library crates: argument parsing, progress bars and error
+//! reporting live here; every capability is a library call.
+
+mod classic;
+mod convert;
+mod demo;
+mod global;
+mod info;
+mod output;
+
+use anyhow::Result;
+use clap::{FromArgMatches, Parser, Subcommand};
+use global::Global;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+#[derive(Parser, Debug)]
+#[command(
+    name = "ignis",
+    version,
+    about = "Controllable fire animations for games, motion graphics and VFX",
+    after_help = "Examples:\n  ignis demo -o ignis-demo                 # every method on built-in defaults, with a gallery\n  \
+ignis classic --size 320x200 --frames 300 -o fire.mp4\n  ignis info candle.mp4 --json\n  ignis bench classic"
+)]
+struct Cli {
+    /// No progress bars or chatter (errors are still printed).
+    #[arg(short, long, global = true)]
+    quiet: bool,
+    #[command(subcommand)]
+    cmd: Cmd,
+}
+
+#[derive(Subcommand, Debug)]
+enum Cmd {
+    /// The classic pixel-buffer fire (McNally 1999).
+    Classic(classic::Args),
+    /// Frames, fps, size, codec and decoder of a video, image or frame sequence.
+    Info(info::Args),
+    /// Any source to any output (footage to a flipbook, MP4 to EXR frames, ...).
+    Convert(convert::Args),
+    /// The main job: every method on built-in defaults, written with a gallery page.
+    Demo(DemoArgs),
+    /// Headline performance figures of a method as one JSON object.
+    Bench(BenchArgs),
+}
+
+#[derive(clap::Args, Debug)]
+#[command(after_help = "Examples:\n  ignis demo                 # writes ./ignis-demo/index.html\n  ignis demo -o /tmp/fire --quick")]
+struct DemoArgs {
+    /// Directory to write into (created if missing).
+    #[arg(short, long, default_value = "ignis-demo")]
+    output: PathBuf,
+    /// Seed for every generator.
+    #[arg(long, default_value_t = 7)]
+    seed: u64,
+    /// Tiny sizes and few frames (a smoke test in seconds).
+    #[arg(long)]
+    quick: bool,
+}
+
+#[derive(clap::Args, Debug)]
+#[command(after_help = "Examples:\n  ignis bench classic\n  ignis bench classic --quick")]
+struct BenchArgs {
+    /// What to measure.
+    #[arg(value_parser = ["classic"])]
+    target: String,
+    /// Fewer repetitions (a smoke test; figures are noisier).
+    #[arg(long)]
+    quick: bool,
+}
+
+/// Parses a subcommand's arguments from an argv (first element = program name); used
+/// by the demo to run commands exactly as a user would type them.
+pub(crate) fn parse_sub<T: clap::Args + FromArgMatches>(argv: &[&str]) -> Result<T> {
+    let cmd = T::augment_args(clap::Command::new("ignis").no_binary_name(false));
+    let m = cmd.try_get_matches_from(argv)?;
+    Ok(T::from_arg_matches(&m)?)
+}
+
+fn run(cli: Cli) -> Result<()> {
+    let g = Global { quiet: cli.quiet };
+    match cli.cmd {
+        Cmd::Classic(a) => classic::run(&a, &g).map(|_| ()),
+        Cmd::Info(a) => info::run(&a),
+        Cmd::Convert(a) => convert::run(&a, &g).map(|_| ()),
+        Cmd::Demo(a) => {
+            let t = std::time::Instant::now();
+            let mut d = demo::Demo::new(&a.output, g.clone(), a.seed, a.quick)?;
+            classic::demo(&mut d)?;
+            let index = d.finish()?;
+            g.say(format!("done in {:.1} s; open {}", t.elapsed().as_secs_f64(), index.display()));
+            Ok(())
+        }
+        Cmd::Bench(a) => {
+            let v = match a.target.as_str() {
+                "classic" => classic::bench(a.quick)?,
+                other => anyhow::bail!("unknown bench target `{other}`"),
+            };
+            println!("{}", serde_json::to_string_pretty(&v)?);
+            Ok(())
+        }
+    }
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    match run(cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e}");
+            for cause in e.chain().skip(1) {
+                eprintln!("  caused by: {cause}");
+            }
+            ExitCode::FAILURE
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn cli_is_well_formed() {
+        <super::Cli as clap::CommandFactory>::command().debug_assert();
+    }
+}

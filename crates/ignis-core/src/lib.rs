@@ -1,0 +1,23 @@
+//! `ignis-core`: the pieces every Ignis generator shares.
+//!
+//! - [`frame`]: [`GrayFrame`] (linear luminance, `f32`) and [`RgbaFrame`]
+//!   (linear-light RGBA, `f32`, straight alpha), [`Size`] with allocation limits.
+//! - [`palette`]: intensity → colour ramps (transfer functions) and presets.
+//! - [`colour`]: synthetic HLS colouring (eigenfires-thesis §6.1.2).
+//! - [`post`]: bloom (§6.2) and the alpha matte (§6.2).
+//! - [`rng`]: the seeded RNG every generator uses.
+//!
+//! **Invariant:** this crate knows nothing of files, codecs, clap or GPUs. Pixel data is
+//! linear light everywhere; only `ignis-media` converts to 8-bit sRGB.
+
+pub mod colour;
+pub mod error;
+pub mod frame;
+pub mod palette;
+pub mod post;
+pub mod rng;
+
+pub use error::{CoreError, Result};
+pub use frame::{GrayFrame, RgbaFrame, Size};
+pub use palette::Palette;
+pub use rng::Rng;
