@@ -315,34 +315,61 @@ impl ClassicFire {
 /// values of the row below it, so bands are independent.
 fn burn_band(band: &mut [u8], w: usize, e: usize, below: &[u8], fade: u8, kernel: Kernel, scratch: &mut [u8]) {
     let rows = band.len() / w;
-    for r in 0..rows {
+    let mut r = 0;
+    if kernel == Kernel::Article {
+        // Groups of ARTICLE_ROWS rows interleaved column by column: each row is a serial
+        // chain, but different rows' chains are independent, so the CPU overlaps them.
+        while r + ARTICLE_ROWS <= rows {
+            let (head, rest) = band.split_at_mut((r + ARTICLE_ROWS) * w);
+            let under: &[u8] = if r + ARTICLE_ROWS < rows { &rest[..w] } else { below };
+            let mut it = head[r * w..].chunks_exact_mut(w);
+            let group: [&mut [u8]; ARTICLE_ROWS] = std::array::from_fn(|_| it.next().expect("row"));
+            burn_rows_article(group, under, e, fade);
+            r += ARTICLE_ROWS;
+        }
+    }
+    while r < rows {
         let (cur_part, rest) = band.split_at_mut((r + 1) * w);
         let cur = &mut cur_part[r * w..];
         let under: &[u8] = if r + 1 < rows { &rest[..w] } else { below };
         match kernel {
-            Kernel::Article => burn_row_article(cur, under, e, fade),
+            Kernel::Article => burn_rows_article([cur], under, e, fade),
             Kernel::Buffered => {
                 scratch.copy_from_slice(cur);
                 burn_row_buffered(cur, scratch, under, e, fade);
             }
         }
+        r += 1;
     }
 }
 
-/// The article's inner loop over one row: in place, `left` is this frame's value.
+/// Rows the article kernel interleaves.
+const ARTICLE_ROWS: usize = 8;
+
+/// The article's inner loop over `N` consecutive rows at once, exactly as the C code: in
+/// place, left to right, `left` being this frame's value and `right`/`below` last frame's.
+/// Row `k` reads row `k + 1` at column `x` before row `k + 1`'s column `x` is updated, and
+/// the last row reads `under`, so the result is the same as running the rows one by one.
+///
+/// `floor((a + b + c + d) / 4) − fade`, clamped at 0, is computed as
+/// `max((a + b + c + d − 4·fade) >> 2, 0)` with an arithmetic shift: the same integer.
 #[inline]
-fn burn_row_article(cur: &mut [u8], under: &[u8], e: usize, fade: u8) {
-    let w = cur.len();
-    let fade = fade as u32;
-    let mut left = cur[e - 1] as u32;
-    // Iterate over windows so the compiler can drop bounds checks.
-    let inner = &mut cur[e - 1..w - e + 1];
-    let under = &under[e..w - e];
-    for x in 0..under.len() {
-        let s = (left + inner[x + 1] as u32 + inner[x + 2] as u32 + under[x] as u32) >> 2;
-        let v = s.saturating_sub(fade);
-        inner[x + 1] = v as u8;
-        left = v;
+fn burn_rows_article<const N: usize>(mut rows: [&mut [u8]; N], under: &[u8], e: usize, fade: u8) {
+    let w = under.len();
+    for r in rows.iter() {
+        assert_eq!(r.len(), w);
+    }
+    let f4 = 4 * fade as i32;
+    let mut left: [i32; N] = std::array::from_fn(|k| rows[k][e - 1] as i32);
+    for x in e..w - e {
+        for k in 0..N {
+            let below = if k + 1 < N { rows[k + 1][x] } else { under[x] } as i32;
+            let row = &mut rows[k];
+            let s = left[k] + row[x] as i32 + row[x + 1] as i32 + below - f4;
+            let v = (s >> 2).max(0);
+            row[x] = v as u8;
+            left[k] = v;
+        }
     }
 }
 

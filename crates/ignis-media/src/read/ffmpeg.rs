@@ -1,0 +1,229 @@
+//! Everything the pure path cannot decode goes through the system `ffmpeg`, found on `PATH`
+//! (or next to the executable) by the `ffmpeg-sidecar` crate, built without its
+//! `download_ffmpeg` feature: nothing is ever downloaded, so offline machines behave the
+//! same. `ffprobe` (run directly; sidecar only locates it) gives size, fps and frame count
+//! from the container without decoding.
+//!
+//! Frames come out of `ffmpeg` as raw 8-bit RGBA on a pipe; crop and scale are applied in
+//! Rust like every other source so results do not depend on ffmpeg's filters.
+//!
+//! Set `IGNIS_NO_FFMPEG=1` to behave as if ffmpeg were absent (e.g. to check that a file
+//! decodes on machines without it).
+
+use std::path::Path;
+use std::process::Command;
+use std::sync::OnceLock;
+
+use ffmpeg_sidecar::child::FfmpegChild;
+use ffmpeg_sidecar::command::FfmpegCommand;
+use ffmpeg_sidecar::event::{FfmpegEvent, LogLevel};
+use ffmpeg_sidecar::iter::FfmpegIterator;
+use ignis_core::{RgbaFrame, Size};
+
+use super::{Decoder, FrameSource, SourceInfo};
+use crate::convert;
+use crate::error::{MediaError, Result};
+
+/// Whether both `ffmpeg` and `ffprobe` run (checked once per process), unless
+/// `IGNIS_NO_FFMPEG` is set.
+pub(crate) fn ffmpeg_available() -> bool {
+    static FOUND: OnceLock<bool> = OnceLock::new();
+    if std::env::var_os("IGNIS_NO_FFMPEG").is_some_and(|v| !v.is_empty() && v != "0") {
+        return false;
+    }
+    *FOUND.get_or_init(|| {
+        ffmpeg_sidecar::command::ffmpeg_is_installed()
+            && ffmpeg_sidecar::ffprobe::ffprobe_is_installed()
+    })
+}
+
+#[derive(serde::Deserialize)]
+struct ProbeOut {
+    #[serde(default)]
+    streams: Vec<ProbeStream>,
+}
+
+#[derive(serde::Deserialize)]
+struct ProbeStream {
+    codec_name: Option<String>,
+    profile: Option<String>,
+    width: Option<u32>,
+    height: Option<u32>,
+    avg_frame_rate: Option<String>,
+    r_frame_rate: Option<String>,
+    nb_frames: Option<String>,
+}
+
+fn parse_rate(r: Option<&str>) -> Option<f64> {
+    let r = r?;
+    let v = match r.split_once('/') {
+        Some((n, d)) => n.parse::<f64>().ok()? / d.parse::<f64>().ok()?,
+        None => r.parse().ok()?,
+    };
+    (v.is_finite() && v > 0.0).then_some(v)
+}
+
+/// Probes `path` with `ffprobe` (container headers only).
+pub(crate) fn probe(path: &Path, _hint: Option<&str>) -> Result<SourceInfo> {
+    let out = Command::new(ffmpeg_sidecar::ffprobe::ffprobe_path())
+        .args(["-v", "error", "-select_streams", "v:0", "-show_entries"])
+        .arg("stream=codec_name,profile,width,height,avg_frame_rate,r_frame_rate,nb_frames")
+        .args(["-of", "json"])
+        .arg(path)
+        .output()
+        .map_err(|e| {
+            MediaError::unsupported(
+                path,
+                "input for the built-in decoders",
+                format!("install ffmpeg/ffprobe ({e})"),
+            )
+        })?;
+    if !out.status.success() {
+        let msg = String::from_utf8_lossy(&out.stderr);
+        return Err(MediaError::decode(
+            path,
+            None,
+            format!("ffprobe cannot read it: {}", msg.trim()),
+        ));
+    }
+    let parsed: ProbeOut = serde_json::from_slice(&out.stdout)
+        .map_err(|e| MediaError::decode(path, None, format!("unexpected ffprobe output: {e}")))?;
+    let Some(s) = parsed.streams.into_iter().next() else {
+        return Err(MediaError::decode(path, None, "no video stream"));
+    };
+    let (Some(w), Some(h)) = (s.width, s.height) else {
+        return Err(MediaError::decode(
+            path,
+            None,
+            "ffprobe reports no frame size",
+        ));
+    };
+    let size =
+        Size::new(w, h).map_err(|e| MediaError::decode(path, None, format!("frame size: {e}")))?;
+    let fps = parse_rate(s.avg_frame_rate.as_deref())
+        .or(parse_rate(s.r_frame_rate.as_deref()))
+        .unwrap_or(30.0);
+    let codec_name = s.codec_name.unwrap_or_else(|| "unknown".into());
+    let codec = match s.profile {
+        Some(p) if !p.is_empty() && p != "unknown" => format!("{codec_name} ({p})"),
+        _ => codec_name,
+    };
+    Ok(SourceInfo {
+        size,
+        fps,
+        frame_count: s.nb_frames.and_then(|n| n.parse().ok()).filter(|&n| n > 0),
+        codec,
+        decoder: Decoder::Ffmpeg,
+        path: path.to_path_buf(),
+    })
+}
+
+/// A running `ffmpeg` decoding to raw RGBA on stdout.
+pub(crate) struct FfmpegSource {
+    child: FfmpegChild,
+    events: FfmpegIterator,
+    info: SourceInfo,
+    errors: Vec<String>,
+    finished: bool,
+}
+
+impl FfmpegSource {
+    /// Starts `ffmpeg` at frame `start` (an accurate seek: ffmpeg decodes from the previous
+    /// keyframe and drops frames before the seek time), stopping after `end` if given.
+    pub(crate) fn start(info: &SourceInfo, start: u64, end: Option<u64>) -> Result<FfmpegSource> {
+        let mut cmd = FfmpegCommand::new();
+        cmd.hide_banner();
+        if start > 0 {
+            // Half a frame early, so rounding of timestamps cannot skip frame `start`.
+            cmd.seek(format!("{:.6}", (start as f64 - 0.5) / info.fps));
+        }
+        cmd.input(&info.path);
+        cmd.args(["-map", "0:v:0", "-an", "-sn", "-dn"]);
+        if let Some(e) = end {
+            cmd.arg("-frames:v").arg((e - start).to_string());
+        }
+        cmd.args(["-f", "rawvideo", "-pix_fmt", "rgba"]).output("-");
+        let mut child = cmd.spawn().map_err(|e| {
+            MediaError::unsupported(
+                &info.path,
+                "input for the built-in decoders",
+                format!("install ffmpeg ({e})"),
+            )
+        })?;
+        let events = child.iter().map_err(|e| {
+            MediaError::decode(&info.path, None, format!("cannot talk to ffmpeg: {e}"))
+        })?;
+        Ok(FfmpegSource {
+            child,
+            events,
+            info: info.clone(),
+            errors: Vec::new(),
+            finished: false,
+        })
+    }
+}
+
+impl FrameSource for FfmpegSource {
+    fn next_frame(&mut self) -> Option<Result<RgbaFrame>> {
+        if self.finished {
+            return None;
+        }
+        for event in self.events.by_ref() {
+            match event {
+                FfmpegEvent::OutputFrame(f) => {
+                    let Ok(size) = Size::new(f.width, f.height) else {
+                        continue;
+                    };
+                    if f.data.len() != size.pixels() * 4 {
+                        self.finished = true;
+                        return Some(Err(MediaError::decode(
+                            &self.info.path,
+                            None,
+                            "short frame from ffmpeg",
+                        )));
+                    }
+                    return Some(Ok(convert::from_srgba8(size, &f.data)));
+                }
+                FfmpegEvent::Log(LogLevel::Error | LogLevel::Fatal, msg)
+                | FfmpegEvent::Error(msg)
+                    if self.errors.len() < 8 =>
+                {
+                    self.errors.push(msg);
+                }
+                _ => {}
+            }
+        }
+        self.finished = true;
+        match self.child.wait() {
+            Ok(status) if status.success() => None,
+            Ok(status) => Some(Err(MediaError::decode(
+                &self.info.path,
+                None,
+                format!("ffmpeg failed ({status}): {}", self.errors.join("; ")),
+            ))),
+            Err(e) => Some(Err(MediaError::io(&self.info.path, e))),
+        }
+    }
+}
+
+impl Drop for FfmpegSource {
+    fn drop(&mut self) {
+        if !self.finished {
+            let _ = self.child.kill();
+        }
+        let _ = self.child.wait();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rates() {
+        assert_eq!(parse_rate(Some("25/1")), Some(25.0));
+        assert!((parse_rate(Some("30000/1001")).unwrap() - 29.97).abs() < 0.01);
+        assert_eq!(parse_rate(Some("0/0")), None);
+        assert_eq!(parse_rate(None), None);
+    }
+}

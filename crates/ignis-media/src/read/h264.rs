@@ -1,0 +1,423 @@
+//! The pure-cargo MP4/H.264 path: the `mp4` demuxer and OpenH264 (compiled from Cisco's
+//! source by `openh264-sys2`, no runtime download).
+//!
+//! OpenH264 decodes the Constrained Baseline profile (what WebRTC, many phones and our own
+//! MP4 writer produce); Main/High streams use CABAC and B-frames, which it does not
+//! support, so [`probe_mp4`] sends them to `ffmpeg` by reading `profile_idc` from the
+//! `avcC` sample description.
+//!
+//! Decoding runs one step ahead on a worker thread (demux + decode + YUV→RGBA8 there; the
+//! 8-bit → linear `f32` conversion on the caller's thread), so the two cores overlap.
+
+use std::fs::File;
+use std::io::BufReader;
+use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::path::{Path, PathBuf};
+use std::sync::mpsc::{sync_channel, Receiver};
+
+use ignis_core::{RgbaFrame, Size};
+use openh264::decoder::{DecodeOptions, Decoder as H264Decoder, DecoderConfig, Flush};
+use openh264::formats::YUVSource;
+use openh264::OpenH264API;
+
+use super::{ffmpeg, Decoder, FrameSource, Probed, SourceInfo};
+use crate::convert;
+use crate::error::{MediaError, Result};
+
+/// Human name of an H.264 profile from `profile_idc` and the constraint flags byte.
+pub fn avc_profile_name(profile_idc: u8, constraints: u8) -> &'static str {
+    match profile_idc {
+        66 if constraints & 0x40 != 0 => "Constrained Baseline",
+        66 => "Baseline",
+        77 => "Main",
+        88 => "Extended",
+        100 => "High",
+        110 => "High 10",
+        122 => "High 4:2:2",
+        244 => "High 4:4:4 Predictive",
+        44 => "CAVLC 4:4:4 Intra",
+        _ => "unknown profile",
+    }
+}
+
+/// What the opener needs from the MP4 header.
+pub(crate) struct Mp4Probe {
+    track_id: u32,
+    len: u64,
+}
+
+type Mp4File = mp4::Mp4Reader<BufReader<File>>;
+
+fn read_header(path: &Path, len: u64) -> Result<Mp4File> {
+    let file = File::open(path).map_err(|e| MediaError::io(path, e))?;
+    // The `mp4` crate can panic on some malformed boxes; a damaged file must give an error.
+    match catch_unwind(AssertUnwindSafe(|| {
+        mp4::Mp4Reader::read_header(BufReader::new(file), len)
+    })) {
+        Ok(Ok(r)) => Ok(r),
+        Ok(Err(e)) => Err(MediaError::decode(
+            path,
+            None,
+            format!("not a readable MP4 ({e}); the file may be truncated or damaged"),
+        )),
+        Err(_) => Err(MediaError::decode(
+            path,
+            None,
+            "malformed MP4 header; the file may be truncated or damaged",
+        )),
+    }
+}
+
+/// Probes an ISO-BMFF file: H.264 Baseline → OpenH264; anything else → ffmpeg when
+/// available, else an `Unsupported` error naming the profile/codec and the fix.
+pub(crate) fn probe_mp4(path: &Path, len: u64, have_ffmpeg: bool) -> Result<Probed> {
+    let reader = match read_header(path, len) {
+        Ok(r) => r,
+        // Fragmented or exotic layouts the `mp4` crate cannot parse may still be fine for
+        // ffmpeg; if ffprobe cannot read it either, report the demuxer's error.
+        Err(e) => {
+            if have_ffmpeg {
+                if let Ok(info) = ffmpeg::probe(path, None) {
+                    return Ok(Probed::Ffmpeg(info));
+                }
+            }
+            return Err(e);
+        }
+    };
+    let video = reader
+        .tracks()
+        .values()
+        .filter(|t| matches!(t.track_type(), Ok(mp4::TrackType::Video)))
+        .min_by_key(|t| t.track_id());
+    let Some(track) = video else {
+        return Err(MediaError::decode(path, None, "the MP4 has no video track"));
+    };
+    let stsd = &track.trak.mdia.minf.stbl.stsd;
+    let (codec, baseline) = match &stsd.avc1 {
+        Some(avc1) => {
+            let p = avc1.avcc.avc_profile_indication;
+            let name = avc_profile_name(p, avc1.avcc.profile_compatibility);
+            (format!("h264 ({name})"), p == 66)
+        }
+        None if stsd.hev1.is_some() => ("hevc".to_string(), false),
+        None if stsd.vp09.is_some() => ("vp9".to_string(), false),
+        None => ("an unknown video codec".to_string(), false),
+    };
+    if !baseline || track.trak.mdia.minf.stbl.stsd.avc1.is_none() {
+        if have_ffmpeg {
+            return ffmpeg::probe(path, None).map(Probed::Ffmpeg);
+        }
+        return Err(MediaError::unsupported(
+            path,
+            format!("{codec} video"),
+            "the built-in decoder handles only H.264 (Constrained) Baseline; install ffmpeg \
+             (e.g. `apt install ffmpeg`), or convert to a PNG sequence with ffmpeg elsewhere: \
+             ffmpeg -i INPUT frames/%04d.png",
+        ));
+    }
+    let count = track.sample_count() as u64;
+    let mdhd = &track.trak.mdia.mdhd;
+    let fps = if mdhd.duration > 0 && mdhd.timescale > 0 {
+        count as f64 * mdhd.timescale as f64 / mdhd.duration as f64
+    } else {
+        0.0
+    };
+    let fps = if fps.is_finite() && fps > 0.0 {
+        fps
+    } else {
+        30.0
+    };
+    let size = Size::new(track.width() as u32, track.height() as u32).map_err(|e| {
+        MediaError::decode(path, None, format!("bad frame size in the MP4 header: {e}"))
+    })?;
+    let info = SourceInfo {
+        size,
+        fps,
+        frame_count: Some(count),
+        codec,
+        decoder: Decoder::Openh264,
+        path: path.to_path_buf(),
+    };
+    Ok(Probed::Mp4(
+        info,
+        Mp4Probe {
+            track_id: track.track_id(),
+            len,
+        },
+    ))
+}
+
+/// Length-prefixed (AVCC) NAL units → Annex B (start codes), appended to `out`.
+fn avcc_to_annexb(
+    sample: &[u8],
+    length_size: usize,
+    out: &mut Vec<u8>,
+) -> std::result::Result<(), String> {
+    let mut i = 0;
+    while i < sample.len() {
+        if i + length_size > sample.len() {
+            return Err("truncated NAL length".into());
+        }
+        let mut n = 0usize;
+        for &b in &sample[i..i + length_size] {
+            n = (n << 8) | b as usize;
+        }
+        i += length_size;
+        if n > sample.len() - i {
+            return Err(format!(
+                "NAL unit of {n} bytes runs past the end of its sample"
+            ));
+        }
+        out.extend_from_slice(&[0, 0, 0, 1]);
+        out.extend_from_slice(&sample[i..i + n]);
+        i += n;
+    }
+    Ok(())
+}
+
+/// Pictures the worker may decode ahead of the caller (8-bit RGBA, ~0.9 MB each at
+/// 480x480): enough slack that a busy scheduler does not stall the pipeline.
+const QUEUE: usize = 8;
+
+/// A decoded picture as 8-bit RGBA, tagged with its index in the stream.
+type Msg = Result<(u64, Vec<u8>, Size)>;
+
+/// Streams frames from a Baseline MP4, starting at any frame (decoding from the preceding
+/// sync sample).
+pub(crate) struct Openh264Source {
+    rx: Receiver<Msg>,
+    expected: Size,
+}
+
+impl Openh264Source {
+    pub(crate) fn start(info: &SourceInfo, probe: Mp4Probe, start: u64) -> Result<Openh264Source> {
+        let path = info.path.clone();
+        let reader = read_header(&path, probe.len)?;
+        let track = reader.tracks().get(&probe.track_id).expect("probed track");
+        let avcc = &track
+            .trak
+            .mdia
+            .minf
+            .stbl
+            .stsd
+            .avc1
+            .as_ref()
+            .expect("probed avc1")
+            .avcc;
+        let length_size = (avcc.length_size_minus_one & 3) as usize + 1;
+        let mut header = Vec::new();
+        for nal in avcc
+            .sequence_parameter_sets
+            .iter()
+            .chain(&avcc.picture_parameter_sets)
+        {
+            header.extend_from_slice(&[0, 0, 0, 1]);
+            header.extend_from_slice(&nal.bytes);
+        }
+        // Sample numbers are 1-based; decode from the last sync sample at or before `start`.
+        let target = start + 1;
+        let first = match &track.trak.mdia.minf.stbl.stss {
+            Some(stss) => stss
+                .entries
+                .iter()
+                .copied()
+                .map(u64::from)
+                .filter(|&s| s <= target)
+                .max()
+                .unwrap_or(1),
+            None => target,
+        };
+        let count = track.sample_count() as u64;
+        let api = OpenH264API::from_source();
+        let config = DecoderConfig::new().flush_after_decode(Flush::NoFlush);
+        let decoder = H264Decoder::with_api_config(api, config)
+            .map_err(|e| MediaError::decode(&path, None, format!("cannot start OpenH264: {e}")))?;
+        let (tx, rx) = sync_channel::<Msg>(QUEUE);
+        let job = Job {
+            path,
+            reader,
+            track_id: probe.track_id,
+            length_size,
+            header,
+            first,
+            target,
+            count,
+            decoder,
+        };
+        std::thread::Builder::new()
+            .name("ignis-h264".into())
+            .spawn(move || job.run(|m| tx.send(m).is_ok()))
+            .map_err(|e| MediaError::io(&info.path, e))?;
+        Ok(Openh264Source {
+            rx,
+            expected: info.size,
+        })
+    }
+}
+
+struct Job {
+    path: PathBuf,
+    reader: Mp4File,
+    track_id: u32,
+    length_size: usize,
+    header: Vec<u8>,
+    /// First sample decoded (1-based).
+    first: u64,
+    /// First sample sent (1-based).
+    target: u64,
+    count: u64,
+    decoder: H264Decoder,
+}
+
+impl Job {
+    /// Decodes samples `first..=count`, sending pictures from `target` on; stops when
+    /// `send` returns false (the reader was dropped) or after the first error.
+    fn run(mut self, mut send: impl FnMut(Msg) -> bool) {
+        let mut annexb = Vec::new();
+        let mut picture = self.first; // 1-based number of the next picture out of the decoder
+        let mut header = std::mem::take(&mut self.header);
+        for sample_id in self.first..=self.count {
+            let frame = Some(sample_id - 1);
+            let sample = catch_unwind(AssertUnwindSafe(|| {
+                self.reader.read_sample(self.track_id, sample_id as u32)
+            }));
+            let sample = match sample {
+                Ok(Ok(Some(s))) => s,
+                Ok(Ok(None)) => break,
+                Ok(Err(e)) => {
+                    send(Err(MediaError::decode(
+                        &self.path,
+                        frame,
+                        format!("cannot read sample: {e} (truncated file?)"),
+                    )));
+                    return;
+                }
+                Err(_) => {
+                    send(Err(MediaError::decode(
+                        &self.path,
+                        frame,
+                        "malformed sample table",
+                    )));
+                    return;
+                }
+            };
+            annexb.clear();
+            annexb.append(&mut header);
+            if let Err(msg) = avcc_to_annexb(&sample.bytes, self.length_size, &mut annexb) {
+                send(Err(MediaError::decode(&self.path, frame, msg)));
+                return;
+            }
+            let want = picture >= self.target;
+            match self.decoder.decode_with_options(
+                &annexb,
+                DecodeOptions::new().flush_after_decode(Flush::NoFlush),
+            ) {
+                Ok(Some(yuv)) => {
+                    if want {
+                        let (w, h) = yuv.dimensions();
+                        let mut rgba = vec![0u8; w * h * 4];
+                        yuv.write_rgba8(&mut rgba);
+                        let size = Size {
+                            width: w as u32,
+                            height: h as u32,
+                        };
+                        if !send(Ok((picture - 1, rgba, size))) {
+                            return;
+                        }
+                    }
+                    picture += 1;
+                }
+                Ok(None) => {}
+                Err(e) => {
+                    send(Err(MediaError::decode(
+                        &self.path,
+                        frame,
+                        format!("H.264 decode failed: {e}"),
+                    )));
+                    return;
+                }
+            }
+        }
+        match self.decoder.flush_remaining() {
+            Ok(rest) => {
+                for yuv in rest {
+                    if picture >= self.target {
+                        let (w, h) = yuv.dimensions();
+                        let mut rgba = vec![0u8; w * h * 4];
+                        yuv.write_rgba8(&mut rgba);
+                        let size = Size {
+                            width: w as u32,
+                            height: h as u32,
+                        };
+                        if !send(Ok((picture - 1, rgba, size))) {
+                            return;
+                        }
+                    }
+                    picture += 1;
+                }
+            }
+            Err(e) => {
+                send(Err(MediaError::decode(
+                    &self.path,
+                    None,
+                    format!("H.264 flush failed: {e}"),
+                )));
+            }
+        }
+    }
+}
+
+impl FrameSource for Openh264Source {
+    fn next_frame(&mut self) -> Option<Result<RgbaFrame>> {
+        let (_, bytes, size) = match self.rx.recv().ok()? {
+            Ok(m) => m,
+            Err(e) => return Some(Err(e)),
+        };
+        if size != self.expected {
+            // Let the reader report the mismatch with its path and index.
+            return Some(Ok(RgbaFrame::new(
+                Size::new(size.width.max(1), size.height.max(1)).ok()?,
+            )));
+        }
+        Some(Ok(convert::from_srgba8(size, &bytes)))
+    }
+}
+
+/// Raw decode throughput helper for the benchmark: decodes every picture of a Baseline MP4
+/// to 8-bit RGBA without the linear-light conversion, returning the number of pictures.
+#[doc(hidden)]
+pub fn decode_rgba8_count(path: &Path) -> Result<u64> {
+    let len = std::fs::metadata(path)
+        .map_err(|e| MediaError::io(path, e))?
+        .len();
+    let Probed::Mp4(info, probe) = probe_mp4(path, len, false)? else {
+        return Err(MediaError::bad("path", "not a Baseline MP4"));
+    };
+    let source = Openh264Source::start(&info, probe, 0)?;
+    let mut n = 0;
+    for m in source.rx.iter() {
+        m?;
+        n += 1;
+    }
+    Ok(n)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn avcc_conversion() {
+        let mut out = Vec::new();
+        avcc_to_annexb(&[0, 0, 0, 2, 0x65, 0xAA, 0, 0, 0, 1, 0x41], 4, &mut out).unwrap();
+        assert_eq!(out, [0, 0, 0, 1, 0x65, 0xAA, 0, 0, 0, 1, 0x41]);
+        assert!(avcc_to_annexb(&[0, 0, 0, 9, 0x65], 4, &mut Vec::new()).is_err());
+        assert!(avcc_to_annexb(&[0, 0], 4, &mut Vec::new()).is_err());
+    }
+
+    #[test]
+    fn profile_names() {
+        assert_eq!(avc_profile_name(66, 0xC0), "Constrained Baseline");
+        assert_eq!(avc_profile_name(100, 0), "High");
+    }
+}

@@ -1,0 +1,465 @@
+//! Stills, image sequences (a directory or a printf pattern) and GIFs, via the `image` crate.
+//!
+//! A directory holds frames sorted by name (digit runs compared as numbers, so `f2.png`
+//! comes before `f10.png`; zero-padded names sort the same either way). Hidden files
+//! (starting with `.`, e.g. a writer's partial output) and non-image files are ignored.
+//! A pattern `frames/%04d.png` (`%d`, `%Nd`, `%0Nd`) matches the files in `frames/` whose
+//! name is the prefix, a number and the suffix, in numeric order from the smallest.
+//! All frames must have one size; the opener checks every header (not the pixels) and
+//! names the first file that differs.
+
+use std::cmp::Ordering;
+use std::fs::File;
+use std::io::BufReader;
+use std::path::{Path, PathBuf};
+
+use ignis_core::{RgbaFrame, Size};
+use image::ImageFormat;
+
+use super::{Decoder, FrameSource, Probed, SourceInfo};
+use crate::convert;
+use crate::error::{MediaError, Result};
+
+/// Frame rate assumed for image sequences and stills, which do not store one.
+pub const DEFAULT_SEQUENCE_FPS: f64 = 30.0;
+
+const STILL_EXTENSIONS: &[&str] = &["png", "jpg", "jpeg", "exr", "tif", "tiff"];
+
+pub(crate) fn is_still_magic(m: &[u8]) -> bool {
+    m.starts_with(b"\x89PNG")
+        || m.starts_with(&[0xFF, 0xD8, 0xFF])
+        || m.starts_with(b"II*\0")
+        || m.starts_with(b"MM\0*")
+        || m.starts_with(&[0x76, 0x2F, 0x31, 0x01])
+}
+
+fn open_reader(path: &Path) -> Result<image::ImageReader<BufReader<File>>> {
+    let meta = std::fs::metadata(path).map_err(|e| MediaError::io(path, e))?;
+    if meta.len() == 0 {
+        return Err(MediaError::decode(
+            path,
+            None,
+            "the file is empty (0 bytes)",
+        ));
+    }
+    image::ImageReader::open(path)
+        .map_err(|e| MediaError::io(path, e))?
+        .with_guessed_format()
+        .map_err(|e| MediaError::io(path, e))
+}
+
+fn dimensions(path: &Path) -> Result<Size> {
+    let (w, h) = open_reader(path)?
+        .into_dimensions()
+        .map_err(|e| MediaError::decode(path, None, format!("not a readable image: {e}")))?;
+    Size::new(w, h).map_err(|e| MediaError::decode(path, None, e.to_string()))
+}
+
+/// Decodes one still to a linear, straight-alpha frame (EXR is un-premultiplied).
+pub(crate) fn decode_still(path: &Path) -> Result<RgbaFrame> {
+    let reader = open_reader(path)?;
+    let exr = reader.format() == Some(ImageFormat::OpenExr);
+    let img = reader
+        .decode()
+        .map_err(|e| MediaError::decode(path, None, format!("not a readable image: {e}")))?;
+    let mut frame = convert::from_dynamic(img)?;
+    if exr {
+        convert::unpremultiply(&mut frame);
+    }
+    Ok(frame)
+}
+
+fn codec_of(path: &Path) -> String {
+    match image::ImageReader::open(path)
+        .ok()
+        .and_then(|r| r.with_guessed_format().ok())
+        .and_then(|r| r.format())
+    {
+        Some(f) => f
+            .extensions_str()
+            .first()
+            .copied()
+            .unwrap_or("image")
+            .to_string(),
+        None => "image".into(),
+    }
+}
+
+pub(crate) fn probe_image(path: &Path) -> Result<Probed> {
+    let size = dimensions(path)?;
+    Ok(Probed::Image(SourceInfo {
+        size,
+        fps: DEFAULT_SEQUENCE_FPS,
+        frame_count: Some(1),
+        codec: codec_of(path),
+        decoder: Decoder::Image,
+        path: path.to_path_buf(),
+    }))
+}
+
+/// Natural order: digit runs compare as numbers.
+fn natural_cmp(a: &str, b: &str) -> Ordering {
+    let (mut a, mut b) = (a.as_bytes(), b.as_bytes());
+    loop {
+        match (a.first(), b.first()) {
+            (None, None) => return Ordering::Equal,
+            (None, _) => return Ordering::Less,
+            (_, None) => return Ordering::Greater,
+            (Some(x), Some(y)) if x.is_ascii_digit() && y.is_ascii_digit() => {
+                let la = a.iter().take_while(|c| c.is_ascii_digit()).count();
+                let lb = b.iter().take_while(|c| c.is_ascii_digit()).count();
+                let (da, db) = (&a[..la], &b[..lb]);
+                let ta = trim_zeros(da);
+                let tb = trim_zeros(db);
+                let o = ta.len().cmp(&tb.len()).then(ta.cmp(tb)).then(la.cmp(&lb));
+                if o != Ordering::Equal {
+                    return o;
+                }
+                a = &a[la..];
+                b = &b[lb..];
+            }
+            (Some(x), Some(y)) => {
+                if x != y {
+                    return x.cmp(y);
+                }
+                a = &a[1..];
+                b = &b[1..];
+            }
+        }
+    }
+}
+
+fn trim_zeros(d: &[u8]) -> &[u8] {
+    let n = d.iter().take_while(|&&c| c == b'0').count();
+    &d[n.min(d.len().saturating_sub(1))..]
+}
+
+/// A parsed printf frame pattern: `prefix`, `%0{width}d`, `suffix`.
+#[derive(Debug, PartialEq)]
+pub(crate) struct Pattern {
+    pub prefix: String,
+    pub width: usize,
+    pub suffix: String,
+}
+
+impl Pattern {
+    pub(crate) fn parse(name: &str) -> Option<Pattern> {
+        let i = name.find('%')?;
+        let rest = &name[i + 1..];
+        let digits = rest.chars().take_while(|c| c.is_ascii_digit()).count();
+        if !rest[digits..].starts_with('d') {
+            return None;
+        }
+        let width = rest[..digits].parse().unwrap_or(0);
+        let suffix = &rest[digits + 1..];
+        if suffix.contains('%') {
+            return None;
+        }
+        Some(Pattern {
+            prefix: name[..i].to_string(),
+            width,
+            suffix: suffix.to_string(),
+        })
+    }
+    pub(crate) fn format(&self, n: u64) -> String {
+        format!("{}{:0w$}{}", self.prefix, n, self.suffix, w = self.width)
+    }
+    fn matches(&self, name: &str) -> Option<u64> {
+        let mid = name
+            .strip_prefix(&self.prefix)?
+            .strip_suffix(&self.suffix)?;
+        if mid.is_empty() || !mid.bytes().all(|c| c.is_ascii_digit()) || mid.len() < self.width {
+            return None;
+        }
+        mid.parse().ok()
+    }
+}
+
+fn list_dir(dir: &Path) -> Result<Vec<(String, PathBuf)>> {
+    let rd = std::fs::read_dir(dir).map_err(|e| MediaError::io(dir, e))?;
+    let mut out = Vec::new();
+    for e in rd {
+        let e = e.map_err(|e| MediaError::io(dir, e))?;
+        let Ok(name) = e.file_name().into_string() else {
+            continue;
+        };
+        if name.starts_with('.') || !e.path().is_file() {
+            continue;
+        }
+        out.push((name, e.path()));
+    }
+    Ok(out)
+}
+
+pub(crate) fn probe_pattern(path: &Path) -> Result<Probed> {
+    let name = path
+        .file_name()
+        .and_then(|n| n.to_str())
+        .unwrap_or_default();
+    let pat = Pattern::parse(name).ok_or_else(|| {
+        MediaError::bad(
+            "path",
+            format!("`{name}` is not a frame pattern; write e.g. frames/%04d.png"),
+        )
+    })?;
+    let dir = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    let mut files: Vec<(u64, PathBuf)> = list_dir(&dir)?
+        .into_iter()
+        .filter_map(|(n, p)| pat.matches(&n).map(|k| (k, p)))
+        .collect();
+    files.sort();
+    if files.is_empty() {
+        return Err(MediaError::io(
+            path,
+            std::io::Error::new(
+                std::io::ErrorKind::NotFound,
+                format!("no files in {} match `{name}`", dir.display()),
+            ),
+        ));
+    }
+    finish_sequence(path, files.into_iter().map(|(_, p)| p).collect())
+}
+
+pub(crate) fn probe_dir(dir: &Path) -> Result<Probed> {
+    let mut files: Vec<(String, PathBuf)> = list_dir(dir)?
+        .into_iter()
+        .filter(|(n, _)| {
+            let ext = n
+                .rsplit_once('.')
+                .map(|(_, e)| e.to_ascii_lowercase())
+                .unwrap_or_default();
+            STILL_EXTENSIONS.contains(&ext.as_str())
+        })
+        .collect();
+    files.sort_by(|a, b| natural_cmp(&a.0, &b.0));
+    if files.is_empty() {
+        return Err(MediaError::io(
+            dir,
+            std::io::Error::new(
+                std::io::ErrorKind::NotFound,
+                "the directory holds no PNG, JPEG, EXR or TIFF frames",
+            ),
+        ));
+    }
+    finish_sequence(dir, files.into_iter().map(|(_, p)| p).collect())
+}
+
+fn finish_sequence(path: &Path, files: Vec<PathBuf>) -> Result<Probed> {
+    let size = dimensions(&files[0])?;
+    for f in &files[1..] {
+        let s = dimensions(f)?;
+        if s != size {
+            return Err(MediaError::decode(
+                f,
+                None,
+                format!(
+                    "frame size {s} differs from {size} of the first frame {}",
+                    files[0].display()
+                ),
+            ));
+        }
+    }
+    let info = SourceInfo {
+        size,
+        fps: DEFAULT_SEQUENCE_FPS,
+        frame_count: Some(files.len() as u64),
+        codec: format!("{} sequence", codec_of(&files[0])),
+        decoder: Decoder::ImageSequence,
+        path: path.to_path_buf(),
+    };
+    Ok(Probed::Sequence(info, files))
+}
+
+/// Decodes the files of a sequence in order, from frame `start`.
+pub(crate) struct SequenceSource {
+    files: std::vec::IntoIter<PathBuf>,
+}
+
+impl SequenceSource {
+    pub(crate) fn new(files: Vec<PathBuf>, start: u64) -> SequenceSource {
+        let mut files = files.into_iter();
+        if start > 0 {
+            files.nth(start as usize - 1);
+        }
+        SequenceSource { files }
+    }
+}
+
+impl FrameSource for SequenceSource {
+    fn next_frame(&mut self) -> Option<Result<RgbaFrame>> {
+        let f = self.files.next()?;
+        Some(decode_still(&f))
+    }
+}
+
+type GifDecoder = gif::Decoder<BufReader<File>>;
+
+fn gif_decoder(path: &Path) -> Result<GifDecoder> {
+    let f = File::open(path).map_err(|e| MediaError::io(path, e))?;
+    let mut opts = gif::DecodeOptions::new();
+    opts.set_color_output(gif::ColorOutput::RGBA);
+    opts.read_info(BufReader::new(f))
+        .map_err(|e| MediaError::decode(path, None, format!("not a readable GIF: {e}")))
+}
+
+pub(crate) fn probe_gif(path: &Path) -> Result<Probed> {
+    let mut dec = gif_decoder(path)?;
+    let size = Size::new(dec.width() as u32, dec.height() as u32)
+        .map_err(|e| MediaError::decode(path, None, e.to_string()))?;
+    // The delay of the first frame gives the rate; counting frames would mean decoding all.
+    let fps = match dec.read_next_frame() {
+        Ok(Some(f)) if f.delay > 0 => 100.0 / f.delay as f64,
+        Ok(Some(_)) => 10.0,
+        Ok(None) => return Err(MediaError::decode(path, None, "the GIF has no frames")),
+        Err(e) => return Err(MediaError::decode(path, Some(0), e.to_string())),
+    };
+    Ok(Probed::Gif(SourceInfo {
+        size,
+        fps,
+        frame_count: None,
+        codec: "gif".into(),
+        decoder: Decoder::Gif,
+        path: path.to_path_buf(),
+    }))
+}
+
+/// Streams the frames of a GIF composited onto its canvas (disposal methods honoured;
+/// the background is transparent).
+pub(crate) struct GifSource {
+    dec: GifDecoder,
+    canvas: Vec<u8>,
+    saved: Vec<u8>,
+    /// Disposal of the previous frame: method and rectangle (left, top, width, height).
+    pending: Option<(gif::DisposalMethod, [usize; 4])>,
+    size: Size,
+    path: PathBuf,
+    index: u64,
+}
+
+impl GifSource {
+    pub(crate) fn start(path: &Path, start: u64) -> Result<GifSource> {
+        let dec = gif_decoder(path)?;
+        let size = Size::new(dec.width() as u32, dec.height() as u32)
+            .map_err(|e| MediaError::decode(path, None, e.to_string()))?;
+        let mut s = GifSource {
+            dec,
+            canvas: vec![0; size.pixels() * 4],
+            saved: Vec::new(),
+            pending: None,
+            size,
+            path: path.to_path_buf(),
+            index: 0,
+        };
+        for _ in 0..start {
+            match s.advance() {
+                Ok(true) => {}
+                Ok(false) => break,
+                Err(e) => return Err(e),
+            }
+        }
+        Ok(s)
+    }
+
+    /// Composites the next frame onto the canvas; false at the end.
+    fn advance(&mut self) -> Result<bool> {
+        let w = self.size.width as usize;
+        let h = self.size.height as usize;
+        if let Some((method, [l, t, fw, fh])) = self.pending.take() {
+            match method {
+                gif::DisposalMethod::Background => {
+                    for y in t..(t + fh).min(h) {
+                        let a = (y * w + l.min(w)) * 4;
+                        let b = (y * w + (l + fw).min(w)) * 4;
+                        self.canvas[a..b].fill(0);
+                    }
+                }
+                gif::DisposalMethod::Previous if self.saved.len() == self.canvas.len() => {
+                    self.canvas.copy_from_slice(&self.saved);
+                }
+                _ => {}
+            }
+        }
+        let frame = match self.dec.read_next_frame() {
+            Ok(Some(f)) => f,
+            Ok(None) => return Ok(false),
+            Err(e) => {
+                return Err(MediaError::decode(
+                    &self.path,
+                    Some(self.index),
+                    e.to_string(),
+                ))
+            }
+        };
+        let (l, t) = (frame.left as usize, frame.top as usize);
+        let (fw, fh) = (frame.width as usize, frame.height as usize);
+        if frame.dispose == gif::DisposalMethod::Previous {
+            self.saved.clone_from(&self.canvas);
+        }
+        for y in 0..fh {
+            let cy = t + y;
+            if cy >= h {
+                break;
+            }
+            for x in 0..fw {
+                let cx = l + x;
+                if cx >= w {
+                    break;
+                }
+                let src = &frame.buffer[(y * fw + x) * 4..(y * fw + x) * 4 + 4];
+                if src[3] != 0 {
+                    self.canvas[(cy * w + cx) * 4..(cy * w + cx) * 4 + 4].copy_from_slice(src);
+                }
+            }
+        }
+        self.pending = Some((frame.dispose, [l, t, fw, fh]));
+        self.index += 1;
+        Ok(true)
+    }
+}
+
+impl FrameSource for GifSource {
+    fn next_frame(&mut self) -> Option<Result<RgbaFrame>> {
+        match self.advance() {
+            Ok(true) => Some(Ok(convert::from_srgba8(self.size, &self.canvas))),
+            Ok(false) => None,
+            Err(e) => Some(Err(e)),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn natural_order() {
+        let mut v = vec!["f10.png", "f2.png", "f1.png", "f02.png"];
+        v.sort_by(|a, b| natural_cmp(a, b));
+        assert_eq!(v, ["f1.png", "f2.png", "f02.png", "f10.png"]);
+    }
+
+    #[test]
+    fn patterns() {
+        let p = Pattern::parse("%04d.png").unwrap();
+        assert_eq!(
+            p,
+            Pattern {
+                prefix: "".into(),
+                width: 4,
+                suffix: ".png".into()
+            }
+        );
+        assert_eq!(p.format(7), "0007.png");
+        assert_eq!(p.matches("0012.png"), Some(12));
+        assert_eq!(p.matches("12.png"), None);
+        assert_eq!(p.matches("0012.exr"), None);
+        assert_eq!(
+            Pattern::parse("f_%d.exr").unwrap().matches("f_123.exr"),
+            Some(123)
+        );
+        assert!(Pattern::parse("f_%s.png").is_none());
+    }
+}

@@ -1,0 +1,325 @@
+//! Writing: PNG and EXR sequences, GIF, MP4/H.264 and flipbooks (sprite sheet + JSON).
+//!
+//! Frames pushed in are **linear light, straight alpha**. What each output stores:
+//!
+//! | format | pixels | alpha |
+//! |---|---|---|
+//! | PNG sequence | 8-bit sRGB RGBA | **straight** (unassociated), as PNG specifies |
+//! | EXR sequence | linear `f32` RGBA | **premultiplied**, the OpenEXR convention compositors expect |
+//! | GIF | 8-bit sRGB, ≤ 256 colours per frame (NeuQuant) | none: composited over `background` (default black) |
+//! | MP4 (H.264 Constrained Baseline, BT.601 limited range, 4:2:0) | 8-bit | none: composited over `background` (default black) |
+//! | flipbook PNG | 8-bit sRGB RGBA | `straight` or `premultiplied` (linear light premultiplied, then sRGB-encoded), stated in the JSON |
+//!
+//! MP4 needs even dimensions (4:2:0): an odd width or height is padded by one pixel
+//! (and a side under 16 pixels to 16, OpenH264's minimum), repeating the last column/row; [`FrameWriter::output_size`] says what was written.
+//! GIF delays are whole centiseconds (accumulated so the average rate is right); browsers
+//! treat delays under 2 cs as 10 cs, so rates above 50 fps play at 50.
+//!
+//! Every writer is atomic: output goes to a hidden temporary name in the destination's
+//! directory (`.name.XXXX.partial`) and is renamed into place by [`FrameWriter::finish`].
+//! An error, or dropping the writer without `finish`, deletes the temporary output and
+//! leaves nothing under the final name. Sequences go into a temporary directory renamed at
+//! the end, or, when the destination directory already exists, into hidden per-file
+//! temporaries renamed one by one at the end (old frames with other names are left alone).
+
+mod flipbook;
+mod gif_out;
+mod mp4_out;
+mod sequence_out;
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use ignis_core::{RgbaFrame, Size};
+
+use crate::error::{MediaError, Result};
+
+pub use flipbook::{read_flipbook, AlphaMode, Flipbook, FlipbookMeta, FlipbookOptions};
+
+/// An output format.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Format {
+    /// H.264 in MP4 (OpenH264 encoder + `mp4` muxer; no ffmpeg needed).
+    Mp4,
+    /// Animated GIF.
+    Gif,
+    /// A directory of 8-bit sRGB PNGs, or a `%04d.png` pattern.
+    PngSequence,
+    /// A directory of linear `f32` EXRs, or a `%04d.exr` pattern.
+    ExrSequence,
+    /// One sprite-sheet PNG plus a JSON sidecar.
+    Flipbook,
+}
+
+impl Format {
+    /// The format a path implies: `.mp4`, `.gif`, `.png` (flipbook), a directory (trailing
+    /// `/` or an existing directory: PNG sequence) or a pattern `%04d.png` / `%04d.exr`.
+    pub fn from_path(path: &Path) -> Result<Format> {
+        let s = path.to_string_lossy();
+        let name = path
+            .file_name()
+            .map(|n| n.to_string_lossy().to_lowercase())
+            .unwrap_or_default();
+        if name.contains('%') {
+            return if name.ends_with(".png") {
+                Ok(Format::PngSequence)
+            } else if name.ends_with(".exr") {
+                Ok(Format::ExrSequence)
+            } else {
+                Err(MediaError::bad(
+                    "path",
+                    format!("frame pattern `{s}` must end in .png or .exr"),
+                ))
+            };
+        }
+        if s.ends_with('/') || s.ends_with(std::path::MAIN_SEPARATOR) || path.is_dir() {
+            return Ok(Format::PngSequence);
+        }
+        match name.rsplit_once('.').map(|(_, e)| e) {
+            Some("mp4") => Ok(Format::Mp4),
+            Some("gif") => Ok(Format::Gif),
+            Some("png") => Ok(Format::Flipbook),
+            _ => Err(MediaError::bad(
+                "path",
+                format!(
+                    "cannot tell the output format of `{s}`: use .mp4, .gif, .png (flipbook), a directory \
+                     ending in / (PNG sequence), a pattern like frames/%04d.png or frames/%04d.exr, or set the format"
+                ),
+            )),
+        }
+    }
+}
+
+/// How to write. `Default`: format from the path, 30 fps, looping, black background.
+#[derive(Clone, Debug, PartialEq)]
+pub struct WriteOptions {
+    /// Output format; `None` = from the path ([`Format::from_path`]).
+    pub format: Option<Format>,
+    /// Frames per second, > 0 (default 30). Stored in MP4, GIF delays and flipbook JSON.
+    pub fps: f64,
+    /// Loop playback (GIF loop count, flipbook JSON `loop`). Default true.
+    pub loop_: bool,
+    /// Sprite-sheet layout for [`Format::Flipbook`].
+    pub flipbook: FlipbookOptions,
+    /// Linear-light colour that formats without alpha (MP4, GIF) composite over. Default black.
+    pub background: [f32; 3],
+}
+
+impl Default for WriteOptions {
+    fn default() -> Self {
+        WriteOptions {
+            format: None,
+            fps: 30.0,
+            loop_: true,
+            flipbook: FlipbookOptions::default(),
+            background: [0.0; 3],
+        }
+    }
+}
+
+/// One output format's encoder.
+pub(crate) trait Sink: Send {
+    fn push(&mut self, frame: &RgbaFrame) -> Result<()>;
+    /// Completes the output and renames it into place.
+    fn finish(self: Box<Self>) -> Result<Vec<PathBuf>>;
+}
+
+/// A writer of frames of one size; see the module docs for formats and atomicity.
+pub struct FrameWriter {
+    sink: Option<Box<dyn Sink>>,
+    size: Size,
+    output_size: Size,
+    frames: u64,
+    path: PathBuf,
+    format: Format,
+}
+
+/// Creates a writer for frames of `size` at `path`.
+pub fn create(path: &Path, size: Size, opts: &WriteOptions) -> Result<FrameWriter> {
+    let size = Size::new(size.width, size.height)?;
+    if !(opts.fps.is_finite() && opts.fps > 0.0) {
+        return Err(MediaError::bad(
+            "fps",
+            format!("{} must be a finite number > 0, e.g. 30", opts.fps),
+        ));
+    }
+    let format = match opts.format {
+        Some(f) => f,
+        None => Format::from_path(path)?,
+    };
+    let mut output_size = size;
+    let sink: Box<dyn Sink> = match format {
+        Format::PngSequence | Format::ExrSequence => Box::new(sequence_out::SequenceSink::new(
+            path,
+            format == Format::ExrSequence,
+        )?),
+        Format::Gif => Box::new(gif_out::GifSink::new(path, size, opts)?),
+        Format::Mp4 => {
+            let s = mp4_out::Mp4Sink::new(path, size, opts)?;
+            output_size = s.output_size();
+            Box::new(s)
+        }
+        Format::Flipbook => Box::new(flipbook::FlipbookSink::new(path, size, opts)?),
+    };
+    Ok(FrameWriter {
+        sink: Some(sink),
+        size,
+        output_size,
+        frames: 0,
+        path: path.to_path_buf(),
+        format,
+    })
+}
+
+impl FrameWriter {
+    /// Encodes one frame (linear light, straight alpha, of the size given to [`create`]).
+    /// After an error the writer is unusable and `finish` returns an error.
+    pub fn push(&mut self, frame: &RgbaFrame) -> Result<()> {
+        if frame.size() != self.size {
+            return Err(MediaError::bad(
+                "frame",
+                format!(
+                    "frame {} is {}, but this writer was created for {}",
+                    self.frames,
+                    frame.size(),
+                    self.size
+                ),
+            ));
+        }
+        let sink = self
+            .sink
+            .as_mut()
+            .ok_or_else(|| MediaError::encode(&self.path, "an earlier frame failed"))?;
+        if let Err(e) = sink.push(frame) {
+            self.sink = None; // drops the temporary output
+            return Err(e);
+        }
+        self.frames += 1;
+        Ok(())
+    }
+
+    /// Completes the output and moves it into place; returns every path written (for a
+    /// flipbook: the PNG then the JSON; for a sequence: each frame in order).
+    pub fn finish(mut self) -> Result<Vec<PathBuf>> {
+        let sink = self
+            .sink
+            .take()
+            .ok_or_else(|| MediaError::encode(&self.path, "an earlier frame failed"))?;
+        if self.frames == 0 {
+            return Err(MediaError::bad(
+                "frames",
+                format!("no frames were written to {}", self.path.display()),
+            ));
+        }
+        sink.finish()
+    }
+
+    /// Frames pushed so far.
+    pub fn frames(&self) -> u64 {
+        self.frames
+    }
+    /// The format being written.
+    pub fn format(&self) -> Format {
+        self.format
+    }
+    /// The size of frames in the file: the input size, except MP4 pads odd sides to even.
+    pub fn output_size(&self) -> Size {
+        self.output_size
+    }
+}
+
+/// A hidden temporary file next to `path`, deleted on drop unless persisted.
+pub(crate) fn temp_file_for(path: &Path) -> Result<tempfile::NamedTempFile> {
+    let dir = parent_dir(path);
+    std::fs::create_dir_all(&dir).map_err(|e| MediaError::io(&dir, e))?;
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let mut b = tempfile::Builder::new();
+    let prefix = format!(".{name}.");
+    b.prefix(&prefix).suffix(".partial");
+    // tempfile creates 0600 files; outputs are ordinary files others must read (web
+    // servers, game engines, render farms), so use the usual 0644.
+    #[cfg(unix)]
+    b.permissions(std::os::unix::fs::PermissionsExt::from_mode(0o644));
+    b.tempfile_in(&dir)
+        .map_err(|e| MediaError::io(&dir, e))
+}
+
+/// Flushes and renames a temporary file into place.
+pub(crate) fn persist(tmp: tempfile::NamedTempFile, path: &Path) -> Result<()> {
+    tmp.as_file()
+        .sync_all()
+        .map_err(|e| MediaError::io(tmp.path(), e))?;
+    tmp.persist(path)
+        .map_err(|e| MediaError::io(path, e.error))?;
+    Ok(())
+}
+
+pub(crate) fn parent_dir(path: &Path) -> PathBuf {
+    match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    }
+}
+
+/// Encodes 8-bit RGBA as PNG into `w`.
+pub(crate) fn encode_png(w: impl Write, size: Size, rgba: &[u8]) -> image::ImageResult<()> {
+    use image::codecs::png::{CompressionType, FilterType, PngEncoder};
+    use image::ImageEncoder;
+    PngEncoder::new_with_quality(w, CompressionType::Fast, FilterType::Adaptive).write_image(
+        rgba,
+        size.width,
+        size.height,
+        image::ExtendedColorType::Rgba8,
+    )
+}
+
+/// Writes one still as an 8-bit sRGB PNG with straight alpha, atomically.
+pub fn write_png(path: &Path, frame: &RgbaFrame) -> Result<()> {
+    let tmp = temp_file_for(path)?;
+    let rgba = crate::convert::to_srgba8(frame);
+    {
+        let mut w = std::io::BufWriter::new(tmp.as_file());
+        encode_png(&mut w, frame.size(), &rgba)
+            .map_err(|e| MediaError::encode(path, e.to_string()))?;
+        w.flush().map_err(|e| MediaError::io(tmp.path(), e))?;
+    }
+    persist(tmp, path)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn format_from_path() {
+        assert_eq!(
+            Format::from_path(Path::new("a/fire.mp4")).unwrap(),
+            Format::Mp4
+        );
+        assert_eq!(
+            Format::from_path(Path::new("fire.GIF")).unwrap(),
+            Format::Gif
+        );
+        assert_eq!(
+            Format::from_path(Path::new("fire.png")).unwrap(),
+            Format::Flipbook
+        );
+        assert_eq!(
+            Format::from_path(Path::new("out/")).unwrap(),
+            Format::PngSequence
+        );
+        assert_eq!(
+            Format::from_path(Path::new("f/%04d.png")).unwrap(),
+            Format::PngSequence
+        );
+        assert_eq!(
+            Format::from_path(Path::new("f/%04d.exr")).unwrap(),
+            Format::ExrSequence
+        );
+        assert!(Format::from_path(Path::new("fire.webm")).is_err());
+        assert!(Format::from_path(Path::new("f/%04d.jpg")).is_err());
+    }
+}

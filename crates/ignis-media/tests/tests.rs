@@ -1,0 +1,907 @@
+//! Integration tests of `ignis-media`: the shared footage, writer round trips, bad input.
+//!
+//! Tests needing `../shared/data` or `ffmpeg` print why they skipped and return.
+
+use std::path::{Path, PathBuf};
+
+use ignis_core::palette::srgb_to_linear;
+use ignis_media::*;
+
+fn data(name: &str) -> Option<PathBuf> {
+    let p = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/data")).join(name);
+    if p.exists() {
+        Some(p)
+    } else {
+        println!("skipped: ../shared/data not present");
+        None
+    }
+}
+
+fn have_ffmpeg() -> bool {
+    let ok = ffmpeg_available();
+    if !ok {
+        println!("skipped: ffmpeg/ffprobe not on PATH");
+    }
+    ok
+}
+
+/// A frame whose colours are exact 8-bit sRGB codes and alpha exact 8-bit values, so
+/// 8-bit round trips are exact. `alpha` picks opaque or a pattern.
+fn test_frame(size: Size, t: u32, alpha: bool) -> RgbaFrame {
+    let mut f = RgbaFrame::new(size);
+    let (w, h) = (size.width, size.height);
+    for y in 0..h {
+        for x in 0..w {
+            // Smooth gradients plus a moving bright blob: codec-friendly, fire-like.
+            let dx = x as f32 - (w as f32 * 0.3 + t as f32 * 1.5);
+            let dy = y as f32 - h as f32 * 0.5;
+            let blob = (-(dx * dx + dy * dy) / (0.05 * (w * w) as f32)).exp();
+            let r = (40.0 + 200.0 * blob + 15.0 * x as f32 / w as f32) as u32;
+            let g = (20.0 + 150.0 * blob * blob + 20.0 * y as f32 / h as f32) as u32;
+            let b = (10.0 + 40.0 * blob.powi(4)) as u32;
+            let a = if alpha {
+                [255u32, 128, 64, 0, 200][((x / 3 + y / 2) % 5) as usize]
+            } else {
+                255
+            };
+            let c = |v: u32| srgb_to_linear(v.min(255) as f32 / 255.0);
+            f.set(x, y, [c(r), c(g), c(b), a as f32 / 255.0]);
+        }
+    }
+    f
+}
+
+/// Mean absolute error between two frames in 8-bit sRGB levels (colour only).
+fn mae_srgb8(a: &RgbaFrame, b: &RgbaFrame) -> f64 {
+    use ignis_core::palette::linear_to_srgb;
+    assert_eq!(a.size(), b.size());
+    let mut sum = 0.0;
+    for (p, q) in a.data().iter().zip(b.data()) {
+        for c in 0..3 {
+            sum += ((linear_to_srgb(p[c]) - linear_to_srgb(q[c])) * 255.0).abs() as f64;
+        }
+    }
+    sum / (a.data().len() * 3) as f64
+}
+
+fn write_all(path: &Path, frames: &[RgbaFrame], opts: &WriteOptions) -> Vec<PathBuf> {
+    let mut w = create(path, frames[0].size(), opts).unwrap();
+    for f in frames {
+        w.push(f).unwrap();
+    }
+    w.finish().unwrap()
+}
+
+fn read_all(path: &Path) -> Vec<RgbaFrame> {
+    open(path, &ReadOptions::default())
+        .unwrap()
+        .collect::<Result<Vec<_>, _>>()
+        .unwrap()
+}
+
+fn dir_entries(dir: &Path) -> Vec<String> {
+    let mut v: Vec<String> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    v.sort();
+    v
+}
+
+mod footage {
+    use super::*;
+
+    #[test]
+    fn candle_pure_cargo_path_counts_796_frames() {
+        let Some(path) = data("candle.mp4") else {
+            return;
+        };
+        let info = probe(&path).unwrap();
+        assert_eq!(info.decoder, Decoder::Openh264);
+        assert_eq!(info.size, Size::new(480, 480).unwrap());
+        assert_eq!(info.frame_count, Some(796));
+        assert!((info.fps - 30.0).abs() < 0.1, "fps {}", info.fps);
+        assert!(
+            info.codec.starts_with("h264 (") && info.codec.contains("Baseline"),
+            "{}",
+            info.codec
+        );
+        let mut n = 0;
+        for f in open(&path, &ReadOptions::default()).unwrap() {
+            assert_eq!(f.unwrap().size(), info.size);
+            n += 1;
+        }
+        assert_eq!(n, 796);
+    }
+
+    #[test]
+    fn candle_range_seeks_to_the_same_frames() {
+        let Some(path) = data("candle.mp4") else {
+            return;
+        };
+        let seq: Vec<RgbaFrame> = open(
+            &path,
+            &ReadOptions {
+                range: Some(FrameRange::frames(0, Some(95))),
+                ..Default::default()
+            },
+        )
+        .unwrap()
+        .collect::<Result<_, _>>()
+        .unwrap();
+        assert_eq!(seq.len(), 95);
+        let opts = ReadOptions {
+            range: Some(FrameRange::frames(90, Some(95))),
+            ..Default::default()
+        };
+        let reader = open(&path, &opts).unwrap();
+        assert_eq!(reader.info().frame_count, Some(5));
+        let ranged: Vec<RgbaFrame> = reader.collect::<Result<_, _>>().unwrap();
+        assert_eq!(ranged.len(), 5);
+        for (a, b) in ranged.iter().zip(&seq[90..]) {
+            assert_eq!(a, b);
+        }
+        // Seconds: 1.0 s .. 1.1 s at 30 fps = frames 30, 31, 32.
+        let opts = ReadOptions {
+            range: Some(FrameRange::seconds(1.0, Some(1.1))),
+            ..Default::default()
+        };
+        let r = open(&path, &opts).unwrap();
+        assert_eq!(r.position(), 30);
+        assert_eq!(r.count(), 3);
+    }
+
+    #[test]
+    fn candle_crop_and_scale() {
+        let Some(path) = data("candle.mp4") else {
+            return;
+        };
+        let opts = ReadOptions {
+            range: Some(FrameRange::frames(0, Some(2))),
+            crop: Some(Rect {
+                x: 100,
+                y: 50,
+                width: 200,
+                height: 300,
+            }),
+            scale: Some(Size::new(50, 75).unwrap()),
+        };
+        let r = open(&path, &opts).unwrap();
+        assert_eq!(r.info().size, Size::new(50, 75).unwrap());
+        assert_eq!(r.source_info().size, Size::new(480, 480).unwrap());
+        let frames: Vec<_> = r.collect::<Result<_, _>>().unwrap();
+        assert_eq!(frames.len(), 2);
+        assert_eq!(frames[0].size(), Size::new(50, 75).unwrap());
+        let bad = ReadOptions {
+            crop: Some(Rect {
+                x: 400,
+                y: 0,
+                width: 100,
+                height: 10,
+            }),
+            ..Default::default()
+        };
+        assert!(matches!(
+            open(&path, &bad),
+            Err(MediaError::BadParameter { name: "crop", .. })
+        ));
+    }
+
+    #[test]
+    fn candle_range_errors() {
+        let Some(path) = data("candle.mp4") else {
+            return;
+        };
+        let empty = ReadOptions {
+            range: Some(FrameRange::frames(10, Some(10))),
+            ..Default::default()
+        };
+        let e = open(&path, &empty).err().unwrap();
+        assert!(e.to_string().contains("empty range"), "{e}");
+        let past = ReadOptions {
+            range: Some(FrameRange::frames(790, Some(800))),
+            ..Default::default()
+        };
+        let e = open(&path, &past).err().unwrap();
+        assert!(e.to_string().contains("past the end"), "{e}");
+    }
+
+    #[test]
+    fn campfire_through_ffmpeg() {
+        let Some(path) = data("campfire.mp4") else {
+            return;
+        };
+        if !have_ffmpeg() {
+            return;
+        }
+        let info = probe(&path).unwrap();
+        assert_eq!(info.decoder, Decoder::Ffmpeg);
+        assert_eq!(info.size, Size::new(960, 540).unwrap());
+        assert_eq!(info.frame_count, Some(512));
+        assert!((info.fps - 25.0).abs() < 0.01, "fps {}", info.fps);
+        assert!(info.codec.contains("High"), "{}", info.codec);
+        let opts = ReadOptions {
+            range: Some(FrameRange::frames(100, Some(103))),
+            ..Default::default()
+        };
+        let frames: Vec<_> = open(&path, &opts)
+            .unwrap()
+            .collect::<Result<_, _>>()
+            .unwrap();
+        assert_eq!(frames.len(), 3);
+        let lum = frames[0].luminance();
+        assert!(
+            lum.max() > 0.2,
+            "campfire frame should have bright flames, max {}",
+            lum.max()
+        );
+        assert!(
+            lum.mean() < 0.5,
+            "and a dark night background, mean {}",
+            lum.mean()
+        );
+        // An accurate seek: frame 101 alone equals the second frame of 100..103.
+        let opts = ReadOptions {
+            range: Some(FrameRange::frames(101, Some(102))),
+            ..Default::default()
+        };
+        let one: Vec<_> = open(&path, &opts)
+            .unwrap()
+            .collect::<Result<_, _>>()
+            .unwrap();
+        assert_eq!(one.len(), 1);
+        assert!(mae_srgb8(&one[0], &frames[1]) < 0.01);
+        // Past the end is caught from ffprobe's frame count.
+        let past = ReadOptions {
+            range: Some(FrameRange::frames(500, Some(600))),
+            ..Default::default()
+        };
+        assert!(open(&path, &past).is_err());
+    }
+}
+
+mod probing {
+    use super::*;
+
+    /// Makes a 12-frame 64x48 clip with the system ffmpeg; None if this ffmpeg lacks the codec.
+    fn make(dir: &Path, name: &str, args: &[&str]) -> Option<PathBuf> {
+        let out = dir.join(name);
+        let ok = std::process::Command::new("ffmpeg")
+            .args([
+                "-nostdin",
+                "-y",
+                "-v",
+                "error",
+                "-f",
+                "lavfi",
+                "-i",
+                "testsrc=size=64x48:rate=10",
+                "-frames:v",
+                "12",
+            ])
+            .args(args)
+            .arg(&out)
+            .status()
+            .is_ok_and(|s| s.success());
+        if !ok {
+            println!("skipped {name}: this ffmpeg cannot encode it");
+        }
+        ok.then_some(out)
+    }
+
+    #[test]
+    fn decoder_is_chosen_by_content_not_extension() {
+        if !have_ffmpeg() {
+            return;
+        }
+        let dir = tempfile::tempdir().unwrap();
+        let cases: [(&str, &[&str], Decoder, &str); 4] = [
+            (
+                "base.mp4",
+                &[
+                    "-pix_fmt",
+                    "yuv420p",
+                    "-c:v",
+                    "libx264",
+                    "-profile:v",
+                    "baseline",
+                ],
+                Decoder::Openh264,
+                "Baseline",
+            ),
+            (
+                "main.mp4",
+                &[
+                    "-pix_fmt",
+                    "yuv420p",
+                    "-c:v",
+                    "libx264",
+                    "-profile:v",
+                    "main",
+                ],
+                Decoder::Ffmpeg,
+                "h264 (Main)",
+            ),
+            // An AVI (MJPEG) misnamed .mp4 still goes to ffmpeg.
+            (
+                "avi-named.mp4",
+                &["-c:v", "mjpeg", "-f", "avi"],
+                Decoder::Ffmpeg,
+                "mjpeg",
+            ),
+            ("clip.webm", &["-c:v", "libvpx-vp9"], Decoder::Ffmpeg, "vp9"),
+        ];
+        for (name, args, decoder, codec) in cases {
+            let Some(path) = make(dir.path(), name, args) else {
+                continue;
+            };
+            let info = probe(&path).unwrap();
+            assert_eq!(info.decoder, decoder, "{name}: {info:?}");
+            assert!(info.codec.contains(codec), "{name}: {}", info.codec);
+            assert_eq!(info.size, Size::new(64, 48).unwrap());
+            let frames = read_all(&path);
+            assert_eq!(frames.len(), 12, "{name}");
+            let opts = ReadOptions {
+                range: Some(FrameRange::frames(5, Some(7))),
+                ..Default::default()
+            };
+            let two: Vec<_> = open(&path, &opts)
+                .unwrap()
+                .collect::<Result<_, _>>()
+                .unwrap();
+            assert_eq!(two.len(), 2, "{name}");
+            assert!(
+                mae_srgb8(&two[0], &frames[5]) < 0.01,
+                "{name}: seek gave another frame"
+            );
+        }
+    }
+}
+
+mod roundtrip {
+    use super::*;
+
+    fn size(w: u32, h: u32) -> Size {
+        Size::new(w, h).unwrap()
+    }
+
+    #[test]
+    fn png_sequence_directory_is_exact() {
+        let dir = tempfile::tempdir().unwrap();
+        let frames: Vec<_> = (0..5).map(|t| test_frame(size(17, 13), t, true)).collect();
+        let out = dir.path().join("seq/");
+        let written = write_all(&out, &frames, &WriteOptions::default());
+        assert_eq!(written.len(), 5);
+        assert_eq!(
+            dir_entries(&dir.path().join("seq")),
+            ["0000.png", "0001.png", "0002.png", "0003.png", "0004.png"]
+        );
+        let info = probe(&out).unwrap();
+        assert_eq!(
+            (info.decoder, info.frame_count, info.size),
+            (Decoder::ImageSequence, Some(5), size(17, 13))
+        );
+        assert_eq!(read_all(&out), frames);
+    }
+
+    #[test]
+    fn png_pattern_into_existing_directory_is_exact() {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(dir.path().join("notes.txt"), "keep me").unwrap();
+        let frames: Vec<_> = (0..3).map(|t| test_frame(size(8, 6), t, true)).collect();
+        let pattern = dir.path().join("f_%03d.png");
+        write_all(&pattern, &frames, &WriteOptions::default());
+        assert_eq!(
+            dir_entries(dir.path()),
+            ["f_000.png", "f_001.png", "f_002.png", "notes.txt"]
+        );
+        assert_eq!(read_all(&pattern), frames);
+        // A range and scale on a sequence.
+        let opts = ReadOptions {
+            range: Some(FrameRange::frames(1, None)),
+            scale: Some(size(4, 3)),
+            ..Default::default()
+        };
+        let r: Vec<_> = open(&pattern, &opts)
+            .unwrap()
+            .collect::<Result<_, _>>()
+            .unwrap();
+        assert_eq!(r.len(), 2);
+        assert_eq!(r[0].size(), size(4, 3));
+    }
+
+    #[test]
+    fn exr_sequence_is_exact_f32() {
+        let dir = tempfile::tempdir().unwrap();
+        // Alphas that are powers of two make premultiply/unpremultiply exact; HDR values too.
+        let frames: Vec<_> = (0..3)
+            .map(|t| {
+                let mut f = test_frame(size(9, 7), t, false);
+                for (i, p) in f.data_mut().iter_mut().enumerate() {
+                    p[0] *= 3.7;
+                    p[3] = [1.0, 0.5, 0.25][(i + t as usize) % 3];
+                }
+                f
+            })
+            .collect();
+        let pattern = dir.path().join("exr/%04d.exr");
+        write_all(&pattern, &frames, &WriteOptions::default());
+        assert_eq!(probe(&pattern).unwrap().codec, "exr sequence");
+        assert_eq!(read_all(&pattern), frames);
+    }
+
+    #[test]
+    fn gif_roundtrip_within_palette_error() {
+        let dir = tempfile::tempdir().unwrap();
+        let frames: Vec<_> = (0..8).map(|t| test_frame(size(40, 30), t, false)).collect();
+        let path = dir.path().join("fire.gif");
+        let opts = WriteOptions {
+            fps: 25.0,
+            ..Default::default()
+        };
+        write_all(&path, &frames, &opts);
+        let info = probe(&path).unwrap();
+        assert_eq!((info.decoder, info.size), (Decoder::Gif, size(40, 30)));
+        assert!((info.fps - 25.0).abs() < 1e-9);
+        let back = read_all(&path);
+        assert_eq!(back.len(), 8);
+        for (a, b) in frames.iter().zip(&back) {
+            let e = mae_srgb8(a, b);
+            println!("gif mean abs error {e:.2} levels");
+            // NeuQuant on smooth gradients: documented bound of 3 levels mean abs error.
+            assert!(e < 3.0, "gif mean abs error {e:.2} levels");
+        }
+        let bytes = std::fs::read(&path).unwrap();
+        assert!(
+            bytes.windows(11).any(|w| w == b"NETSCAPE2.0"),
+            "GIF must loop (NETSCAPE extension)"
+        );
+    }
+
+    #[test]
+    fn gif_composites_alpha_over_background() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("bg.gif");
+        let f = RgbaFrame::filled(size(6, 4), [1.0, 1.0, 1.0, 0.0]);
+        let opts = WriteOptions {
+            background: [0.0, 0.0, 1.0],
+            ..Default::default()
+        };
+        write_all(&path, &[f], &opts);
+        let back = read_all(&path);
+        let p = back[0].get(2, 2);
+        assert!(p[0] < 0.01 && p[2] > 0.99 && p[3] == 1.0, "{p:?}");
+    }
+
+    #[test]
+    fn mp4_roundtrip_via_pure_path() {
+        let dir = tempfile::tempdir().unwrap();
+        let frames: Vec<_> = (0..30)
+            .map(|t| test_frame(size(64, 48), t, false))
+            .collect();
+        let path = dir.path().join("fire.mp4");
+        write_all(&path, &frames, &WriteOptions::default());
+        assert_eq!(dir_entries(dir.path()), ["fire.mp4"]);
+        let info = probe(&path).unwrap();
+        assert_eq!(info.decoder, Decoder::Openh264, "{info:?}");
+        assert_eq!((info.size, info.frame_count), (size(64, 48), Some(30)));
+        assert!((info.fps - 30.0).abs() < 1e-6, "fps {}", info.fps);
+        let back = read_all(&path);
+        assert_eq!(back.len(), 30);
+        let worst = frames
+            .iter()
+            .zip(&back)
+            .map(|(a, b)| mae_srgb8(a, b))
+            .fold(0.0, f64::max);
+        println!(
+            "mp4 worst mean abs error {worst:.2} levels, {} bytes",
+            std::fs::metadata(&path).unwrap().len()
+        );
+        // H.264 at 0.3 bit/pixel plus 4:2:0 chroma: documented bound of 4 levels mean abs error.
+        assert!(worst < 4.0, "mp4 mean abs error {worst:.2} levels");
+        ffprobe_checks(&path, 64, 48, 30);
+    }
+
+    #[test]
+    fn mp4_pads_odd_sizes() {
+        let dir = tempfile::tempdir().unwrap();
+        let frames: Vec<_> = (0..4).map(|t| test_frame(size(33, 21), t, false)).collect();
+        let path = dir.path().join("odd.mp4");
+        let mut w = create(&path, size(33, 21), &WriteOptions::default()).unwrap();
+        assert_eq!(w.output_size(), size(34, 22));
+        for f in &frames {
+            w.push(f).unwrap();
+        }
+        w.finish().unwrap();
+        let back = read_all(&path);
+        assert_eq!((back.len(), back[0].size()), (4, size(34, 22)));
+        // The padding repeats the last column.
+        let (a, b) = (back[0].get(32, 5), back[0].get(33, 5));
+        assert!((a[0] - b[0]).abs() < 0.05, "{a:?} {b:?}");
+        ffprobe_checks(&path, 34, 22, 4);
+    }
+
+    /// `ffprobe` reads the stream and `ffmpeg` decodes it without a single error message.
+    fn ffprobe_checks(path: &Path, w: u32, h: u32, n: u32) {
+        if !have_ffmpeg() {
+            return;
+        }
+        let out = std::process::Command::new("ffprobe")
+            .args([
+                "-v",
+                "error",
+                "-select_streams",
+                "v:0",
+                "-count_frames",
+                "-show_entries",
+            ])
+            .arg("stream=codec_name,profile,width,height,nb_frames,nb_read_frames")
+            .args(["-of", "default=noprint_wrappers=1"])
+            .arg(path)
+            .output()
+            .unwrap();
+        let text = String::from_utf8_lossy(&out.stdout);
+        assert!(
+            out.status.success() && out.stderr.is_empty(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        for want in [
+            "codec_name=h264".to_string(),
+            format!("width={w}"),
+            format!("height={h}"),
+            format!("nb_read_frames={n}"),
+        ] {
+            assert!(text.contains(&want), "ffprobe output lacks {want}:\n{text}");
+        }
+        let dec = std::process::Command::new("ffmpeg")
+            .args(["-v", "error", "-i"])
+            .arg(path)
+            .args(["-f", "null", "-"])
+            .output()
+            .unwrap();
+        assert!(
+            dec.status.success() && dec.stderr.is_empty(),
+            "{}",
+            String::from_utf8_lossy(&dec.stderr)
+        );
+    }
+
+    #[test]
+    fn flipbook_sheet_and_json_roundtrip() {
+        let dir = tempfile::tempdir().unwrap();
+        let frames: Vec<_> = (0..10).map(|t| test_frame(size(12, 10), t, true)).collect();
+        let path = dir.path().join("fire.png");
+        let opts = WriteOptions {
+            fps: 24.0,
+            flipbook: FlipbookOptions {
+                padding: 2,
+                ..Default::default()
+            },
+            ..Default::default()
+        };
+        let written = write_all(&path, &frames, &opts);
+        let json = dir.path().join("fire.json");
+        assert_eq!(written, [path.clone(), json.clone()]);
+        assert_eq!(dir_entries(dir.path()), ["fire.json", "fire.png"]);
+        let fb = read_flipbook(&json).unwrap();
+        let m = &fb.meta;
+        assert_eq!(
+            (m.image.as_str(), m.frame_width, m.frame_height),
+            ("fire.png", 12, 10)
+        );
+        assert_eq!((m.columns, m.rows, m.frame_count, m.padding), (4, 3, 10, 2));
+        assert_eq!((m.fps, m.loop_, m.alpha), (24.0, true, AlphaMode::Straight));
+        assert_eq!(m.order, "row-major, top-left first");
+        // The sheet has exactly the size the JSON implies, and the padding bleeds edges.
+        let sheet = read_image(&path).unwrap();
+        assert_eq!(sheet.size(), size(4 * 16, 3 * 14));
+        assert_eq!(sheet.get(16, 14), frames[5].get(0, 0)); // cell (1,1) corner = frame 5 (0,0)
+        assert_eq!(sheet.get(16 + 2, 14 + 2), frames[5].get(0, 0));
+        assert_eq!(sheet.get(16 + 15, 14 + 8), frames[5].get(11, 6));
+        assert_eq!(fb.frames, frames);
+        let text = std::fs::read_to_string(&json).unwrap();
+        for key in [
+            "\"frame_width\"",
+            "\"columns\"",
+            "\"rows\"",
+            "\"frame_count\"",
+            "\"loop\"",
+            "\"padding\"",
+            "\"alpha\": \"straight\"",
+        ] {
+            assert!(text.contains(key), "{key} missing from {text}");
+        }
+    }
+
+    #[test]
+    fn flipbook_premultiplied() {
+        let dir = tempfile::tempdir().unwrap();
+        let frames: Vec<_> = (0..3).map(|t| test_frame(size(5, 5), t, true)).collect();
+        let path = dir.path().join("pm.png");
+        let opts = WriteOptions {
+            flipbook: FlipbookOptions {
+                alpha: AlphaMode::Premultiplied,
+                columns: Some(3),
+                ..Default::default()
+            },
+            ..Default::default()
+        };
+        write_all(&path, &frames, &opts);
+        let fb = read_flipbook(&dir.path().join("pm.json")).unwrap();
+        assert_eq!(
+            (fb.meta.columns, fb.meta.rows, fb.meta.alpha),
+            (3, 1, AlphaMode::Premultiplied)
+        );
+        for (a, b) in frames.iter().zip(&fb.frames) {
+            for (p, q) in a.data().iter().zip(b.data()) {
+                if p[3] >= 0.25 {
+                    for c in 0..3 {
+                        assert!((p[c] - q[c]).abs() < 0.03, "{p:?} vs {q:?}");
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn jpeg_sequence_and_tiff_still() {
+        let dir = tempfile::tempdir().unwrap();
+        let seq = dir.path().join("jpg");
+        std::fs::create_dir(&seq).unwrap();
+        let img = image::RgbImage::from_fn(20, 10, |x, y| {
+            image::Rgb([(x * 12) as u8, (y * 25) as u8, 128])
+        });
+        for i in 0..3 {
+            img.save(seq.join(format!("frame{i}.jpg"))).unwrap();
+        }
+        let info = probe(&seq).unwrap();
+        assert_eq!(
+            (info.codec.as_str(), info.frame_count, info.size),
+            ("jpg sequence", Some(3), size(20, 10))
+        );
+        let frames = read_all(&seq);
+        assert_eq!(frames.len(), 3);
+        let p = frames[0].get(10, 5);
+        assert!(
+            (p[0] - srgb_to_linear(120.0 / 255.0)).abs() < 0.03 && p[3] == 1.0,
+            "{p:?}"
+        );
+        let tif = dir.path().join("still.tif");
+        img.save(&tif).unwrap();
+        let f = read_image(&tif).unwrap();
+        assert_eq!(f.get(3, 4)[0], srgb_to_linear(36.0 / 255.0));
+        assert_eq!(probe(&tif).unwrap().decoder, Decoder::Image);
+    }
+
+    #[test]
+    fn still_png_is_exact() {
+        let dir = tempfile::tempdir().unwrap();
+        let f = test_frame(size(7, 5), 1, true);
+        let path = dir.path().join("still.png");
+        write_png(&path, &f).unwrap();
+        assert_eq!(read_image(&path).unwrap(), f);
+        let info = probe(&path).unwrap();
+        assert_eq!((info.decoder, info.frame_count), (Decoder::Image, Some(1)));
+        assert_eq!(dir_entries(dir.path()), ["still.png"]);
+    }
+}
+
+mod bad_input {
+    use super::*;
+
+    #[test]
+    fn missing_file() {
+        let e = probe(Path::new("/nonexistent/ignis/fire.mp4")).unwrap_err();
+        assert!(
+            matches!(&e, MediaError::Io { source, .. } if source.kind() == std::io::ErrorKind::NotFound),
+            "{e}"
+        );
+        assert!(e.to_string().contains("/nonexistent/ignis/fire.mp4"));
+        assert!(open(
+            Path::new("/nonexistent/ignis/%04d.png"),
+            &ReadOptions::default()
+        )
+        .is_err());
+    }
+
+    #[test]
+    fn zero_byte_files() {
+        let dir = tempfile::tempdir().unwrap();
+        for name in ["empty.mp4", "empty.png", "empty.gif"] {
+            let p = dir.path().join(name);
+            std::fs::write(&p, b"").unwrap();
+            let e = open(&p, &ReadOptions::default()).err().unwrap();
+            assert!(matches!(e, MediaError::Decode { .. }), "{e}");
+            assert!(e.to_string().contains("empty"), "{e}");
+            assert!(read_image(&p).is_err());
+        }
+    }
+
+    #[test]
+    fn garbage_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("noise.mp4");
+        std::fs::write(
+            &p,
+            (0..5000u32)
+                .map(|i| (i * 7919 % 251) as u8)
+                .collect::<Vec<_>>(),
+        )
+        .unwrap();
+        assert!(open(&p, &ReadOptions::default()).is_err());
+    }
+
+    #[test]
+    fn truncated_mp4() {
+        let dir = tempfile::tempdir().unwrap();
+        let frames: Vec<_> = (0..10)
+            .map(|t| test_frame(Size::new(32, 32).unwrap(), t, false))
+            .collect();
+        let path = dir.path().join("whole.mp4");
+        write_all(&path, &frames, &WriteOptions::default());
+        let bytes = std::fs::read(&path).unwrap();
+        for cut in [8, 40, bytes.len() / 2, bytes.len() - 20] {
+            let t = dir.path().join(format!("cut{cut}.mp4"));
+            std::fs::write(&t, &bytes[..cut]).unwrap();
+            let result =
+                open(&t, &ReadOptions::default()).and_then(|r| r.collect::<Result<Vec<_>, _>>());
+            let e = result.expect_err("a truncated MP4 must not decode cleanly");
+            assert!(matches!(e, MediaError::Decode { .. }), "{e}");
+        }
+    }
+
+    #[test]
+    fn truncated_footage_errors_without_panicking() {
+        let Some(path) = data("candle.mp4") else {
+            return;
+        };
+        let dir = tempfile::tempdir().unwrap();
+        let bytes = std::fs::read(&path).unwrap();
+        let t = dir.path().join("candle-cut.mp4");
+        std::fs::write(&t, &bytes[..bytes.len() / 3]).unwrap();
+        let result =
+            open(&t, &ReadOptions::default()).and_then(|r| r.collect::<Result<Vec<_>, _>>());
+        assert!(result.is_err());
+    }
+
+    #[test]
+    fn mixed_frame_sizes_name_the_offender() {
+        let dir = tempfile::tempdir().unwrap();
+        let s = |w, h| Size::new(w, h).unwrap();
+        write_png(&dir.path().join("f01.png"), &RgbaFrame::new(s(8, 8))).unwrap();
+        write_png(&dir.path().join("f02.png"), &RgbaFrame::new(s(8, 8))).unwrap();
+        write_png(&dir.path().join("f03.png"), &RgbaFrame::new(s(9, 8))).unwrap();
+        write_png(&dir.path().join("f04.png"), &RgbaFrame::new(s(7, 8))).unwrap();
+        let e = open(dir.path(), &ReadOptions::default()).err().unwrap();
+        match &e {
+            MediaError::Decode { path, .. } => assert!(path.ends_with("f03.png"), "{e}"),
+            other => panic!("expected a decode error, got {other}"),
+        }
+        assert!(
+            e.to_string().contains("f03.png") && e.to_string().contains("9x8"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn empty_frame_in_sequence_is_named() {
+        let dir = tempfile::tempdir().unwrap();
+        write_png(
+            &dir.path().join("a0.png"),
+            &RgbaFrame::new(Size::new(4, 4).unwrap()),
+        )
+        .unwrap();
+        std::fs::write(dir.path().join("a1.png"), b"").unwrap();
+        let e = open(dir.path(), &ReadOptions::default()).err().unwrap();
+        assert!(
+            e.to_string().contains("a1.png") && e.to_string().contains("empty"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn sequence_range_errors() {
+        let dir = tempfile::tempdir().unwrap();
+        for i in 0..3 {
+            write_png(
+                &dir.path().join(format!("{i}.png")),
+                &RgbaFrame::new(Size::new(4, 4).unwrap()),
+            )
+            .unwrap();
+        }
+        let r = |a, b| ReadOptions {
+            range: Some(FrameRange::frames(a, b)),
+            ..Default::default()
+        };
+        assert!(open(dir.path(), &r(2, Some(1))).is_err());
+        assert!(open(dir.path(), &r(3, None)).is_err());
+        assert!(open(dir.path(), &r(1, Some(4))).is_err());
+        assert_eq!(open(dir.path(), &r(1, Some(3))).unwrap().count(), 2);
+    }
+
+    /// Every format: a writer dropped half-way, or one with no frames, leaves nothing.
+    #[test]
+    fn failed_writes_leave_nothing() {
+        let size = Size::new(16, 12).unwrap();
+        let frame = test_frame(size, 0, true);
+        for name in [
+            "a.mp4",
+            "a.gif",
+            "a.png",
+            "seq/",
+            "pat/%04d.png",
+            "exr/%04d.exr",
+        ] {
+            let dir = tempfile::tempdir().unwrap();
+            let path = dir.path().join(name);
+            // Dropped without finish.
+            let mut w = create(&path, size, &WriteOptions::default()).unwrap();
+            w.push(&frame).unwrap();
+            w.push(&frame).unwrap();
+            // A wrong-size frame is refused without writing.
+            assert!(w.push(&RgbaFrame::new(Size::new(3, 3).unwrap())).is_err());
+            drop(w);
+            assert!(
+                dir_entries(dir.path()).is_empty(),
+                "{name}: left {:?}",
+                dir_entries(dir.path())
+            );
+            // Finished with no frames.
+            let w = create(&path, size, &WriteOptions::default()).unwrap();
+            assert!(w.finish().is_err());
+            assert!(
+                dir_entries(dir.path()).is_empty(),
+                "{name}: left {:?}",
+                dir_entries(dir.path())
+            );
+        }
+        // A sequence into an existing directory leaves that directory as it was.
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::create_dir(dir.path().join("out")).unwrap();
+        let mut w = create(&dir.path().join("out"), size, &WriteOptions::default()).unwrap();
+        w.push(&frame).unwrap();
+        drop(w);
+        assert!(dir_entries(&dir.path().join("out")).is_empty());
+    }
+
+    #[test]
+    fn bad_write_parameters() {
+        let dir = tempfile::tempdir().unwrap();
+        let size = Size::new(4, 4).unwrap();
+        let e = create(&dir.path().join("x.webm"), size, &WriteOptions::default())
+            .err()
+            .unwrap();
+        assert!(
+            matches!(e, MediaError::BadParameter { name: "path", .. }),
+            "{e}"
+        );
+        let e = create(
+            &dir.path().join("x.gif"),
+            size,
+            &WriteOptions {
+                fps: 0.0,
+                ..Default::default()
+            },
+        )
+        .err()
+        .unwrap();
+        assert!(
+            matches!(e, MediaError::BadParameter { name: "fps", .. }),
+            "{e}"
+        );
+        let opts = WriteOptions {
+            flipbook: FlipbookOptions {
+                columns: Some(1),
+                rows: Some(1),
+                ..Default::default()
+            },
+            ..Default::default()
+        };
+        let mut w = create(&dir.path().join("fb.png"), size, &opts).unwrap();
+        w.push(&RgbaFrame::new(size)).unwrap();
+        w.push(&RgbaFrame::new(size)).unwrap();
+        assert!(w.finish().is_err());
+        assert!(dir_entries(dir.path()).is_empty());
+    }
+}
