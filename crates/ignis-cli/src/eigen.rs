@@ -6,7 +6,9 @@ use crate::global::Global;
 use anyhow::{bail, Context, Result};
 use ignis_core::Size;
 use ignis_eigen::analysis::{self, ESelect};
-use ignis_eigen::train::{ClipInput, ClipSource, ClipSpec, FrameIter, Progress, TrainConfig, TrainParams};
+use ignis_eigen::train::{
+    ClipInput, ClipSource, ClipSpec, FrameIter, Progress, TrainConfig, TrainParams,
+};
 use ignis_eigen::{plot, EigenfireDb, PreprocessParams};
 use std::path::{Path, PathBuf};
 
@@ -14,7 +16,9 @@ use std::path::{Path, PathBuf};
 #[derive(clap::Subcommand, Debug)]
 pub enum Command {
     /// Train an Eigenfire database from videos (default settings) or from a clips.toml.
-    #[command(after_help = "Examples:\n  ignis eigen train candle.mp4 campfire.mp4 -o fire.db\n  ignis eigen train clips.toml -o fire.db\n  ignis eigen train candle.mp4 --stride 2 --train-size 82x134 --keep 99% -o fire.db\n\nclips.toml:\n  [[clip]]\n  name = \"candle\"\n  path = \"candle.mp4\"\n  start = 0\n  end = 400\n  stride = 2\n  [preprocess]\n  train_size = \"102x168\"\n  [train]\n  pack_size = 100\n  e_detect = \"95%\"")]
+    #[command(
+        after_help = "Examples:\n  ignis eigen train candle.mp4 campfire.mp4 -o fire.db\n  ignis eigen train clips.toml -o fire.db\n  ignis eigen train candle.mp4 --stride 2 --train-size 82x134 --keep 99% -o fire.db\n\nclips.toml:\n  [[clip]]\n  name = \"candle\"\n  path = \"candle.mp4\"\n  start = 0\n  end = 400\n  stride = 2\n  [preprocess]\n  train_size = \"102x168\"\n  [train]\n  pack_size = 100\n  e_detect = \"95%\""
+    )]
     Train(TrainArgs),
     /// Describe a database: clips, frames, resolution, E, spectrum, thresholds, size.
     #[command(after_help = "Example:\n  ignis eigen info fire.db --json")]
@@ -24,11 +28,15 @@ pub enum Command {
     #[command(after_help = "Example:\n  ignis eigen plot fire.db -o plots/")]
     Plot(PlotArgs),
     /// Reconstruct one training frame with E Eigenfires (eq. 22).
-    #[command(after_help = "Example:\n  ignis eigen reconstruct fire.db --clip candle --frame 120 --eigenfires 50 -o f.png")]
+    #[command(
+        after_help = "Example:\n  ignis eigen reconstruct fire.db --clip candle --frame 120 --eigenfires 50 -o f.png"
+    )]
     Reconstruct(ReconstructArgs),
     /// Run pre-processing on a clip and write every stage's image, so you can see what
     /// each step does.
-    #[command(after_help = "Example:\n  ignis eigen preprocess candle.mp4 --config pre.toml -o stages/\n  ignis eigen preprocess candle.mp4 --print-config > pre.toml")]
+    #[command(
+        after_help = "Example:\n  ignis eigen preprocess candle.mp4 --config pre.toml -o stages/\n  ignis eigen preprocess candle.mp4 --print-config > pre.toml"
+    )]
     Preprocess(PreprocessArgs),
 }
 
@@ -147,7 +155,13 @@ pub struct PreprocessArgs {
     pub end: Option<usize>,
     #[arg(long, default_value_t = 1)]
     pub stride: usize,
-    /// Print the default settings as TOML and exit.
+    /// Size of the training frames, e.g. 102x168 (overrides the config).
+    #[arg(long)]
+    pub train_size: Option<Size>,
+    /// Common pre-processed frame size, e.g. 410x670 (overrides the config).
+    #[arg(long)]
+    pub frame_size: Option<Size>,
+    /// Print the settings (defaults, or --config with overrides) as TOML and exit.
     #[arg(long)]
     pub print_config: bool,
 }
@@ -172,7 +186,11 @@ struct Bars<'g> {
 impl Progress for Bars<'_> {
     fn stage(&mut self, name: &str, len: u64) {
         self.finish_stage();
-        self.bar = Some(if len == 0 { self.g.spinner(name) } else { self.g.progress(len, name) });
+        self.bar = Some(if len == 0 {
+            self.g.spinner(name)
+        } else {
+            self.g.progress(len, name)
+        });
     }
     fn inc(&mut self, n: u64) {
         if let Some(b) = &self.bar {
@@ -196,7 +214,10 @@ fn media_source(path: &Path) -> Result<ClipSource<'static>> {
         size: info.size,
         frame_count: info.frame_count.map(|n| n as usize),
         open: Box::new(move |start| {
-            let opts = ignis_media::ReadOptions { range: Some(ignis_media::FrameRange::frames(start as u64, None)), ..Default::default() };
+            let opts = ignis_media::ReadOptions {
+                range: Some(ignis_media::FrameRange::frames(start as u64, None)),
+                ..Default::default()
+            };
             let r = ignis_media::open(&p, &opts).map_err(|e| e.to_string())?;
             Ok(Box::new(r.map(|f| f.map_err(|e| e.to_string()))) as FrameIter<'static>)
         }),
@@ -209,9 +230,19 @@ fn clip_name(path: &Path, taken: &[String]) -> String {
         .map(|s| s.to_string_lossy().into_owned())
         .unwrap_or_else(|| "clip".into())
         .chars()
-        .map(|c| if c.is_ascii_alphanumeric() || c == '-' || c == '_' { c } else { '_' })
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
+                c
+            } else {
+                '_'
+            }
+        })
         .collect();
-    let mut name = if stem.is_empty() { "clip".to_string() } else { stem };
+    let mut name = if stem.is_empty() {
+        "clip".to_string()
+    } else {
+        stem
+    };
     let base = name.clone();
     let mut i = 2;
     while taken.contains(&name) {
@@ -225,7 +256,8 @@ fn read_preprocess(config: Option<&Path>) -> Result<PreprocessParams> {
     match config {
         None => Ok(PreprocessParams::default()),
         Some(p) => {
-            let text = std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?;
+            let text =
+                std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?;
             PreprocessParams::from_toml(&text).with_context(|| format!("reading {}", p.display()))
         }
     }
@@ -235,9 +267,11 @@ fn train(a: TrainArgs, g: &Global) -> Result<()> {
     let is_toml = a.inputs.len() == 1 && a.inputs[0].extension().is_some_and(|e| e == "toml");
     let (specs, mut pre, mut tp) = if is_toml {
         let p = &a.inputs[0];
-        let text = std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?;
+        let text =
+            std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?;
         let base = p.parent().unwrap_or(Path::new("."));
-        let c = TrainConfig::from_toml(&text, base).with_context(|| format!("reading {}", p.display()))?;
+        let c = TrainConfig::from_toml(&text, base)
+            .with_context(|| format!("reading {}", p.display()))?;
         (c.clips, c.preprocess, c.train)
     } else {
         let mut specs: Vec<ClipSpec> = Vec::new();
@@ -250,7 +284,11 @@ fn train(a: TrainArgs, g: &Global) -> Result<()> {
             s.stride = a.stride;
             specs.push(s);
         }
-        (specs, read_preprocess(a.config.as_deref())?, TrainParams::default())
+        (
+            specs,
+            read_preprocess(a.config.as_deref())?,
+            TrainParams::default(),
+        )
     };
     if let Some(s) = a.train_size {
         pre.train_size = Some(s);
@@ -279,13 +317,21 @@ fn train(a: TrainArgs, g: &Global) -> Result<()> {
     for s in specs {
         let source = match (&s.path, s.synthetic) {
             (Some(p), _) => media_source(p).with_context(|| format!("clip `{}`", s.name))?,
-            (None, Some(style)) => ClipSource::synthetic(ignis_eigen::synthetic::SyntheticParams { style, frames: s.end.unwrap_or(120), ..Default::default() }, 30.0),
+            (None, Some(style)) => ClipSource::synthetic(
+                ignis_eigen::synthetic::SyntheticParams {
+                    style,
+                    frames: s.end.unwrap_or(120),
+                    ..Default::default()
+                },
+                30.0,
+            ),
             (None, None) => bail!("clip `{}` has neither a path nor `synthetic`", s.name),
         };
         clips.push(ClipInput { spec: s, source });
     }
     let mut bars = Bars { g, bar: None };
-    let r = ignis_eigen::train(&clips, &pre, &tp, &a.output, &mut bars).with_context(|| format!("training {}", a.output.display()))?;
+    let r = ignis_eigen::train(&clips, &pre, &tp, &a.output, &mut bars)
+        .with_context(|| format!("training {}", a.output.display()))?;
     bars.finish_stage();
     let m = &r.manifest;
     g.say(format!(
@@ -339,9 +385,21 @@ fn info(a: InfoArgs, g: &Global) -> Result<()> {
     }
     let _ = g;
     println!("{}", a.db.display());
-    println!("  frames       {} (training size {}, pre-processed size {})", m.frames, m.train_size, m.frame_size);
-    println!("  Eigenfires   {} stored in {} packs of {}, {} usable", m.components, m.packs.len(), m.pack_size, db.usable_components());
-    println!("  E            detection {}, rendering {}", m.e_detect, m.e_render);
+    println!(
+        "  frames       {} (training size {}, pre-processed size {})",
+        m.frames, m.train_size, m.frame_size
+    );
+    println!(
+        "  Eigenfires   {} stored in {} packs of {}, {} usable",
+        m.components,
+        m.packs.len(),
+        m.pack_size,
+        db.usable_components()
+    );
+    println!(
+        "  E            detection {}, rendering {}",
+        m.e_detect, m.e_render
+    );
     println!(
         "  spectrum     λ1..3 = {}; 90% variance at E={}, 95% at {}, 99% at {}; stored Eigenfires retain {:.2}%",
         ev.iter().take(3).map(|v| format!("{v:.4}")).collect::<Vec<_>>().join(", "),
@@ -375,11 +433,17 @@ fn info(a: InfoArgs, g: &Global) -> Result<()> {
 }
 
 fn write_gray(path: &Path, f: &ignis_core::GrayFrame) -> Result<()> {
-    ignis_media::write_png(path, &f.to_rgba()).with_context(|| format!("writing {}", path.display()))
+    ignis_media::write_png(path, &f.to_rgba())
+        .with_context(|| format!("writing {}", path.display()))
 }
 
 /// Writes every analysis figure of `db` into `dir`; returns `(file name, caption)`.
-pub fn write_plots(db: &EigenfireDb, dir: &Path, sheet: usize, compression: bool) -> Result<Vec<(String, String)>> {
+pub fn write_plots(
+    db: &EigenfireDb,
+    dir: &Path,
+    sheet: usize,
+    compression: bool,
+) -> Result<Vec<(String, String)>> {
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let mut out = Vec::new();
     let p = dir.join("scatter3d.png");
@@ -388,25 +452,51 @@ pub fn write_plots(db: &EigenfireDb, dir: &Path, sheet: usize, compression: bool
     for c in db.clips() {
         let f = format!("weights-{}.png", c.name);
         plot::weight_clusters(db, &c.name, 0, 31, 10, &dir.join(&f), (900, 450))?;
-        out.push((f, format!("Clip {}: weights of Eigenfires 1-10 over 31 consecutive frames (Figure 27)", c.name)));
+        out.push((
+            f,
+            format!(
+                "Clip {}: weights of Eigenfires 1-10 over 31 consecutive frames (Figure 27)",
+                c.name
+            ),
+        ));
         let f = format!("frame-weights-{}.png", c.name);
         plot::frame_weights(db, c.first_row, 100, &dir.join(&f), (900, 400))?;
-        out.push((f, format!("Clip {}: the first 100 weights of one frame (Figure 28)", c.name)));
+        out.push((
+            f,
+            format!(
+                "Clip {}: the first 100 weights of one frame (Figure 28)",
+                c.name
+            ),
+        ));
     }
     plot::spectrum(db, &dir.join("spectrum.png"), (800, 450))?;
-    out.push(("spectrum.png".into(), "Eigenvalue spectrum and retained variance".into()));
+    out.push((
+        "spectrum.png".into(),
+        "Eigenvalue spectrum and retained variance".into(),
+    ));
     let s = analysis::eigenfire_sheet(db, sheet, 8)?;
     write_gray(&dir.join("eigenfires.png"), &s)?;
-    out.push(("eigenfires.png".into(), format!("The first {sheet} Eigenfires scaled by eq. 19-20")));
+    out.push((
+        "eigenfires.png".into(),
+        format!("The first {sheet} Eigenfires scaled by eq. 19-20"),
+    ));
     if compression {
         let k = db.usable_components();
-        let mut es: Vec<usize> = [1, 2, 5, 10, 20, 50, 100, 200, 500, 1000].iter().copied().filter(|&e| e < k).collect();
+        let mut es: Vec<usize> = [1, 2, 5, 10, 20, 50, 100, 200, 500, 1000]
+            .iter()
+            .copied()
+            .filter(|&e| e < k)
+            .collect();
         es.push(k);
         let rep = analysis::compression_report(db, &es, 8, &db.manifest().preprocess.hermite)?;
         plot::compression_chart(&rep, &dir.join("compression.png"), (800, 450))?;
         let json = serde_json::to_string_pretty(&rep)?;
-        std::fs::write(dir.join("compression.json"), json).with_context(|| format!("writing {}", dir.join("compression.json").display()))?;
-        out.push(("compression.png".into(), "PSNR against E, with and without Hermite clean-up (data in compression.json)".into()));
+        std::fs::write(dir.join("compression.json"), json)
+            .with_context(|| format!("writing {}", dir.join("compression.json").display()))?;
+        out.push((
+            "compression.png".into(),
+            "PSNR against E, with and without Hermite clean-up (data in compression.json)".into(),
+        ));
     }
     Ok(out)
 }
@@ -429,24 +519,42 @@ fn reconstruct(a: ReconstructArgs, g: &Global) -> Result<()> {
     let herm = db.manifest().preprocess.hermite.clone();
     let f = analysis::reconstruct_row(&db, row, e, a.hermite.then_some(&herm))?;
     write_gray(&a.output, &f)?;
-    g.say(format!("wrote {} ({} frame {} with E = {})", a.output.display(), a.clip, a.frame, e.min(db.usable_components())));
+    g.say(format!(
+        "wrote {} ({} frame {} with E = {})",
+        a.output.display(),
+        a.clip,
+        a.frame,
+        e.min(db.usable_components())
+    ));
     Ok(())
 }
 
 fn preprocess(a: PreprocessArgs, g: &Global) -> Result<()> {
-    let pre = read_preprocess(a.config.as_deref())?;
+    let mut pre = read_preprocess(a.config.as_deref())?;
+    if let Some(s) = a.train_size {
+        pre.train_size = Some(s);
+    }
+    if let Some(s) = a.frame_size {
+        pre.pose.frame_size = s;
+    }
     if a.print_config {
         print!("{}", pre.to_toml());
         return Ok(());
     }
-    let (Some(input), Some(out)) = (a.input, a.output) else { bail!("give an input and -o DIR") };
+    let (Some(input), Some(out)) = (a.input, a.output) else {
+        bail!("give an input and -o DIR")
+    };
     let mut spec = ClipSpec::new(&clip_name(&input, &[]));
     spec.start = a.start;
     spec.end = a.end;
     spec.stride = a.stride;
-    let clip = ClipInput { source: media_source(&input)?, spec };
+    let clip = ClipInput {
+        source: media_source(&input)?,
+        spec,
+    };
     let mut bars = Bars { g, bar: None };
-    let stages = ignis_eigen::train::preprocess_clip(&clip, &pre, &a.frames, &mut bars).with_context(|| format!("pre-processing {}", input.display()))?;
+    let stages = ignis_eigen::train::preprocess_clip(&clip, &pre, &a.frames, &mut bars)
+        .with_context(|| format!("pre-processing {}", input.display()))?;
     bars.finish_stage();
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
     for (frame, st) in &stages {
@@ -455,7 +563,12 @@ fn preprocess(a: PreprocessArgs, g: &Global) -> Result<()> {
             ignis_media::write_png(&p, img).with_context(|| format!("writing {}", p.display()))?;
         }
     }
-    g.say(format!("wrote {} stage images for {} frames to {}", stages.iter().map(|s| s.1.images.len()).sum::<usize>(), stages.len(), out.display()));
+    g.say(format!(
+        "wrote {} stage images for {} frames to {}",
+        stages.iter().map(|s| s.1.images.len()).sum::<usize>(),
+        stages.len(),
+        out.display()
+    ));
     Ok(())
 }
 
@@ -467,21 +580,73 @@ pub fn demo(ctx: &mut crate::demo::Demo) -> Result<()> {
         "Eigenfires I (eigenfires thesis ch. 3-4)",
         "Two synthetic flame clips rendered by Ignis are pre-processed (HSV mask, contours, Hermite background removal, pose normalisation), a PCA gives the Eigenfires, and every frame becomes a vector of weights.",
     );
-    let (size, frames, train) = if ctx.quick { (Size { width: 48, height: 64 }, 10, Size { width: 24, height: 32 }) } else { (Size { width: 96, height: 128 }, 60, Size { width: 60, height: 96 }) };
-    let clips: Vec<ClipInput> = [("candle", FlameStyle::Candle), ("campfire", FlameStyle::Campfire)]
-        .into_iter()
-        .map(|(name, style)| ClipInput { spec: ClipSpec::new(name), source: ClipSource::synthetic(SyntheticParams { size, frames, style, seed: ctx.seed }, 30.0) })
-        .collect();
-    let mut pre = PreprocessParams::with_sizes(Size { width: train.width * 2, height: train.height * 2 }, Some(train));
+    let (size, frames, train) = if ctx.quick {
+        (
+            Size {
+                width: 48,
+                height: 64,
+            },
+            10,
+            Size {
+                width: 24,
+                height: 32,
+            },
+        )
+    } else {
+        (
+            Size {
+                width: 96,
+                height: 128,
+            },
+            60,
+            Size {
+                width: 60,
+                height: 96,
+            },
+        )
+    };
+    let clips: Vec<ClipInput> = [
+        ("candle", FlameStyle::Candle),
+        ("campfire", FlameStyle::Campfire),
+    ]
+    .into_iter()
+    .map(|(name, style)| ClipInput {
+        spec: ClipSpec::new(name),
+        source: ClipSource::synthetic(
+            SyntheticParams {
+                size,
+                frames,
+                style,
+                seed: ctx.seed,
+            },
+            30.0,
+        ),
+    })
+    .collect();
+    let mut pre = PreprocessParams::with_sizes(
+        Size {
+            width: train.width * 2,
+            height: train.height * 2,
+        },
+        Some(train),
+    );
     pre.pose_samples = 8;
-    let tp = TrainParams { pack_size: 16, store_frames: true, ..Default::default() };
-    let dbp = ctx.path("eigen/fire.db/x")?.parent().map(Path::to_path_buf).context("demo path")?;
-    let mut bars = Bars { g: &ctx.global, bar: None };
-    let r = ignis_eigen::train(&clips, &pre, &tp, &dbp, &mut bars).context("training the demo Eigenfire database")?;
+    let tp = TrainParams {
+        pack_size: 16,
+        store_frames: true,
+        ..Default::default()
+    };
+    let dbp = ctx.path("eigen/fire.db")?;
+    let mut bars = Bars {
+        g: &ctx.global,
+        bar: None,
+    };
+    let r = ignis_eigen::train(&clips, &pre, &tp, &dbp, &mut bars)
+        .context("training the demo Eigenfire database")?;
     bars.finish_stage();
     let db = open_db(&dbp)?;
     let settings = format!("2 synthetic clips × {frames} frames at {size}, seed {}, training size {train}, {} Eigenfires", ctx.seed, r.manifest.components);
-    let plots = ctx.path("eigen/plots/x")?.parent().map(Path::to_path_buf).context("demo path")?;
+    let plots = ctx.path("eigen/plots")?;
     let files = write_plots(&db, &plots, 16, true)?;
     for (f, caption) in files {
         ctx.item(&format!("eigen/plots/{f}"), &caption, &settings);
@@ -496,6 +661,10 @@ pub fn demo(ctx: &mut crate::demo::Demo) -> Result<()> {
     let sheet = analysis::contact_sheet(&strip, 4, 2)?;
     let p = ctx.path("eigen/reconstruct.png")?;
     write_gray(&p, &sheet)?;
-    ctx.item("eigen/reconstruct.png", &format!("A campfire frame reconstructed with E = 1, 3, 10 and {k} (eq. 22)"), &settings);
+    ctx.item(
+        "eigen/reconstruct.png",
+        &format!("A campfire frame reconstructed with E = 1, 3, 10 and {k} (eq. 22)"),
+        &settings,
+    );
     Ok(())
 }

@@ -6,6 +6,7 @@
 mod classic;
 mod convert;
 mod demo;
+mod eigen;
 mod global;
 mod info;
 mod output;
@@ -42,6 +43,9 @@ enum Cmd {
     Convert(convert::Args),
     /// The main job: every method on built-in defaults, written with a gallery page.
     Demo(DemoArgs),
+    /// Eigenfires: train a PCA database on real fire footage, analyse and reconstruct.
+    #[command(subcommand)]
+    Eigen(eigen::Command),
     /// Headline performance figures of a method as one JSON object.
     Bench(BenchArgs),
 }
@@ -61,10 +65,10 @@ struct DemoArgs {
 }
 
 #[derive(clap::Args, Debug)]
-#[command(after_help = "Examples:\n  ignis bench classic\n  ignis bench classic --quick")]
+#[command(after_help = "Examples:\n  ignis bench classic\n  ignis bench classic --quick\n  ignis bench eigen-train")]
 struct BenchArgs {
     /// What to measure.
-    #[arg(value_parser = ["classic"])]
+    #[arg(value_parser = ["classic", "eigen-train"])]
     target: String,
     /// Fewer repetitions (a smoke test; figures are noisier).
     #[arg(long)]
@@ -85,10 +89,12 @@ fn run(cli: Cli) -> Result<()> {
         Cmd::Classic(a) => classic::run(&a, &g).map(|_| ()),
         Cmd::Info(a) => info::run(&a),
         Cmd::Convert(a) => convert::run(&a, &g).map(|_| ()),
+        Cmd::Eigen(c) => eigen::run(c, &g),
         Cmd::Demo(a) => {
             let t = std::time::Instant::now();
             let mut d = demo::Demo::new(&a.output, g.clone(), a.seed, a.quick)?;
             classic::demo(&mut d)?;
+            eigen::demo(&mut d)?;
             let index = d.finish()?;
             g.say(format!("done in {:.1} s; open {}", t.elapsed().as_secs_f64(), index.display()));
             Ok(())
@@ -96,6 +102,7 @@ fn run(cli: Cli) -> Result<()> {
         Cmd::Bench(a) => {
             let v = match a.target.as_str() {
                 "classic" => classic::bench(a.quick)?,
+                "eigen-train" => ignis_pca::bench_figures(a.quick),
                 other => anyhow::bail!("unknown bench target `{other}`"),
             };
             println!("{}", serde_json::to_string_pretty(&v)?);

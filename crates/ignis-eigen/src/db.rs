@@ -1,0 +1,648 @@
+//! The Eigenfire database on disk (thesis §4.1 "off-line mode", §4.8 packs).
+//!
+//! A directory:
+//! ```text
+//! fire.db/
+//!   manifest.json        readable: format version, clips (source, range, stride, fps,
+//!                        resolution, pose, thresholds), pre-processing settings, E for
+//!                        detection and rendering, SHA-256 and size of every data file
+//!   mean.npy             Ψ, eq. (12): (H, W) f32 at the training size
+//!   eigenvalues.npy      (k,) f64, descending
+//!   weights.npy          Ω, eq. (18): (M, k) f32, one row per training frame
+//!   angles.npy           (M,) f32, rotation applied by pose normalisation (radians)
+//!   packs/pack_001.npy   Eigenfires 1..=P as (P, H, W) f32, then pack_002.npy, ...
+//!   frames/<clip>.npy    optional full-resolution pre-processed frames (F, H', W') f32
+//! ```
+//! Every array is a NumPy `.npy` file. Dropping the last packs is the compression of §4.8:
+//! the database then offers fewer Eigenfires. Loading memory-maps each file lazily; a
+//! pack's checksum is verified the first time it is used, and a missing, truncated or
+//! corrupt pack is reported by file name and never used. Writing is atomic: everything
+//! goes to a temporary directory beside the target, which then replaces the target by
+//! rename (the previous database is moved aside first and deleted last, so a crash leaves
+//! either the old or the new database, never a mixture).
+//!
+//! Departure: the thesis writes an XML file plus binary packages; JSON + `.npy` are used
+//! so that numpy and any JSON reader can open the database.
+
+use crate::error::{EigenError, Result};
+use crate::npy::{self, Header};
+use crate::pose::ClipPose;
+use crate::preprocess::PreprocessParams;
+use ignis_core::{GrayFrame, Size};
+use memmap2::Mmap;
+use serde::{Deserialize, Serialize};
+use sha2::{Digest, Sha256};
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
+
+/// Name of the format in the manifest.
+pub const FORMAT: &str = "ignis-eigenfires";
+/// Current format version; databases with a larger version are refused.
+pub const VERSION: u32 = 1;
+
+/// One data file listed in the manifest.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct FileEntry {
+    /// Path relative to the database directory.
+    pub file: String,
+    /// Size in bytes.
+    pub bytes: u64,
+    /// SHA-256 of the whole file, lowercase hex.
+    pub sha256: String,
+}
+
+/// A pack of Eigenfires.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PackEntry {
+    #[serde(flatten)]
+    pub entry: FileEntry,
+    /// Index (0-based) of the first Eigenfire in the pack.
+    pub first: usize,
+    /// Number of Eigenfires in the pack.
+    pub count: usize,
+}
+
+/// Consecutive-frame distances of a clip in PCA space (§4.5–4.6) and the thresholds
+/// suggested from them.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, Default)]
+pub struct Thresholds {
+    /// Components used for the distances (E for detection).
+    pub e: usize,
+    /// Mean distance between consecutive training frames.
+    pub mean: f64,
+    pub min: f64,
+    pub max: f64,
+    /// Indices (within the clip) of frames whose distance to the next one is a local
+    /// maximum above mean + one standard deviation (jumps in the motion).
+    pub peaks: Vec<usize>,
+    /// Suggested θ_min: the 10th percentile of the consecutive distances (candidates
+    /// nearer than this are "the same frame", §4.5).
+    pub theta_min: f64,
+    /// Suggested θ_average: the mean consecutive distance (§4.6).
+    pub theta_average: f64,
+}
+
+/// One training clip.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ClipEntry {
+    /// Name used on the command line (`--clip candle`).
+    pub name: String,
+    /// Where the frames came from (a path or `synthetic:<style>`).
+    pub source: String,
+    /// Source frame range `[start, end)` and stride actually used.
+    pub start: usize,
+    pub end: usize,
+    pub stride: usize,
+    /// Frames per second of the source (divide by `stride` for the training rate).
+    pub fps: f64,
+    /// Resolution of the source.
+    pub source_size: Size,
+    /// Row of `weights.npy` holding this clip's first frame.
+    pub first_row: usize,
+    /// Number of training frames.
+    pub frames: usize,
+    /// Centring and scaling applied (§3.4).
+    pub pose: ClipPose,
+    /// Suggested thresholds (§4.5–4.6).
+    pub thresholds: Thresholds,
+    /// `frames/<name>.npy` when the full-resolution pre-processed frames are stored.
+    pub frames_file: Option<FileEntry>,
+}
+
+/// The readable description of a database.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Manifest {
+    pub format: String,
+    pub version: u32,
+    /// Program that wrote it.
+    pub created_by: String,
+    /// Size of the training frames (and of the mean and every Eigenfire).
+    pub train_size: Size,
+    /// Common frame size of the pre-processed frames (§3.4).
+    pub frame_size: Size,
+    /// M, training frames over all clips.
+    pub frames: usize,
+    /// k, Eigenfires stored.
+    pub components: usize,
+    /// Eigenfires per pack.
+    pub pack_size: usize,
+    /// Sum of all eigenvalues, retained or not (for retained-variance fractions).
+    pub total_variance: f64,
+    /// E used for recognition/detection (§4.8, §5.1.2).
+    pub e_detect: usize,
+    /// E used for rendering/reconstruction.
+    pub e_render: usize,
+    pub clips: Vec<ClipEntry>,
+    pub preprocess: PreprocessParams,
+    pub mean: FileEntry,
+    pub eigenvalues: FileEntry,
+    pub weights: FileEntry,
+    pub angles: FileEntry,
+    pub packs: Vec<PackEntry>,
+}
+
+/// SHA-256 of a byte slice, lowercase hex.
+pub fn sha256_hex(bytes: &[u8]) -> String {
+    let d = Sha256::digest(bytes);
+    d.iter().map(|b| format!("{b:02x}")).collect()
+}
+
+/// Hashes a file and returns its manifest entry.
+pub fn file_entry(dir: &Path, rel: &str) -> Result<FileEntry> {
+    let p = dir.join(rel);
+    let bytes = std::fs::read(&p).map_err(|e| EigenError::io(&p, e))?;
+    Ok(FileEntry {
+        file: rel.into(),
+        bytes: bytes.len() as u64,
+        sha256: sha256_hex(&bytes),
+    })
+}
+
+/// Atomically replaces `target` by the directory `tmp` (same parent): the old database is
+/// renamed aside, the new one renamed in, then the old one deleted.
+pub fn commit_dir(tmp: &Path, target: &Path) -> Result<()> {
+    let aside = target.with_file_name(format!(
+        ".{}.old-{}",
+        target
+            .file_name()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default(),
+        std::process::id()
+    ));
+    let had_old = target.exists();
+    if had_old {
+        if !target.join("manifest.json").exists()
+            && target
+                .read_dir()
+                .map(|mut d| d.next().is_some())
+                .unwrap_or(true)
+        {
+            return Err(EigenError::bad(
+                "output",
+                format!(
+                    "{} exists and is not an Eigenfire database; refusing to replace it",
+                    target.display()
+                ),
+            ));
+        }
+        std::fs::rename(target, &aside).map_err(|e| EigenError::io(target, e))?;
+    }
+    if let Err(e) = std::fs::rename(tmp, target) {
+        if had_old {
+            let _ = std::fs::rename(&aside, target);
+        }
+        return Err(EigenError::io(target, e));
+    }
+    if had_old {
+        let _ = std::fs::remove_dir_all(&aside);
+    }
+    Ok(())
+}
+
+/// A temporary directory beside `target` for an atomic write.
+pub fn temp_dir_for(target: &Path) -> Result<PathBuf> {
+    let parent = match target.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    std::fs::create_dir_all(&parent).map_err(|e| EigenError::io(&parent, e))?;
+    let name = target
+        .file_name()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "db".into());
+    let tmp = parent.join(format!(".{name}.tmp-{}", std::process::id()));
+    if tmp.exists() {
+        std::fs::remove_dir_all(&tmp).map_err(|e| EigenError::io(&tmp, e))?;
+    }
+    std::fs::create_dir_all(tmp.join("packs")).map_err(|e| EigenError::io(&tmp, e))?;
+    std::fs::create_dir_all(tmp.join("frames")).map_err(|e| EigenError::io(&tmp, e))?;
+    Ok(tmp)
+}
+
+/// A memory-mapped, checked `.npy` file.
+struct Mapped {
+    map: Mmap,
+    header: Header,
+}
+
+impl Mapped {
+    fn f32(&self) -> std::borrow::Cow<'_, [f32]> {
+        npy::f32_data(&self.map, &self.header)
+    }
+}
+
+/// An opened Eigenfire database. Cheap to open: only the manifest, mean, eigenvalues,
+/// weights and angles are read (and their checksums verified); packs and stored frames are
+/// mapped and verified on first use.
+pub struct EigenfireDb {
+    dir: PathBuf,
+    manifest: Manifest,
+    mean: Vec<f32>,
+    eigenvalues: Vec<f64>,
+    weights: Mapped,
+    /// A copy of the weights when the file's data is not 4-byte aligned (not written by
+    /// us); otherwise the map is used in place.
+    weights_copy: Option<Vec<f32>>,
+    angles: Vec<f32>,
+    packs: Vec<OnceLock<std::result::Result<Mapped, String>>>,
+    frames: Vec<OnceLock<std::result::Result<Mapped, String>>>,
+}
+
+impl std::fmt::Debug for EigenfireDb {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("EigenfireDb")
+            .field("dir", &self.dir)
+            .field("frames", &self.manifest.frames)
+            .field("components", &self.manifest.components)
+            .finish()
+    }
+}
+
+fn map_checked(db: &Path, entry: &FileEntry, verify: bool) -> std::result::Result<Mapped, String> {
+    let p = db.join(&entry.file);
+    let f = std::fs::File::open(&p).map_err(|e| format!("missing or unreadable ({e})"))?;
+    let len = f.metadata().map_err(|e| e.to_string())?.len();
+    if len != entry.bytes {
+        return Err(format!(
+            "truncated or resized: {len} bytes, the manifest says {}",
+            entry.bytes
+        ));
+    }
+    // SAFETY: the database is written once (atomically) and treated as read-only; a
+    // concurrent external modification could change the mapped bytes, which at worst
+    // gives wrong numbers, never unsoundness for plain f32 data.
+    let map = unsafe { Mmap::map(&f) }.map_err(|e| format!("cannot map ({e})"))?;
+    if verify {
+        let h = sha256_hex(&map);
+        if h != entry.sha256 {
+            return Err(format!(
+                "checksum mismatch (corrupt): sha256 {h}, the manifest says {}",
+                entry.sha256
+            ));
+        }
+    }
+    let header = npy::parse_header(&map)?;
+    if header.file_len() != map.len() {
+        return Err(format!(
+            "array header says {} bytes, file has {}",
+            header.file_len(),
+            map.len()
+        ));
+    }
+    Ok(Mapped { map, header })
+}
+
+impl EigenfireDb {
+    /// Opens the database at `dir`. Fails (naming the file) when the manifest, mean,
+    /// eigenvalues, weights or angles are missing or corrupt; packs are checked lazily (see
+    /// [`EigenfireDb::verify`] to check everything now).
+    pub fn open(dir: &Path) -> Result<EigenfireDb> {
+        let dberr = |file: &str, reason: String| EigenError::Database {
+            db: dir.to_path_buf(),
+            file: file.into(),
+            reason,
+        };
+        let mpath = dir.join("manifest.json");
+        let text = std::fs::read_to_string(&mpath).map_err(|e| {
+            dberr(
+                "manifest.json",
+                format!("cannot read ({e}); is this an Eigenfire database?"),
+            )
+        })?;
+        let manifest: Manifest = serde_json::from_str(&text)
+            .map_err(|e| dberr("manifest.json", format!("malformed: {e}")))?;
+        if manifest.format != FORMAT {
+            return Err(dberr(
+                "manifest.json",
+                format!("format is `{}`, expected `{FORMAT}`", manifest.format),
+            ));
+        }
+        if manifest.version > VERSION {
+            return Err(dberr(
+                "manifest.json",
+                format!(
+                    "format version {} is newer than this program reads ({VERSION})",
+                    manifest.version
+                ),
+            ));
+        }
+        let n = manifest.train_size.pixels();
+        let (m, k) = (manifest.frames, manifest.components);
+        let load = |e: &FileEntry, shape: &[usize]| -> Result<Mapped> {
+            let mp = map_checked(dir, e, true).map_err(|r| dberr(&e.file, r))?;
+            if mp.header.len() != shape.iter().product::<usize>() {
+                return Err(dberr(
+                    &e.file,
+                    format!(
+                        "shape {:?} does not match the manifest ({shape:?})",
+                        mp.header.shape
+                    ),
+                ));
+            }
+            Ok(mp)
+        };
+        let mean = load(&manifest.mean, &[n])?.f32().into_owned();
+        let ev = load(&manifest.eigenvalues, &[k])?;
+        let eigenvalues = npy::f64_data(&ev.map, &ev.header);
+        let weights = load(&manifest.weights, &[m, k])?;
+        let weights_copy = match weights.f32() {
+            std::borrow::Cow::Borrowed(_) => None,
+            std::borrow::Cow::Owned(v) => Some(v),
+        };
+        let angles = load(&manifest.angles, &[m])?.f32().into_owned();
+        let mut first = 0;
+        for p in &manifest.packs {
+            if p.first != first || p.count == 0 {
+                return Err(dberr(
+                    &p.entry.file,
+                    "packs are not contiguous in the manifest".into(),
+                ));
+            }
+            first += p.count;
+        }
+        if first != k {
+            return Err(dberr(
+                "manifest.json",
+                format!("packs hold {first} Eigenfires, the manifest says {k}"),
+            ));
+        }
+        let packs = manifest.packs.iter().map(|_| OnceLock::new()).collect();
+        let frames = manifest.clips.iter().map(|_| OnceLock::new()).collect();
+        Ok(EigenfireDb {
+            dir: dir.to_path_buf(),
+            manifest,
+            mean,
+            eigenvalues,
+            weights,
+            weights_copy,
+            angles,
+            packs,
+            frames,
+        })
+    }
+
+    /// The database directory.
+    pub fn path(&self) -> &Path {
+        &self.dir
+    }
+    pub fn manifest(&self) -> &Manifest {
+        &self.manifest
+    }
+    pub fn clips(&self) -> &[ClipEntry] {
+        &self.manifest.clips
+    }
+    /// Size of the mean and of every Eigenfire.
+    pub fn train_size(&self) -> Size {
+        self.manifest.train_size
+    }
+    /// Ψ, the mean training frame.
+    pub fn mean(&self) -> GrayFrame {
+        GrayFrame::from_vec(self.manifest.train_size, self.mean.clone()).expect("checked at open")
+    }
+    /// Eigenvalues, descending (length k).
+    pub fn eigenvalues(&self) -> &[f64] {
+        &self.eigenvalues
+    }
+    /// M, number of training frames.
+    pub fn n_frames(&self) -> usize {
+        self.manifest.frames
+    }
+    /// k, number of Eigenfires stored (some may be in unusable packs).
+    pub fn n_components(&self) -> usize {
+        self.manifest.components
+    }
+    /// All weights, M×k, row `i` = training frame `i` (see [`EigenfireDb::frame_index`]).
+    pub fn weights(&self) -> faer::MatRef<'_, f32> {
+        let s: &[f32] = match (&self.weights_copy, self.weights.f32()) {
+            (Some(v), _) => v,
+            (None, std::borrow::Cow::Borrowed(s)) => s,
+            (None, std::borrow::Cow::Owned(_)) => unreachable!("alignment was checked at open"),
+        };
+        faer::MatRef::from_row_major_slice(s, self.manifest.frames, self.manifest.components)
+    }
+    /// Weights of training frame `i` (length k).
+    pub fn frame_weights(&self, i: usize) -> Vec<f32> {
+        let w = self.weights();
+        (0..w.ncols()).map(|j| w[(i, j)]).collect()
+    }
+    /// Rotation (radians) pose normalisation applied to training frame `i`.
+    pub fn angle(&self, i: usize) -> f32 {
+        self.angles[i]
+    }
+    /// Row of clip `clip`'s source frame `frame`, if that frame was trained on.
+    pub fn frame_index(&self, clip: &str, frame: usize) -> Result<usize> {
+        let c = self.clip(clip)?;
+        if frame < c.start || frame >= c.end || (frame - c.start) % c.stride != 0 {
+            return Err(EigenError::bad(
+                "frame",
+                format!("clip `{clip}` was trained on frames {}..{} every {}; frame {frame} is not one of them", c.start, c.end, c.stride),
+            ));
+        }
+        let j = (frame - c.start) / c.stride;
+        if j >= c.frames {
+            return Err(EigenError::bad(
+                "frame",
+                format!("clip `{clip}` has {} training frames", c.frames),
+            ));
+        }
+        Ok(c.first_row + j)
+    }
+    /// The clip called `name`.
+    pub fn clip(&self, name: &str) -> Result<&ClipEntry> {
+        self.manifest
+            .clips
+            .iter()
+            .find(|c| c.name == name)
+            .ok_or_else(|| {
+                let names: Vec<&str> = self
+                    .manifest
+                    .clips
+                    .iter()
+                    .map(|c| c.name.as_str())
+                    .collect();
+                EigenError::bad(
+                    "clip",
+                    format!(
+                        "no clip `{name}` in the database (clips: {})",
+                        names.join(", ")
+                    ),
+                )
+            })
+    }
+    /// Which clip and source frame training row `i` is.
+    pub fn row_origin(&self, i: usize) -> Option<(&ClipEntry, usize)> {
+        self.manifest
+            .clips
+            .iter()
+            .find(|c| i >= c.first_row && i < c.first_row + c.frames)
+            .map(|c| (c, c.start + (i - c.first_row) * c.stride))
+    }
+
+    fn pack(&self, p: usize) -> Result<&Mapped> {
+        let e = &self.manifest.packs[p];
+        let r = self.packs[p].get_or_init(|| {
+            let mp = map_checked(&self.dir, &e.entry, true)?;
+            if mp.header.len() != e.count * self.manifest.train_size.pixels()
+                || mp.header.dtype != npy::Dtype::F32
+            {
+                return Err(format!(
+                    "shape {:?} does not match the manifest",
+                    mp.header.shape
+                ));
+            }
+            Ok(mp)
+        });
+        r.as_ref().map_err(|reason| EigenError::Database {
+            db: self.dir.clone(),
+            file: e.entry.file.clone(),
+            reason: reason.clone(),
+        })
+    }
+
+    /// Eigenfire `i` (0-based) as a raw vector of length N. Fails, naming the pack file,
+    /// when its pack is missing, truncated or corrupt.
+    pub fn eigenfire_vec(&self, i: usize) -> Result<std::borrow::Cow<'_, [f32]>> {
+        if i >= self.manifest.components {
+            return Err(EigenError::bad(
+                "eigenfire",
+                format!("index {i} out of range (k = {})", self.manifest.components),
+            ));
+        }
+        let p = i / self.manifest.pack_size;
+        let mp = self.pack(p)?;
+        let n = self.manifest.train_size.pixels();
+        let off = (i - self.manifest.packs[p].first) * n;
+        Ok(match mp.f32() {
+            std::borrow::Cow::Borrowed(s) => std::borrow::Cow::Borrowed(&s[off..off + n]),
+            std::borrow::Cow::Owned(v) => std::borrow::Cow::Owned(v[off..off + n].to_vec()),
+        })
+    }
+
+    /// Eigenfire `i` (0-based) as a frame (raw values, not scaled for display; see
+    /// [`crate::analysis::eigenfire_image`]).
+    pub fn eigenfire(&self, i: usize) -> Result<GrayFrame> {
+        Ok(GrayFrame::from_vec(
+            self.manifest.train_size,
+            self.eigenfire_vec(i)?.into_owned(),
+        )?)
+    }
+
+    /// Eigenfires that can be used: the leading ones whose packs are all intact (checks and
+    /// caches every pack up to the first bad one).
+    pub fn usable_components(&self) -> usize {
+        let mut n = 0;
+        for (p, e) in self.manifest.packs.iter().enumerate() {
+            if self.pack(p).is_err() {
+                break;
+            }
+            n += e.count;
+        }
+        n
+    }
+
+    /// Checks every file now; returns the problems found (file, reason), empty when the
+    /// database is intact.
+    pub fn verify(&self) -> Vec<(String, String)> {
+        let mut bad = Vec::new();
+        for (p, e) in self.manifest.packs.iter().enumerate() {
+            if let Err(EigenError::Database { reason, .. }) = self.pack(p) {
+                bad.push((e.entry.file.clone(), reason));
+            }
+        }
+        for (c, clip) in self.manifest.clips.iter().enumerate() {
+            if clip.frames_file.is_some() {
+                if let Err(e) = self.frames_map(c) {
+                    bad.push((
+                        clip.frames_file
+                            .as_ref()
+                            .map(|f| f.file.clone())
+                            .unwrap_or_default(),
+                        e.to_string(),
+                    ));
+                }
+            }
+        }
+        bad
+    }
+
+    /// Reconstructs a frame from weights with the first `e` Eigenfires, eq. (22):
+    /// I = Ψ + Σ_{i<e} ωᵢ uᵢ. `e` is clamped to the weights' length; fails, naming the pack,
+    /// if a needed pack is unusable.
+    pub fn reconstruct(&self, weights: &[f32], e: usize) -> Result<GrayFrame> {
+        let e = e.min(weights.len()).min(self.manifest.components);
+        let mut out = self.mean.clone();
+        for (i, &w) in weights.iter().enumerate().take(e) {
+            let u = self.eigenfire_vec(i)?;
+            for (o, &v) in out.iter_mut().zip(u.iter()) {
+                *o += w * v;
+            }
+        }
+        Ok(GrayFrame::from_vec(self.manifest.train_size, out)?)
+    }
+
+    /// Euclidean distance between training frames `i` and `j` over the first `e`
+    /// components, eq. (21).
+    pub fn distance(&self, i: usize, j: usize, e: usize) -> f64 {
+        let w = self.weights();
+        let e = e.min(w.ncols());
+        (0..e)
+            .map(|c| ((w[(i, c)] - w[(j, c)]) as f64).powi(2))
+            .sum::<f64>()
+            .sqrt()
+    }
+
+    fn frames_map(&self, c: usize) -> Result<&Mapped> {
+        let clip = &self.manifest.clips[c];
+        let e = clip.frames_file.as_ref().ok_or_else(|| {
+            EigenError::bad(
+                "frames",
+                format!(
+                    "clip `{}` has no stored pre-processed frames (train with store_frames = true)",
+                    clip.name
+                ),
+            )
+        })?;
+        let r = self.frames[c].get_or_init(|| map_checked(&self.dir, e, true));
+        r.as_ref().map_err(|reason| EigenError::Database {
+            db: self.dir.clone(),
+            file: e.file.clone(),
+            reason: reason.clone(),
+        })
+    }
+
+    /// The stored full-resolution pre-processed frame (§7.1.2 fast path) of clip `clip`,
+    /// source frame `frame`.
+    pub fn preprocessed_frame(&self, clip: &str, frame: usize) -> Result<GrayFrame> {
+        let row = self.frame_index(clip, frame)?;
+        let c = self
+            .manifest
+            .clips
+            .iter()
+            .position(|c| c.name == clip)
+            .expect("found by frame_index");
+        let mp = self.frames_map(c)?;
+        let n = self.manifest.frame_size.pixels();
+        let j = row - self.manifest.clips[c].first_row;
+        let data = mp.f32();
+        Ok(GrayFrame::from_vec(
+            self.manifest.frame_size,
+            data[j * n..(j + 1) * n].to_vec(),
+        )?)
+    }
+
+    /// Total size of the database files in bytes.
+    pub fn bytes_on_disk(&self) -> u64 {
+        let m = &self.manifest;
+        let mut b = m.mean.bytes + m.eigenvalues.bytes + m.weights.bytes + m.angles.bytes;
+        b += m.packs.iter().map(|p| p.entry.bytes).sum::<u64>();
+        b += m
+            .clips
+            .iter()
+            .filter_map(|c| c.frames_file.as_ref())
+            .map(|f| f.bytes)
+            .sum::<u64>();
+        b + std::fs::metadata(self.dir.join("manifest.json"))
+            .map(|m| m.len())
+            .unwrap_or(0)
+    }
+}

@@ -1,0 +1,363 @@
+//! HSV masks and their clean-up: multi-range masks combined by union, intersection or
+//! difference, then morphology and smoothing.
+//!
+//! Source: eigenfires-thesis.txt §3.2.1, eq. (3)–(4), Figure 17.
+//!
+//! Pixel conventions: input frames are linear light; the HSV thresholds are on the
+//! **sRGB-encoded** colour (what an animator sees and what the thesis's 8-bit OpenCV
+//! values mean), with H in degrees `0..360` and S, V in `0..=1`. A mask is an 8-bit
+//! [`image::GrayImage`], 255 = inside, 0 = outside.
+
+use crate::error::{EigenError, Result};
+use ignis_core::palette::linear_to_srgb;
+use ignis_core::RgbaFrame;
+use image::GrayImage;
+use imageproc::distance_transform::Norm;
+use serde::{Deserialize, Serialize};
+
+/// A box in HSV space. `h[0] > h[1]` wraps around 360° (e.g. `[330, 30]` is the reds).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct HsvRange {
+    /// Hue range in degrees, `0..=360`. Default `[0, 360]` (any hue).
+    #[serde(default = "full_hue")]
+    pub h: [f32; 2],
+    /// Saturation range, `0..=1`. Default `[0, 1]`.
+    #[serde(default = "unit")]
+    pub s: [f32; 2],
+    /// Value (brightness) range, `0..=1`. Default `[0, 1]`.
+    #[serde(default = "unit")]
+    pub v: [f32; 2],
+}
+
+fn full_hue() -> [f32; 2] {
+    [0.0, 360.0]
+}
+fn unit() -> [f32; 2] {
+    [0.0, 1.0]
+}
+
+/// How a layer's range combines with the mask built so far (thesis: "adding",
+/// "subtracting", "difference").
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum Combine {
+    /// `mask ∪ range`.
+    #[default]
+    Union,
+    /// `mask ∩ range`.
+    Intersection,
+    /// `mask \ range` (removes the range from the mask).
+    Difference,
+}
+
+/// One repetition of eq. (4): a range and how it combines.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MaskLayer {
+    #[serde(flatten)]
+    pub range: HsvRange,
+    #[serde(default)]
+    pub combine: Combine,
+}
+
+/// A morphological operation on the mask.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum MorphOp {
+    Dilate,
+    Erode,
+    Open,
+    Close,
+}
+
+/// A morphology step: `op` with a disk (L2 norm) of `radius` pixels.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Morph {
+    pub op: MorphOp,
+    /// Radius in pixels, `1..=50`.
+    pub radius: u8,
+}
+
+/// Settings of [`flame_mask`].
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct MaskParams {
+    /// Layers applied in order to an initially empty mask. Default: everything with
+    /// V ≥ 0.3 (any hue), union the blue root of a flame (H 180–260°, S ≥ 0.3, V ≥ 0.12):
+    /// works on flames filmed on a dark background.
+    pub layers: Vec<MaskLayer>,
+    /// Morphology steps applied in order. Default: close r=2, open r=1.
+    pub morphology: Vec<Morph>,
+    /// Gaussian smoothing of the mask (σ in pixels, 0 = off), re-thresholded at one half.
+    /// Default 1.0.
+    pub smooth_sigma: f32,
+    /// Canny thresholds `[low, high]` (on 8-bit gradient magnitudes) for the `edges`
+    /// stage image; the edges are for inspection and do not change the mask. Default
+    /// `[50, 100]`.
+    pub canny: [f32; 2],
+}
+
+impl Default for MaskParams {
+    fn default() -> Self {
+        MaskParams {
+            layers: vec![
+                MaskLayer {
+                    range: HsvRange {
+                        h: full_hue(),
+                        s: unit(),
+                        v: [0.3, 1.0],
+                    },
+                    combine: Combine::Union,
+                },
+                MaskLayer {
+                    range: HsvRange {
+                        h: [180.0, 260.0],
+                        s: [0.3, 1.0],
+                        v: [0.12, 1.0],
+                    },
+                    combine: Combine::Union,
+                },
+            ],
+            morphology: vec![
+                Morph {
+                    op: MorphOp::Close,
+                    radius: 2,
+                },
+                Morph {
+                    op: MorphOp::Open,
+                    radius: 1,
+                },
+            ],
+            smooth_sigma: 1.0,
+            canny: [50.0, 100.0],
+        }
+    }
+}
+
+impl MaskParams {
+    /// Checks every range and radius.
+    pub fn validate(&self) -> Result<()> {
+        if self.layers.is_empty() {
+            return Err(EigenError::bad(
+                "mask.layers",
+                "needs at least one HSV range",
+            ));
+        }
+        for (i, l) in self.layers.iter().enumerate() {
+            let r = &l.range;
+            let ok_h = r.h.iter().all(|v| (0.0..=360.0).contains(v));
+            let ok_sv =
+                r.s.iter()
+                    .chain(r.v.iter())
+                    .all(|v| (0.0..=1.0).contains(v));
+            if !ok_h || !ok_sv || r.s[0] > r.s[1] || r.v[0] > r.v[1] {
+                return Err(EigenError::bad(
+                    "mask.layers",
+                    format!("layer {i}: h must be within 0..=360, s and v within 0..=1 with min <= max (got h={:?} s={:?} v={:?})", r.h, r.s, r.v),
+                ));
+            }
+        }
+        for m in &self.morphology {
+            if m.radius == 0 || m.radius > 50 {
+                return Err(EigenError::bad(
+                    "mask.morphology",
+                    format!("radius {} must be within 1..=50", m.radius),
+                ));
+            }
+        }
+        if !(0.0..=50.0).contains(&self.smooth_sigma) {
+            return Err(EigenError::bad(
+                "mask.smooth_sigma",
+                "must be within 0..=50 pixels",
+            ));
+        }
+        if !(self.canny[0] >= 0.0 && self.canny[0] <= self.canny[1]) {
+            return Err(EigenError::bad("mask.canny", "needs 0 <= low <= high"));
+        }
+        Ok(())
+    }
+}
+
+/// sRGB-encoded RGB (`0..=1`) → (H degrees, S, V), eq. (3).
+pub fn rgb_to_hsv(r: f32, g: f32, b: f32) -> (f32, f32, f32) {
+    let max = r.max(g).max(b);
+    let min = r.min(g).min(b);
+    let d = max - min;
+    let v = max;
+    let s = if max > 0.0 { d / max } else { 0.0 };
+    let h = if d <= 0.0 {
+        0.0
+    } else if max == r {
+        60.0 * ((g - b) / d).rem_euclid(6.0)
+    } else if max == g {
+        60.0 * ((b - r) / d + 2.0)
+    } else {
+        60.0 * ((r - g) / d + 4.0)
+    };
+    (h, s, v)
+}
+
+impl HsvRange {
+    /// Whether an (H, S, V) triple lies in the range (hue wraps when `h[0] > h[1]`).
+    pub fn contains(&self, h: f32, s: f32, v: f32) -> bool {
+        let in_h = if self.h[0] <= self.h[1] {
+            h >= self.h[0] && h <= self.h[1]
+        } else {
+            h >= self.h[0] || h <= self.h[1]
+        };
+        in_h && s >= self.s[0] && s <= self.s[1] && v >= self.v[0] && v <= self.v[1]
+    }
+}
+
+/// The raw HSV mask of eq. (4) repeated over `layers` (no morphology).
+pub fn hsv_mask(frame: &RgbaFrame, layers: &[MaskLayer]) -> GrayImage {
+    let (w, h) = (frame.width(), frame.height());
+    let mut out = GrayImage::new(w, h);
+    for (px, o) in frame.data().iter().zip(out.as_mut().iter_mut()) {
+        let (hh, s, v) = rgb_to_hsv(
+            linear_to_srgb(px[0]),
+            linear_to_srgb(px[1]),
+            linear_to_srgb(px[2]),
+        );
+        let mut m = false;
+        for l in layers {
+            let inside = l.range.contains(hh, s, v);
+            m = match l.combine {
+                Combine::Union => m || inside,
+                Combine::Intersection => m && inside,
+                Combine::Difference => m && !inside,
+            };
+        }
+        *o = if m { 255 } else { 0 };
+    }
+    out
+}
+
+/// Applies one morphology step.
+pub fn morph(mask: &GrayImage, m: Morph) -> GrayImage {
+    use imageproc::morphology as mo;
+    match m.op {
+        MorphOp::Dilate => mo::dilate(mask, Norm::L2, m.radius),
+        MorphOp::Erode => mo::erode(mask, Norm::L2, m.radius),
+        MorphOp::Open => mo::open(mask, Norm::L2, m.radius),
+        MorphOp::Close => mo::close(mask, Norm::L2, m.radius),
+    }
+}
+
+/// Gaussian smoothing of a binary mask, re-thresholded at 128 (rounds corners, removes
+/// single-pixel specks).
+pub fn smooth_mask(mask: &GrayImage, sigma: f32) -> GrayImage {
+    if sigma <= 0.0 {
+        return mask.clone();
+    }
+    let mut b = imageproc::filter::gaussian_blur_f32(mask, sigma);
+    for v in b.as_mut().iter_mut() {
+        *v = if *v >= 128 { 255 } else { 0 };
+    }
+    b
+}
+
+/// The full mask of §3.2.1: HSV layers, then morphology, then smoothing.
+pub fn flame_mask(frame: &RgbaFrame, p: &MaskParams) -> GrayImage {
+    let mut m = hsv_mask(frame, &p.layers);
+    for step in &p.morphology {
+        m = morph(&m, *step);
+    }
+    smooth_mask(&m, p.smooth_sigma)
+}
+
+/// Canny edges of the mask (for the `edges` stage image).
+pub fn mask_edges(mask: &GrayImage, p: &MaskParams) -> GrayImage {
+    imageproc::edges::canny(mask, p.canny[0], p.canny[1])
+}
+
+/// Number of pixels inside a mask.
+pub fn mask_area(mask: &GrayImage) -> usize {
+    mask.as_raw().iter().filter(|&&v| v > 0).count()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ignis_core::palette::srgb_to_linear;
+    use ignis_core::Size;
+
+    fn px(r: f32, g: f32, b: f32) -> [f32; 4] {
+        [srgb_to_linear(r), srgb_to_linear(g), srgb_to_linear(b), 1.0]
+    }
+
+    #[test]
+    fn hsv_and_combine() {
+        let (h, s, v) = rgb_to_hsv(1.0, 0.0, 0.0);
+        assert_eq!((h, s, v), (0.0, 1.0, 1.0));
+        assert!((rgb_to_hsv(0.0, 0.0, 1.0).0 - 240.0).abs() < 1e-4);
+        let wrap = HsvRange {
+            h: [330.0, 30.0],
+            s: unit(),
+            v: unit(),
+        };
+        assert!(
+            wrap.contains(350.0, 0.5, 0.5)
+                && wrap.contains(10.0, 0.5, 0.5)
+                && !wrap.contains(90.0, 0.5, 0.5)
+        );
+        let f = RgbaFrame::from_vec(
+            Size::new(3, 1).unwrap(),
+            vec![px(1.0, 0.0, 0.0), px(0.0, 0.0, 1.0), px(0.0, 0.0, 0.0)],
+        )
+        .unwrap();
+        let red = MaskLayer {
+            range: HsvRange {
+                h: [330.0, 30.0],
+                s: [0.5, 1.0],
+                v: [0.5, 1.0],
+            },
+            combine: Combine::Union,
+        };
+        let blue = MaskLayer {
+            range: HsvRange {
+                h: [200.0, 260.0],
+                s: [0.5, 1.0],
+                v: [0.5, 1.0],
+            },
+            combine: Combine::Union,
+        };
+        let bright = MaskLayer {
+            range: HsvRange {
+                h: full_hue(),
+                s: unit(),
+                v: [0.5, 1.0],
+            },
+            combine: Combine::Union,
+        };
+        assert_eq!(
+            hsv_mask(&f, &[red.clone(), blue.clone()]).as_raw(),
+            &vec![255, 255, 0]
+        );
+        let inter = MaskLayer {
+            combine: Combine::Intersection,
+            ..red.clone()
+        };
+        assert_eq!(
+            hsv_mask(&f, &[bright.clone(), inter]).as_raw(),
+            &vec![255, 0, 0]
+        );
+        let diff = MaskLayer {
+            combine: Combine::Difference,
+            ..red
+        };
+        assert_eq!(hsv_mask(&f, &[bright, diff]).as_raw(), &vec![0, 255, 0]);
+    }
+
+    #[test]
+    fn defaults_validate() {
+        MaskParams::default().validate().unwrap();
+        let bad = MaskParams {
+            layers: vec![],
+            ..Default::default()
+        };
+        assert!(bad.validate().is_err());
+    }
+}

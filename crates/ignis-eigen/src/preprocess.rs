@@ -1,0 +1,284 @@
+//! The pre-processing pipeline of thesis chapter 3, configured in TOML: mask → contours →
+//! hole removal → Hermite background removal → pose normalisation → grayscale training
+//! frame (optionally resized, §7.1.2).
+//!
+//! Source: eigenfires-thesis.txt §3.2–3.4, §4.2 (common frame size), §7.1.2 (training on
+//! resized frames while the full-resolution pre-processed frames are kept for output).
+//!
+//! Pixel conventions: input [`RgbaFrame`]s and output [`GrayFrame`]s are linear light
+//! (luminance with Rec. 709 weights); masks are 8-bit, 255 = flame.
+
+use crate::contour::{contour_tree, draw_contours, fill_contours, remove_holes, ContourParams};
+use crate::error::{EigenError, Result};
+use crate::hermite::{hermite_darken, HermiteParams};
+use crate::mask::{flame_mask, hsv_mask, mask_area, mask_edges, MaskParams};
+use crate::pose::{lean_angle, mask_extent, resize, warp, ClipPose, MaskExtent, PoseParams};
+use ignis_core::{GrayFrame, RgbaFrame, Size};
+use image::GrayImage;
+use serde::{Deserialize, Serialize};
+
+/// Every pre-processing setting. Parsed from TOML with [`PreprocessParams::from_toml`];
+/// every field has a default that works on flames filmed on a dark background.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct PreprocessParams {
+    /// HSV ranges, morphology, smoothing (§3.2.1).
+    pub mask: MaskParams,
+    /// Hole removal and simplification (§3.2.2–3.2.3).
+    pub contours: ContourParams,
+    /// Background and smoke removal (§3.3).
+    pub hermite: HermiteParams,
+    /// Centring, scaling, rotation, common frame size (§3.4).
+    pub pose: PoseParams,
+    /// Size of the frames the PCA is trained on (§7.1.2); `None` trains at
+    /// `pose.frame_size`. Default 102x168 (a quarter of 410x670 per side).
+    #[serde(default = "default_train_size", with = "crate::pose::size_str::option")]
+    pub train_size: Option<Size>,
+    /// Frames sampled (evenly over the range) to find each clip's pose. Default 24.
+    #[serde(default = "default_pose_samples")]
+    pub pose_samples: usize,
+}
+
+impl Default for PreprocessParams {
+    fn default() -> Self {
+        PreprocessParams {
+            mask: MaskParams::default(),
+            contours: ContourParams::default(),
+            hermite: HermiteParams::default(),
+            pose: PoseParams::default(),
+            train_size: default_train_size(),
+            pose_samples: default_pose_samples(),
+        }
+    }
+}
+
+fn default_train_size() -> Option<Size> {
+    Some(Size {
+        width: 102,
+        height: 168,
+    })
+}
+fn default_pose_samples() -> usize {
+    24
+}
+
+impl PreprocessParams {
+    /// The defaults with training at `train_size` and a common frame size of
+    /// `frame_size`.
+    pub fn with_sizes(frame_size: Size, train_size: Option<Size>) -> Self {
+        let mut p = PreprocessParams {
+            train_size,
+            ..Default::default()
+        };
+        p.pose.frame_size = frame_size;
+        p
+    }
+
+    /// Parses TOML (tables `[mask]`, `[contours]`, `[hermite]`, `[pose]`, keys
+    /// `train_size = "102x168"`, `pose_samples`), then validates.
+    pub fn from_toml(text: &str) -> Result<Self> {
+        let p: PreprocessParams = toml::from_str(text)
+            .map_err(|e| EigenError::bad("pre-processing config", e.to_string()))?;
+        p.validate()?;
+        Ok(p)
+    }
+
+    /// The settings as TOML (what `ignis eigen preprocess --print-config` prints).
+    pub fn to_toml(&self) -> String {
+        toml::to_string_pretty(self).expect("plain data serialises")
+    }
+
+    /// Checks every setting.
+    pub fn validate(&self) -> Result<()> {
+        self.mask.validate()?;
+        self.contours.validate()?;
+        self.hermite.validate()?;
+        self.pose.validate()?;
+        if let Some(s) = self.train_size {
+            Size::new(s.width, s.height)?;
+        }
+        if self.pose_samples == 0 {
+            return Err(EigenError::bad("pose_samples", "must be at least 1"));
+        }
+        Ok(())
+    }
+
+    /// The size of the training frames.
+    pub fn training_size(&self) -> Size {
+        self.train_size.unwrap_or(self.pose.frame_size)
+    }
+}
+
+/// The mask of one frame after contours and hole removal, with what pose needs.
+#[derive(Clone, Debug)]
+pub struct FrameMask {
+    /// The filled contour mask (255 = flame interior).
+    pub mask: GrayImage,
+    /// Lean angle from the weighted least-squares line (radians, 0 = upright).
+    pub angle: Option<f32>,
+    /// Extent of the flame, `None` when nothing is left.
+    pub extent: Option<MaskExtent>,
+}
+
+/// §3.2: mask, contour tree, hole removal, fill.
+pub fn frame_mask(frame: &RgbaFrame, p: &PreprocessParams) -> FrameMask {
+    let m = flame_mask(frame, &p.mask);
+    let nodes = contour_tree(&m);
+    let area = frame.width() as f64 * frame.height() as f64;
+    let keep = remove_holes(&nodes, &p.contours, area);
+    let filled = fill_contours(
+        frame.width(),
+        frame.height(),
+        &nodes,
+        &keep,
+        p.contours.simplify_epsilon,
+    );
+    let angle = if p.pose.rotate {
+        lean_angle(&nodes, &keep).map(|a| a.0)
+    } else {
+        None
+    };
+    FrameMask {
+        extent: mask_extent(&filled),
+        mask: filled,
+        angle,
+    }
+}
+
+/// One pre-processed frame.
+#[derive(Clone, Debug)]
+pub struct Processed {
+    /// At `pose.frame_size`: the full-resolution pre-processed frame (§7.1.2).
+    pub frame: GrayFrame,
+    /// At the training size (what the PCA sees).
+    pub train: GrayFrame,
+    /// Rotation applied (radians), 0 without `pose.rotate`.
+    pub angle: f32,
+    /// Pixels left in the mask.
+    pub mask_pixels: usize,
+}
+
+/// Runs the whole per-frame pipeline with a clip pose already found.
+pub fn preprocess_frame(frame: &RgbaFrame, pose: &ClipPose, p: &PreprocessParams) -> Processed {
+    let fm = frame_mask(frame, p);
+    let gray = hermite_darken(&frame.luminance(), Some(&fm.mask), &p.hermite);
+    let angle = fm.angle.unwrap_or(0.0);
+    let out = warp(&gray, pose, angle, &p.pose);
+    let train = match p.train_size {
+        Some(s) => resize(&out, s),
+        None => out.clone(),
+    };
+    Processed {
+        frame: out,
+        train,
+        angle,
+        mask_pixels: mask_area(&fm.mask),
+    }
+}
+
+/// Every stage of the pipeline for one frame, for `ignis eigen preprocess`.
+#[derive(Clone, Debug)]
+pub struct FrameStages {
+    /// `(stage name, image)` in pipeline order; images are linear-light grey RGBA at the
+    /// source size, except `normalised` (frame size) and `train` (training size).
+    pub images: Vec<(&'static str, RgbaFrame)>,
+    pub processed: Processed,
+}
+
+fn mask_rgba(m: &GrayImage) -> RgbaFrame {
+    let size = Size {
+        width: m.width(),
+        height: m.height(),
+    };
+    GrayFrame::from_vec(size, m.as_raw().iter().map(|&v| v as f32 / 255.0).collect())
+        .expect("same size")
+        .to_rgba()
+}
+
+/// Runs the pipeline keeping every intermediate image: `1-hsv`, `2-mask` (after
+/// morphology and smoothing), `3-edges` (Canny), `4-contours` (kept contours bright,
+/// removed ones dim), `5-filled`, `6-gray`, `7-hermite`, `8-normalised`, `9-train`.
+pub fn preprocess_stages(frame: &RgbaFrame, pose: &ClipPose, p: &PreprocessParams) -> FrameStages {
+    let raw = hsv_mask(frame, &p.mask.layers);
+    let m = flame_mask(frame, &p.mask);
+    let nodes = contour_tree(&m);
+    let keep = remove_holes(
+        &nodes,
+        &p.contours,
+        frame.width() as f64 * frame.height() as f64,
+    );
+    let lines = draw_contours(frame.width(), frame.height(), &nodes, &keep);
+    let filled = fill_contours(
+        frame.width(),
+        frame.height(),
+        &nodes,
+        &keep,
+        p.contours.simplify_epsilon,
+    );
+    let gray = frame.luminance();
+    let herm = hermite_darken(&gray, Some(&filled), &p.hermite);
+    let processed = preprocess_frame(frame, pose, p);
+    let images = vec![
+        ("1-hsv", mask_rgba(&raw)),
+        ("2-mask", mask_rgba(&m)),
+        ("3-edges", mask_rgba(&mask_edges(&m, &p.mask))),
+        ("4-contours", mask_rgba(&lines)),
+        ("5-filled", mask_rgba(&filled)),
+        ("6-gray", gray.to_rgba()),
+        ("7-hermite", herm.to_rgba()),
+        ("8-normalised", processed.frame.to_rgba()),
+        ("9-train", processed.train.to_rgba()),
+    ];
+    FrameStages { images, processed }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::synthetic::{synthetic_clip, SyntheticParams};
+
+    #[test]
+    fn toml_roundtrip_and_defaults() {
+        let p = PreprocessParams::default();
+        let text = toml::to_string(&p).unwrap();
+        assert_eq!(PreprocessParams::from_toml(&text).unwrap(), p);
+        let q = PreprocessParams::from_toml(
+            "train_size = \"64x96\"\n[hermite]\ni_min = 0.2\n[[mask.layers]]\nv = [0.5, 1.0]\n",
+        )
+        .unwrap();
+        assert_eq!(
+            q.train_size,
+            Some(Size {
+                width: 64,
+                height: 96
+            })
+        );
+        assert_eq!(q.hermite.i_min, 0.2);
+        assert_eq!(q.mask.layers.len(), 1);
+        assert!(PreprocessParams::from_toml("[hermite]\ni_min = 0.9\ni_max = 0.1\n").is_err());
+        assert!(PreprocessParams::from_toml("bogus = 1\n").is_err());
+    }
+
+    #[test]
+    fn pipeline_on_synthetic() {
+        let frames = synthetic_clip(&SyntheticParams {
+            frames: 2,
+            ..Default::default()
+        })
+        .unwrap();
+        let p = PreprocessParams::with_sizes(
+            Size::new(48, 80).unwrap(),
+            Some(Size::new(24, 40).unwrap()),
+        );
+        let fm = frame_mask(&frames[0], &p);
+        let e = fm.extent.expect("flame found");
+        let pose = crate::pose::clip_pose("synthetic", &[Some(e)], &p.pose).unwrap();
+        let st = preprocess_stages(&frames[0], &pose, &p);
+        assert_eq!(st.images.len(), 9);
+        assert_eq!(st.processed.train.size(), Size::new(24, 40).unwrap());
+        assert!(st.processed.train.max() > 0.3);
+        // The glow far from the flame is removed.
+        let h = &st.images[6].1;
+        assert_eq!(h.get(2, 2)[0], 0.0);
+    }
+}

@@ -1,0 +1,587 @@
+//! Motion transition between two ranges of Eigenfire weights (T1 + T2), and loops.
+//!
+//! Source: eigenfires-thesis.txt §5.1 (Motion Transition), §5.1.1 (low-pass filter),
+//! §5.1.2 (recognition: `theta_min`, separate E for detection and rendering),
+//! §5.1.2.1 (Direct Bridging), §5.1.2.2 (End Growing Connection, Algorithm 1), and §4.5
+//! (thresholds from the distances of consecutive frames).
+//!
+//! This module works on **weight vectors only**: a [`WeightSpace`] borrows the M×E weight
+//! matrix of a database (row-major, frame `i` = `weights[i*E..(i+1)*E]`) and the clip
+//! spans. It reads no files and renders no images; a [`Join`] names database frames
+//! ([`FrameRef::Db`]) or carries synthetic weight vectors ([`FrameRef::Weights`], low-pass
+//! morphs) that a renderer projects onto the Eigenfires.
+//!
+//! T1 and T2 are ranges of *global* frame indices (rows of the weight matrix). As in the
+//! thesis, α is the last frame of T1 and β the first frame of T2. [`Join::frames`] holds
+//! only the new frames to insert between T1 and T2.
+//!
+//! Every join reports a [`seam_ratio`]: the largest distance between consecutive frames of
+//! T1's tail + transition + T2's head, divided by the median distance between consecutive
+//! frames of the source clips (1.0 = as smooth as the footage; a plain cut between
+//! different flames is typically 3 or more). This figure is ours, not the thesis's.
+//!
+//! Departures from the thesis (each is repeated where it is implemented):
+//! - All distances (recognition *and* seam ratio) use the first `e_detect` weights
+//!   (§5.1.2 lets detection use fewer Eigenfires than rendering).
+//! - `theta_min` defaults to the mean consecutive distance of the clip a frame belongs to
+//!   (§4.5's suggestion), and adapts per clip when a path crosses clips (the thesis's
+//!   proposed "adaptive mode" at the end of §5.1.2.2), instead of one user number.
+
+mod bridging;
+mod end_growing;
+mod low_pass;
+
+pub use bridging::direct_bridging;
+pub use end_growing::end_growing;
+pub use low_pass::{low_pass, LowPassParams};
+
+use std::ops::Range;
+
+/// Frames of T1's tail and T2's head that enter the seam ratio on each side.
+pub const SEAM_CONTEXT: usize = 4;
+
+/// Errors of the transition algorithms, split by who is at fault.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum TransitionError {
+    /// A setting is out of range; the message names it and the valid range.
+    #[error("invalid setting `{name}`: {reason}")]
+    BadParameter { name: String, reason: String },
+    /// A frame range (T1, T2 or a loop range) is empty or outside the database.
+    #[error("range `{name}` {start}..{end}: {reason}")]
+    BadRange {
+        name: String,
+        start: usize,
+        end: usize,
+        reason: String,
+    },
+    /// A recognition method found no path (e.g. End Growing did not join within N steps).
+    #[error("{method}: no transition found: {reason}")]
+    NoPath { method: &'static str, reason: String },
+}
+
+fn bad(name: &str, reason: impl Into<String>) -> TransitionError {
+    TransitionError::BadParameter {
+        name: name.into(),
+        reason: reason.into(),
+    }
+}
+
+pub type Result<T, E = TransitionError> = std::result::Result<T, E>;
+
+/// One clip of the database: global frames `start..start + len`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ClipSpan {
+    pub name: String,
+    pub start: usize,
+    pub len: usize,
+}
+
+/// The weight vectors of a database, borrowed, with the clip each frame belongs to.
+#[derive(Clone, Debug)]
+pub struct WeightSpace<'a> {
+    weights: &'a [f32],
+    e: usize,
+    clips: Vec<ClipSpan>,
+    /// Index into `clips` for every frame.
+    clip_of: Vec<usize>,
+    /// Mean consecutive distance (first `e` weights) per clip; see [`WeightSpace::theta_for`].
+    clip_mean: Vec<f64>,
+}
+
+impl<'a> WeightSpace<'a> {
+    /// `weights` is M×E row-major. `clips` must tile `0..M` without overlap (any order);
+    /// an empty `clips` means one clip `"all"` covering every frame.
+    pub fn new(weights: &'a [f32], e: usize, clips: Vec<ClipSpan>) -> Result<Self> {
+        if e == 0 {
+            return Err(bad("e", "the number of weights per frame must be at least 1"));
+        }
+        if weights.is_empty() || weights.len() % e != 0 {
+            return Err(bad(
+                "weights",
+                format!(
+                    "length {} is not a positive multiple of E = {e}",
+                    weights.len()
+                ),
+            ));
+        }
+        if weights.iter().any(|w| !w.is_finite()) {
+            return Err(bad("weights", "contains NaN or infinity"));
+        }
+        let m = weights.len() / e;
+        let clips = if clips.is_empty() {
+            vec![ClipSpan {
+                name: "all".into(),
+                start: 0,
+                len: m,
+            }]
+        } else {
+            clips
+        };
+        let mut clip_of = vec![usize::MAX; m];
+        for (c, span) in clips.iter().enumerate() {
+            if span.len == 0 || span.start + span.len > m {
+                return Err(bad(
+                    "clips",
+                    format!(
+                        "clip `{}` {}..{} is empty or past the {m} frames",
+                        span.name,
+                        span.start,
+                        span.start + span.len
+                    ),
+                ));
+            }
+            for slot in &mut clip_of[span.start..span.start + span.len] {
+                if *slot != usize::MAX {
+                    return Err(bad("clips", format!("clip `{}` overlaps another", span.name)));
+                }
+                *slot = c;
+            }
+        }
+        if let Some(i) = clip_of.iter().position(|&c| c == usize::MAX) {
+            return Err(bad("clips", format!("frame {i} belongs to no clip")));
+        }
+        let mut space = WeightSpace {
+            weights,
+            e,
+            clips,
+            clip_of,
+            clip_mean: Vec::new(),
+        };
+        space.clip_mean = (0..space.clips.len())
+            .map(|c| mean(&space.clip_steps(c, e)))
+            .collect();
+        Ok(space)
+    }
+
+    /// Number of frames M.
+    pub fn len(&self) -> usize {
+        self.clip_of.len()
+    }
+
+    /// Always false (a space has at least one frame).
+    pub fn is_empty(&self) -> bool {
+        self.clip_of.is_empty()
+    }
+
+    /// Weights per frame E.
+    pub fn e(&self) -> usize {
+        self.e
+    }
+
+    pub fn clips(&self) -> &[ClipSpan] {
+        &self.clips
+    }
+
+    /// The weight vector of frame `i` (all E weights).
+    pub fn frame(&self, i: usize) -> &[f32] {
+        &self.weights[i * self.e..(i + 1) * self.e]
+    }
+
+    /// Index (into [`WeightSpace::clips`]) of the clip frame `i` belongs to.
+    pub fn clip_index(&self, i: usize) -> usize {
+        self.clip_of[i]
+    }
+
+    /// Euclidean distance between frames `i` and `j` on the first `e_detect` weights (the
+    /// thesis's recognition distance, §4.5 / §5.1.2).
+    pub fn distance(&self, i: usize, j: usize, e_detect: usize) -> f64 {
+        dist(self.frame(i), self.frame(j), e_detect)
+    }
+
+    /// Default `theta_min` for frame `i`: the mean distance between consecutive frames of
+    /// its clip on all E weights (§4.5). Use [`WeightSpace::clip_mean_step`] for other E.
+    pub fn theta_for(&self, i: usize) -> f64 {
+        self.clip_mean[self.clip_of[i]]
+    }
+
+    /// Mean consecutive distance of clip `c` on the first `e_detect` weights.
+    pub fn clip_mean_step(&self, c: usize, e_detect: usize) -> f64 {
+        mean(&self.clip_steps(c, e_detect))
+    }
+
+    /// Median distance between consecutive frames over all clips (first `e_detect`
+    /// weights): the denominator of [`seam_ratio`]. Returns 0 when no clip has 2 frames.
+    pub fn source_median(&self, e_detect: usize) -> f64 {
+        let mut all: Vec<f64> = (0..self.clips.len())
+            .flat_map(|c| self.clip_steps(c, e_detect))
+            .collect();
+        median(&mut all)
+    }
+
+    fn clip_steps(&self, c: usize, e_detect: usize) -> Vec<f64> {
+        let s = &self.clips[c];
+        (s.start + 1..s.start + s.len)
+            .map(|i| self.distance(i - 1, i, e_detect))
+            .collect()
+    }
+
+    /// Checks that `r` is a non-empty range of frames of this space.
+    pub(crate) fn check_range(&self, name: &str, r: &Range<usize>) -> Result<()> {
+        let reason = if r.start >= r.end {
+            "is empty"
+        } else if r.end > self.len() {
+            "runs past the last frame of the database"
+        } else {
+            return Ok(());
+        };
+        Err(TransitionError::BadRange {
+            name: name.into(),
+            start: r.start,
+            end: r.end,
+            reason: format!("{reason} ({} frames)", self.len()),
+        })
+    }
+}
+
+/// Settings shared by the recognition methods (§5.1.2).
+#[derive(Clone, Debug, PartialEq)]
+pub struct RecognitionParams {
+    /// Number of leading weights used for every distance ("E for detection", §5.1.2).
+    /// 0 = all E. Values above E are clamped to E.
+    pub e_detect: usize,
+    /// Minimum distance between consecutive frames of a path, in weight units.
+    /// `None` = adaptive: the mean consecutive distance of the clip of the frame being
+    /// extended (§4.5; the thesis's adaptive mode at the end of §5.1.2.2). Must be > 0.
+    pub theta_min: Option<f64>,
+    /// Frames of T1 before α and of T2 after β that may not be picked (thesis: "e.g. the
+    /// last 7 images"), to avoid deadlocks and moving back along the same pattern.
+    /// Default 7.
+    pub reject_near: usize,
+}
+
+impl Default for RecognitionParams {
+    fn default() -> Self {
+        RecognitionParams {
+            e_detect: 0,
+            theta_min: None,
+            reject_near: 7,
+        }
+    }
+}
+
+impl RecognitionParams {
+    pub(crate) fn e_detect(&self, space: &WeightSpace) -> usize {
+        if self.e_detect == 0 {
+            space.e()
+        } else {
+            self.e_detect.min(space.e())
+        }
+    }
+
+    pub(crate) fn validate(&self) -> Result<()> {
+        if let Some(t) = self.theta_min {
+            if !(t > 0.0 && t.is_finite()) {
+                return Err(bad(
+                    "theta_min",
+                    format!("must be a finite number > 0, got {t}"),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// θ_min around frame `i`: the fixed value, or the adaptive per-clip mean step.
+    pub(crate) fn theta(&self, space: &WeightSpace, i: usize) -> f64 {
+        match self.theta_min {
+            Some(t) => t,
+            None => {
+                let t = space.clip_mean_step(space.clip_index(i), self.e_detect(space));
+                // A one-frame clip has no steps; fall back to the median of the database.
+                if t > 0.0 {
+                    t
+                } else {
+                    space.source_median(self.e_detect(space)).max(f64::MIN_POSITIVE)
+                }
+            }
+        }
+    }
+}
+
+/// Which transition to build (§5.1; the thesis's three methods plus automatic choice).
+#[derive(Clone, Debug, PartialEq)]
+pub enum Transition {
+    /// §5.1.1: morph weights with a low-pass kernel.
+    LowPass(LowPassParams),
+    /// §5.1.2.1: `steps` database frames near the straight segment α→β. `None` = as many
+    /// as the gap holds at the footage's median step (`round(|αβ| / median) - 1`, ≥ 1).
+    DirectBridging { steps: Option<usize> },
+    /// §5.1.2.2: grow paths from α and β, at most `max_steps` frames (N) in total.
+    EndGrowing { max_steps: usize },
+    /// End Growing (N = 40), then Direct Bridging, then low-pass; the smallest worst jump wins.
+    Auto,
+}
+
+/// A frame of a transition.
+#[derive(Clone, Debug, PartialEq)]
+pub enum FrameRef {
+    /// A frame of the database (global index, a row of the weight matrix).
+    Db(usize),
+    /// A synthetic weight vector (length E) to project onto the Eigenfires.
+    Weights(Vec<f32>),
+}
+
+/// The frames to insert between T1 and T2, and how smooth the result is.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Join {
+    /// The inserted frames, in playing order (T1 and T2 themselves are not included).
+    pub frames: Vec<FrameRef>,
+    /// `"low-pass"`, `"direct-bridging"` or `"end-growing"`.
+    pub method: &'static str,
+    /// See [`seam_ratio`]; computed on T1's last [`SEAM_CONTEXT`] frames + `frames` +
+    /// T2's first [`SEAM_CONTEXT`] frames.
+    pub seam_ratio: f64,
+    /// A human-readable account of what was done (and, for [`Transition::Auto`], why
+    /// this method won).
+    pub why: String,
+}
+
+/// Largest distance between consecutive vectors of `sequence`, divided by
+/// `source_median` (the median consecutive distance of the source clips).
+/// Returns 0 for fewer than two vectors and infinity when `source_median` is 0 and the
+/// sequence moves. Vectors are compared over their common length.
+pub fn seam_ratio(sequence: &[Vec<f32>], source_median: f64) -> f64 {
+    let worst = sequence
+        .windows(2)
+        .map(|w| dist(&w[0], &w[1], usize::MAX))
+        .fold(0.0, f64::max);
+    if worst == 0.0 {
+        0.0
+    } else {
+        worst / source_median
+    }
+}
+
+/// Builds the transition from T1 to T2 with `method`.
+pub fn transition(
+    space: &WeightSpace,
+    t1: Range<usize>,
+    t2: Range<usize>,
+    method: &Transition,
+    rec: &RecognitionParams,
+) -> Result<Join> {
+    match method {
+        Transition::LowPass(p) => low_pass(space, t1, t2, p, rec),
+        Transition::DirectBridging { steps } => direct_bridging(space, t1, t2, *steps, rec),
+        Transition::EndGrowing { max_steps } => end_growing(space, t1, t2, *max_steps, rec),
+        Transition::Auto => auto(space, t1, t2, rec),
+    }
+}
+
+/// A loop (§5.1, "producing loop"): a transition from the end of `range` back to its start.
+pub fn make_loop(
+    space: &WeightSpace,
+    range: Range<usize>,
+    method: &Transition,
+    rec: &RecognitionParams,
+) -> Result<Join> {
+    transition(space, range.clone(), range, method, rec)
+}
+
+/// Tries End Growing (N = 40), then Direct Bridging (automatic steps), then low-pass
+/// (default kernel, rendering with min(50, E) weights); keeps the successful result with
+/// the smallest seam ratio (the worst jump). The thesis orders the fallbacks the same way
+/// (§5.1.2.2, case 3) but leaves the choice to the artist.
+pub fn auto(
+    space: &WeightSpace,
+    t1: Range<usize>,
+    t2: Range<usize>,
+    rec: &RecognitionParams,
+) -> Result<Join> {
+    space.check_range("T1", &t1)?;
+    space.check_range("T2", &t2)?;
+    rec.validate()?;
+    let tries = [
+        Transition::EndGrowing { max_steps: 40 },
+        Transition::DirectBridging { steps: None },
+        Transition::LowPass(LowPassParams::default()),
+    ];
+    let mut best: Option<Join> = None;
+    let mut notes = Vec::new();
+    for t in &tries {
+        match transition(space, t1.clone(), t2.clone(), t, rec) {
+            Ok(j) => {
+                notes.push(format!("{}: seam ratio {:.2}", j.method, j.seam_ratio));
+                if best.as_ref().is_none_or(|b| j.seam_ratio < b.seam_ratio) {
+                    best = Some(j);
+                }
+            }
+            Err(e) => notes.push(format!("failed ({e})")),
+        }
+    }
+    let mut best = best.ok_or_else(|| TransitionError::NoPath {
+        method: "auto",
+        reason: notes.join("; "),
+    })?;
+    best.why = format!(
+        "auto chose {} (smallest worst jump): {}. {}",
+        best.method,
+        notes.join("; "),
+        best.why
+    );
+    Ok(best)
+}
+
+/// Seam ratio of T1's tail + `frames` + T2's head, on the first `e_detect` weights.
+pub(crate) fn join_seam(
+    space: &WeightSpace,
+    t1: &Range<usize>,
+    t2: &Range<usize>,
+    frames: &[FrameRef],
+    e_detect: usize,
+) -> f64 {
+    let cut = |v: &[f32]| v[..e_detect.min(v.len())].to_vec();
+    let tail = t1.end.saturating_sub(SEAM_CONTEXT).max(t1.start)..t1.end;
+    let head = t2.start..(t2.start + SEAM_CONTEXT).min(t2.end);
+    let mut seq: Vec<Vec<f32>> = tail.map(|i| cut(space.frame(i))).collect();
+    seq.extend(frames.iter().map(|f| match f {
+        FrameRef::Db(i) => cut(space.frame(*i)),
+        FrameRef::Weights(w) => cut(w),
+    }));
+    seq.extend(head.map(|i| cut(space.frame(i))));
+    seam_ratio(&seq, space.source_median(e_detect))
+}
+
+pub(crate) fn dist(a: &[f32], b: &[f32], e: usize) -> f64 {
+    a.iter()
+        .zip(b)
+        .take(e)
+        .map(|(x, y)| {
+            let d = *x as f64 - *y as f64;
+            d * d
+        })
+        .sum::<f64>()
+        .sqrt()
+}
+
+fn mean(v: &[f64]) -> f64 {
+    if v.is_empty() {
+        0.0
+    } else {
+        v.iter().sum::<f64>() / v.len() as f64
+    }
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
+
+#[cfg(test)]
+pub(crate) mod testdata {
+    //! A smooth parametric "flame": points on a smooth closed curve in 6-D, clips being
+    //! overlapping arcs of it sampled with different phases, plus small noise.
+    use super::ClipSpan;
+    use ignis_core::Rng;
+
+    pub const E: usize = 6;
+
+    /// Point of the closed curve at angle `t` (radians). Radius ~10 in the first plane.
+    pub fn curve(t: f64) -> [f32; E] {
+        [
+            (10.0 * t.cos()) as f32,
+            (10.0 * t.sin()) as f32,
+            (2.0 * (2.0 * t).cos()) as f32,
+            (2.0 * (2.0 * t).sin()) as f32,
+            (0.5 * (3.0 * t).cos()) as f32,
+            (0.5 * (3.0 * t).sin()) as f32,
+        ]
+    }
+
+    /// `clips` clips of `len` frames each, step `dt` radians, clip `c` starting at angle
+    /// `c * spread` plus a phase offset of a fraction of a step; noise σ = `noise`.
+    pub fn flame(clips: usize, len: usize, dt: f64, spread: f64, noise: f64, seed: u64) -> (Vec<f32>, Vec<ClipSpan>) {
+        let mut rng = Rng::new(seed);
+        let mut w = Vec::with_capacity(clips * len * E);
+        let mut spans = Vec::new();
+        for c in 0..clips {
+            let phase = c as f64 * spread + dt * (c as f64 * 0.37).fract();
+            for i in 0..len {
+                let p = curve(phase + i as f64 * dt);
+                w.extend(p.iter().map(|x| x + (noise * rng.normal()) as f32));
+            }
+            spans.push(ClipSpan {
+                name: format!("clip{c}"),
+                start: c * len,
+                len,
+            });
+        }
+        (w, spans)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn seam_ratio_is_worst_step_over_median() {
+        let seq = vec![vec![0.0, 0.0], vec![1.0, 0.0], vec![1.0, 3.0], vec![1.0, 4.0]];
+        assert!((seam_ratio(&seq, 1.5) - 2.0).abs() < 1e-12);
+        assert_eq!(seam_ratio(&seq[..1], 1.0), 0.0);
+    }
+
+    #[test]
+    fn space_rejects_bad_input() {
+        let w = [0.0f32; 12];
+        assert!(WeightSpace::new(&w, 0, vec![]).is_err());
+        assert!(WeightSpace::new(&w[..5], 2, vec![]).is_err());
+        let gap = vec![ClipSpan { name: "a".into(), start: 0, len: 5 }];
+        assert!(matches!(
+            WeightSpace::new(&w, 2, gap),
+            Err(TransitionError::BadParameter { .. })
+        ));
+        let s = WeightSpace::new(&w, 2, vec![]).unwrap();
+        assert_eq!(s.len(), 6);
+        let rec = RecognitionParams::default();
+        for m in [
+            Transition::Auto,
+            Transition::EndGrowing { max_steps: 10 },
+            Transition::DirectBridging { steps: Some(2) },
+            Transition::LowPass(LowPassParams::default()),
+        ] {
+            let e = transition(&s, 2..2, 3..5, &m, &rec).unwrap_err();
+            assert!(matches!(e, TransitionError::BadRange { .. }), "{m:?}: {e}");
+            let e = transition(&s, 0..2, 3..9, &m, &rec).unwrap_err();
+            assert!(matches!(e, TransitionError::BadRange { .. }), "{m:?}: {e}");
+        }
+    }
+
+    #[test]
+    fn theta_min_must_be_positive() {
+        let (w, clips) = testdata::flame(2, 30, 0.05, 1.0, 0.0, 1);
+        let s = WeightSpace::new(&w, testdata::E, clips).unwrap();
+        for t in [0.0, -1.0, f64::NAN] {
+            let rec = RecognitionParams { theta_min: Some(t), ..Default::default() };
+            for m in [
+                Transition::EndGrowing { max_steps: 10 },
+                Transition::DirectBridging { steps: Some(2) },
+                Transition::Auto,
+            ] {
+                let e = transition(&s, 0..10, 40..50, &m, &rec).unwrap_err();
+                assert!(
+                    matches!(&e, TransitionError::BadParameter { name, .. } if name == "theta_min"),
+                    "{m:?}: {e}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn auto_reports_the_winner() {
+        let (w, clips) = testdata::flame(6, 40, 0.05, 0.9, 0.005, 3);
+        let s = WeightSpace::new(&w, testdata::E, clips).unwrap();
+        let rec = RecognitionParams::default();
+        // T1 ends around angle 0.05*19, T2 starts around angle 0.9*1 + 0.05*12.
+        let j = auto(&s, 0..20, 52..80, &rec).unwrap();
+        assert!(j.why.starts_with("auto chose"), "{}", j.why);
+        assert!(j.seam_ratio <= 1.5, "{}: {}", j.seam_ratio, j.why);
+    }
+}

@@ -1,0 +1,565 @@
+//! Integration tests of `ignis-eigen`: database round trip and corruption, atomic writes,
+//! separation of clips in PCA space, bad input, and real footage when present.
+
+use ignis_core::Size;
+use ignis_eigen::synthetic::{FlameStyle, SyntheticParams};
+use ignis_eigen::train::{train, ClipInput, ClipSource, ClipSpec, NoProgress, TrainParams};
+use ignis_eigen::{EigenError, EigenfireDb, PreprocessParams};
+use std::path::Path;
+
+fn clip(name: &str, style: FlameStyle, frames: usize) -> ClipInput<'static> {
+    let p = SyntheticParams {
+        size: Size::new(48, 64).unwrap(),
+        frames,
+        style,
+        seed: 7,
+    };
+    ClipInput {
+        spec: ClipSpec::new(name),
+        source: ClipSource::synthetic(p, 30.0),
+    }
+}
+
+fn small_pre() -> PreprocessParams {
+    let mut p =
+        PreprocessParams::with_sizes(Size::new(40, 64).unwrap(), Some(Size::new(20, 32).unwrap()));
+    p.pose_samples = 6;
+    p
+}
+
+fn two_clips(frames: usize) -> Vec<ClipInput<'static>> {
+    vec![
+        clip("candle", FlameStyle::Candle, frames),
+        clip("campfire", FlameStyle::Campfire, frames),
+    ]
+}
+
+fn params() -> TrainParams {
+    TrainParams {
+        pack_size: 5,
+        store_frames: true,
+        ..Default::default()
+    }
+}
+
+/// Nearest-centroid accuracy of the 3-D weights (first three components) by clip.
+fn centroid_accuracy(db: &EigenfireDb) -> f64 {
+    let w = db.weights();
+    let cents: Vec<[f64; 3]> = db
+        .clips()
+        .iter()
+        .map(|c| {
+            let mut s = [0.0; 3];
+            for r in c.first_row..c.first_row + c.frames {
+                for (k, sk) in s.iter_mut().enumerate() {
+                    *sk += w[(r, k)] as f64 / c.frames as f64;
+                }
+            }
+            s
+        })
+        .collect();
+    let mut right = 0;
+    for (ci, c) in db.clips().iter().enumerate() {
+        for r in c.first_row..c.first_row + c.frames {
+            let d = |cc: &[f64; 3]| {
+                (0..3)
+                    .map(|k| (w[(r, k)] as f64 - cc[k]).powi(2))
+                    .sum::<f64>()
+            };
+            let best = (0..cents.len())
+                .min_by(|&a, &b| d(&cents[a]).total_cmp(&d(&cents[b])))
+                .unwrap();
+            right += (best == ci) as usize;
+        }
+    }
+    right as f64 / db.n_frames() as f64
+}
+
+mod roundtrip {
+    use super::*;
+
+    #[test]
+    fn write_load_identical_and_api() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("fire.db");
+        let r = train(
+            &two_clips(12),
+            &small_pre(),
+            &params(),
+            &out,
+            &mut NoProgress,
+        )
+        .unwrap();
+        let db = EigenfireDb::open(&out).unwrap();
+        let w = db.weights();
+        assert_eq!((w.nrows(), w.ncols()), (24, r.manifest.components));
+        assert_eq!(r.manifest.components, 23, "M - 1 meaningful Eigenfires");
+        for i in 0..w.nrows() {
+            for j in 0..w.ncols() {
+                assert_eq!(w[(i, j)].to_bits(), r.weights[i * w.ncols() + j].to_bits());
+            }
+        }
+        assert!(db.verify().is_empty());
+        assert_eq!(db.usable_components(), 23);
+        assert_eq!(db.manifest().packs.len(), 5);
+        // Reconstruction with every Eigenfire reproduces the training frame: compare
+        // against the stored pre-processed frame resized the same way.
+        let row = db.frame_index("campfire", 4).unwrap();
+        assert_eq!(row, 16);
+        let full = db.reconstruct(&db.frame_weights(row), 23).unwrap();
+        let pre = db.preprocessed_frame("campfire", 4).unwrap();
+        let expect = ignis_eigen::pose::resize(&pre, db.train_size());
+        let err = full
+            .data()
+            .iter()
+            .zip(expect.data())
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0f32, f32::max);
+        assert!(err < 1e-3, "max reconstruction error {err}");
+        // Fewer Eigenfires: worse but finite.
+        let few = db.reconstruct(&db.frame_weights(row), 2).unwrap();
+        assert!(few.data().iter().all(|v| v.is_finite()));
+        assert!(db.distance(row, row, 10) == 0.0 && db.distance(0, row, 10) > 0.0);
+        assert!(db.frame_index("campfire", 12).is_err() && db.frame_index("nope", 0).is_err());
+        // Thresholds were stored.
+        let t = &db.clip("candle").unwrap().thresholds;
+        assert!(t.theta_min > 0.0 && t.theta_min <= t.theta_average && t.min <= t.max);
+        // Manifest is readable JSON with checksums.
+        let text = std::fs::read_to_string(out.join("manifest.json")).unwrap();
+        assert!(text.contains("\"sha256\"") && text.contains("pack_001.npy"));
+        // Analysis and plots run.
+        let sheet = ignis_eigen::analysis::eigenfire_sheet(&db, 8, 4).unwrap();
+        assert!(sheet.width() > 20 * 4);
+        let rep =
+            ignis_eigen::analysis::compression_report(&db, &[1, 5, 23], 4, &Default::default())
+                .unwrap();
+        assert!(
+            rep[2].psnr > rep[0].psnr && rep[2].bytes > rep[0].bytes,
+            "{rep:?}"
+        );
+        let plots = dir.path().join("plots");
+        ignis_eigen::plot::scatter_3d(&db, &plots.join("s.png"), (400, 300)).unwrap();
+        ignis_eigen::plot::weight_clusters(
+            &db,
+            "candle",
+            0,
+            31,
+            10,
+            &plots.join("w.png"),
+            (400, 200),
+        )
+        .unwrap();
+        ignis_eigen::plot::frame_weights(&db, 0, 100, &plots.join("f.png"), (400, 200)).unwrap();
+        ignis_eigen::plot::spectrum(&db, &plots.join("sp.png"), (400, 200)).unwrap();
+        ignis_eigen::plot::compression_chart(&rep, &plots.join("c.png"), (400, 200)).unwrap();
+        for f in ["s.png", "w.png", "f.png", "sp.png", "c.png"] {
+            assert!(std::fs::metadata(plots.join(f)).unwrap().len() > 100, "{f}");
+        }
+    }
+
+    #[test]
+    fn flipped_byte_in_a_pack_is_named_and_never_used() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("fire.db");
+        train(
+            &two_clips(8),
+            &small_pre(),
+            &params(),
+            &out,
+            &mut NoProgress,
+        )
+        .unwrap();
+        let pack = out.join("packs/pack_002.npy");
+        let mut bytes = std::fs::read(&pack).unwrap();
+        let i = bytes.len() - 7;
+        bytes[i] ^= 0x10;
+        std::fs::write(&pack, bytes).unwrap();
+        let db = EigenfireDb::open(&out).unwrap();
+        db.eigenfire(0).unwrap();
+        let e = db.eigenfire(5).unwrap_err();
+        let msg = e.to_string();
+        assert!(
+            msg.contains("pack_002.npy") && msg.contains("checksum"),
+            "{msg}"
+        );
+        assert!(db
+            .reconstruct(&db.frame_weights(0), 10)
+            .unwrap_err()
+            .to_string()
+            .contains("pack_002.npy"));
+        assert_eq!(db.usable_components(), 5);
+        let problems = db.verify();
+        assert_eq!(problems.len(), 1);
+        assert_eq!(problems[0].0, "packs/pack_002.npy");
+        // Reconstruction within the intact packs still works.
+        db.reconstruct(&db.frame_weights(0), 5).unwrap();
+    }
+
+    #[test]
+    fn truncated_and_missing_packs_are_named() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("fire.db");
+        train(
+            &two_clips(8),
+            &small_pre(),
+            &params(),
+            &out,
+            &mut NoProgress,
+        )
+        .unwrap();
+        let p3 = out.join("packs/pack_003.npy");
+        let len = std::fs::metadata(&p3).unwrap().len();
+        std::fs::OpenOptions::new()
+            .write(true)
+            .open(&p3)
+            .unwrap()
+            .set_len(len - 100)
+            .unwrap();
+        std::fs::remove_file(out.join("packs/pack_001.npy")).unwrap();
+        let db = EigenfireDb::open(&out).unwrap();
+        let m = db.eigenfire(11).unwrap_err().to_string();
+        assert!(m.contains("pack_003.npy") && m.contains("truncated"), "{m}");
+        assert!(db
+            .eigenfire(0)
+            .unwrap_err()
+            .to_string()
+            .contains("pack_001.npy"));
+        assert_eq!(db.usable_components(), 0);
+        // A corrupt weights file fails at open, naming it.
+        let w = out.join("weights.npy");
+        let mut b = std::fs::read(&w).unwrap();
+        let n = b.len() - 1;
+        b[n] ^= 1;
+        std::fs::write(&w, b).unwrap();
+        let m = EigenfireDb::open(&out).unwrap_err().to_string();
+        assert!(m.contains("weights.npy"), "{m}");
+    }
+
+    #[test]
+    fn failed_training_leaves_the_earlier_database_intact() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("fire.db");
+        train(
+            &two_clips(8),
+            &small_pre(),
+            &params(),
+            &out,
+            &mut NoProgress,
+        )
+        .unwrap();
+        let before = std::fs::read_to_string(out.join("manifest.json")).unwrap();
+        // Fails after decoding started (the second clip's mask is empty).
+        let mut pre = small_pre();
+        pre.mask.layers =
+            vec![
+                serde_json::from_str(r#"{"h": [100, 140], "s": [0.9, 1.0], "v": [0.5, 1.0]}"#)
+                    .unwrap(),
+            ];
+        assert!(train(&two_clips(8), &pre, &params(), &out, &mut NoProgress).is_err());
+        assert_eq!(
+            std::fs::read_to_string(out.join("manifest.json")).unwrap(),
+            before
+        );
+        EigenfireDb::open(&out).unwrap();
+        // A successful retrain replaces it, leaving no temporary directories behind.
+        train(
+            &two_clips(6),
+            &small_pre(),
+            &params(),
+            &out,
+            &mut NoProgress,
+        )
+        .unwrap();
+        assert_eq!(EigenfireDb::open(&out).unwrap().n_frames(), 12);
+        let leftovers: Vec<_> = std::fs::read_dir(dir.path())
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect();
+        assert_eq!(leftovers.len(), 1, "{leftovers:?}");
+    }
+}
+
+mod options {
+    use super::*;
+
+    #[test]
+    fn streaming_path_matches_in_memory_on_leading_components() {
+        let dir = tempfile::tempdir().unwrap();
+        let a = train(
+            &two_clips(10),
+            &small_pre(),
+            &params(),
+            &dir.path().join("a.db"),
+            &mut NoProgress,
+        )
+        .unwrap();
+        let p = TrainParams {
+            streaming: true,
+            streaming_components: 6,
+            ..params()
+        };
+        let b = train(
+            &two_clips(10),
+            &small_pre(),
+            &p,
+            &dir.path().join("b.db"),
+            &mut NoProgress,
+        )
+        .unwrap();
+        assert_eq!(b.manifest.components, 6);
+        let (da, db) = (
+            EigenfireDb::open(&dir.path().join("a.db")).unwrap(),
+            EigenfireDb::open(&dir.path().join("b.db")).unwrap(),
+        );
+        // The first eigenvalue agrees, and the first Eigenfire agrees up to sign.
+        let (ea, eb) = (da.eigenvalues()[0], db.eigenvalues()[0]);
+        assert!((ea - eb).abs() / ea < 1e-2, "{ea} vs {eb}");
+        let (ua, ub) = (da.eigenfire(0).unwrap(), db.eigenfire(0).unwrap());
+        let dot: f32 = ua.data().iter().zip(ub.data()).map(|(x, y)| x * y).sum();
+        assert!(dot.abs() > 0.99, "|<u1, u1'>| = {dot}");
+        assert_eq!(a.manifest.frames, b.manifest.frames);
+    }
+
+    #[test]
+    fn rotation_is_stored_and_keep_and_e_settings_apply() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut pre = small_pre();
+        pre.pose.rotate = true;
+        let p = TrainParams {
+            keep: Some("5".parse().unwrap()),
+            e_detect: "3".parse().unwrap(),
+            e_render: "100%".parse().unwrap(),
+            ..params()
+        };
+        let r = train(
+            &[clip("candle", FlameStyle::Candle, 12)],
+            &pre,
+            &p,
+            &dir.path().join("r.db"),
+            &mut NoProgress,
+        )
+        .unwrap();
+        assert_eq!(
+            (
+                r.manifest.components,
+                r.manifest.e_detect,
+                r.manifest.e_render
+            ),
+            (5, 3, 5)
+        );
+        let db = EigenfireDb::open(&dir.path().join("r.db")).unwrap();
+        let angles: Vec<f32> = (0..db.n_frames()).map(|i| db.angle(i)).collect();
+        assert!(
+            angles.iter().any(|a| a.abs() > 0.005) && angles.iter().all(|a| a.abs() < 0.6),
+            "{angles:?}"
+        );
+    }
+}
+
+mod separation {
+    use super::*;
+
+    #[test]
+    fn synthetic_clips_separate_on_three_components() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("fire.db");
+        train(
+            &two_clips(24),
+            &small_pre(),
+            &TrainParams::default(),
+            &out,
+            &mut NoProgress,
+        )
+        .unwrap();
+        let db = EigenfireDb::open(&out).unwrap();
+        let acc = centroid_accuracy(&db);
+        assert!(acc >= 0.95, "nearest-centroid accuracy {acc}");
+    }
+}
+
+mod bad_input {
+    use super::*;
+
+    fn err_of(clips: &[ClipInput<'_>], pre: &PreprocessParams, p: &TrainParams) -> EigenError {
+        let dir = tempfile::tempdir().unwrap();
+        train(clips, pre, p, &dir.path().join("fire.db"), &mut NoProgress).unwrap_err()
+    }
+
+    #[test]
+    fn data_matrix_too_large_is_refused_before_decoding() {
+        // 8000 x 8000 training frames x 100 000 frames: 25.6 TB.
+        let mut pre = small_pre();
+        pre.pose.frame_size = Size::new(8000, 8000).unwrap();
+        pre.train_size = None;
+        let c = clip("huge", FlameStyle::Candle, 100_000);
+        let e = err_of(&[c], &pre, &TrainParams::default());
+        let m = e.to_string();
+        assert!(matches!(e, EigenError::LimitExceeded(_)), "{m}");
+        assert!(m.contains("TB") && m.contains("streaming"), "{m}");
+        // And with an explicit small budget.
+        let e = err_of(
+            &two_clips(8),
+            &small_pre(),
+            &TrainParams {
+                memory_limit: Some(10_000),
+                ..Default::default()
+            },
+        );
+        assert!(
+            matches!(e, EigenError::LimitExceeded(_)) && e.to_string().contains("needs"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn ranges_and_empty_clips_name_the_clip() {
+        let pre = small_pre();
+        let p = TrainParams::default();
+        let mut c = clip("emptyrange", FlameStyle::Candle, 8);
+        c.spec.start = 4;
+        c.spec.end = Some(4);
+        let m = err_of(&[c], &pre, &p).to_string();
+        assert!(m.contains("emptyrange") && m.contains("empty"), "{m}");
+        let mut c = clip("pastend", FlameStyle::Candle, 8);
+        c.spec.end = Some(20);
+        let m = err_of(&[c], &pre, &p).to_string();
+        assert!(m.contains("pastend") && m.contains("past the end"), "{m}");
+        let mut c = clip("startpast", FlameStyle::Candle, 8);
+        c.spec.start = 9;
+        let m = err_of(&[c], &pre, &p).to_string();
+        assert!(m.contains("startpast") && m.contains("past the end"), "{m}");
+        let m = err_of(&[clip("nothing", FlameStyle::Candle, 0)], &pre, &p).to_string();
+        assert!(m.contains("nothing") && m.contains("zero frames"), "{m}");
+        // A source that reports no count and yields nothing.
+        let src = ClipSource {
+            source: "empty-stream".into(),
+            fps: 30.0,
+            size: Size::new(8, 8).unwrap(),
+            frame_count: None,
+            open: Box::new(|_| Ok(Box::new(std::iter::empty()))),
+        };
+        let m = err_of(
+            &[ClipInput {
+                spec: ClipSpec::new("stream"),
+                source: src,
+            }],
+            &pre,
+            &p,
+        )
+        .to_string();
+        assert!(m.contains("stream") && m.contains("zero frames"), "{m}");
+    }
+
+    #[test]
+    fn mask_removing_every_pixel_names_the_clip() {
+        let mut pre = small_pre();
+        pre.mask.layers =
+            vec![
+                serde_json::from_str(r#"{"h": [100, 140], "s": [0.9, 1.0], "v": [0.5, 1.0]}"#)
+                    .unwrap(),
+            ];
+        let m = err_of(
+            &[clip("dark", FlameStyle::Candle, 6)],
+            &pre,
+            &TrainParams::default(),
+        )
+        .to_string();
+        assert!(
+            m.contains("dark") && m.contains("mask removes every pixel"),
+            "{m}"
+        );
+    }
+
+    #[test]
+    fn bad_settings_are_refused() {
+        assert!(PreprocessParams::from_toml("[pose]\nfill = 5.0\n").is_err());
+        let e = err_of(
+            &two_clips(4),
+            &small_pre(),
+            &TrainParams {
+                pack_size: 0,
+                ..Default::default()
+            },
+        );
+        assert!(e.to_string().contains("pack_size"));
+        let mut a = clip("same", FlameStyle::Candle, 4);
+        let b = clip("same", FlameStyle::Campfire, 4);
+        a.spec.stride = 1;
+        assert!(err_of(&[a, b], &small_pre(), &TrainParams::default())
+            .to_string()
+            .contains("two clips"));
+        let c = ignis_eigen::TrainConfig::from_toml("[[clip]]\nname = \"x\"\n", Path::new("."));
+        assert!(c.unwrap_err().to_string().contains("exactly one"));
+    }
+}
+
+mod footage {
+    use super::*;
+    use ignis_eigen::train::FrameIter;
+
+    fn data(name: &str) -> std::path::PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../../shared/data")
+            .join(name)
+    }
+
+    /// A clip over `ignis_media`, decoded at `scale` to keep the test fast.
+    fn media_clip(name: &str, file: &str, scale: Size) -> ClipInput<'static> {
+        let path = data(file);
+        let info = ignis_media::probe(&path).expect("probe");
+        let p = path.clone();
+        let source = ClipSource {
+            source: path.display().to_string(),
+            fps: info.fps,
+            size: scale,
+            frame_count: info.frame_count.map(|n| n as usize),
+            open: Box::new(move |start| {
+                let opts = ignis_media::ReadOptions {
+                    range: Some(ignis_media::FrameRange::frames(start as u64, None)),
+                    scale: Some(scale),
+                    ..Default::default()
+                };
+                let r = ignis_media::open(&p, &opts).map_err(|e| e.to_string())?;
+                Ok(Box::new(r.map(|f| f.map_err(|e| e.to_string()))) as FrameIter<'static>)
+            }),
+        };
+        let mut spec = ClipSpec::new(name);
+        spec.end = Some(120);
+        spec.stride = 4;
+        ClipInput { spec, source }
+    }
+
+    #[test]
+    fn candle_and_campfire_train_and_separate() {
+        if !data("candle.mp4").exists() || !data("campfire.mp4").exists() {
+            println!("skipped: ../shared/data not present");
+            return;
+        }
+        if std::process::Command::new("ffmpeg")
+            .arg("-version")
+            .output()
+            .is_err()
+        {
+            println!("skipped: ffmpeg is not on PATH (needed for campfire.mp4)");
+            return;
+        }
+        let clips = vec![
+            media_clip("candle", "candle.mp4", Size::new(240, 240).unwrap()),
+            media_clip("campfire", "campfire.mp4", Size::new(480, 270).unwrap()),
+        ];
+        let mut pre = PreprocessParams::with_sizes(
+            Size::new(96, 160).unwrap(),
+            Some(Size::new(48, 80).unwrap()),
+        );
+        pre.pose_samples = 8;
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("fire.db");
+        let r = train(&clips, &pre, &TrainParams::default(), &out, &mut NoProgress).unwrap();
+        assert_eq!(r.manifest.frames, 60);
+        let db = EigenfireDb::open(&out).unwrap();
+        assert_eq!(db.clip("campfire").unwrap().frames, 30);
+        let acc = centroid_accuracy(&db);
+        println!("candle vs campfire nearest-centroid accuracy on 3 components: {acc}");
+        assert!(acc >= 0.95, "nearest-centroid accuracy {acc}");
+    }
+}
