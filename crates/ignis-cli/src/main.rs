@@ -10,6 +10,7 @@ mod eigen;
 mod global;
 mod info;
 mod output;
+mod volume;
 
 use anyhow::Result;
 use clap::{FromArgMatches, Parser, Subcommand};
@@ -46,6 +47,9 @@ enum Cmd {
     /// Eigenfires: train a PCA database on real fire footage, analyse and reconstruct.
     #[command(subcommand)]
     Eigen(eigen::Command),
+    /// Procedural volumetric fire (Fuller et al.): profile + B-spline + lattice + noise.
+    #[command(subcommand)]
+    Volume(volume::Command),
     /// Headline performance figures of a method as one JSON object.
     Bench(BenchArgs),
 }
@@ -65,10 +69,10 @@ struct DemoArgs {
 }
 
 #[derive(clap::Args, Debug)]
-#[command(after_help = "Examples:\n  ignis bench classic\n  ignis bench classic --quick\n  ignis bench eigen-train")]
+#[command(after_help = "Examples:\n  ignis bench classic\n  ignis bench classic --quick\n  ignis bench eigen-train\n  ignis bench volume")]
 struct BenchArgs {
     /// What to measure.
-    #[arg(value_parser = ["classic", "eigen-train"])]
+    #[arg(value_parser = ["classic", "eigen-train", "volume"])]
     target: String,
     /// Fewer repetitions (a smoke test; figures are noisier).
     #[arg(long)]
@@ -90,11 +94,13 @@ fn run(cli: Cli) -> Result<()> {
         Cmd::Info(a) => info::run(&a),
         Cmd::Convert(a) => convert::run(&a, &g).map(|_| ()),
         Cmd::Eigen(c) => eigen::run(c, &g),
+        Cmd::Volume(c) => volume::run(c, &g),
         Cmd::Demo(a) => {
             let t = std::time::Instant::now();
             let mut d = demo::Demo::new(&a.output, g.clone(), a.seed, a.quick)?;
             classic::demo(&mut d)?;
             eigen::demo(&mut d)?;
+            volume::demo(&mut d)?;
             let index = d.finish()?;
             g.say(format!("done in {:.1} s; open {}", t.elapsed().as_secs_f64(), index.display()));
             Ok(())
@@ -103,6 +109,7 @@ fn run(cli: Cli) -> Result<()> {
             let v = match a.target.as_str() {
                 "classic" => classic::bench(a.quick)?,
                 "eigen-train" => ignis_pca::bench_figures(a.quick),
+                "volume" => volume::bench(&g, a.quick)?,
                 other => anyhow::bail!("unknown bench target `{other}`"),
             };
             println!("{}", serde_json::to_string_pretty(&v)?);

@@ -13,10 +13,12 @@ use std::time::Instant;
 #[derive(clap::Subcommand, Debug)]
 pub enum Command {
     /// Render a fire file or a preset to MP4, GIF, a flipbook (PNG + JSON) or a sequence.
-    #[command(after_help = "Examples:\n  ignis volume render fire.toml --frames 240 -o fire.mp4\n  \
+    #[command(
+        after_help = "Examples:\n  ignis volume render fire.toml --frames 240 -o fire.mp4\n  \
 ignis volume render --preset torch --size 512x512 --frames 120 -o fire.png     # flipbook with alpha\n  \
 ignis volume render --preset campfire --noise mnoise --octaves 2 -o camp.gif\n  \
-ignis volume render fire.toml --collisions hits.jsonl -o fire.mp4            # report contacts")]
+ignis volume render fire.toml --collisions hits.jsonl -o fire.mp4            # report contacts"
+    )]
     Render(RenderArgs),
 }
 
@@ -66,9 +68,15 @@ fn parse_blend(s: &str) -> Result<Blend> {
         "additive" => Ok(Blend::Additive),
         "cartoon" => Ok(Blend::Cartoon),
         t if t.starts_with("tint:") => {
-            let v: Vec<f32> = t[5..].split(',').map(|x| x.trim().parse::<f32>()).collect::<Result<_, _>>()
+            let v: Vec<f32> = t[5..]
+                .split(',')
+                .map(|x| x.trim().parse::<f32>())
+                .collect::<Result<_, _>>()
                 .with_context(|| format!("--blend {t}: write tint:R,G,B, e.g. tint:0.3,0.5,1"))?;
-            anyhow::ensure!(v.len() == 3, "--blend {t}: a tint needs three numbers R,G,B");
+            anyhow::ensure!(
+                v.len() == 3,
+                "--blend {t}: a tint needs three numbers R,G,B"
+            );
             Ok(Blend::Tint([v[0], v[1], v[2]]))
         }
         other => anyhow::bail!("--blend {other}: choose additive, cartoon or tint:R,G,B"),
@@ -85,10 +93,13 @@ fn parse_noise(s: &str) -> NoiseKind {
 
 /// Reads a fire file, loading profile images with `ignis-media`.
 pub fn load_fire_file(path: &Path) -> Result<FireScene> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
     let base = path.parent().unwrap_or(Path::new("."));
-    FireScene::from_toml(&text, base, &mut |p| ignis_media::read_image(p).map_err(|e| e.to_string()))
-        .with_context(|| format!("fire file {}", path.display()))
+    FireScene::from_toml(&text, base, &mut |p| {
+        ignis_media::read_image(p).map_err(|e| e.to_string())
+    })
+    .with_context(|| format!("fire file {}", path.display()))
 }
 
 impl RenderArgs {
@@ -97,7 +108,9 @@ impl RenderArgs {
         let mut s = match (&self.file, &self.preset) {
             (Some(f), _) => load_fire_file(f)?,
             (None, Some(p)) => FireScene::preset(p.parse::<Preset>()?),
-            (None, None) => anyhow::bail!("give a fire file or --preset torch|candle|campfire|wall"),
+            (None, None) => {
+                anyhow::bail!("give a fire file or --preset torch|candle|campfire|wall")
+            }
         };
         if let Some(size) = self.size {
             s = s.with_size(size);
@@ -142,7 +155,10 @@ pub fn run(cmd: Command, g: &Global) -> Result<()> {
 
 /// Runs `ignis volume render`; returns the files written.
 pub fn render(a: &RenderArgs, g: &Global) -> Result<Vec<PathBuf>> {
-    anyhow::ensure!(a.frames > 0, "--frames 0: nothing to write; ask for at least 1 frame");
+    anyhow::ensure!(
+        a.frames > 0,
+        "--frames 0: nothing to write; ask for at least 1 frame"
+    );
     let scene = a.scene()?;
     let mut opts = a.out.write_options();
     opts.fps = scene.fps as f64;
@@ -161,11 +177,15 @@ pub fn render(a: &RenderArgs, g: &Global) -> Result<Vec<PathBuf>> {
                 hits.push('\n');
             }
         }
-        writer.push(&f.image).with_context(|| format!("writing {}", a.out.output.display()))?;
+        writer
+            .push(&f.image)
+            .with_context(|| format!("writing {}", a.out.output.display()))?;
         pb.inc(1);
     }
     pb.finish_and_clear();
-    let mut files = writer.finish().with_context(|| format!("finishing {}", a.out.output.display()))?;
+    let mut files = writer
+        .finish()
+        .with_context(|| format!("finishing {}", a.out.output.display()))?;
     if let Some(p) = &a.collisions {
         let tmp = p.with_extension("jsonl.tmp");
         std::fs::write(&tmp, hits).with_context(|| format!("writing {}", tmp.display()))?;
@@ -185,7 +205,11 @@ pub fn bench(g: &Global, quick: bool) -> Result<serde_json::Value> {
     let frames = if quick { 2 } else { 30 };
     let mut rows = Vec::new();
     let mut goal = None;
-    for (kind, octaves) in [(NoiseKind::Mnoise, 1u32), (NoiseKind::Perlin3, 3), (NoiseKind::Perlin4, 3)] {
+    for (kind, octaves) in [
+        (NoiseKind::Mnoise, 1u32),
+        (NoiseKind::Perlin3, 3),
+        (NoiseKind::Perlin4, 3),
+    ] {
         for lattice in [35usize, 135] {
             let scene = FireScene::table1(kind, octaves, lattice);
             let mut anim = scene.animator()?;
@@ -196,7 +220,10 @@ pub fn bench(g: &Global, quick: bool) -> Result<serde_json::Value> {
             }
             let secs = t.elapsed().as_secs_f64();
             let fps = frames as f64 / secs;
-            g.say(format!("  {} x{octaves} lattice {lattice}: {fps:.1} fps", kind.name()));
+            g.say(format!(
+                "  {} x{octaves} lattice {lattice}: {fps:.1} fps",
+                kind.name()
+            ));
             if kind == NoiseKind::Perlin4 && lattice == 35 {
                 goal = Some(fps);
             }
@@ -230,30 +257,55 @@ pub fn demo(ctx: &mut crate::demo::Demo) -> Result<()> {
          script or a particle simulation, animated by 4-D Improved Perlin noise and rendered by view-aligned slicing \
          (CPU). Each preset as a GIF and as a flipbook with alpha (a billboard).",
     );
-    let (size, frames) = if ctx.quick { (Size::new(48, 48)?, 8u32) } else { (Size::new(128, 128)?, 48u32) };
+    let (size, frames) = if ctx.quick {
+        (Size::new(48, 48)?, 8u32)
+    } else {
+        (Size::new(128, 128)?, 48u32)
+    };
     for p in Preset::ALL {
         let mut scene = FireScene::preset(p).with_size(size);
         scene.seed = ctx.seed;
         let gif_rel = format!("volume/{}.gif", p.name());
         let book_rel = format!("volume/{}-flipbook.png", p.name());
         let (gif, book) = (ctx.path(&gif_rel)?, ctx.path(&book_rel)?);
-        let opts = ignis_media::WriteOptions { fps: scene.fps as f64, ..Default::default() };
-        let mut wg = ignis_media::create(&gif, size, &opts).with_context(|| format!("creating {}", gif.display()))?;
-        let mut wb = ignis_media::create(&book, size, &opts).with_context(|| format!("creating {}", book.display()))?;
+        let opts = ignis_media::WriteOptions {
+            fps: scene.fps as f64,
+            ..Default::default()
+        };
+        let mut wg = ignis_media::create(&gif, size, &opts)
+            .with_context(|| format!("creating {}", gif.display()))?;
+        let mut wb = ignis_media::create(&book, size, &opts)
+            .with_context(|| format!("creating {}", book.display()))?;
         let mut anim = scene.animator()?;
         let pb = ctx.global.progress(frames as u64, "rendering");
         for _ in 0..frames {
             let f = anim.next_frame()?;
-            wg.push(&f.image).with_context(|| format!("writing {}", gif.display()))?;
-            wb.push(&f.image).with_context(|| format!("writing {}", book.display()))?;
+            wg.push(&f.image)
+                .with_context(|| format!("writing {}", gif.display()))?;
+            wb.push(&f.image)
+                .with_context(|| format!("writing {}", book.display()))?;
             pb.inc(1);
         }
         pb.finish_and_clear();
-        wg.finish().with_context(|| format!("finishing {}", gif.display()))?;
-        wb.finish().with_context(|| format!("finishing {}", book.display()))?;
-        let settings = format!("ignis volume render --preset {} --size {size} --frames {frames} --seed {} -o", p.name(), ctx.seed);
-        ctx.item(&gif_rel, &format!("{} (GIF)", p.name()), &format!("{settings} {}.gif", p.name()));
-        ctx.item(&book_rel, &format!("{} flipbook with alpha", p.name()), &format!("{settings} {}.png", p.name()));
+        wg.finish()
+            .with_context(|| format!("finishing {}", gif.display()))?;
+        wb.finish()
+            .with_context(|| format!("finishing {}", book.display()))?;
+        let settings = format!(
+            "ignis volume render --preset {} --size {size} --frames {frames} --seed {} -o",
+            p.name(),
+            ctx.seed
+        );
+        ctx.item(
+            &gif_rel,
+            &format!("{} (GIF)", p.name()),
+            &format!("{settings} {}.gif", p.name()),
+        );
+        ctx.item(
+            &book_rel,
+            &format!("{} flipbook with alpha", p.name()),
+            &format!("{settings} {}.png", p.name()),
+        );
     }
     Ok(())
 }

@@ -1,0 +1,474 @@
+//! The deformation lattice around the centre curve.
+//!
+//! Source: fuller-procedural-volumetric-fire.txt §3.1 and Figure 9. For each control point
+//! `P_i` the curve's velocity `V_i` and normal `N_i` are sampled at `t = i/(n−1)`; a square
+//! of side `2r_i` centred on `P_i`, in the plane normal to `V_i` and aligned to `N_i`, gives
+//! the `i`-th control points of four corner curves. The centre curve is sampled `c` times
+//! by arc length; the same `t` values on the corner curves give `c` levels of four corners,
+//! i.e. `c − 1` hexahedral cells.
+//!
+//! Departures from the paper:
+//! - `N_i` is a rotation-minimising (parallel-transported) normal rather than the Frenet
+//!   normal, which is undefined on straight pieces and flips at inflections; this is what
+//!   "aligned to the normals to reduce twist" needs.
+//! - Texture coordinates are `(x, y, z)` with `z = level/(c−1)` the height (eq. 11–13 use
+//!   `tex_z` as the height), `x, y ∈ {−1, 1}` from the corner curve.
+//! - The GPU interpolates texture coordinates across triangles; the CPU renderer instead
+//!   inverts each cell's trilinear map (Newton), which is the exact inverse of the forward
+//!   map [`Cell::forward`].
+
+use crate::error::{Result, VolumeError};
+use crate::spline::BSpline;
+
+pub(crate) type V3 = [f32; 3];
+
+#[inline(always)]
+pub(crate) fn sub(a: V3, b: V3) -> V3 {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+#[inline(always)]
+pub(crate) fn add(a: V3, b: V3) -> V3 {
+    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
+}
+#[inline(always)]
+pub(crate) fn scale(a: V3, s: f32) -> V3 {
+    [a[0] * s, a[1] * s, a[2] * s]
+}
+#[inline(always)]
+pub(crate) fn dot(a: V3, b: V3) -> f32 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+#[inline(always)]
+pub(crate) fn cross(a: V3, b: V3) -> V3 {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+#[inline(always)]
+pub(crate) fn norm(a: V3) -> f32 {
+    dot(a, a).sqrt()
+}
+pub(crate) fn normalize(a: V3) -> Option<V3> {
+    let n = norm(a);
+    (n > 1e-12 && n.is_finite()).then(|| scale(a, 1.0 / n))
+}
+
+/// Texture-space corners of a square: index bit 0 → x = ±1, bit 1 → y = ±1.
+const CORNER_XY: [[f32; 2]; 4] = [[-1.0, -1.0], [1.0, -1.0], [-1.0, 1.0], [1.0, 1.0]];
+
+/// One lattice section: a hexahedron with a trilinear map from `(a, b, s) ∈ [0, 1]³` to
+/// world space (`a = (x+1)/2`, `b = (y+1)/2`, `s` the fraction between its two levels).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Cell {
+    /// Polynomial coefficients: `P = k0 + k1 a + k2 b + k3 s + k4 ab + k5 as + k6 bs + k7 abs`.
+    k: [V3; 8],
+    /// World-space bounding box (the hull of the 8 corners contains the cell).
+    pub min: V3,
+    pub max: V3,
+    /// Level index of the bottom face.
+    pub level: usize,
+    /// Inverse Jacobian at the cell centre (rows), for the chord-method inverse.
+    jinv: [V3; 3],
+}
+
+impl Cell {
+    /// A cell from its 8 corners, indexed `ia + 2 ib + 4 is`.
+    pub fn from_corners(c: [V3; 8], level: usize) -> Cell {
+        let k0 = c[0];
+        let k1 = sub(c[1], c[0]);
+        let k2 = sub(c[2], c[0]);
+        let k3 = sub(c[4], c[0]);
+        let k4 = add(sub(c[3], c[1]), sub(c[0], c[2]));
+        let k5 = add(sub(c[5], c[1]), sub(c[0], c[4]));
+        let k6 = add(sub(c[6], c[2]), sub(c[0], c[4]));
+        let k7 = sub(
+            add(add(c[7], c[1]), add(c[2], c[4])),
+            add(add(c[3], c[5]), add(c[6], c[0])),
+        );
+        let mut min = c[0];
+        let mut max = c[0];
+        for p in &c[1..] {
+            for i in 0..3 {
+                min[i] = min[i].min(p[i]);
+                max[i] = max[i].max(p[i]);
+            }
+        }
+        let mut cell = Cell {
+            k: [k0, k1, k2, k3, k4, k5, k6, k7],
+            min,
+            max,
+            level,
+            jinv: [[0.0; 3]; 3],
+        };
+        let (ja, jb, js) = cell.jacobian([0.5; 3]);
+        let det = dot(ja, cross(jb, js));
+        if det.abs() > 1e-20 && det.is_finite() {
+            let inv = 1.0 / det;
+            // rows of J⁻¹ are the cross products of the columns divided by det
+            cell.jinv = [
+                scale(cross(jb, js), inv),
+                scale(cross(js, ja), inv),
+                scale(cross(ja, jb), inv),
+            ];
+        }
+        cell
+    }
+
+    /// Jacobian columns d/da, d/db, d/ds at local coordinates `l`.
+    #[inline(always)]
+    fn jacobian(&self, l: V3) -> (V3, V3, V3) {
+        let [a, b, s] = l;
+        let k = &self.k;
+        let mut ja = [0.0; 3];
+        let mut jb = [0.0; 3];
+        let mut js = [0.0; 3];
+        for i in 0..3 {
+            ja[i] = k[1][i] + b * k[4][i] + s * k[5][i] + b * s * k[7][i];
+            jb[i] = k[2][i] + a * k[4][i] + s * k[6][i] + a * s * k[7][i];
+            js[i] = k[3][i] + a * k[5][i] + b * k[6][i] + a * b * k[7][i];
+        }
+        (ja, jb, js)
+    }
+
+    /// Like [`Cell::inverse`] but first tries the chord method (the centre's inverse
+    /// Jacobian, exact in one step for an affine cell, cheap for nearly affine ones), and
+    /// falls back to Newton's method.
+    #[inline]
+    pub fn inverse_fast(&self, p: V3, guess: V3) -> Option<V3> {
+        let mut l = guess;
+        let m = &self.jinv;
+        for _ in 0..4 {
+            let f = sub(self.forward(l), p);
+            let d = [dot(m[0], f), dot(m[1], f), dot(m[2], f)];
+            l = [l[0] - d[0], l[1] - d[1], l[2] - d[2]];
+            if d[0].abs() + d[1].abs() + d[2].abs() < 1e-5 {
+                return Some(l);
+            }
+            if !l.iter().all(|v| v.abs() < 1e3) {
+                break;
+            }
+        }
+        self.inverse(p, guess)
+    }
+
+    /// World position of local coordinates `(a, b, s)`.
+    #[inline(always)]
+    pub fn forward(&self, l: V3) -> V3 {
+        let [a, b, s] = l;
+        let k = &self.k;
+        let mut p = [0.0; 3];
+        for i in 0..3 {
+            p[i] = k[0][i]
+                + a * k[1][i]
+                + b * k[2][i]
+                + s * k[3][i]
+                + a * b * k[4][i]
+                + a * s * k[5][i]
+                + b * s * k[6][i]
+                + a * b * s * k[7][i];
+        }
+        p
+    }
+
+    /// Local coordinates of world point `p` by Newton's method from `guess`; `None` when it
+    /// does not converge (far outside a strongly bent cell). The result may lie outside
+    /// `[0, 1]³`: the caller decides membership.
+    #[inline]
+    pub fn inverse(&self, p: V3, guess: V3) -> Option<V3> {
+        let mut l = guess;
+        for _ in 0..8 {
+            let [a, b, s] = l;
+            let f = sub(self.forward(l), p);
+            let (ja, jb, js) = self.jacobian(l);
+            let det = dot(ja, cross(jb, js));
+            if det.abs() < 1e-20 || !det.is_finite() {
+                return None;
+            }
+            let inv = 1.0 / det;
+            // Cramer's rule for J d = f
+            let da = dot(f, cross(jb, js)) * inv;
+            let db = dot(ja, cross(f, js)) * inv;
+            let ds = dot(ja, cross(jb, f)) * inv;
+            l = [a - da, b - db, s - ds];
+            // Newton converges quadratically: after a step this small the error is ~1e-8.
+            if da.abs() + db.abs() + ds.abs() < 1e-4 {
+                return Some(l);
+            }
+            if l.iter().any(|v| v.abs() > 1e3 || !v.is_finite()) {
+                return None;
+            }
+        }
+        // accept if the residual is small even without the step criterion
+        (norm(sub(self.forward(l), p)) < 1e-4).then_some(l)
+    }
+}
+
+/// Settings for building a lattice.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LatticeParams {
+    /// Number of levels `c` (the paper's lattice resolution), ≥ 2. Default 35.
+    pub resolution: usize,
+}
+
+impl Default for LatticeParams {
+    fn default() -> Self {
+        LatticeParams { resolution: 35 }
+    }
+}
+
+/// The lattice around one fire at one instant.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Lattice {
+    /// `c` levels of four corners, indexed as [`CORNER_XY`].
+    levels: Vec<[V3; 4]>,
+    /// Radius of the centre curve at each level (eq. 10's horizontal noise scale).
+    radii: Vec<f32>,
+    cells: Vec<Cell>,
+    /// Arc length of the centre curve (eq. 10's vertical noise scale).
+    length: f32,
+    /// Union of the cells' bounding boxes.
+    pub min: V3,
+    pub max: V3,
+}
+
+impl Lattice {
+    /// Builds the lattice of §3.1 around `curve` with `resolution` levels.
+    pub fn build(curve: &BSpline, resolution: usize) -> Result<Lattice> {
+        if !(2..=4096).contains(&resolution) {
+            return Err(VolumeError::bad(
+                "render.lattice",
+                format!("{resolution}; use 2 to 4096"),
+            ));
+        }
+        let pts = curve.points();
+        let n = pts.len();
+        // frames at t = i/(n-1), parallel transported
+        let mut corner_pts: [Vec<[f32; 4]>; 4] = Default::default();
+        let mut prev_n: Option<V3> = None;
+        let mut prev_v: V3 = [0.0, 0.0, 1.0];
+        for (i, p) in pts.iter().enumerate() {
+            let t = i as f32 / (n - 1) as f32;
+            let d = curve.derivative(t);
+            let v = normalize([d[0], d[1], d[2]]).unwrap_or(prev_v);
+            let nrm = match prev_n {
+                None => {
+                    // world x projected onto the plane normal to v (y if v ∥ x)
+                    let r = if v[0].abs() < 0.9 {
+                        [1.0, 0.0, 0.0]
+                    } else {
+                        [0.0, 1.0, 0.0]
+                    };
+                    normalize(sub(r, scale(v, dot(r, v)))).unwrap_or([1.0, 0.0, 0.0])
+                }
+                Some(pn) => normalize(sub(pn, scale(v, dot(pn, v)))).unwrap_or(pn),
+            };
+            let bin = normalize(cross(v, nrm)).unwrap_or([0.0, 1.0, 0.0]);
+            prev_n = Some(nrm);
+            prev_v = v;
+            let r = p[3];
+            for (k, xy) in CORNER_XY.iter().enumerate() {
+                let off = add(scale(nrm, xy[0] * r), scale(bin, xy[1] * r));
+                corner_pts[k].push([p[0] + off[0], p[1] + off[1], p[2] + off[2], r]);
+            }
+        }
+        let corners: Vec<BSpline> = corner_pts
+            .into_iter()
+            .map(|cp| BSpline::new(cp, curve.degree()))
+            .collect::<Result<_>>()?;
+        // arc-length table of the centre curve
+        let dense = (resolution * 16).max(256);
+        let mut ts = Vec::with_capacity(dense + 1);
+        let mut lens = Vec::with_capacity(dense + 1);
+        let mut last = curve.eval(0.0);
+        let mut acc = 0.0f64;
+        for k in 0..=dense {
+            let t = k as f32 / dense as f32;
+            let p = curve.eval(t);
+            acc += norm(sub([p[0], p[1], p[2]], [last[0], last[1], last[2]])) as f64;
+            last = p;
+            ts.push(t);
+            lens.push(acc);
+        }
+        let total = acc;
+        let t_at = |s: f64| -> f32 {
+            if total <= 0.0 {
+                return (s as f32).clamp(0.0, 1.0);
+            }
+            let target = s * total;
+            let k = lens.partition_point(|&l| l < target).clamp(1, dense);
+            let (l0, l1) = (lens[k - 1], lens[k]);
+            let f = if l1 > l0 {
+                ((target - l0) / (l1 - l0)) as f32
+            } else {
+                0.0
+            };
+            ts[k - 1] + f * (ts[k] - ts[k - 1])
+        };
+        let mut levels = Vec::with_capacity(resolution);
+        let mut radii = Vec::with_capacity(resolution);
+        for j in 0..resolution {
+            let t = if total > 0.0 {
+                t_at(j as f64 / (resolution - 1) as f64)
+            } else {
+                j as f32 / (resolution - 1) as f32
+            };
+            let mut lv = [[0.0; 3]; 4];
+            for (k, c) in corners.iter().enumerate() {
+                let q = c.eval(t);
+                lv[k] = [q[0], q[1], q[2]];
+            }
+            levels.push(lv);
+            radii.push(curve.eval(t)[3]);
+        }
+        let cells: Vec<Cell> = (0..resolution - 1)
+            .map(|j| {
+                let (lo, hi) = (levels[j], levels[j + 1]);
+                Cell::from_corners([lo[0], lo[1], lo[2], lo[3], hi[0], hi[1], hi[2], hi[3]], j)
+            })
+            .collect();
+        let mut min = [f32::INFINITY; 3];
+        let mut max = [f32::NEG_INFINITY; 3];
+        for c in &cells {
+            for i in 0..3 {
+                min[i] = min[i].min(c.min[i]);
+                max[i] = max[i].max(c.max[i]);
+            }
+        }
+        Ok(Lattice {
+            levels,
+            radii,
+            cells,
+            length: total as f32,
+            min,
+            max,
+        })
+    }
+
+    pub fn cells(&self) -> &[Cell] {
+        &self.cells
+    }
+    /// The four corners of each level.
+    pub fn levels(&self) -> &[[V3; 4]] {
+        &self.levels
+    }
+    /// Number of levels `c`.
+    pub fn resolution(&self) -> usize {
+        self.levels.len()
+    }
+    /// Arc length of the centre curve.
+    pub fn length(&self) -> f32 {
+        self.length
+    }
+    /// Centre-curve radius at texture height `tex_z` (linear between levels).
+    #[inline]
+    pub fn radius_at(&self, tex_z: f32) -> f32 {
+        let c = self.levels.len();
+        let x = (tex_z.clamp(0.0, 1.0)) * (c - 1) as f32;
+        let j = (x as usize).min(c - 2);
+        let f = x - j as f32;
+        self.radii[j] + f * (self.radii[j + 1] - self.radii[j])
+    }
+
+    /// Texture coordinates of local coordinates `l` in cell `j`.
+    #[inline(always)]
+    pub fn tex_of(&self, j: usize, l: V3) -> V3 {
+        [
+            2.0 * l[0] - 1.0,
+            2.0 * l[1] - 1.0,
+            (j as f32 + l[2]) / (self.levels.len() - 1) as f32,
+        ]
+    }
+
+    /// World position of texture coordinates `tex` (`x, y ∈ [−1, 1]`, `z ∈ [0, 1]`).
+    pub fn forward(&self, tex: V3) -> V3 {
+        let c = self.levels.len();
+        let x = tex[2].clamp(0.0, 1.0) * (c - 1) as f32;
+        let j = (x as usize).min(c - 2);
+        self.cells[j].forward([(tex[0] + 1.0) * 0.5, (tex[1] + 1.0) * 0.5, x - j as f32])
+    }
+
+    /// Texture coordinates of world point `p`, if it lies inside the lattice.
+    pub fn inverse(&self, p: V3) -> Option<V3> {
+        const EPS: f32 = 1e-4;
+        for (j, c) in self.cells.iter().enumerate() {
+            if (0..3).any(|i| p[i] < c.min[i] - EPS || p[i] > c.max[i] + EPS) {
+                continue;
+            }
+            if let Some(l) = c.inverse(p, [0.5, 0.5, 0.5]) {
+                if l.iter().all(|&v| (-EPS..=1.0 + EPS).contains(&v)) {
+                    return Some(self.tex_of(j, l));
+                }
+            }
+        }
+        None
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn bent() -> BSpline {
+        BSpline::new(
+            vec![
+                [0.0, 0.0, 0.0, 1.0],
+                [0.3, 0.1, 1.0, 0.9],
+                [0.9, -0.2, 2.0, 0.6],
+                [1.5, 0.2, 2.6, 0.3],
+            ],
+            3,
+        )
+        .unwrap()
+    }
+
+    #[test]
+    fn inverse_undoes_forward() {
+        let lat = Lattice::build(&bent(), 35).unwrap();
+        let mut rng = ignis_core::Rng::new(3);
+        for _ in 0..500 {
+            let tex = [
+                rng.uniform(-0.98, 0.98) as f32,
+                rng.uniform(-0.98, 0.98) as f32,
+                rng.uniform(0.01, 0.99) as f32,
+            ];
+            let p = lat.forward(tex);
+            let back = lat.inverse(p).expect("inside");
+            // the renderer's chord-method inverse agrees
+            let j = ((tex[2] * 34.0) as usize).min(33);
+            let l = lat.cells()[j].inverse_fast(p, [0.5; 3]).expect("converges");
+            let t2 = lat.tex_of(j, l);
+            for k in 0..3 {
+                assert!((t2[k] - tex[k]).abs() < 1e-4, "fast {tex:?} -> {t2:?}");
+            }
+            for k in 0..3 {
+                assert!((back[k] - tex[k]).abs() < 1e-4, "{tex:?} -> {back:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn straight_curve_gives_boxes_of_side_2r() {
+        let c = BSpline::new(
+            vec![
+                [0.0, 0.0, 0.0, 0.5],
+                [0.0, 0.0, 1.0, 0.5],
+                [0.0, 0.0, 2.0, 0.5],
+                [0.0, 0.0, 3.0, 0.5],
+            ],
+            3,
+        )
+        .unwrap();
+        let lat = Lattice::build(&c, 10).unwrap();
+        assert!((lat.length() - 3.0).abs() < 1e-3);
+        for (j, lv) in lat.levels().iter().enumerate() {
+            let z = 3.0 * j as f32 / 9.0;
+            for (k, p) in lv.iter().enumerate() {
+                assert!((p[0] - 0.5 * CORNER_XY[k][0]).abs() < 1e-5);
+                assert!((p[1] - 0.5 * CORNER_XY[k][1]).abs() < 1e-5);
+                assert!((p[2] - z).abs() < 2e-3, "level {j}: {} vs {z}", p[2]);
+            }
+        }
+    }
+}

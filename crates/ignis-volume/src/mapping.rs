@@ -1,0 +1,117 @@
+//! The per-sample mapping: texture coordinates → noise → profile look-up.
+//!
+//! Source: fuller-procedural-volumetric-fire.txt §4.2, eq. (9)–(14). These are small pure
+//! functions on purpose: a GPU renderer must reproduce them line for line (they are the
+//! pixel shader), and [`shade`] is what the CPU renderer calls for every sample.
+
+use crate::noise::{turbulence, NoiseKind};
+use crate::profile::FireProfile;
+use serde::{Deserialize, Serialize};
+
+/// Noise settings of one fire (§4.2).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct NoiseParams {
+    /// Noise function. Default `perlin4`.
+    pub kind: NoiseKind,
+    /// Number of octaves in the turbulence sum (eq. 9), 0–8; 0 disables noise. Default 3.
+    pub octaves: u32,
+    /// Amplitude factor per octave (eq. 9). Default 0.5.
+    pub gain: f32,
+    /// Frequency factor per octave (eq. 9). Default 2.
+    pub lacunarity: f32,
+    /// World-space spatial frequency of the detail, 1/units (eq. 10). Default 1.
+    pub frequency: f32,
+    /// Stability factor of the kernel `f(tex_z) = stability · √tex_z` (eq. 13); larger
+    /// means more flicker at the top. Default 0.35.
+    pub stability: f32,
+    /// Seconds → noise time (eq. 11's `time`). Default 1.
+    pub time_scale: f32,
+    /// Per-instance offset in noise space so no two fires match; `None` = derived from the
+    /// scene seed and the fire's index.
+    pub offset: Option<[f32; 4]>,
+}
+
+impl Default for NoiseParams {
+    fn default() -> Self {
+        NoiseParams {
+            kind: NoiseKind::Perlin4,
+            octaves: 3,
+            gain: 0.5,
+            lacunarity: 2.0,
+            frequency: 1.0,
+            stability: 0.35,
+            time_scale: 1.0,
+            offset: None,
+        }
+    }
+}
+
+/// Eq. (10): `noise_scale = (radius, radius, length, 1) · frequency`.
+#[inline(always)]
+pub fn noise_scale(radius: f32, length: f32, frequency: f32) -> [f32; 4] {
+    [
+        radius * frequency,
+        radius * frequency,
+        length * frequency,
+        frequency,
+    ]
+}
+
+/// Eq. (11) plus the instance offset of eq. (13):
+/// `(tex_x, tex_y, tex_z − time, time) · noise_scale + offset`.
+#[inline(always)]
+pub fn noise_position(tex: [f32; 3], time: f32, scale: [f32; 4], offset: [f32; 4]) -> [f32; 4] {
+    [
+        tex[0] * scale[0] + offset[0],
+        tex[1] * scale[1] + offset[1],
+        (tex[2] - time) * scale[2] + offset[2],
+        time * scale[3] + offset[3],
+    ]
+}
+
+/// The kernel of eq. (13): `f(tex_z) = stability · √tex_z`.
+#[inline(always)]
+pub fn kernel(tex_z: f32, stability: f32) -> f32 {
+    stability * tex_z.max(0.0).sqrt()
+}
+
+/// Eq. (12): `u = √(tex_x² + tex_y²)`.
+#[inline(always)]
+pub fn radial_u(tex: [f32; 3]) -> f32 {
+    (tex[0] * tex[0] + tex[1] * tex[1]).sqrt()
+}
+
+/// Eq. (12)–(13): the profile coordinates given the turbulence value at this sample.
+#[inline(always)]
+pub fn profile_uv(tex: [f32; 3], turb: f32, stability: f32) -> [f32; 2] {
+    [radial_u(tex), tex[2] + kernel(tex[2], stability) * turb]
+}
+
+/// The whole mapping of eq. (9)–(14) for one sample: the profile colour (straight alpha)
+/// at texture coordinates `tex` of a fire whose local radius is `radius` and whose centre
+/// curve is `length` long, at noise time `time`.
+#[inline]
+pub fn shade(
+    tex: [f32; 3],
+    radius: f32,
+    length: f32,
+    time: f32,
+    noise: &NoiseParams,
+    offset: [f32; 4],
+    profile: &FireProfile,
+) -> [f32; 4] {
+    let u = radial_u(tex);
+    if profile.column_empty(u) {
+        return [0.0; 4];
+    }
+    let turb = if noise.octaves == 0 || noise.stability == 0.0 {
+        0.0
+    } else {
+        let scale = noise_scale(radius, length, noise.frequency);
+        let p = noise_position(tex, time, scale, offset);
+        turbulence(noise.kind, p, noise.octaves, noise.gain, noise.lacunarity)
+    };
+    let [u, v] = profile_uv(tex, turb, noise.stability);
+    profile.sample(u, v)
+}

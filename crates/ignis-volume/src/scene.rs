@@ -1,0 +1,744 @@
+//! Scenes: fires, camera, obstacles and render settings, from a TOML fire file or a preset,
+//! and the animator that steps them frame by frame.
+//!
+//! A fire file (all fields optional except at least one `[[fire]]` with one motion):
+//!
+//! ```toml
+//! seed = 7
+//! fps = 30.0
+//! [camera]
+//! position = [0.0, -7.0, 1.5]
+//! target = [0.0, 0.0, 1.5]
+//! fov = 40.0
+//! [render]
+//! size = "256x256"
+//! slice_spacing = 0.05     # world units, > 0
+//! lattice = 35             # lattice resolution c
+//! blend = "additive"       # or "cartoon", or { tint = [0.3, 0.5, 1.0] }
+//! intensity = 2.5
+//! [bloom]                  # ignis-core BloomParams; passes = 0 disables
+//! passes = 2
+//! radius = 8.0
+//! [[fire]]
+//! profile = "default"      # or an image path, relative to the fire file
+//! degree = 3
+//! noise = { kind = "perlin4", octaves = 3, frequency = 1.0, stability = 0.35 }
+//! curve = { points = [[0,0,0,1], [0,0,1,0.9], [0,0,2,0.7], [0,0,3,0.4]] }  # [x, y, z, radius]
+//! # or: [fire.script] looped = true, [[fire.script.keyframes]] time = 0.0, points = [...]
+//! # or: [fire.simulation] wind = [0.5, 0, 0], control_points = 6, ...
+//! [[obstacle]]
+//! type = "plane"           # or "sphere" with centre and radius
+//! point = [0.0, 0.0, 2.5]
+//! normal = [0.0, 0.0, -1.0]
+//! ```
+
+use crate::error::{Result, VolumeError};
+use crate::lattice::Lattice;
+use crate::mapping::NoiseParams;
+use crate::motion::{Collision, Keyframe, Obstacle, ParticleSim, Script, SimParams};
+use crate::noise::NoiseKind;
+use crate::profile::FireProfile;
+use crate::render::{finish, render, Blend, Camera, FireInstance, RenderParams, RenderStats};
+use crate::spline::BSpline;
+use ignis_core::post::BloomParams;
+use ignis_core::{RgbaFrame, Rng, Size};
+use serde::Deserialize;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+/// How a fire's control points move.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Motion {
+    /// Fixed control points `[x, y, z, radius]`.
+    Static(Vec<[f32; 4]>),
+    /// Scripted keyframes.
+    Script(Script),
+    /// Particle simulation (eq. 7–8).
+    Simulation(SimParams),
+}
+
+/// One fire of a scene.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FireSpec {
+    pub profile: Arc<FireProfile>,
+    /// Degree of the centre curve (1–7). Default 3.
+    pub degree: usize,
+    pub noise: NoiseParams,
+    pub motion: Motion,
+}
+
+impl FireSpec {
+    /// A fire with the default profile and noise.
+    pub fn new(motion: Motion) -> FireSpec {
+        FireSpec {
+            profile: Arc::new(FireProfile::default_profile()),
+            degree: 3,
+            noise: NoiseParams::default(),
+            motion,
+        }
+    }
+}
+
+/// The built-in scenes (`ignis volume render --preset ...`, `ignis demo`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Preset {
+    Torch,
+    Candle,
+    Campfire,
+    Wall,
+}
+
+impl Preset {
+    pub const ALL: [Preset; 4] = [
+        Preset::Torch,
+        Preset::Candle,
+        Preset::Campfire,
+        Preset::Wall,
+    ];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Preset::Torch => "torch",
+            Preset::Candle => "candle",
+            Preset::Campfire => "campfire",
+            Preset::Wall => "wall",
+        }
+    }
+}
+
+impl std::str::FromStr for Preset {
+    type Err = VolumeError;
+    fn from_str(s: &str) -> Result<Preset> {
+        Preset::ALL
+            .into_iter()
+            .find(|p| p.name() == s)
+            .ok_or_else(|| {
+                VolumeError::bad(
+                    "preset",
+                    format!("`{s}`; choose torch, candle, campfire or wall"),
+                )
+            })
+    }
+}
+
+/// Everything needed to render an animation.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FireScene {
+    /// Seed of every random choice (per-fire noise offsets, particle dispersion).
+    pub seed: u64,
+    /// Frames per second of the animation (> 0). Default 30.
+    pub fps: f32,
+    pub camera: Camera,
+    /// Output size. Default 256×256.
+    pub size: Size,
+    /// Distance between view-aligned slices, world units (> 0). Default 0.05.
+    pub slice_spacing: f32,
+    /// Lattice resolution `c` (levels), 2–4096. Default 35.
+    pub lattice: usize,
+    pub blend: Blend,
+    /// See [`RenderParams::intensity`]. Default 2.5.
+    pub intensity: f32,
+    /// Post bloom (ignis-core). Default: 2 passes, radius 6 % of the image height.
+    pub bloom: BloomParams,
+    pub fires: Vec<FireSpec>,
+    pub obstacles: Vec<Obstacle>,
+}
+
+// ---- fire file -------------------------------------------------------------------------
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct FileScene {
+    #[serde(default)]
+    seed: u64,
+    fps: Option<f32>,
+    #[serde(default)]
+    camera: Camera,
+    #[serde(default)]
+    render: FileRender,
+    bloom: Option<BloomParams>,
+    #[serde(default)]
+    fire: Vec<FileFire>,
+    #[serde(default)]
+    obstacle: Vec<Obstacle>,
+}
+
+#[derive(Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+struct FileRender {
+    size: Option<String>,
+    slice_spacing: Option<f32>,
+    lattice: Option<usize>,
+    blend: Option<Blend>,
+    intensity: Option<f32>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct FileFire {
+    profile: Option<String>,
+    degree: Option<usize>,
+    #[serde(default)]
+    noise: NoiseParams,
+    curve: Option<FileCurve>,
+    script: Option<Script>,
+    simulation: Option<SimParams>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct FileCurve {
+    points: Vec<[f32; 4]>,
+}
+
+/// Prefixes the field of a [`VolumeError::BadParameter`].
+fn within(prefix: &str, e: VolumeError) -> VolumeError {
+    match e {
+        VolumeError::BadParameter { field, reason } => VolumeError::BadParameter {
+            field: format!("{prefix}.{field}"),
+            reason,
+        },
+        other => other,
+    }
+}
+
+fn default_bloom(size: Size) -> BloomParams {
+    BloomParams {
+        passes: 2,
+        radius: (size.height as f32 * 0.06).max(1.0),
+        radius_falloff: 0.5,
+        strength: 0.3,
+    }
+}
+
+impl FireScene {
+    /// A scene with no fires and default settings.
+    pub fn empty() -> FireScene {
+        let size = Size::new(256, 256).expect("valid");
+        FireScene {
+            seed: 0,
+            fps: 30.0,
+            camera: Camera::default(),
+            size,
+            slice_spacing: 0.05,
+            lattice: 35,
+            blend: Blend::Additive,
+            intensity: 2.5,
+            bloom: default_bloom(size),
+            fires: Vec::new(),
+            obstacles: Vec::new(),
+        }
+    }
+
+    /// Parses a fire file. Relative profile paths are resolved against `base_dir`; images
+    /// are loaded by `load_image` (the library does not decode files: the CLI passes
+    /// `ignis_media::read_image`). Every error names the offending field.
+    pub fn from_toml(
+        text: &str,
+        base_dir: &Path,
+        load_image: &mut dyn FnMut(&Path) -> std::result::Result<RgbaFrame, String>,
+    ) -> Result<FireScene> {
+        let file: FileScene =
+            toml::from_str(text).map_err(|e| VolumeError::Parse(e.to_string()))?;
+        let mut s = FireScene::empty();
+        s.seed = file.seed;
+        if let Some(f) = file.fps {
+            s.fps = f;
+        }
+        s.camera = file.camera;
+        if let Some(sz) = &file.render.size {
+            s.size = sz
+                .parse::<Size>()
+                .map_err(|e| VolumeError::bad("render.size", e.to_string()))?;
+        }
+        if let Some(v) = file.render.slice_spacing {
+            s.slice_spacing = v;
+        }
+        if let Some(v) = file.render.lattice {
+            s.lattice = v;
+        }
+        if let Some(v) = file.render.blend {
+            s.blend = v;
+        }
+        if let Some(v) = file.render.intensity {
+            s.intensity = v;
+        }
+        s.bloom = file.bloom.unwrap_or_else(|| default_bloom(s.size));
+        s.obstacles = file.obstacle;
+        if file.fire.is_empty() {
+            return Err(VolumeError::bad(
+                "fire",
+                "the file has no [[fire]]; add at least one",
+            ));
+        }
+        let default_profile = Arc::new(FireProfile::default_profile());
+        for (i, f) in file.fire.into_iter().enumerate() {
+            let field = format!("fire[{i}]");
+            let profile = match f.profile.as_deref() {
+                None | Some("default") => default_profile.clone(),
+                Some(p) => {
+                    let path: PathBuf = if Path::new(p).is_absolute() {
+                        PathBuf::from(p)
+                    } else {
+                        base_dir.join(p)
+                    };
+                    if !path.exists() {
+                        return Err(VolumeError::Image {
+                            field: format!("{field}.profile"),
+                            path,
+                            reason: "no such file".into(),
+                        });
+                    }
+                    let img = load_image(&path).map_err(|reason| VolumeError::Image {
+                        field: format!("{field}.profile"),
+                        path: path.clone(),
+                        reason,
+                    })?;
+                    Arc::new(FireProfile::from_frame(&img).map_err(|e| within(&field, e))?)
+                }
+            };
+            let motion = match (f.curve, f.script, f.simulation) {
+                (Some(c), None, None) => Motion::Static(c.points),
+                (None, Some(s), None) => Motion::Script(s),
+                (None, None, Some(p)) => Motion::Simulation(p),
+                (None, None, None) => {
+                    return Err(VolumeError::bad(
+                        field,
+                        "needs one of `curve`, `script` or `simulation`",
+                    ))
+                }
+                _ => {
+                    return Err(VolumeError::bad(
+                        field,
+                        "give only one of `curve`, `script` or `simulation`",
+                    ))
+                }
+            };
+            s.fires.push(FireSpec {
+                profile,
+                degree: f.degree.unwrap_or(3),
+                noise: f.noise,
+                motion,
+            });
+        }
+        s.validate()?;
+        Ok(s)
+    }
+
+    /// Checks every setting; errors name the field as it is spelt in a fire file.
+    pub fn validate(&self) -> Result<()> {
+        if !(self.fps > 0.0 && self.fps <= 1000.0) {
+            return Err(VolumeError::bad(
+                "fps",
+                format!("{}; use (0, 1000]", self.fps),
+            ));
+        }
+        self.camera.validate()?;
+        self.render_params().validate()?;
+        if !(2..=4096).contains(&self.lattice) {
+            return Err(VolumeError::bad(
+                "render.lattice",
+                format!("{}; use 2 to 4096", self.lattice),
+            ));
+        }
+        self.bloom
+            .validate()
+            .map_err(|e| VolumeError::bad("bloom", e.to_string()))?;
+        if self.fires.len() > 256 {
+            return Err(VolumeError::bad("fire", "at most 256 fires"));
+        }
+        for (i, o) in self.obstacles.iter().enumerate() {
+            o.validate(&format!("obstacle[{i}]"))?;
+        }
+        for (i, f) in self.fires.iter().enumerate() {
+            let field = format!("fire[{i}]");
+            let n = &f.noise;
+            if n.octaves > 8 {
+                return Err(VolumeError::bad(
+                    format!("{field}.noise.octaves"),
+                    format!("{}; use 0 to 8", n.octaves),
+                ));
+            }
+            for (name, v) in [
+                ("gain", n.gain),
+                ("lacunarity", n.lacunarity),
+                ("frequency", n.frequency),
+                ("stability", n.stability),
+                ("time_scale", n.time_scale),
+            ] {
+                if !v.is_finite() || v < 0.0 {
+                    return Err(VolumeError::bad(
+                        format!("{field}.noise.{name}"),
+                        format!("{v}; must be finite and ≥ 0"),
+                    ));
+                }
+            }
+            if n.offset.is_some_and(|o| o.iter().any(|v| !v.is_finite())) {
+                return Err(VolumeError::bad(
+                    format!("{field}.noise.offset"),
+                    "must be finite",
+                ));
+            }
+            match &f.motion {
+                Motion::Static(pts) => {
+                    BSpline::new(pts.clone(), f.degree)
+                        .map_err(|e| within(&format!("{field}.curve"), e))?;
+                }
+                Motion::Script(s) => {
+                    s.validate(&format!("{field}.script"))?;
+                    for (k, kf) in s.keyframes.iter().enumerate() {
+                        BSpline::new(kf.points.clone(), f.degree)
+                            .map_err(|e| within(&format!("{field}.script.keyframes[{k}]"), e))?;
+                    }
+                }
+                Motion::Simulation(p) => {
+                    if !(1..=7).contains(&f.degree) {
+                        return Err(VolumeError::bad(format!("{field}.degree"), "use 1 to 7"));
+                    }
+                    p.validate(&format!("{field}.simulation"), f.degree)?;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The renderer settings of this scene.
+    pub fn render_params(&self) -> RenderParams {
+        RenderParams {
+            size: self.size,
+            slice_spacing: self.slice_spacing,
+            blend: self.blend,
+            intensity: self.intensity,
+        }
+    }
+
+    /// Sets the output size (and rescales the default bloom radius with it).
+    pub fn with_size(mut self, size: Size) -> FireScene {
+        let r = self.bloom.radius / self.size.height as f32;
+        self.bloom.radius = (r * size.height as f32).max(1.0);
+        self.size = size;
+        self
+    }
+
+    /// The noise offset of fire `i` (its own, or derived from the seed).
+    pub fn offset(&self, i: usize) -> [f32; 4] {
+        self.fires[i].noise.offset.unwrap_or_else(|| {
+            let mut r = Rng::derive(self.seed, 0x0ff5e7 + i as u64);
+            [0; 4].map(|_| r.uniform(0.0, 200.0) as f32)
+        })
+    }
+
+    /// A checked animator starting at frame 0.
+    pub fn animator(&self) -> Result<Animator<'_>> {
+        self.validate()?;
+        let sims = self
+            .fires
+            .iter()
+            .enumerate()
+            .map(|(i, f)| match &f.motion {
+                Motion::Simulation(p) => Some(ParticleSim::new(
+                    p.clone(),
+                    Rng::derive(self.seed, 0x5133 + i as u64).next_u64(),
+                    &self.obstacles,
+                )),
+                _ => None,
+            })
+            .collect();
+        Ok(Animator {
+            scene: self,
+            sims,
+            frame: 0,
+        })
+    }
+
+    /// The built-in scenes.
+    pub fn preset(p: Preset) -> FireScene {
+        let mut s = FireScene::empty();
+        s.seed = 1;
+        match p {
+            Preset::Candle => {
+                let pose = |dx: f32| {
+                    vec![
+                        [0.0, 0.0, 0.0, 0.22],
+                        [0.3 * dx, 0.0, 0.35, 0.2],
+                        [dx, 0.0, 0.75, 0.14],
+                        [1.8 * dx, 0.0, 1.1, 0.05],
+                    ]
+                };
+                let mut f = FireSpec::new(Motion::Script(Script {
+                    keyframes: vec![
+                        Keyframe {
+                            time: 0.0,
+                            points: pose(0.0),
+                        },
+                        Keyframe {
+                            time: 0.8,
+                            points: pose(0.04),
+                        },
+                        Keyframe {
+                            time: 1.6,
+                            points: pose(-0.03),
+                        },
+                        Keyframe {
+                            time: 2.4,
+                            points: pose(0.0),
+                        },
+                    ],
+                    looped: true,
+                }));
+                f.noise = NoiseParams {
+                    frequency: 3.0,
+                    stability: 0.2,
+                    octaves: 3,
+                    ..Default::default()
+                };
+                s.fires.push(f);
+                s.camera = Camera {
+                    position: [0.0, -3.2, 0.55],
+                    target: [0.0, 0.0, 0.55],
+                    fov: 30.0,
+                };
+                s.slice_spacing = 0.02;
+                s.intensity = 6.0;
+            }
+            Preset::Torch => {
+                let mut f = FireSpec::new(Motion::Simulation(SimParams {
+                    wind: [0.6, 0.0, 0.0],
+                    gust: 0.6,
+                    radius: 0.45,
+                    tip_radius: 0.15,
+                    lifetime: 1.0,
+                    rise_speed: 1.2,
+                    ..Default::default()
+                }));
+                f.noise = NoiseParams {
+                    frequency: 1.6,
+                    stability: 0.4,
+                    ..Default::default()
+                };
+                s.fires.push(f);
+                s.camera = Camera {
+                    position: [0.4, -5.5, 1.1],
+                    target: [0.4, 0.0, 1.1],
+                    fov: 36.0,
+                };
+                s.slice_spacing = 0.04;
+                s.intensity = 3.5;
+            }
+            Preset::Campfire => {
+                for k in 0..5 {
+                    let a = k as f32 / 5.0 * std::f32::consts::TAU + 0.3;
+                    let (c, sn) = (a.cos(), a.sin());
+                    let r0 = 0.55;
+                    let h = 1.5 + 0.3 * ((k * 7 % 5) as f32 / 4.0);
+                    let lean = |f: f32| [r0 * c * (1.0 - f), r0 * sn * (1.0 - f)];
+                    let pts: Vec<[f32; 4]> = (0..5)
+                        .map(|i| {
+                            let f = i as f32 / 4.0;
+                            let [x, y] = lean(f.min(0.8));
+                            [x, y, h * f, 0.45 * (1.0 - 0.7 * f)]
+                        })
+                        .collect();
+                    let mut sway = pts.clone();
+                    for p in sway.iter_mut().skip(2) {
+                        p[0] += 0.08 * (a * 3.0).sin();
+                        p[1] += 0.08 * (a * 3.0).cos();
+                    }
+                    let mut f = FireSpec::new(Motion::Script(Script {
+                        keyframes: vec![
+                            Keyframe {
+                                time: 0.0,
+                                points: pts.clone(),
+                            },
+                            Keyframe {
+                                time: 1.1 + 0.2 * k as f32,
+                                points: sway,
+                            },
+                            Keyframe {
+                                time: 2.2 + 0.4 * k as f32,
+                                points: pts,
+                            },
+                        ],
+                        looped: true,
+                    }));
+                    f.noise = NoiseParams {
+                        frequency: 1.5,
+                        stability: 0.45,
+                        ..Default::default()
+                    };
+                    s.fires.push(f);
+                }
+                s.camera = Camera {
+                    position: [0.0, -6.0, 1.6],
+                    target: [0.0, 0.0, 0.9],
+                    fov: 36.0,
+                };
+                s.slice_spacing = 0.05;
+                s.intensity = 1.6;
+            }
+            Preset::Wall => {
+                for k in 0..9 {
+                    let x = -3.2 + 0.8 * k as f32;
+                    let h = 2.0 + 0.5 * ((k * 5 % 9) as f32 / 8.0);
+                    let mut f = FireSpec::new(Motion::Static(vec![
+                        [x, 0.0, 0.0, 0.55],
+                        [x, 0.0, h * 0.33, 0.5],
+                        [x + 0.05, 0.0, h * 0.66, 0.4],
+                        [x + 0.1, 0.0, h, 0.25],
+                    ]));
+                    f.noise = NoiseParams {
+                        frequency: 1.3,
+                        stability: 0.5,
+                        ..Default::default()
+                    };
+                    s.fires.push(f);
+                }
+                s.camera = Camera {
+                    position: [0.0, -7.5, 1.3],
+                    target: [0.0, 0.0, 1.2],
+                    fov: 45.0,
+                };
+                s.slice_spacing = 0.06;
+                s.intensity = 1.6;
+            }
+        }
+        s
+    }
+
+    /// The scene of Fuller et al.'s Table 1: one unit-radius fire, slice spacing 0.2, seen
+    /// from the side so that about 90,000 pixels are covered at 400×400.
+    pub fn table1(kind: NoiseKind, octaves: u32, lattice: usize) -> FireScene {
+        let mut s = FireScene::empty().with_size(Size::new(400, 400).expect("valid"));
+        let mut f = FireSpec::new(Motion::Static(vec![
+            [0.0, 0.0, 0.0, 1.0],
+            [0.0, 0.0, 1.0, 1.0],
+            [0.2, 0.0, 2.0, 1.0],
+            [0.4, 0.0, 3.0, 1.0],
+        ]));
+        f.noise = NoiseParams {
+            kind,
+            octaves,
+            ..Default::default()
+        };
+        s.fires.push(f);
+        s.lattice = lattice;
+        s.slice_spacing = 0.2;
+        s.intensity = 1.0;
+        s.bloom.passes = 0;
+        s.camera = Camera {
+            position: [0.2, -TABLE1_DISTANCE, 1.5],
+            target: [0.2, 0.0, 1.5],
+            fov: 40.0,
+        };
+        s
+    }
+}
+
+/// Camera distance of [`FireScene::table1`] (chosen so ≈ 90,000 pixels are covered).
+pub const TABLE1_DISTANCE: f32 = 5.4;
+
+/// One rendered frame.
+#[derive(Clone, Debug)]
+pub struct Frame {
+    /// Final frame: bloomed, straight alpha, linear HDR.
+    pub image: RgbaFrame,
+    /// The renderer's premultiplied HDR output before bloom.
+    pub hdr: RgbaFrame,
+    pub stats: RenderStats,
+    /// Contacts between fires and obstacles during this frame.
+    pub collisions: Vec<Collision>,
+    /// Each fire's control points at this frame.
+    pub control_points: Vec<Vec<[f32; 4]>>,
+}
+
+/// Steps a scene's fires (scripts, simulations, collisions) and renders frames.
+pub struct Animator<'a> {
+    scene: &'a FireScene,
+    sims: Vec<Option<ParticleSim>>,
+    frame: u64,
+}
+
+impl Animator<'_> {
+    /// Index of the next frame.
+    pub fn frame_index(&self) -> u64 {
+        self.frame
+    }
+
+    /// Advances the motion one frame; returns control points and contacts.
+    pub fn step(&mut self) -> (Vec<Vec<[f32; 4]>>, Vec<Collision>) {
+        let s = self.scene;
+        let dt = 1.0 / s.fps;
+        let t = self.frame as f32 * dt;
+        let mut pts = Vec::with_capacity(s.fires.len());
+        let mut hits = Vec::new();
+        for (i, f) in s.fires.iter().enumerate() {
+            match &f.motion {
+                Motion::Static(p) => {
+                    let sc = Script {
+                        keyframes: vec![Keyframe {
+                            time: 0.0,
+                            points: p.clone(),
+                        }],
+                        looped: false,
+                    };
+                    let (p, h) = sc.at_with_collisions(t, dt, &s.obstacles, i);
+                    pts.push(p);
+                    hits.extend(h);
+                }
+                Motion::Script(sc) => {
+                    let (p, h) = sc.at_with_collisions(t, dt, &s.obstacles, i);
+                    pts.push(p);
+                    hits.extend(h);
+                }
+                Motion::Simulation(_) => {
+                    let sim = self.sims[i]
+                        .as_mut()
+                        .expect("a simulation per simulated fire");
+                    if self.frame > 0 {
+                        hits.extend(sim.advance(dt, &s.obstacles, i));
+                    }
+                    pts.push(sim.control_points());
+                }
+            }
+        }
+        self.frame += 1;
+        (pts, hits)
+    }
+
+    /// Renders the next frame.
+    pub fn next_frame(&mut self) -> Result<Frame> {
+        let s = self.scene;
+        let t = self.frame as f32 / s.fps;
+        let (pts, collisions) = self.step();
+        let lattices = pts
+            .iter()
+            .zip(&s.fires)
+            .enumerate()
+            .map(|(i, (p, f))| {
+                let c = BSpline::new(p.clone(), f.degree)
+                    .map_err(|e| within(&format!("fire[{i}]"), e))?;
+                Lattice::build(&c, s.lattice)
+            })
+            .collect::<Result<Vec<_>>>()?;
+        let inst: Vec<FireInstance> = lattices
+            .iter()
+            .zip(&s.fires)
+            .enumerate()
+            .map(|(i, (l, f))| FireInstance {
+                lattice: l,
+                profile: &f.profile,
+                noise: f.noise,
+                offset: s.offset(i),
+            })
+            .collect();
+        let (hdr, stats) = render(&inst, &s.camera, &s.render_params(), t)?;
+        let image = finish(&hdr, &s.bloom)?;
+        Ok(Frame {
+            image,
+            hdr,
+            stats,
+            collisions,
+            control_points: pts,
+        })
+    }
+}

@@ -1,0 +1,322 @@
+//! Integration tests of `ignis-volume`.
+
+mod reference {
+    use ignis_volume::noise::{perlin3, perlin3_f64, perlin4};
+
+    /// Improved Perlin 3-D against values from an independent port of Perlin's reference.
+    #[test]
+    fn perlin3_matches_reference_csv() {
+        let path = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../../../shared/reference/improved_noise_3d.csv"
+        );
+        let Ok(text) = std::fs::read_to_string(path) else {
+            println!("skipped: ../shared/reference not present");
+            return;
+        };
+        let mut n = 0;
+        for line in text
+            .lines()
+            .filter(|l| !l.starts_with('#') && !l.starts_with('x') && !l.trim().is_empty())
+        {
+            let v: Vec<f64> = line
+                .split(',')
+                .map(|s| s.trim().parse().expect("number"))
+                .collect();
+            let got = perlin3_f64(v[0], v[1], v[2]);
+            assert!(
+                (got - v[3]).abs() < 1e-6,
+                "noise({}, {}, {}) = {got}, reference {}",
+                v[0],
+                v[1],
+                v[2],
+                v[3]
+            );
+            let got32 = perlin3(v[0] as f32, v[1] as f32, v[2] as f32) as f64;
+            assert!(
+                (got32 - v[3]).abs() < 1e-4,
+                "f32 noise({}, {}, {}) = {got32}",
+                v[0],
+                v[1],
+                v[2]
+            );
+            n += 1;
+        }
+        assert!(n >= 20, "only {n} reference points");
+    }
+
+    #[test]
+    fn perlin4_zero_at_lattice_points() {
+        for x in -3..4 {
+            for y in -2..3 {
+                for z in 0..3 {
+                    for w in [-7, 0, 5, 300] {
+                        assert_eq!(perlin4(x as f32, y as f32, z as f32, w as f32), 0.0);
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn perlin4_continuous_and_in_range() {
+        let mut rng = ignis_core::Rng::new(11);
+        let mut max = 0.0f32;
+        for _ in 0..20000 {
+            let p = [0; 4].map(|_| rng.uniform(-20.0, 20.0) as f32);
+            let v = perlin4(p[0], p[1], p[2], p[3]);
+            assert!(v.abs() <= ignis_volume::noise::PERLIN4_BOUND);
+            max = max.max(v.abs());
+            // Lipschitz-like continuity: a step of 1e-3 changes the value by < 1e-2
+            let e = 1e-3;
+            for k in 0..4 {
+                let mut q = p;
+                q[k] += e;
+                let dv = (perlin4(q[0], q[1], q[2], q[3]) - v).abs();
+                assert!(dv < 1e-2, "jump {dv} at {p:?} axis {k}");
+            }
+        }
+        assert!(max > 0.5 && max < 1.5, "max |noise| {max}");
+        // continuity across an integer boundary
+        for k in 0..4 {
+            let mut a = [2.3f32, -1.7, 0.4, 5.5];
+            let mut b = a;
+            a[k] = 3.0 - 1e-4;
+            b[k] = 3.0 + 1e-4;
+            let (va, vb) = (
+                perlin4(a[0], a[1], a[2], a[3]),
+                perlin4(b[0], b[1], b[2], b[3]),
+            );
+            assert!((va - vb).abs() < 2e-3, "{va} vs {vb}");
+        }
+    }
+}
+
+mod render {
+    use ignis_core::Size;
+    use ignis_volume::{Blend, FireScene, FireSpec, Motion, NoiseParams};
+
+    fn straight(dx_top: f32, octaves: u32) -> FireScene {
+        let mut s = FireScene::empty().with_size(Size::new(64, 64).unwrap());
+        let mut f = FireSpec::new(Motion::Static(vec![
+            [0.0, 0.0, 0.0, 0.6],
+            [0.0, 0.0, 0.8, 0.55],
+            [0.5 * dx_top, 0.0, 1.6, 0.45],
+            [dx_top, 0.0, 2.4, 0.3],
+        ]));
+        f.noise = NoiseParams {
+            octaves,
+            ..Default::default()
+        };
+        s.fires.push(f);
+        s.camera.position = [0.0, -6.0, 1.2];
+        s.camera.target = [0.0, 0.0, 1.2];
+        s.slice_spacing = 0.05;
+        s.bloom.passes = 0;
+        s
+    }
+
+    fn luminance(s: &FireScene) -> ignis_core::GrayFrame {
+        s.animator().unwrap().next_frame().unwrap().hdr.luminance()
+    }
+
+    #[test]
+    fn vertical_fire_without_noise_is_symmetric() {
+        let g = luminance(&straight(0.0, 0));
+        let (w, h) = (g.width(), g.height());
+        let max = g.max();
+        assert!(max > 0.05, "fire is visible: {max}");
+        for y in 0..h {
+            for x in 0..w / 2 {
+                let (a, b) = (g.get(x, y), g.get(w - 1 - x, y));
+                assert!((a - b).abs() <= 1e-3 * max, "({x},{y}) {a} vs {b}");
+            }
+        }
+    }
+
+    fn centroid_x(g: &ignis_core::GrayFrame) -> f64 {
+        let (mut s, mut sx) = (0.0f64, 0.0f64);
+        for y in 0..g.height() {
+            for x in 0..g.width() {
+                let v = g.get(x, y) as f64;
+                s += v;
+                sx += v * x as f64;
+            }
+        }
+        sx / s
+    }
+
+    #[test]
+    fn moving_a_control_point_moves_the_centroid() {
+        let c0 = centroid_x(&luminance(&straight(0.0, 0)));
+        let right = centroid_x(&luminance(&straight(0.6, 0)));
+        let left = centroid_x(&luminance(&straight(-0.6, 0)));
+        assert!(right > c0 + 0.3, "{right} vs {c0}");
+        assert!(left < c0 - 0.3, "{left} vs {c0}");
+    }
+
+    #[test]
+    fn same_bytes_whatever_the_thread_count() {
+        let s = {
+            let mut s = straight(0.3, 3);
+            s.bloom.passes = 1;
+            s
+        };
+        let run = |threads: usize| {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            pool.install(|| {
+                let mut a = s.animator().unwrap();
+                (0..2)
+                    .map(|_| a.next_frame().unwrap().image)
+                    .collect::<Vec<_>>()
+            })
+        };
+        let (a, b) = (run(1), run(3));
+        for (fa, fb) in a.iter().zip(&b) {
+            let ba: Vec<u32> = fa.data().iter().flatten().map(|v| v.to_bits()).collect();
+            let bb: Vec<u32> = fb.data().iter().flatten().map(|v| v.to_bits()).collect();
+            assert!(ba == bb);
+        }
+        // and noise animates: consecutive frames differ
+        assert_ne!(a[0], a[1]);
+    }
+
+    #[test]
+    fn noise_kinds_blend_modes_and_presets_render() {
+        for kind in [
+            ignis_volume::NoiseKind::Perlin3,
+            ignis_volume::NoiseKind::Perlin4,
+            ignis_volume::NoiseKind::Mnoise,
+        ] {
+            let mut s = straight(0.2, 2);
+            s.fires[0].noise.kind = kind;
+            assert!(luminance(&s).max() > 0.01);
+        }
+        for blend in [Blend::Cartoon, Blend::Tint([0.2, 0.4, 1.0])] {
+            let mut s = straight(0.2, 2);
+            s.blend = blend;
+            let f = s.animator().unwrap().next_frame().unwrap().image;
+            assert!(f.data().iter().any(|p| p[3] > 0.9), "{blend:?}");
+            if let Blend::Tint(_) = blend {
+                // blue dominates
+                let (b, r): (f32, f32) = f
+                    .data()
+                    .iter()
+                    .fold((0.0, 0.0), |(b, r), p| (b + p[2] * p[3], r + p[0] * p[3]));
+                assert!(b > r);
+            }
+        }
+        for p in ignis_volume::Preset::ALL {
+            let s = FireScene::preset(p).with_size(Size::new(32, 32).unwrap());
+            let mut a = s.animator().unwrap();
+            let f = a.next_frame().unwrap();
+            assert!(f.stats.covered_pixels > 0, "{}", p.name());
+            assert!(f.image.luminance().max() > 0.01, "{}", p.name());
+        }
+    }
+}
+
+mod fire_file {
+    use ignis_volume::{FireScene, VolumeError};
+    use std::path::Path;
+
+    fn parse(text: &str) -> Result<FireScene, VolumeError> {
+        FireScene::from_toml(text, Path::new("/nonexistent-dir"), &mut |_p| {
+            Err("not used".to_string())
+        })
+    }
+
+    const GOOD: &str = r#"
+seed = 3
+[camera]
+position = [0.0, -6.0, 1.0]
+target = [0.0, 0.0, 1.0]
+[render]
+size = "48x40"
+slice_spacing = 0.1
+lattice = 20
+[[fire]]
+curve = { points = [[0,0,0,1], [0,0,1,0.8], [0,0,2,0.6], [0,0,3,0.3]] }
+[[fire]]
+degree = 2
+noise = { kind = "mnoise", octaves = 1 }
+simulation = { wind = [0.5, 0.0, 0.0], control_points = 5 }
+[[fire]]
+[fire.script]
+looped = true
+[[fire.script.keyframes]]
+time = 0.0
+points = [[1,0,0,0.5], [1,0,1,0.4], [1,0,2,0.2], [1,0,3,0.1]]
+[[fire.script.keyframes]]
+time = 1.0
+points = [[1,0,0,0.5], [1.2,0,1,0.4], [1.4,0,2,0.2], [1.5,0,3,0.1]]
+[[obstacle]]
+type = "plane"
+point = [0.0, 0.0, 2.5]
+normal = [0.0, 0.0, -1.0]
+[[obstacle]]
+type = "sphere"
+centre = [2.0, 0.0, 1.0]
+radius = 0.5
+"#;
+
+    #[test]
+    fn good_file_parses_and_renders() {
+        let s = parse(GOOD).unwrap();
+        assert_eq!(s.fires.len(), 3);
+        assert_eq!(s.size.width, 48);
+        let f = s.animator().unwrap().next_frame().unwrap();
+        assert_eq!(f.image.size(), s.size);
+        // the ceiling at z = 2.5 deflects the fires and is reported
+        assert!(!f.collisions.is_empty());
+    }
+
+    fn err(text: &str) -> String {
+        parse(text).unwrap_err().to_string()
+    }
+
+    #[test]
+    fn too_few_control_points_names_the_field() {
+        let e = err("[[fire]]\ncurve = { points = [[0,0,0,1], [0,0,1,1], [0,0,2,1]] }\n");
+        assert!(
+            e.contains("fire[0].curve.points") && e.contains("at least 4"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn negative_radius_names_the_field() {
+        let e =
+            err("[[fire]]\ncurve = { points = [[0,0,0,1], [0,0,1,-0.5], [0,0,2,1], [0,0,3,1]] }\n");
+        assert!(e.contains("fire[0].curve.points[1].radius"), "{e}");
+    }
+
+    #[test]
+    fn zero_slice_spacing_names_the_field() {
+        let e = err("[render]\nslice_spacing = 0.0\n[[fire]]\ncurve = { points = [[0,0,0,1], [0,0,1,1], [0,0,2,1], [0,0,3,1]] }\n");
+        assert!(e.contains("render.slice_spacing"), "{e}");
+    }
+
+    #[test]
+    fn missing_profile_image_names_the_field() {
+        let e = err("[[fire]]\nprofile = \"flame.png\"\ncurve = { points = [[0,0,0,1], [0,0,1,1], [0,0,2,1], [0,0,3,1]] }\n");
+        assert!(
+            e.contains("fire[0].profile") && e.contains("flame.png"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn other_mistakes_are_clear() {
+        assert!(err("").contains("fire"));
+        assert!(err("[[fire]]\n").contains("curve"));
+        assert!(err("[render]\nsize = \"0x3\"\n[[fire]]\ncurve = { points = [[0,0,0,1], [0,0,1,1], [0,0,2,1], [0,0,3,1]] }\n")
+            .contains("render.size"));
+        assert!(err("bogus = 1\n").contains("bogus"));
+        let e = err("[[fire]]\nsimulation = { control_points = 2 }\n");
+        assert!(e.contains("fire[0].simulation.control_points"), "{e}");
+    }
+}
