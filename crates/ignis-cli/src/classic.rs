@@ -99,15 +99,11 @@ pub fn run(args: &Args, g: &Global) -> Result<Vec<PathBuf>> {
     let pb = g.progress(args.frames as u64, "classic");
     for _ in 0..args.frames {
         fire.step_par();
-        writer.push(&fire.rgba(&palette)).with_context(|| format!("writing {}", args.out.output.display()))?;
+        args.out.push(&mut writer, &fire.rgba(&palette))?;
         pb.inc(1);
     }
     pb.finish_and_clear();
-    let files = writer.finish().with_context(|| format!("finishing {}", args.out.output.display()))?;
-    for f in &files {
-        g.say(format!("wrote {}", f.display()));
-    }
-    Ok(files)
+    args.out.finish(writer, g)
 }
 
 /// Headline figures: ns per pixel per frame at 1920×1080 for each kernel, one thread and

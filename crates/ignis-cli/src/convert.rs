@@ -86,16 +86,12 @@ pub fn run(args: &Args, g: &Global) -> Result<Vec<PathBuf>> {
     let first = first.with_context(|| format!("decoding {}", input.display()))?;
     let mut writer = args.out.create(first.size())?;
     let pb = g.progress(info.frame_count.unwrap_or(0), "converting");
-    writer.push(&first)?;
+    args.out.push(&mut writer, &first)?;
     for frame in reader {
         let frame = frame.with_context(|| format!("decoding {}", input.display()))?;
-        writer.push(&frame).with_context(|| format!("writing {}", args.out.output.display()))?;
+        args.out.push(&mut writer, &frame)?;
         pb.inc(1);
     }
     pb.finish_and_clear();
-    let files = writer.finish().with_context(|| format!("finishing {}", args.out.output.display()))?;
-    for f in &files {
-        g.say(format!("wrote {}", f.display()));
-    }
-    Ok(files)
+    args.out.finish(writer, g)
 }

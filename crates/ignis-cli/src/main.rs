@@ -9,6 +9,7 @@ mod demo;
 mod eigen;
 mod global;
 mod info;
+mod learned;
 mod output;
 mod volume;
 
@@ -47,6 +48,9 @@ enum Cmd {
     /// Eigenfires: train a PCA database on real fire footage, analyse and reconstruct.
     #[command(subcommand)]
     Eigen(eigen::Command),
+    /// Learned flames (Stich & Magnor): a flame model + auto-regressive process.
+    #[command(subcommand)]
+    Learned(learned::Command),
     /// Procedural volumetric fire (Fuller et al.): profile + B-spline + lattice + noise.
     #[command(subcommand)]
     Volume(volume::Command),
@@ -69,10 +73,10 @@ struct DemoArgs {
 }
 
 #[derive(clap::Args, Debug)]
-#[command(after_help = "Examples:\n  ignis bench classic\n  ignis bench classic --quick\n  ignis bench eigen-train\n  ignis bench volume")]
+#[command(after_help = "Examples:\n  ignis bench classic\n  ignis bench classic --quick\n  ignis bench eigen-train\n  ignis bench learned\n  ignis bench volume")]
 struct BenchArgs {
     /// What to measure.
-    #[arg(value_parser = ["classic", "eigen-train", "volume"])]
+    #[arg(value_parser = ["classic", "eigen-train", "learned", "volume"])]
     target: String,
     /// Fewer repetitions (a smoke test; figures are noisier).
     #[arg(long)]
@@ -95,11 +99,13 @@ fn run(cli: Cli) -> Result<()> {
         Cmd::Convert(a) => convert::run(&a, &g).map(|_| ()),
         Cmd::Eigen(c) => eigen::run(c, &g),
         Cmd::Volume(c) => volume::run(c, &g),
+        Cmd::Learned(c) => learned::run(c, &g),
         Cmd::Demo(a) => {
             let t = std::time::Instant::now();
             let mut d = demo::Demo::new(&a.output, g.clone(), a.seed, a.quick)?;
             classic::demo(&mut d)?;
             eigen::demo(&mut d)?;
+            learned::demo(&mut d)?;
             volume::demo(&mut d)?;
             let index = d.finish()?;
             g.say(format!("done in {:.1} s; open {}", t.elapsed().as_secs_f64(), index.display()));
@@ -110,6 +116,7 @@ fn run(cli: Cli) -> Result<()> {
                 "classic" => classic::bench(a.quick)?,
                 "eigen-train" => ignis_pca::bench_figures(a.quick),
                 "volume" => volume::bench(&g, a.quick)?,
+                "learned" => learned::bench(&g, a.quick)?,
                 other => anyhow::bail!("unknown bench target `{other}`"),
             };
             println!("{}", serde_json::to_string_pretty(&v)?);

@@ -65,6 +65,22 @@ impl OutputArgs {
     }
 }
 
+impl OutputArgs {
+    /// Pushes one frame, naming the output on failure.
+    pub fn push(&self, writer: &mut FrameWriter, frame: &ignis_core::RgbaFrame) -> Result<()> {
+        writer.push(frame).with_context(|| format!("writing {}", self.output.display()))
+    }
+
+    /// Completes the output (renaming it into place) and lists what was written.
+    pub fn finish(&self, writer: FrameWriter, g: &crate::global::Global) -> Result<Vec<PathBuf>> {
+        let files = writer.finish().with_context(|| format!("finishing {}", self.output.display()))?;
+        for f in &files {
+            g.say(format!("wrote {}", f.display()));
+        }
+        Ok(files)
+    }
+}
+
 /// `--palette`: a preset name or a gradient PNG.
 #[derive(Clone, Debug)]
 pub struct PaletteArg(pub String);

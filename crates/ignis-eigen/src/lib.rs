@@ -22,12 +22,12 @@ pub mod db;
 pub mod error;
 pub mod hermite;
 pub mod mask;
-pub mod npy;
 pub mod plot;
 pub mod pose;
 pub mod preprocess;
 pub mod synthetic;
 pub mod train;
+pub mod transition;
 
 pub use analysis::ESelect;
 pub use db::{ClipEntry, EigenfireDb, Manifest, Thresholds};

@@ -16,7 +16,9 @@
 
 use std::ops::Range;
 
-use super::{bad, join_seam, FrameRef, Join, RecognitionParams, Result, TransitionError, WeightSpace};
+use super::{
+    bad, join_seam, FrameRef, Join, RecognitionParams, Result, TransitionError, WeightSpace,
+};
 
 /// Direct Bridging from T1 to T2 with `steps` (N) frames; `None` = automatic N.
 pub fn direct_bridging(
@@ -47,7 +49,10 @@ pub fn direct_bridging(
     if n > space.len() {
         return Err(bad(
             "steps",
-            format!("{n} is more than the {} frames of the database", space.len()),
+            format!(
+                "{n} is more than the {} frames of the database",
+                space.len()
+            ),
         ));
     }
     let excluded = excluded_frames(space, &t1, &t2, rec.reject_near, true);
@@ -84,12 +89,14 @@ pub fn direct_bridging(
         }
     }
     let frames: Vec<FrameRef> = chosen.iter().map(|&i| FrameRef::Db(i)).collect();
-    let seam_ratio = join_seam(space, &t1, &t2, &frames, e);
+    let seam_ratio = join_seam(space, &t1, &t2, &frames, (0, 0), e);
     Ok(Join {
         why: format!(
             "{n} bridge point(s) on α={alpha} → β={beta} (|αβ| = {gap:.4}), each replaced by its nearest frame"
         ),
         frames,
+        trim_t1: 0,
+        trim_t2: 0,
         method: "direct-bridging",
         seam_ratio,
     })
@@ -109,12 +116,8 @@ pub(crate) fn excluded_frames(
     let (alpha, beta) = (t1.end - 1, t2.start);
     let ca = &space.clips()[space.clip_index(alpha)];
     let cb = &space.clips()[space.clip_index(beta)];
-    for i in alpha.saturating_sub(reject_near).max(ca.start)..=alpha {
-        ex[i] = true;
-    }
-    for i in beta..=(beta + reject_near).min(cb.start + cb.len - 1) {
-        ex[i] = true;
-    }
+    ex[alpha.saturating_sub(reject_near).max(ca.start)..=alpha].fill(true);
+    ex[beta..=(beta + reject_near).min(cb.start + cb.len - 1)].fill(true);
     if whole_ranges {
         for i in t1.clone().chain(t2.clone()) {
             ex[i] = true;
@@ -135,14 +138,28 @@ mod tests {
         let rec = RecognitionParams::default();
         // T1 = clip 0 up to angle ≈ 0.95; T2 = clip 4 from angle ≈ 1.0 + 0.5 = 1.5.
         let (t1, t2) = (0..20, 170..200);
-        let cut = join_seam(&s, &t1, &t2, &[], testdata::E);
+        let cut = join_seam(&s, &t1, &t2, &[], (0, 0), testdata::E);
         assert!(cut >= 3.0, "plain cut {cut}");
-        let j = transition(&s, t1.clone(), t2.clone(), &Transition::DirectBridging { steps: None }, &rec)
-            .unwrap();
-        assert!(j.seam_ratio <= 1.5, "bridge seam {} (cut {cut}): {}", j.seam_ratio, j.why);
+        let j = transition(
+            &s,
+            t1.clone(),
+            t2.clone(),
+            &Transition::DirectBridging { steps: None },
+            &rec,
+        )
+        .unwrap();
+        assert!(
+            j.seam_ratio <= 1.5,
+            "bridge seam {} (cut {cut}): {}",
+            j.seam_ratio,
+            j.why
+        );
         for f in &j.frames {
             let FrameRef::Db(i) = f else { panic!() };
-            assert!(!t1.contains(i) && !t2.contains(i), "used a frame of T1/T2: {i}");
+            assert!(
+                !t1.contains(i) && !t2.contains(i),
+                "used a frame of T1/T2: {i}"
+            );
         }
     }
 
@@ -150,7 +167,10 @@ mod tests {
     fn respects_theta_min_and_explicit_steps() {
         let (w, clips) = testdata::flame(8, 40, 0.05, 0.25, 0.003, 5);
         let s = WeightSpace::new(&w, testdata::E, clips).unwrap();
-        let rec = RecognitionParams { theta_min: Some(0.4), ..Default::default() };
+        let rec = RecognitionParams {
+            theta_min: Some(0.4),
+            ..Default::default()
+        };
         let j = direct_bridging(&s, 0..20, 170..200, Some(3), &rec).unwrap();
         assert_eq!(j.frames.len(), 3);
         let mut prev = 19;

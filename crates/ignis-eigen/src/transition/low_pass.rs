@@ -7,21 +7,26 @@
 //! Eigenfires only (low frequencies: smooth deformation instead of layered flames, §4.9).
 //! Fine detail may be restored by copying higher-order weights from the target images.
 //!
+//! How we read the thesis: the filter is an ordinary centred filter along time on T1 ++ T2.
+//! Its outputs at the positions whose window straddles the seam (`K.len() - 1` of them:
+//! for the 3-tap kernel, the last frame of T1 and the first of T2) are the morphs, and
+//! they *replace* those frames — "we have to remove the last frame of T1 and the first
+//! frame of T2". Of the "four" outputs the thesis mentions (last two of T1, first two of
+//! T2) the other two see only one side, are near-copies of footage frames, and are
+//! "ignored". [`Join::trim_t1`] / [`Join::trim_t2`] say how many frames were replaced.
+//! A morph that still equals its predecessor (distance < 1e-6) is dropped as a duplicate.
+//!
 //! Where we depart from the thesis, and why:
-//! - *Which outputs.* We emit one morph per kernel window that straddles the seam, i.e.
-//!   `K.len() - 1` frames, in time order, and keep T1's last and T2's first frames. For the
-//!   3-tap kernel the thesis computes four outputs (last two of T1, first two of T2) of
-//!   which two repeat the same windows, and says to "ignore two results out of four"; our
-//!   rule is that choice made once and for any kernel length. Any morph that still equals
-//!   its predecessor (distance < 1e-6) is dropped as the thesis's duplicate.
-//! - *Flip.* A window with at least as many T1 frames as T2 frames uses K; the others use
-//!   K reversed. K[m] multiplies the m-th frame of the window in time order.
+//! - *Flip.* Positions in T1 use K, positions in T2 use K reversed; K[m] multiplies the
+//!   m-th frame of the window in time order, the window starting `(K.len() - 1) / 2`
+//!   frames before the position.
 //! - *Normalisation.* K is divided by its sum so the morphs keep the weights' scale (the
 //!   thesis's kernels already sum to 1); a kernel summing to 0 is an error.
 //! - *Detail injection* is deterministic: weights `inject_from..E` are copied from the
-//!   target image of the morph's side (α for T1-side windows, β for T2-side ones); the
-//!   thesis copies "a few" such weights at random. Weights `e_render..inject_from` are 0.
-//! - Windows reaching past the start of T1 or the end of T2 repeat the edge frame.
+//!   target image of the morph's side (α for T1 positions, β for T2 ones); the thesis
+//!   copies "a few" such weights at random. Weights `e_render..inject_from` are 0.
+//! - Windows reaching past the start of T1 or the end of T2 repeat the edge frame, and
+//!   the number of frames replaced is capped by the length of T1 and T2.
 
 use std::ops::Range;
 
@@ -102,16 +107,20 @@ pub fn low_pass(
             (t2.start + (pos - n1) as usize).min(t2.end - 1)
         }
     };
+    let c = (l as isize - 1) / 2; // window of position p: p - c .. p - c + l
+                                  // Straddling positions: p - c ≤ n1 - 1 and p - c + l - 1 ≥ n1.
+    let first = (n1 - l as isize + 1 + c).max(0);
+    let last = (n1 - 1 + c).min(n1 + t2.len() as isize - 1);
+    let trim_t1 = (n1 - first) as usize;
+    let trim_t2 = (last - n1 + 1) as usize;
     let mut frames: Vec<FrameRef> = Vec::with_capacity(l - 1);
-    let mut prev: Vec<f32> = space.frame(alpha).to_vec();
-    for w in 0..l - 1 {
-        let s = n1 - (l as isize - 1) + w as isize; // first position of the window
-        let t1_count = l - 1 - w;
-        let t1_side = t1_count >= l - t1_count;
+    let mut prev: Vec<f32> = space.frame(at(first - 1)).to_vec();
+    for pos in first..=last {
+        let t1_side = pos < n1;
         let mut out = vec![0.0f64; e];
-        for (m, _) in k.iter().enumerate() {
+        for m in 0..l {
             let km = if t1_side { k[m] } else { k[l - 1 - m] };
-            let f = space.frame(at(s + m as isize));
+            let f = space.frame(at(pos - c + m as isize));
             for (o, &x) in out[..e_render].iter_mut().zip(f) {
                 *o += km * x as f64;
             }
@@ -119,9 +128,7 @@ pub fn low_pass(
         let mut out: Vec<f32> = out.into_iter().map(|x| x as f32).collect();
         if let Some(from) = p.inject_from {
             let target = space.frame(if t1_side { alpha } else { beta });
-            for d in from.min(e)..e {
-                out[d] = target[d];
-            }
+            out[from.min(e)..].copy_from_slice(&target[from.min(e)..]);
         }
         if super::dist(&out, &prev, usize::MAX) < 1e-6 {
             continue; // the thesis's duplicate frame
@@ -130,10 +137,10 @@ pub fn low_pass(
         frames.push(FrameRef::Weights(out));
     }
     let e_detect = rec.e_detect(space);
-    let seam_ratio = join_seam(space, &t1, &t2, &frames, e_detect);
+    let seam_ratio = join_seam(space, &t1, &t2, &frames, (trim_t1, trim_t2), e_detect);
     Ok(Join {
         why: format!(
-            "{} morph frame(s) from a {l}-tap kernel, rendered with {e_render} of {e} weights{}",
+            "{} morph frame(s) replacing T1's last {trim_t1} and T2's first {trim_t2} frame(s), from a {l}-tap kernel, rendered with {e_render} of {e} weights{}",
             frames.len(),
             match p.inject_from {
                 Some(f) if f < e => format!(", weights {f}..{e} copied from α/β"),
@@ -141,6 +148,8 @@ pub fn low_pass(
             }
         ),
         frames,
+        trim_t1,
+        trim_t2,
         method: "low-pass",
         seam_ratio,
     })
@@ -158,16 +167,16 @@ mod tests {
         }
     }
 
-    /// Frame i = [i, 10 i, 100 i, 1000 i].
-    fn ramp() -> Vec<f32> {
+    /// Frame i = i² × [1, 10, 100, 1000], i = 0..6.
+    fn squares() -> Vec<f32> {
         (0..6)
-            .flat_map(|i| [1.0, 10.0, 100.0, 1000.0].map(|s| s * i as f32))
+            .flat_map(|i| [1.0, 10.0, 100.0, 1000.0].map(|s| s * (i * i) as f32))
             .collect()
     }
 
     #[test]
     fn box_kernel_arithmetic() {
-        let w = ramp();
+        let w = squares();
         let s = WeightSpace::new(&w, 4, vec![]).unwrap();
         let p = LowPassParams {
             kernel: vec![1.0, 1.0, 1.0], // normalised to 1/3 each
@@ -175,19 +184,24 @@ mod tests {
             inject_from: None,
         };
         let j = low_pass(&s, 0..3, 3..6, &p, &RecognitionParams::default()).unwrap();
+        // The morphs replace α (frame 2) and β (frame 3): windows (1,2,3) and (2,3,4)
+        // of the values 1, 4, 9, 16 give 14/3 and 29/3.
+        assert_eq!((j.trim_t1, j.trim_t2), (1, 1));
         assert_eq!(j.frames.len(), 2);
-        // Windows (1,2,3) and (2,3,4): means 2 and 3.
-        for (f, want) in j.frames.iter().zip([2.0f32, 3.0]) {
+        for (f, want) in j.frames.iter().zip([14.0f32 / 3.0, 29.0 / 3.0]) {
             let got = weights(f);
             for (g, sc) in got.iter().zip([1.0, 10.0, 100.0, 1000.0]) {
-                assert!((g - want * sc).abs() < 1e-3, "{got:?} vs {want}");
+                assert!(
+                    (g - want * sc).abs() < 1e-6 * sc * 10.0,
+                    "{got:?} vs {want}"
+                );
             }
         }
     }
 
     #[test]
     fn asymmetric_kernel_is_flipped_and_detail_injected() {
-        let w = ramp();
+        let w = squares();
         let s = WeightSpace::new(&w, 4, vec![]).unwrap();
         let p = LowPassParams {
             kernel: vec![1.0, 2.0, 3.0], // → [1/6, 2/6, 3/6]
@@ -196,12 +210,12 @@ mod tests {
         };
         let j = low_pass(&s, 0..3, 3..6, &p, &RecognitionParams::default()).unwrap();
         assert_eq!(j.frames.len(), 2);
-        // T1-side window (1,2,3) with K: (1+4+9)/6 = 14/6; T2-side window (2,3,4) with K
-        // flipped [3,2,1]/6: (6+6+4)/6 = 16/6. Weight 2 is zeroed (e_render = 2), weight 3
-        // is copied from α = frame 2 (2000) and β = frame 3 (3000).
+        // α's window (1, 4, 9) with K: (1 + 8 + 27)/6 = 6; β's window (4, 9, 16) with K
+        // flipped [3, 2, 1]/6: (12 + 18 + 16)/6 = 46/6. Weight 2 is zeroed (e_render = 2);
+        // weight 3 is copied from α = frame 2 (4 × 1000) and β = frame 3 (9 × 1000).
         let want = [
-            [14.0 / 6.0, 140.0 / 6.0, 0.0, 2000.0],
-            [16.0 / 6.0, 160.0 / 6.0, 0.0, 3000.0],
+            [6.0, 60.0, 0.0, 4000.0],
+            [46.0 / 6.0, 460.0 / 6.0, 0.0, 9000.0],
         ];
         for (f, want) in j.frames.iter().zip(want) {
             let got = weights(f);
@@ -212,28 +226,59 @@ mod tests {
     }
 
     #[test]
+    fn five_tap_kernel_replaces_two_frames_per_side() {
+        let w = squares();
+        let s = WeightSpace::new(&w, 4, vec![]).unwrap();
+        let p = LowPassParams {
+            kernel: vec![1.0; 5],
+            e_render: 4,
+            inject_from: None,
+        };
+        let j = low_pass(&s, 0..3, 3..6, &p, &RecognitionParams::default()).unwrap();
+        assert_eq!((j.trim_t1, j.trim_t2, j.frames.len()), (2, 2, 4));
+        // Position 1: window (0, 0, 1, 4, 9) — the edge frame repeated — mean 14/5.
+        assert!((weights(&j.frames[0])[0] - 14.0 / 5.0).abs() < 1e-5);
+        // Position 4: window (4, 9, 16, 25, 25), mean 79/5.
+        assert!((weights(&j.frames[3])[0] - 79.0 / 5.0).abs() < 1e-5);
+    }
+
+    #[test]
     fn duplicate_morphs_are_dropped() {
         // T1 and T2 all the same frame: every morph equals α and is dropped.
         let w = vec![1.0f32; 12];
         let s = WeightSpace::new(&w, 2, vec![]).unwrap();
-        let j = low_pass(&s, 0..3, 3..6, &LowPassParams::default(), &Default::default()).unwrap();
+        let j = low_pass(
+            &s,
+            0..3,
+            3..6,
+            &LowPassParams::default(),
+            &Default::default(),
+        )
+        .unwrap();
         assert!(j.frames.is_empty());
     }
 
     #[test]
     fn bad_kernels() {
-        let w = ramp();
+        let w = squares();
         let s = WeightSpace::new(&w, 4, vec![]).unwrap();
         let rec = RecognitionParams::default();
         for kernel in [vec![1.0, -1.0], vec![0.5], vec![], vec![f32::NAN, 1.0]] {
-            let p = LowPassParams { kernel: kernel.clone(), ..Default::default() };
+            let p = LowPassParams {
+                kernel: kernel.clone(),
+                ..Default::default()
+            };
             let e = low_pass(&s, 0..3, 3..6, &p, &rec).unwrap_err();
             assert!(
                 matches!(&e, TransitionError::BadParameter { name, .. } if name == "kernel"),
                 "{kernel:?}: {e}"
             );
         }
-        let p = LowPassParams { e_render: 10, inject_from: Some(5), ..Default::default() };
+        let p = LowPassParams {
+            e_render: 10,
+            inject_from: Some(5),
+            ..Default::default()
+        };
         assert!(low_pass(&s, 0..3, 3..6, &p, &rec).is_err());
     }
 
@@ -253,11 +298,18 @@ mod tests {
             })
             .unwrap();
         let t2 = beta..beta + 15;
-        let cut = super::super::join_seam(&s, &t1, &t2, &[], testdata::E);
+        let cut = super::super::join_seam(&s, &t1, &t2, &[], (0, 0), testdata::E);
         assert!(cut >= 3.0, "plain cut {cut}");
-        let p = LowPassParams { kernel: vec![1.0; 7], ..Default::default() };
+        let p = LowPassParams {
+            kernel: vec![1.0; 7],
+            ..Default::default()
+        };
         let j = transition(&s, t1, t2, &Transition::LowPass(p), &rec).unwrap();
         assert_eq!(j.frames.len(), 6);
-        assert!(j.seam_ratio <= 1.5, "low-pass seam {} (cut {cut})", j.seam_ratio);
+        assert!(
+            j.seam_ratio <= 1.5,
+            "low-pass seam {} (cut {cut})",
+            j.seam_ratio
+        );
     }
 }

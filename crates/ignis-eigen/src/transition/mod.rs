@@ -13,7 +13,9 @@
 //!
 //! T1 and T2 are ranges of *global* frame indices (rows of the weight matrix). As in the
 //! thesis, α is the last frame of T1 and β the first frame of T2. [`Join::frames`] holds
-//! only the new frames to insert between T1 and T2.
+//! only the new frames to insert between T1 and T2; low-pass morphs also replace T1's last
+//! [`Join::trim_t1`] and T2's first [`Join::trim_t2`] frames (0 for the other methods).
+//! For a loop over a range shorter than the kernel, those two trims may overlap.
 //!
 //! Every join reports a [`seam_ratio`]: the largest distance between consecutive frames of
 //! T1's tail + transition + T2's head, divided by the median distance between consecutive
@@ -23,9 +25,15 @@
 //! Departures from the thesis (each is repeated where it is implemented):
 //! - All distances (recognition *and* seam ratio) use the first `e_detect` weights
 //!   (§5.1.2 lets detection use fewer Eigenfires than rendering).
-//! - `theta_min` defaults to the mean consecutive distance of the clip a frame belongs to
-//!   (§4.5's suggestion), and adapts per clip when a path crosses clips (the thesis's
-//!   proposed "adaptive mode" at the end of §5.1.2.2), instead of one user number.
+//! - `theta_min` defaults, per clip, to a quantile (default the 10th percentile) of the
+//!   distances between consecutive frames of the clip the path is at — the same rule as
+//!   `Thresholds::theta_min` of the database — and so adapts when a path crosses clips
+//!   (the thesis's proposed "adaptive mode", end of §5.1.2.2), instead of one user
+//!   number. §4.1 asks for a threshold "slightly bigger than zero" and §5.1.2.2 used "the
+//!   average of thresholds or smallest threshold". We tried the clip's median step
+//!   (≈ its mean): it rejects the natural next frame about half of the time; on the test
+//!   flame End Growing then gave seam ratios 2.0–2.1 or no path (3 seeds) instead of
+//!   1.3–1.5 with the 10th percentile.
 
 mod bridging;
 mod end_growing;
@@ -56,7 +64,10 @@ pub enum TransitionError {
     },
     /// A recognition method found no path (e.g. End Growing did not join within N steps).
     #[error("{method}: no transition found: {reason}")]
-    NoPath { method: &'static str, reason: String },
+    NoPath {
+        method: &'static str,
+        reason: String,
+    },
 }
 
 fn bad(name: &str, reason: impl Into<String>) -> TransitionError {
@@ -84,8 +95,6 @@ pub struct WeightSpace<'a> {
     clips: Vec<ClipSpan>,
     /// Index into `clips` for every frame.
     clip_of: Vec<usize>,
-    /// Mean consecutive distance (first `e` weights) per clip; see [`WeightSpace::theta_for`].
-    clip_mean: Vec<f64>,
 }
 
 impl<'a> WeightSpace<'a> {
@@ -93,9 +102,12 @@ impl<'a> WeightSpace<'a> {
     /// an empty `clips` means one clip `"all"` covering every frame.
     pub fn new(weights: &'a [f32], e: usize, clips: Vec<ClipSpan>) -> Result<Self> {
         if e == 0 {
-            return Err(bad("e", "the number of weights per frame must be at least 1"));
+            return Err(bad(
+                "e",
+                "the number of weights per frame must be at least 1",
+            ));
         }
-        if weights.is_empty() || weights.len() % e != 0 {
+        if weights.is_empty() || !weights.len().is_multiple_of(e) {
             return Err(bad(
                 "weights",
                 format!(
@@ -132,7 +144,10 @@ impl<'a> WeightSpace<'a> {
             }
             for slot in &mut clip_of[span.start..span.start + span.len] {
                 if *slot != usize::MAX {
-                    return Err(bad("clips", format!("clip `{}` overlaps another", span.name)));
+                    return Err(bad(
+                        "clips",
+                        format!("clip `{}` overlaps another", span.name),
+                    ));
                 }
                 *slot = c;
             }
@@ -140,17 +155,12 @@ impl<'a> WeightSpace<'a> {
         if let Some(i) = clip_of.iter().position(|&c| c == usize::MAX) {
             return Err(bad("clips", format!("frame {i} belongs to no clip")));
         }
-        let mut space = WeightSpace {
+        Ok(WeightSpace {
             weights,
             e,
             clips,
             clip_of,
-            clip_mean: Vec::new(),
-        };
-        space.clip_mean = (0..space.clips.len())
-            .map(|c| mean(&space.clip_steps(c, e)))
-            .collect();
-        Ok(space)
+        })
     }
 
     /// Number of frames M.
@@ -188,15 +198,16 @@ impl<'a> WeightSpace<'a> {
         dist(self.frame(i), self.frame(j), e_detect)
     }
 
-    /// Default `theta_min` for frame `i`: the mean distance between consecutive frames of
-    /// its clip on all E weights (§4.5). Use [`WeightSpace::clip_mean_step`] for other E.
-    pub fn theta_for(&self, i: usize) -> f64 {
-        self.clip_mean[self.clip_of[i]]
-    }
-
-    /// Mean consecutive distance of clip `c` on the first `e_detect` weights.
-    pub fn clip_mean_step(&self, c: usize, e_detect: usize) -> f64 {
-        mean(&self.clip_steps(c, e_detect))
+    /// Quantile `q` (0 = smallest, 0.5 = median, 1 = largest) of the distances between
+    /// consecutive frames of clip `c`, on the first `e_detect` weights, picked like
+    /// `analysis` does (nearest rank). 0 for a one-frame clip.
+    pub fn clip_step_quantile(&self, c: usize, e_detect: usize, q: f64) -> f64 {
+        let mut d = self.clip_steps(c, e_detect);
+        if d.is_empty() {
+            return 0.0;
+        }
+        d.sort_by(f64::total_cmp);
+        d[((d.len() - 1) as f64 * q.clamp(0.0, 1.0)).round() as usize]
     }
 
     /// Median distance between consecutive frames over all clips (first `e_detect`
@@ -239,10 +250,19 @@ pub struct RecognitionParams {
     /// Number of leading weights used for every distance ("E for detection", §5.1.2).
     /// 0 = all E. Values above E are clamped to E.
     pub e_detect: usize,
-    /// Minimum distance between consecutive frames of a path, in weight units.
-    /// `None` = adaptive: the mean consecutive distance of the clip of the frame being
-    /// extended (§4.5; the thesis's adaptive mode at the end of §5.1.2.2). Must be > 0.
+    /// Minimum distance between consecutive frames of a path, in weight units (on the
+    /// first `e_detect` weights). Must be > 0. `None` = adaptive: `theta_quantile` of the
+    /// consecutive distances of the clip of the frame being extended (§4.5–4.6; the
+    /// thesis's adaptive mode at the end of §5.1.2.2). Default `None`.
     pub theta_min: Option<f64>,
+    /// Quantile of a clip's consecutive distances used as the adaptive θ_min, in [0, 1].
+    /// Default 0.1 (the database's `Thresholds::theta_min`); 0.5 = the median step.
+    pub theta_quantile: f64,
+    /// End Growing's case 2: the two paths are joined when their ends are closer than
+    /// this, in weight units. `None` = the mean of the median consecutive distance of the
+    /// two ends' clips (a footage-sized step). Must be > 0. See `end_growing` for why this
+    /// is not θ_min as in the thesis.
+    pub join_gap: Option<f64>,
     /// Frames of T1 before α and of T2 after β that may not be picked (thesis: "e.g. the
     /// last 7 images"), to avoid deadlocks and moving back along the same pattern.
     /// Default 7.
@@ -254,6 +274,8 @@ impl Default for RecognitionParams {
         RecognitionParams {
             e_detect: 0,
             theta_min: None,
+            theta_quantile: 0.1,
+            join_gap: None,
             reject_near: 7,
         }
     }
@@ -277,20 +299,47 @@ impl RecognitionParams {
                 ));
             }
         }
+        if let Some(t) = self.join_gap {
+            if !(t > 0.0 && t.is_finite()) {
+                return Err(bad(
+                    "join_gap",
+                    format!("must be a finite number > 0, got {t}"),
+                ));
+            }
+        }
+        if !(0.0..=1.0).contains(&self.theta_quantile) {
+            return Err(bad(
+                "theta_quantile",
+                format!("must lie in [0, 1], got {}", self.theta_quantile),
+            ));
+        }
         Ok(())
     }
 
-    /// θ_min around frame `i`: the fixed value, or the adaptive per-clip mean step.
+    /// θ_min around frame `i`: the fixed value, or the adaptive per-clip quantile.
     pub(crate) fn theta(&self, space: &WeightSpace, i: usize) -> f64 {
-        match self.theta_min {
+        self.fixed_or_quantile(space, i, self.theta_min, self.theta_quantile)
+    }
+
+    /// End Growing's join gap between frames `a` and `b`.
+    pub(crate) fn join_gap(&self, space: &WeightSpace, a: usize, b: usize) -> f64 {
+        0.5 * (self.fixed_or_quantile(space, a, self.join_gap, 0.5)
+            + self.fixed_or_quantile(space, b, self.join_gap, 0.5))
+    }
+
+    fn fixed_or_quantile(&self, space: &WeightSpace, i: usize, fixed: Option<f64>, q: f64) -> f64 {
+        match fixed {
             Some(t) => t,
             None => {
-                let t = space.clip_mean_step(space.clip_index(i), self.e_detect(space));
+                let e = self.e_detect(space);
+                let t = space.clip_step_quantile(space.clip_index(i), e, q);
                 // A one-frame clip has no steps; fall back to the median of the database.
                 if t > 0.0 {
                     t
                 } else {
-                    space.source_median(self.e_detect(space)).max(f64::MIN_POSITIVE)
+                    space
+                        .source_median(self.e_detect(space))
+                        .max(f64::MIN_POSITIVE)
                 }
             }
         }
@@ -325,10 +374,15 @@ pub enum FrameRef {
 pub struct Join {
     /// The inserted frames, in playing order (T1 and T2 themselves are not included).
     pub frames: Vec<FrameRef>,
+    /// How many of T1's last frames the transition replaces (play T1 without them).
+    /// Non-zero only for low-pass, whose morphs are filtered versions of those frames.
+    pub trim_t1: usize,
+    /// How many of T2's first frames the transition replaces (see `trim_t1`).
+    pub trim_t2: usize,
     /// `"low-pass"`, `"direct-bridging"` or `"end-growing"`.
     pub method: &'static str,
-    /// See [`seam_ratio`]; computed on T1's last [`SEAM_CONTEXT`] frames + `frames` +
-    /// T2's first [`SEAM_CONTEXT`] frames.
+    /// See [`seam_ratio`]; computed on T1's last [`SEAM_CONTEXT`] frames (after `trim_t1`)
+    /// + `frames` + T2's first [`SEAM_CONTEXT`] frames (after `trim_t2`).
     pub seam_ratio: f64,
     /// A human-readable account of what was done (and, for [`Transition::Auto`], why
     /// this method won).
@@ -421,17 +475,21 @@ pub fn auto(
     Ok(best)
 }
 
-/// Seam ratio of T1's tail + `frames` + T2's head, on the first `e_detect` weights.
+/// Seam ratio of T1's tail + `frames` + T2's head, on the first `e_detect` weights, with
+/// `trim` = (frames cut from T1's end, frames cut from T2's start).
 pub(crate) fn join_seam(
     space: &WeightSpace,
     t1: &Range<usize>,
     t2: &Range<usize>,
     frames: &[FrameRef],
+    trim: (usize, usize),
     e_detect: usize,
 ) -> f64 {
     let cut = |v: &[f32]| v[..e_detect.min(v.len())].to_vec();
-    let tail = t1.end.saturating_sub(SEAM_CONTEXT).max(t1.start)..t1.end;
-    let head = t2.start..(t2.start + SEAM_CONTEXT).min(t2.end);
+    let t1_end = t1.end.saturating_sub(trim.0).max(t1.start);
+    let t2_start = (t2.start + trim.1).min(t2.end);
+    let tail = t1_end.saturating_sub(SEAM_CONTEXT).max(t1.start)..t1_end;
+    let head = t2_start..(t2_start + SEAM_CONTEXT).min(t2.end);
     let mut seq: Vec<Vec<f32>> = tail.map(|i| cut(space.frame(i))).collect();
     seq.extend(frames.iter().map(|f| match f {
         FrameRef::Db(i) => cut(space.frame(*i)),
@@ -451,14 +509,6 @@ pub(crate) fn dist(a: &[f32], b: &[f32], e: usize) -> f64 {
         })
         .sum::<f64>()
         .sqrt()
-}
-
-fn mean(v: &[f64]) -> f64 {
-    if v.is_empty() {
-        0.0
-    } else {
-        v.iter().sum::<f64>() / v.len() as f64
-    }
 }
 
 fn median(v: &mut [f64]) -> f64 {
@@ -495,16 +545,26 @@ pub(crate) mod testdata {
         ]
     }
 
-    /// `clips` clips of `len` frames each, step `dt` radians, clip `c` starting at angle
-    /// `c * spread` plus a phase offset of a fraction of a step; noise σ = `noise`.
-    pub fn flame(clips: usize, len: usize, dt: f64, spread: f64, noise: f64, seed: u64) -> (Vec<f32>, Vec<ClipSpan>) {
+    /// `clips` clips of `len` frames each, steps of `dt` × U(0.6, 1.4) radians (a flame's
+    /// speed varies), clip `c` starting at angle `c * spread` plus a fraction of a step;
+    /// noise σ = `noise`.
+    pub fn flame(
+        clips: usize,
+        len: usize,
+        dt: f64,
+        spread: f64,
+        noise: f64,
+        seed: u64,
+    ) -> (Vec<f32>, Vec<ClipSpan>) {
         let mut rng = Rng::new(seed);
         let mut w = Vec::with_capacity(clips * len * E);
         let mut spans = Vec::new();
         for c in 0..clips {
             let phase = c as f64 * spread + dt * (c as f64 * 0.37).fract();
-            for i in 0..len {
-                let p = curve(phase + i as f64 * dt);
+            let mut t = phase;
+            for _ in 0..len {
+                let p = curve(t);
+                t += dt * rng.uniform(0.6, 1.4);
                 w.extend(p.iter().map(|x| x + (noise * rng.normal()) as f32));
             }
             spans.push(ClipSpan {
@@ -523,7 +583,12 @@ mod tests {
 
     #[test]
     fn seam_ratio_is_worst_step_over_median() {
-        let seq = vec![vec![0.0, 0.0], vec![1.0, 0.0], vec![1.0, 3.0], vec![1.0, 4.0]];
+        let seq = vec![
+            vec![0.0, 0.0],
+            vec![1.0, 0.0],
+            vec![1.0, 3.0],
+            vec![1.0, 4.0],
+        ];
         assert!((seam_ratio(&seq, 1.5) - 2.0).abs() < 1e-12);
         assert_eq!(seam_ratio(&seq[..1], 1.0), 0.0);
     }
@@ -533,7 +598,11 @@ mod tests {
         let w = [0.0f32; 12];
         assert!(WeightSpace::new(&w, 0, vec![]).is_err());
         assert!(WeightSpace::new(&w[..5], 2, vec![]).is_err());
-        let gap = vec![ClipSpan { name: "a".into(), start: 0, len: 5 }];
+        let gap = vec![ClipSpan {
+            name: "a".into(),
+            start: 0,
+            len: 5,
+        }];
         assert!(matches!(
             WeightSpace::new(&w, 2, gap),
             Err(TransitionError::BadParameter { .. })
@@ -559,7 +628,25 @@ mod tests {
         let (w, clips) = testdata::flame(2, 30, 0.05, 1.0, 0.0, 1);
         let s = WeightSpace::new(&w, testdata::E, clips).unwrap();
         for t in [0.0, -1.0, f64::NAN] {
-            let rec = RecognitionParams { theta_min: Some(t), ..Default::default() };
+            let rec = RecognitionParams {
+                theta_min: Some(t),
+                ..Default::default()
+            };
+            let gap = RecognitionParams {
+                join_gap: Some(t),
+                ..Default::default()
+            };
+            let e = end_growing(&s, 0..10, 40..50, 10, &gap).unwrap_err();
+            assert!(matches!(&e, TransitionError::BadParameter { name, .. } if name == "join_gap"));
+            let q = RecognitionParams {
+                theta_quantile: [1.5, -0.1, f64::NAN][(t.abs() as usize).min(2)],
+                ..Default::default()
+            };
+            let e = end_growing(&s, 0..10, 40..50, 10, &q).unwrap_err();
+            assert!(
+                matches!(&e, TransitionError::BadParameter { name, .. } if name == "theta_quantile"),
+                "{e}"
+            );
             for m in [
                 Transition::EndGrowing { max_steps: 10 },
                 Transition::DirectBridging { steps: Some(2) },

@@ -1,0 +1,83 @@
+//! Headline figures for `ignis bench learned` (the criterion benches in
+//! `benches/learned.rs` measure the same steps with statistics).
+//!
+//! Issue goals: training on 100 frames, 26 parameters, `N_c = 200` in ≤ 5 s (the paper's
+//! Matlab took ≈ 30 min on a 3 GHz Pentium 4); synthesis plus rendering of 256×256 frames
+//! at ≥ 200 frames/s on one core.
+
+use crate::model::{train, TrainParams};
+use crate::synth::{Controls, Synthesiser};
+use crate::synthetic::flame_clip;
+use crate::EmParams;
+use ignis_core::{GrayFrame, Palette, Size};
+use serde_json::{json, Value};
+use std::time::Instant;
+
+/// Runs the benchmark and returns its figures. `quick` uses fewer synthesised frames.
+pub fn figures(quick: bool) -> crate::Result<Value> {
+    let size = Size::new(256, 256)?;
+    let clip = flame_clip(size, 100, 1);
+    let p = TrainParams {
+        em: EmParams {
+            seed: 1,
+            ..EmParams::default()
+        },
+        ..TrainParams::default()
+    };
+    let mut iterations = 0;
+    let mut fit_done = None;
+    let t = Instant::now();
+    let training = train(clip, &p, |pr| {
+        if let crate::Progress::Iteration(i, _) = pr {
+            fit_done.get_or_insert_with(|| t.elapsed().as_secs_f64());
+            iterations = i + 1;
+        }
+    })?;
+    let train_s = t.elapsed().as_secs_f64();
+    let fit_s = fit_done.unwrap_or(train_s);
+    let model = &training.model;
+
+    let frames = if quick { 300 } else { 3000 };
+    let mut synth = Synthesiser::new(model, Controls::default(), 1)?;
+    let mut out = GrayFrame::new(size);
+    for _ in 0..20 {
+        synth.next_frame_into(&mut out);
+    }
+    let t = Instant::now();
+    for _ in 0..frames {
+        synth.next_frame_into(&mut out);
+    }
+    let gray_fps = frames as f64 / t.elapsed().as_secs_f64();
+    let palette = Palette::preset("candle")?;
+    let t = Instant::now();
+    let mut checksum = 0.0f32;
+    for _ in 0..frames {
+        synth.next_frame_into(&mut out);
+        checksum += palette.apply(&out).data()[0][0];
+    }
+    let rgba_fps = frames as f64 / t.elapsed().as_secs_f64();
+    let t = Instant::now();
+    let steps = 100_000;
+    for _ in 0..steps {
+        std::hint::black_box(synth.step());
+    }
+    let steps_per_s = steps as f64 / t.elapsed().as_secs_f64();
+    Ok(json!({
+        "name": "learned flames: train 100x256x256 (26 params, Nc 200), synth 256x256",
+        "train_frames": 100,
+        "parameters": model.n_state(),
+        "particles": p.em.particles,
+        "train_total_s": train_s,
+        "train_fit_and_pca_s": fit_s,
+        "train_em_s": train_s - fit_s,
+        "em_iterations": iterations,
+        "spectral_radius": model.report.spectral_radius,
+        "stabilised": model.report.stabilised.is_some(),
+        "synth_render_gray_256_fps_1thread": gray_fps,
+        "synth_render_palette_256_fps_1thread": rgba_fps,
+        "arp_steps_per_s": steps_per_s,
+        "goal_train_s": 5.0,
+        "goal_fps": 200.0,
+        "checksum": checksum,
+    }))
+}

@@ -1,0 +1,483 @@
+//! Training a flame model from frames, and its small versioned file.
+//!
+//! Source: stich-magnor-learning-flames.txt §3 (flame model), §3.2 (eigenflames by PCA via
+//! `ignis-pca`), §4 (ARP), §5 (skipping frames with several plumes).
+//!
+//! Data flow: frames are normalised one at a time as they stream in (only the
+//! `norm_size²` normalised image and 21 shape values are kept per frame); the normalised
+//! images of all usable frames form the PCA data matrix (`norm_size² × M` `f32`, 16 KiB
+//! per frame at the default 64²); the state series `[path, width, height, weights]` of the
+//! longest run of consecutive usable frames trains the ARP.
+
+use crate::arp::Arp;
+use crate::em::{learn, EmParams, EmReport};
+use crate::error::{LearnedError, Result};
+use crate::moments::Pose;
+use crate::shape::{normalise, render_into, Placement, RenderScratch, Shape, ShapeParams, Skip};
+use faer::Mat;
+use ignis_core::{GrayFrame, Size};
+use ignis_pca::{Keep, Pca, PcaOptions};
+use serde::{Deserialize, Serialize};
+use std::io::Write;
+use std::path::Path;
+
+/// The model file format version this build reads and writes.
+pub const MODEL_VERSION: u32 = 1;
+const MAGIC: &str = "IGNIS-LEARNED-FLAME";
+
+/// Settings of [`train`].
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct TrainParams {
+    pub shape: ShapeParams,
+    pub em: EmParams,
+}
+
+/// Progress of [`train`], for progress bars and the per-iteration likelihood printout.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Progress {
+    /// Frame `i` has been normalised.
+    Frame(usize),
+    /// EM iteration `i` finished its E-step with this log-likelihood.
+    Iteration(usize, f64),
+}
+
+/// Counts of what the fit used.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct FitSummary {
+    /// Frames read.
+    pub frames: usize,
+    /// Frames with no flame.
+    pub skipped_dark: usize,
+    /// Frames with more than one disjoint flame (§5).
+    pub skipped_multiple: usize,
+    /// First frame index and length of the longest run of consecutive usable frames, on
+    /// which the dynamics were learned.
+    pub run_start: usize,
+    pub run_len: usize,
+    /// Fraction of the normalised images' variance the kept eigenflames explain.
+    pub explained_variance: f64,
+    /// Source frame size.
+    pub source_size: Size,
+}
+
+/// A trained flame model: shape settings, eigenflames and the learned ARP.
+#[derive(Clone, Debug)]
+pub struct FlameModel {
+    /// Shape settings (`n_eigen` is the number of eigenflames actually kept).
+    pub shape: ShapeParams,
+    /// Mean normalised image and eigenflames (`norm_size²` pixels).
+    pub pca: Pca,
+    /// The learned process on the state `[path (N_p), width (N_w), height, weights (N_e)]`.
+    pub arp: Arp,
+    /// How learning went (likelihood per iteration, stability).
+    pub report: EmReport,
+    /// What the fit used.
+    pub summary: FitSummary,
+    /// Mean centroid as a fraction of the frame size, and mean tilt (radians).
+    pub placement: Placement,
+    /// The last `K` training states (oldest first): where synthesis starts.
+    pub init: Vec<Vec<f64>>,
+    /// Per-parameter mean and deviation of the training states.
+    pub state_mean: Vec<f64>,
+    pub state_std: Vec<f64>,
+}
+
+/// The result of [`train`]: the model and the fitted training data it came from.
+#[derive(Clone, Debug)]
+pub struct Training {
+    pub model: FlameModel,
+    /// Source frame index of each usable frame.
+    pub frame_index: Vec<usize>,
+    /// Pose of each usable frame.
+    pub poses: Vec<Pose>,
+    /// State of each usable frame (`[path, width, height, weights]`).
+    pub states: Vec<Vec<f64>>,
+    /// Indices into `states` of the run the dynamics were learned on.
+    pub run: std::ops::Range<usize>,
+}
+
+/// Fits the flame model to `frames` and learns its dynamics (§3–§4).
+pub fn train(
+    frames: impl IntoIterator<Item = GrayFrame>,
+    p: &TrainParams,
+    mut progress: impl FnMut(Progress),
+) -> Result<Training> {
+    p.shape.validate()?;
+    p.em.validate()?;
+    let sp = &p.shape;
+    let ns2 = (sp.norm_size * sp.norm_size) as usize;
+    let (mut images, mut shapes, mut poses, mut index) =
+        (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let (mut n_frames, mut dark, mut multi) = (0, 0, 0);
+    let mut source_size: Option<Size> = None;
+    for (i, frame) in frames.into_iter().enumerate() {
+        n_frames += 1;
+        match source_size {
+            None => source_size = Some(frame.size()),
+            Some(s) if s != frame.size() => {
+                return Err(LearnedError::Unsupported(format!(
+                    "frame {i} is {} but earlier frames are {s}; all frames must have one size",
+                    frame.size()
+                )))
+            }
+            _ => {}
+        }
+        match normalise(&frame, sp) {
+            Ok(n) => {
+                images.push(n.image);
+                shapes.push(n.shape);
+                poses.push(n.pose);
+                index.push(i);
+            }
+            Err(Skip::Dark) => dark += 1,
+            Err(Skip::Multiple) => multi += 1,
+        }
+        progress(Progress::Frame(i));
+    }
+    let k = p.em.order;
+    if images.is_empty() {
+        return Err(LearnedError::Unsupported(format!(
+            "no flame found in {n_frames} frames ({dark} dark, {multi} with several flames); \
+             use footage of a single bright flame on a dark background"
+        )));
+    }
+    // Longest run of consecutive usable frames.
+    let (mut best, mut start) = (0..1, 0);
+    for j in 1..=index.len() {
+        if j == index.len() || index[j] != index[j - 1] + 1 {
+            if j - start > best.len() {
+                best = start..j;
+            }
+            start = j;
+        }
+    }
+    if best.len() < k + 2 {
+        return Err(LearnedError::Unsupported(format!(
+            "only {} consecutive usable frames (of {n_frames}; {dark} dark, {multi} with several flames); \
+             an ARP of order {k} needs at least {}",
+            best.len(),
+            k + 2
+        )));
+    }
+    // §3.1: every normalised image gets the clip's average intensity.
+    let means: Vec<f64> = images
+        .iter()
+        .map(|im| im.iter().map(|&v| v as f64).sum::<f64>() / ns2 as f64)
+        .collect();
+    let avg = means.iter().sum::<f64>() / means.len() as f64;
+    for (im, &m) in images.iter_mut().zip(&means) {
+        let g = if m > 0.0 { (avg / m) as f32 } else { 1.0 };
+        im.iter_mut().for_each(|v| *v *= g);
+    }
+    // §3.2: eigenflames with ignis-pca.
+    let m = images.len();
+    let data = Mat::<f32>::from_fn(ns2, m, |i, j| images[j][i]);
+    drop(images);
+    let opts = PcaOptions {
+        keep: Keep::Count(sp.n_eigen),
+        ..Default::default()
+    };
+    let (pca, weights) = Pca::fit_owned_with_weights(data, &opts)
+        .map_err(|e| LearnedError::Numerical(format!("eigenflames: {e}")))?;
+    let ne = pca.n_components();
+    let explained = pca.explained_variance_ratio().iter().sum::<f64>();
+    let mut shape = sp.clone();
+    shape.n_eigen = ne;
+    let states: Vec<Vec<f64>> = (0..m)
+        .map(|j| {
+            let mut s = shapes[j].to_vec();
+            s.extend((0..ne).map(|e| weights[(e, j)] as f64));
+            s
+        })
+        .collect();
+    let run_states = &states[best.clone()];
+    let learned = learn(run_states, &p.em, |i, ll| {
+        progress(Progress::Iteration(i, ll))
+    })?;
+    let n = shape.n_state();
+    let state_mean: Vec<f64> = (0..n)
+        .map(|i| states.iter().map(|s| s[i]).sum::<f64>() / m as f64)
+        .collect();
+    let state_std: Vec<f64> = (0..n)
+        .map(|i| {
+            (states
+                .iter()
+                .map(|s| (s[i] - state_mean[i]).powi(2))
+                .sum::<f64>()
+                / m as f64)
+                .sqrt()
+        })
+        .collect();
+    let src = source_size.expect("at least one frame");
+    let placement = Placement {
+        cx: poses.iter().map(|p| p.cx).sum::<f64>() / m as f64 / src.width as f64,
+        cy: poses.iter().map(|p| p.cy).sum::<f64>() / m as f64 / src.height as f64,
+        tilt: poses.iter().map(|p| p.tilt).sum::<f64>() / m as f64,
+    };
+    let model = FlameModel {
+        shape,
+        pca,
+        arp: learned.arp,
+        report: learned.report,
+        summary: FitSummary {
+            frames: n_frames,
+            skipped_dark: dark,
+            skipped_multiple: multi,
+            run_start: index[best.start],
+            run_len: best.len(),
+            explained_variance: explained,
+            source_size: src,
+        },
+        placement,
+        init: run_states[run_states.len() - k..].to_vec(),
+        state_mean,
+        state_std,
+    };
+    Ok(Training {
+        model,
+        frame_index: index,
+        poses,
+        states,
+        run: best,
+    })
+}
+
+impl FlameModel {
+    /// Number of state parameters (26 with the defaults).
+    pub fn n_state(&self) -> usize {
+        self.shape.n_state()
+    }
+
+    /// Splits a state into its shape and eigenflame weights.
+    pub fn split(&self, state: &[f64]) -> (Shape, Vec<f32>) {
+        let (np, nw) = (self.shape.n_path, self.shape.n_width);
+        let shape = Shape {
+            path: state[..np].to_vec(),
+            width: state[np..np + nw].to_vec(),
+            height: state[np + nw],
+        };
+        let w = state[np + nw + 1..].iter().map(|&v| v as f32).collect();
+        (shape, w)
+    }
+
+    /// Renders `state` at `place` (output pixels) into `out` (§3 reversed). `normalised`
+    /// is scratch of `norm_size²` values.
+    pub fn render_state_into(
+        &self,
+        state: &[f64],
+        place: &Placement,
+        normalised: &mut Vec<f32>,
+        scratch: &mut RenderScratch,
+        out: &mut GrayFrame,
+    ) {
+        let (shape, w) = self.split(state);
+        normalised.resize(self.pca.n_pixels(), 0.0);
+        self.pca.reconstruct_into(&w, w.len(), normalised);
+        render_into(normalised, &shape, place, &self.shape, scratch, out);
+    }
+
+    /// The default placement (mean training centroid and tilt) for an output of `size`.
+    pub fn placement_for(&self, size: Size) -> Placement {
+        Placement {
+            cx: self.placement.cx * size.width as f64,
+            cy: self.placement.cy * size.height as f64,
+            tilt: self.placement.tilt,
+        }
+    }
+
+    /// Eigenflame `e` (0 = the mean image) as a frame scaled to `0..=1` for viewing.
+    pub fn eigenflame_image(&self, e: usize) -> Option<GrayFrame> {
+        let ns = self.shape.norm_size;
+        let v: Vec<f32> = if e == 0 {
+            self.pca.mean.clone()
+        } else if e <= self.pca.n_components() {
+            (0..self.pca.n_pixels())
+                .map(|i| self.pca.components[(i, e - 1)])
+                .collect()
+        } else {
+            return None;
+        };
+        let (lo, hi) = v
+            .iter()
+            .fold((f32::MAX, f32::MIN), |(a, b), &x| (a.min(x), b.max(x)));
+        let (lo, span) = if e == 0 {
+            (0.0, hi.max(1e-12))
+        } else {
+            (lo, (hi - lo).max(1e-12))
+        };
+        GrayFrame::from_vec(
+            Size {
+                width: ns,
+                height: ns,
+            },
+            v.iter().map(|x| (x - lo) / span).collect(),
+        )
+        .ok()
+    }
+
+    /// Writes the model atomically (temporary file in the same folder, then rename).
+    /// Format: one line `IGNIS-LEARNED-FLAME <version>`, then JSON.
+    pub fn save(&self, path: &Path) -> Result<()> {
+        let file = ModelFile {
+            shape: self.shape.clone(),
+            mean: self.pca.mean.clone(),
+            eigenflames: (0..self.pca.n_components())
+                .map(|e| {
+                    (0..self.pca.n_pixels())
+                        .map(|i| self.pca.components[(i, e)])
+                        .collect()
+                })
+                .collect(),
+            eigenvalues: self.pca.eigenvalues.clone(),
+            total_variance: self.pca.total_variance,
+            n_samples: self.pca.n_samples,
+            arp: self.arp.clone(),
+            report: self.report.clone(),
+            summary: self.summary.clone(),
+            placement: self.placement,
+            init: self.init.clone(),
+            state_mean: self.state_mean.clone(),
+            state_std: self.state_std.clone(),
+        };
+        let io = |source| LearnedError::Io {
+            path: path.to_path_buf(),
+            source,
+        };
+        let dir = path
+            .parent()
+            .filter(|d| !d.as_os_str().is_empty())
+            .unwrap_or(Path::new("."));
+        let name = path
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let tmp = dir.join(format!(".{name}.tmp{}", std::process::id()));
+        let mut f = std::fs::File::create(&tmp).map_err(io)?;
+        let body = serde_json::to_vec(&file)
+            .map_err(|e| LearnedError::Numerical(format!("serialising: {e}")))?;
+        f.write_all(format!("{MAGIC} {MODEL_VERSION}\n").as_bytes())
+            .map_err(io)?;
+        f.write_all(&body).map_err(io)?;
+        f.sync_all().map_err(io)?;
+        drop(f);
+        std::fs::rename(&tmp, path).map_err(|e| {
+            let _ = std::fs::remove_file(&tmp);
+            io(e)
+        })
+    }
+
+    /// Reads a model written by [`FlameModel::save`]; a file of another format version is
+    /// a [`LearnedError::BadModelFile`] naming both versions.
+    pub fn load(path: &Path) -> Result<FlameModel> {
+        let bytes = std::fs::read(path).map_err(|source| LearnedError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        let bad = |reason: String| LearnedError::BadModelFile {
+            path: path.to_path_buf(),
+            reason,
+        };
+        let nl = bytes
+            .iter()
+            .position(|&b| b == b'\n')
+            .unwrap_or(bytes.len().min(64));
+        let head = String::from_utf8_lossy(&bytes[..nl]);
+        let mut parts = head.split_whitespace();
+        if parts.next() != Some(MAGIC) {
+            return Err(bad(format!(
+                "not an Ignis learned-flame model (no `{MAGIC}` header)"
+            )));
+        }
+        let version: u32 = parts
+            .next()
+            .and_then(|v| v.parse().ok())
+            .ok_or_else(|| bad("the header has no version number".into()))?;
+        if version != MODEL_VERSION {
+            return Err(bad(format!(
+                "format version {version}, but this build of Ignis reads version {MODEL_VERSION}; \
+                 retrain it with `ignis learned train`"
+            )));
+        }
+        let f: ModelFile = serde_json::from_slice(&bytes[nl + 1..])
+            .map_err(|e| bad(format!("corrupt model body: {e}")))?;
+        f.shape.validate()?;
+        let (ns2, ne, n) = (
+            (f.shape.norm_size * f.shape.norm_size) as usize,
+            f.eigenflames.len(),
+            f.shape.n_state(),
+        );
+        if f.mean.len() != ns2
+            || f.eigenflames.iter().any(|e| e.len() != ns2)
+            || ne != f.shape.n_eigen
+            || f.arp.dim() != n
+            || f.arp.a.iter().any(|a| a.len() != n * n)
+            || f.arp.b.len() != n * n
+            || f.init.len() != f.arp.order()
+            || f.init.iter().any(|x| x.len() != n)
+            || f.state_mean.len() != n
+            || f.state_std.len() != n
+        {
+            return Err(bad("inconsistent sizes inside the model".into()));
+        }
+        let components = Mat::from_fn(ns2, ne, |i, e| f.eigenflames[e][i]);
+        let pca = Pca {
+            mean: f.mean,
+            components,
+            eigenvalues: f.eigenvalues,
+            total_variance: f.total_variance,
+            n_samples: f.n_samples,
+        };
+        Ok(FlameModel {
+            shape: f.shape,
+            pca,
+            arp: f.arp,
+            report: f.report,
+            summary: f.summary,
+            placement: f.placement,
+            init: f.init,
+            state_mean: f.state_mean,
+            state_std: f.state_std,
+        })
+    }
+}
+
+/// On-disk body of a model (after the header line).
+#[derive(Serialize, Deserialize)]
+struct ModelFile {
+    shape: ShapeParams,
+    mean: Vec<f32>,
+    eigenflames: Vec<Vec<f32>>,
+    eigenvalues: Vec<f64>,
+    total_variance: f64,
+    n_samples: usize,
+    arp: Arp,
+    report: EmReport,
+    summary: FitSummary,
+    placement: Placement,
+    init: Vec<Vec<f64>>,
+    state_mean: Vec<f64>,
+    state_std: Vec<f64>,
+}
+
+impl Training {
+    /// Renders the fitted state of usable frame `j` at its own pose (for the
+    /// reproduction check): the inverse of the normalisation, at the source size.
+    pub fn render_fitted(&self, j: usize) -> GrayFrame {
+        let m = &self.model;
+        let mut out = GrayFrame::new(m.summary.source_size);
+        let pose = &self.poses[j];
+        let place = Placement {
+            cx: pose.cx,
+            cy: pose.cy,
+            tilt: pose.tilt,
+        };
+        m.render_state_into(
+            &self.states[j],
+            &place,
+            &mut Vec::new(),
+            &mut RenderScratch::default(),
+            &mut out,
+        );
+        out
+    }
+}

@@ -1,0 +1,557 @@
+//! The generic flame model: deformation parameters from slice moments, normalisation of
+//! the flame image, and the inverse (rendering) warp.
+//!
+//! Source: stich-magnor-learning-flames.txt §3.1 (deformation parameters), §3.2
+//! (eigenflames are fitted on the images this module normalises).
+//!
+//! Per frame:
+//! 1. The global moments give the [`Pose`]: centroid, main-axis tilt and the height
+//!    measure `σ_v` (deviation along the main axis). Coordinates become `(u, v)`: `v` up the
+//!    main axis, `u` across it, both in units of `σ_v` and centred on the centroid.
+//! 2. The canonical range `v ∈ [−below, above]` is cut into `n_path` (and `n_width`)
+//!    equal height slices; each slice's own moments give its centroid across the axis (the
+//!    *path*) and its deviation (the *width*).
+//! 3. Natural cubic splines through the slice values give path and width at every row.
+//! 4. The normalised image (`size × size`) samples the frame at
+//!    `u = path(v) + u' · width(v)`, i.e. every slice is centred and scaled to unit width,
+//!    and is scaled to the clip's average intensity.
+//!
+//! Rendering inverts steps 1–4 for every output pixel (one smooth warp).
+//!
+//! *Departures:* the sign of the main axis is fixed by "flames burn upwards"; the
+//! normalised intensity gain is not part of the state (as in the paper's 26 parameters),
+//! so per-frame brightness flicker lives only in the eigenflame weights.
+
+use crate::error::{LearnedError, Result};
+use crate::moments::{Moments, Pose};
+use crate::spline::natural_cubic;
+use ignis_core::{GrayFrame, Size};
+use serde::{Deserialize, Serialize};
+
+/// Settings of the flame model.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ShapeParams {
+    /// `N_p`, path parameters (slices), 2..=64. Default 10 (§5).
+    pub n_path: usize,
+    /// `N_w`, width parameters (slices), 2..=64. Default 10 (§5).
+    pub n_width: usize,
+    /// `N_e`, eigenflames kept, 1..=64. Default 5 (§5).
+    pub n_eigen: usize,
+    /// Side of the normalised images in pixels, 16..=256. Default 64.
+    pub norm_size: u32,
+    /// Canonical extent below the centroid along the main axis, in `σ_v`. Default 2.2.
+    pub below: f64,
+    /// Canonical extent above the centroid, in `σ_v`. Default 3.2.
+    pub above: f64,
+    /// Canonical half-width across the axis, in slice widths. Default 3.5.
+    pub half_width: f64,
+    /// Skip frames whose thresholded flame has more than one sizeable component (§5).
+    /// Default true.
+    pub skip_multiple: bool,
+    /// Threshold for the component test, as a fraction of the frame's maximum. Default 0.2.
+    pub component_threshold: f32,
+    /// A component counts if it holds at least this fraction of the thresholded area.
+    /// Default 0.03.
+    pub min_component: f32,
+    /// Linear intensity subtracted from every pixel (clamped at 0) before anything else,
+    /// to drop a lit background such as a candle's glowing wax, ≥ 0. Default 0.
+    #[serde(default)]
+    pub black_level: f32,
+}
+
+impl Default for ShapeParams {
+    fn default() -> Self {
+        ShapeParams {
+            n_path: 10,
+            n_width: 10,
+            n_eigen: 5,
+            norm_size: 64,
+            below: 2.2,
+            above: 3.2,
+            half_width: 3.5,
+            skip_multiple: true,
+            component_threshold: 0.2,
+            min_component: 0.03,
+            black_level: 0.0,
+        }
+    }
+}
+
+impl ShapeParams {
+    pub fn validate(&self) -> Result<()> {
+        for (name, v, lo, hi) in [
+            ("n_path", self.n_path, 2, 64),
+            ("n_width", self.n_width, 2, 64),
+            ("n_eigen", self.n_eigen, 1, 64),
+            ("norm_size", self.norm_size as usize, 16, 256),
+        ] {
+            if !(lo..=hi).contains(&v) {
+                return Err(LearnedError::bad(
+                    name,
+                    format!("{v} is outside {lo}..={hi}"),
+                ));
+            }
+        }
+        for (name, v) in [
+            ("below", self.below),
+            ("above", self.above),
+            ("half_width", self.half_width),
+        ] {
+            if !(v > 0.0 && v <= 20.0) {
+                return Err(LearnedError::bad(name, format!("{v} must be in (0, 20]")));
+            }
+        }
+        if !(self.black_level >= 0.0 && self.black_level.is_finite()) {
+            return Err(LearnedError::bad(
+                "black_level",
+                format!("{} must be ≥ 0", self.black_level),
+            ));
+        }
+        Ok(())
+    }
+
+    /// Number of shape parameters `N_p + N_w + 1`.
+    pub fn n_shape(&self) -> usize {
+        self.n_path + self.n_width + 1
+    }
+
+    /// Length of the full state `N_p + N_w + 1 + N_e`.
+    pub fn n_state(&self) -> usize {
+        self.n_shape() + self.n_eigen
+    }
+
+    /// `v` of normalised row `r` (top row = `above`).
+    fn row_v(&self, r: f64) -> f64 {
+        self.above - (r + 0.5) / self.norm_size as f64 * (self.above + self.below)
+    }
+
+    /// Centres of `n` equal slices of `[−below, above]`, bottom to top.
+    fn slice_centres(&self, n: usize) -> Vec<f64> {
+        let h = (self.above + self.below) / n as f64;
+        (0..n).map(|i| -self.below + (i as f64 + 0.5) * h).collect()
+    }
+}
+
+/// The shape of one frame: path and width per slice (bottom to top, `σ_v` units), and the
+/// height `σ_v` as a fraction of the frame height.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Shape {
+    pub path: Vec<f64>,
+    pub width: Vec<f64>,
+    pub height: f64,
+}
+
+impl Shape {
+    /// `[path…, width…, height]`.
+    pub fn to_vec(&self) -> Vec<f64> {
+        let mut v = self.path.clone();
+        v.extend_from_slice(&self.width);
+        v.push(self.height);
+        v
+    }
+}
+
+/// Why a frame was not used.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Skip {
+    /// No intensity at all.
+    Dark,
+    /// More than one disjoint flame (§5).
+    Multiple,
+}
+
+/// Bilinear sample with zero outside; `(x, y)` in pixel-centre coordinates of `data`.
+#[inline]
+fn bilinear(data: &[f32], w: usize, h: usize, x: f64, y: f64) -> f32 {
+    let (fx, fy) = (x - 0.5, y - 0.5);
+    let (x0, y0) = (fx.floor(), fy.floor());
+    let (tx, ty) = ((fx - x0) as f32, (fy - y0) as f32);
+    let (x0, y0) = (x0 as isize, y0 as isize);
+    let at = |xi: isize, yi: isize| -> f32 {
+        if xi < 0 || yi < 0 || xi >= w as isize || yi >= h as isize {
+            0.0
+        } else {
+            data[yi as usize * w + xi as usize]
+        }
+    };
+    let top = at(x0, y0) * (1.0 - tx) + at(x0 + 1, y0) * tx;
+    let bot = at(x0, y0 + 1) * (1.0 - tx) + at(x0 + 1, y0 + 1) * tx;
+    top * (1.0 - ty) + bot * ty
+}
+
+/// Box-filters `frame` down by an integer factor (anti-aliasing before resampling).
+fn box_down(frame: &GrayFrame, f: usize) -> (Vec<f32>, usize, usize) {
+    let (w, h) = (frame.width() as usize, frame.height() as usize);
+    if f <= 1 {
+        return (frame.data().to_vec(), w, h);
+    }
+    let (dw, dh) = (w.div_ceil(f), h.div_ceil(f));
+    let mut out = vec![0.0f32; dw * dh];
+    let mut cnt = vec![0u32; dw * dh];
+    for (y, row) in frame.rows().enumerate() {
+        let o = (y / f) * dw;
+        for (x, &v) in row.iter().enumerate() {
+            out[o + x / f] += v;
+            cnt[o + x / f] += 1;
+        }
+    }
+    out.iter_mut().zip(&cnt).for_each(|(v, &c)| *v /= c as f32);
+    (out, dw, dh)
+}
+
+/// Counts sizeable 4-connected components above `thr · max` (on a ≤ 128-pixel
+/// downsampled copy, so a 480² frame costs little).
+pub fn count_flames(frame: &GrayFrame, thr: f32, min_frac: f32) -> usize {
+    let f = (frame.width().max(frame.height()) as usize).div_ceil(128);
+    let (d, w, h) = box_down(frame, f);
+    let max = d.iter().copied().fold(0.0f32, f32::max);
+    if max <= 0.0 {
+        return 0;
+    }
+    let mask: Vec<bool> = d.iter().map(|&v| v > thr * max).collect();
+    let total = mask.iter().filter(|&&m| m).count();
+    let mut label = vec![false; w * h];
+    let mut stack = Vec::new();
+    let mut count = 0;
+    for start in 0..w * h {
+        if !mask[start] || label[start] {
+            continue;
+        }
+        let mut area = 0usize;
+        label[start] = true;
+        stack.push(start);
+        while let Some(i) = stack.pop() {
+            area += 1;
+            let (x, y) = (i % w, i / w);
+            let mut visit = |j: usize| {
+                if mask[j] && !label[j] {
+                    label[j] = true;
+                    stack.push(j);
+                }
+            };
+            if x > 0 {
+                visit(i - 1);
+            }
+            if x + 1 < w {
+                visit(i + 1);
+            }
+            if y > 0 {
+                visit(i - w);
+            }
+            if y + 1 < h {
+                visit(i + w);
+            }
+        }
+        if area as f32 >= min_frac * total as f32 {
+            count += 1;
+        }
+    }
+    count
+}
+
+/// The result of normalising one frame.
+#[derive(Clone, Debug)]
+pub struct Normalised {
+    pub pose: Pose,
+    pub shape: Shape,
+    /// `norm_size²` values, row-major, not yet scaled to the clip's average intensity.
+    pub image: Vec<f32>,
+}
+
+/// Normalises one frame (§3.1): pose, slice moments, path/width splines and the
+/// normalised image.
+pub fn normalise(frame: &GrayFrame, p: &ShapeParams) -> std::result::Result<Normalised, Skip> {
+    let levelled;
+    let frame = if p.black_level > 0.0 {
+        levelled = frame.map(|v| (v - p.black_level).max(0.0));
+        &levelled
+    } else {
+        frame
+    };
+    let moments = Moments::of(frame);
+    let pose = match moments.pose() {
+        Some(pose) if pose.sigma_v > 0.25 && frame.max() > 0.0 => pose,
+        _ => return Err(Skip::Dark),
+    };
+    if p.skip_multiple && count_flames(frame, p.component_threshold, p.min_component) > 1 {
+        return Err(Skip::Multiple);
+    }
+    let ns = p.norm_size as usize;
+    let sv = pose.sigma_v;
+    // Anti-alias: the canonical grid spacing along v in source pixels.
+    let step = (p.above + p.below) * sv / ns as f64;
+    let f = (step / 1.5).floor().max(1.0) as usize;
+    let (src, sw, sh) = box_down(frame, f);
+    let inv_f = 1.0 / f as f64;
+    let (upx, upy) = pose.up();
+    let (rx, ry) = pose.right();
+    let sample = |u: f64, v: f64| -> f32 {
+        let x = pose.cx + (u * rx + v * upx) * sv;
+        let y = pose.cy + (u * ry + v * upy) * sv;
+        bilinear(&src, sw, sh, x * inv_f, y * inv_f)
+    };
+
+    // Upright image U: ns rows over [−below, above], square cells, for slice moments.
+    let cell = (p.above + p.below) / ns as f64;
+    let nu = ns;
+    let u_of = |c: usize| (c as f64 + 0.5 - nu as f64 / 2.0) * cell;
+    let mut rows_m = vec![[0.0f64; 3]; ns]; // per row: Σ I, Σ u I, Σ u² I
+    for (r, acc) in rows_m.iter_mut().enumerate() {
+        let v = p.row_v(r as f64);
+        for c in 0..nu {
+            let u = u_of(c);
+            let i = sample(u, v) as f64;
+            acc[0] += i;
+            acc[1] += i * u;
+            acc[2] += i * u * u;
+        }
+    }
+    let total: f64 = rows_m.iter().map(|a| a[0]).sum();
+    if !(total > 0.0) {
+        return Err(Skip::Dark);
+    }
+    // Slice moments: n slices over the ns rows (row 0 = top), bottom to top.
+    let slices = |n: usize| -> (Vec<f64>, Vec<f64>) {
+        let mut path = vec![f64::NAN; n];
+        let mut width = vec![f64::NAN; n];
+        for (s, (pp, ww)) in path.iter_mut().zip(width.iter_mut()).enumerate() {
+            // Slice s (from the bottom) covers v in [−below + s h, −below + (s+1) h].
+            let lo = -p.below + s as f64 * (p.above + p.below) / n as f64;
+            let hi = lo + (p.above + p.below) / n as f64;
+            let mut a = [0.0f64; 3];
+            for (r, m) in rows_m.iter().enumerate() {
+                let v = p.row_v(r as f64);
+                if v >= lo && v < hi {
+                    a.iter_mut().zip(m).for_each(|(x, y)| *x += y);
+                }
+            }
+            if a[0] > 1e-3 * total / n as f64 {
+                let mu = a[1] / a[0];
+                *pp = mu;
+                *ww = (a[2] / a[0] - mu * mu).max(0.0).sqrt().max(0.02);
+            }
+        }
+        fill_gaps(&mut path);
+        fill_gaps(&mut width);
+        (path, width)
+    };
+    let (path, _) = slices(p.n_path);
+    let (_, width) = slices(p.n_width);
+    let height = sv / frame.height() as f64;
+    let shape = Shape {
+        path,
+        width,
+        height,
+    };
+
+    // Normalised image: every row centred on path(v) and scaled by width(v).
+    let (path_r, width_r) = row_profiles(&shape, p);
+    let mut image = vec![0.0f32; ns * ns];
+    for r in 0..ns {
+        let v = p.row_v(r as f64);
+        for c in 0..ns {
+            let up = canonical_u(c as f64, p);
+            // 2 × 2 supersampling across, where the slice width stretches the grid.
+            let du = 0.25 * 2.0 * p.half_width / ns as f64;
+            let dv = 0.25 * cell;
+            let mut acc = 0.0;
+            for (a, b) in [(-du, -dv), (du, -dv), (-du, dv), (du, dv)] {
+                acc += sample(path_r[r] + (up + a) * width_r[r], v + b);
+            }
+            image[r * ns + c] = 0.25 * acc;
+        }
+    }
+    Ok(Normalised { pose, shape, image })
+}
+
+/// Canonical `u'` (in slice widths) of normalised column `c`.
+#[inline]
+fn canonical_u(c: f64, p: &ShapeParams) -> f64 {
+    -p.half_width + (c + 0.5) / p.norm_size as f64 * 2.0 * p.half_width
+}
+
+/// Replaces NaN entries by the nearest valid neighbour (0.5 if none is valid).
+fn fill_gaps(v: &mut [f64]) {
+    let valid: Vec<usize> = (0..v.len()).filter(|&i| v[i].is_finite()).collect();
+    if valid.is_empty() {
+        v.iter_mut().for_each(|x| *x = 0.5);
+        return;
+    }
+    for i in 0..v.len() {
+        if !v[i].is_finite() {
+            let j = *valid
+                .iter()
+                .min_by_key(|&&j| j.abs_diff(i))
+                .expect("non-empty");
+            v[i] = v[j];
+        }
+    }
+}
+
+/// Path and width at the centre of every normalised row (cubic spline through the slices).
+pub fn row_profiles(shape: &Shape, p: &ShapeParams) -> (Vec<f64>, Vec<f64>) {
+    let ns = p.norm_size as usize;
+    let at: Vec<f64> = (0..ns).map(|r| p.row_v(r as f64)).rev().collect(); // increasing v
+    let mut path = vec![0.0; ns];
+    let mut width = vec![0.0; ns];
+    natural_cubic(
+        &p.slice_centres(shape.path.len()),
+        &shape.path,
+        &at,
+        &mut path,
+    );
+    natural_cubic(
+        &p.slice_centres(shape.width.len()),
+        &shape.width,
+        &at,
+        &mut width,
+    );
+    path.reverse();
+    width.reverse();
+    width.iter_mut().for_each(|w| *w = w.max(0.02));
+    (path, width)
+}
+
+/// Where and how large to draw a flame: centroid in output pixels, tilt in radians.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Placement {
+    pub cx: f64,
+    pub cy: f64,
+    pub tilt: f64,
+}
+
+/// Scratch buffers and tables for rendering (reused between frames: no allocation per frame).
+#[derive(Clone, Debug, Default)]
+pub struct RenderScratch {
+    path: Vec<f32>,
+    width_inv: Vec<f32>,
+}
+
+/// Renders a normalised image back into `out` (§3.1 reversed): the flame of `shape`,
+/// centred at `place`, with `σ_v = shape.height · out.height()`. `out` is overwritten.
+pub fn render_into(
+    normalised: &[f32],
+    shape: &Shape,
+    place: &Placement,
+    p: &ShapeParams,
+    scratch: &mut RenderScratch,
+    out: &mut GrayFrame,
+) {
+    let ns = p.norm_size as usize;
+    debug_assert_eq!(normalised.len(), ns * ns);
+    let (path_r, width_r) = row_profiles(shape, p);
+    scratch.path.clear();
+    scratch.path.extend(path_r.iter().map(|&v| v as f32));
+    scratch.width_inv.clear();
+    scratch
+        .width_inv
+        .extend(width_r.iter().map(|&w| (1.0 / w) as f32));
+    let sv = (shape.height * out.height() as f64).max(1e-3);
+    let (upx, upy) = (place.tilt.sin(), -place.tilt.cos());
+    let (rx, ry) = (place.tilt.cos(), place.tilt.sin());
+    // Row coordinate rr = (above − v) · ns / (above + below) − 0.5; column
+    // cc = (u' + half_width) · ns / (2 half_width) − 0.5.
+    let kr = ns as f64 / (p.above + p.below);
+    let kc = (ns as f64 / (2.0 * p.half_width)) as f32;
+    let c_off = (p.half_width * ns as f64 / (2.0 * p.half_width)) as f32 - 0.5;
+    let nsf = ns as f32;
+    let w = out.width() as usize;
+    for (y, row) in out.rows_mut().enumerate() {
+        let dy = (y as f64 + 0.5 - place.cy) / sv;
+        // u and v are affine in x along the row.
+        let dx0 = (0.5 - place.cx) / sv;
+        let u0 = (dx0 * rx + dy * ry) as f32;
+        let v0 = (dx0 * upx + dy * upy) as f32;
+        let du = (rx / sv) as f32;
+        let dv = (upx / sv) as f32;
+        let rr0 = ((p.above - v0 as f64) * kr - 0.5) as f32;
+        let drr = -(dv as f64 * kr) as f32;
+        for (x, o) in row.iter_mut().enumerate().take(w) {
+            let xf = x as f32;
+            let rr = rr0 + drr * xf;
+            if !(rr > -1.0 && rr < nsf) {
+                *o = 0.0;
+                continue;
+            }
+            let u = u0 + du * xf;
+            // Path and width at this row: linear between row centres.
+            let rc = rr.clamp(0.0, nsf - 1.0);
+            let r0 = rc as usize;
+            let r1 = (r0 + 1).min(ns - 1);
+            let t = rc - r0 as f32;
+            let path = scratch.path[r0] + (scratch.path[r1] - scratch.path[r0]) * t;
+            let winv = scratch.width_inv[r0] + (scratch.width_inv[r1] - scratch.width_inv[r0]) * t;
+            let cc = (u - path) * winv * kc + c_off;
+            if !(cc > -1.0 && cc < nsf) {
+                *o = 0.0;
+                continue;
+            }
+            // Bilinear in the normalised image, zero outside.
+            let (fr, fc) = (rr.floor(), cc.floor());
+            let (ty, tx) = (rr - fr, cc - fc);
+            let (ir, ic) = (fr as isize, fc as isize);
+            let at = |r: isize, c: isize| -> f32 {
+                if r < 0 || c < 0 || r >= ns as isize || c >= ns as isize {
+                    0.0
+                } else {
+                    normalised[r as usize * ns + c as usize]
+                }
+            };
+            let top = at(ir, ic) * (1.0 - tx) + at(ir, ic + 1) * tx;
+            let bot = at(ir + 1, ic) * (1.0 - tx) + at(ir + 1, ic + 1) * tx;
+            *o = (top * (1.0 - ty) + bot * ty).max(0.0);
+        }
+    }
+}
+
+/// Output size check shared by the renderers.
+pub(crate) fn check_size(size: Size) -> Result<()> {
+    Size::new(size.width, size.height)?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn normalise_then_render_reproduces_a_flame() {
+        let clip = crate::synthetic::flame_clip(Size::new(96, 96).unwrap(), 1, 5);
+        let p = ShapeParams::default();
+        let n = normalise(&clip[0], &p).unwrap();
+        let mut out = GrayFrame::new(clip[0].size());
+        let place = Placement {
+            cx: n.pose.cx,
+            cy: n.pose.cy,
+            tilt: n.pose.tilt,
+        };
+        render_into(
+            &n.image,
+            &n.shape,
+            &place,
+            &p,
+            &mut RenderScratch::default(),
+            &mut out,
+        );
+        let psnr = crate::psnr(&clip[0], &out);
+        assert!(psnr > 30.0, "PSNR {psnr}");
+    }
+
+    #[test]
+    fn two_flames_are_detected() {
+        let s = Size::new(64, 64).unwrap();
+        let f = GrayFrame::from_fn(s, |x, y| {
+            let g = |cx: f32| (-((x as f32 - cx).powi(2) + (y as f32 - 32.0).powi(2)) / 20.0).exp();
+            g(16.0) + g(48.0)
+        });
+        assert_eq!(count_flames(&f, 0.2, 0.03), 2);
+        assert!(matches!(
+            normalise(&f, &ShapeParams::default()),
+            Err(Skip::Multiple)
+        ));
+        assert!(matches!(
+            normalise(&GrayFrame::new(s), &ShapeParams::default()),
+            Err(Skip::Dark)
+        ));
+    }
+}

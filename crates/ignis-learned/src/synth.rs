@@ -1,0 +1,266 @@
+//! Synthesising new flames from a trained model, with user controls.
+//!
+//! Source: stich-magnor-learning-flames.txt §4.3 (sampling the ARP, eq. 2, step by step)
+//! and §5.1 (controls: a path offset for wind, height, width and scale; an
+//! intensity-to-colour transfer function — the palettes of `ignis-core`).
+//!
+//! Controls act on the sampled state before rendering, never on the process itself, so
+//! the dynamics stay those learned:
+//! - `wind`: the path of slice `i` is offset by `wind · tᵢ²`, `tᵢ ∈ (0, 1)` its height
+//!   from the bottom of the canonical range: the base stays, the tip bends. Units of
+//!   `σ_v` (the flame's main-axis deviation, roughly a fifth of its visible height);
+//!   positive bends to the right.
+//! - `height`: multiplies the length of the flame while keeping its width in pixels.
+//! - `width`: multiplies every slice width.
+//! - `scale`: multiplies the whole flame.
+
+use crate::error::{LearnedError, Result};
+use crate::model::FlameModel;
+use crate::shape::{render_into, Placement, RenderScratch};
+use ignis_core::{GrayFrame, Rng, Size};
+use serde::{Deserialize, Serialize};
+
+/// Wind (path offset) over time.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub enum Wind {
+    /// The same offset on every frame.
+    Constant(f64),
+    /// `(frame, offset)` keys, frames increasing; linear in between, held outside.
+    Keys(Vec<(f64, f64)>),
+}
+
+impl Default for Wind {
+    fn default() -> Self {
+        Wind::Constant(0.0)
+    }
+}
+
+impl Wind {
+    /// The offset at frame `t`.
+    pub fn at(&self, t: f64) -> f64 {
+        match self {
+            Wind::Constant(w) => *w,
+            Wind::Keys(k) if k.is_empty() => 0.0,
+            Wind::Keys(k) => {
+                if t <= k[0].0 {
+                    return k[0].1;
+                }
+                for w in k.windows(2) {
+                    if t <= w[1].0 {
+                        let f = (t - w[0].0) / (w[1].0 - w[0].0).max(1e-12);
+                        return w[0].1 + f * (w[1].1 - w[0].1);
+                    }
+                }
+                k[k.len() - 1].1
+            }
+        }
+    }
+
+    /// Parses `0.3` (constant) or `0:0,100:0.5,200:-0.2` (frame:offset keys).
+    pub fn parse(s: &str) -> Result<Wind> {
+        let bad = || {
+            LearnedError::bad(
+                "wind",
+                format!("`{s}` is not a number or frame:offset keys like 0:0,100:0.5"),
+            )
+        };
+        if let Ok(v) = s.trim().parse::<f64>() {
+            return if v.is_finite() {
+                Ok(Wind::Constant(v))
+            } else {
+                Err(bad())
+            };
+        }
+        let mut keys = Vec::new();
+        for part in s.split(',') {
+            let (f, v) = part.split_once(':').ok_or_else(bad)?;
+            let (f, v): (f64, f64) = (
+                f.trim().parse().map_err(|_| bad())?,
+                v.trim().parse().map_err(|_| bad())?,
+            );
+            if !f.is_finite()
+                || !v.is_finite()
+                || keys.last().is_some_and(|&(lf, _): &(f64, f64)| f <= lf)
+            {
+                return Err(bad());
+            }
+            keys.push((f, v));
+        }
+        Ok(Wind::Keys(keys))
+    }
+}
+
+/// User controls of synthesis (§5.1).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Controls {
+    /// Path offset (bend), see the module docs. Default none.
+    pub wind: Wind,
+    /// Height multiplier, 0.1..=10. Default 1.
+    pub height: f64,
+    /// Width multiplier, 0.1..=10. Default 1.
+    pub width: f64,
+    /// Scale multiplier (whole flame), 0.1..=10. Default 1.
+    pub scale: f64,
+}
+
+impl Default for Controls {
+    fn default() -> Self {
+        Controls {
+            wind: Wind::default(),
+            height: 1.0,
+            width: 1.0,
+            scale: 1.0,
+        }
+    }
+}
+
+impl Controls {
+    pub fn validate(&self) -> Result<()> {
+        for (name, v) in [
+            ("height", self.height),
+            ("width", self.width),
+            ("scale", self.scale),
+        ] {
+            if !(0.1..=10.0).contains(&v) {
+                return Err(LearnedError::bad(name, format!("{v} is outside 0.1..=10")));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// An endless, seeded stream of new flames from a model (§4.3).
+pub struct Synthesiser<'m> {
+    model: &'m FlameModel,
+    controls: Controls,
+    rng: Rng,
+    /// The last `K` states, newest first.
+    hist: Vec<Vec<f64>>,
+    next: Vec<f64>,
+    noise: Vec<f64>,
+    shown: Vec<f64>,
+    normalised: Vec<f32>,
+    scratch: RenderScratch,
+    t: u64,
+}
+
+impl<'m> Synthesiser<'m> {
+    /// Starts from the model's last training states; the same model, controls and seed
+    /// give the same frames.
+    pub fn new(model: &'m FlameModel, controls: Controls, seed: u64) -> Result<Synthesiser<'m>> {
+        controls.validate()?;
+        let n = model.n_state();
+        Ok(Synthesiser {
+            model,
+            controls,
+            rng: Rng::new(seed),
+            hist: model.init.iter().rev().cloned().collect(),
+            next: vec![0.0; n],
+            noise: vec![0.0; n],
+            shown: vec![0.0; n],
+            normalised: Vec::new(),
+            scratch: RenderScratch::default(),
+            t: 0,
+        })
+    }
+
+    /// Changes the controls from the next frame on (for interactive steering).
+    pub fn set_controls(&mut self, controls: Controls) -> Result<()> {
+        controls.validate()?;
+        self.controls = controls;
+        Ok(())
+    }
+
+    /// Samples the next state from the ARP (eq. 2), before controls.
+    pub fn step(&mut self) -> &[f64] {
+        let hist: Vec<&[f64]> = self.hist.iter().map(|h| h.as_slice()).collect();
+        self.model
+            .arp
+            .step(&hist, &mut self.rng, &mut self.noise, &mut self.next);
+        drop(hist);
+        let mut last = self.hist.pop().expect("order ≥ 1");
+        last.copy_from_slice(&self.next);
+        self.hist.insert(0, last);
+        self.t += 1;
+        &self.hist[0]
+    }
+
+    /// The latest state with the controls applied (what is rendered).
+    pub fn controlled_state(&mut self) -> &[f64] {
+        let s = &self.model.shape;
+        let (np, nw) = (s.n_path, s.n_width);
+        self.shown.copy_from_slice(&self.hist[0]);
+        let wind = self.controls.wind.at(self.t.saturating_sub(1) as f64);
+        for i in 0..np {
+            let t = (i as f64 + 0.5) / np as f64;
+            self.shown[i] += wind * t * t / self.controls.height;
+        }
+        let wmul = self.controls.width / self.controls.height;
+        for w in &mut self.shown[np..np + nw] {
+            *w = (*w * wmul).max(0.02);
+        }
+        let h = &mut self.shown[np + nw];
+        *h = (*h * self.controls.height * self.controls.scale).max(1e-4);
+        &self.shown
+    }
+
+    /// Samples the next state and renders it into `out` at the model's mean placement.
+    pub fn next_frame_into(&mut self, out: &mut GrayFrame) {
+        self.step();
+        self.controlled_state();
+        let mut place = self.model.placement_for(out.size());
+        // Scaling and lengthening keep the flame's base where it was: move the centroid
+        // up by the extra height below it.
+        let base_drop = self.model.shape.below * 0.5;
+        let grow = self.controls.height * self.controls.scale - 1.0;
+        let h0 =
+            self.hist[0][self.model.shape.n_path + self.model.shape.n_width] * out.height() as f64;
+        place.cy -= grow * base_drop * h0;
+        let (shape, w) = self.model.split(&self.shown);
+        self.normalised.resize(self.model.pca.n_pixels(), 0.0);
+        self.model
+            .pca
+            .reconstruct_into(&w, w.len(), &mut self.normalised);
+        render_into(
+            &self.normalised,
+            &shape,
+            &place,
+            &self.model.shape,
+            &mut self.scratch,
+            out,
+        );
+    }
+
+    /// Renders `frames` frames of `size` (a convenience over [`Self::next_frame_into`]).
+    pub fn frames(&mut self, size: Size, frames: usize) -> Result<Vec<GrayFrame>> {
+        crate::shape::check_size(size)?;
+        Ok((0..frames)
+            .map(|_| {
+                let mut f = GrayFrame::new(size);
+                self.next_frame_into(&mut f);
+                f
+            })
+            .collect())
+    }
+}
+
+/// Convenience: the default placement of a model for an output size (re-exported for
+/// callers who render states themselves).
+pub fn placement(model: &FlameModel, size: Size) -> Placement {
+    model.placement_for(size)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn wind_parses_and_interpolates() {
+        assert_eq!(Wind::parse("0.3").unwrap(), Wind::Constant(0.3));
+        let w = Wind::parse("0:0,100:1").unwrap();
+        assert!((w.at(50.0) - 0.5).abs() < 1e-12);
+        assert_eq!(w.at(500.0), 1.0);
+        assert!(Wind::parse("10:0,5:1").is_err());
+        assert!(Wind::parse("abc").is_err());
+    }
+}
