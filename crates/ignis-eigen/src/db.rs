@@ -25,10 +25,10 @@
 //! so that numpy and any JSON reader can open the database.
 
 use crate::error::{EigenError, Result};
-use crate::npy::{self, Header};
 use crate::pose::ClipPose;
 use crate::preprocess::PreprocessParams;
 use ignis_core::{GrayFrame, Size};
+use ignis_pca::npy::{self, Header};
 use memmap2::Mmap;
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
@@ -281,7 +281,13 @@ fn map_checked(db: &Path, entry: &FileEntry, verify: bool) -> std::result::Resul
             ));
         }
     }
-    let header = npy::parse_header(&map)?;
+    let header = npy::parse_header(&p, &map).map_err(|e| match e {
+        ignis_pca::PcaError::Unsupported { reason, .. } => reason,
+        other => other.to_string(),
+    })?;
+    if header.fortran_order {
+        return Err("Fortran-order arrays are not supported".into());
+    }
     if header.file_len() != map.len() {
         return Err(format!(
             "array header says {} bytes, file has {}",

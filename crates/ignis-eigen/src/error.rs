@@ -64,6 +64,15 @@ impl EigenError {
             source,
         }
     }
+    /// An error of `ignis_pca::npy` (reading or writing an array file). I/O errors keep
+    /// their path; the others name the file in their message.
+    pub(crate) fn npy(e: ignis_pca::PcaError) -> Self {
+        match e {
+            ignis_pca::PcaError::Io { path, source } => EigenError::Io { path, source },
+            ignis_pca::PcaError::LimitExceeded { .. } => EigenError::LimitExceeded(e.to_string()),
+            other => EigenError::bad("npy", other.to_string()),
+        }
+    }
 }
 
 pub type Result<T, E = EigenError> = std::result::Result<T, E>;

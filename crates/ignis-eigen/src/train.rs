@@ -12,13 +12,13 @@
 use crate::analysis::{thresholds, ESelect};
 use crate::db::{self, ClipEntry, FileEntry, Manifest, PackEntry};
 use crate::error::{EigenError, Result};
-use crate::npy::{self, Dtype, NpyWriter};
 use crate::pose::{clip_pose, ClipPose};
 use crate::preprocess::{
     frame_mask, preprocess_frame, preprocess_stages, FrameStages, PreprocessParams,
 };
 use crate::synthetic::{synthetic_frame, FlameStyle, SyntheticParams};
 use ignis_core::{RgbaFrame, Size};
+use ignis_pca::npy::{self, Dtype, NpyWriter};
 use ignis_pca::{Keep, Method, Pca, PcaOptions};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -508,7 +508,7 @@ fn train_into(
     };
     let stream_path = tmp.join("data.tmp.npy");
     let mut stream = if p.streaming {
-        Some(NpyWriter::create(&stream_path, Dtype::F32, &[m, n])?)
+        Some(NpyWriter::create(&stream_path, Dtype::F32, &[m, n]).map_err(EigenError::npy)?)
     } else {
         None
     };
@@ -518,15 +518,18 @@ fn train_into(
         progress.stage(&format!("pre-process {name}"), plan.frames as u64);
         let rel = format!("frames/{name}.npy");
         let mut fw = if p.store_frames {
-            Some(NpyWriter::create(
-                &tmp.join(&rel),
-                Dtype::F32,
-                &[
-                    plan.frames,
-                    frame_size.height as usize,
-                    frame_size.width as usize,
-                ],
-            )?)
+            Some(
+                NpyWriter::create(
+                    &tmp.join(&rel),
+                    Dtype::F32,
+                    &[
+                        plan.frames,
+                        frame_size.height as usize,
+                        frame_size.width as usize,
+                    ],
+                )
+                .map_err(EigenError::npy)?,
+            )
         } else {
             None
         };
@@ -551,10 +554,10 @@ fn train_into(
                 }
             }
             if let Some(s) = stream.as_mut() {
-                s.write_f32(pr.train.data())?;
+                s.write_f32(pr.train.data()).map_err(EigenError::npy)?;
             }
             if let Some(w) = fw.as_mut() {
-                w.write_f32(pr.frame.data())?;
+                w.write_f32(pr.frame.data()).map_err(EigenError::npy)?;
             }
             angles.push(pr.angle);
             j += 1;
@@ -575,7 +578,7 @@ fn train_into(
             return Err(EigenError::clip(name, "the mask removes every pixel in every frame; widen the HSV ranges (e.g. lower the V minimum of [[preprocess.mask.layers]])"));
         }
         if let Some(w) = fw {
-            w.finish()?;
+            w.finish().map_err(EigenError::npy)?;
             frames_files.push(Some(db::file_entry(tmp, &rel)?));
         } else {
             frames_files.push(None);
@@ -612,7 +615,11 @@ fn train_into(
         }
         (pca, flat)
     } else {
-        stream.take().expect("streaming").finish()?;
+        stream
+            .take()
+            .expect("streaming")
+            .finish()
+            .map_err(EigenError::npy)?;
         let mut src = ignis_pca::NpySource::open(&stream_path).map_err(pca_err)?;
         let kk = p.streaming_components.min(m.saturating_sub(1)).max(1);
         let opts = ignis_pca::StreamingOptions {
@@ -622,14 +629,15 @@ fn train_into(
         };
         let pca = ignis_pca::fit_streaming(&mut src, kk, &opts).map_err(pca_err)?;
         let k = pca.n_components();
-        let bytes = std::fs::read(&stream_path).map_err(|e| EigenError::io(&stream_path, e))?;
-        let h = npy::parse_header(&bytes).map_err(|r| EigenError::bad("streaming data", r))?;
-        let all = npy::f32_data(&bytes, &h);
+        drop(src);
+        // Project the frames in place from a read-only map of the streamed data.
+        let map = npy::mmap_f32(&stream_path).map_err(EigenError::npy)?;
+        let all = map.as_slice();
         let mut flat = Vec::with_capacity(k * m);
         for col in 0..m {
             flat.extend(pca.project(&all[col * n..(col + 1) * n]));
         }
-        drop(bytes);
+        drop(map);
         let _ = std::fs::remove_file(&stream_path);
         (pca, flat)
     };
@@ -645,23 +653,25 @@ fn train_into(
     progress.stage("write", pack_count as u64 + 3);
     let ts = pre.training_size();
     let (h, w) = (ts.height as usize, ts.width as usize);
-    npy::write_f32(&tmp.join("mean.npy"), &[h, w], &pca.mean)?;
-    npy::write_f64(&tmp.join("eigenvalues.npy"), &[k], &pca.eigenvalues)?;
-    npy::write_f32(&tmp.join("weights.npy"), &[m, k], &weights)?;
-    npy::write_f32(&tmp.join("angles.npy"), &[m], &angles)?;
+    npy::write_f32(&tmp.join("mean.npy"), &pca.mean, &[h, w], false).map_err(EigenError::npy)?;
+    npy::write_f64(&tmp.join("eigenvalues.npy"), &pca.eigenvalues, &[k], false)
+        .map_err(EigenError::npy)?;
+    npy::write_f32(&tmp.join("weights.npy"), &weights, &[m, k], false).map_err(EigenError::npy)?;
+    npy::write_f32(&tmp.join("angles.npy"), &angles, &[m], false).map_err(EigenError::npy)?;
     progress.inc(3);
     let mut packs = Vec::new();
     for pi in 0..pack_count {
         let first = pi * p.pack_size;
         let count = p.pack_size.min(k - first);
         let rel = format!("packs/pack_{:03}.npy", pi + 1);
-        let mut wr = NpyWriter::create(&tmp.join(&rel), Dtype::F32, &[count, h, w])?;
+        let mut wr = NpyWriter::create(&tmp.join(&rel), Dtype::F32, &[count, h, w])
+            .map_err(EigenError::npy)?;
         for i in first..first + count {
             let col = pca.components.col(i);
             let v: Vec<f32> = (0..n).map(|r| col[r]).collect();
-            wr.write_f32(&v)?;
+            wr.write_f32(&v).map_err(EigenError::npy)?;
         }
-        wr.finish()?;
+        wr.finish().map_err(EigenError::npy)?;
         packs.push(PackEntry {
             entry: db::file_entry(tmp, &rel)?,
             first,

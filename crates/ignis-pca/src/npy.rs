@@ -4,8 +4,10 @@
 //! Written by hand rather than with `npyz`: the header is one short Python-dict line, we need the
 //! exact data offset and alignment to memory-map the payload as `&[f32]` (which `npyz` does not
 //! expose), and writing Fortran order lets a faer matrix go to disk without a transpose.
-//! Writers are atomic (temp file in the same folder, then rename). Numpy opens these files with
-//! `np.load(path)` (and `np.load(path, mmap_mode="r")`).
+//! Writers are atomic (temp file in the same folder, then rename); [`NpyWriter`] streams a C-order
+//! array piece by piece. [`parse_header`], [`f32_data`] and [`f64_data`] read a file already in
+//! memory (e.g. a memory map). Numpy opens these files with `np.load(path)` (and
+//! `np.load(path, mmap_mode="r")`).
 
 use std::io::{BufWriter, Read, Write};
 use std::path::{Path, PathBuf};
@@ -58,6 +60,10 @@ impl Header {
     /// True for zero elements.
     pub fn is_empty(&self) -> bool {
         self.len() == 0
+    }
+    /// Size in bytes of a complete file with this header (header plus payload).
+    pub fn file_len(&self) -> usize {
+        self.data_offset + self.len() * self.dtype.size()
     }
 }
 
@@ -211,11 +217,8 @@ impl Elem for f64 {
     }
 }
 
-/// Writes atomically: `write` fills a temp file next to `path`, which is then renamed.
-fn atomic_write(
-    path: &Path,
-    write: impl FnOnce(&mut BufWriter<&std::fs::File>) -> std::io::Result<()>,
-) -> Result<(), PcaError> {
+/// The temp file next to `path` that an atomic write fills before renaming it to `path`.
+fn temp_path(path: &Path) -> PathBuf {
     let dir = match path.parent() {
         Some(d) if !d.as_os_str().is_empty() => d.to_owned(),
         _ => PathBuf::from("."),
@@ -224,7 +227,18 @@ fn atomic_write(
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_default();
-    let tmp = dir.join(format!(".{name}.tmp{}", std::process::id()));
+    // Unique per process and call, so concurrent writers of the same path do not collide.
+    static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let n = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    dir.join(format!(".{name}.tmp{}-{n}", std::process::id()))
+}
+
+/// Writes atomically: `write` fills a temp file next to `path`, which is then renamed.
+fn atomic_write(
+    path: &Path,
+    write: impl FnOnce(&mut BufWriter<&std::fs::File>) -> std::io::Result<()>,
+) -> Result<(), PcaError> {
+    let tmp = temp_path(path);
     let res = (|| {
         let f = std::fs::File::create(&tmp)?;
         let mut w = BufWriter::with_capacity(1 << 20, &f);
@@ -313,23 +327,9 @@ pub fn write_f64(
     write_slice(path, data, shape, fortran)
 }
 
-fn read_all<T: Elem>(path: &Path) -> Result<(Vec<T>, Header), PcaError> {
-    let bytes = std::fs::read(path).map_err(io(path))?;
-    let h = parse_header(path, &bytes)?;
-    let payload = &bytes[h.data_offset..];
-    let len = h.len();
-    if payload.len() < len * h.dtype.size() {
-        return Err(unsupported(
-            path,
-            format!(
-                "truncated: shape {:?} needs {} bytes of data, file has {}",
-                h.shape,
-                len * h.dtype.size(),
-                payload.len()
-            ),
-        ));
-    }
-    let data = match h.dtype {
+/// Decodes the first `len` elements of `payload` (stored as `dtype`), converting to `T`.
+fn decode<T: Elem>(payload: &[u8], dtype: Dtype, len: usize) -> Vec<T> {
+    match dtype {
         Dtype::F32 => payload
             .chunks_exact(4)
             .take(len)
@@ -340,8 +340,191 @@ fn read_all<T: Elem>(path: &Path) -> Result<(Vec<T>, Header), PcaError> {
             .take(len)
             .map(|c| T::from_f64(f64::from_le_bytes(c.try_into().expect("8 bytes"))))
             .collect(),
-    };
-    Ok((data, h))
+    }
+}
+
+/// The payload bytes of `h` within a whole file held in `bytes`.
+///
+/// # Panics
+/// If `bytes` is shorter than `h.file_len()`.
+fn payload<'a>(bytes: &'a [u8], h: &Header) -> &'a [u8] {
+    assert!(
+        bytes.len() >= h.file_len(),
+        ".npy payload truncated: shape {:?} needs {} bytes, have {}",
+        h.shape,
+        h.file_len(),
+        bytes.len()
+    );
+    &bytes[h.data_offset..h.file_len()]
+}
+
+/// The data of a whole `.npy` file held in memory (e.g. a memory map) whose header `h` came from
+/// [`parse_header`], as f32 in file order. Borrows in place when the file is f32 and the payload
+/// is 4-byte aligned; copies otherwise (f64 files are converted).
+///
+/// # Panics
+/// If `bytes` is shorter than `h.file_len()` (check that first for untrusted files).
+pub fn f32_data<'a>(bytes: &'a [u8], h: &Header) -> std::borrow::Cow<'a, [f32]> {
+    let d = payload(bytes, h);
+    if h.dtype == Dtype::F32 && cfg!(target_endian = "little") {
+        // SAFETY: every bit pattern is a valid f32; `align_to` only yields aligned elements.
+        let (pre, mid, post) = unsafe { d.align_to::<f32>() };
+        if pre.is_empty() && post.is_empty() {
+            return std::borrow::Cow::Borrowed(mid);
+        }
+    }
+    std::borrow::Cow::Owned(decode(d, h.dtype, h.len()))
+}
+
+/// Like [`f32_data`], as f64 (always a copy; f32 files are converted).
+///
+/// # Panics
+/// If `bytes` is shorter than `h.file_len()`.
+pub fn f64_data(bytes: &[u8], h: &Header) -> Vec<f64> {
+    decode(payload(bytes, h), h.dtype, h.len())
+}
+
+/// Streams a C-order array to `path` piece by piece (e.g. one video frame at a time), so it
+/// never has to be in memory whole: the header is written first, then the values in file order
+/// (last index fastest). Atomic like the other writers: the data goes to a temp file next to
+/// `path`, which [`NpyWriter::finish`] renames once exactly `shape.product()` values were
+/// written; dropping an unfinished writer deletes the temp file.
+pub struct NpyWriter {
+    file: Option<BufWriter<std::fs::File>>,
+    path: PathBuf,
+    tmp: PathBuf,
+    dtype: Dtype,
+    expected: usize,
+    written: usize,
+    renamed: bool,
+}
+
+impl NpyWriter {
+    /// Starts `path` as an array of `dtype` with `shape` (C order).
+    pub fn create(path: &Path, dtype: Dtype, shape: &[usize]) -> Result<NpyWriter, PcaError> {
+        let tmp = temp_path(path);
+        let f = std::fs::File::create(&tmp).map_err(io(path))?;
+        let mut w = NpyWriter {
+            file: Some(BufWriter::with_capacity(1 << 20, f)),
+            path: path.to_owned(),
+            tmp,
+            dtype,
+            expected: shape.iter().product(),
+            written: 0,
+            renamed: false,
+        };
+        let header = header_bytes(dtype, false, shape);
+        w.put(&header)?;
+        Ok(w)
+    }
+
+    /// The destination path.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    fn put(&mut self, bytes: &[u8]) -> Result<(), PcaError> {
+        let f = self.file.as_mut().expect("NpyWriter used after finish");
+        f.write_all(bytes).map_err(io(&self.path))
+    }
+
+    fn push<T: Elem>(&mut self, v: &[T]) -> Result<(), PcaError> {
+        if T::DTYPE != self.dtype {
+            return Err(crate::bad(
+                "dtype",
+                format!(
+                    "{}: writing {:?} values into a {:?} array",
+                    self.path.display(),
+                    T::DTYPE,
+                    self.dtype
+                ),
+            ));
+        }
+        if self.written + v.len() > self.expected {
+            return Err(crate::bad(
+                "shape",
+                format!(
+                    "{}: {} values written would exceed the shape's {}",
+                    self.path.display(),
+                    self.written + v.len(),
+                    self.expected
+                ),
+            ));
+        }
+        let mut bytes = Vec::with_capacity(v.len().min(1 << 14) * T::DTYPE.size());
+        for chunk in v.chunks(1 << 14) {
+            bytes.clear();
+            for x in chunk {
+                x.to_le(&mut bytes);
+            }
+            self.put(&bytes)?;
+        }
+        self.written += v.len();
+        Ok(())
+    }
+
+    /// Appends f32 values (the array must be f32).
+    pub fn write_f32(&mut self, v: &[f32]) -> Result<(), PcaError> {
+        self.push(v)
+    }
+
+    /// Appends f64 values (the array must be f64).
+    pub fn write_f64(&mut self, v: &[f64]) -> Result<(), PcaError> {
+        self.push(v)
+    }
+
+    /// Flushes, syncs and renames the temp file to the destination. Fails (and deletes the temp
+    /// file) if fewer values were written than the shape holds.
+    pub fn finish(mut self) -> Result<(), PcaError> {
+        if self.written != self.expected {
+            return Err(crate::bad(
+                "shape",
+                format!(
+                    "{}: wrote {} values for a shape of {}",
+                    self.path.display(),
+                    self.written,
+                    self.expected
+                ),
+            ));
+        }
+        let w = self.file.take().expect("NpyWriter used after finish");
+        let res = (|| {
+            let f = w.into_inner().map_err(|e| e.into_error())?;
+            f.sync_all()?;
+            drop(f);
+            std::fs::rename(&self.tmp, &self.path)
+        })();
+        self.renamed = res.is_ok();
+        res.map_err(io(&self.path))
+    }
+}
+
+impl Drop for NpyWriter {
+    fn drop(&mut self) {
+        // Unfinished, or failed during finish: remove the partial file.
+        self.file.take();
+        if !self.renamed {
+            let _ = std::fs::remove_file(&self.tmp);
+        }
+    }
+}
+
+fn read_all<T: Elem>(path: &Path) -> Result<(Vec<T>, Header), PcaError> {
+    let bytes = std::fs::read(path).map_err(io(path))?;
+    let h = parse_header(path, &bytes)?;
+    let have = bytes.len() - h.data_offset.min(bytes.len());
+    if bytes.len() < h.file_len() {
+        return Err(unsupported(
+            path,
+            format!(
+                "truncated: shape {:?} needs {} bytes of data, file has {}",
+                h.shape,
+                h.len() * h.dtype.size(),
+                have
+            ),
+        ));
+    }
+    Ok((decode(payload(&bytes, &h), h.dtype, h.len()), h))
 }
 
 /// Reads a flat array (any shape, converting f64↔f32) in file order, with its header.
@@ -479,5 +662,95 @@ mod unit {
             parse_header(p, &be),
             Err(PcaError::Unsupported { .. })
         ));
+    }
+
+    fn no_temp_files(dir: &Path) -> bool {
+        !dir.read_dir()
+            .unwrap()
+            .any(|e| e.unwrap().file_name().to_string_lossy().contains(".tmp"))
+    }
+
+    #[test]
+    fn streaming_writer_and_in_memory_views() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("frames.npy");
+        let data: Vec<f32> = (0..24).map(|i| i as f32 * 0.5 - 3.0).collect();
+        let mut w = NpyWriter::create(&p, Dtype::F32, &[2, 3, 4]).unwrap();
+        assert_eq!(w.path(), p.as_path());
+        for frame in data.chunks(12) {
+            w.write_f32(frame).unwrap();
+        }
+        // Nothing appears at the destination before `finish`.
+        assert!(!p.exists());
+        w.finish().unwrap();
+        assert!(no_temp_files(dir.path()));
+
+        let bytes = std::fs::read(&p).unwrap();
+        let h = parse_header(&p, &bytes).unwrap();
+        assert_eq!(
+            (h.dtype, h.shape.as_slice(), h.fortran_order),
+            (Dtype::F32, &[2usize, 3, 4][..], false)
+        );
+        assert_eq!(h.data_offset % 64, 0);
+        assert_eq!(h.file_len(), bytes.len());
+        let view = f32_data(&bytes, &h);
+        assert_eq!(&*view, &data[..]);
+        assert_eq!(read_f32(&p).unwrap().0, data);
+        assert_eq!(
+            f64_data(&bytes, &h),
+            data.iter().map(|&x| x as f64).collect::<Vec<_>>()
+        );
+        // A payload that is not 4-byte aligned is copied, with the same values.
+        let mut shifted = vec![0u8];
+        shifted.extend_from_slice(&bytes);
+        let hs = Header {
+            data_offset: h.data_offset + 1,
+            ..h.clone()
+        };
+        let v = f32_data(&shifted, &hs);
+        assert!(matches!(v, std::borrow::Cow::Owned(_)));
+        assert_eq!(&*v, &data[..]);
+
+        // f64 streaming, read back as f64 and (converted) as f32.
+        let q = dir.path().join("ev.npy");
+        let mut w = NpyWriter::create(&q, Dtype::F64, &[3]).unwrap();
+        w.write_f64(&[1.5, -2.0]).unwrap();
+        w.write_f64(&[0.25]).unwrap();
+        w.finish().unwrap();
+        let b = std::fs::read(&q).unwrap();
+        let h = parse_header(&q, &b).unwrap();
+        assert_eq!(h.dtype, Dtype::F64);
+        assert_eq!(f64_data(&b, &h), vec![1.5, -2.0, 0.25]);
+        assert_eq!(&*f32_data(&b, &h), &[1.5f32, -2.0, 0.25][..]);
+    }
+
+    #[test]
+    fn streaming_writer_rejects_wrong_counts_and_types_and_cleans_up() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("a.npy");
+        // Too few values: finish fails, naming the file; nothing is left behind.
+        let mut w = NpyWriter::create(&p, Dtype::F32, &[2, 2]).unwrap();
+        w.write_f32(&[1.0, 2.0, 3.0]).unwrap();
+        let e = w.finish().unwrap_err().to_string();
+        assert!(e.contains("a.npy") && e.contains("wrote 3 values"), "{e}");
+        assert!(!p.exists());
+        assert!(no_temp_files(dir.path()));
+        // Too many values, or the wrong element type: refused at the write, naming the file.
+        let mut w = NpyWriter::create(&p, Dtype::F32, &[2]).unwrap();
+        let e = w.write_f32(&[1.0, 2.0, 3.0]).unwrap_err().to_string();
+        assert!(e.contains("a.npy") && e.contains("exceed"), "{e}");
+        let e = w.write_f64(&[1.0]).unwrap_err().to_string();
+        assert!(e.contains("a.npy") && e.contains("F64"), "{e}");
+        // Dropped unfinished: no file, no temp file.
+        drop(w);
+        assert!(!p.exists());
+        assert!(no_temp_files(dir.path()));
+        // A destination whose folder does not exist is an I/O error naming it.
+        let bad = dir.path().join("missing/b.npy");
+        let e = NpyWriter::create(&bad, Dtype::F32, &[1]).err().unwrap();
+        assert!(
+            matches!(&e, PcaError::Io { path, .. } if path == &bad),
+            "{e}"
+        );
     }
 }
