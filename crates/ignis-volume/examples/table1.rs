@@ -1,5 +1,6 @@
 //! Measures Fuller et al.'s Table 1 grid on this machine and optionally dumps preview
-//! images: `cargo run --release -p ignis-volume --example table1 [-- DIR]`.
+//! images: `cargo run --release -p ignis-volume --example table1 [-- DIR]`
+//! (`TABLE1_ONLY=perlin4-35` or `TABLE1_ONLY=perlin4` restricts the grid).
 
 use ignis_volume::{render, BSpline, FireInstance, FireScene, Lattice, NoiseKind, Preset};
 use std::io::Write;
@@ -36,6 +37,13 @@ fn main() {
         (NoiseKind::Perlin4, 3),
     ] {
         for lattice in [35usize, 135] {
+            // `TABLE1_ONLY=perlin4-35` (or `perlin4`) runs a subset, e.g. for profiling.
+            if let Ok(only) = std::env::var("TABLE1_ONLY") {
+                let name = format!("{}-{lattice}", kind.name());
+                if !(name == only || kind.name() == only) {
+                    continue;
+                }
+            }
             let scene = FireScene::table1(kind, octaves, lattice);
             let mut anim = scene.animator().unwrap();
             let (pts, _) = anim.step();

@@ -136,18 +136,36 @@ fn lerp(t: f32, a: f32, b: f32) -> f32 {
     a + t * (b - a)
 }
 
+/// Perlin's 16 gradients (12 cube-edge directions + 4 repeats) as a table, so the
+/// renderer's noise has no data-dependent branches. `g · (x, y, z)` equals the reference
+/// `grad` bit for bit: the zero component adds an exact zero and the ±1 factors are exact.
+static GRAD3: [[f32; 3]; 16] = {
+    let mut g = [[0.0f32; 3]; 16];
+    let mut h = 0;
+    while h < 16 {
+        // u and v as in the reference `grad`: u = x (h < 8) else y; v = y (h < 4),
+        // x (h = 12, 14) else z; signs from bits 0 and 1.
+        let su = if h & 1 == 0 { 1.0 } else { -1.0 };
+        let sv = if h & 2 == 0 { 1.0 } else { -1.0 };
+        let ui = if h < 8 { 0 } else { 1 };
+        let vi = if h < 4 {
+            1
+        } else if h == 12 || h == 14 {
+            0
+        } else {
+            2
+        };
+        g[h][ui] = su;
+        g[h][vi] = sv;
+        h += 1;
+    }
+    g
+};
+
 #[inline(always)]
 fn grad3(hash: usize, x: f32, y: f32, z: f32) -> f32 {
-    let h = hash & 15;
-    let u = if h < 8 { x } else { y };
-    let v = if h < 4 {
-        y
-    } else if h == 12 || h == 14 {
-        x
-    } else {
-        z
-    };
-    (if h & 1 == 0 { u } else { -u }) + (if h & 2 == 0 { v } else { -v })
+    let g = &GRAD3[hash & 15];
+    g[0] * x + g[1] * y + g[2] * z
 }
 
 /// `floor` without a libm call (x86-64 baseline has no `roundss`); exact for |x| < 2³¹.
@@ -208,19 +226,34 @@ pub fn perlin3(x: f32, y: f32, z: f32) -> f32 {
     )
 }
 
-/// One of the 32 4-D gradients (one zero component, three ±1) dotted with `(x, y, z, w)`.
+/// The 32 4-D gradients (one zero component, three ±1), indexed like the branchy form:
+/// bits 3–4 pick the zero component (x, y, z, w → 0..3 reversed: 0 ⇒ x is zero, …) and bits
+/// 0–2 the signs of the remaining three in order.
+static GRAD4: [[f32; 4]; 32] = {
+    let mut g = [[0.0f32; 4]; 32];
+    let mut h = 0;
+    while h < 32 {
+        let zero = h >> 3;
+        let mut bit = 0;
+        let mut c = 0;
+        while c < 4 {
+            if c != zero {
+                g[h][c] = if h & (1 << bit) == 0 { 1.0 } else { -1.0 };
+                bit += 1;
+            }
+            c += 1;
+        }
+        h += 1;
+    }
+    g
+};
+
+/// One of the 32 4-D gradients dotted with `(x, y, z, w)` (table look-up, no branches; the
+/// zero component contributes an exact zero, so the sum equals the three-term form).
 #[inline(always)]
 fn grad4(hash: usize, x: f32, y: f32, z: f32, w: f32) -> f32 {
-    let h = hash & 31;
-    let (a, b, c) = match h >> 3 {
-        0 => (y, z, w),
-        1 => (x, z, w),
-        2 => (x, y, w),
-        _ => (x, y, z),
-    };
-    (if h & 1 == 0 { a } else { -a })
-        + (if h & 2 == 0 { b } else { -b })
-        + (if h & 4 == 0 { c } else { -c })
+    let g = &GRAD4[hash & 31];
+    g[0] * x + g[1] * y + g[2] * z + g[3] * w
 }
 
 /// Improved Noise in 4-D (GPU Gems 2 ch. 26 extension of Perlin 2002). Zero at integer
@@ -401,6 +434,39 @@ mod tests {
         for &v in PERMUTATION.iter() {
             assert!(!seen[v as usize]);
             seen[v as usize] = true;
+        }
+    }
+
+    #[test]
+    fn gradient_tables_match_the_branchy_reference() {
+        let ref3 = |h: usize, x: f32, y: f32, z: f32| {
+            let h = h & 15;
+            let u = if h < 8 { x } else { y };
+            let v = if h < 4 {
+                y
+            } else if h == 12 || h == 14 {
+                x
+            } else {
+                z
+            };
+            (if h & 1 == 0 { u } else { -u }) + (if h & 2 == 0 { v } else { -v })
+        };
+        let ref4 = |h: usize, x: f32, y: f32, z: f32, w: f32| {
+            let h = h & 31;
+            let (a, b, c) = match h >> 3 {
+                0 => (y, z, w),
+                1 => (x, z, w),
+                2 => (x, y, w),
+                _ => (x, y, z),
+            };
+            (if h & 1 == 0 { a } else { -a })
+                + (if h & 2 == 0 { b } else { -b })
+                + (if h & 4 == 0 { c } else { -c })
+        };
+        let (x, y, z, w) = (0.3125f32, -0.71, 0.123, 0.9);
+        for h in 0..64 {
+            assert_eq!(grad3(h, x, y, z), ref3(h, x, y, z), "grad3 {h}");
+            assert_eq!(grad4(h, x, y, z, w), ref4(h, x, y, z, w), "grad4 {h}");
         }
     }
 

@@ -409,6 +409,7 @@ impl FireScene {
             slice_spacing: self.slice_spacing,
             blend: self.blend,
             intensity: self.intensity,
+            exact_inverse: false,
         }
     }
 
