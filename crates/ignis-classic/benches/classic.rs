@@ -9,7 +9,14 @@ fn bench(c: &mut Criterion) {
     let mut g = c.benchmark_group("classic 1920x1080");
     g.throughput(Throughput::Elements(size.pixels() as u64));
     for kernel in [Kernel::Article, Kernel::Buffered] {
-        let mut fire = ClassicFire::new(ClassicParams { size, fade: 1, kernel, seed: 1, ..Default::default() }).unwrap();
+        let mut fire = ClassicFire::new(ClassicParams {
+            size,
+            fade: 1,
+            kernel,
+            seed: 1,
+            ..Default::default()
+        })
+        .unwrap();
         for _ in 0..100 {
             fire.step();
         }

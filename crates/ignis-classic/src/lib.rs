@@ -38,7 +38,10 @@ pub enum ClassicError {
 }
 
 fn bad(name: &'static str, reason: impl Into<String>) -> ClassicError {
-    ClassicError::BadParameter { name, reason: reason.into() }
+    ClassicError::BadParameter {
+        name,
+        reason: reason.into(),
+    }
 }
 
 /// Which update loop to run; see the module docs.
@@ -121,13 +124,19 @@ pub struct ClassicParams {
 impl Default for ClassicParams {
     fn default() -> Self {
         ClassicParams {
-            size: Size { width: 320, height: 200 },
+            size: Size {
+                width: 320,
+                height: 200,
+            },
             fade: 1,
             edge: 1,
             heat: 255,
             source: SourceMode::default(),
             source_edge: SourceEdge::Bottom,
-            sparkle: Some(Sparkle { threshold: 48, boost: 24 }),
+            sparkle: Some(Sparkle {
+                threshold: 48,
+                boost: 24,
+            }),
             kernel: Kernel::Article,
             seed: 0,
         }
@@ -139,13 +148,19 @@ impl ClassicParams {
     pub fn validate(&self) -> Result<(), ClassicError> {
         let s = Size::new(self.size.width, self.size.height)?;
         if self.edge == 0 {
-            return Err(bad("edge", "must be at least 1 (the filter reads the pixels left, right and below)"));
+            return Err(bad(
+                "edge",
+                "must be at least 1 (the filter reads the pixels left, right and below)",
+            ));
         }
         let min_side = 2 * self.edge + 2;
         if s.width < min_side || s.height < min_side {
             return Err(bad(
                 "size",
-                format!("{s} is too small for an edge of {}; use at least {min_side}x{min_side}", self.edge),
+                format!(
+                    "{s} is too small for an edge of {}; use at least {min_side}x{min_side}",
+                    self.edge
+                ),
             ));
         }
         if self.heat == 0 {
@@ -153,7 +168,10 @@ impl ClassicParams {
         }
         if let SourceMode::Perlin { scale, speed } = self.source {
             if !(scale > 0.0 && scale.is_finite()) {
-                return Err(bad("source.scale", format!("{scale}: must be a positive number of pixels")));
+                return Err(bad(
+                    "source.scale",
+                    format!("{scale}: must be a positive number of pixels"),
+                ));
             }
             if !(speed >= 0.0 && speed.is_finite()) {
                 return Err(bad("source.speed", format!("{speed}: must be ≥ 0")));
@@ -190,7 +208,17 @@ impl ClassicFire {
         let n = w - 2 * params.edge as usize;
         let heat = params.heat as u32;
         let source = (0..n).map(|_| rng.below(heat + 1) as u8).collect();
-        Ok(ClassicFire { w, h, buf: vec![0; w * h], scratch: vec![0; w], rng, source, frame: 0, noise, params })
+        Ok(ClassicFire {
+            w,
+            h,
+            buf: vec![0; w * h],
+            scratch: vec![0; w],
+            rng,
+            source,
+            frame: 0,
+            noise,
+            params,
+        })
     }
 
     pub fn params(&self) -> &ClassicParams {
@@ -221,7 +249,15 @@ impl ClassicFire {
     pub fn step(&mut self) {
         let (w, h, e) = (self.w, self.h, self.params.edge as usize);
         let below = self.buf[(h - e) * w..(h - e + 1) * w].to_vec();
-        burn_band(&mut self.buf[e * w..(h - e) * w], w, e, &below, self.params.fade, self.params.kernel, &mut self.scratch);
+        burn_band(
+            &mut self.buf[e * w..(h - e) * w],
+            w,
+            e,
+            &below,
+            self.params.fade,
+            self.params.kernel,
+            &mut self.scratch,
+        );
         self.after_burn();
     }
 
@@ -236,13 +272,20 @@ impl ClassicFire {
         let (fade, kernel) = (self.params.fade, self.params.kernel);
         let region = &mut self.buf[e * w..(h - e + 1) * w];
         // the old row just below each band, copied before any band changes it
-        let belows: Vec<Vec<u8>> =
-            (0..rows.div_ceil(band)).map(|b| { let r = ((b + 1) * band).min(rows); region[r * w..(r + 1) * w].to_vec() }).collect();
+        let belows: Vec<Vec<u8>> = (0..rows.div_ceil(band))
+            .map(|b| {
+                let r = ((b + 1) * band).min(rows);
+                region[r * w..(r + 1) * w].to_vec()
+            })
+            .collect();
         let burnable = &mut region[..rows * w];
-        burnable.par_chunks_mut(band * w).zip(belows.par_iter()).for_each_init(
-            || vec![0u8; w],
-            |scratch, (chunk, below)| burn_band(chunk, w, e, below, fade, kernel, scratch),
-        );
+        burnable
+            .par_chunks_mut(band * w)
+            .zip(belows.par_iter())
+            .for_each_init(
+                || vec![0u8; w],
+                |scratch, (chunk, below)| burn_band(chunk, w, e, below, fade, kernel, scratch),
+            );
         self.after_burn();
     }
 
@@ -304,16 +347,32 @@ impl ClassicFire {
     pub fn rgba(&self, palette: &Palette) -> RgbaFrame {
         let idx: Vec<u8> = match self.params.source_edge {
             SourceEdge::Bottom => self.buf.clone(),
-            SourceEdge::Top => self.buf.chunks_exact(self.w).rev().flatten().copied().collect(),
+            SourceEdge::Top => self
+                .buf
+                .chunks_exact(self.w)
+                .rev()
+                .flatten()
+                .copied()
+                .collect(),
         };
-        palette.apply_indexed(self.params.size, &idx).expect("buffer matches size")
+        palette
+            .apply_indexed(self.params.size, &idx)
+            .expect("buffer matches size")
     }
 }
 
 /// Burns the rows of `band` (a whole number of rows of width `w`), top to bottom; `below` is
 /// the old row under the band's last row. Each row reads its own old values and the old
 /// values of the row below it, so bands are independent.
-fn burn_band(band: &mut [u8], w: usize, e: usize, below: &[u8], fade: u8, kernel: Kernel, scratch: &mut [u8]) {
+fn burn_band(
+    band: &mut [u8],
+    w: usize,
+    e: usize,
+    below: &[u8],
+    fade: u8,
+    kernel: Kernel,
+    scratch: &mut [u8],
+) {
     let rows = band.len() / w;
     let mut r = 0;
     if kernel == Kernel::Article {
@@ -321,7 +380,11 @@ fn burn_band(band: &mut [u8], w: usize, e: usize, below: &[u8], fade: u8, kernel
         // chain, but different rows' chains are independent, so the CPU overlaps them.
         while r + ARTICLE_ROWS <= rows {
             let (head, rest) = band.split_at_mut((r + ARTICLE_ROWS) * w);
-            let under: &[u8] = if r + ARTICLE_ROWS < rows { &rest[..w] } else { below };
+            let under: &[u8] = if r + ARTICLE_ROWS < rows {
+                &rest[..w]
+            } else {
+                below
+            };
             let mut it = head[r * w..].chunks_exact_mut(w);
             let group: [&mut [u8]; ARTICLE_ROWS] = std::array::from_fn(|_| it.next().expect("row"));
             burn_rows_article(group, under, e, fade);
@@ -378,7 +441,12 @@ fn burn_rows_article<const N: usize>(mut rows: [&mut [u8]; N], under: &[u8], e: 
 fn burn_row_buffered(cur: &mut [u8], old: &[u8], under: &[u8], e: usize, fade: u8) {
     let w = cur.len();
     let n = w - 2 * e;
-    let (l, m, r, u) = (&old[e - 1..e - 1 + n], &old[e..e + n], &old[e + 1..e + 1 + n], &under[e..e + n]);
+    let (l, m, r, u) = (
+        &old[e - 1..e - 1 + n],
+        &old[e..e + n],
+        &old[e + 1..e + 1 + n],
+        &under[e..e + n],
+    );
     let out = &mut cur[e..e + n];
     let fade = fade as u16;
     for i in 0..n {
@@ -435,7 +503,11 @@ impl Perlin1 {
         lerp(
             v,
             lerp(u, Self::grad(p[a], x, y), Self::grad(p[b], x - 1.0, y)),
-            lerp(u, Self::grad(p[a + 1], x, y - 1.0), Self::grad(p[b + 1], x - 1.0, y - 1.0)),
+            lerp(
+                u,
+                Self::grad(p[a + 1], x, y - 1.0),
+                Self::grad(p[b + 1], x - 1.0, y - 1.0),
+            ),
         )
     }
 
@@ -456,7 +528,11 @@ mod tests {
     use super::*;
 
     fn params(w: u32, h: u32) -> ClassicParams {
-        ClassicParams { size: Size::new(w, h).unwrap(), seed: 3, ..Default::default() }
+        ClassicParams {
+            size: Size::new(w, h).unwrap(),
+            seed: 3,
+            ..Default::default()
+        }
     }
 
     #[test]
@@ -467,33 +543,74 @@ mod tests {
         let mut c = init.clone();
         for y in e..h - e {
             for x in e..w - e {
-                let p = ((c[y * w + x] as i32 + c[y * w + x - 1] as i32 + c[y * w + x + 1] as i32 + c[(y + 1) * w + x] as i32) >> 2) - fade;
+                let p = ((c[y * w + x] as i32
+                    + c[y * w + x - 1] as i32
+                    + c[y * w + x + 1] as i32
+                    + c[(y + 1) * w + x] as i32)
+                    >> 2)
+                    - fade;
                 c[y * w + x] = if p < 0 { 0 } else { p as u8 };
             }
         }
         let mut ours = init.clone();
         let below = ours[2 * w..3 * w].to_vec();
-        burn_band(&mut ours[w..2 * w], w, e, &below, fade as u8, Kernel::Article, &mut vec![0; w]);
+        burn_band(
+            &mut ours[w..2 * w],
+            w,
+            e,
+            &below,
+            fade as u8,
+            Kernel::Article,
+            &mut vec![0; w],
+        );
         assert_eq!(ours, c);
     }
 
     #[test]
     fn rejects_bad_parameters() {
-        assert!(ClassicFire::new(ClassicParams { edge: 0, ..params(32, 32) }).is_err());
-        assert!(ClassicFire::new(ClassicParams { edge: 20, ..params(32, 32) }).is_err());
-        assert!(ClassicFire::new(ClassicParams { heat: 0, ..params(32, 32) }).is_err());
-        let p = ClassicParams { source: SourceMode::Perlin { scale: 0.0, speed: 1.0 }, ..params(32, 32) };
+        assert!(ClassicFire::new(ClassicParams {
+            edge: 0,
+            ..params(32, 32)
+        })
+        .is_err());
+        assert!(ClassicFire::new(ClassicParams {
+            edge: 20,
+            ..params(32, 32)
+        })
+        .is_err());
+        assert!(ClassicFire::new(ClassicParams {
+            heat: 0,
+            ..params(32, 32)
+        })
+        .is_err());
+        let p = ClassicParams {
+            source: SourceMode::Perlin {
+                scale: 0.0,
+                speed: 1.0,
+            },
+            ..params(32, 32)
+        };
         assert!(ClassicFire::new(p).is_err());
     }
 
     #[test]
     fn perlin_source_is_smooth() {
-        let p = ClassicParams { source: SourceMode::Perlin { scale: 24.0, speed: 0.05 }, ..params(200, 20) };
+        let p = ClassicParams {
+            source: SourceMode::Perlin {
+                scale: 24.0,
+                speed: 0.05,
+            },
+            ..params(200, 20)
+        };
         let mut f = ClassicFire::new(p).unwrap();
         f.step();
         let y = f.source_row();
         let line = &f.buffer()[y * 200 + 1..y * 200 + 199];
-        let max_jump = line.windows(2).map(|w| (w[0] as i32 - w[1] as i32).abs()).max().unwrap();
+        let max_jump = line
+            .windows(2)
+            .map(|w| (w[0] as i32 - w[1] as i32).abs())
+            .max()
+            .unwrap();
         assert!(max_jump <= 40, "smooth source line, max jump {max_jump}");
         let spread = *line.iter().max().unwrap() as i32 - *line.iter().min().unwrap() as i32;
         assert!(spread > 40, "it varies along the line, spread {spread}");

@@ -26,7 +26,8 @@ mod golden {
         let p = fire.params();
         let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/golden");
         let path = dir.join(name);
-        let img = image::GrayImage::from_raw(p.size.width, p.size.height, fire.buffer().to_vec()).unwrap();
+        let img = image::GrayImage::from_raw(p.size.width, p.size.height, fire.buffer().to_vec())
+            .unwrap();
         if std::env::var_os("UPDATE_GOLDEN").is_some() || !path.exists() {
             std::fs::create_dir_all(&dir).unwrap();
             img.save(&path).unwrap();
@@ -36,13 +37,23 @@ mod golden {
         }
         let golden = image::open(&path).unwrap().to_luma8();
         assert_eq!(golden.dimensions(), img.dimensions());
-        let diff = golden.as_raw().iter().zip(img.as_raw()).filter(|(a, b)| a != b).count();
+        let diff = golden
+            .as_raw()
+            .iter()
+            .zip(img.as_raw())
+            .filter(|(a, b)| a != b)
+            .count();
         assert_eq!(diff, 0, "{diff} pixels differ from {name}");
     }
 
     #[test]
     fn classic_64x48_fade3_seed7() {
-        let p = ClassicParams { size: Size::new(64, 48).unwrap(), fade: 3, seed: 7, ..Default::default() };
+        let p = ClassicParams {
+            size: Size::new(64, 48).unwrap(),
+            fade: 3,
+            seed: 7,
+            ..Default::default()
+        };
         check("classic-64x48-fade3-seed7.png", &run(&p, 40, false));
     }
 
@@ -52,12 +63,18 @@ mod golden {
             size: Size::new(64, 48).unwrap(),
             fade: 1,
             seed: 7,
-            source: SourceMode::Perlin { scale: 16.0, speed: 0.1 },
+            source: SourceMode::Perlin {
+                scale: 16.0,
+                speed: 0.1,
+            },
             kernel: Kernel::Buffered,
             sparkle: None,
             ..Default::default()
         };
-        check("classic-64x48-fade1-perlin-buffered-seed7.png", &run(&p, 40, false));
+        check(
+            "classic-64x48-fade1-perlin-buffered-seed7.png",
+            &run(&p, 40, false),
+        );
     }
 }
 
@@ -67,9 +84,20 @@ mod properties {
     #[test]
     fn fade_255_blanks_everything_above_the_source_line_in_one_frame() {
         for kernel in [Kernel::Article, Kernel::Buffered] {
-            let p = ClassicParams { size: Size::new(48, 40).unwrap(), fade: 255, sparkle: None, kernel, seed: 1, ..Default::default() };
+            let p = ClassicParams {
+                size: Size::new(48, 40).unwrap(),
+                fade: 255,
+                sparkle: None,
+                kernel,
+                seed: 1,
+                ..Default::default()
+            };
             // warm up with a gentle fade so the buffer is full of fire, then switch to 255
-            let mut f = ClassicFire::new(ClassicParams { fade: 1, ..p.clone() }).unwrap();
+            let mut f = ClassicFire::new(ClassicParams {
+                fade: 1,
+                ..p.clone()
+            })
+            .unwrap();
             for _ in 0..60 {
                 f.step();
             }
@@ -87,17 +115,36 @@ mod properties {
 
     #[test]
     fn same_seed_same_bytes_different_seed_different_bytes() {
-        let p = ClassicParams { size: Size::new(40, 30).unwrap(), seed: 11, ..Default::default() };
+        let p = ClassicParams {
+            size: Size::new(40, 30).unwrap(),
+            seed: 11,
+            ..Default::default()
+        };
         assert_eq!(run(&p, 20, false).buffer(), run(&p, 20, false).buffer());
-        let q = ClassicParams { seed: 12, ..p.clone() };
+        let q = ClassicParams {
+            seed: 12,
+            ..p.clone()
+        };
         assert_ne!(run(&p, 20, false).buffer(), run(&q, 20, false).buffer());
     }
 
     #[test]
     fn top_source_mirrors_the_bottom_one() {
-        let p = ClassicParams { size: Size::new(30, 20).unwrap(), seed: 5, ..Default::default() };
+        let p = ClassicParams {
+            size: Size::new(30, 20).unwrap(),
+            seed: 5,
+            ..Default::default()
+        };
         let a = run(&p, 10, false).gray();
-        let b = run(&ClassicParams { source_edge: SourceEdge::Top, ..p }, 10, false).gray();
+        let b = run(
+            &ClassicParams {
+                source_edge: SourceEdge::Top,
+                ..p
+            },
+            10,
+            false,
+        )
+        .gray();
         for y in 0..20 {
             assert_eq!(a.row(y), b.row(19 - y));
         }
@@ -105,18 +152,33 @@ mod properties {
 
     #[test]
     fn identical_output_for_any_thread_count() {
-        let p = ClassicParams { size: Size::new(97, 181).unwrap(), seed: 9, fade: 1, ..Default::default() };
+        let p = ClassicParams {
+            size: Size::new(97, 181).unwrap(),
+            seed: 9,
+            fade: 1,
+            ..Default::default()
+        };
         let reference = run(&p, 30, false);
         for kernel in [Kernel::Article, Kernel::Buffered] {
-            let p = ClassicParams { kernel, ..p.clone() };
+            let p = ClassicParams {
+                kernel,
+                ..p.clone()
+            };
             let single = run(&p, 30, false);
             if kernel == Kernel::Article {
                 assert_eq!(single.buffer(), reference.buffer());
             }
             for threads in [1, 2, 3, 8] {
-                let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .unwrap();
                 let par = pool.install(|| run(&p, 30, true));
-                assert_eq!(par.buffer(), single.buffer(), "{kernel:?} with {threads} threads");
+                assert_eq!(
+                    par.buffer(),
+                    single.buffer(),
+                    "{kernel:?} with {threads} threads"
+                );
             }
         }
     }

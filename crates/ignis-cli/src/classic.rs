@@ -9,9 +9,11 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 #[derive(clap::Args, Debug)]
-#[command(after_help = "Examples:\n  ignis classic --size 320x200 --frames 300 --fps 30 --palette classic --seed 7 -o fire.mp4\n  \
+#[command(
+    after_help = "Examples:\n  ignis classic --size 320x200 --frames 300 --fps 30 --palette classic --seed 7 -o fire.mp4\n  \
 ignis classic --source perlin --palette blue-gas -o sheet.png          # flipbook + sheet.json\n  \
-ignis classic --frames 48 -o frames/%04d.exr                           # linear EXR sequence")]
+ignis classic --frames 48 -o frames/%04d.exr                           # linear EXR sequence"
+)]
 pub struct Args {
     /// Buffer size WIDTHxHEIGHT.
     #[arg(long, default_value = "320x200")]
@@ -73,13 +75,27 @@ impl Args {
             edge: self.edge,
             heat: self.heat,
             source: if self.source == "perlin" {
-                SourceMode::Perlin { scale: self.noise_scale, speed: self.noise_speed }
+                SourceMode::Perlin {
+                    scale: self.noise_scale,
+                    speed: self.noise_speed,
+                }
             } else {
                 SourceMode::Random { drift: self.drift }
             },
-            source_edge: if self.source_edge == "top" { SourceEdge::Top } else { SourceEdge::Bottom },
-            sparkle: (self.sparkle > 0).then_some(Sparkle { threshold: self.sparkle, boost: self.sparkle_boost }),
-            kernel: if self.kernel == "buffered" { Kernel::Buffered } else { Kernel::Article },
+            source_edge: if self.source_edge == "top" {
+                SourceEdge::Top
+            } else {
+                SourceEdge::Bottom
+            },
+            sparkle: (self.sparkle > 0).then_some(Sparkle {
+                threshold: self.sparkle,
+                boost: self.sparkle_boost,
+            }),
+            kernel: if self.kernel == "buffered" {
+                Kernel::Buffered
+            } else {
+                Kernel::Article
+            },
             seed: self.seed,
         }
     }
@@ -115,7 +131,13 @@ pub fn bench(quick: bool) -> Result<serde_json::Value> {
     out.insert("size".into(), "1920x1080".into());
     out.insert("threads".into(), rayon::current_num_threads().into());
     for kernel in [Kernel::Article, Kernel::Buffered] {
-        let mut fire = ClassicFire::new(ClassicParams { size, fade: 1, kernel, seed: 1, ..Default::default() })?;
+        let mut fire = ClassicFire::new(ClassicParams {
+            size,
+            fade: 1,
+            kernel,
+            seed: 1,
+            ..Default::default()
+        })?;
         for _ in 0..20 {
             fire.step();
         }
@@ -129,7 +151,11 @@ pub fn bench(quick: bool) -> Result<serde_json::Value> {
                 }
             }
             let ns = t.elapsed().as_secs_f64() * 1e9 / (frames as f64 * size.pixels() as f64);
-            let name = format!("{}_{}_ns_per_pixel", format!("{kernel:?}").to_lowercase(), if par { "rayon" } else { "1thread" });
+            let name = format!(
+                "{}_{}_ns_per_pixel",
+                format!("{kernel:?}").to_lowercase(),
+                if par { "rayon" } else { "1thread" }
+            );
             out.insert(name, ((ns * 1000.0).round() / 1000.0).into());
         }
     }
@@ -143,26 +169,62 @@ pub fn demo(ctx: &mut crate::demo::Demo) -> Result<()> {
         "McNally's pixel-buffer fire (1999): each pixel becomes the average of itself, its left, right and lower \
          neighbours minus a fade, shown through a palette. Every output format Ignis writes.",
     );
-    let (size, frames) = if ctx.quick { ("64x48", 8) } else { ("320x200", 120) };
+    let (size, frames) = if ctx.quick {
+        ("64x48", 8)
+    } else {
+        ("320x200", 120)
+    };
     let variants: &[(&str, &str, &[&str])] = &[
-        ("classic/fire.mp4", "MP4 (H.264, OpenH264)", &["--palette", "classic"]),
-        ("classic/fire.gif", "looping GIF preview, smooth Perlin source", &["--source", "perlin", "--palette", "candle"]),
-        ("classic/flipbook.png", "flipbook sprite sheet (+ flipbook.json), blue gas", &["--palette", "blue-gas", "--fade", "3"]),
-        ("classic/png/%04d.png", "PNG sequence, green, fire hanging from the top", &["--palette", "green", "--source-edge", "top"]),
-        ("classic/exr/%04d.exr", "EXR sequence (linear f32, for compositing)", &["--palette", "classic"]),
+        (
+            "classic/fire.mp4",
+            "MP4 (H.264, OpenH264)",
+            &["--palette", "classic"],
+        ),
+        (
+            "classic/fire.gif",
+            "looping GIF preview, smooth Perlin source",
+            &["--source", "perlin", "--palette", "candle"],
+        ),
+        (
+            "classic/flipbook.png",
+            "flipbook sprite sheet (+ flipbook.json), blue gas",
+            &["--palette", "blue-gas", "--fade", "3"],
+        ),
+        (
+            "classic/png/%04d.png",
+            "PNG sequence, green, fire hanging from the top",
+            &["--palette", "green", "--source-edge", "top"],
+        ),
+        (
+            "classic/exr/%04d.exr",
+            "EXR sequence (linear f32, for compositing)",
+            &["--palette", "classic"],
+        ),
     ];
     for (i, (rel, caption, extra)) in variants.iter().enumerate() {
         let path = ctx.path(rel)?;
         let frames_s = frames.to_string();
         let seed = (ctx.seed + i as u64).to_string();
-        let mut argv = vec!["classic", "--size", size, "--frames", &frames_s, "--seed", &seed, "-o"];
+        let mut argv = vec![
+            "classic", "--size", size, "--frames", &frames_s, "--seed", &seed, "-o",
+        ];
         let path_s = path.to_string_lossy().to_string();
         argv.push(&path_s);
         argv.extend_from_slice(extra);
         let args = crate::parse_sub::<Args>(&argv)?;
         run(&args, &Global { quiet: true })?;
-        let shown = if rel.contains('%') { rel.replace("%04d", "0000") } else { rel.to_string() };
-        let settings = format!("ignis {}", argv.iter().map(|a| if *a == path_s { *rel } else { *a }).collect::<Vec<&str>>().join(" "));
+        let shown = if rel.contains('%') {
+            rel.replace("%04d", "0000")
+        } else {
+            rel.to_string()
+        };
+        let settings = format!(
+            "ignis {}",
+            argv.iter()
+                .map(|a| if *a == path_s { *rel } else { *a })
+                .collect::<Vec<&str>>()
+                .join(" ")
+        );
         ctx.item(&shown, caption, &settings);
     }
     Ok(())

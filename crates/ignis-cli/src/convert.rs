@@ -9,8 +9,10 @@ use ignis_media::{FrameRange, ReadOptions, Rect};
 use std::path::PathBuf;
 
 #[derive(clap::Args, Debug)]
-#[command(after_help = "Examples:\n  ignis convert candle.mp4 --range 100..160 --scale 128x128 -o candle.png   # flipbook\n  \
-ignis convert campfire.mp4 --seconds 2..4 -o frames/%04d.exr\n  ignis convert 'frames/%04d.png' --fps 24 -o clip.mp4")]
+#[command(
+    after_help = "Examples:\n  ignis convert candle.mp4 --range 100..160 --scale 128x128 -o candle.png   # flipbook\n  \
+ignis convert campfire.mp4 --seconds 2..4 -o frames/%04d.exr\n  ignis convert 'frames/%04d.png' --fps 24 -o clip.mp4"
+)]
 pub struct Args {
     /// A video, an image, a directory of frames or a printf pattern.
     pub input: PathBuf,
@@ -32,19 +34,27 @@ pub struct Args {
 
 /// Parses `A..B`, `A..` or `..B`.
 pub fn parse_range(s: &str) -> Result<(f64, Option<f64>)> {
-    let (a, b) = s.split_once("..").with_context(|| format!("range `{s}` is not START..END, e.g. 100..220"))?;
+    let (a, b) = s
+        .split_once("..")
+        .with_context(|| format!("range `{s}` is not START..END, e.g. 100..220"))?;
     let num = |v: &str, what: &str| -> Result<Option<f64>> {
         if v.trim().is_empty() {
             return Ok(None);
         }
-        let x: f64 = v.trim().parse().with_context(|| format!("range `{s}`: {what} `{v}` is not a number"))?;
+        let x: f64 = v
+            .trim()
+            .parse()
+            .with_context(|| format!("range `{s}`: {what} `{v}` is not a number"))?;
         anyhow::ensure!(x >= 0.0 && x.is_finite(), "range `{s}`: {what} must be ≥ 0");
         Ok(Some(x))
     };
     let start = num(a, "start")?.unwrap_or(0.0);
     let end = num(b, "end")?;
     if let Some(e) = end {
-        anyhow::ensure!(e > start, "range `{s}` is empty: END must be greater than START");
+        anyhow::ensure!(
+            e > start,
+            "range `{s}` is empty: END must be greater than START"
+        );
     }
     Ok((start, end))
 }
@@ -70,19 +80,31 @@ impl Args {
                     .collect::<Result<_, _>>()
                     .with_context(|| format!("--crop `{c}` is not X,Y,WIDTH,HEIGHT"))?;
                 anyhow::ensure!(v.len() == 4, "--crop `{c}` is not X,Y,WIDTH,HEIGHT");
-                Some(Rect { x: v[0], y: v[1], width: v[2], height: v[3] })
+                Some(Rect {
+                    x: v[0],
+                    y: v[1],
+                    width: v[2],
+                    height: v[3],
+                })
             }
             None => None,
         };
-        Ok(ReadOptions { range, crop, scale: self.scale })
+        Ok(ReadOptions {
+            range,
+            crop,
+            scale: self.scale,
+        })
     }
 }
 
 pub fn run(args: &Args, g: &Global) -> Result<Vec<PathBuf>> {
     let input = &args.input;
-    let mut reader = ignis_media::open(input, &args.read_options()?).with_context(|| format!("reading {}", input.display()))?;
+    let mut reader = ignis_media::open(input, &args.read_options()?)
+        .with_context(|| format!("reading {}", input.display()))?;
     let info = reader.info().clone();
-    let first = reader.next().with_context(|| format!("{}: no frames in the requested range", input.display()))?;
+    let first = reader
+        .next()
+        .with_context(|| format!("{}: no frames in the requested range", input.display()))?;
     let first = first.with_context(|| format!("decoding {}", input.display()))?;
     let mut writer = args.out.create(first.size())?;
     let pb = g.progress(info.frame_count.unwrap_or(0), "converting");

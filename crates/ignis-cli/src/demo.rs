@@ -37,33 +37,50 @@ pub struct Demo {
 
 impl Demo {
     pub fn new(dir: &Path, global: Global, seed: u64, quick: bool) -> Result<Demo> {
-        std::fs::create_dir_all(dir).with_context(|| format!("creating demo directory {}", dir.display()))?;
-        Ok(Demo { dir: dir.to_path_buf(), global, seed, quick, sections: Vec::new() })
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("creating demo directory {}", dir.display()))?;
+        Ok(Demo {
+            dir: dir.to_path_buf(),
+            global,
+            seed,
+            quick,
+            sections: Vec::new(),
+        })
     }
 
     /// Starts a new section.
     pub fn section(&mut self, title: &str, text: &str) {
         self.global.say(format!("== {title}"));
-        self.sections.push(Section { title: title.into(), text: text.into(), items: Vec::new() });
+        self.sections.push(Section {
+            title: title.into(),
+            text: text.into(),
+            items: Vec::new(),
+        });
     }
 
     /// Absolute path for a file in the demo directory (its parent is created).
     pub fn path(&self, rel: &str) -> Result<PathBuf> {
         let p = self.dir.join(rel);
         if let Some(parent) = p.parent() {
-            std::fs::create_dir_all(parent).with_context(|| format!("creating {}", parent.display()))?;
+            std::fs::create_dir_all(parent)
+                .with_context(|| format!("creating {}", parent.display()))?;
         }
         Ok(p)
     }
 
     /// Adds a written result to the current section.
     pub fn item(&mut self, rel: &str, caption: &str, settings: &str) {
-        self.global.say(format!("  wrote {}", self.dir.join(rel).display()));
+        self.global
+            .say(format!("  wrote {}", self.dir.join(rel).display()));
         if self.sections.is_empty() {
             self.section("Results", "");
         }
         let s = self.sections.last_mut().expect("a section");
-        s.items.push(Item { file: rel.into(), caption: caption.into(), settings: settings.into() });
+        s.items.push(Item {
+            file: rel.into(),
+            caption: caption.into(),
+            settings: settings.into(),
+        });
     }
 
     /// Writes `index.html` (atomically) and returns its path.
@@ -77,12 +94,19 @@ impl Demo {
              <h1>Ignis demo</h1><p>Every result below was made by <code>ignis demo</code> on built-in defaults.</p>",
         );
         for s in &self.sections {
-            html.push_str(&format!("<h2>{}</h2><p>{}</p><div class=\"grid\">", esc(&s.title), esc(&s.text)));
+            html.push_str(&format!(
+                "<h2>{}</h2><p>{}</p><div class=\"grid\">",
+                esc(&s.title),
+                esc(&s.text)
+            ));
             for it in &s.items {
                 let f = esc(&it.file);
                 let media = if it.file.ends_with(".mp4") {
                     format!("<video src=\"{f}\" controls loop muted autoplay></video>")
-                } else if it.file.ends_with(".png") || it.file.ends_with(".gif") || it.file.ends_with(".jpg") {
+                } else if it.file.ends_with(".png")
+                    || it.file.ends_with(".gif")
+                    || it.file.ends_with(".jpg")
+                {
                     format!("<a href=\"{f}\"><img src=\"{f}\" alt=\"{f}\"></a>")
                 } else {
                     String::new()
@@ -105,5 +129,8 @@ impl Demo {
 }
 
 fn esc(s: &str) -> String {
-    s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;").replace('"', "&quot;")
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
 }

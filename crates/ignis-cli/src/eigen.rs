@@ -38,6 +38,93 @@ pub enum Command {
         after_help = "Example:\n  ignis eigen preprocess candle.mp4 --config pre.toml -o stages/\n  ignis eigen preprocess candle.mp4 --print-config > pre.toml"
     )]
     Preprocess(PreprocessArgs),
+    /// Make a seamless loop of a clip range (§5.1): the range, then a transition from its
+    /// end back to its start (End Growing, Direct Bridging or low-pass morphs).
+    #[command(
+        after_help = "Examples:\n  ignis eigen loop fire.db --clip candle --range 100..220 -o loop.gif\n  ignis eigen loop fire.db --clip candle --range 100..220 --method low-pass --eigenfires 50 --palette candle -o loop.png\n\nThe range is in source frame numbers (as `reconstruct --frame`); -o loop.png writes a flipbook."
+    )]
+    Loop(LoopArgs),
+    /// Create a new flame by setting Eigenfire weights by hand (§5.2), starting from the
+    /// mean flame or from a database frame.
+    #[command(
+        after_help = "Examples:\n  ignis eigen synth fire.db --weights 2=12000,3=-5000 -o flame.png\n  ignis eigen synth fire.db --weights 0=1.5 --from candle:120 --eigenfires 50 -o flame.png\n\nIndices are 0-based Eigenfire numbers; the command prints each edited weight's spread in the database for scale."
+    )]
+    Synth(SynthArgs),
+}
+
+fn parse_range(s: &str) -> std::result::Result<std::ops::Range<usize>, String> {
+    let (a, b) = s
+        .split_once("..")
+        .ok_or_else(|| format!("`{s}` is not a range START..END (e.g. 100..220)"))?;
+    let n = |x: &str| {
+        x.trim()
+            .parse::<usize>()
+            .map_err(|_| format!("`{x}` in `{s}` is not a frame number"))
+    };
+    let (a, b) = (n(a)?, n(b)?);
+    if a >= b {
+        return Err(format!("range `{s}` is empty (START must be < END)"));
+    }
+    Ok(a..b)
+}
+
+fn parse_from(s: &str) -> std::result::Result<(String, usize), String> {
+    let (c, f) = s
+        .rsplit_once(':')
+        .ok_or_else(|| format!("`{s}` is not CLIP:FRAME (e.g. candle:120)"))?;
+    let f = f
+        .parse::<usize>()
+        .map_err(|_| format!("`{f}` in `{s}` is not a frame number"))?;
+    if c.is_empty() {
+        return Err(format!("`{s}` has no clip name (CLIP:FRAME)"));
+    }
+    Ok((c.to_string(), f))
+}
+
+#[derive(clap::Args, Debug)]
+pub struct LoopArgs {
+    /// Database directory.
+    pub db: PathBuf,
+    /// Clip name (see `ignis eigen info`).
+    #[arg(long)]
+    pub clip: String,
+    /// Source frames START..END of the clip to loop (END excluded).
+    #[arg(long, value_parser = parse_range)]
+    pub range: std::ops::Range<usize>,
+    /// Transition back to the start: auto (best of the three), end-growing, direct
+    /// (Direct Bridging) or low-pass.
+    #[arg(long, default_value = "auto", value_parser = ["auto", "end-growing", "direct", "low-pass"])]
+    pub method: String,
+    /// E for rendering reconstructed frames (default: the database's E for rendering).
+    #[arg(long)]
+    pub eigenfires: Option<usize>,
+    /// Colour ramp: a preset or a gradient PNG (left = cold, right = hot).
+    #[arg(long, default_value = "candle")]
+    pub palette: crate::output::PaletteArg,
+    #[command(flatten)]
+    pub out: crate::output::OutputArgs,
+}
+
+#[derive(clap::Args, Debug)]
+pub struct SynthArgs {
+    /// Database directory.
+    pub db: PathBuf,
+    /// Weight edits INDEX=VALUE,... (0-based Eigenfire index), e.g. 2=12000,3=-5000.
+    #[arg(long, allow_hyphen_values = true)]
+    pub weights: String,
+    /// Start from this database frame (CLIP:FRAME) instead of the mean flame.
+    #[arg(long, value_parser = parse_from)]
+    pub from: Option<(String, usize)>,
+    /// E, the number of Eigenfires (default: the database's E for rendering; raised to
+    /// cover every edited index).
+    #[arg(long)]
+    pub eigenfires: Option<usize>,
+    /// Colour ramp: a preset or a gradient PNG; `grey` for the raw grey image.
+    #[arg(long, default_value = "candle")]
+    pub palette: crate::output::PaletteArg,
+    /// Output PNG.
+    #[arg(short, long)]
+    pub output: PathBuf,
 }
 
 #[derive(clap::Args, Debug)]
@@ -174,6 +261,8 @@ pub fn run(cmd: Command, g: &Global) -> Result<()> {
         Command::Plot(a) => plot_cmd(a, g),
         Command::Reconstruct(a) => reconstruct(a, g),
         Command::Preprocess(a) => preprocess(a, g),
+        Command::Loop(a) => loop_cmd(&a, g).map(|_| ()),
+        Command::Synth(a) => synth_cmd(&a, g).map(|_| ()),
     }
 }
 
@@ -529,6 +618,97 @@ fn reconstruct(a: ReconstructArgs, g: &Global) -> Result<()> {
     Ok(())
 }
 
+/// `ignis eigen loop`; returns the join (for the demo's caption).
+fn loop_cmd(a: &LoopArgs, g: &Global) -> Result<ignis_eigen::transition::Join> {
+    use ignis_eigen::animate;
+    let db = open_db(&a.db)?;
+    let method = animate::parse_method(&a.method)?;
+    let e = a.eigenfires.unwrap_or(db.manifest().e_render);
+    if e == 0 {
+        bail!("--eigenfires must be at least 1");
+    }
+    let palette = a.palette.load()?;
+    let rows = animate::clip_rows(&db, &a.clip, a.range.clone())
+        .with_context(|| format!("clip `{}` range {}..{}", a.clip, a.range.start, a.range.end))?;
+    let sp = g.spinner("finding the transition");
+    let (frames, join) = animate::render_loop(&db, &a.clip, a.range.clone(), method, e)
+        .with_context(|| {
+            format!(
+                "looping clip `{}` frames {}..{} with {}",
+                a.clip, a.range.start, a.range.end, a.method
+            )
+        })?;
+    sp.finish_and_clear();
+    let plain = animate::plain_cut_ratio(&db, rows.clone())?;
+    let size = frames[0].size();
+    let mut w = a.out.create(size)?;
+    for f in &frames {
+        a.out.push(&mut w, &palette.apply(f))?;
+    }
+    a.out.finish(w, g)?;
+    g.say(format!(
+        "method {}: {} range frame(s) + {} transition frame(s) = {} frames at {}, E = {} (the transition replaces the range's last {} and first {} frame(s)); seam ratio {:.2} (plain cut {:.2})",
+        join.method,
+        frames.len() - join.frames.len(),
+        join.frames.len(),
+        frames.len(),
+        size,
+        e.min(db.usable_components()),
+        join.trim_t1,
+        join.trim_t2,
+        join.seam_ratio,
+        plain,
+    ));
+    g.say(format!("why: {}", join.why));
+    Ok(join)
+}
+
+/// `ignis eigen synth`.
+fn synth_cmd(a: &SynthArgs, g: &Global) -> Result<()> {
+    use ignis_eigen::animate;
+    let db = open_db(&a.db)?;
+    let edits = animate::parse_weight_edits(&a.weights).context("reading --weights")?;
+    let e = a.eigenfires.unwrap_or(db.manifest().e_render);
+    let palette = a.palette.load()?;
+    let from = a.from.as_ref().map(|(c, f)| (c.as_str(), *f));
+    let f = animate::synth(&db, from, &edits, e).with_context(|| {
+        format!(
+            "synthesising from {}",
+            match &a.from {
+                Some((c, fr)) => format!("clip `{c}` frame {fr}"),
+                None => "the mean flame".into(),
+            }
+        )
+    })?;
+    ignis_media::write_png(&a.output, &palette.apply(&f))
+        .with_context(|| format!("writing {}", a.output.display()))?;
+    let w = db.weights();
+    let spread = |j: usize| {
+        let m = w.nrows().max(1) as f64;
+        let mean = (0..w.nrows()).map(|i| w[(i, j)] as f64).sum::<f64>() / m;
+        ((0..w.nrows())
+            .map(|i| (w[(i, j)] as f64 - mean).powi(2))
+            .sum::<f64>()
+            / m)
+            .sqrt()
+    };
+    let notes: Vec<String> = edits
+        .iter()
+        .map(|&(i, v)| format!("ω{i} = {v} (database spread ±{:.3})", spread(i)))
+        .collect();
+    g.say(format!(
+        "wrote {} ({} at {}): {}",
+        a.output.display(),
+        match &a.from {
+            Some((c, fr)) => format!("clip {c} frame {fr}"),
+            None => "mean flame".into(),
+        },
+        f.size(),
+        notes.join(", ")
+    ));
+    Ok(())
+}
+
 fn preprocess(a: PreprocessArgs, g: &Global) -> Result<()> {
     let mut pre = read_preprocess(a.config.as_deref())?;
     if let Some(s) = a.train_size {
@@ -665,6 +845,61 @@ pub fn demo(ctx: &mut crate::demo::Demo) -> Result<()> {
         "eigen/reconstruct.png",
         &format!("A campfire frame reconstructed with E = 1, 3, 10 and {k} (eq. 22)"),
         &settings,
+    );
+    // A loop (§5.1) over most of the candle clip, and a synthesised flame (§5.2).
+    let g = crate::global::Global { quiet: true };
+    let c = db.clip("candle")?;
+    let (lo, hi) = (c.start + c.stride, c.start + c.stride * c.frames);
+    let range = format!("{lo}..{hi}");
+    let dbs = dbp.to_string_lossy().to_string();
+    let gif = ctx.path("eigen/loop.gif")?;
+    let gifs = gif.to_string_lossy().to_string();
+    let argv = [
+        "loop",
+        &dbs,
+        "--clip",
+        "candle",
+        "--range",
+        &range,
+        "--palette",
+        "candle",
+        "-o",
+        &gifs,
+    ];
+    let join = loop_cmd(&crate::parse_sub::<LoopArgs>(&argv)?, &g).context("demo loop")?;
+    ctx.item(
+        "eigen/loop.gif",
+        &format!(
+            "Candle frames {range} looped (§5.1): {} with {} transition frame(s), seam ratio {:.2}",
+            join.method,
+            join.frames.len(),
+            join.seam_ratio
+        ),
+        &format!(
+            "ignis eigen loop fire.db --clip candle --range {range} --palette candle -o loop.gif"
+        ),
+    );
+    let png = ctx.path("eigen/synth.png")?;
+    let pngs = png.to_string_lossy().to_string();
+    let j = (0..db.n_frames())
+        .map(|i| db.frame_weights(i)[0].abs())
+        .fold(0.0f32, f32::max);
+    let wts = format!("0={:.3}", 1.5 * j);
+    let argv = [
+        "synth",
+        &dbs,
+        "--weights",
+        &wts,
+        "--palette",
+        "candle",
+        "-o",
+        &pngs,
+    ];
+    synth_cmd(&crate::parse_sub::<SynthArgs>(&argv)?, &g).context("demo synth")?;
+    ctx.item(
+        "eigen/synth.png",
+        "A new flame (§5.2): the mean flame with Eigenfire 0's weight set to 1.5 × its largest value in the database",
+        &format!("ignis eigen synth fire.db --weights {wts} --palette candle -o synth.png"),
     );
     Ok(())
 }

@@ -4,7 +4,9 @@ use anyhow::{Context, Result};
 use std::path::PathBuf;
 
 #[derive(clap::Args, Debug)]
-#[command(after_help = "Examples:\n  ignis info candle.mp4\n  ignis info campfire.mp4 --json\n  ignis info 'frames/%04d.png'")]
+#[command(
+    after_help = "Examples:\n  ignis info candle.mp4\n  ignis info campfire.mp4 --json\n  ignis info 'frames/%04d.png'"
+)]
 pub struct Args {
     /// A video, an image, a directory of frames or a printf pattern.
     pub input: PathBuf,
@@ -14,7 +16,8 @@ pub struct Args {
 }
 
 pub fn run(args: &Args) -> Result<()> {
-    let info = ignis_media::probe(&args.input).with_context(|| format!("reading {}", args.input.display()))?;
+    let info = ignis_media::probe(&args.input)
+        .with_context(|| format!("reading {}", args.input.display()))?;
     if args.json {
         let v = serde_json::json!({
             "path": info.path,
@@ -30,7 +33,9 @@ pub fn run(args: &Args) -> Result<()> {
         println!("file:    {}", info.path.display());
         println!(
             "frames:  {}",
-            info.frame_count.map(|n| n.to_string()).unwrap_or_else(|| "unknown (container does not say)".into())
+            info.frame_count
+                .map(|n| n.to_string())
+                .unwrap_or_else(|| "unknown (container does not say)".into())
         );
         println!("fps:     {}", info.fps);
         println!("size:    {}", info.size);

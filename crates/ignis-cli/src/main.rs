@@ -59,7 +59,9 @@ enum Cmd {
 }
 
 #[derive(clap::Args, Debug)]
-#[command(after_help = "Examples:\n  ignis demo                 # writes ./ignis-demo/index.html\n  ignis demo -o /tmp/fire --quick")]
+#[command(
+    after_help = "Examples:\n  ignis demo                 # writes ./ignis-demo/index.html\n  ignis demo -o /tmp/fire --quick"
+)]
 struct DemoArgs {
     /// Directory to write into (created if missing).
     #[arg(short, long, default_value = "ignis-demo")]
@@ -73,7 +75,9 @@ struct DemoArgs {
 }
 
 #[derive(clap::Args, Debug)]
-#[command(after_help = "Examples:\n  ignis bench classic\n  ignis bench classic --quick\n  ignis bench eigen-train\n  ignis bench learned\n  ignis bench volume")]
+#[command(
+    after_help = "Examples:\n  ignis bench classic\n  ignis bench classic --quick\n  ignis bench eigen-train\n  ignis bench learned\n  ignis bench volume"
+)]
 struct BenchArgs {
     /// What to measure.
     #[arg(value_parser = ["classic", "eigen-train", "learned", "volume"])]
@@ -108,7 +112,11 @@ fn run(cli: Cli) -> Result<()> {
             learned::demo(&mut d)?;
             volume::demo(&mut d)?;
             let index = d.finish()?;
-            g.say(format!("done in {:.1} s; open {}", t.elapsed().as_secs_f64(), index.display()));
+            g.say(format!(
+                "done in {:.1} s; open {}",
+                t.elapsed().as_secs_f64(),
+                index.display()
+            ));
             Ok(())
         }
         Cmd::Bench(a) => {

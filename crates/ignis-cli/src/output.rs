@@ -52,7 +52,11 @@ impl OutputArgs {
                 columns: self.columns,
                 rows: self.rows,
                 padding: self.padding,
-                alpha: if self.premultiplied { AlphaMode::Premultiplied } else { AlphaMode::Straight },
+                alpha: if self.premultiplied {
+                    AlphaMode::Premultiplied
+                } else {
+                    AlphaMode::Straight
+                },
             },
             background: [0.0; 3],
         }
@@ -68,12 +72,16 @@ impl OutputArgs {
 impl OutputArgs {
     /// Pushes one frame, naming the output on failure.
     pub fn push(&self, writer: &mut FrameWriter, frame: &ignis_core::RgbaFrame) -> Result<()> {
-        writer.push(frame).with_context(|| format!("writing {}", self.output.display()))
+        writer
+            .push(frame)
+            .with_context(|| format!("writing {}", self.output.display()))
     }
 
     /// Completes the output (renaming it into place) and lists what was written.
     pub fn finish(&self, writer: FrameWriter, g: &crate::global::Global) -> Result<Vec<PathBuf>> {
-        let files = writer.finish().with_context(|| format!("finishing {}", self.output.display()))?;
+        let files = writer
+            .finish()
+            .with_context(|| format!("finishing {}", self.output.display()))?;
         for f in &files {
             g.say(format!("wrote {}", f.display()));
         }
@@ -104,9 +112,11 @@ impl PaletteArg {
     pub fn load(&self) -> Result<Palette> {
         if self.0.to_lowercase().ends_with(".png") {
             let path = PathBuf::from(&self.0);
-            let img = ignis_media::read_image(&path).with_context(|| format!("reading palette {}", path.display()))?;
+            let img = ignis_media::read_image(&path)
+                .with_context(|| format!("reading palette {}", path.display()))?;
             let row = img.row(img.height() / 2).to_vec();
-            Ok(Palette::from_strip(&self.0, &row).with_context(|| format!("palette {}", path.display()))?)
+            Ok(Palette::from_strip(&self.0, &row)
+                .with_context(|| format!("palette {}", path.display()))?)
         } else {
             Ok(Palette::preset(&self.0)?)
         }

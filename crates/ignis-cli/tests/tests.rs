@@ -4,11 +4,16 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 fn ignis(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_ignis")).args(args).output().expect("runs ignis")
+    Command::new(env!("CARGO_BIN_EXE_ignis"))
+        .args(args)
+        .output()
+        .expect("runs ignis")
 }
 
 fn data(name: &str) -> Option<PathBuf> {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data").join(name);
+    let p = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../../shared/data")
+        .join(name);
     if p.exists() {
         Some(p)
     } else {
@@ -18,7 +23,11 @@ fn data(name: &str) -> Option<PathBuf> {
 }
 
 fn has_ffmpeg() -> bool {
-    let ok = Command::new("ffprobe").arg("-version").output().map(|o| o.status.success()).unwrap_or(false);
+    let ok = Command::new("ffprobe")
+        .arg("-version")
+        .output()
+        .map(|o| o.status.success())
+        .unwrap_or(false);
     if !ok {
         eprintln!("skipped: ffmpeg/ffprobe not on PATH");
     }
@@ -28,14 +37,22 @@ fn has_ffmpeg() -> bool {
 /// Asserts a failed run: non-zero exit, an `error:` line containing `needle`, no panic.
 fn assert_fails(out: &Output, needle: &str) {
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success(), "expected failure, got success; stderr: {err}");
+    assert!(
+        !out.status.success(),
+        "expected failure, got success; stderr: {err}"
+    );
     assert!(!err.contains("panicked"), "panicked: {err}");
-    assert!(err.to_lowercase().contains(&needle.to_lowercase()), "stderr lacks `{needle}`: {err}");
+    assert!(
+        err.to_lowercase().contains(&needle.to_lowercase()),
+        "stderr lacks `{needle}`: {err}"
+    );
 }
 
 fn files_in(dir: &Path) -> Vec<String> {
-    let mut v: Vec<String> =
-        std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+    let mut v: Vec<String> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
     v.sort();
     v
 }
@@ -48,15 +65,44 @@ mod classic {
         let t = tempfile::tempdir().unwrap();
         for name in ["a.mp4", "a.gif", "a.png", "seq/%04d.png", "exr/%04d.exr"] {
             let out = t.path().join(name);
-            let o = ignis(&["classic", "--size", "48x32", "--frames", "6", "--seed", "3", "-q", "-o", out.to_str().unwrap()]);
-            assert!(o.status.success(), "{name}: {}", String::from_utf8_lossy(&o.stderr));
+            let o = ignis(&[
+                "classic",
+                "--size",
+                "48x32",
+                "--frames",
+                "6",
+                "--seed",
+                "3",
+                "-q",
+                "-o",
+                out.to_str().unwrap(),
+            ]);
+            assert!(
+                o.status.success(),
+                "{name}: {}",
+                String::from_utf8_lossy(&o.stderr)
+            );
         }
         assert!(t.path().join("a.json").exists(), "flipbook sidecar");
         assert_eq!(files_in(&t.path().join("seq")).len(), 6);
         assert_eq!(files_in(&t.path().join("exr")).len(), 6);
         let b = t.path().join("b.png");
-        ignis(&["classic", "--size", "48x32", "--frames", "6", "--seed", "3", "-q", "-o", b.to_str().unwrap()]);
-        assert_eq!(std::fs::read(t.path().join("a.png")).unwrap(), std::fs::read(&b).unwrap());
+        ignis(&[
+            "classic",
+            "--size",
+            "48x32",
+            "--frames",
+            "6",
+            "--seed",
+            "3",
+            "-q",
+            "-o",
+            b.to_str().unwrap(),
+        ]);
+        assert_eq!(
+            std::fs::read(t.path().join("a.png")).unwrap(),
+            std::fs::read(&b).unwrap()
+        );
     }
 
     #[test]
@@ -66,10 +112,27 @@ mod classic {
         }
         let t = tempfile::tempdir().unwrap();
         let out = t.path().join("f.mp4");
-        let o = ignis(&["classic", "--size", "64x48", "--frames", "10", "-q", "-o", out.to_str().unwrap()]);
+        let o = ignis(&[
+            "classic",
+            "--size",
+            "64x48",
+            "--frames",
+            "10",
+            "-q",
+            "-o",
+            out.to_str().unwrap(),
+        ]);
         assert!(o.status.success());
         let p = Command::new("ffprobe")
-            .args(["-v", "error", "-count_frames", "-show_entries", "stream=codec_name,width,height,nb_read_frames", "-of", "csv=p=0"])
+            .args([
+                "-v",
+                "error",
+                "-count_frames",
+                "-show_entries",
+                "stream=codec_name,width,height,nb_read_frames",
+                "-of",
+                "csv=p=0",
+            ])
             .arg(&out)
             .output()
             .unwrap();
@@ -83,11 +146,30 @@ mod classic {
         let out = t.path().join("x.mp4");
         let o = out.to_str().unwrap();
         assert_fails(&ignis(&["classic", "--size", "0x0", "-o", o]), "zero side");
-        assert_fails(&ignis(&["classic", "--size", "100000x100000", "-o", o]), "at most");
-        assert_fails(&ignis(&["classic", "--palette", "plaid", "-o", o]), "unknown palette");
+        assert_fails(
+            &ignis(&["classic", "--size", "100000x100000", "-o", o]),
+            "at most",
+        );
+        assert_fails(
+            &ignis(&["classic", "--palette", "plaid", "-o", o]),
+            "unknown palette",
+        );
         assert_fails(&ignis(&["classic", "--edge", "0", "-o", o]), "edge");
-        assert_fails(&ignis(&["classic", "--frames", "5", "-o", t.path().join("x.txt").to_str().unwrap()]), "format");
-        assert!(files_in(t.path()).is_empty(), "left behind: {:?}", files_in(t.path()));
+        assert_fails(
+            &ignis(&[
+                "classic",
+                "--frames",
+                "5",
+                "-o",
+                t.path().join("x.txt").to_str().unwrap(),
+            ]),
+            "format",
+        );
+        assert!(
+            files_in(t.path()).is_empty(),
+            "left behind: {:?}",
+            files_in(t.path())
+        );
     }
 }
 
@@ -112,26 +194,43 @@ mod info {
 
     #[test]
     fn campfire_through_ffmpeg() {
-        let Some(p) = data("campfire.mp4") else { return };
+        let Some(p) = data("campfire.mp4") else {
+            return;
+        };
         let v = info_json(&p);
         assert_eq!(v["width"], 960);
         assert_eq!(v["height"], 540);
         assert_eq!(v["frames"], 512);
         assert_eq!(v["decoder"], "ffmpeg");
-        let human = String::from_utf8_lossy(&ignis(&["info", p.to_str().unwrap()]).stdout).to_string();
+        let human =
+            String::from_utf8_lossy(&ignis(&["info", p.to_str().unwrap()]).stdout).to_string();
         assert!(human.contains("High"), "{human}");
     }
 
     #[test]
     fn bad_inputs_give_clear_errors() {
         let t = tempfile::tempdir().unwrap();
-        assert_fails(&ignis(&["info", t.path().join("nope.mp4").to_str().unwrap()]), "nope.mp4");
+        assert_fails(
+            &ignis(&["info", t.path().join("nope.mp4").to_str().unwrap()]),
+            "nope.mp4",
+        );
         let empty = t.path().join("empty.mp4");
         std::fs::write(&empty, b"").unwrap();
         assert_fails(&ignis(&["info", empty.to_str().unwrap()]), "empty.mp4");
         // a truncated MP4 of our own
         let full = t.path().join("full.mp4");
-        assert!(ignis(&["classic", "--size", "32x32", "--frames", "20", "-q", "-o", full.to_str().unwrap()]).status.success());
+        assert!(ignis(&[
+            "classic",
+            "--size",
+            "32x32",
+            "--frames",
+            "20",
+            "-q",
+            "-o",
+            full.to_str().unwrap()
+        ])
+        .status
+        .success());
         let bytes = std::fs::read(&full).unwrap();
         let cut = t.path().join("cut.mp4");
         std::fs::write(&cut, &bytes[..bytes.len() / 3]).unwrap();
@@ -139,14 +238,34 @@ mod info {
         assert!(!String::from_utf8_lossy(&o.stderr).contains("panicked"));
         // Decoding it to a flipbook must fail cleanly and leave no output behind.
         let sheet = t.path().join("sheet.png");
-        assert_fails(&ignis(&["convert", cut.to_str().unwrap(), "-q", "-o", sheet.to_str().unwrap()]), "cut.mp4");
+        assert_fails(
+            &ignis(&[
+                "convert",
+                cut.to_str().unwrap(),
+                "-q",
+                "-o",
+                sheet.to_str().unwrap(),
+            ]),
+            "cut.mp4",
+        );
         assert!(!sheet.exists() && !t.path().join("sheet.json").exists());
         // mixed sizes
         let mixed = t.path().join("mixed");
         std::fs::create_dir(&mixed).unwrap();
         for (i, s) in ["32x32", "32x32", "16x16"].iter().enumerate() {
             let p = mixed.join(format!("f{i}.png"));
-            assert!(ignis(&["classic", "--size", s, "--frames", "1", "-q", "-o", t.path().join("tmp.png").to_str().unwrap()]).status.success());
+            assert!(ignis(&[
+                "classic",
+                "--size",
+                s,
+                "--frames",
+                "1",
+                "-q",
+                "-o",
+                t.path().join("tmp.png").to_str().unwrap()
+            ])
+            .status
+            .success());
             std::fs::rename(t.path().join("tmp.png"), &p).unwrap();
         }
         assert_fails(&ignis(&["info", mixed.to_str().unwrap()]), "f2.png");
@@ -161,13 +280,44 @@ mod convert {
         let Some(p) = data("candle.mp4") else { return };
         let t = tempfile::tempdir().unwrap();
         let out = t.path().join("c.png");
-        let o = ignis(&["convert", p.to_str().unwrap(), "--range", "100..110", "--scale", "64x64", "-q", "-o", out.to_str().unwrap()]);
+        let o = ignis(&[
+            "convert",
+            p.to_str().unwrap(),
+            "--range",
+            "100..110",
+            "--scale",
+            "64x64",
+            "-q",
+            "-o",
+            out.to_str().unwrap(),
+        ]);
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-        let meta: serde_json::Value = serde_json::from_slice(&std::fs::read(t.path().join("c.json")).unwrap()).unwrap();
+        let meta: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(t.path().join("c.json")).unwrap()).unwrap();
         assert_eq!(meta["frame_count"], 10);
         assert_eq!(meta["frame_width"], 64);
-        assert_fails(&ignis(&["convert", p.to_str().unwrap(), "--range", "900..950", "-o", out.to_str().unwrap()]), "range");
-        assert_fails(&ignis(&["convert", p.to_str().unwrap(), "--range", "50..50", "-o", out.to_str().unwrap()]), "empty");
+        assert_fails(
+            &ignis(&[
+                "convert",
+                p.to_str().unwrap(),
+                "--range",
+                "900..950",
+                "-o",
+                out.to_str().unwrap(),
+            ]),
+            "range",
+        );
+        assert_fails(
+            &ignis(&[
+                "convert",
+                p.to_str().unwrap(),
+                "--range",
+                "50..50",
+                "-o",
+                out.to_str().unwrap(),
+            ]),
+            "empty",
+        );
     }
 }
 
@@ -190,10 +340,20 @@ mod demo {
 
     #[test]
     fn help_has_examples() {
-        for sub in [&["--help"][..], &["classic", "--help"], &["info", "--help"], &["convert", "--help"], &["demo", "--help"], &["bench", "--help"]] {
+        for sub in [
+            &["--help"][..],
+            &["classic", "--help"],
+            &["info", "--help"],
+            &["convert", "--help"],
+            &["demo", "--help"],
+            &["bench", "--help"],
+        ] {
             let o = ignis(sub);
             assert!(o.status.success());
-            assert!(String::from_utf8_lossy(&o.stdout).contains("ignis "), "{sub:?} help has an example");
+            assert!(
+                String::from_utf8_lossy(&o.stdout).contains("ignis "),
+                "{sub:?} help has an example"
+            );
         }
     }
 }

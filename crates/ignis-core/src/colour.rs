@@ -27,7 +27,11 @@ pub fn rgb_to_hls(rgb: [f32; 3]) -> Hls {
         return Hls { h: 0.0, l, s: 0.0 };
     }
     let d = max - min;
-    let s = if l <= 0.5 { d / (max + min) } else { d / (2.0 - max - min) };
+    let s = if l <= 0.5 {
+        d / (max + min)
+    } else {
+        d / (2.0 - max - min)
+    };
     let h = if max == r {
         ((g - b) / d).rem_euclid(6.0)
     } else if max == g {
@@ -35,7 +39,11 @@ pub fn rgb_to_hls(rgb: [f32; 3]) -> Hls {
     } else {
         (r - g) / d + 4.0
     } / 6.0;
-    Hls { h: h.rem_euclid(1.0), l, s }
+    Hls {
+        h: h.rem_euclid(1.0),
+        l,
+        s,
+    }
 }
 
 /// HLS → RGB (`0..=1` each).
@@ -44,7 +52,11 @@ pub fn hls_to_rgb(c: Hls) -> [f32; 3] {
     if s <= 0.0 {
         return [l, l, l];
     }
-    let m2 = if l <= 0.5 { l * (1.0 + s) } else { l + s - l * s };
+    let m2 = if l <= 0.5 {
+        l * (1.0 + s)
+    } else {
+        l + s - l * s
+    };
     let m1 = 2.0 * l - m2;
     let v = |hue: f32| {
         let hue = hue.rem_euclid(1.0);
@@ -82,18 +94,29 @@ pub fn synthetic_colour(gray: &GrayFrame, tint: &Tint) -> Result<RgbaFrame> {
         Tint::Solid(c) => {
             let t = rgb_to_hls(*c);
             for &v in gray.data() {
-                let [r, g, b] = hls_to_rgb(Hls { h: t.h, l: v.clamp(0.0, 1.0), s: t.s });
+                let [r, g, b] = hls_to_rgb(Hls {
+                    h: t.h,
+                    l: v.clamp(0.0, 1.0),
+                    s: t.s,
+                });
                 out.push([r, g, b, 1.0]);
             }
         }
         Tint::VerticalGradient(stops) => {
             if stops.is_empty() {
-                return Err(CoreError::bad("tint", "a gradient needs at least one colour"));
+                return Err(CoreError::bad(
+                    "tint",
+                    "a gradient needs at least one colour",
+                ));
             }
             let n = stops.len();
             for y in 0..h {
                 // bottom row = stop 0
-                let pos = if h > 1 { (h - 1 - y) as f32 / (h - 1) as f32 } else { 0.0 };
+                let pos = if h > 1 {
+                    (h - 1 - y) as f32 / (h - 1) as f32
+                } else {
+                    0.0
+                };
                 let x = pos * (n - 1) as f32;
                 let i = (x.floor() as usize).min(n.saturating_sub(2));
                 let f = if n > 1 { x - i as f32 } else { 0.0 };
@@ -101,7 +124,11 @@ pub fn synthetic_colour(gray: &GrayFrame, tint: &Tint) -> Result<RgbaFrame> {
                 let c = [0, 1, 2].map(|k| a[k] + (b[k] - a[k]) * f);
                 let t = rgb_to_hls(c);
                 for &v in gray.row(y as u32) {
-                    let [r, g, b] = hls_to_rgb(Hls { h: t.h, l: v.clamp(0.0, 1.0), s: t.s });
+                    let [r, g, b] = hls_to_rgb(Hls {
+                        h: t.h,
+                        l: v.clamp(0.0, 1.0),
+                        s: t.s,
+                    });
                     out.push([r, g, b, 1.0]);
                 }
             }
@@ -116,7 +143,11 @@ pub fn synthetic_colour(gray: &GrayFrame, tint: &Tint) -> Result<RgbaFrame> {
             }
             for (&v, p) in gray.data().iter().zip(tex.data()) {
                 let t = rgb_to_hls([p[0], p[1], p[2]]);
-                let [r, g, b] = hls_to_rgb(Hls { h: t.h, l: v.clamp(0.0, 1.0), s: t.s });
+                let [r, g, b] = hls_to_rgb(Hls {
+                    h: t.h,
+                    l: v.clamp(0.0, 1.0),
+                    s: t.s,
+                });
                 out.push([r, g, b, 1.0]);
             }
         }
@@ -131,7 +162,13 @@ mod tests {
 
     #[test]
     fn hls_roundtrip() {
-        for &c in &[[1.0, 0.35, 0.05], [0.2, 0.4, 0.9], [0.5, 0.5, 0.5], [0.0, 1.0, 0.0], [0.9, 0.1, 0.7]] {
+        for &c in &[
+            [1.0, 0.35, 0.05],
+            [0.2, 0.4, 0.9],
+            [0.5, 0.5, 0.5],
+            [0.0, 1.0, 0.0],
+            [0.9, 0.1, 0.7],
+        ] {
             let back = hls_to_rgb(rgb_to_hls(c));
             for k in 0..3 {
                 assert!((back[k] - c[k]).abs() < 1e-5, "{c:?} -> {back:?}");

@@ -16,7 +16,10 @@ pub enum CoreError {
 
 impl CoreError {
     pub fn bad(name: &'static str, reason: impl Into<String>) -> Self {
-        CoreError::BadParameter { name, reason: reason.into() }
+        CoreError::BadParameter {
+            name,
+            reason: reason.into(),
+        }
     }
 }
 

@@ -85,7 +85,11 @@ pub struct GrayFrame {
 impl GrayFrame {
     /// A black frame.
     pub fn new(size: Size) -> GrayFrame {
-        GrayFrame { width: size.width, height: size.height, data: vec![0.0; size.pixels()] }
+        GrayFrame {
+            width: size.width,
+            height: size.height,
+            data: vec![0.0; size.pixels()],
+        }
     }
 
     /// Wraps row-major data; fails if `data.len() != width * height`.
@@ -97,7 +101,11 @@ impl GrayFrame {
                 size.pixels()
             )));
         }
-        Ok(GrayFrame { width: size.width, height: size.height, data })
+        Ok(GrayFrame {
+            width: size.width,
+            height: size.height,
+            data,
+        })
     }
 
     /// Builds a frame by evaluating `f(x, y)` at every pixel.
@@ -108,7 +116,11 @@ impl GrayFrame {
                 data.push(f(x, y));
             }
         }
-        GrayFrame { width: size.width, height: size.height, data }
+        GrayFrame {
+            width: size.width,
+            height: size.height,
+            data,
+        }
     }
 
     pub fn width(&self) -> u32 {
@@ -118,7 +130,10 @@ impl GrayFrame {
         self.height
     }
     pub fn size(&self) -> Size {
-        Size { width: self.width, height: self.height }
+        Size {
+            width: self.width,
+            height: self.height,
+        }
     }
     pub fn data(&self) -> &[f32] {
         &self.data
@@ -152,7 +167,11 @@ impl GrayFrame {
     }
     /// Applies `f` to every value.
     pub fn map(&self, f: impl Fn(f32) -> f32) -> GrayFrame {
-        GrayFrame { width: self.width, height: self.height, data: self.data.iter().map(|&v| f(v)).collect() }
+        GrayFrame {
+            width: self.width,
+            height: self.height,
+            data: self.data.iter().map(|&v| f(v)).collect(),
+        }
     }
     /// Largest value (0 for an all-black or empty frame).
     pub fn max(&self) -> f32 {
@@ -186,11 +205,19 @@ pub struct RgbaFrame {
 impl RgbaFrame {
     /// A transparent black frame.
     pub fn new(size: Size) -> RgbaFrame {
-        RgbaFrame { width: size.width, height: size.height, data: vec![[0.0; 4]; size.pixels()] }
+        RgbaFrame {
+            width: size.width,
+            height: size.height,
+            data: vec![[0.0; 4]; size.pixels()],
+        }
     }
     /// A frame filled with one colour.
     pub fn filled(size: Size, c: [f32; 4]) -> RgbaFrame {
-        RgbaFrame { width: size.width, height: size.height, data: vec![c; size.pixels()] }
+        RgbaFrame {
+            width: size.width,
+            height: size.height,
+            data: vec![c; size.pixels()],
+        }
     }
     /// Wraps row-major data; fails if `data.len() != width * height`.
     pub fn from_vec(size: Size, data: Vec<[f32; 4]>) -> Result<RgbaFrame> {
@@ -201,7 +228,11 @@ impl RgbaFrame {
                 size.pixels()
             )));
         }
-        Ok(RgbaFrame { width: size.width, height: size.height, data })
+        Ok(RgbaFrame {
+            width: size.width,
+            height: size.height,
+            data,
+        })
     }
     pub fn width(&self) -> u32 {
         self.width
@@ -210,7 +241,10 @@ impl RgbaFrame {
         self.height
     }
     pub fn size(&self) -> Size {
-        Size { width: self.width, height: self.height }
+        Size {
+            width: self.width,
+            height: self.height,
+        }
     }
     pub fn data(&self) -> &[[f32; 4]] {
         &self.data
@@ -238,7 +272,11 @@ impl RgbaFrame {
         GrayFrame {
             width: self.width,
             height: self.height,
-            data: self.data.iter().map(|p| LUMA[0] * p[0] + LUMA[1] * p[1] + LUMA[2] * p[2]).collect(),
+            data: self
+                .data
+                .iter()
+                .map(|p| LUMA[0] * p[0] + LUMA[1] * p[1] + LUMA[2] * p[2])
+                .collect(),
         }
     }
     /// Replaces the alpha channel by `alpha` (values clamped to `0..=1`).
@@ -284,10 +322,22 @@ mod tests {
 
     #[test]
     fn size_parses_and_checks() {
-        assert_eq!("320x200".parse::<Size>().unwrap(), Size { width: 320, height: 200 });
+        assert_eq!(
+            "320x200".parse::<Size>().unwrap(),
+            Size {
+                width: 320,
+                height: 200
+            }
+        );
         assert!("0x0".parse::<Size>().is_err());
-        assert!(matches!("100000x100000".parse::<Size>(), Err(CoreError::LimitExceeded(_))));
-        assert!(matches!("16000x16000".parse::<Size>(), Err(CoreError::LimitExceeded(_))));
+        assert!(matches!(
+            "100000x100000".parse::<Size>(),
+            Err(CoreError::LimitExceeded(_))
+        ));
+        assert!(matches!(
+            "16000x16000".parse::<Size>(),
+            Err(CoreError::LimitExceeded(_))
+        ));
         assert!("abc".parse::<Size>().is_err());
         assert!("12x".parse::<Size>().is_err());
     }

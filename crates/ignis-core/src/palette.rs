@@ -55,12 +55,24 @@ impl Palette {
         let mut table = Vec::with_capacity(Self::LEN);
         for i in 0..Self::LEN {
             let t = i as f32 / (Self::LEN - 1) as f32;
-            let k = stops.iter().position(|s| s.0 >= t).unwrap_or(stops.len() - 1).max(1);
+            let k = stops
+                .iter()
+                .position(|s| s.0 >= t)
+                .unwrap_or(stops.len() - 1)
+                .max(1);
             let (p0, c0) = stops[k - 1];
             let (p1, c1) = stops[k];
-            let f = if p1 > p0 { ((t - p0) / (p1 - p0)).clamp(0.0, 1.0) } else { 1.0 };
+            let f = if p1 > p0 {
+                ((t - p0) / (p1 - p0)).clamp(0.0, 1.0)
+            } else {
+                1.0
+            };
             let (a, b) = (lin(c0), lin(c1));
-            let a_alpha = if alpha_ramp > 0.0 { (t / alpha_ramp).min(1.0) } else { 1.0 };
+            let a_alpha = if alpha_ramp > 0.0 {
+                (t / alpha_ramp).min(1.0)
+            } else {
+                1.0
+            };
             table.push([
                 a[0] + (b[0] - a[0]) * f,
                 a[1] + (b[1] - a[1]) * f,
@@ -68,7 +80,10 @@ impl Palette {
                 a_alpha,
             ]);
         }
-        Ok(Palette { name: name.to_string(), table })
+        Ok(Palette {
+            name: name.to_string(),
+            table,
+        })
     }
 
     /// A palette from a strip of linear RGBA pixels (e.g. one row of a gradient PNG,
@@ -77,7 +92,10 @@ impl Palette {
         if strip.len() < 2 {
             return Err(CoreError::bad(
                 "palette",
-                format!("a gradient strip needs at least 2 pixels, got {}", strip.len()),
+                format!(
+                    "a gradient strip needs at least 2 pixels, got {}",
+                    strip.len()
+                ),
             ));
         }
         let n = strip.len() - 1;
@@ -90,7 +108,10 @@ impl Palette {
                 [0, 1, 2, 3].map(|c| a[c] + (b[c] - a[c]) * f)
             })
             .collect();
-        Ok(Palette { name: name.to_string(), table })
+        Ok(Palette {
+            name: name.to_string(),
+            table,
+        })
     }
 
     /// A built-in preset by name: `classic`, `candle`, `blue-gas`, `green`, `grey`.
@@ -155,7 +176,12 @@ impl Palette {
         let i = (x as usize).min(Self::LEN - 2);
         let f = x - i as f32;
         let (a, b) = (self.table[i], self.table[i + 1]);
-        [a[0] + (b[0] - a[0]) * f, a[1] + (b[1] - a[1]) * f, a[2] + (b[2] - a[2]) * f, a[3] + (b[3] - a[3]) * f]
+        [
+            a[0] + (b[0] - a[0]) * f,
+            a[1] + (b[1] - a[1]) * f,
+            a[2] + (b[2] - a[2]) * f,
+            a[3] + (b[3] - a[3]) * f,
+        ]
     }
 
     /// Colours a whole grey frame.

@@ -19,7 +19,9 @@ pub fn gaussian_kernel(sigma: f32) -> Vec<f32> {
         return vec![1.0];
     }
     let r = (3.0 * sigma).ceil() as i32;
-    let mut k: Vec<f32> = (-r..=r).map(|i| (-(i * i) as f32 / (2.0 * sigma * sigma)).exp()).collect();
+    let mut k: Vec<f32> = (-r..=r)
+        .map(|i| (-(i * i) as f32 / (2.0 * sigma * sigma)).exp())
+        .collect();
     let s: f32 = k.iter().sum();
     k.iter_mut().for_each(|v| *v /= s);
     k
@@ -76,7 +78,12 @@ pub struct BloomParams {
 
 impl Default for BloomParams {
     fn default() -> Self {
-        BloomParams { passes: 3, radius: 24.0, radius_falloff: 0.5, strength: 0.4 }
+        BloomParams {
+            passes: 3,
+            radius: 24.0,
+            radius_falloff: 0.5,
+            strength: 0.4,
+        }
     }
 }
 
@@ -84,10 +91,16 @@ impl BloomParams {
     /// Checks the ranges of every field.
     pub fn validate(&self) -> Result<()> {
         if self.passes > 16 {
-            return Err(CoreError::bad("bloom.passes", format!("{} passes; use 0 to 16", self.passes)));
+            return Err(CoreError::bad(
+                "bloom.passes",
+                format!("{} passes; use 0 to 16", self.passes),
+            ));
         }
         if !(self.radius >= 0.0 && self.radius <= 512.0) {
-            return Err(CoreError::bad("bloom.radius", format!("{} px; use 0 to 512", self.radius)));
+            return Err(CoreError::bad(
+                "bloom.radius",
+                format!("{} px; use 0 to 512", self.radius),
+            ));
         }
         if !(self.radius_falloff > 0.0 && self.radius_falloff <= 1.0) {
             return Err(CoreError::bad("bloom.radius_falloff", "must be in (0, 1]"));
@@ -138,9 +151,18 @@ pub fn bloom_rgba(src: &RgbaFrame, p: &BloomParams) -> Result<RgbaFrame> {
 /// The alpha matte of §6.2: `clamp(bloom + source, 0, 1)`.
 pub fn alpha_matte(src: &GrayFrame, bloomed: &GrayFrame) -> Result<GrayFrame> {
     if src.size() != bloomed.size() {
-        return Err(CoreError::SizeMismatch(format!("source {} vs bloom {}", src.size(), bloomed.size())));
+        return Err(CoreError::SizeMismatch(format!(
+            "source {} vs bloom {}",
+            src.size(),
+            bloomed.size()
+        )));
     }
-    let data = src.data().iter().zip(bloomed.data()).map(|(&a, &b)| (a + b).clamp(0.0, 1.0)).collect();
+    let data = src
+        .data()
+        .iter()
+        .zip(bloomed.data())
+        .map(|(&a, &b)| (a + b).clamp(0.0, 1.0))
+        .collect();
     GrayFrame::from_vec(src.size(), data)
 }
 
@@ -150,7 +172,13 @@ mod tests {
     use crate::Size;
 
     fn spot() -> GrayFrame {
-        GrayFrame::from_fn(Size::new(41, 31).unwrap(), |x, y| if x == 20 && y == 15 { 1.0 } else { 0.0 })
+        GrayFrame::from_fn(Size::new(41, 31).unwrap(), |x, y| {
+            if x == 20 && y == 15 {
+                1.0
+            } else {
+                0.0
+            }
+        })
     }
 
     #[test]
@@ -166,14 +194,35 @@ mod tests {
     #[test]
     fn bloom_lightens_and_spreads() {
         let s = spot();
-        let b = bloom(&s, &BloomParams { radius: 3.0, ..Default::default() }).unwrap();
+        let b = bloom(
+            &s,
+            &BloomParams {
+                radius: 3.0,
+                ..Default::default()
+            },
+        )
+        .unwrap();
         for (o, i) in b.data().iter().zip(s.data()) {
             assert!(o >= i);
         }
         assert!(b.get(23, 15) > 0.0);
-        let none = bloom(&s, &BloomParams { passes: 0, ..Default::default() }).unwrap();
+        let none = bloom(
+            &s,
+            &BloomParams {
+                passes: 0,
+                ..Default::default()
+            },
+        )
+        .unwrap();
         assert_eq!(none, s);
-        assert!(bloom(&s, &BloomParams { radius_falloff: 0.0, ..Default::default() }).is_err());
+        assert!(bloom(
+            &s,
+            &BloomParams {
+                radius_falloff: 0.0,
+                ..Default::default()
+            }
+        )
+        .is_err());
         let m = alpha_matte(&s, &b).unwrap();
         assert!(m.data().iter().all(|&v| (0.0..=1.0).contains(&v)));
         assert_eq!(m.get(20, 15), 1.0);

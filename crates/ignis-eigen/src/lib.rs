@@ -17,6 +17,7 @@
 //! [`GrayFrame`]: ignis_core::GrayFrame
 
 pub mod analysis;
+pub mod animate;
 pub mod contour;
 pub mod db;
 pub mod error;

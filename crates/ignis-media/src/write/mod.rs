@@ -243,8 +243,7 @@ pub(crate) fn temp_file_for(path: &Path) -> Result<tempfile::NamedTempFile> {
     // servers, game engines, render farms), so use the usual 0644.
     #[cfg(unix)]
     b.permissions(std::os::unix::fs::PermissionsExt::from_mode(0o644));
-    b.tempfile_in(&dir)
-        .map_err(|e| MediaError::io(&dir, e))
+    b.tempfile_in(&dir).map_err(|e| MediaError::io(&dir, e))
 }
 
 /// Flushes and renames a temporary file into place.

@@ -62,7 +62,10 @@ impl SequenceSink {
             // an ordinary directory (0755), not tempfile's private 0700
             #[cfg(unix)]
             b.permissions(std::os::unix::fs::PermissionsExt::from_mode(0o755));
-            Some(b.tempdir_in(&parent).map_err(|e| MediaError::io(&parent, e))?)
+            Some(
+                b.tempdir_in(&parent)
+                    .map_err(|e| MediaError::io(&parent, e))?,
+            )
         };
         Ok(SequenceSink {
             exr,

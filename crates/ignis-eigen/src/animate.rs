@@ -1,0 +1,428 @@
+//! Animation from an Eigenfire database: loops (§5.1) and synthesised flames (§5.2).
+//!
+//! Source: eigenfires-thesis.txt §5.1 (motion transition, "producing loop"), §5.2
+//! (creating new flames by setting Eigenfire weights by hand) and §7.1.2 (rendering
+//! database frames from the stored pre-processed frames instead of reconstructing them).
+//!
+//! This module joins [`crate::transition`] (which works on weight vectors only) to an
+//! opened [`EigenfireDb`]: it builds the [`WeightSpace`] of a database, turns a clip range
+//! plus a [`Join`] back to its start into a list of grey frames, and reconstructs frames
+//! from edited weights.
+//!
+//! Conventions:
+//! - Clip ranges are **source frame numbers** (as `--frame` of `reconstruct`), converted
+//!   to training rows through the clip's start and stride.
+//! - Distances (recognition and seam ratio) use the database's E for detection.
+//! - Frames are linear grey values, not clamped (a palette clamps when colouring).
+
+use std::ops::Range;
+
+use ignis_core::GrayFrame;
+
+use crate::db::EigenfireDb;
+use crate::error::{EigenError, Result};
+use crate::transition::{
+    self, ClipSpan, FrameRef, Join, LowPassParams, RecognitionParams, Transition, TransitionError,
+    WeightSpace,
+};
+
+fn from_transition(e: TransitionError) -> EigenError {
+    match e {
+        TransitionError::BadParameter { name, reason } => EigenError::BadParameter { name, reason },
+        TransitionError::BadRange { .. } => EigenError::bad("range", e.to_string()),
+        TransitionError::NoPath { .. } => EigenError::bad("method", e.to_string()),
+    }
+}
+
+/// The weights of `db` as an owned M×k row-major matrix, k, and the clip spans (training
+/// rows), ready for [`WeightSpace::new`].
+pub fn weight_space(db: &EigenfireDb) -> Result<(Vec<f32>, usize, Vec<ClipSpan>)> {
+    let w = db.weights();
+    let (m, k) = (w.nrows(), w.ncols());
+    if m == 0 || k == 0 {
+        return Err(EigenError::bad(
+            "database",
+            format!("has {m} frames and {k} Eigenfires; a loop needs at least one of each"),
+        ));
+    }
+    let mut flat = Vec::with_capacity(m * k);
+    for i in 0..m {
+        flat.extend((0..k).map(|j| w[(i, j)]));
+    }
+    let spans = db
+        .clips()
+        .iter()
+        .map(|c| ClipSpan {
+            name: c.name.clone(),
+            start: c.first_row,
+            len: c.frames,
+        })
+        .collect();
+    Ok((flat, k, spans))
+}
+
+/// Recognition settings for `db`: its E for detection, everything else default.
+pub fn recognition_params(db: &EigenfireDb) -> RecognitionParams {
+    RecognitionParams {
+        e_detect: db.manifest().e_detect,
+        ..Default::default()
+    }
+}
+
+/// Training rows of clip `clip` whose source frame lies in `range` (source frame numbers).
+pub fn clip_rows(db: &EigenfireDb, clip: &str, range: Range<usize>) -> Result<Range<usize>> {
+    let c = db.clip(clip)?;
+    let last = c.start + c.frames.saturating_sub(1) * c.stride;
+    if range.start >= range.end {
+        return Err(EigenError::bad(
+            "range",
+            format!("{}..{} is empty", range.start, range.end),
+        ));
+    }
+    if range.start < c.start || range.start > last {
+        return Err(EigenError::bad(
+            "range",
+            format!(
+                "{}..{} starts outside clip `{clip}`, whose training frames are {}..={last}",
+                range.start, range.end, c.start
+            ),
+        ));
+    }
+    let first = (range.start - c.start).div_ceil(c.stride);
+    let end = (range.end - c.start).div_ceil(c.stride).min(c.frames);
+    if end <= first {
+        return Err(EigenError::bad(
+            "range",
+            format!(
+                "{}..{} holds no training frame of clip `{clip}` (every {} from {})",
+                range.start, range.end, c.stride, c.start
+            ),
+        ));
+    }
+    Ok(c.first_row + first..c.first_row + end)
+}
+
+/// Seam ratio of a plain cut from the end of `rows` back to its start (no transition
+/// frames): what [`Join::seam_ratio`] is to be compared with.
+pub fn plain_cut_ratio(db: &EigenfireDb, rows: Range<usize>) -> Result<f64> {
+    let (w, k, spans) = weight_space(db)?;
+    let space = WeightSpace::new(&w, k, spans).map_err(from_transition)?;
+    space.check_range("range", &rows).map_err(from_transition)?;
+    let rec = recognition_params(db);
+    let e = rec.e_detect(&space);
+    Ok(transition::join_seam(&space, &rows, &rows, &[], (0, 0), e))
+}
+
+/// Parses a method name: `auto`, `end-growing`, `direct` (direct bridging) or `low-pass`.
+pub fn parse_method(s: &str) -> Result<Transition> {
+    Ok(match s {
+        "auto" => Transition::Auto,
+        "end-growing" => Transition::EndGrowing { max_steps: 40 },
+        "direct" | "direct-bridging" => Transition::DirectBridging { steps: None },
+        "low-pass" => Transition::LowPass(LowPassParams::default()),
+        other => {
+            return Err(EigenError::bad(
+                "method",
+                format!("unknown method `{other}`; choose auto, end-growing, direct or low-pass"),
+            ))
+        }
+    })
+}
+
+/// Whether every clip of `db` has its pre-processed frames stored (§7.1.2 fast path).
+fn has_stored_frames(db: &EigenfireDb) -> bool {
+    !db.clips().is_empty() && db.clips().iter().all(|c| c.frames_file.is_some())
+}
+
+/// Renders a loop of clip `clip` over source frames `range`: the range's frames (without
+/// the [`Join::trim_t2`] first and [`Join::trim_t1`] last frames a low-pass join replaces)
+/// followed by the transition back to the start, so that playing the result repeatedly
+/// loops. Synthetic frames are reconstructed with `e_render` Eigenfires (clamped to the
+/// usable ones). Database frames are the stored pre-processed frames when the database
+/// has them (§7.1.2; every frame is then at the pre-processed size, reconstructions being
+/// resized to it), else reconstructions with `e_render` Eigenfires at the training size.
+pub fn render_loop(
+    db: &EigenfireDb,
+    clip: &str,
+    range: Range<usize>,
+    method: Transition,
+    e_render: usize,
+) -> Result<(Vec<GrayFrame>, Join)> {
+    let rows = clip_rows(db, clip, range)?;
+    let (w, k, spans) = weight_space(db)?;
+    let space = WeightSpace::new(&w, k, spans).map_err(from_transition)?;
+    let rec = recognition_params(db);
+    let join =
+        transition::make_loop(&space, rows.clone(), &method, &rec).map_err(from_transition)?;
+    let e = e_render.clamp(1, db.usable_components().max(1));
+    let stored = has_stored_frames(db);
+    let size = if stored {
+        db.manifest().frame_size
+    } else {
+        db.train_size()
+    };
+    let render_weights = |wv: &[f32]| -> Result<GrayFrame> {
+        let f = db.reconstruct(wv, e)?;
+        Ok(crate::pose::resize(&f, size))
+    };
+    let render_row = |r: usize| -> Result<GrayFrame> {
+        if stored {
+            if let Some((c, frame)) = db.row_origin(r) {
+                return db.preprocessed_frame(&c.name, frame);
+            }
+        }
+        render_weights(space.frame(r))
+    };
+    // Body: the range without the frames the transition replaces. A low-pass join over a
+    // range shorter than its kernel may replace everything; the body is then empty.
+    let body_start = rows.start + join.trim_t2;
+    let body_end = rows.end.saturating_sub(join.trim_t1).max(body_start);
+    let mut out = Vec::with_capacity(body_end - body_start + join.frames.len());
+    for r in body_start..body_end {
+        out.push(render_row(r)?);
+    }
+    for f in &join.frames {
+        out.push(match f {
+            FrameRef::Db(r) => render_row(*r)?,
+            FrameRef::Weights(wv) => render_weights(wv)?,
+        });
+    }
+    if out.is_empty() {
+        return Err(EigenError::bad(
+            "range",
+            "the loop has no frames left (the transition replaced the whole range); use a longer range",
+        ));
+    }
+    Ok((out, join))
+}
+
+/// Parses weight edits `2=12000,3=-5000` (Eigenfire index = weight; spaces allowed).
+/// Fails naming the first malformed item.
+pub fn parse_weight_edits(s: &str) -> Result<Vec<(usize, f32)>> {
+    let mut out = Vec::new();
+    for item in s.split(',').map(str::trim).filter(|i| !i.is_empty()) {
+        let bad = |why: &str| {
+            EigenError::bad(
+                "weights",
+                format!("`{item}`: {why} (expected INDEX=VALUE, e.g. 2=12000)"),
+            )
+        };
+        let (i, v) = item.split_once('=').ok_or_else(|| bad("no `=`"))?;
+        let i: usize = i
+            .trim()
+            .parse()
+            .map_err(|_| bad("the Eigenfire index is not a whole number ≥ 0"))?;
+        let v: f32 = v
+            .trim()
+            .parse()
+            .map_err(|_| bad("the weight is not a number"))?;
+        if !v.is_finite() {
+            return Err(bad("the weight is not finite"));
+        }
+        out.push((i, v));
+    }
+    if out.is_empty() {
+        return Err(EigenError::bad(
+            "weights",
+            format!("`{s}` holds no INDEX=VALUE item"),
+        ));
+    }
+    Ok(out)
+}
+
+/// Synthesises a flame (§5.2): starts from the mean (all weights zero) or from the weights
+/// of clip `from.0`'s source frame `from.1`, sets the weights in `edits` (Eigenfire index,
+/// 0-based, = value) and reconstructs with the first `max(e, largest edited index + 1)`
+/// Eigenfires. An index at or above the database's (usable) Eigenfire count is an error.
+pub fn synth(
+    db: &EigenfireDb,
+    from: Option<(&str, usize)>,
+    edits: &[(usize, f32)],
+    e: usize,
+) -> Result<GrayFrame> {
+    let k = db.n_components();
+    let usable = db.usable_components();
+    let mut w = match from {
+        None => vec![0.0f32; k],
+        Some((clip, frame)) => db.frame_weights(db.frame_index(clip, frame)?),
+    };
+    let mut e = e;
+    for &(i, v) in edits {
+        if i >= usable {
+            return Err(EigenError::bad(
+                "weights",
+                format!(
+                    "Eigenfire index {i} is out of range: the database has {usable} usable Eigenfires (0..{usable}){}",
+                    if usable < k { format!(" of {k} stored") } else { String::new() }
+                ),
+            ));
+        }
+        if !v.is_finite() {
+            return Err(EigenError::bad(
+                "weights",
+                format!("weight of Eigenfire {i} is not finite"),
+            ));
+        }
+        w[i] = v;
+        e = e.max(i + 1);
+    }
+    db.reconstruct(&w, e.min(usable))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::synthetic::{FlameStyle, SyntheticParams};
+    use crate::train::{train, ClipInput, ClipSource, ClipSpec, NoProgress, TrainParams};
+    use crate::PreprocessParams;
+    use ignis_core::Size;
+
+    fn tiny_db(dir: &std::path::Path, store_frames: bool) -> EigenfireDb {
+        let clips: Vec<ClipInput> = [
+            ("candle", FlameStyle::Candle),
+            ("campfire", FlameStyle::Campfire),
+        ]
+        .into_iter()
+        .map(|(name, style)| ClipInput {
+            spec: ClipSpec::new(name),
+            source: ClipSource::synthetic(
+                SyntheticParams {
+                    size: Size::new(48, 64).unwrap(),
+                    frames: 30,
+                    style,
+                    seed: 7,
+                },
+                30.0,
+            ),
+        })
+        .collect();
+        let mut pre = PreprocessParams::with_sizes(
+            Size::new(40, 64).unwrap(),
+            Some(Size::new(20, 32).unwrap()),
+        );
+        pre.pose_samples = 6;
+        let tp = TrainParams {
+            pack_size: 8,
+            store_frames,
+            ..Default::default()
+        };
+        let out = dir.join("fire.db");
+        train(&clips, &pre, &tp, &out, &mut NoProgress).unwrap();
+        EigenfireDb::open(&out).unwrap()
+    }
+
+    #[test]
+    fn loop_length_and_seam() {
+        let dir = tempfile::tempdir().unwrap();
+        let db = tiny_db(dir.path(), true);
+        let range = 2..26;
+        let rows = clip_rows(&db, "candle", range.clone()).unwrap();
+        assert_eq!(rows.len(), 24);
+        let plain = plain_cut_ratio(&db, rows.clone()).unwrap();
+        for method in ["auto", "direct", "low-pass", "end-growing"] {
+            let m = parse_method(method).unwrap();
+            let (frames, join) = match render_loop(&db, "candle", range.clone(), m, 10) {
+                Ok(x) => x,
+                // End Growing may legitimately find no path on a tiny database.
+                Err(e) if method == "end-growing" => {
+                    assert!(e.to_string().contains("no transition"), "{e}");
+                    continue;
+                }
+                Err(e) => panic!("{method}: {e}"),
+            };
+            assert_eq!(
+                frames.len(),
+                rows.len() - join.trim_t1 - join.trim_t2 + join.frames.len(),
+                "{method}"
+            );
+            assert!(
+                join.seam_ratio.is_finite() && join.seam_ratio >= 0.0,
+                "{method}"
+            );
+            // Stored frames: everything at the pre-processed size.
+            assert!(frames.iter().all(|f| f.size() == db.manifest().frame_size));
+            if method == "auto" {
+                assert!(
+                    join.seam_ratio <= plain + 1e-9,
+                    "auto {} > plain cut {plain}: {}",
+                    join.seam_ratio,
+                    join.why
+                );
+            }
+        }
+        // Without stored frames: reconstructions at the training size.
+        let dir2 = tempfile::tempdir().unwrap();
+        let db2 = tiny_db(dir2.path(), false);
+        let (frames, join) = render_loop(&db2, "campfire", 0..20, Transition::Auto, 5).unwrap();
+        assert_eq!(
+            frames.len(),
+            20 - join.trim_t1 - join.trim_t2 + join.frames.len()
+        );
+        assert!(frames.iter().all(|f| f.size() == db2.train_size()));
+        // Bad ranges and clips.
+        for (clip, r) in [("candle", 5..5), ("candle", 40..50), ("nope", 0..10)] {
+            assert!(render_loop(&db, clip, r, Transition::Auto, 5).is_err());
+        }
+        assert!(parse_method("sideways").is_err());
+    }
+
+    #[test]
+    fn synth_mean_and_edits() {
+        let dir = tempfile::tempdir().unwrap();
+        let db = tiny_db(dir.path(), false);
+        let mean = db.mean();
+        let s = synth(&db, None, &[], 10).unwrap();
+        assert_eq!(s.data(), mean.data());
+        // An edit on component 0 moves the image along Eigenfire 0 only.
+        let u0 = db.eigenfire_vec(0).unwrap().into_owned();
+        let u1 = db.eigenfire_vec(1).unwrap().into_owned();
+        let s = synth(&db, None, &[(0, 2.5)], 1).unwrap();
+        let d: Vec<f32> = s
+            .data()
+            .iter()
+            .zip(mean.data())
+            .map(|(a, b)| a - b)
+            .collect();
+        let dot = |a: &[f32], b: &[f32]| {
+            a.iter()
+                .zip(b)
+                .map(|(x, y)| *x as f64 * *y as f64)
+                .sum::<f64>()
+        };
+        let p0 = dot(&d, &u0) / dot(&u0, &u0);
+        let p1 = dot(&d, &u1) / dot(&u1, &u1);
+        assert!((p0 - 2.5).abs() < 1e-3, "projection on Eigenfire 0: {p0}");
+        assert!(p1.abs() < 1e-3, "projection on Eigenfire 1: {p1}");
+        // From a database frame with no edits = its reconstruction.
+        let row = db.frame_index("candle", 3).unwrap();
+        let s = synth(&db, Some(("candle", 3)), &[], 6).unwrap();
+        assert_eq!(
+            s.data(),
+            db.reconstruct(&db.frame_weights(row), 6).unwrap().data()
+        );
+        // Bad index and bad source frame.
+        let k = db.n_components();
+        let e = synth(&db, None, &[(k, 1.0)], 5).unwrap_err().to_string();
+        assert!(e.contains(&format!("index {k}")), "{e}");
+        assert!(synth(&db, Some(("candle", 999)), &[], 5).is_err());
+    }
+
+    #[test]
+    fn parse_edits() {
+        assert_eq!(
+            parse_weight_edits("2=12000, 3=-5000").unwrap(),
+            vec![(2, 12000.0), (3, -5000.0)]
+        );
+        for (s, bad) in [
+            ("2=abc", "2=abc"),
+            ("x=1", "x=1"),
+            ("1=2,3", "`3`"),
+            ("-1=4", "-1=4"),
+            ("1=inf", "1=inf"),
+        ] {
+            let e = parse_weight_edits(s).unwrap_err().to_string();
+            assert!(e.contains(bad), "{s}: {e}");
+        }
+        assert!(parse_weight_edits(" , ").is_err());
+    }
+}
