@@ -535,11 +535,7 @@ mod footage {
             println!("skipped: ../shared/data not present");
             return;
         }
-        if std::process::Command::new("ffmpeg")
-            .arg("-version")
-            .output()
-            .is_err()
-        {
+        if !ignis_media::ffmpeg_available() {
             println!("skipped: ffmpeg is not on PATH (needed for campfire.mp4)");
             return;
         }
