@@ -755,7 +755,6 @@ fn preprocess(a: PreprocessArgs, g: &Global) -> Result<()> {
 /// The Eigenfire section of `ignis demo`: trains a database on two synthetic clips (so
 /// nothing external is needed) and adds its figures to the gallery.
 pub fn demo(ctx: &mut crate::demo::Demo) -> Result<()> {
-    use ignis_eigen::synthetic::{FlameStyle, SyntheticParams};
     ctx.section(
         "Eigenfires I (eigenfires thesis ch. 3-4)",
         "Two synthetic flame clips rendered by Ignis are pre-processed (HSV mask, contours, Hermite background removal, pose normalisation), a PCA gives the Eigenfires, and every frame becomes a vector of weights.",
@@ -785,24 +784,7 @@ pub fn demo(ctx: &mut crate::demo::Demo) -> Result<()> {
             },
         )
     };
-    let clips: Vec<ClipInput> = [
-        ("candle", FlameStyle::Candle),
-        ("campfire", FlameStyle::Campfire),
-    ]
-    .into_iter()
-    .map(|(name, style)| ClipInput {
-        spec: ClipSpec::new(name),
-        source: ClipSource::synthetic(
-            SyntheticParams {
-                size,
-                frames,
-                style,
-                seed: ctx.seed,
-            },
-            30.0,
-        ),
-    })
-    .collect();
+    let clips = ignis_eigen::train::synthetic_clips(size, frames, ctx.seed);
     let mut pre = PreprocessParams::with_sizes(
         Size {
             width: train.width * 2,

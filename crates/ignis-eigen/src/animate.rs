@@ -272,30 +272,12 @@ pub fn synth(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::synthetic::{FlameStyle, SyntheticParams};
-    use crate::train::{train, ClipInput, ClipSource, ClipSpec, NoProgress, TrainParams};
+    use crate::train::{synthetic_clips, train, NoProgress, TrainParams};
     use crate::PreprocessParams;
     use ignis_core::Size;
 
     fn tiny_db(dir: &std::path::Path, store_frames: bool) -> EigenfireDb {
-        let clips: Vec<ClipInput> = [
-            ("candle", FlameStyle::Candle),
-            ("campfire", FlameStyle::Campfire),
-        ]
-        .into_iter()
-        .map(|(name, style)| ClipInput {
-            spec: ClipSpec::new(name),
-            source: ClipSource::synthetic(
-                SyntheticParams {
-                    size: Size::new(48, 64).unwrap(),
-                    frames: 30,
-                    style,
-                    seed: 7,
-                },
-                30.0,
-            ),
-        })
-        .collect();
+        let clips = synthetic_clips(Size::new(48, 64).unwrap(), 30, 7);
         let mut pre = PreprocessParams::with_sizes(
             Size::new(40, 64).unwrap(),
             Some(Size::new(20, 32).unwrap()),

@@ -239,6 +239,29 @@ pub struct ClipInput<'a> {
     pub source: ClipSource<'a>,
 }
 
+/// The two built-in synthetic clips, `candle` and `campfire` (30 fps), that the demo and
+/// tests train on so they need no footage.
+pub fn synthetic_clips(size: Size, frames: usize, seed: u64) -> Vec<ClipInput<'static>> {
+    [
+        ("candle", FlameStyle::Candle),
+        ("campfire", FlameStyle::Campfire),
+    ]
+    .into_iter()
+    .map(|(name, style)| ClipInput {
+        spec: ClipSpec::new(name),
+        source: ClipSource::synthetic(
+            SyntheticParams {
+                size,
+                frames,
+                style,
+                seed,
+            },
+            30.0,
+        ),
+    })
+    .collect()
+}
+
 struct Planned {
     start: usize,
     end: usize,
