@@ -25,6 +25,17 @@ pub struct Section {
 }
 
 /// The demo run: where to write, and the gallery so far.
+/// `../shared/data/<name>` (relative to the working directory or to the source tree),
+/// when present.
+pub fn shared_data(name: &str) -> Option<PathBuf> {
+    [
+        PathBuf::from("../shared/data").join(name),
+        PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/data")).join(name),
+    ]
+    .into_iter()
+    .find(|p| p.is_file())
+}
+
 pub struct Demo {
     pub dir: PathBuf,
     pub global: Global,

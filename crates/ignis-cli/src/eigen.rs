@@ -50,6 +50,16 @@ pub enum Command {
         after_help = "Examples:\n  ignis eigen synth fire.db --weights 2=12000,3=-5000 -o flame.png\n  ignis eigen synth fire.db --weights 0=1.5 --from candle:120 --eigenfires 50 -o flame.png\n\nIndices are 0-based Eigenfire numbers; the command prints each edited weight's spread in the database for scale."
     )]
     Synth(SynthArgs),
+    /// Render a scenario (§5.1): named motions (clip ranges) in order, joined by
+    /// transitions, coloured (original Algorithm 2, synthetic, palette or grey) with bloom,
+    /// smoke and custom masks; prints a table per join (method, steps, seam ratio).
+    #[command(
+        after_help = "Examples:\n  ignis eigen scenario fire.db > scene.toml\n  ignis eigen animate scene.toml -o fire.mp4\n  ignis eigen animate scene.toml -o fire.png --columns 8\n  ignis eigen animate scene.toml --dry-run -o x.gif\n\nThe seam ratio is the largest step of the joined sequence over the footage's median step:\n1.0 is as smooth as the footage; a plain cut between different flames is typically 3 or more."
+    )]
+    Animate(crate::animate::AnimateArgs),
+    /// Print a commented example scenario for a database (every clip as two motions).
+    #[command(after_help = "Example:\n  ignis eigen scenario fire.db > scene.toml")]
+    Scenario(crate::animate::ScenarioArgs),
 }
 
 fn parse_range(s: &str) -> std::result::Result<std::ops::Range<usize>, String> {
@@ -98,6 +108,10 @@ pub struct LoopArgs {
     /// E for rendering reconstructed frames (default: the database's E for rendering).
     #[arg(long)]
     pub eigenfires: Option<usize>,
+    /// Let the loop's first and last frames move inwards by up to N training frames each,
+    /// to start and end where the footage is calm (0 = exactly the range).
+    #[arg(long, default_value_t = 8)]
+    pub search: usize,
     /// Colour ramp: a preset or a gradient PNG (left = cold, right = hot).
     #[arg(long, default_value = "candle")]
     pub palette: crate::output::PaletteArg,
@@ -263,6 +277,8 @@ pub fn run(cmd: Command, g: &Global) -> Result<()> {
         Command::Preprocess(a) => preprocess(a, g),
         Command::Loop(a) => loop_cmd(&a, g).map(|_| ()),
         Command::Synth(a) => synth_cmd(&a, g).map(|_| ()),
+        Command::Animate(a) => crate::animate::animate_cmd(&a, g).map(|_| ()),
+        Command::Scenario(a) => crate::animate::scenario_cmd(&a),
     }
 }
 
@@ -352,7 +368,7 @@ fn read_preprocess(config: Option<&Path>) -> Result<PreprocessParams> {
     }
 }
 
-fn train(a: TrainArgs, g: &Global) -> Result<()> {
+pub fn train(a: TrainArgs, g: &Global) -> Result<()> {
     let is_toml = a.inputs.len() == 1 && a.inputs[0].extension().is_some_and(|e| e == "toml");
     let (specs, mut pre, mut tp) = if is_toml {
         let p = &a.inputs[0];
@@ -631,13 +647,15 @@ fn loop_cmd(a: &LoopArgs, g: &Global) -> Result<ignis_eigen::transition::Join> {
     let rows = animate::clip_rows(&db, &a.clip, a.range.clone())
         .with_context(|| format!("clip `{}` range {}..{}", a.clip, a.range.start, a.range.end))?;
     let sp = g.spinner("finding the transition");
-    let (frames, join) = animate::render_loop(&db, &a.clip, a.range.clone(), method, e)
-        .with_context(|| {
-            format!(
-                "looping clip `{}` frames {}..{} with {}",
-                a.clip, a.range.start, a.range.end, a.method
-            )
-        })?;
+    let (frames, join, used) =
+        animate::render_loop(&db, &a.clip, a.range.clone(), method, e, a.search).with_context(
+            || {
+                format!(
+                    "looping clip `{}` frames {}..{} with {}",
+                    a.clip, a.range.start, a.range.end, a.method
+                )
+            },
+        )?;
     sp.finish_and_clear();
     let plain = animate::plain_cut_ratio(&db, rows.clone())?;
     let size = frames[0].size();
@@ -659,6 +677,12 @@ fn loop_cmd(a: &LoopArgs, g: &Global) -> Result<ignis_eigen::transition::Join> {
         join.seam_ratio,
         plain,
     ));
+    if used != a.range {
+        g.say(format!(
+            "loop points moved to {}..{} (--search {}; --search 0 keeps {}..{})",
+            used.start, used.end, a.search, a.range.start, a.range.end
+        ));
+    }
     g.say(format!("why: {}", join.why));
     Ok(join)
 }
@@ -883,5 +907,5 @@ pub fn demo(ctx: &mut crate::demo::Demo) -> Result<()> {
         "A new flame (§5.2): the mean flame with Eigenfire 0's weight set to 1.5 × its largest value in the database",
         &format!("ignis eigen synth fire.db --weights {wts} --palette candle -o synth.png"),
     );
-    Ok(())
+    crate::animate::demo(ctx, &dbp)
 }

@@ -493,20 +493,6 @@ pub fn bench(_g: &Global, quick: bool) -> Result<serde_json::Value> {
     Ok(ignis_learned::bench::figures(quick)?)
 }
 
-/// Finds `candle.mp4` in `../shared/data` (relative to the working directory or to the
-/// source tree).
-fn candle_path() -> Option<PathBuf> {
-    [
-        PathBuf::from("../shared/data/candle.mp4"),
-        PathBuf::from(concat!(
-            env!("CARGO_MANIFEST_DIR"),
-            "/../../../shared/data/candle.mp4"
-        )),
-    ]
-    .into_iter()
-    .find(|p| p.is_file())
-}
-
 /// The demo section: a model trained on a flame Ignis renders itself (and on candle.mp4
 /// when `../shared/data` is present), then new flames with wind and height controls.
 pub fn demo(ctx: &mut crate::demo::Demo) -> Result<()> {
@@ -554,7 +540,7 @@ pub fn demo(ctx: &mut crate::demo::Demo) -> Result<()> {
         None::<&str>,
     )];
     if !quick {
-        if let Some(c) = candle_path() {
+        if let Some(c) = crate::demo::shared_data("candle.mp4") {
             sources.push((
                 "candle",
                 "../shared/data/candle.mp4".into(),

@@ -3,6 +3,7 @@
 //! A thin layer over the library crates: argument parsing, progress bars and error
 //! reporting live here; every capability is a library call.
 
+mod animate;
 mod classic;
 mod convert;
 mod demo;
@@ -76,15 +77,19 @@ struct DemoArgs {
 
 #[derive(clap::Args, Debug)]
 #[command(
-    after_help = "Examples:\n  ignis bench classic\n  ignis bench classic --quick\n  ignis bench eigen-train\n  ignis bench learned\n  ignis bench volume"
+    after_help = "Examples:\n  ignis bench classic\n  ignis bench classic --quick\n  ignis bench eigen-train\n  ignis bench eigen-animate --keep-db /tmp/bench.db\n  ignis bench learned\n  ignis bench volume"
 )]
 struct BenchArgs {
     /// What to measure.
-    #[arg(value_parser = ["classic", "eigen-train", "learned", "volume"])]
+    #[arg(value_parser = ["classic", "eigen-train", "eigen-animate", "learned", "volume"])]
     target: String,
     /// Fewer repetitions (a smoke test; figures are noisier).
     #[arg(long)]
     quick: bool,
+    /// eigen-animate: keep the trained benchmark database in this directory and reuse it
+    /// on later runs (training 2,197 frames takes about half a minute).
+    #[arg(long, value_name = "DIR")]
+    keep_db: Option<std::path::PathBuf>,
 }
 
 /// Parses a subcommand's arguments from an argv (first element = program name); used
@@ -123,6 +128,12 @@ fn run(cli: Cli) -> Result<()> {
             let v = match a.target.as_str() {
                 "classic" => classic::bench(a.quick)?,
                 "eigen-train" => ignis_pca::bench_figures(a.quick),
+                "eigen-animate" => {
+                    let sp = g.spinner("training the benchmark database, then timing");
+                    let v = ignis_eigen::bench::animate_figures(a.quick, a.keep_db.as_deref())?;
+                    sp.finish_and_clear();
+                    v
+                }
                 "volume" => volume::bench(&g, a.quick)?,
                 "learned" => learned::bench(&g, a.quick)?,
                 other => anyhow::bail!("unknown bench target `{other}`"),

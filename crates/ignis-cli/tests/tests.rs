@@ -326,6 +326,152 @@ mod convert {
     }
 }
 
+mod eigen {
+    use super::*;
+
+    /// A small database trained by the CLI from Ignis's synthetic clips (no footage).
+    fn train_db(dir: &Path) -> PathBuf {
+        let cfg = dir.join("clips.toml");
+        std::fs::write(
+            &cfg,
+            "[[clip]]\nname = \"candle\"\nsynthetic = \"candle\"\nend = 40\n\n[[clip]]\nname = \"campfire\"\nsynthetic = \"campfire\"\nend = 40\n\n[preprocess]\ntrain_size = \"24x32\"\npose_samples = 6\n[preprocess.pose]\nframe_size = \"48x64\"\n\n[train]\nstore_frames = true\npack_size = 16\n",
+        )
+        .unwrap();
+        let db = dir.join("fire.db");
+        let o = ignis(&[
+            "eigen",
+            "train",
+            cfg.to_str().unwrap(),
+            "-q",
+            "-o",
+            db.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        db
+    }
+
+    #[test]
+    fn loop_synth_scenario_and_animate() {
+        let t = tempfile::tempdir().unwrap();
+        let db = train_db(t.path());
+        let dbs = db.to_str().unwrap();
+        // A loop as a GIF and as a flipbook.
+        let gif = t.path().join("loop.gif");
+        let o = ignis(&[
+            "eigen",
+            "loop",
+            dbs,
+            "--clip",
+            "candle",
+            "--range",
+            "2..36",
+            "-o",
+            gif.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        assert!(String::from_utf8_lossy(&o.stdout).contains("seam ratio"));
+        assert!(gif.exists());
+        let fb = t.path().join("loop.png");
+        let o = ignis(&[
+            "eigen",
+            "loop",
+            dbs,
+            "--clip",
+            "campfire",
+            "--range",
+            "0..30",
+            "--method",
+            "low-pass",
+            "--search",
+            "0",
+            "-o",
+            fb.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        assert!(fb.exists() && t.path().join("loop.json").exists());
+        // A synthesised flame, and its bad inputs.
+        let png = t.path().join("flame.png");
+        let o = ignis(&[
+            "eigen",
+            "synth",
+            dbs,
+            "--weights",
+            "0=1.5,1=-0.5",
+            "--from",
+            "candle:10",
+            "-o",
+            png.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        assert!(png.exists());
+        let bad = t.path().join("bad.png");
+        assert_fails(
+            &ignis(&[
+                "eigen",
+                "synth",
+                dbs,
+                "--weights",
+                "0=lots",
+                "-o",
+                bad.to_str().unwrap(),
+            ]),
+            "not a number",
+        );
+        assert_fails(
+            &ignis(&[
+                "eigen",
+                "synth",
+                dbs,
+                "--weights",
+                "9999=1",
+                "-o",
+                bad.to_str().unwrap(),
+            ]),
+            "index 9999 is out of range",
+        );
+        assert!(!bad.exists());
+        // The scenario template renders as printed.
+        let o = ignis(&["eigen", "scenario", dbs]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let scene = t.path().join("scene.toml");
+        std::fs::write(&scene, &o.stdout).unwrap();
+        let out = t.path().join("anim.png");
+        let o = ignis(&[
+            "eigen",
+            "animate",
+            scene.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let stdout = String::from_utf8_lossy(&o.stdout);
+        assert!(
+            stdout.contains("seam ratio") && stdout.contains("candle-a → candle-b"),
+            "{stdout}"
+        );
+        assert!(out.exists() && t.path().join("anim.json").exists());
+        // A bad scenario names its file and line; nothing is written.
+        let text = std::fs::read_to_string(&scene).unwrap().replacen(
+            "clip = \"campfire\"",
+            "clip = \"torch\"",
+            1,
+        );
+        std::fs::write(&scene, &text).unwrap();
+        let line = text.lines().position(|l| l.contains("\"torch\"")).unwrap() + 1;
+        let out2 = t.path().join("anim2.mp4");
+        let o = ignis(&[
+            "eigen",
+            "animate",
+            scene.to_str().unwrap(),
+            "-o",
+            out2.to_str().unwrap(),
+        ]);
+        assert_fails(&o, &format!("scene.toml:{line}:"));
+        assert_fails(&o, "unknown clip `torch`");
+        assert!(!out2.exists());
+    }
+}
+
 mod demo {
     use super::*;
 
@@ -352,6 +498,10 @@ mod demo {
             &["convert", "--help"],
             &["demo", "--help"],
             &["bench", "--help"],
+            &["eigen", "animate", "--help"],
+            &["eigen", "loop", "--help"],
+            &["eigen", "synth", "--help"],
+            &["eigen", "scenario", "--help"],
         ] {
             let o = ignis(sub);
             assert!(o.status.success());

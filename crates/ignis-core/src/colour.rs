@@ -85,23 +85,52 @@ pub enum Tint {
     Texture(RgbaFrame),
 }
 
-/// Colours `gray` by HLS transfer (§6.1.2 steps 1–4). Alpha is 1 everywhere; use
-/// [`crate::post::alpha_matte`] for a matte.
-pub fn synthetic_colour(gray: &GrayFrame, tint: &Tint) -> Result<RgbaFrame> {
-    let (w, h) = (gray.width() as usize, gray.height() as usize);
-    let mut out = Vec::with_capacity(w * h);
-    match tint {
-        Tint::Solid(c) => {
-            let t = rgb_to_hls(*c);
-            for &v in gray.data() {
-                let [r, g, b] = hls_to_rgb(Hls {
-                    h: t.h,
-                    l: v.clamp(0.0, 1.0),
-                    s: t.s,
-                });
-                out.push([r, g, b, 1.0]);
-            }
+/// HLS → RGB for a fixed hue and saturation, as a function of lightness only.
+///
+/// With h and s fixed, each channel of [`hls_to_rgb`] is linear in l on `[0, ½]` (through
+/// 0 at l = 0) and on `[½, 1]` (through 1 at l = 1): m1 and m2 are linear in l on each
+/// half, and the hue picks a fixed mix of them. So the channel is exactly the
+/// interpolation between its values at l = 0, ½ and 1, which is what this evaluates —
+/// a multiply-add per channel instead of the branchy general conversion.
+#[derive(Clone, Copy, Debug)]
+struct LightnessRamp {
+    half: [f32; 3],
+}
+
+impl LightnessRamp {
+    fn new(tint: [f32; 3]) -> Self {
+        let t = rgb_to_hls(tint);
+        LightnessRamp {
+            half: hls_to_rgb(Hls {
+                h: t.h,
+                l: 0.5,
+                s: t.s,
+            }),
         }
+    }
+
+    #[inline]
+    fn at(&self, l: f32) -> [f32; 4] {
+        let l = l.clamp(0.0, 1.0);
+        let c = |h: f32| {
+            if l <= 0.5 {
+                2.0 * l * h
+            } else {
+                h + (2.0 * l - 1.0) * (1.0 - h)
+            }
+        };
+        [c(self.half[0]), c(self.half[1]), c(self.half[2]), 1.0]
+    }
+}
+
+/// Colours `gray` by HLS transfer (§6.1.2 steps 1–4). Alpha is 1 everywhere; use
+/// [`crate::post::alpha_matte`] for a matte. Rows are coloured in parallel.
+pub fn synthetic_colour(gray: &GrayFrame, tint: &Tint) -> Result<RgbaFrame> {
+    use rayon::prelude::*;
+    let (w, h) = (gray.width() as usize, gray.height() as usize);
+    // One ramp per row (solid: the same; gradient: by height).
+    let row_ramps: Vec<LightnessRamp> = match tint {
+        Tint::Solid(c) => vec![LightnessRamp::new(*c); h],
         Tint::VerticalGradient(stops) => {
             if stops.is_empty() {
                 return Err(CoreError::bad(
@@ -110,28 +139,21 @@ pub fn synthetic_colour(gray: &GrayFrame, tint: &Tint) -> Result<RgbaFrame> {
                 ));
             }
             let n = stops.len();
-            for y in 0..h {
-                // bottom row = stop 0
-                let pos = if h > 1 {
-                    (h - 1 - y) as f32 / (h - 1) as f32
-                } else {
-                    0.0
-                };
-                let x = pos * (n - 1) as f32;
-                let i = (x.floor() as usize).min(n.saturating_sub(2));
-                let f = if n > 1 { x - i as f32 } else { 0.0 };
-                let (a, b) = (stops[i], stops[(i + 1).min(n - 1)]);
-                let c = [0, 1, 2].map(|k| a[k] + (b[k] - a[k]) * f);
-                let t = rgb_to_hls(c);
-                for &v in gray.row(y as u32) {
-                    let [r, g, b] = hls_to_rgb(Hls {
-                        h: t.h,
-                        l: v.clamp(0.0, 1.0),
-                        s: t.s,
-                    });
-                    out.push([r, g, b, 1.0]);
-                }
-            }
+            (0..h)
+                .map(|y| {
+                    // bottom row = stop 0
+                    let pos = if h > 1 {
+                        (h - 1 - y) as f32 / (h - 1) as f32
+                    } else {
+                        0.0
+                    };
+                    let x = pos * (n - 1) as f32;
+                    let i = (x.floor() as usize).min(n.saturating_sub(2));
+                    let f = if n > 1 { x - i as f32 } else { 0.0 };
+                    let (a, b) = (stops[i], stops[(i + 1).min(n - 1)]);
+                    LightnessRamp::new([0, 1, 2].map(|k| a[k] + (b[k] - a[k]) * f))
+                })
+                .collect()
         }
         Tint::Texture(tex) => {
             if tex.size() != gray.size() {
@@ -141,17 +163,29 @@ pub fn synthetic_colour(gray: &GrayFrame, tint: &Tint) -> Result<RgbaFrame> {
                     gray.size()
                 )));
             }
-            for (&v, p) in gray.data().iter().zip(tex.data()) {
-                let t = rgb_to_hls([p[0], p[1], p[2]]);
-                let [r, g, b] = hls_to_rgb(Hls {
-                    h: t.h,
-                    l: v.clamp(0.0, 1.0),
-                    s: t.s,
-                });
-                out.push([r, g, b, 1.0]);
-            }
+            Vec::new()
         }
-    }
+    };
+    let mut out = vec![[0.0f32; 4]; w * h];
+    out.par_chunks_mut(w.max(1))
+        .enumerate()
+        .for_each(|(y, row)| {
+            let g = &gray.data()[y * w..(y + 1) * w];
+            match tint {
+                Tint::Texture(tex) => {
+                    let t = &tex.data()[y * w..(y + 1) * w];
+                    for ((o, &v), p) in row.iter_mut().zip(g).zip(t) {
+                        *o = LightnessRamp::new([p[0], p[1], p[2]]).at(v);
+                    }
+                }
+                _ => {
+                    let ramp = row_ramps[y];
+                    for (o, &v) in row.iter_mut().zip(g) {
+                        *o = ramp.at(v);
+                    }
+                }
+            }
+        });
     RgbaFrame::from_vec(gray.size(), out)
 }
 
@@ -172,6 +206,32 @@ mod tests {
             let back = hls_to_rgb(rgb_to_hls(c));
             for k in 0..3 {
                 assert!((back[k] - c[k]).abs() < 1e-5, "{c:?} -> {back:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn ramp_equals_the_general_conversion() {
+        for &c in &[
+            [1.0, 0.35, 0.05],
+            [0.2, 0.4, 0.9],
+            [0.5, 0.5, 0.5],
+            [0.0, 1.0, 0.0],
+            [0.9, 0.1, 0.7],
+            [1.0, 0.42, 0.08],
+        ] {
+            let t = rgb_to_hls(c);
+            let ramp = LightnessRamp::new(c);
+            for i in 0..=200 {
+                let l = i as f32 / 200.0;
+                let want = hls_to_rgb(Hls { h: t.h, l, s: t.s });
+                let got = ramp.at(l);
+                for k in 0..3 {
+                    assert!(
+                        (got[k] - want[k]).abs() < 2e-6,
+                        "{c:?} at l = {l}: {got:?} vs {want:?}"
+                    );
+                }
             }
         }
     }

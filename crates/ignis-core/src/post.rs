@@ -7,7 +7,14 @@
 //!
 //! The separable Gaussian is written here rather than taken from `imageproc` because it
 //! works in place on Ignis's linear `f32` frames (no conversion copies), clamps at the
-//! edges, and parallelises over rows with `rayon`; it is about fifty lines.
+//! edges, and parallelises over rows with `rayon`.
+//!
+//! Departure, for speed: the thesis blurs every pass at full resolution. [`bloom`] blurs
+//! passes with σ ≥ 6 px on a reduced copy of the frame ([`approx_gaussian_blur`]: a
+//! `[1 3 3 1]` pyramid, a Gaussian with the variance corrected, bilinear doublings back up
+//! — the usual game-engine bloom). At 410×670 with the default passes this takes the bloom
+//! from ≈ 40 ms to ≈ 1 ms; the result stays within 0.2 % of the exact bloom's peak on
+//! flame-like frames (tested against the full-resolution version).
 
 use crate::error::{CoreError, Result};
 use crate::frame::{GrayFrame, RgbaFrame};
@@ -28,37 +35,16 @@ pub fn gaussian_kernel(sigma: f32) -> Vec<f32> {
 }
 
 /// Gaussian blur of a grey frame with standard deviation `sigma` pixels (edges clamped).
+/// This is the exact reference; [`bloom`] uses [`approx_gaussian_blur`] for large σ.
 pub fn gaussian_blur(src: &GrayFrame, sigma: f32) -> GrayFrame {
     let k = gaussian_kernel(sigma);
     if k.len() == 1 {
         return src.clone();
     }
-    let r = (k.len() / 2) as isize;
     let (w, h) = (src.width() as usize, src.height() as usize);
     let mut tmp = vec![0.0f32; w * h];
-    // horizontal
-    tmp.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
-        let s = &src.data()[y * w..(y + 1) * w];
-        for (x, o) in row.iter_mut().enumerate() {
-            let mut acc = 0.0;
-            for (j, &kv) in k.iter().enumerate() {
-                let xx = (x as isize + j as isize - r).clamp(0, w as isize - 1) as usize;
-                acc += kv * s[xx];
-            }
-            *o = acc;
-        }
-    });
-    // vertical, row by row so the inner loop runs along contiguous memory
     let mut out = vec![0.0f32; w * h];
-    out.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
-        for (j, &kv) in k.iter().enumerate() {
-            let yy = (y as isize + j as isize - r).clamp(0, h as isize - 1) as usize;
-            let s = &tmp[yy * w..(yy + 1) * w];
-            for (o, &v) in row.iter_mut().zip(s) {
-                *o += kv * v;
-            }
-        }
-    });
+    blur_plane(src.data(), w, h, &k, &mut tmp, &mut out);
     GrayFrame::from_vec(src.size(), out).expect("same size")
 }
 
@@ -114,38 +100,392 @@ impl BloomParams {
 
 /// The bloom of a grey frame: steps 1–5 of §6.2 (colourise it afterwards with
 /// [`crate::colour::synthetic_colour`] or a palette — step 6).
+///
+/// Each pass's blur is [`approx_gaussian_blur`]: exact for σ < 6 px, computed at reduced
+/// resolution for larger σ (see that function for the tolerance). Passes that share a
+/// reduction level share its pyramid and upsampling. The result is the same whatever the
+/// rayon thread count.
 pub fn bloom(src: &GrayFrame, p: &BloomParams) -> Result<GrayFrame> {
     p.validate()?;
-    let mut dest = src.clone();
-    let mut sigma = p.radius;
-    for _ in 0..p.passes {
-        let blurred = gaussian_blur(src, sigma);
-        for (d, &b) in dest.data_mut().iter_mut().zip(blurred.data()) {
-            *d += p.strength * b;
-        }
-        sigma *= p.radius_falloff;
-    }
-    // lighten blending with the source
-    for (d, &s) in dest.data_mut().iter_mut().zip(src.data()) {
-        *d = d.max(s);
-    }
-    Ok(dest)
+    let (w, h) = (src.width() as usize, src.height() as usize);
+    let out = bloom_plane(src.data(), w, h, p);
+    GrayFrame::from_vec(src.size(), out)
 }
 
 /// Bloom on each channel of an RGBA frame (alpha kept), for colour sources such as the
-/// volume renderer's HDR output.
+/// volume renderer's HDR output. Same blur and tolerance as [`bloom`].
 pub fn bloom_rgba(src: &RgbaFrame, p: &BloomParams) -> Result<RgbaFrame> {
     p.validate()?;
-    let size = src.size();
+    let (w, h) = (src.width() as usize, src.height() as usize);
+    let planes: Vec<Vec<f32>> = (0..3)
+        .into_par_iter()
+        .map(|c| {
+            let ch: Vec<f32> = src.data().iter().map(|px| px[c]).collect();
+            bloom_plane(&ch, w, h, p)
+        })
+        .collect();
     let mut out = src.clone();
-    for c in 0..3 {
-        let ch = GrayFrame::from_vec(size, src.data().iter().map(|px| px[c]).collect())?;
-        let b = bloom(&ch, p)?;
-        for (o, &v) in out.data_mut().iter_mut().zip(b.data()) {
-            o[c] = v;
+    out.data_mut()
+        .par_chunks_mut(w)
+        .enumerate()
+        .for_each(|(y, row)| {
+            let rs = y * w..(y + 1) * w;
+            let (r, g, b) = (
+                &planes[0][rs.clone()],
+                &planes[1][rs.clone()],
+                &planes[2][rs],
+            );
+            for (i, o) in row.iter_mut().enumerate() {
+                o[0] = r[i];
+                o[1] = g[i];
+                o[2] = b[i];
+            }
+        });
+    Ok(out)
+}
+
+/// Smallest σ, in pixels of the reduced level, at which a pass is blurred at reduced
+/// resolution (so σ ≥ 6 full-resolution pixels for the first halving). At 3 px the
+/// result is within ≈ 1 % of the exact Gaussian's peak on a one-pixel impulse and within
+/// 0.4 % on flame-sized shapes (tests `approx_blur_is_within_tolerance_of_exact`).
+const MIN_LEVEL_SIGMA: f32 = 3.0;
+/// Deepest reduction: 2⁴ = 16×.
+const MAX_LEVEL: u32 = 4;
+
+/// The reduction level (factor `2^level`) for a blur of `sigma` pixels on a `w`×`h` frame.
+fn blur_level(sigma: f32, w: usize, h: usize) -> u32 {
+    let mut level = 0;
+    while level < MAX_LEVEL
+        && sigma >= MIN_LEVEL_SIGMA * (2u32 << level) as f32
+        && w.div_ceil(2 << level) >= 4
+        && h.div_ceil(2 << level) >= 4
+    {
+        level += 1;
+    }
+    level
+}
+
+/// σ, in reduced pixels, to use at reduction factor `k` so that the `log₂k` halvings
+/// ([`downsample2`], variance `(k²−1)/4` full-resolution pixels² together), the blur
+/// (`k²σ_l²`) and the `log₂k` doublings ([`upsample2_add`], `(k²−1)/4`) add up to the
+/// variance `σ²` of the requested full-resolution Gaussian.
+fn level_sigma(sigma: f32, k: f32) -> f32 {
+    let var = sigma * sigma - (k * k - 1.0) / 2.0;
+    var.max(0.0).sqrt() / k
+}
+
+/// A Gaussian blur of standard deviation `sigma` pixels (edges clamped) that is fast for
+/// large σ, the "fast path" used by [`bloom`]; [`gaussian_blur`] stays the exact
+/// reference.
+///
+/// For σ < 6 (or a frame too small to reduce) it is exact: the same sums in the same
+/// order as [`gaussian_blur`]. For larger σ the frame is halved `L` times with the
+/// `[1 3 3 1]/8` filter ([`downsample2`]) to the coarsest level `k = 2^L ≤ 16` that
+/// leaves σ/k ≥ 3 px, blurred there with σ reduced by [`level_sigma`] (the halvings and
+/// doublings widen the result; the total variance stays σ²), and brought back with `L`
+/// bilinear doublings ([`upsample2_add`]). Clamp-to-edge is reproduced exactly at every
+/// level (padding, see [`downsample2`]). The filters are position-independent up to
+/// their third moment, so the difference from the exact Gaussian is smooth, not a
+/// ripple: measured at most 0.91 % of the exact result's peak on a one-pixel impulse
+/// (σ = 6…24) and 0.31 % on a 203×331 flame shape (σ = 6…48); the tests bound these at
+/// 1.2 % and 0.4 %.
+pub fn approx_gaussian_blur(src: &GrayFrame, sigma: f32) -> GrayFrame {
+    let (w, h) = (src.width() as usize, src.height() as usize);
+    let mut out = vec![0.0f32; w * h];
+    let p = BloomParams {
+        passes: 1,
+        radius: sigma,
+        radius_falloff: 1.0,
+        strength: 1.0,
+    };
+    accumulate_blurs(src.data(), w, h, &p, &mut out, false);
+    GrayFrame::from_vec(src.size(), out).expect("same size")
+}
+
+/// Bloom of one `w`×`h` plane: `max(src + strength·Σ blur_σᵢ(src), src)`.
+fn bloom_plane(src: &[f32], w: usize, h: usize, p: &BloomParams) -> Vec<f32> {
+    let mut out = src.to_vec();
+    accumulate_blurs(src, w, h, p, &mut out, true);
+    out
+}
+
+/// Padding, in samples, on every side of a reduced level (full resolution has none).
+const PAD: usize = 2;
+
+/// A plane of `w`×`h` values, row-major; reduced levels include [`PAD`] samples of
+/// padding on every side.
+struct Plane {
+    w: usize,
+    h: usize,
+    data: Vec<f32>,
+}
+
+/// A borrowed [`Plane`] (or the full-resolution source).
+#[derive(Clone, Copy)]
+struct PlaneRef<'a> {
+    w: usize,
+    h: usize,
+    data: &'a [f32],
+}
+
+impl Plane {
+    fn as_ref(&self) -> PlaneRef<'_> {
+        PlaneRef {
+            w: self.w,
+            h: self.h,
+            data: &self.data,
         }
     }
-    Ok(out)
+}
+
+/// Halves the resolution with the separable `[1 3 3 1]/8` filter: sample `q` of the new
+/// level averages samples `2q−1 … 2q+2` of `src` (whose first `src_pad` rows and columns
+/// are padding), clamped to `src`'s edges. The new level has `⌈n/2⌉` samples per axis
+/// (`n` = unpadded size of `src`) plus [`PAD`] on each side.
+///
+/// The filter is the transpose of the `(3/4, 1/4)` bilinear doubling of
+/// [`upsample2_add`]: it keeps the centroid of every input pixel (a box filter would snap
+/// it to the block centre, an error of up to `k/2` pixels) and widens every pixel by the
+/// same variance `3m²/4` (full-resolution pixels², `m` = spacing of `src`).
+///
+/// Edges: by induction the outermost padding sample of each level equals the level's
+/// clamped extension far outside, so clamping at the padded plane's edge reproduces the
+/// full-resolution clamp-to-edge exactly (two samples of padding are what the 4-tap
+/// filter needs for that).
+fn downsample2(src: PlaneRef<'_>, src_pad: usize, n: (usize, usize)) -> Plane {
+    let (dw, dh) = (n.0.div_ceil(2) + 2 * PAD, n.1.div_ceil(2) + 2 * PAD);
+    // source sample 2q−1 of new unpadded sample q = Q − PAD, in padded source indices
+    let first = |big_q: usize| (2 * big_q + src_pad) as isize - 2 * PAD as isize - 1;
+    let mut data = vec![0.0f32; dw * dh];
+    // margin on each side of the column-filtered row so every tap is in range
+    const M: usize = 2 * PAD + 2;
+    data.par_chunks_mut(dw)
+        .with_min_len(min_rows(dw))
+        .enumerate()
+        .for_each_init(
+            || vec![0.0f32; src.w + 2 * M],
+            |ext, (big_q, row)| {
+                let r0 = first(big_q);
+                let rows = [0, 1, 2, 3].map(|t| {
+                    let y = (r0 + t).clamp(0, src.h as isize - 1) as usize;
+                    &src.data[y * src.w..(y + 1) * src.w]
+                });
+                let mid = &mut ext[M..M + src.w];
+                for (i, e) in mid.iter_mut().enumerate() {
+                    *e = (rows[0][i] + rows[3][i]) + 3.0 * (rows[1][i] + rows[2][i]);
+                }
+                let (lo, hi) = (ext[M], ext[M + src.w - 1]);
+                ext[..M].fill(lo);
+                ext[M + src.w..].fill(hi);
+                // output c takes ext[c0 + 2c .. c0 + 2c + 4]: two consecutive pairs
+                let c0 = (first(0) + M as isize) as usize;
+                let pairs = ext[c0..].chunks_exact(2);
+                debug_assert!(pairs.len() > row.len());
+                for ((o, ab), cd) in row.iter_mut().zip(pairs.clone()).zip(pairs.skip(1)) {
+                    *o = ((ab[0] + cd[1]) + 3.0 * (ab[1] + cd[0])) * (1.0 / 64.0);
+                }
+            },
+        );
+    Plane { w: dw, h: dh, data }
+}
+
+/// Exact separable Gaussian (kernel `k`, edges clamped) of `src` into `out`, using `tmp`
+/// (all `w·h` long). Sums run over the taps in kernel order, as in [`gaussian_blur`].
+fn blur_plane(src: &[f32], w: usize, h: usize, k: &[f32], tmp: &mut [f32], out: &mut [f32]) {
+    let r = k.len() / 2;
+    // horizontal: each row padded with its edge values, then tap-by-tap over the row so
+    // the inner loop is a contiguous multiply-add
+    tmp.par_chunks_mut(w).zip(src.par_chunks(w)).for_each_init(
+        || vec![0.0f32; w + 2 * r],
+        |pad, (o, s)| {
+            pad[..r].fill(s[0]);
+            pad[r..r + w].copy_from_slice(s);
+            pad[r + w..].fill(s[w - 1]);
+            o.fill(0.0);
+            for (j, &kv) in k.iter().enumerate() {
+                for (ov, &pv) in o.iter_mut().zip(&pad[j..j + w]) {
+                    *ov += kv * pv;
+                }
+            }
+        },
+    );
+    // vertical, row by row so the inner loop runs along contiguous memory
+    let tmp = &*tmp;
+    out.par_chunks_mut(w)
+        .with_min_len(min_rows(w))
+        .enumerate()
+        .for_each(|(y, row)| {
+            row.fill(0.0);
+            for (j, &kv) in k.iter().enumerate() {
+                let yy = (y + j).saturating_sub(r).min(h - 1);
+                for (o, &v) in row.iter_mut().zip(&tmp[yy * w..(yy + 1) * w]) {
+                    *o += kv * v;
+                }
+            }
+        });
+}
+
+/// Doubles the resolution of a reduced level (padded by [`PAD`]) by bilinear
+/// interpolation and adds the result to `dst` (`dst_w` wide): the next finer reduced
+/// level with its padding (`dst_pad = PAD`) or full resolution (`dst_pad = 0`).
+///
+/// Sample `i` of the finer level sits at `i/2 − 1/4` on the coarser grid, so the weights
+/// are always `(3/4, 1/4)` or `(1/4, 3/4)`: every output is widened by the same variance
+/// `3m²/4` (full-resolution pixels², `m` = spacing of the finer level). A direct
+/// `k×` bilinear upsampling would instead widen by `k²f(1−f)`, a ripple with period `k`.
+fn upsample2_add(
+    src: &Plane,
+    dst: &mut [f32],
+    dst_w: usize,
+    dst_pad: usize,
+    lighten: Option<&[f32]>,
+) {
+    // With I' = (unpadded index) + PAD on both grids, finer sample I' = 2q takes
+    // ¼·s[q] + ¾·s[q+1] and I' = 2q+1 takes ¾·s[q+1] + ¼·s[q+2] (padded coarse indices).
+    let off = PAD - dst_pad;
+    dst.par_chunks_mut(dst_w)
+        .with_min_len(min_rows(dst_w))
+        .enumerate()
+        .for_each_init(
+            || vec![0.0f32; src.w],
+            |line, (r, row)| {
+                let i = r + off;
+                let odd = i & 1;
+                let j = i / 2 + odd;
+                let (wa, wb) = if odd == 0 { (0.25, 0.75) } else { (0.75, 0.25) };
+                let a = &src.data[j * src.w..(j + 1) * src.w];
+                let b = &src.data[(j + 1) * src.w..(j + 2) * src.w];
+                for ((l, &av), &bv) in line.iter_mut().zip(a).zip(b) {
+                    *l = wa * av + wb * bv;
+                }
+                let l = &line[off / 2..];
+                let n2 = row.len() / 2 * 2;
+                let (head, tail) = row.split_at_mut(n2);
+                debug_assert!(l.len() >= n2 / 2 + 2);
+                for (o, t) in head.chunks_exact_mut(2).zip(l.windows(3)) {
+                    o[0] += 0.25 * t[0] + 0.75 * t[1];
+                    o[1] += 0.75 * t[1] + 0.25 * t[2];
+                }
+                if let Some(o) = tail.first_mut() {
+                    let q = n2 / 2;
+                    *o += 0.25 * l[q] + 0.75 * l[q + 1];
+                }
+                if let Some(src) = lighten {
+                    for (o, &s) in row.iter_mut().zip(&src[r * dst_w..(r + 1) * dst_w]) {
+                        *o = o.max(s);
+                    }
+                }
+            },
+        );
+}
+
+/// Rows per rayon task for planes `w` wide: at least ~16 K values, so the small reduced
+/// levels run as one task instead of paying for thread wake-ups.
+fn min_rows(w: usize) -> usize {
+    (16_384 / w.max(1)).max(1)
+}
+
+/// Adds `strength ×` the blur of `src` for every pass of `p` to `out`; with `lighten`,
+/// finishes with `out = max(out, src)` (§6.2 step 5).
+///
+/// Passes at reduction level `L > 0` are blurred on [`reduce`]d planes, then summed from
+/// the deepest level upwards: the running sum is doubled in resolution with
+/// [`upsample2_add`] and the passes of the next level are added, until one last doubling
+/// adds everything to `out` (the classic game-engine bloom chain). A pass at level `L`
+/// is thus widened by the box (`(k²−1)/12`) and `L` doublings (`(k²−1)/4` together);
+/// [`level_sigma`] removes both from its σ. Every value is computed by the same
+/// operations whatever the row split, so the result does not depend on rayon's threads.
+fn accumulate_blurs(
+    src: &[f32],
+    w: usize,
+    h: usize,
+    p: &BloomParams,
+    out: &mut [f32],
+    lighten: bool,
+) {
+    // The σ of every pass and the reduction level each needs.
+    let mut sigmas = Vec::with_capacity(p.passes as usize);
+    let mut sigma = p.radius;
+    for _ in 0..p.passes {
+        sigmas.push(sigma);
+        sigma *= p.radius_falloff;
+    }
+    let levels: Vec<u32> = sigmas.iter().map(|&s| blur_level(s, w, h)).collect();
+    let deepest = levels.iter().copied().max().unwrap_or(0) as usize;
+    let mut tmp = Vec::new();
+    let mut blurred = Vec::new();
+    let mut blur = |input: &[f32], pw: usize, ph: usize, sigma: f32, rate: f32, acc: &mut [f32]| {
+        let kernel = gaussian_kernel(sigma);
+        if kernel.len() == 1 {
+            for (a, &v) in acc.iter_mut().zip(input) {
+                *a += rate * v;
+            }
+            return;
+        }
+        tmp.resize(pw * ph, 0.0);
+        blurred.resize(pw * ph, 0.0);
+        blur_plane(input, pw, ph, &kernel, &mut tmp, &mut blurred);
+        for (a, &v) in acc.iter_mut().zip(&blurred) {
+            *a += rate * v;
+        }
+    };
+    // The pyramid, down to the deepest level any pass needs.
+    let mut pyramid: Vec<Plane> = Vec::with_capacity(deepest);
+    let mut n = (w, h);
+    for level in 1..=deepest {
+        let next = match level {
+            1 => downsample2(PlaneRef { w, h, data: src }, 0, n),
+            _ => downsample2(pyramid[level - 2].as_ref(), PAD, n),
+        };
+        n = (n.0.div_ceil(2), n.1.div_ceil(2));
+        pyramid.push(next);
+    }
+    // The chain from the deepest level up to level 1 (`strength` applied per pass).
+    let mut sum: Option<Plane> = None;
+    for level in (1..=deepest).rev() {
+        let k = 1usize << level;
+        let plane = &pyramid[level - 1];
+        let (nw, nh) = (plane.w, plane.h);
+        let mut acc = vec![0.0f32; nw * nh];
+        if let Some(coarse) = &sum {
+            upsample2_add(coarse, &mut acc, nw, PAD, None);
+        }
+        for (&s, _) in sigmas
+            .iter()
+            .zip(&levels)
+            .filter(|(_, &l)| l as usize == level)
+        {
+            blur(
+                &plane.data,
+                nw,
+                nh,
+                level_sigma(s, k as f32),
+                p.strength,
+                &mut acc,
+            );
+        }
+        sum = Some(Plane {
+            w: nw,
+            h: nh,
+            data: acc,
+        });
+    }
+    // Full resolution: the passes too small to reduce, exactly, then the chain.
+    for (&s, _) in sigmas.iter().zip(&levels).filter(|(_, &l)| l == 0) {
+        blur(src, w, h, s, p.strength, out);
+    }
+    let lighten = lighten.then_some(src);
+    match &sum {
+        Some(coarse) => upsample2_add(coarse, out, w, 0, lighten),
+        None => {
+            if let Some(src) = lighten {
+                out.par_chunks_mut(w)
+                    .zip(src.par_chunks(w))
+                    .with_min_len(min_rows(w))
+                    .for_each(|(o, s)| o.iter_mut().zip(s).for_each(|(o, &s)| *o = o.max(s)));
+            }
+        }
+    }
 }
 
 /// The alpha matte of §6.2: `clamp(bloom + source, 0, 1)`.
@@ -226,5 +566,193 @@ mod tests {
         let m = alpha_matte(&s, &b).unwrap();
         assert!(m.data().iter().all(|&v| (0.0..=1.0).contains(&v)));
         assert_eq!(m.get(20, 15), 1.0);
+    }
+
+    /// The first implementation of [`gaussian_blur`] (per-tap clamped indices), kept to
+    /// show the vectorised one computes the same sums in the same order.
+    fn reference_gaussian_blur(src: &GrayFrame, sigma: f32) -> GrayFrame {
+        let k = gaussian_kernel(sigma);
+        if k.len() == 1 {
+            return src.clone();
+        }
+        let r = (k.len() / 2) as isize;
+        let (w, h) = (src.width() as usize, src.height() as usize);
+        let mut tmp = vec![0.0f32; w * h];
+        // horizontal
+        tmp.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
+            let s = &src.data()[y * w..(y + 1) * w];
+            for (x, o) in row.iter_mut().enumerate() {
+                let mut acc = 0.0;
+                for (j, &kv) in k.iter().enumerate() {
+                    let xx = (x as isize + j as isize - r).clamp(0, w as isize - 1) as usize;
+                    acc += kv * s[xx];
+                }
+                *o = acc;
+            }
+        });
+        // vertical, row by row so the inner loop runs along contiguous memory
+        let mut out = vec![0.0f32; w * h];
+        out.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
+            for (j, &kv) in k.iter().enumerate() {
+                let yy = (y as isize + j as isize - r).clamp(0, h as isize - 1) as usize;
+                let s = &tmp[yy * w..(yy + 1) * w];
+                for (o, &v) in row.iter_mut().zip(s) {
+                    *o += kv * v;
+                }
+            }
+        });
+        GrayFrame::from_vec(src.size(), out).expect("same size")
+    }
+
+    #[test]
+    fn gaussian_blur_is_bit_identical_to_the_reference() {
+        let f = flame(57, 83);
+        for sigma in [0.0, 0.4, 1.0, 2.5, 7.0, 30.0] {
+            assert_eq!(
+                gaussian_blur(&f, sigma),
+                reference_gaussian_blur(&f, sigma),
+                "σ {sigma}"
+            );
+        }
+        let thin = GrayFrame::from_fn(Size::new(1, 9).unwrap(), |_, y| y as f32);
+        assert_eq!(
+            gaussian_blur(&thin, 3.0),
+            reference_gaussian_blur(&thin, 3.0)
+        );
+    }
+
+    /// The bloom as §6.2 prints it, with the exact [`gaussian_blur`] for every pass.
+    fn reference_bloom(src: &GrayFrame, p: &BloomParams) -> GrayFrame {
+        let mut dest = src.clone();
+        let mut sigma = p.radius;
+        for _ in 0..p.passes {
+            let blurred = gaussian_blur(src, sigma);
+            for (d, &b) in dest.data_mut().iter_mut().zip(blurred.data()) {
+                *d += p.strength * b;
+            }
+            sigma *= p.radius_falloff;
+        }
+        for (d, &s) in dest.data_mut().iter_mut().zip(src.data()) {
+            *d = d.max(s);
+        }
+        dest
+    }
+
+    /// A flame-like test frame: a bright teardrop on black with a hard-edged hot core,
+    /// sizes chosen odd so the reductions clamp a last row and column.
+    fn flame(w: u32, h: u32) -> GrayFrame {
+        GrayFrame::from_fn(Size::new(w, h).unwrap(), |x, y| {
+            let u = (x as f32 + 0.5) / w as f32 - 0.5;
+            let v = 1.0 - (y as f32 + 0.5) / h as f32;
+            let half = 0.3 * (1.0 - v).max(0.0) * (v * 5.0).min(1.0);
+            let body = (1.0 - u.abs() / half.max(1e-3)).clamp(0.0, 1.0);
+            if body > 0.6 {
+                1.0
+            } else {
+                body
+            }
+        })
+    }
+
+    fn max_abs_diff(a: &GrayFrame, b: &GrayFrame) -> f32 {
+        a.data()
+            .iter()
+            .zip(b.data())
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0, f32::max)
+    }
+
+    #[test]
+    fn approx_blur_is_exact_below_six_pixels() {
+        let f = flame(57, 83);
+        for sigma in [0.0, 1.0, 2.5, 5.9] {
+            assert_eq!(
+                approx_gaussian_blur(&f, sigma),
+                gaussian_blur(&f, sigma),
+                "σ {sigma}"
+            );
+        }
+    }
+
+    #[test]
+    fn approx_blur_is_within_tolerance_of_exact() {
+        let f = flame(203, 331);
+        for sigma in [6.0, 9.0, 12.0, 24.0, 48.0] {
+            let exact = gaussian_blur(&f, sigma);
+            let fast = approx_gaussian_blur(&f, sigma);
+            let err = max_abs_diff(&exact, &fast) / exact.max();
+            assert!(err < 0.004, "σ {sigma}: {err}");
+            assert!((fast.mean() - exact.mean()).abs() < 3e-3 * exact.mean());
+        }
+        // An impulse is the worst case: the reduced levels' non-Gaussian filters show most
+        // on a one-pixel peak.
+        let spot = GrayFrame::from_fn(Size::new(201, 151).unwrap(), |x, y| {
+            if x == 100 && y == 75 {
+                1.0
+            } else {
+                0.0
+            }
+        });
+        for sigma in [6.0, 12.0, 24.0] {
+            let exact = gaussian_blur(&spot, sigma);
+            let fast = approx_gaussian_blur(&spot, sigma);
+            let err = max_abs_diff(&exact, &fast) / exact.max();
+            assert!(err < 0.012, "impulse σ {sigma}: {err}");
+        }
+    }
+
+    #[test]
+    fn fast_bloom_matches_the_exact_bloom() {
+        let f = flame(205, 335);
+        for p in [
+            BloomParams::default(),
+            BloomParams {
+                passes: 5,
+                radius: 40.0,
+                radius_falloff: 0.7,
+                strength: 0.8,
+            },
+        ] {
+            let exact = reference_bloom(&f, &p);
+            let fast = bloom(&f, &p).unwrap();
+            let err = max_abs_diff(&exact, &fast);
+            assert!(err < 0.002 * exact.max(), "{p:?}: {err}");
+        }
+    }
+
+    #[test]
+    fn bloom_is_independent_of_the_thread_count() {
+        let f = flame(131, 97);
+        let rgba = RgbaFrame::from_vec(
+            f.size(),
+            f.data()
+                .iter()
+                .map(|&v| [v, 0.5 * v, 0.1 * v, 0.7])
+                .collect(),
+        )
+        .unwrap();
+        let p = BloomParams {
+            radius: 14.0,
+            ..Default::default()
+        };
+        let run = |threads: usize| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap()
+                .install(|| (bloom(&f, &p).unwrap(), bloom_rgba(&rgba, &p).unwrap()))
+        };
+        let (g1, c1) = run(1);
+        let (g3, c3) = run(3);
+        assert_eq!(g1, g3);
+        assert_eq!(c1, c3);
+        // each colour channel is the grey bloom of that channel; alpha is kept
+        let green =
+            GrayFrame::from_vec(f.size(), rgba.data().iter().map(|p| p[1]).collect()).unwrap();
+        let bg = bloom(&green, &p).unwrap();
+        for (px, &v) in c1.data().iter().zip(bg.data()) {
+            assert_eq!(px[1], v);
+            assert_eq!(px[3], 0.7);
+        }
     }
 }

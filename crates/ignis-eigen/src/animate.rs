@@ -34,20 +34,15 @@ fn from_transition(e: TransitionError) -> EigenError {
     }
 }
 
-/// The weights of `db` as an owned M×k row-major matrix, k, and the clip spans (training
-/// rows), ready for [`WeightSpace::new`].
-pub fn weight_space(db: &EigenfireDb) -> Result<(Vec<f32>, usize, Vec<ClipSpan>)> {
-    let w = db.weights();
-    let (m, k) = (w.nrows(), w.ncols());
+/// The weights of `db` as its M×k row-major matrix (borrowed, no copy), k, and the clip
+/// spans (training rows), ready for [`WeightSpace::new`].
+pub fn weight_space(db: &EigenfireDb) -> Result<(&[f32], usize, Vec<ClipSpan>)> {
+    let (m, k) = (db.n_frames(), db.n_components());
     if m == 0 || k == 0 {
         return Err(EigenError::bad(
             "database",
             format!("has {m} frames and {k} Eigenfires; a loop needs at least one of each"),
         ));
-    }
-    let mut flat = Vec::with_capacity(m * k);
-    for i in 0..m {
-        flat.extend((0..k).map(|j| w[(i, j)]));
     }
     let spans = db
         .clips()
@@ -58,7 +53,7 @@ pub fn weight_space(db: &EigenfireDb) -> Result<(Vec<f32>, usize, Vec<ClipSpan>)
             len: c.frames,
         })
         .collect();
-    Ok((flat, k, spans))
+    Ok((db.weights_row_major(), k, spans))
 }
 
 /// Recognition settings for `db`: its E for detection, everything else default.
@@ -106,7 +101,7 @@ pub fn clip_rows(db: &EigenfireDb, clip: &str, range: Range<usize>) -> Result<Ra
 /// frames): what [`Join::seam_ratio`] is to be compared with.
 pub fn plain_cut_ratio(db: &EigenfireDb, rows: Range<usize>) -> Result<f64> {
     let (w, k, spans) = weight_space(db)?;
-    let space = WeightSpace::new(&w, k, spans).map_err(from_transition)?;
+    let space = WeightSpace::new(w, k, spans).map_err(from_transition)?;
     space.check_range("range", &rows).map_err(from_transition)?;
     let rec = recognition_params(db);
     let e = rec.e_detect(&space);
@@ -130,7 +125,7 @@ pub fn parse_method(s: &str) -> Result<Transition> {
 }
 
 /// Whether every clip of `db` has its pre-processed frames stored (§7.1.2 fast path).
-fn has_stored_frames(db: &EigenfireDb) -> bool {
+pub(crate) fn has_stored_frames(db: &EigenfireDb) -> bool {
     !db.clips().is_empty() && db.clips().iter().all(|c| c.frames_file.is_some())
 }
 
@@ -141,19 +136,25 @@ fn has_stored_frames(db: &EigenfireDb) -> bool {
 /// usable ones). Database frames are the stored pre-processed frames when the database
 /// has them (§7.1.2; every frame is then at the pre-processed size, reconstructions being
 /// resized to it), else reconstructions with `e_render` Eigenfires at the training size.
+///
+/// With `search` > 0 the loop's first and last frames may move inwards by up to `search`
+/// training frames each (see [`best_loop`]); the range actually used is returned.
 pub fn render_loop(
     db: &EigenfireDb,
     clip: &str,
     range: Range<usize>,
     method: Transition,
     e_render: usize,
-) -> Result<(Vec<GrayFrame>, Join)> {
+    search: usize,
+) -> Result<(Vec<GrayFrame>, Join, Range<usize>)> {
     let rows = clip_rows(db, clip, range)?;
     let (w, k, spans) = weight_space(db)?;
-    let space = WeightSpace::new(&w, k, spans).map_err(from_transition)?;
+    let space = WeightSpace::new(w, k, spans).map_err(from_transition)?;
     let rec = recognition_params(db);
-    let join =
-        transition::make_loop(&space, rows.clone(), &method, &rec).map_err(from_transition)?;
+    let (rows, join) = best_loop(&space, rows, search, &method, &rec).map_err(from_transition)?;
+    let c = db.clip(clip)?;
+    let used = c.start + (rows.start - c.first_row) * c.stride
+        ..c.start + (rows.end - c.first_row) * c.stride;
     let e = e_render.clamp(1, db.usable_components().max(1));
     let stored = has_stored_frames(db);
     let size = if stored {
@@ -193,7 +194,64 @@ pub fn render_loop(
             "the loop has no frames left (the transition replaced the whole range); use a longer range",
         ));
     }
-    Ok((out, join))
+    Ok((out, join, used))
+}
+
+/// How many candidate loop points [`best_loop`] joins with the full method.
+const LOOP_CANDIDATES: usize = 6;
+
+/// A loop over `rows` whose first and last frames may each move inwards by up to
+/// `search` frames (0 = exactly `rows`), choosing the loop points like video textures do:
+/// footage is not equally calm everywhere (on `candle.mp4` about a fifth of consecutive
+/// steps exceed 1.5× the median), and the seam ratio counts the footage on both sides of
+/// the seam. Every (start, end) pair is ranked by the plain cut's seam ratio (cheap: no
+/// transition), the best [`LOOP_CANDIDATES`] are joined with `method`, and the join with
+/// the smallest seam ratio wins (ties: the least trimmed). Deterministic.
+pub fn best_loop(
+    space: &WeightSpace,
+    rows: Range<usize>,
+    search: usize,
+    method: &Transition,
+    rec: &RecognitionParams,
+) -> std::result::Result<(Range<usize>, Join), TransitionError> {
+    if search == 0 {
+        return Ok((
+            rows.clone(),
+            transition::make_loop(space, rows, method, rec)?,
+        ));
+    }
+    space.check_range("range", &rows)?;
+    // Keep at least half of the range (and never less than 2 frames).
+    let search = search.min(rows.len().saturating_sub(2) / 4);
+    let e = rec.e_detect(space);
+    let mut cands: Vec<(f64, usize, Range<usize>)> = Vec::new();
+    for a in 0..=search {
+        for b in 0..=search {
+            let r = rows.start + a..rows.end - b;
+            let cost = transition::join_seam(space, &r, &r, &[], (0, 0), e);
+            cands.push((cost, a + b, r));
+        }
+    }
+    cands.sort_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)));
+    let mut best: Option<(Range<usize>, Join, usize)> = None;
+    let mut last_err = None;
+    for (_, trimmed, r) in cands.into_iter().take(LOOP_CANDIDATES) {
+        match transition::make_loop(space, r.clone(), method, rec) {
+            Ok(j) => {
+                let better = best.as_ref().is_none_or(|(_, bj, bt)| {
+                    j.seam_ratio < bj.seam_ratio || (j.seam_ratio == bj.seam_ratio && trimmed < *bt)
+                });
+                if better {
+                    best = Some((r, j, trimmed));
+                }
+            }
+            Err(e) => last_err = Some(e),
+        }
+    }
+    match best {
+        Some((r, j, _)) => Ok((r, j)),
+        None => Err(last_err.expect("at least one candidate was tried")),
+    }
 }
 
 /// Parses weight edits `2=12000,3=-5000` (Eigenfire index = weight; spaces allowed).
@@ -303,7 +361,7 @@ mod tests {
         let plain = plain_cut_ratio(&db, rows.clone()).unwrap();
         for method in ["auto", "direct", "low-pass", "end-growing"] {
             let m = parse_method(method).unwrap();
-            let (frames, join) = match render_loop(&db, "candle", range.clone(), m, 10) {
+            let (frames, join, _) = match render_loop(&db, "candle", range.clone(), m, 10, 0) {
                 Ok(x) => x,
                 // End Growing may legitimately find no path on a tiny database.
                 Err(e) if method == "end-growing" => {
@@ -335,7 +393,9 @@ mod tests {
         // Without stored frames: reconstructions at the training size.
         let dir2 = tempfile::tempdir().unwrap();
         let db2 = tiny_db(dir2.path(), false);
-        let (frames, join) = render_loop(&db2, "campfire", 0..20, Transition::Auto, 5).unwrap();
+        let (frames, join, used) =
+            render_loop(&db2, "campfire", 0..20, Transition::Auto, 5, 0).unwrap();
+        assert_eq!(used, 0..20);
         assert_eq!(
             frames.len(),
             20 - join.trim_t1 - join.trim_t2 + join.frames.len()
@@ -343,7 +403,7 @@ mod tests {
         assert!(frames.iter().all(|f| f.size() == db2.train_size()));
         // Bad ranges and clips.
         for (clip, r) in [("candle", 5..5), ("candle", 40..50), ("nope", 0..10)] {
-            assert!(render_loop(&db, clip, r, Transition::Auto, 5).is_err());
+            assert!(render_loop(&db, clip, r, Transition::Auto, 5, 0).is_err());
         }
         assert!(parse_method("sideways").is_err());
     }

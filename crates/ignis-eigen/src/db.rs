@@ -219,6 +219,14 @@ pub fn temp_dir_for(target: &Path) -> Result<PathBuf> {
     Ok(tmp)
 }
 
+/// Pixels per rayon task in [`EigenfireDb::reconstruct`] (16 KiB of output, in L1).
+const RECON_BLOCK: usize = 4096;
+/// Pixels (rows of the N×B output) per rayon task in [`EigenfireDb::reconstruct_batch`].
+const BATCH_BLOCK: usize = 2048;
+
+/// Packs in use by a reconstruction: (first Eigenfire, how many of them, the pack's data).
+type PackData<'a> = Vec<(usize, usize, std::borrow::Cow<'a, [f32]>)>;
+
 /// A memory-mapped, checked `.npy` file.
 struct Mapped {
     map: Mmap,
@@ -426,6 +434,15 @@ impl EigenfireDb {
         };
         faer::MatRef::from_row_major_slice(s, self.manifest.frames, self.manifest.components)
     }
+    /// All weights as one M×k row-major slice (row `i` = training frame `i`), without a
+    /// copy: what [`crate::transition::WeightSpace::new`] takes.
+    pub fn weights_row_major(&self) -> &[f32] {
+        match (&self.weights_copy, self.weights.f32()) {
+            (Some(v), _) => v,
+            (None, std::borrow::Cow::Borrowed(s)) => s,
+            (None, std::borrow::Cow::Owned(_)) => unreachable!("alignment was checked at open"),
+        }
+    }
     /// Weights of training frame `i` (length k).
     pub fn frame_weights(&self, i: usize) -> Vec<f32> {
         let w = self.weights();
@@ -438,7 +455,7 @@ impl EigenfireDb {
     /// Row of clip `clip`'s source frame `frame`, if that frame was trained on.
     pub fn frame_index(&self, clip: &str, frame: usize) -> Result<usize> {
         let c = self.clip(clip)?;
-        if frame < c.start || frame >= c.end || (frame - c.start) % c.stride != 0 {
+        if frame < c.start || frame >= c.end || !(frame - c.start).is_multiple_of(c.stride) {
             return Err(EigenError::bad(
                 "frame",
                 format!("clip `{clip}` was trained on frames {}..{} every {}; frame {frame} is not one of them", c.start, c.end, c.stride),
@@ -574,16 +591,120 @@ impl EigenfireDb {
     /// Reconstructs a frame from weights with the first `e` Eigenfires, eq. (22):
     /// I = Ψ + Σ_{i<e} ωᵢ uᵢ. `e` is clamped to the weights' length; fails, naming the pack,
     /// if a needed pack is unusable.
+    ///
+    /// Pixels are split into fixed blocks on rayon's pool; within a pixel the sum runs over
+    /// i in order, so the result does not depend on the thread count.
     pub fn reconstruct(&self, weights: &[f32], e: usize) -> Result<GrayFrame> {
+        use rayon::prelude::*;
         let e = e.min(weights.len()).min(self.manifest.components);
+        let packs = self.pack_data(e)?;
+        let n = self.manifest.train_size.pixels();
         let mut out = self.mean.clone();
-        for (i, &w) in weights.iter().enumerate().take(e) {
-            let u = self.eigenfire_vec(i)?;
-            for (o, &v) in out.iter_mut().zip(u.iter()) {
-                *o += w * v;
-            }
-        }
+        out.par_chunks_mut(RECON_BLOCK)
+            .enumerate()
+            .for_each(|(b, o)| {
+                let (r0, len) = (b * RECON_BLOCK, o.len());
+                fn seg(data: &[f32], start: usize, len: usize) -> &[f32] {
+                    &data[start..start + len]
+                }
+                for (first, count, data) in &packs {
+                    let w = &weights[*first..first + count];
+                    // Four Eigenfires per pass over the block (same order of operations
+                    // as one at a time: ((o + w0·u0) + w1·u1) + ...).
+                    let mut j = 0;
+                    while j + 4 <= w.len() {
+                        let (u0, u1, u2, u3) = (
+                            seg(data, j * n + r0, len),
+                            seg(data, (j + 1) * n + r0, len),
+                            seg(data, (j + 2) * n + r0, len),
+                            seg(data, (j + 3) * n + r0, len),
+                        );
+                        let (w0, w1, w2, w3) = (w[j], w[j + 1], w[j + 2], w[j + 3]);
+                        for (p, o) in o.iter_mut().enumerate() {
+                            *o = *o + w0 * u0[p] + w1 * u1[p] + w2 * u2[p] + w3 * u3[p];
+                        }
+                        j += 4;
+                    }
+                    for (j, &wj) in w.iter().enumerate().skip(j) {
+                        for (o, &v) in o.iter_mut().zip(seg(data, j * n + r0, len)) {
+                            *o += wj * v;
+                        }
+                    }
+                }
+            });
         Ok(GrayFrame::from_vec(self.manifest.train_size, out)?)
+    }
+
+    /// Reconstructs many frames at once, eq. (22) for each: frame `b` uses the first
+    /// `min(e, weights[b].len())` Eigenfires. One matrix product per pack (B×e weights
+    /// times e×N Eigenfires), so every Eigenfire is read once per batch instead of once per
+    /// frame. Equal to [`EigenfireDb::reconstruct`] up to rounding (≈ 1e-6 relative; the
+    /// product sums in another order). Fails, naming the pack, if a needed pack is
+    /// unusable.
+    ///
+    /// Parallelism follows `ignis-pca`'s policy: fixed blocks of pixels on rayon's pool,
+    /// each a sequential faer product (`Par::Seq`), so the result does not depend on the
+    /// thread count.
+    pub fn reconstruct_batch(&self, weights: &[&[f32]], e: usize) -> Result<Vec<GrayFrame>> {
+        use rayon::prelude::*;
+        let b = weights.len();
+        let longest = weights.iter().map(|w| w.len()).max().unwrap_or(0);
+        let e = e.min(longest).min(self.manifest.components);
+        if b == 0 {
+            return Ok(Vec::new());
+        }
+        let packs = self.pack_data(e)?;
+        let n = self.manifest.train_size.pixels();
+        // e×B weights; a frame with fewer weights gets zeros past its own length.
+        let w = faer::Mat::<f32>::from_fn(e, b, |i, j| weights[j].get(i).copied().unwrap_or(0.0));
+        let mut out = faer::Mat::<f32>::zeros(n, b);
+        out.as_mut()
+            .par_row_chunks_mut(BATCH_BLOCK)
+            .enumerate()
+            .for_each(|(blk, mut dst)| {
+                let r0 = blk * BATCH_BLOCK;
+                let len = dst.nrows();
+                for j in 0..b {
+                    for (r, m) in self.mean[r0..r0 + len].iter().enumerate() {
+                        dst[(r, j)] = *m;
+                    }
+                }
+                for (first, count, data) in &packs {
+                    let u = faer::MatRef::from_column_major_slice(&data[..count * n], n, *count);
+                    faer::linalg::matmul::matmul(
+                        dst.as_mut(),
+                        faer::Accum::Add,
+                        u.subrows(r0, len),
+                        w.subrows(*first, *count),
+                        1.0f32,
+                        faer::Par::Seq,
+                    );
+                }
+            });
+        (0..b)
+            .map(|j| {
+                let col = out.col(j);
+                let v: Vec<f32> = match col.try_as_col_major() {
+                    Some(c) => c.as_slice().to_vec(),
+                    None => (0..n).map(|r| col[r]).collect(),
+                };
+                Ok(GrayFrame::from_vec(self.manifest.train_size, v)?)
+            })
+            .collect()
+    }
+
+    /// The packs holding Eigenfires `0..e`: (first Eigenfire, how many of them are below
+    /// `e`, the pack's data). Fails, naming the first unusable pack.
+    fn pack_data(&self, e: usize) -> Result<PackData<'_>> {
+        let mut v = Vec::new();
+        for (p, entry) in self.manifest.packs.iter().enumerate() {
+            if entry.first >= e {
+                break;
+            }
+            let count = entry.count.min(e - entry.first);
+            v.push((entry.first, count, self.pack(p)?.f32()));
+        }
+        Ok(v)
     }
 
     /// Euclidean distance between training frames `i` and `j` over the first `e`
@@ -650,5 +771,121 @@ impl EigenfireDb {
         b + std::fs::metadata(self.dir.join("manifest.json"))
             .map(|m| m.len())
             .unwrap_or(0)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::train::{synthetic_clips, train, NoProgress, TrainParams};
+
+    /// A small database: 2 × 24 frames of 20×32, 5 Eigenfires per pack (the last pack
+    /// partly filled), so reconstructions cross pack boundaries.
+    fn small_db(dir: &Path) -> EigenfireDb {
+        let clips = synthetic_clips(Size::new(40, 64).unwrap(), 24, 3);
+        let mut pre = PreprocessParams::with_sizes(
+            Size::new(40, 64).unwrap(),
+            Some(Size::new(20, 32).unwrap()),
+        );
+        pre.pose_samples = 6;
+        let p = TrainParams {
+            pack_size: 5,
+            ..Default::default()
+        };
+        let out = dir.join("db");
+        train(&clips, &pre, &p, &out, &mut NoProgress).unwrap();
+        EigenfireDb::open(&out).unwrap()
+    }
+
+    /// Eq. (22) one Eigenfire at a time, the order `reconstruct` promises.
+    fn naive(db: &EigenfireDb, w: &[f32], e: usize) -> Vec<f32> {
+        let mut out = db.mean().data().to_vec();
+        for (i, &wi) in w.iter().enumerate().take(e.min(db.n_components())) {
+            for (o, &v) in out.iter_mut().zip(db.eigenfire_vec(i).unwrap().iter()) {
+                *o += wi * v;
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn reconstruct_batch_matches_reconstruct() {
+        let tmp = tempfile::tempdir().unwrap();
+        let db = small_db(tmp.path());
+        let k = db.n_components();
+        assert!(k > 10, "k = {k}");
+        assert_eq!(db.weights_row_major().len(), db.n_frames() * k);
+        assert_eq!(db.weights_row_major()[k + 2], db.weights()[(1, 2)]);
+        let rows: Vec<Vec<f32>> = (0..db.n_frames())
+            .step_by(5)
+            .map(|r| db.frame_weights(r))
+            .collect();
+        let mut refs: Vec<&[f32]> = rows.iter().map(|v| v.as_slice()).collect();
+        refs.push(&rows[1][..3]); // fewer weights than e: uses its own 3
+        for e in [0, 1, 7, k, k + 10] {
+            let batch = db.reconstruct_batch(&refs, e).unwrap();
+            assert_eq!(batch.len(), refs.len());
+            for (w, b) in refs.iter().zip(&batch) {
+                let single = db.reconstruct(w, e).unwrap();
+                assert_eq!(single.data(), naive(&db, w, e.min(w.len())).as_slice());
+                let scale = single.data().iter().fold(0f32, |a, v| a.max(v.abs()));
+                let diff = single
+                    .data()
+                    .iter()
+                    .zip(b.data())
+                    .fold(0f32, |a, (x, y)| a.max((x - y).abs()));
+                assert!(diff <= 1e-4 * scale, "e = {e}: {diff} vs scale {scale}");
+            }
+        }
+        assert!(db.reconstruct_batch(&[], 5).unwrap().is_empty());
+    }
+
+    #[test]
+    fn reconstruction_does_not_depend_on_the_thread_count() {
+        let tmp = tempfile::tempdir().unwrap();
+        let db = small_db(tmp.path());
+        let rows: Vec<Vec<f32>> = (0..6).map(|r| db.frame_weights(r * 7)).collect();
+        let refs: Vec<&[f32]> = rows.iter().map(|v| v.as_slice()).collect();
+        let k = db.n_components();
+        let one = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .unwrap();
+        let three = rayon::ThreadPoolBuilder::new()
+            .num_threads(3)
+            .build()
+            .unwrap();
+        let run = || {
+            (
+                db.reconstruct_batch(&refs, k).unwrap(),
+                db.reconstruct(refs[2], k).unwrap(),
+            )
+        };
+        let a = one.install(run);
+        let b = three.install(run);
+        assert_eq!(a, b);
+        assert_eq!(a, run());
+    }
+
+    #[test]
+    fn reconstruct_names_a_corrupt_pack() {
+        let tmp = tempfile::tempdir().unwrap();
+        let db = small_db(tmp.path());
+        let w = db.frame_weights(0);
+        let pack2 = db.path().join("packs/pack_002.npy");
+        let mut bytes = std::fs::read(&pack2).unwrap();
+        let last = bytes.len() - 1;
+        bytes[last] ^= 0x40;
+        std::fs::write(&pack2, bytes).unwrap();
+        // Eigenfires 0..5 are in the intact first pack.
+        assert!(db.reconstruct(&w, 5).is_ok());
+        assert!(db.reconstruct_batch(&[&w], 5).is_ok());
+        for r in [
+            db.reconstruct(&w, 6).map(|_| ()),
+            db.reconstruct_batch(&[&w], 6).map(|_| ()),
+        ] {
+            let e = r.unwrap_err().to_string();
+            assert!(e.contains("pack_002.npy"), "{e}");
+        }
     }
 }

@@ -40,6 +40,15 @@ pub enum EigenError {
     /// Drawing a plot failed.
     #[error("plot {file}: {reason}")]
     Plot { file: String, reason: String },
+    /// A scenario file (`ignis eigen animate`) is malformed or does not fit the database.
+    /// Displayed as `file:line:column: message`, like a compiler.
+    #[error("{}:{line}:{column}: {message}", file.display())]
+    Scenario {
+        file: PathBuf,
+        line: usize,
+        column: usize,
+        message: String,
+    },
     /// An error from `ignis-core` (sizes, frames).
     #[error(transparent)]
     Core(#[from] ignis_core::CoreError),

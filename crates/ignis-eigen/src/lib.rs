@@ -18,6 +18,8 @@
 
 pub mod analysis;
 pub mod animate;
+pub mod bench;
+pub mod colour;
 pub mod contour;
 pub mod db;
 pub mod error;
@@ -26,6 +28,8 @@ pub mod mask;
 pub mod plot;
 pub mod pose;
 pub mod preprocess;
+pub mod render;
+pub mod scenario;
 pub mod synthetic;
 pub mod train;
 pub mod transition;

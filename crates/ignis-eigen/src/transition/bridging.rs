@@ -68,11 +68,9 @@ pub fn direct_bridging(
             .map(|(&x, &y)| (x as f64 + f * (y as f64 - x as f64)) as f32)
             .collect();
         let theta = rec.theta(space, prev);
-        let best = (0..space.len())
-            .filter(|&i| !excluded[i] && !chosen.contains(&i))
-            .filter(|&i| space.distance(prev, i, e) >= theta)
-            .map(|i| (super::dist(space.frame(i), &point, e), i))
-            .min_by(|x, y| x.0.total_cmp(&y.0));
+        let best = nearest_allowed(space, prev, theta, &point, e, |i| {
+            !excluded[i] && !chosen.contains(&i)
+        });
         match best {
             Some((_, i)) => {
                 chosen.push(i);
@@ -100,6 +98,58 @@ pub fn direct_bridging(
         method: "direct-bridging",
         seam_ratio,
     })
+}
+
+/// The frame nearest to `point` (first index among equal distances) among the frames
+/// `allowed` and at least `theta` from `prev`, with its distance.
+///
+/// Frames are scanned in index order; each distance is abandoned as soon as its leading
+/// weights put it past the best so far (see [`super::dist_upto`], which keeps the result
+/// identical to computing every distance in full). Blocks of frames run on rayon's pool
+/// and are merged in index order, so the answer does not depend on the thread count.
+fn nearest_allowed(
+    space: &WeightSpace,
+    prev: usize,
+    theta: f64,
+    point: &[f32],
+    e: usize,
+    allowed: impl Fn(usize) -> bool + Sync,
+) -> Option<(f64, usize)> {
+    use rayon::prelude::*;
+    const BLOCK: usize = 512;
+    let p = space.frame(prev);
+    let scan = |range: Range<usize>| -> Option<(f64, usize)> {
+        let mut best: Option<(f64, usize)> = None;
+        for i in range {
+            if !allowed(i) {
+                continue;
+            }
+            let f = space.frame(i);
+            // `None` = farther than θ_min: allowed.
+            if super::dist_upto(p, f, e, theta).is_some_and(|d| d < theta) {
+                continue;
+            }
+            let limit = best.map_or(f64::INFINITY, |b| b.0);
+            if let Some(d) = super::dist_upto(f, point, e, limit) {
+                if best.is_none_or(|b| d < b.0) {
+                    best = Some((d, i));
+                }
+            }
+        }
+        best
+    };
+    let blocks: Vec<Option<(f64, usize)>> = (0..space.len().div_ceil(BLOCK))
+        .into_par_iter()
+        .map(|b| scan(b * BLOCK..((b + 1) * BLOCK).min(space.len())))
+        .collect();
+    // Blocks in index order, strict `<`: the first of equal minima wins, as in one scan.
+    blocks
+        .into_iter()
+        .flatten()
+        .fold(None, |best, c| match best {
+            Some(b) if b.0 <= c.0 => Some(b),
+            _ => Some(c),
+        })
 }
 
 /// Frames a recognition path may not use: the `reject_near` frames of α's clip up to α
@@ -161,6 +211,29 @@ mod tests {
                 "used a frame of T1/T2: {i}"
             );
         }
+    }
+
+    #[test]
+    fn nearest_allowed_equals_a_full_scan() {
+        let w = super::super::tests::pca_like(1200, 70, 8);
+        let s = WeightSpace::new(&w, 70, vec![]).unwrap();
+        for (prev, target, e, theta) in [(3, 900, 70, 0.5), (600, 20, 9, 2.0), (10, 11, 70, 1e-9)] {
+            let point: Vec<f32> = s.frame(target)[..e].iter().map(|x| x + 0.01).collect();
+            let allowed = |i: usize| i % 7 != 3 && i != target;
+            let want = (0..s.len())
+                .filter(|&i| allowed(i))
+                .filter(|&i| s.distance(prev, i, e) >= theta)
+                .map(|i| (super::super::dist(s.frame(i), &point, e), i))
+                .min_by(|x, y| x.0.total_cmp(&y.0));
+            assert_eq!(nearest_allowed(&s, prev, theta, &point, e, allowed), want);
+        }
+        // Equal distances: the first frame wins, as with `min_by`.
+        let w = [0.0f32, 5.0, 1.0, -1.0, 1.0, 3.0];
+        let s = WeightSpace::new(&w, 1, vec![]).unwrap();
+        assert_eq!(
+            nearest_allowed(&s, 1, 0.5, &[0.0], 1, |i| i != 0),
+            Some((1.0, 2))
+        );
     }
 
     #[test]

@@ -44,6 +44,8 @@
 //!   accept any pair that closes the gap by θ_min, so single steps of ~2 footage steps
 //!   do occur (measured on the test flame: worst step 1.8 → below 1.5 after this).
 
+use std::cmp::Reverse;
+use std::collections::BinaryHeap;
 use std::ops::Range;
 
 use super::bridging::excluded_frames;
@@ -132,29 +134,35 @@ pub(crate) fn grow(
             join: JoinAt::Already,
         });
     }
-    let sorted = |from: usize, used: &[usize], theta: f64, gap: f64| -> Vec<usize> {
-        let mut v: Vec<(f64, usize)> = (0..space.len())
-            .filter(|&i| !excluded[i] && !used.contains(&i))
-            .map(|i| (d(from, i), i))
-            .filter(|&(x, _)| x >= theta && x < gap)
-            .collect();
-        v.sort_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)));
-        v.into_iter().map(|(_, i)| i).collect()
-    };
     for step in 1..=half_steps {
         let (ca, cb) = (*a_path.last().unwrap(), *b_path.last().unwrap());
         let big_d = d(ca, cb);
-        let list_a = sorted(ca, &a_path, rec.theta(space, ca), big_d);
-        let list_b = sorted(cb, &b_path, rec.theta(space, cb), big_d);
+        let mut list_a = NearList::new(space, ca, rec.theta(space, ca), big_d, e, |i| {
+            !excluded[i] && !a_path.contains(&i)
+        });
+        let mut list_b = NearList::new(space, cb, rec.theta(space, cb), big_d, e, |i| {
+            !excluded[i] && !b_path.contains(&i)
+        });
         let theta = pair_theta(space, rec, ca, cb);
+        // A pair is accepted only when D12 ≤ D − θ_min; a D12 known to be larger (by a
+        // margin far beyond rounding) is rejected without finishing its sum.
+        let d12_limit = (big_d - theta).max(0.0) + 1e-9 * (big_d + theta);
+        // D1 depends on k only and D2 on j only: computed once per list entry.
+        let (mut d1_of, mut d2_of) = (Vec::new(), Vec::new());
         let (mut j, mut k) = (0, 0);
         let mut found = false;
-        while j < list_a.len() && k < list_b.len() {
-            let (aj, bk) = (list_a[j], list_b[k]);
-            let d12 = d(aj, bk);
-            let d1 = d(ca, bk);
-            let d2 = d(cb, aj);
-            if big_d - d12 < theta {
+        while let (Some(aj), Some(bk)) = (list_a.get(j), list_b.get(k)) {
+            // `None`: D12 > D − θ_min + margin, so D − D12 < θ_min (the branch that
+            // computing D12 in full would take).
+            let d12 = super::dist_upto(space.frame(aj), space.frame(bk), e, d12_limit);
+            if d1_of.len() <= k {
+                d1_of.push(d(ca, bk));
+            }
+            if d2_of.len() <= j {
+                d2_of.push(d(cb, aj));
+            }
+            let (d1, d2) = (d1_of[k], d2_of[j]);
+            if d12.is_none_or(|d12| big_d - d12 < theta) {
                 let short_to_a = d1 - big_d <= theta;
                 let short_to_b = d2 - big_d <= theta;
                 if short_to_a && short_to_b {
@@ -194,6 +202,99 @@ pub(crate) fn grow(
             2 * half_steps
         ),
     })
+}
+
+/// Algorithm 1's candidate list: the frames `allowed` with θ ≤ d < gap, d = the distance
+/// from `from`, sorted by (d, index) — produced on demand, since the walk over the two
+/// lists usually accepts a pair within the first few entries.
+///
+/// Every frame starts with a cheap lower bound of its distance (the first few weights,
+/// see [`super::dist_lower_bound`]) in a min-heap; a popped bound is replaced by a tighter
+/// one, then by the exact distance, and a popped exact distance is the next entry
+/// (nothing left in the heap can be smaller, ties go to the lower index). The entries and
+/// their order are exactly those of computing, filtering and sorting every distance.
+struct NearList<'s, 'a> {
+    space: &'s WeightSpace<'a>,
+    from: usize,
+    theta: f64,
+    gap: f64,
+    e: usize,
+    /// (distance or lower bound, frame, stage), smallest first; stage `s` is a bound over
+    /// the first [`NearList::STAGES`]`[s]` weights, the last stage the exact distance.
+    heap: BinaryHeap<Reverse<(TotalF64, usize, usize)>>,
+    list: Vec<usize>,
+}
+
+/// An f64 ordered by [`f64::total_cmp`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct TotalF64(f64);
+impl Eq for TotalF64 {}
+impl PartialOrd for TotalF64 {
+    fn partial_cmp(&self, o: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(o))
+    }
+}
+impl Ord for TotalF64 {
+    fn cmp(&self, o: &Self) -> std::cmp::Ordering {
+        self.0.total_cmp(&o.0)
+    }
+}
+
+impl<'s, 'a> NearList<'s, 'a> {
+    /// Weights in the successive lower bounds; the last stage is the whole distance.
+    const STAGES: [usize; 3] = [32, 192, usize::MAX];
+
+    fn new(
+        space: &'s WeightSpace<'a>,
+        from: usize,
+        theta: f64,
+        gap: f64,
+        e: usize,
+        allowed: impl Fn(usize) -> bool,
+    ) -> Self {
+        let f = space.frame(from);
+        let bounds: Vec<Reverse<(TotalF64, usize, usize)>> = (0..space.len())
+            .filter(|&i| allowed(i))
+            .filter_map(|i| {
+                let lb = super::dist_lower_bound(f, space.frame(i), e, Self::STAGES[0]);
+                // d ≥ lb ≥ gap: not a candidate.
+                (lb < gap).then_some(Reverse((TotalF64(lb), i, 0)))
+            })
+            .collect();
+        NearList {
+            space,
+            from,
+            theta,
+            gap,
+            e,
+            heap: BinaryHeap::from(bounds),
+            list: Vec::new(),
+        }
+    }
+
+    /// Entry `j` (0 = nearest), or `None` past the end.
+    fn get(&mut self, j: usize) -> Option<usize> {
+        let last = Self::STAGES.len() - 1;
+        while self.list.len() <= j {
+            let Reverse((_, i, stage)) = self.heap.pop()?;
+            if stage == last {
+                self.list.push(i);
+                continue;
+            }
+            let (f, g) = (self.space.frame(self.from), self.space.frame(i));
+            if stage + 1 < last {
+                let lb = super::dist_lower_bound(f, g, self.e, Self::STAGES[stage + 1]);
+                if lb < self.gap {
+                    self.heap.push(Reverse((TotalF64(lb), i, stage + 1)));
+                }
+            } else if let Some(d) = super::dist_upto(f, g, self.e, self.gap) {
+                if d >= self.theta && d < self.gap {
+                    self.heap.push(Reverse((TotalF64(d), i, last)));
+                }
+            }
+        }
+        Some(self.list[j])
+    }
 }
 
 fn pair_theta(space: &WeightSpace, rec: &RecognitionParams, a: usize, b: usize) -> f64 {
@@ -240,7 +341,8 @@ fn try_join(
         .into_iter()
         .find(|&(a, b)| {
             let (x, y) = (a_path[a], b_path[b]);
-            space.distance(x, y, e) < rec.join_gap(space, x, y)
+            let gap = rec.join_gap(space, x, y);
+            super::dist_upto(space.frame(x), space.frame(y), e, gap).is_some_and(|d| d < gap)
         })
         .map(|(a, b)| Grown {
             path: build(a, b + 1),
@@ -260,7 +362,15 @@ pub(crate) fn optimize_path(
     e: usize,
     rec: &RecognitionParams,
 ) -> Vec<usize> {
-    let d = |i: usize, j: usize| space.distance(i, j, e);
+    // Distances between path frames are asked for again and again (the detour pass
+    // restarts after every removal): remember them.
+    let memo = std::cell::RefCell::new(std::collections::HashMap::new());
+    let d = |i: usize, j: usize| {
+        *memo
+            .borrow_mut()
+            .entry((i.min(j), i.max(j)))
+            .or_insert_with(|| space.distance(i, j, e))
+    };
     let mut full = Vec::with_capacity(path.len() + 2);
     full.push(alpha);
     full.extend(path);
@@ -297,18 +407,70 @@ pub(crate) fn optimize_path(
             break;
         }
         let theta = rec.theta(space, p);
-        let best = (0..space.len())
-            .filter(|&m| !excluded[m] && !full.contains(&m))
-            .map(|m| (d(p, m), d(m, n), m))
-            .filter(|&(x, y, _)| x >= theta && y >= theta)
-            .map(|(x, y, m)| (x.max(y), m))
-            .min_by(|x, y| x.0.total_cmp(&y.0));
-        match best {
-            Some((w, m)) if w < worst => full.insert(i + 1, m),
-            _ => break,
+        match best_split(space, p, n, theta, worst, e, |m| {
+            !excluded[m] && !full.contains(&m)
+        }) {
+            Some(m) => full.insert(i + 1, m),
+            None => break,
         }
     }
     full[1..full.len() - 1].to_vec()
+}
+
+/// The `allowed` frame m with both steps p→m and m→n at least `theta` that minimises the
+/// larger of the two, if that is below `worst` (first index among equal minima).
+///
+/// The same as taking the minimum over every frame and then comparing it with `worst`:
+/// scanning in index order with a strict `<` keeps the first minimum, and starting from
+/// `worst` only drops frames that could not be inserted anyway. Distances past the best so
+/// far are abandoned early (exactly, see [`super::dist_upto`]).
+#[allow(clippy::too_many_arguments)]
+fn best_split(
+    space: &WeightSpace,
+    p: usize,
+    n: usize,
+    theta: f64,
+    worst: f64,
+    e: usize,
+    allowed: impl Fn(usize) -> bool + Sync,
+) -> Option<usize> {
+    use rayon::prelude::*;
+    const BLOCK: usize = 512;
+    let (fp, fn_) = (space.frame(p), space.frame(n));
+    let scan = |range: Range<usize>| -> (f64, Option<usize>) {
+        let mut best = (worst, None);
+        for m in range {
+            if !allowed(m) {
+                continue;
+            }
+            let fm = space.frame(m);
+            let Some(x) = super::dist_upto(fp, fm, e, best.0) else {
+                continue;
+            };
+            if x < theta {
+                continue;
+            }
+            let Some(y) = super::dist_upto(fm, fn_, e, best.0) else {
+                continue;
+            };
+            if y < theta {
+                continue;
+            }
+            let w = x.max(y);
+            if w < best.0 {
+                best = (w, Some(m));
+            }
+        }
+        best
+    };
+    let blocks: Vec<(f64, Option<usize>)> = (0..space.len().div_ceil(BLOCK))
+        .into_par_iter()
+        .map(|b| scan(b * BLOCK..((b + 1) * BLOCK).min(space.len())))
+        .collect();
+    blocks
+        .into_iter()
+        .fold((worst, None), |best, c| if c.0 < best.0 { c } else { best })
+        .1
 }
 
 #[cfg(test)]
@@ -434,6 +596,49 @@ mod tests {
         let e = end_growing(&s, 0..1, 1..2, 10, &strict()).unwrap_err();
         assert!(e.to_string().contains("step 1"), "{e}");
         assert!(end_growing(&s, 0..1, 1..2, 1, &strict()).is_err());
+    }
+
+    #[test]
+    fn scans_equal_full_scans() {
+        let w = super::super::tests::pca_like(1100, 70, 9);
+        let s = WeightSpace::new(&w, 70, vec![]).unwrap();
+        let d = |i: usize, j: usize, e: usize| s.distance(i, j, e);
+        let allowed = |i: usize| i % 5 != 1;
+        for (from, to, e) in [(5, 700, 70), (400, 420, 20), (1000, 30, 70)] {
+            let gap = d(from, to, e);
+            let theta = 0.1 * gap;
+            let want: Vec<(f64, usize)> = (0..s.len())
+                .filter(|&i| allowed(i))
+                .map(|i| (d(from, i, e), i))
+                .filter(|&(x, _)| x >= theta && x < gap)
+                .collect();
+            let mut want: Vec<usize> = want.into_iter().map(|(_, i)| i).collect();
+            want.sort_by(|&x, &y| d(from, x, e).total_cmp(&d(from, y, e)).then(x.cmp(&y)));
+            let mut list = NearList::new(&s, from, theta, gap, e, allowed);
+            let got: Vec<usize> = (0..).map_while(|j| list.get(j)).collect();
+            assert_eq!(got, want);
+            assert!(list.get(got.len() + 3).is_none());
+            for worst in [gap, 0.6 * gap, 0.3 * gap] {
+                let want = (0..s.len())
+                    .filter(|&m| allowed(m))
+                    .map(|m| (d(from, m, e), d(m, to, e), m))
+                    .filter(|&(x, y, _)| x >= theta && y >= theta)
+                    .map(|(x, y, m)| (x.max(y), m))
+                    .min_by(|x, y| x.0.total_cmp(&y.0))
+                    .filter(|&(w, _)| w < worst)
+                    .map(|(_, m)| m);
+                assert_eq!(best_split(&s, from, to, theta, worst, e, allowed), want);
+            }
+        }
+    }
+
+    #[test]
+    fn near_list_breaks_ties_by_index() {
+        let xs = [0.0f32, 1.0, -1.0, 2.0, -2.0, 1.0, 0.2, 3.0];
+        let s = WeightSpace::new(&xs, 1, vec![]).unwrap();
+        let mut list = NearList::new(&s, 0, 0.5, 3.0, 1, |i| i != 5);
+        let got: Vec<usize> = (0..).map_while(|j| list.get(j)).collect();
+        assert_eq!(got, vec![1, 2, 3, 4]);
     }
 
     #[test]

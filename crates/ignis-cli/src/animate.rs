@@ -1,0 +1,409 @@
+//! `ignis eigen animate` and `ignis eigen scenario`: an artist's motion list (a TOML
+//! scenario, eigenfires thesis §5.1) joined by transitions, coloured (chapter 6) and
+//! written by any `ignis-media` writer. The algorithms live in `ignis_eigen::scenario`
+//! (parsing, joins) and `ignis_eigen::animate` (rendering); this file reads footage for
+//! original colouring and prints the report.
+
+use crate::global::Global;
+use anyhow::{Context, Result};
+use ignis_core::RgbaFrame;
+use ignis_eigen::render::{self, SourceFrames, SyntheticSources};
+use ignis_eigen::scenario::{Plan, Scenario};
+use ignis_eigen::{ClipEntry, EigenError, EigenfireDb};
+use std::path::{Path, PathBuf};
+
+#[derive(clap::Args, Debug)]
+pub struct AnimateArgs {
+    /// Scenario file (TOML); `ignis eigen scenario fire.db` prints a commented one.
+    pub scenario: PathBuf,
+    /// Only find the transitions and print the table; write nothing.
+    #[arg(long)]
+    pub dry_run: bool,
+    #[command(flatten)]
+    pub out: crate::output::OutputArgs,
+}
+
+#[derive(clap::Args, Debug)]
+pub struct ScenarioArgs {
+    /// Database directory the scenario is for.
+    pub db: PathBuf,
+}
+
+/// [`SourceFrames`] over `ignis-media`, falling back to redrawing synthetic clips.
+pub struct MediaSources;
+
+impl SourceFrames for MediaSources {
+    fn read(
+        &mut self,
+        clip: &ClipEntry,
+        path: Option<&Path>,
+        frames: &[usize],
+    ) -> ignis_eigen::Result<Vec<Option<RgbaFrame>>> {
+        if path.is_none() && SyntheticSources::params(clip).is_some() {
+            return SyntheticSources.read(clip, None, frames);
+        }
+        let p = path.map_or_else(|| PathBuf::from(&clip.source), Path::to_path_buf);
+        let fail = |why: String| EigenError::Decode {
+            clip: clip.name.clone(),
+            reason: format!(
+                "{}: {why}{}",
+                p.display(),
+                if path.is_none() {
+                    " (the path recorded at training; give the footage under [originals] in the scenario)"
+                } else {
+                    ""
+                }
+            ),
+        };
+        let (Some(&lo), Some(&hi)) = (frames.first(), frames.last()) else {
+            return Ok(Vec::new());
+        };
+        let opts = ignis_media::ReadOptions {
+            range: Some(ignis_media::FrameRange::frames(
+                lo as u64,
+                Some(hi as u64 + 1),
+            )),
+            ..Default::default()
+        };
+        let reader = ignis_media::open(&p, &opts).map_err(|e| fail(e.to_string()))?;
+        let mut out = vec![None; frames.len()];
+        let mut want = frames.iter().enumerate().peekable();
+        for (i, f) in reader.enumerate() {
+            let n = lo + i;
+            let f = f.map_err(|e| fail(e.to_string()))?;
+            while let Some((j, _)) = want.next_if(|(_, &w)| w == n) {
+                out[j] = Some(f.clone());
+            }
+            if want.peek().is_none() {
+                break;
+            }
+        }
+        Ok(out)
+    }
+}
+
+fn print_table(g: &Global, plan: &Plan, sc: &Scenario, out_loops: bool) {
+    g.say(format!(
+        "{:<4} {:<28} {:<16} {:>5} {:>10} {:>9}",
+        "join", "motions", "method", "steps", "seam ratio", "plain cut"
+    ));
+    for (i, j) in plan.joins.iter().enumerate() {
+        g.say(format!(
+            "{:<4} {:<28} {:<16} {:>5} {:>10.2} {:>9.2}",
+            i + 1,
+            format!("{} → {}", j.from, j.to),
+            j.join.method,
+            j.join.frames.len(),
+            j.join.seam_ratio,
+            j.plain_cut
+        ));
+    }
+    for (i, j) in plan.joins.iter().enumerate() {
+        g.say(format!("join {}: {}", i + 1, j.join.why));
+    }
+    g.say(format!(
+        "{} frames, E = {} for rendering{}, E = {} for detection; largest step {:.2}; wrap (last → first) seam ratio {:.2}{}",
+        plan.frames.len(),
+        plan.e_render,
+        if plan.e_render != plan.e_render_requested {
+            format!(" (asked {}, clamped to the usable Eigenfires)", plan.e_render_requested)
+        } else {
+            String::new()
+        },
+        plan.e_detect,
+        plan.worst_step,
+        plan.wrap_seam,
+        if plan.loops { " (loop = true)" } else { "" }
+    ));
+    if out_loops && !sc.is_loop() && plan.wrap_seam > 1.5 {
+        g.say(format!(
+            "warning: the output loops but the scenario does not (wrap seam ratio {:.2} > 1.5); set `loop = true` in {} or pass --no-loop",
+            plan.wrap_seam,
+            sc.file().display()
+        ));
+    }
+}
+
+/// `ignis eigen animate`; returns the plan (for the demo's captions).
+pub fn animate_cmd(a: &AnimateArgs, g: &Global) -> Result<Plan> {
+    let sc = Scenario::from_file(&a.scenario)?;
+    let db = EigenfireDb::open(&sc.database).with_context(|| {
+        format!(
+            "opening the database {} named in {}",
+            sc.database.display(),
+            a.scenario.display()
+        )
+    })?;
+    let bar = g.progress(sc.join_count() as u64, "finding transitions");
+    let plan = sc.plan(&db, &mut |i, _| bar.set_position(i as u64))?;
+    bar.finish_and_clear();
+    let opts = a.out.write_options();
+    let out_loops = opts.loop_
+        && matches!(
+            opts.format
+                .or_else(|| ignis_media::Format::from_path(&a.out.output).ok()),
+            Some(ignis_media::Format::Gif | ignis_media::Format::Flipbook)
+        );
+    print_table(g, &plan, &sc, out_loops);
+    if a.dry_run {
+        return Ok(plan);
+    }
+    let size = render::output_size(&db);
+    let mut w = a.out.create(size)?;
+    let bar = g.progress(plan.frames.len() as u64, "rendering");
+    let mut sink = |f: RgbaFrame| -> ignis_eigen::Result<()> {
+        w.push(&f).map_err(|e| EigenError::BadParameter {
+            name: "output".into(),
+            reason: format!("{}: {e}", a.out.output.display()),
+        })
+    };
+    render::render_plan(
+        &db,
+        &plan,
+        &sc.look,
+        &mut MediaSources,
+        &mut sink,
+        &mut |n| bar.set_position(n as u64),
+    )
+    .with_context(|| format!("rendering {}", a.scenario.display()))?;
+    bar.finish_and_clear();
+    a.out.finish(w, g)?;
+    g.say(format!(
+        "{} frames at {size}, colour {}{}{}",
+        plan.frames.len(),
+        sc.look.mode.name(),
+        if sc.look.bloom.is_some() {
+            " + bloom"
+        } else {
+            ""
+        },
+        if sc.look.smoke.is_some() {
+            " + smoke"
+        } else {
+            ""
+        },
+    ));
+    Ok(plan)
+}
+
+/// A commented scenario for `db`: every clip as a motion, joined with each method.
+pub fn template(db: &EigenfireDb, db_path: &str) -> String {
+    let mut s = String::new();
+    s.push_str("# Ignis scenario (eigenfires thesis §5.1): motions joined by transitions.\n");
+    s.push_str("# Render: ignis eigen animate scene.toml -o fire.mp4\n");
+    s.push_str(&format!("database = {db_path:?}\n"));
+    let clips = db.clips();
+    let mut names = Vec::new();
+    for c in clips {
+        // The first and last thirds of each clip, so every join has a gap to bridge.
+        let third = (c.frames / 3).max(1);
+        let at = |j: usize| c.start + j * c.stride;
+        names.push((format!("{}-a", c.name), c, c.start, at(third)));
+        if c.frames >= 3 {
+            names.push((format!("{}-b", c.name), c, at(c.frames - third), c.end));
+        }
+    }
+    let seq: Vec<String> = names.iter().map(|n| format!("{:?}", n.0)).collect();
+    s.push_str(&format!("sequence = [{}]\n", seq.join(", ")));
+    s.push_str("loop = true                 # join the last motion back to the first\n");
+    s.push_str(&format!(
+        "# e_detect = {}              # E for detection (database default)\n# e_render = {}              # E for rendering (database default)\n\n",
+        db.manifest().e_detect,
+        db.manifest().e_render
+    ));
+    for (name, c, lo, hi) in &names {
+        s.push_str(&format!(
+            "[motions.{name}]\nclip = {:?}\nstart = {lo}\nend = {hi}               # excluded; source frame numbers\n# weights = \"1=0.5\"        # §5.2: set Eigenfire weights on every frame\n\n",
+            c.name
+        ));
+    }
+    s.push_str("[transition]                # defaults for every join\nmethod = \"auto\"             # auto | end-growing | direct | low-pass\n\n");
+    s.push_str("# [[join]]                  # join 1 (positional), overrides [transition]\n# method = \"end-growing\"\n# steps = 40                # N: most frames (end-growing) / frames (direct)\n# theta_min = 2.5           # fixed θ_min (default: adaptive, per clip)\n# kernel = [0.2, 0.2, 0.6]  # low-pass\n# eigenfires = 50           # low-pass: E of the morphs\n\n");
+    s.push_str("[colour]\nmode = \"original\"           # original (Algorithm 2) | synthetic | palette | grey\ntint = [1.0, 0.42, 0.08]    # synthetic colour, and the bloom's tint\n# palette = \"candle\"        # palette mode\nthreshold = 0.013           # original: copy the footage above this grey level (thesis 30/255)\nalpha = \"matte\"             # matte | opaque\nfast_path = true            # §7.1.2: stored pre-processed frames for database frames\n# mask_mode = \"add\"         # add | replace (custom masks, §6.4)\n\n");
+    s.push_str("[bloom]\npasses = 3\nradius = 24.0\nstrength = 0.4\n\n");
+    s.push_str("# [smoke]                   # §6.3 (original mode)\n# threshold = 0.03\n# blur = 1.0\n# colour = [0.35, 0.35, 0.35]\n\n");
+    s.push_str(
+        "# [originals]               # colour footage per clip (default: the training source)\n",
+    );
+    for c in clips {
+        s.push_str(&format!("# {} = {:?}\n", c.name, c.source));
+    }
+    s.push_str("\n# [masks]                   # custom masks per clip, numbered like the clip's frames\n# candle = \"masks/%04d.png\"\n");
+    s
+}
+
+pub fn scenario_cmd(a: &ScenarioArgs) -> Result<()> {
+    let db = EigenfireDb::open(&a.db)
+        .with_context(|| format!("opening the database {}", a.db.display()))?;
+    print!("{}", template(&db, &a.db.to_string_lossy()));
+    Ok(())
+}
+
+/// Writes `text` as the scenario `rel` in the demo directory.
+fn write_scenario(ctx: &crate::demo::Demo, rel: &str, text: &str) -> Result<PathBuf> {
+    let p = ctx.path(rel)?;
+    std::fs::write(&p, text).with_context(|| format!("writing {}", p.display()))?;
+    Ok(p)
+}
+
+/// Renders scenario `rel` to `out_rel` for the demo and adds it to the gallery.
+fn demo_render(ctx: &mut crate::demo::Demo, rel: &str, out_rel: &str, what: &str) -> Result<()> {
+    let g = Global { quiet: true };
+    let sp = ctx.path(rel)?.to_string_lossy().into_owned();
+    let op = ctx.path(out_rel)?.to_string_lossy().into_owned();
+    let argv = ["animate", sp.as_str(), "-o", op.as_str()];
+    let plan = animate_cmd(&crate::parse_sub::<AnimateArgs>(&argv)?, &g)
+        .with_context(|| format!("demo scenario {rel}"))?;
+    let joins: Vec<String> = plan
+        .joins
+        .iter()
+        .map(|j| {
+            format!(
+                "{} → {}: {} ({} frames, seam ratio {:.2}, plain cut {:.2})",
+                j.from,
+                j.to,
+                j.join.method,
+                j.join.frames.len(),
+                j.join.seam_ratio,
+                j.plain_cut
+            )
+        })
+        .collect();
+    ctx.item(
+        out_rel,
+        &format!("{what}: {}", joins.join("; ")),
+        &format!("ignis eigen animate {rel} -o {out_rel}"),
+    );
+    Ok(())
+}
+
+/// The scenario text of the demo: `motions` as (name, clip, start, end), joined in
+/// `sequence` order with `methods` (one per join), looping.
+fn demo_scenario(
+    db: &str,
+    motions: &[(&str, &str, usize, usize)],
+    sequence: &[&str],
+    methods: &[&str],
+    colour: &str,
+) -> String {
+    let mut s = format!("database = {db:?}\nsequence = {sequence:?}\nloop = true\n\n");
+    for (name, clip, a, b) in motions {
+        s.push_str(&format!(
+            "[motions.{name}]\nclip = {clip:?}\nstart = {a}\nend = {b}\n\n"
+        ));
+    }
+    for m in methods {
+        s.push_str(&format!("[[join]]\nmethod = {m:?}\n\n"));
+    }
+    s.push_str(colour);
+    s
+}
+
+/// The Eigenfires II part of `ignis demo`: a scenario with every transition method and a
+/// loop, in original and synthetic colouring, on the synthetic database `dbp`; and, when
+/// `../shared/data` is present (full demo only), the same on candle.mp4 + campfire.mp4.
+pub fn demo(ctx: &mut crate::demo::Demo, dbp: &Path) -> Result<()> {
+    let db = EigenfireDb::open(dbp)?;
+    let (c, f) = (db.clip("candle")?, db.clip("campfire")?);
+    let half = |e: &ClipEntry| e.start + (e.frames / 2) * e.stride;
+    let motions = [
+        ("calm", "candle", c.start, half(c)),
+        ("wide", "campfire", f.start, f.end),
+        ("tall", "candle", half(c), c.end),
+    ];
+    let seq = ["calm", "wide", "tall", "wide"];
+    // Tiny quick-mode clips may leave End Growing without a path: auto falls back.
+    let methods = if ctx.quick {
+        ["auto"; 4]
+    } else {
+        ["end-growing", "direct", "low-pass", "auto"]
+    };
+    let dbs = dbp.to_string_lossy();
+    for (mode, extra) in [
+        (
+            "original",
+            "[colour]\nmode = \"original\"\n\n[smoke]\nthreshold = 0.02\n",
+        ),
+        (
+            "synthetic",
+            "[colour]\nmode = \"synthetic\"\ntint = [1.0, 0.35, 0.05]\n",
+        ),
+    ] {
+        let rel = format!("eigen/scenario-{mode}.toml");
+        write_scenario(
+            ctx,
+            &rel,
+            &demo_scenario(&dbs, &motions, &seq, &methods, extra),
+        )?;
+        demo_render(
+            ctx,
+            &rel,
+            &format!("eigen/scenario-{mode}.gif"),
+            &format!("Scenario calm → wide → tall → wide → (loop), {mode} colouring"),
+        )?;
+    }
+    if ctx.quick {
+        return Ok(());
+    }
+    // Real footage.
+    let (Some(candle), campfire) = (
+        crate::demo::shared_data("candle.mp4"),
+        crate::demo::shared_data("campfire.mp4"),
+    ) else {
+        ctx.global
+            .say("  (../shared/data not found: skipping the footage scenario)");
+        return Ok(());
+    };
+    let campfire = campfire.filter(|_| ignis_media::ffmpeg_available());
+    let real = ctx.path("eigen/footage.db")?;
+    let mut argv: Vec<String> = vec!["train".into(), candle.to_string_lossy().into_owned()];
+    if let Some(cf) = &campfire {
+        argv.push(cf.to_string_lossy().into_owned());
+    }
+    argv.extend(["--stride", "2", "--train-size", "48x80", "-o"].map(String::from));
+    argv.push(real.to_string_lossy().into_owned());
+    let a = crate::parse_sub::<crate::eigen::TrainArgs>(
+        &argv.iter().map(String::as_str).collect::<Vec<_>>(),
+    )?;
+    crate::eigen::train(a, &Global { quiet: true }).context("training the footage database")?;
+    let fdb = EigenfireDb::open(&real)?;
+    let cn = fdb.clips()[0].name.clone();
+    let mut motions = vec![
+        ("calm", cn.as_str(), 100, 300),
+        ("later", cn.as_str(), 400, 700),
+    ];
+    let mut seq = vec!["calm", "later"];
+    let mut methods = vec!["end-growing", "direct"];
+    let cf_name = fdb.clips().get(1).map(|c| c.name.clone());
+    if let Some(cf) = &cf_name {
+        motions.push(("camp", cf.as_str(), 0, 240));
+        seq.push("camp");
+        methods = vec!["end-growing", "direct", "low-pass"];
+    }
+    let reals = real.to_string_lossy();
+    for (mode, extra) in [
+        ("original", "[colour]\nmode = \"original\"\n"),
+        ("synthetic", "[colour]\nmode = \"synthetic\"\n"),
+    ] {
+        let rel = format!("eigen/footage-{mode}.toml");
+        write_scenario(
+            ctx,
+            &rel,
+            &demo_scenario(&reals, &motions, &seq, &methods, extra),
+        )?;
+        demo_render(
+            ctx,
+            &rel,
+            &format!("eigen/footage-{mode}.mp4"),
+            &format!(
+                "candle.mp4{} joined and looped, {mode} colouring",
+                if cf_name.is_some() {
+                    " + campfire.mp4"
+                } else {
+                    ""
+                }
+            ),
+        )?;
+    }
+    Ok(())
+}
