@@ -100,6 +100,17 @@ fn print_table(g: &Global, plan: &Plan, sc: &Scenario, out_loops: bool) {
     }
     for (i, j) in plan.joins.iter().enumerate() {
         g.say(format!("join {}: {}", i + 1, j.join.why));
+        if j.join.seam_ratio > j.plain_cut + 1e-9 {
+            g.say(format!(
+                "warning: join {} ({} → {}): {} is rougher than a plain cut ({:.2} > {:.2}); try method = \"auto\" or another method for this join",
+                i + 1,
+                j.from,
+                j.to,
+                j.join.method,
+                j.join.seam_ratio,
+                j.plain_cut
+            ));
+        }
     }
     g.say(format!(
         "{} frames, E = {} for rendering{}, E = {} for detection; largest step {:.2}; wrap (last → first) seam ratio {:.2}{}",
@@ -277,6 +288,41 @@ fn demo_render(ctx: &mut crate::demo::Demo, rel: &str, out_rel: &str, what: &str
     Ok(())
 }
 
+/// `methods` (one per join of `seq`, looping), with any that finds no path on `db`
+/// replaced by `auto` — End Growing can legitimately fail between very different flames
+/// (the thesis's case 3), and the demo must not.
+fn workable(
+    db: &EigenfireDb,
+    motions: &[(&str, &str, usize, usize)],
+    seq: &[&str],
+    methods: &[&str],
+) -> Result<Vec<&'static str>> {
+    use ignis_eigen::transition::{self, WeightSpace};
+    let (w, k, spans) = ignis_eigen::animate::weight_space(db)?;
+    let space = WeightSpace::new(w, k, spans)?;
+    let rec = ignis_eigen::animate::recognition_params(db);
+    let rows = |name: &str| -> Result<std::ops::Range<usize>> {
+        let m = motions
+            .iter()
+            .find(|m| m.0 == name)
+            .expect("motion of the demo");
+        Ok(ignis_eigen::animate::clip_rows(db, m.1, m.2..m.3)?)
+    };
+    let mut out = Vec::new();
+    for (i, m) in methods.iter().enumerate() {
+        let (a, b) = (rows(seq[i])?, rows(seq[(i + 1) % seq.len()])?);
+        let t = ignis_eigen::animate::parse_method(m)?;
+        let ok = transition::transition(&space, a, b, &t, &rec).is_ok();
+        out.push(match (ok, *m) {
+            (true, "end-growing") => "end-growing",
+            (true, "direct") => "direct",
+            (true, "low-pass") => "low-pass",
+            _ => "auto",
+        });
+    }
+    Ok(out)
+}
+
 /// The scenario text of the demo: `motions` as (name, clip, start, end), joined in
 /// `sequence` order with `methods` (one per join), looping.
 fn demo_scenario(
@@ -308,16 +354,25 @@ pub fn demo(ctx: &mut crate::demo::Demo, dbp: &Path) -> Result<()> {
     let half = |e: &ClipEntry| e.start + (e.frames / 2) * e.stride;
     let motions = [
         ("calm", "candle", c.start, half(c)),
-        ("wide", "campfire", f.start, f.end),
         ("tall", "candle", half(c), c.end),
+        // Two thirds of the campfire clip: its wide → wide loop then has the last third
+        // to bridge through (a join never uses frames of its own two motions).
+        (
+            "wide",
+            "campfire",
+            f.start,
+            f.start + (2 * f.frames / 3) * f.stride,
+        ),
     ];
-    let seq = ["calm", "wide", "tall", "wide"];
-    // Tiny quick-mode clips may leave End Growing without a path: auto falls back.
-    let methods = if ctx.quick {
-        ["auto"; 4]
-    } else {
-        ["end-growing", "direct", "low-pass", "auto"]
-    };
+    // Joins: calm → tall (same clip), tall → wide, wide → wide (a campfire loop inside
+    // the sequence), wide → calm (the loop back to the start).
+    let seq = ["calm", "tall", "wide", "wide"];
+    let methods = workable(
+        &db,
+        &motions,
+        &seq,
+        &["end-growing", "auto", "direct", "low-pass"],
+    )?;
     let dbs = dbp.to_string_lossy();
     for (mode, extra) in [
         (
@@ -339,7 +394,7 @@ pub fn demo(ctx: &mut crate::demo::Demo, dbp: &Path) -> Result<()> {
             ctx,
             &rel,
             &format!("eigen/scenario-{mode}.gif"),
-            &format!("Scenario calm → wide → tall → wide → (loop), {mode} colouring"),
+            &format!("Scenario calm → tall → wide → wide → (loop), {mode} colouring"),
         )?;
     }
     if ctx.quick {
@@ -360,7 +415,21 @@ pub fn demo(ctx: &mut crate::demo::Demo, dbp: &Path) -> Result<()> {
     if let Some(cf) = &campfire {
         argv.push(cf.to_string_lossy().into_owned());
     }
-    argv.extend(["--stride", "2", "--train-size", "48x80", "-o"].map(String::from));
+    // Stored pre-processed frames (§7.1.2) at a modest size keep the output sharp and the
+    // demo folder small (~60 MB).
+    argv.extend(
+        [
+            "--stride",
+            "2",
+            "--train-size",
+            "48x80",
+            "--frame-size",
+            "120x196",
+            "--store-frames",
+            "-o",
+        ]
+        .map(String::from),
+    );
     argv.push(real.to_string_lossy().into_owned());
     let a = crate::parse_sub::<crate::eigen::TrainArgs>(
         &argv.iter().map(String::as_str).collect::<Vec<_>>(),
@@ -380,6 +449,7 @@ pub fn demo(ctx: &mut crate::demo::Demo, dbp: &Path) -> Result<()> {
         seq.push("camp");
         methods = vec!["end-growing", "direct", "low-pass"];
     }
+    let methods = workable(&fdb, &motions, &seq, &methods)?;
     let reals = real.to_string_lossy();
     for (mode, extra) in [
         ("original", "[colour]\nmode = \"original\"\n"),

@@ -244,8 +244,8 @@ mod tests {
         assert_eq!(&out.data()[0][..3], &[0.0, 0.0, 0.0]);
         assert_eq!(&out.data()[2][..3], &[1.0, 1.0, 1.0]);
         let mid = hls_to_rgb(rgb_to_hls([1.0, 0.5, 0.0]));
-        for k in 0..3 {
-            assert!((out.data()[1][k] - mid[k]).abs() < 1e-5);
+        for (got, want) in out.data()[1].iter().zip(mid) {
+            assert!((got - want).abs() < 1e-5);
         }
         let bad = RgbaFrame::new(Size::new(2, 2).unwrap());
         assert!(synthetic_colour(&g, &Tint::Texture(bad)).is_err());

@@ -299,7 +299,7 @@ fn training_frames<'s>(
         .enumerate()
         .map(move |(i, f)| (i + start, f))
         .take_while(move |(i, _)| *i < end)
-        .filter(move |(i, _)| (i - start) % stride == 0))
+        .filter(move |(i, _)| (i - start).is_multiple_of(stride)))
 }
 
 /// Checks the clip's range against what is known before decoding; returns `[start, end)`

@@ -788,6 +788,97 @@ mod animate {
         assert!(e.to_string().contains("/nonexistent/scene.toml"), "{e}");
     }
 
+    /// Synthetic clips as originals; any other path is a custom mask: white (1.0) on the
+    /// left half of every frame, black elsewhere.
+    struct MaskSources;
+    impl ignis_eigen::render::SourceFrames for MaskSources {
+        fn read(
+            &mut self,
+            clip: &ignis_eigen::ClipEntry,
+            path: Option<&Path>,
+            frames: &[usize],
+        ) -> ignis_eigen::Result<Vec<Option<RgbaFrame>>> {
+            match path {
+                None => SyntheticSources.read(clip, None, frames),
+                Some(_) => Ok(frames
+                    .iter()
+                    .map(|_| {
+                        let s = clip.source_size;
+                        let data = (0..s.pixels())
+                            .map(|i| {
+                                let v = if (i as u32 % s.width) < s.width / 2 {
+                                    1.0
+                                } else {
+                                    0.0
+                                };
+                                [v, v, v, 1.0]
+                            })
+                            .collect();
+                        Some(RgbaFrame::from_vec(s, data).unwrap())
+                    })
+                    .collect()),
+            }
+        }
+    }
+
+    #[test]
+    fn custom_masks_let_more_of_the_original_through() {
+        let body = "sequence = [\"calm\"]\n\n[motions.calm]\nclip = \"candle\"\nstart = 4\nend = 8\n\n[colour]\nmode = \"original\"\nalpha = \"opaque\"\n\n[bloom]\nenabled = false\n";
+        let run = |name: &str, text: &str| {
+            let sc = Scenario::from_file(&scenario(name, text)).unwrap();
+            let db = EigenfireDb::open(&sc.database).unwrap();
+            let plan = sc.plan(&db, &mut |_, _| {}).unwrap();
+            let mut frames = Vec::new();
+            render_plan(
+                &db,
+                &plan,
+                &sc.look,
+                &mut MaskSources,
+                &mut |f| {
+                    frames.push(f);
+                    Ok(())
+                },
+                &mut |_| {},
+            )
+            .unwrap();
+            frames
+        };
+        let plain = run("mask0.toml", body);
+        let added = run(
+            "mask1.toml",
+            &format!("{body}\n[masks]\ncandle = \"masks/%04d.png\"\n"),
+        );
+        let replaced = run(
+            "mask2.toml",
+            &format!(
+                "{}\n[masks]\ncandle = \"masks/%04d.png\"\n",
+                body.replace("alpha = ", "mask_mode = \"replace\"\nalpha = ")
+            ),
+        );
+        let energy = |fs: &[RgbaFrame]| -> f64 {
+            fs.iter()
+                .flat_map(|f| f.data())
+                .map(|p| (p[0] + p[1] + p[2]) as f64)
+                .sum()
+        };
+        // Add: the mask only ever adds original pixels (the warped mask covers part of the
+        // frame; outside the flame the synthetic originals are dark, so the gain is small),
+        // so the image gains light and no pixel loses any.
+        assert!(
+            energy(&added) > energy(&plain) + 1.0,
+            "{} vs {}",
+            energy(&added),
+            energy(&plain)
+        );
+        for (a, p) in added.iter().zip(&plain) {
+            for (x, y) in a.data().iter().zip(p.data()) {
+                assert!(x[0] >= y[0] - 1e-6);
+            }
+        }
+        // Replace: the custom mask alone decides, so frames differ from both.
+        assert!(replaced != plain && replaced != added);
+    }
+
     #[test]
     fn modes_parse() {
         let sc = Scenario::from_file(&scenario(
