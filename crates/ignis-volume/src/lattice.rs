@@ -71,6 +71,22 @@ pub struct Cell {
     pub level: usize,
     /// Inverse Jacobian at the cell centre (rows), for the chord-method inverse.
     jinv: [V3; 3],
+    /// `(|k4| + |k5| + |k6| + 4|k7|) / 4`: bounds the second-order remainder of the map,
+    /// `|F(l + Δ) − F(l) − J(l) Δ| ≤ nonlin · ‖Δ‖₁²` for `l` in the unit cube and
+    /// `‖Δ‖₁ ≤ 1`, which tells [`Cell::inverse_predicted`] when one Newton step suffices.
+    nonlin: f32,
+    /// World position of the cell centre, `forward([½, ½, ½])`.
+    centre: V3,
+    /// `k` padded to four components (the 4th zero), for [`Cell::forward4`].
+    k4: [[f32; 4]; 8],
+}
+
+/// What a ray carries from one [`Cell::inverse_tracked`] to the next: the inverse
+/// Jacobian of its last Newton solve, as columns padded to four lanes (`None` before the
+/// first solve or after a failed one).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Track {
+    m: Option<[[f32; 4]; 3]>,
 }
 
 impl Cell {
@@ -101,7 +117,11 @@ impl Cell {
             max,
             level,
             jinv: [[0.0; 3]; 3],
+            nonlin: (norm(k4) + norm(k5) + norm(k6) + 4.0 * norm(k7)) / 4.0,
+            centre: [0.0; 3],
+            k4: [k0, k1, k2, k3, k4, k5, k6, k7].map(|v| [v[0], v[1], v[2], 0.0]),
         };
+        cell.centre = cell.forward([0.5; 3]);
         let (ja, jb, js) = cell.jacobian([0.5; 3]);
         let det = dot(ja, cross(jb, js));
         if det.abs() > 1e-20 && det.is_finite() {
@@ -135,7 +155,7 @@ impl Cell {
     /// Like [`Cell::inverse`] but first tries the chord method (the centre's inverse
     /// Jacobian, exact in one step for an affine cell, cheap for nearly affine ones), and
     /// falls back to Newton's method.
-    #[inline]
+    #[inline(always)]
     pub fn inverse_fast(&self, p: V3, guess: V3) -> Option<V3> {
         let mut l = guess;
         let m = &self.jinv;
@@ -156,36 +176,165 @@ impl Cell {
     /// The renderer's inverse for a good `guess` (extrapolated from the previous ray
     /// samples): Newton's method with the exact Jacobian, stopping once a step is below
     /// [`Cell::FAST_STEP`] — convergence is quadratic, so the error left is of the order of
-    /// the step squared (≪ 1e-4). `None` when it does not converge.
-    #[inline]
+    /// the step squared (≪ 1e-4) — or once the error bound after the step is below
+    /// [`Cell::NEWTON_TOL`]. `None` when it does not converge.
+    ///
+    /// The bound: Newton's error after a step `δ` from `l` is `J(l)⁻¹ R` with `R` the
+    /// second-order Taylor remainder of the trilinear map, `|R| ≤ nonlin · ‖Δ‖₁²` (`Δ` the
+    /// distance to the root, ≈ `δ`), so `|error| ≤ ‖J(l)⁻¹‖_F · nonlin · δ²`. For the
+    /// nearly affine cells of a gently bent fire `nonlin` is small and the first step is
+    /// already accurate, which saves the confirming second step (about a third of the
+    /// inverse's cost on the Table 1 scene).
+    #[inline(always)]
     pub fn inverse_predicted(&self, p: V3, guess: V3) -> Option<V3> {
+        match self.newton(p, guess) {
+            Ok((l, _)) => Some(l),
+            Err(true) => self.inverse_fast(p, guess),
+            Err(false) => None,
+        }
+    }
+
+    /// [`Cell::inverse_predicted`] along a ray: `track` carries the inverse Jacobian from
+    /// the last Newton solve on this ray (this cell or a neighbour: the lattice map is
+    /// continuous, so its Jacobian changes little). With it, up to three chord steps
+    /// `l ← l − m (F(l) − p)` (a forward evaluation and a 3×3 product each, about a third
+    /// of a Newton step) are tried. The chord iteration contracts by `κ = ‖I − m J‖`; a
+    /// step is accepted when it is below [`Cell::CHORD_STEP`] and less than half the
+    /// previous one (so `κ < ½` is observed, and the error left is below the step). When
+    /// the steps do not shrink fast enough, Newton runs from `guess` and refreshes `m`
+    /// (or clears it when it falls back to the chord-from-centre method).
+    #[inline(always)]
+    pub fn inverse_tracked(&self, p: V3, guess: V3, track: &mut Track) -> Option<V3> {
+        if let Some(mc) = &track.m {
+            let p4 = [p[0], p[1], p[2], 0.0];
+            let mut l = [guess[0], guess[1], guess[2], 0.0];
+            let mut prev = f32::INFINITY;
+            for _ in 0..3 {
+                let fw = self.forward4([l[0], l[1], l[2]]);
+                let mut d = [0.0f32; 4];
+                for i in 0..4 {
+                    d[i] = fw[i] - p4[i];
+                }
+                let mut dd = [0.0f32; 4];
+                for i in 0..4 {
+                    dd[i] = mc[0][i] * d[0] + mc[1][i] * d[1] + mc[2][i] * d[2];
+                }
+                for i in 0..4 {
+                    l[i] -= dd[i];
+                }
+                let step = dd[0].abs() + dd[1].abs() + dd[2].abs();
+                if step < Self::CHORD_STEP && step < 0.5 * prev {
+                    return Some([l[0], l[1], l[2]]);
+                }
+                let shrinking = step < 0.25 * prev; // false for NaN too
+                if !shrinking && prev.is_finite() {
+                    break;
+                }
+                prev = step;
+            }
+        }
+        match self.newton(p, guess) {
+            Ok((l, jinv)) => {
+                // columns of J⁻¹, padded to four lanes
+                let mut mc = [[0.0f32; 4]; 3];
+                for (c, col) in mc.iter_mut().enumerate() {
+                    for (r, row) in jinv.iter().enumerate() {
+                        col[r] = row[c];
+                    }
+                }
+                track.m = Some(mc);
+                Some(l)
+            }
+            Err(fallback) => {
+                track.m = None;
+                if fallback {
+                    self.inverse_fast(p, guess)
+                } else {
+                    None
+                }
+            }
+        }
+    }
+
+    /// [`Cell::forward`] with the 3 components padded to 4 (the 4th is 0), arranged so the
+    /// components are computed side by side in one vector register.
+    #[inline(always)]
+    fn forward4(&self, l: V3) -> [f32; 4] {
+        let [a, b, s] = l;
+        let (ab, as_, bs) = (a * b, a * s, b * s);
+        let abs = ab * s;
+        let k = &self.k4;
+        let mut p = [0.0; 4];
+        // summed as a tree (depth 3) rather than left to right (depth 7): the chord
+        // iteration is a chain of dependent operations, so latency is what counts
+        for i in 0..4 {
+            p[i] = ((k[0][i] + a * k[1][i]) + (b * k[2][i] + s * k[3][i]))
+                + ((ab * k[4][i] + as_ * k[5][i]) + (bs * k[6][i] + abs * k[7][i]));
+        }
+        p
+    }
+
+    /// Acceptance threshold of the chord step in [`Cell::inverse_tracked`] (sum of |step|,
+    /// local units).
+    pub const CHORD_STEP: f32 = 1e-4;
+
+    /// The Newton iteration of [`Cell::inverse_predicted`]: the root and the inverse
+    /// Jacobian at the last iterate, or `Err(true)` when it did not settle in 6 steps
+    /// (try the slower method) and `Err(false)` when it diverged or hit a singular point.
+    #[inline(always)]
+    fn newton(&self, p: V3, guess: V3) -> std::result::Result<(V3, [V3; 3]), bool> {
         let mut l = guess;
         for _ in 0..6 {
             let [a, b, s] = l;
             let f = sub(self.forward(l), p);
             let (ja, jb, js) = self.jacobian(l);
-            let cbs = cross(jb, js);
-            let det = dot(ja, cbs);
+            // rows of det · J⁻¹
+            let r0 = cross(jb, js);
+            let r1 = cross(js, ja);
+            let r2 = cross(ja, jb);
+            let det = dot(ja, r0);
             if det.abs() < 1e-20 || !det.is_finite() {
-                return None;
+                return Err(false);
             }
             let inv = 1.0 / det;
-            let da = dot(f, cbs) * inv;
-            let db = dot(ja, cross(f, js)) * inv;
-            let ds = dot(ja, cross(jb, f)) * inv;
+            let da = dot(f, r0) * inv;
+            let db = dot(f, r1) * inv;
+            let ds = dot(f, r2) * inv;
             l = [a - da, b - db, s - ds];
-            if da.abs() + db.abs() + ds.abs() < Self::FAST_STEP {
-                return Some(l);
+            let jinv = || [scale(r0, inv), scale(r1, inv), scale(r2, inv)];
+            let step = da.abs() + db.abs() + ds.abs();
+            if step < Self::FAST_STEP {
+                return Ok((l, jinv()));
+            }
+            if step < 0.5 {
+                // ‖J⁻¹‖_F² · (nonlin · step²)² < tol², with 1.5× slack on ‖Δ‖ ≈ step
+                let jinv2 = (dot(r0, r0) + dot(r1, r1) + dot(r2, r2)) * inv * inv;
+                let e = self.nonlin * 2.25 * step * step;
+                if jinv2 * e * e < Self::NEWTON_TOL * Self::NEWTON_TOL {
+                    return Ok((l, jinv()));
+                }
             }
             if !l.iter().all(|v| v.abs() < 1e3) {
-                return None;
+                return Err(false);
             }
         }
-        self.inverse_fast(p, guess)
+        Err(true)
+    }
+
+    /// A first guess of the local coordinates of `p` with no history: one chord step from
+    /// the centre (exact for an affine cell). Not clamped; it may lie outside the cell.
+    #[inline(always)]
+    pub fn chord_guess(&self, p: V3) -> V3 {
+        let f = sub(p, self.centre);
+        let m = &self.jinv;
+        [0.5 + dot(m[0], f), 0.5 + dot(m[1], f), 0.5 + dot(m[2], f)]
     }
 
     /// Acceptance threshold of [`Cell::inverse_predicted`] (sum of |step| in local units).
     pub const FAST_STEP: f32 = 1e-3;
+
+    /// Error bound (local units) below which [`Cell::inverse_predicted`] accepts a step.
+    pub const NEWTON_TOL: f32 = 1e-5;
 
     /// World position of local coordinates `(a, b, s)`.
     #[inline(always)]
@@ -209,7 +358,7 @@ impl Cell {
     /// Local coordinates of world point `p` by Newton's method from `guess`; `None` when it
     /// does not converge (far outside a strongly bent cell). The result may lie outside
     /// `[0, 1]³`: the caller decides membership.
-    #[inline]
+    #[inline(always)]
     pub fn inverse(&self, p: V3, guess: V3) -> Option<V3> {
         let mut l = guess;
         for _ in 0..8 {
@@ -396,7 +545,7 @@ impl Lattice {
         self.length
     }
     /// Centre-curve radius at texture height `tex_z` (linear between levels).
-    #[inline]
+    #[inline(always)]
     pub fn radius_at(&self, tex_z: f32) -> f32 {
         let c = self.levels.len();
         let x = (tex_z.clamp(0.0, 1.0)) * (c - 1) as f32;

@@ -19,6 +19,9 @@ pub struct FireProfile {
     texels: Vec<[f32; 4]>,
     /// Largest alpha in each column, to skip the noise where the profile is empty.
     col_alpha: Vec<f32>,
+    /// Per column pair `i, i + 1` (the bilinear footprint of a look-up): the closed range
+    /// of `v` outside which [`FireProfile::sample`] has zero alpha; `[1, 0]` when empty.
+    v_support: Vec<[f32; 2]>,
 }
 
 impl FireProfile {
@@ -46,11 +49,27 @@ impl FireProfile {
         let col_alpha = (0..w)
             .map(|x| (0..h).map(|y| texels[y * w + x][3]).fold(0.0, f32::max))
             .collect();
+        let v_support = (0..w - 1)
+            .map(|i| {
+                let lit = |y: usize| texels[y * w + i][3] > 0.0 || texels[y * w + i + 1][3] > 0.0;
+                match ((0..h).find(|&y| lit(y)), (0..h).rev().find(|&y| lit(y))) {
+                    // A look-up at `v` reads rows `j = ⌊v (h−1)⌋` (at most h−2) and `j + 1`,
+                    // so it can see a lit row only if `rmin − 1 ≤ j ≤ rmax`, i.e.
+                    // `(rmin − 1)/(h−1) ≤ v < (rmax + 1)/(h−1)`.
+                    (Some(rmin), Some(rmax)) => [
+                        ((rmin as f32 - 1.0) / (h - 1) as f32).max(0.0),
+                        ((rmax as f32 + 1.0) / (h - 1) as f32).min(1.0),
+                    ],
+                    _ => [1.0, 0.0],
+                }
+            })
+            .collect();
         Ok(FireProfile {
             w,
             h,
             texels,
             col_alpha,
+            v_support,
         })
     }
 
@@ -111,6 +130,22 @@ impl FireProfile {
         self.col_alpha[i] <= 0.0 && self.col_alpha[i + 1] <= 0.0
     }
 
+    /// The closed range `[v_lo, v_hi]` outside which the look-up at `(u, v)` has zero alpha
+    /// (conservative: the alpha may also be zero inside); `None` when it is zero for every
+    /// `v` (as [`FireProfile::column_empty`]). The renderer uses it to skip noise octaves
+    /// that cannot make a sample visible.
+    #[inline(always)]
+    pub fn v_support(&self, u: f32) -> Option<[f32; 2]> {
+        if !(0.0..=1.0).contains(&u) {
+            return None;
+        }
+        // the same column index as `sample`
+        let x = u * (self.w - 1) as f32;
+        let i = (x as usize).min(self.w - 2);
+        let r = self.v_support[i];
+        (r[0] <= r[1]).then_some(r)
+    }
+
     /// Bilinear look-up at `(u, v)` (eq. 2 / 14); transparent black outside the unit square.
     #[inline(always)]
     pub fn sample(&self, u: f32, v: f32) -> [f32; 4] {
@@ -151,5 +186,27 @@ mod tests {
         // round trip through an image keeps the orientation
         let q = FireProfile::from_frame(&p.to_frame()).unwrap();
         assert_eq!(p, q);
+    }
+
+    /// Outside `v_support` every look-up is transparent, on a fine grid.
+    #[test]
+    fn v_support_bounds_the_alpha() {
+        let p = FireProfile::default_profile();
+        let n = 1000;
+        let mut inside = 0;
+        for a in 0..=n {
+            let u = a as f32 / n as f32;
+            let s = p.v_support(u);
+            assert_eq!(s.is_none(), p.column_empty(u), "u {u}");
+            for b in 0..=n {
+                let v = b as f32 / n as f32;
+                let alpha = p.sample(u, v)[3];
+                match s {
+                    Some([lo, hi]) if v >= lo && v <= hi => inside += (alpha > 0.0) as u32,
+                    _ => assert_eq!(alpha, 0.0, "u {u} v {v} support {s:?}"),
+                }
+            }
+        }
+        assert!(inside > 1000);
     }
 }
