@@ -311,20 +311,32 @@ pub fn perlin4(x: f32, y: f32, z: f32, w: f32) -> f32 {
     lerp(ft, cube(0, w), cube(1, w1))
 }
 
-/// A proven bound on |[`perlin4`]| (in practice values stay near ±1).
+/// A proven bound on |[`perlin4`]|: `√3` (in practice values stay near ±1).
 ///
-/// Proof: with fractions `x_k ∈ [0, 1]` and fades `f_k = fade(x_k)`, the noise is
-/// `Σ_c w_c g_c·d_c` over the 16 corners `c`, with weights `w_c = Π_k (f_k or 1 − f_k)`
-/// (non-negative, summing to 1), offsets `d_ck = x_k` or `x_k − 1` and gradient
-/// components in {−1, 0, 1}. So `|n| ≤ Σ_k Σ_c w_c |d_ck|`, and for each axis the sum over
-/// corners factorises to `h(x_k) = (1 − f_k) x_k + f_k (1 − x_k) = x_k + f_k (1 − 2 x_k)`.
-/// For `x ≤ ½`, `h(x) ≤ ½ ⟺ f(x) ≤ ½`, true since the fade is increasing with
-/// `f(½) = ½`; `h` is symmetric about ½. Hence `|n| ≤ 4 · ½ = 2` (3-D: 1.5).
-pub const PERLIN4_BOUND: f32 = 2.0;
+/// Proof. With fractions `x_k ∈ [0, 1]` (k = 1..4) and fades `f_k = fade(x_k)`, the noise
+/// is `n = Σ_c w_c (g_c · d_c)` over the 16 corners `c`, with weights
+/// `w_c = Π_k (1 − f_k or f_k)` (non-negative, summing to 1), offsets `d_ck = x_k` or
+/// `x_k − 1`, and gradients `g_c` with one zero component and three ±1, so `|g_c|₂ = √3`.
+/// 1. Cauchy–Schwarz per corner: `|g_c · d_c| ≤ √3 |d_c|₂`.
+/// 2. Jensen (the square root is concave, `Σ w_c = 1`):
+///    `|n| ≤ √3 Σ_c w_c |d_c|₂ ≤ √3 (Σ_c w_c |d_c|₂²)^½`.
+/// 3. The weights factorise over the axes, so `Σ_c w_c |d_c|₂² = Σ_k q(x_k)` with
+///    `q(x) = (1 − f) x² + f (1 − x)² = x² + f (1 − 2x)`.
+/// 4. `q ≤ ¼` on `[0, 1]`: `q` is symmetric about ½ (`f(1 − x) = 1 − f(x)`); for `x < ½`,
+///    `q(x) ≤ ¼ ⟺ f(x)(1 − 2x) ≤ (½ − x)(½ + x) ⟺ f(x) ≤ ¼ + x/2`. The fade is convex
+///    on `[0, ½]` (`f'' = 60x(1 − x)(1 − 2x) ≥ 0`) with `f(0) = 0`, `f(½) = ½`, so
+///    `f(x) ≤ x ≤ ¼ + x/2` there.
+///
+/// Hence `|n| ≤ √3 · (4 · ¼)^½ = √3 ≈ 1.732` (the looser axis-by-axis bound is 2). The
+/// constant is rounded up; `f32` evaluation adds a few ulps, covered by the renderer's
+/// margins. Tested on random points (`noise_within_proven_bounds`) and on `q ≤ ¼`.
+pub const PERLIN4_BOUND: f32 = 1.732_051;
 
-/// A proven bound on |[`perlin3`]| and |[`mnoise`]| (same gradients and fade); see
-/// [`PERLIN4_BOUND`] for the argument (three axes of at most ½ each).
-pub const PERLIN3_BOUND: f32 = 1.5;
+/// A proven bound on |[`perlin3`]| and |[`mnoise`]|: `√(3/2)`. The argument of
+/// [`PERLIN4_BOUND`] with three axes and gradients with two ±1 components and one zero
+/// (Perlin's 12 edge directions; M-noise uses `hash % 12` of the same set), so `|g|₂ = √2`
+/// and `|n| ≤ √2 · (3 · ¼)^½ = √(3/2) ≈ 1.2247` (the axis-by-axis bound is 1.5).
+pub const PERLIN3_BOUND: f32 = 1.224_745;
 
 /// Olano-style permutation polynomial `(34x² + x) mod 289` on integers 0..289.
 #[inline(always)]
@@ -850,8 +862,9 @@ impl NoiseKind {
         }
     }
 
-    /// A proven bound on |noise| for this kind (see [`PERLIN4_BOUND`]): 1.5 for the 3-D
-    /// noises (Perlin 3-D and M-noise share the gradient set and the fade), 2 for 4-D.
+    /// A proven bound on |noise| for this kind (see [`PERLIN4_BOUND`]): `√(3/2)` for the
+    /// 3-D noises (Perlin 3-D and M-noise share the gradient set and the fade), `√3` for
+    /// 4-D.
     pub fn bound(self) -> f32 {
         match self {
             NoiseKind::Perlin3 | NoiseKind::Mnoise => PERLIN3_BOUND,
@@ -1038,6 +1051,22 @@ mod tests {
                     assert!(t[l] == ts);
                 }
             }
+        }
+    }
+
+    /// The bounds are the rounded-up square roots of the proof, and the lemma `q ≤ ¼` of
+    /// [`PERLIN4_BOUND`] holds on a fine grid.
+    #[test]
+    fn proven_bound_constants() {
+        assert!(PERLIN4_BOUND as f64 >= 3f64.sqrt() && (PERLIN4_BOUND as f64) < 3f64.sqrt() + 1e-6);
+        assert!(
+            PERLIN3_BOUND as f64 >= 1.5f64.sqrt() && (PERLIN3_BOUND as f64) < 1.5f64.sqrt() + 1e-6
+        );
+        for i in 0..=100_000 {
+            let x = i as f64 / 100_000.0;
+            let f = fade64(x);
+            let q = (1.0 - f) * x * x + f * (1.0 - x) * (1.0 - x);
+            assert!(q <= 0.25 + 1e-15, "q({x}) = {q}");
         }
     }
 
