@@ -19,7 +19,7 @@ use crate::colour::{original_colouring, synthetic_smoke, warp_rgba, OriginalColo
 use crate::db::{ClipEntry, EigenfireDb};
 use crate::error::{EigenError, Result};
 use crate::scenario::{ColourMode, Look, Plan, PlanFrame};
-use crate::synthetic::{synthetic_frame, FlameStyle, SyntheticParams};
+use crate::synthetic::{parse_source_name, synthetic_frame, SyntheticParams};
 use crate::transition::FrameRef;
 
 /// Reads source frames for original colouring (§6.1.1), synthetic smoke (§6.3) and custom
@@ -46,18 +46,12 @@ pub struct SyntheticSources;
 impl SyntheticSources {
     /// The synthetic clip parameters of `clip`, if its source is synthetic.
     pub fn params(clip: &ClipEntry) -> Option<SyntheticParams> {
-        let rest = clip.source.strip_prefix("synthetic:")?;
-        let (style, seed) = rest.split_once(":seed=")?;
-        let style = match style {
-            "candle" => FlameStyle::Candle,
-            "campfire" => FlameStyle::Campfire,
-            _ => return None,
-        };
+        let (style, seed) = parse_source_name(&clip.source)?;
         Some(SyntheticParams {
             size: clip.source_size,
             frames: clip.end,
             style,
-            seed: seed.parse().ok()?,
+            seed,
         })
     }
 }
@@ -94,10 +88,11 @@ impl SourceFrames for SyntheticSources {
     }
 }
 
-/// Resizes every channel of `src` to `size` (area average when shrinking).
-pub fn resize_rgba(src: &RgbaFrame, size: Size) -> RgbaFrame {
+/// Resizes every channel of `src` to `size` (area average when shrinking, as
+/// [`crate::pose::resize`]); returns `src` itself when it already has that size.
+pub fn resize_rgba(src: RgbaFrame, size: Size) -> RgbaFrame {
     if src.size() == size {
-        return src.clone();
+        return src;
     }
     let chans: Vec<GrayFrame> = (0..4)
         .map(|c| {
@@ -175,7 +170,7 @@ fn load_layers(
             continue;
         }
         let warp = |f: &RgbaFrame, r: usize| {
-            resize_rgba(&warp_rgba(f, &clip.pose, db.angle(r), pose_p), size)
+            resize_rgba(warp_rgba(f, &clip.pose, db.angle(r), pose_p), size)
         };
         if want_original {
             // The frame, and for smoke its next frame (the previous at the clip's end).

@@ -168,8 +168,8 @@ struct RawScenario {
     join: Vec<Spanned<RawJoin>>,
     #[serde(default)]
     colour: RawColour,
-    bloom: Option<RawBloom>,
-    smoke: Option<RawSmoke>,
+    bloom: Option<Spanned<RawBloom>>,
+    smoke: Option<Spanned<RawSmoke>>,
     #[serde(default)]
     originals: BTreeMap<String, Spanned<String>>,
     #[serde(default)]
@@ -398,7 +398,8 @@ impl Scenario {
                 }
             };
         }
-        if let Some(b) = &self.raw.bloom {
+        if let Some(bs) = &self.raw.bloom {
+            let b = bs.get_ref();
             look.bloom = if b.enabled {
                 let d = BloomParams::default();
                 let p = BloomParams {
@@ -408,13 +409,14 @@ impl Scenario {
                     strength: b.strength.unwrap_or(d.strength),
                 };
                 p.validate()
-                    .map_err(|e| self.err_at(self.table_span("bloom"), format!("[bloom]: {e}")))?;
+                    .map_err(|e| self.err_at(bs.span(), format!("[bloom]: {e}")))?;
                 Some(p)
             } else {
                 None
             };
         }
-        if let Some(s) = &self.raw.smoke {
+        if let Some(ss) = &self.raw.smoke {
+            let s = ss.get_ref();
             look.smoke = if s.enabled {
                 let d = SmokeParams::default();
                 let p = SmokeParams {
@@ -428,7 +430,7 @@ impl Scenario {
                     || p.colour.iter().any(|c| !(0.0..=4.0).contains(c));
                 if bad {
                     return Err(self.err_at(
-                        self.table_span("smoke"),
+                        ss.span(),
                         "[smoke]: threshold must be in 0..=1, blur in 0..=64 px, colour values in 0..=4",
                     ));
                 }
@@ -450,13 +452,6 @@ impl Scenario {
             .map(|(k, v)| (k.clone(), self.resolve_path(v.get_ref())))
             .collect();
         Ok(look)
-    }
-
-    /// Span of the header of table `[name]` (for errors inside plain tables).
-    fn table_span(&self, name: &str) -> Range<usize> {
-        let header = format!("[{name}]");
-        let at = self.text.find(&header).unwrap_or(0);
-        at..at + header.len()
     }
 
     /// Checks that need no database: the sequence, motion names, join settings.
@@ -780,7 +775,6 @@ impl Scenario {
                 frames.push(PlanFrame {
                     source: FrameRef::Db(r),
                     edits: full.clone(),
-                    motion: Some(i),
                 });
             }
             if let Some(j) = joins.get(i) {
@@ -794,7 +788,6 @@ impl Scenario {
                     frames.push(PlanFrame {
                         source: f.clone(),
                         edits,
-                        motion: None,
                     });
                 }
             }
@@ -863,8 +856,6 @@ pub struct PlanFrame {
     pub source: FrameRef,
     /// Weight edits `(index, value, strength)`: w ← w + strength·(value − w).
     pub edits: Vec<(usize, f32, f32)>,
-    /// Index into the sequence of the motion this frame belongs to; `None` in joins.
-    pub motion: Option<usize>,
 }
 
 /// The frames to render, and how smooth they are.
@@ -941,6 +932,13 @@ mod tests {
             "{base}sequence = [\"a\"]\n{m}[[join]]\nmethod = \"direct\"\n"
         ));
         assert!(e.contains("1 [[join]] tables for 0 join(s)"), "{e}");
+        // An out-of-range bloom setting names its table's line.
+        let e = err(&format!("{base}sequence = [\"a\"]\n{m}[bloom]\nstrength = 9.0\n"));
+        assert!(
+            e.starts_with("dir/scene.toml:5:") || e.starts_with("dir/scene.toml:6:"),
+            "{e}"
+        );
+        assert!(e.contains("[bloom]") && e.contains("strength"), "{e}");
         // A kernel that cannot be normalised.
         let e = err(&format!(
             "{base}sequence = [\"a\", \"a\"]\n{m}[transition]\nmethod = \"low-pass\"\nkernel = [1.0, -1.0]\n"

@@ -20,6 +20,34 @@ pub enum FlameStyle {
     Campfire,
 }
 
+impl FlameStyle {
+    const ALL: [(FlameStyle, &'static str); 2] = [
+        (FlameStyle::Candle, "candle"),
+        (FlameStyle::Campfire, "campfire"),
+    ];
+
+    pub fn name(self) -> &'static str {
+        Self::ALL
+            .iter()
+            .find(|(s, _)| *s == self)
+            .expect("listed")
+            .1
+    }
+}
+
+/// The source description a database records for a synthetic clip:
+/// `synthetic:<style>:seed=<n>`. [`parse_source_name`] reads it back.
+pub fn source_name(p: &SyntheticParams) -> String {
+    format!("synthetic:{}:seed={}", p.style.name(), p.seed)
+}
+
+/// Style and seed of a [`source_name`]; `None` for any other source.
+pub fn parse_source_name(s: &str) -> Option<(FlameStyle, u64)> {
+    let (style, seed) = s.strip_prefix("synthetic:")?.split_once(":seed=")?;
+    let style = FlameStyle::ALL.iter().find(|(_, n)| *n == style)?.0;
+    Some((style, seed.parse().ok()?))
+}
+
 /// Settings of [`synthetic_clip`].
 #[derive(Clone, Debug)]
 pub struct SyntheticParams {

@@ -44,13 +44,9 @@ pub struct ClipSource<'a> {
 impl<'a> ClipSource<'a> {
     /// A synthetic clip (see [`crate::synthetic`]), frames made on demand.
     pub fn synthetic(p: SyntheticParams, fps: f64) -> ClipSource<'static> {
-        let style = match p.style {
-            FlameStyle::Candle => "candle",
-            FlameStyle::Campfire => "campfire",
-        };
         let n = p.frames;
         ClipSource {
-            source: format!("synthetic:{style}:seed={}", p.seed),
+            source: crate::synthetic::source_name(&p),
             fps,
             size: p.size,
             frame_count: Some(n),
