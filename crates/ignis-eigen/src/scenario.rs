@@ -933,7 +933,9 @@ mod tests {
         ));
         assert!(e.contains("1 [[join]] tables for 0 join(s)"), "{e}");
         // An out-of-range bloom setting names its table's line.
-        let e = err(&format!("{base}sequence = [\"a\"]\n{m}[bloom]\nstrength = 9.0\n"));
+        let e = err(&format!(
+            "{base}sequence = [\"a\"]\n{m}[bloom]\nstrength = 9.0\n"
+        ));
         assert!(
             e.starts_with("dir/scene.toml:5:") || e.starts_with("dir/scene.toml:6:"),
             "{e}"
