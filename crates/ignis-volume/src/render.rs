@@ -9,7 +9,11 @@
 //! [`crate::mapping::shade`]. This is exactly what the slicing computes, up to the GPU's
 //! linear (rather than trilinear) interpolation inside a cell.
 //!
-//! Performance: cells are binned into 16×16-pixel tiles by their projected bounding boxes
+//! Performance: only the part of each cell where a sample can be visible is marched
+//! ([`visible_boxes`]: the profile columns within reach of the cell's heights for any
+//! turbulence within its proven bound; a skipped sample's alpha is exactly zero); the rest
+//! of a ray only until the pixel is known to be covered. Cells are binned into 16×16-pixel
+//! tiles by their projected bounding boxes
 //! (empty tiles cost nothing; boxes are stored inline for the per-pixel slab tests, and a
 //! pixel outside a cell's projected rectangle skips that cell's slab test), rayon runs over
 //! tiles with per-worker scratch buffers. On x86-64 CPUs with AVX2 the tile renderer runs
@@ -186,9 +190,11 @@ pub struct RenderStats {
     /// Pixels whose ray has at least one sample inside a lattice cell (the pixels a GPU
     /// would run the shader on).
     pub covered_pixels: u64,
-    /// Samples inside a cell.
+    /// Samples found inside a cell. The fast path marches only the parts of cells where a
+    /// sample can be visible (plus, per pixel, what it takes to find `covered_pixels`),
+    /// so it counts fewer than [`RenderParams::exact_inverse`], which marches every slice.
     pub samples: u64,
-    /// Samples inside the unit cylinder with a non-empty profile column (noise evaluated).
+    /// Of those, the samples inside the unit cylinder (handed to the shading).
     pub shaded: u64,
 }
 
@@ -209,8 +215,13 @@ const MAX_RANGES: usize = 64;
 struct Cand {
     fire: u32,
     cell: u32,
+    /// The cell's bounding box, relative to the camera position (as the slab tests use it).
     min: V3,
     max: V3,
+    /// Bounding box of the part of the cell that can be visible ([`visible_boxes`]),
+    /// relative to the camera; empty (`vmin > vmax`) when none can be.
+    vmin: V3,
+    vmax: V3,
     /// Pixel rectangle `[x0, x1] × [y0, y1]` (inclusive) containing the cell's projection,
     /// with a pixel of margin: rays of other pixels cannot meet the cell (it lies in the
     /// convex hull of its corners, whose projection is inside this rectangle), so their
@@ -248,7 +259,9 @@ fn render_with(
     // bin cells into tiles
     let mut bins: Vec<Vec<Cand>> = vec![Vec::new(); (tx * ty) as usize];
     for (fi, f) in fires.iter().enumerate() {
+        let visible = visible_boxes(f, params.exact_inverse);
         for (ci, c) in f.lattice.cells().iter().enumerate() {
+            let (vmin, vmax) = visible[ci];
             let mut lo = [f32::INFINITY; 2];
             let mut hi = [f32::NEG_INFINITY; 2];
             let mut behind = false;
@@ -297,8 +310,10 @@ fn render_with(
                     bins[(y as u32 * tx + x as u32) as usize].push(Cand {
                         fire: fi as u32,
                         cell: ci as u32,
-                        min: c.min,
-                        max: c.max,
+                        min: sub(c.min, camera.position),
+                        max: sub(c.max, camera.position),
+                        vmin: sub(vmin, camera.position),
+                        vmax: sub(vmax, camera.position),
                         px,
                     });
                 }
@@ -342,6 +357,101 @@ fn render_with(
     Ok((RgbaFrame::from_vec(size, data)?, stats))
 }
 
+/// `rem[o]`: a bound on `|Σ_{i ≥ o} gain^i · noise|` (the octaves from `o` on), with a
+/// relative margin for rounding; `rem[octaves] = 0`.
+fn turbulence_bounds(noise: &NoiseParams) -> [f32; 9] {
+    let mut rem = [0.0f32; 9];
+    let b = noise.kind.bound() as f64;
+    let g = (noise.gain as f64).abs();
+    let mut acc = 0.0f64;
+    for o in (0..(noise.octaves as usize).min(8)).rev() {
+        acc += b * g.powi(o as i32);
+        rem[o] = (acc * (1.0 + 1e-4)) as f32;
+    }
+    rem
+}
+
+/// Per lattice cell of `fire`, the world bounding box of the part of the cell where a
+/// sample can be visible — `(min, max)`, empty (`min > max`) if nowhere — or the whole
+/// cell's box when `full`.
+///
+/// A sample at texture height `z` and radius `u` is shaded only if the profile column at
+/// `u` has some alpha within reach of `z` for a turbulence within its proven bound
+/// (`reachable` with no octave summed yet; otherwise its alpha is exactly zero and it adds
+/// nothing to any blend). Over the cell's height range that holds only for
+/// `u ≤ reach`, i.e. in the sub-square `|tex_x|, |tex_y| ≤ reach` of the cell's cross
+/// section; the trilinear image of that sub-box lies in the convex hull of its 8 corners,
+/// whose bounding box is returned. Margins far above the inverse's error
+/// ([`INVERSE_TEX_TOL`]) and `f32` rounding keep every sample the shading would keep.
+fn visible_boxes(fire: &FireInstance, full: bool) -> Vec<(V3, V3)> {
+    let cells = fire.lattice.cells();
+    let whole = |c: &crate::lattice::Cell| (c.min, c.max);
+    let noise = &fire.noise;
+    if full {
+        return cells.iter().map(whole).collect();
+    }
+    let turbulent = noise.octaves > 0 && noise.stability != 0.0;
+    let r = if turbulent {
+        turbulence_bounds(noise)[0]
+    } else {
+        0.0
+    };
+    let profile = fire.profile;
+    let w = profile.width();
+    let n = cells.len();
+    cells
+        .iter()
+        .enumerate()
+        .map(|(j, c)| {
+            // the cell's texture heights, with a margin for rounding
+            let z0 = j as f32 / n as f32 - 1e-3;
+            let z1 = (j + 1) as f32 / n as f32 + 1e-3;
+            let k = if turbulent {
+                kernel(z1, noise.stability)
+            } else {
+                0.0
+            };
+            let eps = 2e-4 * (1.0 + k * r);
+            let (vlo, vhi) = (z0 - k * r - eps, z1 + k * r + eps);
+            // the last profile column (`u ∈ [i, i + 1) / (w − 1)`) with alpha in reach
+            let last = (0..w - 1).rev().find(|&i| {
+                let u = (i as f32 + 0.5) / (w - 1) as f32;
+                profile
+                    .v_support(u)
+                    .is_some_and(|[lo, hi]| hi >= vlo && lo <= vhi)
+            });
+            let Some(i) = last else {
+                return ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
+            };
+            let reach = (i + 1) as f32 / (w - 1) as f32 + 2e-3;
+            if reach >= 1.0 {
+                return whole(c);
+            }
+            let (a0, a1) = (0.5 - 0.5 * reach, 0.5 + 0.5 * reach);
+            let mut lo = [f32::INFINITY; 3];
+            let mut hi = [f32::NEG_INFINITY; 3];
+            for corner in 0..8 {
+                let l = [
+                    if corner & 1 == 0 { a0 } else { a1 },
+                    if corner & 2 == 0 { a0 } else { a1 },
+                    (corner >> 2) as f32,
+                ];
+                let q = c.forward(l);
+                for a in 0..3 {
+                    lo[a] = lo[a].min(q[a]);
+                    hi[a] = hi[a].max(q[a]);
+                }
+            }
+            for a in 0..3 {
+                let m = 1e-4 * (1.0 + lo[a].abs().max(hi[a].abs()));
+                lo[a] -= m;
+                hi[a] += m;
+            }
+            (lo, hi)
+        })
+        .collect()
+}
+
 struct Ctx<'a, 'b> {
     fires: &'a [FireInstance<'b>],
     camera: &'a Camera,
@@ -356,17 +466,40 @@ struct Ctx<'a, 'b> {
     simd: bool,
 }
 
+/// The ray parameter interval `(t0, t1)` (with `t0 ≥ 1e-4`) in which the ray `o + t d`
+/// (`inv` = `1/d` per axis) is inside the box `o + [min, max]`, if not empty.
+#[inline(always)]
+fn slab(inv: V3, min: V3, max: V3) -> Option<(f32, f32)> {
+    let mut t0 = 1e-4f32;
+    let mut t1 = f32::INFINITY;
+    for a in 0..3 {
+        let x = min[a] * inv[a];
+        let y = max[a] * inv[a];
+        let (x, y) = if x < y { (x, y) } else { (y, x) };
+        if x.is_nan() || y.is_nan() {
+            continue;
+        }
+        t0 = t0.max(x);
+        t1 = t1.min(y);
+    }
+    (t0 <= t1).then_some((t0, t1))
+}
+
 /// A pixel's ray being marched (see [`Ctx::march`]).
 struct Ray<'r> {
     o: V3,
     d: V3,
-    /// `d · forward`: sample `k` is at `o + d · k · spacing / cosf`.
-    cosf: f32,
+    /// World distance between samples, `spacing / (d · forward)`: sample `k` is at
+    /// `o + d · k · step`.
+    step: f32,
     /// The candidate cells the ray meets, with its parameter interval in each.
     ranges: &'r [(u32, f32, f32)],
     /// Next slice index, and the last one.
     k: i64,
     k1: i64,
+    /// The slices that may meet a visible part of a cell ([`visible_boxes`]); empty if
+    /// `.0 > .1`.
+    visible: (i64, i64),
     pix: u16,
     covered: bool,
     /// While tracking, `g` is the last sample's global lattice coordinates
@@ -378,6 +511,9 @@ struct Ray<'r> {
     dg: Option<V3>,
     /// Inverse Jacobian of the last Newton solve, for the chord steps.
     m: Track,
+    /// Local-coordinate tolerance of the certified chord steps: [`INVERSE_TEX_TOL`] in
+    /// texture space (`tex_x = 2a − 1`, `tex_z = (j + s)/cells`).
+    tol: V3,
 }
 
 /// One fire's samples in one tile, in march order (pixel by pixel, front to back), plus
@@ -393,68 +529,26 @@ struct Scratch {
     tex: Vec<V3>,
     /// Straight-alpha colour of each sample (after shading).
     col: Vec<[f32; 4]>,
-    /// Batched noise: the samples still in play (structure of arrays).
-    act: Active,
+    /// Batched noise: the samples still in play.
+    act: Vec<Live>,
     /// Memoised permutation hashes of the noise cells met so far.
     noise_cache: NoiseCache,
 }
 
-/// Samples whose noise is still being summed, as structure of arrays.
-#[derive(Default)]
-struct Active {
+/// A sample whose noise is still being summed.
+#[derive(Clone, Copy, Debug)]
+struct Live {
     /// Index into the sample arrays.
-    idx: Vec<u32>,
-    /// Noise-space position (eq. 11 + 13) per axis.
-    p: [Vec<f32>; 4],
+    idx: u32,
+    /// Noise-space position (eq. 11 + 13).
+    p: [f32; 4],
     /// Partial turbulence sum.
-    sum: Vec<f32>,
+    sum: f32,
     /// `tex_z`, kernel `f(tex_z)` (eq. 13) and the profile's visible `v` range.
-    z: Vec<f32>,
-    kern: Vec<f32>,
-    lo: Vec<f32>,
-    hi: Vec<f32>,
-}
-
-impl Active {
-    fn clear(&mut self) {
-        self.idx.clear();
-        for a in &mut self.p {
-            a.clear();
-        }
-        self.sum.clear();
-        self.z.clear();
-        self.kern.clear();
-        self.lo.clear();
-        self.hi.clear();
-    }
-
-    /// Keeps only the entries for which `keep(i)` holds, in order.
-    fn retain(&mut self, mut keep: impl FnMut(&Active, usize) -> bool) {
-        let mut n = 0;
-        for i in 0..self.idx.len() {
-            if keep(self, i) {
-                self.idx[n] = self.idx[i];
-                for a in &mut self.p {
-                    a[n] = a[i];
-                }
-                self.sum[n] = self.sum[i];
-                self.z[n] = self.z[i];
-                self.kern[n] = self.kern[i];
-                self.lo[n] = self.lo[i];
-                self.hi[n] = self.hi[i];
-                n += 1;
-            }
-        }
-        self.idx.truncate(n);
-        for a in &mut self.p {
-            a.truncate(n);
-        }
-        self.sum.truncate(n);
-        self.z.truncate(n);
-        self.kern.truncate(n);
-        self.lo.truncate(n);
-        self.hi.truncate(n);
-    }
+    z: f32,
+    kern: f32,
+    lo: f32,
+    hi: f32,
 }
 
 /// Whether `v = z + kern · t` can reach `[lo, hi]` for some turbulence `t` in
@@ -622,8 +716,31 @@ impl Ctx<'_, '_> {
         let Some(mut ray) = self.ray(group, x, y, best_k, pix, ranges) else {
             return false;
         };
-        while ray.k <= ray.k1 {
-            self.sample(fire, &mut ray, stats, out);
+        let cells = fire.lattice.cells().len() as f32;
+        ray.tol = [
+            0.5 * INVERSE_TEX_TOL,
+            0.5 * INVERSE_TEX_TOL,
+            cells * INVERSE_TEX_TOL,
+        ];
+        // the slices that may be visible, then the others only until one sample is known
+        // to lie inside a cell (for `covered`; their alpha is zero)
+        let (k0, k1) = (ray.k, ray.k1);
+        let (v0, v1) = ray.visible;
+        let rest = if v0 <= v1 {
+            ray.k1 = v1;
+            ray.k = v0;
+            while ray.k <= ray.k1 {
+                self.sample(fire, &mut ray, stats, out);
+            }
+            [(k0, v0 - 1), (v1 + 1, k1)]
+        } else {
+            [(k0, k1), (1, 0)]
+        };
+        for (a, b) in rest {
+            (ray.k, ray.k1, ray.tracking) = (a, b, false);
+            while !ray.covered && ray.k <= ray.k1 {
+                self.sample(fire, &mut ray, stats, out);
+            }
         }
         ray.covered
     }
@@ -654,50 +771,57 @@ impl Ctx<'_, '_> {
         let mut nr = 0;
         let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
         let (xi, yi) = (x as i32, y as i32);
+        let (mut vlo, mut vhi) = (f32::INFINITY, f32::NEG_INFINITY);
         for cell in group {
             if xi < cell.px[0] || xi > cell.px[1] || yi < cell.px[2] || yi > cell.px[3] {
                 continue;
             }
-            let mut t0 = 1e-4f32;
-            let mut t1 = f32::INFINITY;
-            for a in 0..3 {
-                let x = (cell.min[a] - o[a]) * inv[a];
-                let y = (cell.max[a] - o[a]) * inv[a];
-                let (x, y) = if x < y { (x, y) } else { (y, x) };
-                if x.is_nan() || y.is_nan() {
-                    continue;
-                }
-                t0 = t0.max(x);
-                t1 = t1.min(y);
-            }
-            if t0 > t1 {
+            let Some((t0, t1)) = slab(inv, cell.min, cell.max) else {
                 continue;
-            }
+            };
             lo = lo.min(t0);
             hi = hi.max(t1);
             if nr < ranges.len() {
                 ranges[nr] = (cell.cell, t0, t1);
                 nr += 1;
             }
+            if cell.vmin[0] > cell.vmax[0] {
+                continue; // nothing of this cell can be visible
+            }
+            if let Some((t0, t1)) = slab(inv, cell.vmin, cell.vmax) {
+                vlo = vlo.min(t0);
+                vhi = vhi.max(t1);
+            }
         }
         if nr == 0 {
             return None;
         }
+        let step = spacing / cosf;
         let k0 = (lo * cosf / spacing).ceil() as i64;
         let k1 = ((hi * cosf / spacing).floor() as i64).min(best_k.saturating_sub(1));
+        let visible = if vlo <= vhi {
+            (
+                ((vlo * cosf / spacing).ceil() as i64).max(k0),
+                ((vhi * cosf / spacing).floor() as i64).min(k1),
+            )
+        } else {
+            (1, 0)
+        };
         Some(Ray {
             o,
             d,
-            cosf,
+            step,
             ranges: &ranges[..nr],
             k: k0,
             k1,
+            visible,
             pix,
             covered: false,
             tracking: false,
             g: [0.5; 3],
             dg: None,
             m: Track::default(),
+            tol: [0.0; 3],
         })
     }
 
@@ -710,7 +834,7 @@ impl Ctx<'_, '_> {
         let exact = self.params.exact_inverse;
         let cells = fire.lattice.cells();
         let last = cells.len() - 1;
-        let t = k as f32 * self.params.slice_spacing / r.cosf;
+        let t = k as f32 * r.step;
         let p = add(r.o, scale(r.d, t));
         let (mut j, mut guess) = if r.tracking {
             let pred = match r.dg {
@@ -748,13 +872,7 @@ impl Ctx<'_, '_> {
                 None => return,
             }
         };
-        // local-coordinate tolerance of the certified chord step: `INVERSE_TEX_TOL` in texture
-        // space (`tex_x = 2a − 1`, `tex_z = (j + s)/(c − 1)`)
-        let tol = [
-            0.5 * INVERSE_TEX_TOL,
-            0.5 * INVERSE_TEX_TOL,
-            cells.len() as f32 * INVERSE_TEX_TOL,
-        ];
+        let tol = r.tol;
         let mut found = None;
         for _ in 0..6 {
             let l = if exact {
@@ -792,7 +910,7 @@ impl Ctx<'_, '_> {
         } else {
             // no previous sample yet: the ray's step mapped by the inverse Jacobian at the
             // cell centre (the affine part of the map), a first-order prediction
-            Some(cells[j].local_direction(scale(r.d, self.params.slice_spacing / r.cosf)))
+            Some(cells[j].local_direction(scale(r.d, r.step)))
         };
         r.g = ng;
         r.tracking = true;
@@ -863,18 +981,8 @@ impl Ctx<'_, '_> {
         let time = self.time * noise.time_scale;
         let length = fire.lattice.length();
         let profile = fire.profile;
-        // rem[o]: bound on |Σ_{i ≥ o} gain^i · noise|, with a relative margin for rounding
         let octaves = noise.octaves as usize;
-        let mut rem = [0.0f32; 9];
-        {
-            let b = noise.kind.bound() as f64;
-            let g = (noise.gain as f64).abs();
-            let mut acc = 0.0f64;
-            for o in (0..octaves.min(8)).rev() {
-                acc += b * g.powi(o as i32);
-                rem[o] = (acc * (1.0 + 1e-4)) as f32;
-            }
-        }
+        let rem = turbulence_bounds(noise);
         let act = &mut s.act;
         act.clear();
         for (i, &tex) in s.tex.iter().enumerate() {
@@ -889,47 +997,43 @@ impl Ctx<'_, '_> {
             }
             let scale = noise_scale(fire.lattice.radius_at(z), length, noise.frequency);
             let p = noise_position(tex, time, scale, fire.offset);
-            act.idx.push(i as u32);
-            for (dst, v) in act.p.iter_mut().zip(p) {
-                dst.push(v);
-            }
-            act.sum.push(0.0);
-            act.z.push(z);
-            act.kern.push(kern);
-            act.lo.push(lo);
-            act.hi.push(hi);
+            act.push(Live {
+                idx: i as u32,
+                p,
+                sum: 0.0,
+                z,
+                kern,
+                lo,
+                hi,
+            });
         }
         // turbulence (eq. 9), octave by octave, as `turbulence` computes it
         let mut amp = 1.0f32;
         let mut f = 1.0f32;
         for o in 0..octaves {
-            let m = act.idx.len();
-            let mut start = 0;
-            while start < m {
-                let len = LANES.min(m - start);
+            for batch in act.chunks_mut(LANES) {
                 let mut q = [[0.0f32; LANES]; 4];
-                for (a, qa) in q.iter_mut().enumerate() {
-                    for (l, v) in act.p[a][start..start + len].iter().enumerate() {
-                        qa[l] = v * f;
+                for (l, live) in batch.iter().enumerate() {
+                    for (qa, pa) in q.iter_mut().zip(live.p) {
+                        qa[l] = pa * f;
                     }
                 }
                 let val = noise.kind.eval_lanes_cached(&q, &mut s.noise_cache);
-                for (l, sum) in act.sum[start..start + len].iter_mut().enumerate() {
-                    *sum += amp * val[l];
+                for (live, v) in batch.iter_mut().zip(val) {
+                    live.sum += amp * v;
                 }
-                start += len;
             }
             amp *= noise.gain;
             f *= noise.lacunarity;
             if o + 1 < octaves {
                 let r = rem[o + 1];
-                act.retain(|a, i| reachable(a.z[i], a.kern[i], a.sum[i], r, a.lo[i], a.hi[i]));
+                act.retain(|a| reachable(a.z, a.kern, a.sum, r, a.lo, a.hi));
             }
         }
-        for (j, &i) in act.idx.iter().enumerate() {
-            let tex = s.tex[i as usize];
-            let [u, v] = profile_uv(tex, act.sum[j], noise.stability);
-            s.col[i as usize] = profile.sample(u, v);
+        for live in act.iter() {
+            let i = live.idx as usize;
+            let [u, v] = profile_uv(s.tex[i], live.sum, noise.stability);
+            s.col[i] = profile.sample(u, v);
         }
     }
 }
@@ -1107,14 +1211,20 @@ mod tests {
     }
 
     /// The batched shading (lanes noise, octaves skipped only where the alpha is provably
-    /// zero) gives the very same colour as `shade` for every sample.
+    /// zero) gives the very same colour as `shade` for every sample, and every sample with
+    /// some alpha lies in the part of its cell the fast path marches (`visible_boxes`).
     #[test]
-    fn batched_shading_equals_scalar_shading() {
+    fn batched_shading_equals_scalar_shading_and_culls_only_invisible_samples() {
         let mut scenes = Vec::new();
         for kind in [NoiseKind::Perlin3, NoiseKind::Perlin4, NoiseKind::Mnoise] {
             scenes.push(FireScene::table1(kind, 3, 35).with_size(Size::new(64, 48).unwrap()));
         }
-        scenes.push(FireScene::preset(Preset::Campfire).with_size(Size::new(48, 48).unwrap()));
+        for p in Preset::ALL {
+            scenes.push(FireScene::preset(p).with_size(Size::new(48, 48).unwrap()));
+        }
+        let mut calm = FireScene::table1(NoiseKind::Perlin4, 0, 35);
+        calm = calm.with_size(Size::new(64, 48).unwrap());
+        scenes.push(calm);
         for scene in &scenes {
             let mut anim = scene.animator().unwrap();
             let (pts, _) = anim.step();
@@ -1153,8 +1263,10 @@ mod tests {
                 .map(|(i, c)| Cand {
                     fire: 0,
                     cell: i as u32,
-                    min: c.min,
-                    max: c.max,
+                    min: sub(c.min, scene.camera.position),
+                    max: sub(c.max, scene.camera.position),
+                    vmin: sub(c.min, scene.camera.position),
+                    vmax: sub(c.max, scene.camera.position),
                     px: [i32::MIN, i32::MAX, i32::MIN, i32::MAX],
                 })
                 .collect();
@@ -1176,9 +1288,28 @@ mod tests {
                     );
                 }
             }
-            assert!(s.tex.len() > 1000, "{stats:?}");
+            assert!(s.tex.len() > 300, "{stats:?}");
             ctx.shade_reference(&inst[0], &mut s);
             let reference = s.col.clone();
+            // every visible sample lies in its cell's visible box (what the fast path
+            // marches)
+            let visible = visible_boxes(&inst[0], false);
+            let n = lat.cells().len();
+            for (tex, c) in s.tex.iter().zip(&reference) {
+                if c[3] <= 0.0 {
+                    continue;
+                }
+                let p = lat.forward(*tex);
+                let j = ((tex[2] * n as f32) as usize).min(n - 1);
+                let inside = |j: usize| {
+                    let (lo, hi) = visible[j];
+                    (0..3).all(|a| p[a] >= lo[a] && p[a] <= hi[a])
+                };
+                assert!(
+                    inside(j) || (j > 0 && inside(j - 1)),
+                    "visible sample at {tex:?} outside the visible box of cell {j}"
+                );
+            }
             ctx.shade_batched(&inst[0], &mut s);
             let visible = reference.iter().filter(|c| c[3] > 0.0).count();
             assert!(visible > 100 && visible < reference.len());
