@@ -104,6 +104,17 @@ struct Certificate {
     n: [[f32; 4]; 4],
 }
 
+/// See [`Cell::affine_inverse`]: `l ≈ ½ + M (p − centre)` within `err` per component.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AffineInverse {
+    /// Rows of `M`, the inverse Jacobian at the cell centre.
+    pub m: [[f64; 3]; 3],
+    /// World position of the cell centre.
+    pub centre: [f64; 3],
+    /// Bound on the model's error in `a`, `b`, `s` for points of the cell.
+    pub err: [f64; 3],
+}
+
 /// What a ray carries from one [`Cell::inverse_tracked`] to the next: the inverse
 /// Jacobian of its last Newton solve, as columns padded to four lanes (`None` before the
 /// first solve or after a failed one).
@@ -271,6 +282,65 @@ impl Cell {
             centre: self.centre,
             n,
         })
+    }
+
+    /// A conservative affine model of the inverse map, for culling: every point
+    /// `p = F(l)` of the cell (`l ∈ [0, 1]³`) has `|l − ½ − M (p − F(c))| ≤ err` per
+    /// component, with `M` the inverse Jacobian at the centre `c = (½, ½, ½)`.
+    ///
+    /// From the expansion about the centre (see `Certificate`),
+    /// `M (F(l) − F(c)) = M J(c) x + M N(x)` with `x = l − c`, `|x| ≤ ½` and
+    /// `N(x) = x_a x_b w4 + x_a x_s w5 + x_b x_s w6 + x_a x_b x_s w7`, so the error is at most
+    /// `½ |I − M J(c)| 1 + ¼ (|M w4| + |M w5| + |M w6|) + ⅛ |M w7|` (all in `f64` from the
+    /// cell's exact `f32` coefficients, rounded up). `None` for a cell without a
+    /// [`Certificate`]: not nearly affine, the bound would be of no use.
+    pub fn affine_inverse(&self) -> Option<AffineInverse> {
+        self.cert.as_ref()?;
+        let k = self.k.map(|v| v.map(|x| x as f64));
+        let comb = |w: &[(usize, f64)]| -> [f64; 3] {
+            [0, 1, 2].map(|i| w.iter().map(|&(j, f)| f * k[j][i]).sum())
+        };
+        let centre = comb(&[
+            (0, 1.0),
+            (1, 0.5),
+            (2, 0.5),
+            (3, 0.5),
+            (4, 0.25),
+            (5, 0.25),
+            (6, 0.25),
+            (7, 0.125),
+        ]);
+        // Jacobian columns at the centre
+        let ja = comb(&[(1, 1.0), (4, 0.5), (5, 0.5), (7, 0.25)]);
+        let jb = comb(&[(2, 1.0), (4, 0.5), (6, 0.5), (7, 0.25)]);
+        let js = comb(&[(3, 1.0), (5, 0.5), (6, 0.5), (7, 0.25)]);
+        let cross = |a: [f64; 3], b: [f64; 3]| {
+            [
+                a[1] * b[2] - a[2] * b[1],
+                a[2] * b[0] - a[0] * b[2],
+                a[0] * b[1] - a[1] * b[0],
+            ]
+        };
+        let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+        let det = dot(ja, cross(jb, js));
+        if !(det.abs() > 1e-30 && det.is_finite()) {
+            return None;
+        }
+        let m = [cross(jb, js), cross(js, ja), cross(ja, jb)].map(|r| r.map(|v| v / det));
+        let absm = |v: [f64; 3]| [0, 1, 2].map(|r| dot(m[r], v).abs());
+        let w4 = absm(comb(&[(4, 1.0), (7, 0.5)]));
+        let w5 = absm(comb(&[(5, 1.0), (7, 0.5)]));
+        let w6 = absm(comb(&[(6, 1.0), (7, 0.5)]));
+        let w7 = absm(k[7]);
+        let cols = [ja, jb, js];
+        let err = [0, 1, 2].map(|r| {
+            let id: f64 = (0..3)
+                .map(|c| (dot(m[r], cols[c]) - if r == c { 1.0 } else { 0.0 }).abs())
+                .sum();
+            let e = 0.5 * id + 0.25 * (w4[r] + w5[r] + w6[r]) + 0.125 * w7[r];
+            e * (1.0 + 1e-6) + 1e-9
+        });
+        Some(AffineInverse { m, centre, err })
     }
 
     /// Half-margin of the box `[−CERT_BOX, 1 + CERT_BOX]³` (local coordinates) on which
@@ -991,6 +1061,39 @@ mod tests {
             }
             println!("{res} levels: {certified}/{n} cells certified, {answered} answers, worst error / bound {worst:.3}");
             assert!(answered > 1_000, "{answered}");
+        }
+    }
+
+    /// The affine model's error bound holds at random points of every certified cell.
+    #[test]
+    fn affine_inverse_error_bound() {
+        let mut rng = ignis_core::Rng::new(29);
+        for (curve, res) in [(bent(), 35usize), (bent(), 12)] {
+            let lat = Lattice::build(&curve, res).unwrap();
+            let mut checked = 0;
+            let mut worst = 0.0f64;
+            for c in lat.cells() {
+                let Some(aff) = c.affine_inverse() else {
+                    continue;
+                };
+                for _ in 0..300 {
+                    let l = [0; 3].map(|_| rng.uniform(0.0, 1.0) as f32);
+                    let p = c.forward(l);
+                    for r in 0..3 {
+                        let est = 0.5
+                            + (0..3)
+                                .map(|i| aff.m[r][i] * (p[i] as f64 - aff.centre[i]))
+                                .sum::<f64>();
+                        let e = (est - l[r] as f64).abs();
+                        // `p` is rounded to f32: allow for that (≈ 1e-7 · |M| · |p|)
+                        assert!(e <= aff.err[r] + 1e-5, "error {e} > bound {}", aff.err[r]);
+                        worst = worst.max(e / (aff.err[r] + 1e-5));
+                    }
+                    checked += 1;
+                }
+            }
+            println!("{res} levels: {checked} points, worst error / bound {worst:.3}");
+            assert!(checked > 1000);
         }
     }
 

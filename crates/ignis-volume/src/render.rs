@@ -10,7 +10,7 @@
 //! linear (rather than trilinear) interpolation inside a cell.
 //!
 //! Performance: only the part of each cell where a sample can be visible is marched
-//! ([`visible_boxes`]: the profile columns within reach of the cell's heights for any
+//! ([`visible_parts`]: the profile columns within reach of the cell's heights for any
 //! turbulence within its proven bound; a skipped sample's alpha is exactly zero); the rest
 //! of a ray only until the pixel is known to be covered. Cells are binned into 16×16-pixel
 //! tiles by their projected bounding boxes
@@ -218,10 +218,12 @@ struct Cand {
     /// The cell's bounding box, relative to the camera position (as the slab tests use it).
     min: V3,
     max: V3,
-    /// Bounding box of the part of the cell that can be visible ([`visible_boxes`]),
+    /// Bounding box of the part of the cell that can be visible ([`visible_parts`]),
     /// relative to the camera; empty (`vmin > vmax`) when none can be.
     vmin: V3,
     vmax: V3,
+    /// The tighter description of that part for a nearly affine cell.
+    disc: Option<Disc>,
     /// Pixel rectangle `[x0, x1] × [y0, y1]` (inclusive) containing the cell's projection,
     /// with a pixel of margin: rays of other pixels cannot meet the cell (it lies in the
     /// convex hull of its corners, whose projection is inside this rectangle), so their
@@ -259,9 +261,9 @@ fn render_with(
     // bin cells into tiles
     let mut bins: Vec<Vec<Cand>> = vec![Vec::new(); (tx * ty) as usize];
     for (fi, f) in fires.iter().enumerate() {
-        let visible = visible_boxes(f, params.exact_inverse);
+        let visible = visible_parts(f, camera.position, params.exact_inverse);
         for (ci, c) in f.lattice.cells().iter().enumerate() {
-            let (vmin, vmax) = visible[ci];
+            let vis = visible[ci];
             let mut lo = [f32::INFINITY; 2];
             let mut hi = [f32::NEG_INFINITY; 2];
             let mut behind = false;
@@ -312,8 +314,9 @@ fn render_with(
                         cell: ci as u32,
                         min: sub(c.min, camera.position),
                         max: sub(c.max, camera.position),
-                        vmin: sub(vmin, camera.position),
-                        vmax: sub(vmax, camera.position),
+                        vmin: sub(vis.min, camera.position),
+                        vmax: sub(vis.max, camera.position),
+                        disc: vis.disc,
                         px,
                     });
                 }
@@ -371,21 +374,98 @@ fn turbulence_bounds(noise: &NoiseParams) -> [f32; 9] {
     rem
 }
 
-/// Per lattice cell of `fire`, the world bounding box of the part of the cell where a
-/// sample can be visible — `(min, max)`, empty (`min > max`) if nowhere — or the whole
-/// cell's box when `full`.
+/// Where a lattice cell can hold a visible sample (see [`visible_parts`]).
+#[derive(Clone, Copy, Debug)]
+struct Visible {
+    /// World bounding box of that part; empty (`min > max`) if there is none.
+    min: V3,
+    max: V3,
+    /// For a nearly affine cell, a tighter description (used instead of the box).
+    disc: Option<Disc>,
+}
+
+/// The part of a nearly affine cell where a visible sample can lie, through the cell's
+/// affine inverse model ([`crate::lattice::Cell::affine_inverse`]): with
+/// `(x_a, x_b, x_s) = M (p − F(c))` (`l − ½` up to the model's error),
+/// `x_a² + x_b² ≤ r2` and `|x_s| ≤ h`. All in `f64`.
+#[derive(Clone, Copy, Debug)]
+struct Disc {
+    /// Rows of `M`.
+    m: [[f64; 3]; 3],
+    /// `M (o − F(c))` for the camera position `o`.
+    alpha: [f64; 3],
+    r2: f64,
+    h: f64,
+}
+
+impl Disc {
+    /// The ray parameter interval (`t ≥ 1e-4`, slightly widened) in which the camera ray
+    /// with direction `d` is in the region, if not empty: `x(t) = alpha + t M d`, one
+    /// linear and one quadratic inequality in `t`.
+    #[inline(always)]
+    fn interval(&self, d: V3) -> Option<(f32, f32)> {
+        let d = d.map(f64::from);
+        let b = self.m.map(|r| r[0] * d[0] + r[1] * d[1] + r[2] * d[2]);
+        let a = self.alpha;
+        let (mut lo, mut hi) = (1e-4f64, f64::INFINITY);
+        if b[2] != 0.0 {
+            let (t0, t1) = ((-self.h - a[2]) / b[2], (self.h - a[2]) / b[2]);
+            lo = lo.max(t0.min(t1));
+            hi = hi.min(t0.max(t1));
+        } else if a[2].abs() > self.h {
+            return None;
+        }
+        let qa = b[0] * b[0] + b[1] * b[1];
+        let qb = a[0] * b[0] + a[1] * b[1];
+        let qc = a[0] * a[0] + a[1] * a[1] - self.r2;
+        if qa > 0.0 {
+            let disc = qb * qb - qa * qc;
+            if disc < 0.0 {
+                return None;
+            }
+            let sq = disc.sqrt();
+            lo = lo.max((-qb - sq) / qa);
+            hi = hi.min((-qb + sq) / qa);
+        } else if qc > 0.0 {
+            return None;
+        }
+        if lo > hi || hi.is_nan() {
+            return None;
+        }
+        let m = 1e-6 * (1.0 + hi.abs());
+        Some(((lo - m) as f32, (hi + m) as f32))
+    }
+
+    /// Whether world point `p` is in the region (for tests).
+    #[cfg(test)]
+    fn contains(&self, p: V3, o: V3) -> bool {
+        let q = [0, 1, 2].map(|i| p[i] as f64 - o[i] as f64);
+        let x = [0, 1, 2]
+            .map(|r| self.alpha[r] + self.m[r].iter().zip(q).map(|(m, q)| m * q).sum::<f64>());
+        x[0] * x[0] + x[1] * x[1] <= self.r2 && x[2].abs() <= self.h
+    }
+}
+
+/// Per lattice cell of `fire`, where a sample can be visible — or, when `full`, the whole
+/// cell's box. `camera` is the camera position.
 ///
 /// A sample at texture height `z` and radius `u` is shaded only if the profile column at
 /// `u` has some alpha within reach of `z` for a turbulence within its proven bound
 /// (`reachable` with no octave summed yet; otherwise its alpha is exactly zero and it adds
-/// nothing to any blend). Over the cell's height range that holds only for
-/// `u ≤ reach`, i.e. in the sub-square `|tex_x|, |tex_y| ≤ reach` of the cell's cross
-/// section; the trilinear image of that sub-box lies in the convex hull of its 8 corners,
-/// whose bounding box is returned. Margins far above the inverse's error
-/// ([`INVERSE_TEX_TOL`]) and `f32` rounding keep every sample the shading would keep.
-fn visible_boxes(fire: &FireInstance, full: bool) -> Vec<(V3, V3)> {
+/// nothing to any blend), and only if `u ≤ 1`. Over the cell's height range that holds
+/// only for `u ≤ reach`. The box: the trilinear image of the sub-square
+/// `|tex_x|, |tex_y| ≤ reach` lies in the convex hull of its 8 corners, whose bounding box
+/// it is. The disc, for nearly affine cells: a visible sample has `l ∈ [0, 1]³` and
+/// `√((a − ½)² + (b − ½)²) ≤ reach / 2`, so its affine estimate lies within the model's
+/// error of that. Margins far above the inverse's error ([`INVERSE_TEX_TOL`]) and `f32`
+/// rounding keep every sample the shading would keep.
+fn visible_parts(fire: &FireInstance, camera: V3, full: bool) -> Vec<Visible> {
     let cells = fire.lattice.cells();
-    let whole = |c: &crate::lattice::Cell| (c.min, c.max);
+    let whole = |c: &crate::lattice::Cell| Visible {
+        min: c.min,
+        max: c.max,
+        disc: None,
+    };
     let noise = &fire.noise;
     if full {
         return cells.iter().map(whole).collect();
@@ -421,11 +501,25 @@ fn visible_boxes(fire: &FireInstance, full: bool) -> Vec<(V3, V3)> {
                     .is_some_and(|[lo, hi]| hi >= vlo && lo <= vhi)
             });
             let Some(i) = last else {
-                return ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
+                return Visible {
+                    min: [f32::INFINITY; 3],
+                    max: [f32::NEG_INFINITY; 3],
+                    disc: None,
+                };
             };
-            let reach = (i + 1) as f32 / (w - 1) as f32 + 2e-3;
+            let reach = ((i + 1) as f32 / (w - 1) as f32).min(1.0) + 2e-3;
+            let disc = c.affine_inverse().map(|aff| {
+                let rel = [0, 1, 2].map(|i| camera[i] as f64 - aff.centre[i]);
+                let radius = 0.5 * reach as f64 + aff.err[0].hypot(aff.err[1]) + 1e-3;
+                Disc {
+                    m: aff.m,
+                    alpha: aff.m.map(|r| r[0] * rel[0] + r[1] * rel[1] + r[2] * rel[2]),
+                    r2: radius * radius,
+                    h: 0.5 + aff.err[2] + 1e-3,
+                }
+            });
             if reach >= 1.0 {
-                return whole(c);
+                return Visible { disc, ..whole(c) };
             }
             let (a0, a1) = (0.5 - 0.5 * reach, 0.5 + 0.5 * reach);
             let mut lo = [f32::INFINITY; 3];
@@ -447,7 +541,11 @@ fn visible_boxes(fire: &FireInstance, full: bool) -> Vec<(V3, V3)> {
                 lo[a] -= m;
                 hi[a] += m;
             }
-            (lo, hi)
+            Visible {
+                min: lo,
+                max: hi,
+                disc,
+            }
         })
         .collect()
 }
@@ -489,15 +587,14 @@ fn slab(inv: V3, min: V3, max: V3) -> Option<(f32, f32)> {
 struct Ray<'r> {
     o: V3,
     d: V3,
-    /// World distance between samples, `spacing / (d · forward)`: sample `k` is at
-    /// `o + d · k · step`.
-    step: f32,
+    /// `d · forward`: sample `k` is at `o + d · k · spacing / cosf`.
+    cosf: f32,
     /// The candidate cells the ray meets, with its parameter interval in each.
     ranges: &'r [(u32, f32, f32)],
     /// Next slice index, and the last one.
     k: i64,
     k1: i64,
-    /// The slices that may meet a visible part of a cell ([`visible_boxes`]); empty if
+    /// The slices that may meet a visible part of a cell ([`visible_parts`]); empty if
     /// `.0 > .1`.
     visible: (i64, i64),
     pix: u16,
@@ -788,7 +885,11 @@ impl Ctx<'_, '_> {
             if cell.vmin[0] > cell.vmax[0] {
                 continue; // nothing of this cell can be visible
             }
-            if let Some((t0, t1)) = slab(inv, cell.vmin, cell.vmax) {
+            let part = match &cell.disc {
+                Some(disc) => disc.interval(d),
+                None => slab(inv, cell.vmin, cell.vmax),
+            };
+            if let Some((t0, t1)) = part {
                 vlo = vlo.min(t0);
                 vhi = vhi.max(t1);
             }
@@ -796,7 +897,6 @@ impl Ctx<'_, '_> {
         if nr == 0 {
             return None;
         }
-        let step = spacing / cosf;
         let k0 = (lo * cosf / spacing).ceil() as i64;
         let k1 = ((hi * cosf / spacing).floor() as i64).min(best_k.saturating_sub(1));
         let visible = if vlo <= vhi {
@@ -810,7 +910,7 @@ impl Ctx<'_, '_> {
         Some(Ray {
             o,
             d,
-            step,
+            cosf,
             ranges: &ranges[..nr],
             k: k0,
             k1,
@@ -834,7 +934,7 @@ impl Ctx<'_, '_> {
         let exact = self.params.exact_inverse;
         let cells = fire.lattice.cells();
         let last = cells.len() - 1;
-        let t = k as f32 * r.step;
+        let t = k as f32 * self.params.slice_spacing / r.cosf;
         let p = add(r.o, scale(r.d, t));
         let (mut j, mut guess) = if r.tracking {
             let pred = match r.dg {
@@ -910,7 +1010,7 @@ impl Ctx<'_, '_> {
         } else {
             // no previous sample yet: the ray's step mapped by the inverse Jacobian at the
             // cell centre (the affine part of the map), a first-order prediction
-            Some(cells[j].local_direction(scale(r.d, r.step)))
+            Some(cells[j].local_direction(scale(r.d, self.params.slice_spacing / r.cosf)))
         };
         r.g = ng;
         r.tracking = true;
@@ -1212,7 +1312,7 @@ mod tests {
 
     /// The batched shading (lanes noise, octaves skipped only where the alpha is provably
     /// zero) gives the very same colour as `shade` for every sample, and every sample with
-    /// some alpha lies in the part of its cell the fast path marches (`visible_boxes`).
+    /// some alpha lies in the part of its cell the fast path marches (`visible_parts`).
     #[test]
     fn batched_shading_equals_scalar_shading_and_culls_only_invisible_samples() {
         let mut scenes = Vec::new();
@@ -1267,6 +1367,7 @@ mod tests {
                     max: sub(c.max, scene.camera.position),
                     vmin: sub(c.min, scene.camera.position),
                     vmax: sub(c.max, scene.camera.position),
+                    disc: None,
                     px: [i32::MIN, i32::MAX, i32::MIN, i32::MAX],
                 })
                 .collect();
@@ -1293,8 +1394,9 @@ mod tests {
             let reference = s.col.clone();
             // every visible sample lies in its cell's visible box (what the fast path
             // marches)
-            let visible = visible_boxes(&inst[0], false);
+            let visible = visible_parts(&inst[0], scene.camera.position, false);
             let n = lat.cells().len();
+            let mut discs = 0;
             for (tex, c) in s.tex.iter().zip(&reference) {
                 if c[3] <= 0.0 {
                     continue;
@@ -1302,14 +1404,25 @@ mod tests {
                 let p = lat.forward(*tex);
                 let j = ((tex[2] * n as f32) as usize).min(n - 1);
                 let inside = |j: usize| {
-                    let (lo, hi) = visible[j];
-                    (0..3).all(|a| p[a] >= lo[a] && p[a] <= hi[a])
+                    let v = &visible[j];
+                    let in_box = (0..3).all(|a| p[a] >= v.min[a] && p[a] <= v.max[a]);
+                    match &v.disc {
+                        Some(d) => in_box && d.contains(p, scene.camera.position),
+                        None => in_box,
+                    }
                 };
+                discs += visible[j].disc.is_some() as usize;
                 assert!(
                     inside(j) || (j > 0 && inside(j - 1)),
-                    "visible sample at {tex:?} outside the visible box of cell {j}"
+                    "visible sample at {tex:?} outside the visible part of cell {j}"
                 );
             }
+            // nearly every visible sample was checked against a disc too
+            let lit = reference.iter().filter(|c| c[3] > 0.0).count();
+            assert!(
+                discs * 10 >= lit * 9,
+                "{discs} of {lit} in cells with a disc"
+            );
             ctx.shade_batched(&inst[0], &mut s);
             let visible = reference.iter().filter(|c| c[3] > 0.0).count();
             assert!(visible > 100 && visible < reference.len());
