@@ -22,6 +22,9 @@ use crate::spline::BSpline;
 
 pub(crate) type V3 = [f32; 3];
 
+/// Points per call of [`Cell::inverse_certified_lanes`].
+pub const CHORD_LANES: usize = 8;
+
 #[inline(always)]
 pub(crate) fn sub(a: V3, b: V3) -> V3 {
     [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
@@ -439,6 +442,95 @@ impl Cell {
             }
         }
         Err(None)
+    }
+
+    /// [`Cell::inverse_certified`] on [`CHORD_LANES`] points at once, each started from
+    /// the chord step from the centre (`l₀ − ½ = M (p − F(c))`, exact for an affine
+    /// cell): the same iteration and the same proven acceptance test, lane by lane.
+    /// Returns the local coordinates and, per lane, whether the bound was met (`false`:
+    /// no certificate, not met within 3 steps, or the box left `D`; that lane's
+    /// coordinates are then meaningless). A lane's result depends on its own point only,
+    /// so [`Cell::inverse_chord_certified`] (one point) gives the same bits.
+    #[inline(always)]
+    pub fn inverse_certified_lanes(
+        &self,
+        p: &[[f32; CHORD_LANES]; 3],
+        tol: V3,
+    ) -> ([[f32; CHORD_LANES]; 3], [bool; CHORD_LANES]) {
+        const L: usize = CHORD_LANES;
+        let mut done = [false; L];
+        let Some(c) = self.cert.as_ref() else {
+            return ([[0.0; L]; 3], done);
+        };
+        let mut q = [[0.0f32; L]; 3];
+        for (i, qi) in q.iter_mut().enumerate() {
+            for l in 0..L {
+                let d = [
+                    p[0][l] - c.centre[0],
+                    p[1][l] - c.centre[1],
+                    p[2][l] - c.centre[2],
+                ];
+                qi[l] = c.m[0][i] * d[0] + c.m[1][i] * d[1] + c.m[2][i] * d[2];
+            }
+        }
+        let mut x = q;
+        let mut out = [[0.0f32; L]; 3];
+        let mut live = [true; L];
+        let lim = 0.5 + Self::CERT_BOX;
+        for _ in 0..3 {
+            let mut next_live = [false; L];
+            for l in 0..L {
+                let (xa, xb, xs) = (x[0][l], x[1][l], x[2][l]);
+                let (ab, as_, bs) = (xa * xb, xa * xs, xb * xs);
+                let abs = ab * xs;
+                let n = &c.n;
+                let mut nx = [0.0f32; 3];
+                let mut ad = [0.0f32; 3];
+                for i in 0..3 {
+                    nx[i] =
+                        q[i][l] - ((ab * n[0][i] + as_ * n[1][i]) + (bs * n[2][i] + abs * n[3][i]));
+                    ad[i] = (x[i][l] - nx[i]).abs();
+                }
+                let mut inside = true;
+                let mut ok = true;
+                for i in 0..3 {
+                    let err = c.q[0][i] * ad[0] + c.q[1][i] * ad[1] + c.q[2][i] * ad[2];
+                    let rho = ad[i] + err;
+                    inside &= x[i][l] - rho >= -lim && x[i][l] + rho <= lim;
+                    ok &= err <= tol[i];
+                }
+                let accept = live[l] && inside && ok;
+                for i in 0..3 {
+                    if accept {
+                        out[i][l] = nx[i] + 0.5;
+                    }
+                    if live[l] {
+                        x[i][l] = nx[i];
+                    }
+                }
+                done[l] |= accept;
+                next_live[l] = live[l] && inside && !ok;
+            }
+            live = next_live;
+            if !live.iter().any(|&v| v) {
+                break;
+            }
+        }
+        (out, done)
+    }
+
+    /// [`Cell::inverse_certified_lanes`] for one point: within `tol` of the exact inverse
+    /// (proven) or `None`. The same bits as the lanes version gives for `p`.
+    pub fn inverse_chord_certified(&self, p: V3, tol: V3) -> Option<V3> {
+        let (l, ok) = self.inverse_certified_lanes(
+            &[
+                [p[0]; CHORD_LANES],
+                [p[1]; CHORD_LANES],
+                [p[2]; CHORD_LANES],
+            ],
+            tol,
+        );
+        ok[0].then_some([l[0][0], l[1][0], l[2][0]])
     }
 
     /// Jacobian columns d/da, d/db, d/ds at local coordinates `l`.

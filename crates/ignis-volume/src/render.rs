@@ -18,10 +18,16 @@
 //! pixel outside a cell's projected rectangle skips that cell's slab test), rayon runs over
 //! tiles with per-worker scratch buffers. On x86-64 CPUs with AVX2 the tile renderer runs
 //! as an AVX2 build of the same code (runtime dispatch in `Ctx::tile`; bit-identical
-//! output, tested). Per tile and fire, every pixel's ray is marched first and its samples
-//! collected; then the samples are shaded in bulk; then they are added up per pixel in
-//! march order (so the sums are those of shading one by one).
-//! - Marching: along a ray the global lattice coordinates `(a, b, level + s)` are
+//! output, tested). Per tile and fire, the samples are found first; then they are shaded
+//! in bulk; then they are added up per pixel.
+//! - Finding samples cell by cell ([`Ctx::march_cells`], for a lattice whose cells all
+//!   have a certified inverse, [`per_cell_ok`] — every Table 1 lattice): per candidate
+//!   cell, the slices of every pixel's ray inside the part of the cell that can be visible
+//!   become candidates, which are inverted eight at a time with the cell's certified chord
+//!   iteration ([`crate::lattice::Cell::inverse_certified_lanes`], to [`CELL_TEX_TOL`]);
+//!   one rule per shared face ([`Ctx::owns`]) gives each sample to exactly one cell.
+//! - Otherwise, ray by ray (and, in the per-cell case, for the coverage of pixels that
+//!   found no visible sample): along a ray the global lattice coordinates `(a, b, level + s)` are
 //!   extrapolated from the previous two samples (for the second sample, from the ray's
 //!   step mapped by the cell's inverse Jacobian), which gives the cell and a close guess;
 //!   a ray's first sample starts from a chord step from the cell centre (moving to the
@@ -36,7 +42,9 @@
 //!   lies well beyond an end face of the lattice (`s` < 0 in the bottom cell or > 1 in the
 //!   top one, by 0.05 plus its would-be error bound) ends the search: such a sample is
 //!   outside the fire whatever the exact inverse.
-//! - Shading (`Ctx::shade_batched`): the turbulence runs [`LANES`] samples at a time
+//! - Shading (`Ctx::shade_batched`): samples are put in slice-then-pixel order (so the
+//!   eight of a batch mostly share their noise cells; [`crate::noise::avx2`] then
+//!   broadcasts the cells' gradients); the turbulence runs [`LANES`] samples at a time
 //!   through the structure-of-arrays noise ([`crate::noise::NoiseKind::eval_lanes_cached`],
 //!   equal to the scalar noise value for value; the permutation hashes of the noise cells
 //!   are memoised per worker), octave by octave, and a sample leaves the batch as soon as
@@ -56,7 +64,7 @@
 //! alpha every Ignis frame uses.
 
 use crate::error::{Result, VolumeError};
-use crate::lattice::{add, cross, dot, normalize, scale, sub, Lattice, Track, V3};
+use crate::lattice::{add, cross, dot, normalize, scale, sub, Lattice, Track, CHORD_LANES, V3};
 use crate::mapping::{
     kernel, noise_position, noise_scale, profile_uv, radial_u, shade, NoiseParams,
 };
@@ -206,6 +214,15 @@ const TILE: u32 = 16;
 /// `certified_inverse_error_bound` checks ≤ this + 2e-6 against an `f64` inverse).
 /// Texture space: `x, y ∈ [−1, 1]` across the fire, `z ∈ [0, 1]` along it.
 pub const INVERSE_TEX_TOL: f32 = 3e-5;
+/// Error bound, per texture coordinate, of the certified inverse in [`Ctx::march_cells`]:
+/// a quarter of [`INVERSE_TEX_TOL`]. The chord iteration there starts from the cell
+/// centre rather than from a prediction along the ray, so the iterate it accepts is
+/// usually close to its bound; the tighter bound costs about one more step (vectorised).
+pub const CELL_TEX_TOL: f32 = 0.25 * INVERSE_TEX_TOL;
+/// How far beyond its end faces (in `s`, as a multiple of the certified inverse's error
+/// bound in `s`) a sample may lie and still be assigned to a cell by
+/// [`Ctx::march_cells`]; see [`Ctx::owns`].
+const OWNER_SLACK: f32 = 8.0;
 /// Cells kept per ray and fire for finding the entry cell (more are ignored).
 const MAX_RANGES: usize = 64;
 
@@ -334,6 +351,10 @@ fn render_with(
         aspect,
         time,
         simd,
+        per_cell: fires
+            .iter()
+            .map(|f| !params.exact_inverse && per_cell_ok(f.lattice))
+            .collect(),
     };
     let tiles: Vec<(Vec<[f32; 4]>, RenderStats)> = (0..tx * ty)
         .into_par_iter()
@@ -459,6 +480,10 @@ impl Disc {
 /// `√((a − ½)² + (b − ½)²) ≤ reach / 2`, so its affine estimate lies within the model's
 /// error of that. Margins far above the inverse's error ([`INVERSE_TEX_TOL`]) and `f32`
 /// rounding keep every sample the shading would keep.
+///
+/// Both extend [`OWNER_SLACK`] beyond the cell's end faces in `s` (`s ∈ [−σ, 1 + σ]`), so
+/// they also hold every sample the per-cell march ([`Ctx::march_cells`]) assigns to the
+/// cell (whose computed `s` may be off by the certified inverse's error).
 fn visible_parts(fire: &FireInstance, camera: V3, full: bool) -> Vec<Visible> {
     let cells = fire.lattice.cells();
     let whole = |c: &crate::lattice::Cell| Visible {
@@ -479,6 +504,7 @@ fn visible_parts(fire: &FireInstance, camera: V3, full: bool) -> Vec<Visible> {
     let profile = fire.profile;
     let w = profile.width();
     let n = cells.len();
+    let sigma = OWNER_SLACK * n as f32 * INVERSE_TEX_TOL;
     cells
         .iter()
         .enumerate()
@@ -515,12 +541,10 @@ fn visible_parts(fire: &FireInstance, camera: V3, full: bool) -> Vec<Visible> {
                     m: aff.m,
                     alpha: aff.m.map(|r| r[0] * rel[0] + r[1] * rel[1] + r[2] * rel[2]),
                     r2: radius * radius,
-                    h: 0.5 + aff.err[2] + 1e-3,
+                    h: 0.5 + sigma as f64 + aff.err[2] + 1e-3,
                 }
             });
-            if reach >= 1.0 {
-                return Visible { disc, ..whole(c) };
-            }
+            let reach = reach.min(1.0);
             let (a0, a1) = (0.5 - 0.5 * reach, 0.5 + 0.5 * reach);
             let mut lo = [f32::INFINITY; 3];
             let mut hi = [f32::NEG_INFINITY; 3];
@@ -528,7 +552,7 @@ fn visible_parts(fire: &FireInstance, camera: V3, full: bool) -> Vec<Visible> {
                 let l = [
                     if corner & 1 == 0 { a0 } else { a1 },
                     if corner & 2 == 0 { a0 } else { a1 },
-                    (corner >> 2) as f32,
+                    (corner >> 2) as f32 * (1.0 + 2.0 * sigma) - sigma,
                 ];
                 let q = c.forward(l);
                 for a in 0..3 {
@@ -562,6 +586,39 @@ struct Ctx<'a, 'b> {
     time: f32,
     /// Use the AVX2 build of the tile renderer when the CPU has it (same results).
     simd: bool,
+    /// Per fire: find its samples cell by cell ([`Ctx::march_cells`]) rather than ray by
+    /// ray ([`per_cell_ok`]).
+    per_cell: Vec<bool>,
+}
+
+/// Whether [`Ctx::march_cells`] may find this lattice's samples: every cell has a
+/// certificate (nearly affine, so the certified chord inverse answers), and neighbouring
+/// cells are of similar thickness across their shared face (the rows `∇s` of their
+/// centres' inverse Jacobians differ in length by less than 1.5×, so by less than 2× anywhere on the face), which the face rule of
+/// [`Ctx::owns`] relies on.
+fn per_cell_ok(lattice: &Lattice) -> bool {
+    let cells = lattice.cells();
+    let grad_s = |c: &crate::lattice::Cell| c.affine_inverse().map(|a| norm64(a.m[2]));
+    let mut prev: Option<f64> = None;
+    for c in cells {
+        let Some(g) = grad_s(c) else {
+            return false;
+        };
+        if !(g > 0.0 && g.is_finite()) {
+            return false;
+        }
+        if let Some(p) = prev {
+            if !(g < 1.5 * p && p < 1.5 * g) {
+                return false;
+            }
+        }
+        prev = Some(g);
+    }
+    true
+}
+
+fn norm64(v: [f64; 3]) -> f64 {
+    (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
 }
 
 /// The ray parameter interval `(t0, t1)` (with `t0 ≥ 1e-4`) in which the ray `o + t d`
@@ -628,8 +685,21 @@ struct Scratch {
     col: Vec<[f32; 4]>,
     /// Batched noise: the samples still in play.
     act: Vec<Live>,
+    /// Sample indices ordered by slice, then pixel (see `Ctx::shade_batched`), and the
+    /// counting sort's buckets.
+    order: Vec<u32>,
+    buckets: Vec<u32>,
     /// Memoised permutation hashes of the noise cells met so far.
     noise_cache: NoiseCache,
+    /// Per-cell march ([`Ctx::march_cells`]): per pixel of the tile, the scaled ray
+    /// direction and its reciprocal and whether a sample was found; the current cell's
+    /// candidate samples (world position, pixel, slice).
+    dirs: Vec<V3>,
+    invs: Vec<V3>,
+    hit: Vec<bool>,
+    cand_p: [Vec<f32>; 3],
+    cand_pix: Vec<u16>,
+    cand_k: Vec<i64>,
 }
 
 /// A sample whose noise is still being summed.
@@ -677,7 +747,7 @@ impl Ctx<'_, '_> {
             // SAFETY: the CPU supports AVX2 (checked just above).
             return unsafe { self.tile_avx2(tx, ty, cands, scratch) };
         }
-        self.tile_impl(tx, ty, cands, scratch)
+        self.tile_impl(tx, ty, cands, scratch, false)
     }
 
     #[cfg(target_arch = "x86_64")]
@@ -689,9 +759,11 @@ impl Ctx<'_, '_> {
         cands: &[Cand],
         scratch: &mut Scratch,
     ) -> (Vec<[f32; 4]>, RenderStats) {
-        self.tile_impl(tx, ty, cands, scratch)
+        self.tile_impl(tx, ty, cands, scratch, true)
     }
 
+    /// `avx2`: the CPU has AVX2 and this is the AVX2 build (the noise then uses
+    /// [`crate::noise::avx2`]).
     #[inline(always)]
     fn tile_impl(
         &self,
@@ -699,6 +771,7 @@ impl Ctx<'_, '_> {
         ty: u32,
         cands: &[Cand],
         scratch: &mut Scratch,
+        avx2: bool,
     ) -> (Vec<[f32; 4]>, RenderStats) {
         let mut stats = RenderStats::default();
         if cands.is_empty() {
@@ -711,15 +784,12 @@ impl Ctx<'_, '_> {
         let n = tw * (y1 - y0) as usize;
         let mut acc = vec![[0.0f32; 4]; n];
         let mut covered = vec![false; n];
-        // Cartoon: slice index of the pixel's opaque sample so far (i64::MAX = none) and
-        // whether it came from the fire being processed.
+        // Cartoon: slice index of the pixel's nearest opaque sample so far (i64::MAX = none).
         let mut best_k = vec![i64::MAX; n];
-        let mut hit_now = vec![false; n];
         let mut ranges = [(0u32, 0.0f32, 0.0f32); MAX_RANGES];
-        // Candidates are grouped by fire (binning order). Per fire: march every pixel's
-        // ray and collect its samples, shade them all (the noise in batches), then add them
-        // up per pixel in march order — the same order, hence the same sums, as shading
-        // sample by sample.
+        // Candidates are grouped by fire (binning order). Per fire: find the samples (per
+        // cell for a fire whose cells all have a certified inverse, else ray by ray), shade
+        // them all (the noise in batches), then add them up per pixel.
         let mut i = 0;
         while i < cands.len() {
             let fi = cands[i].fire;
@@ -732,7 +802,22 @@ impl Ctx<'_, '_> {
             scratch.pix.clear();
             scratch.k.clear();
             scratch.tex.clear();
+            if self.per_cell[fi as usize] {
+                self.march_cells(
+                    fire,
+                    group,
+                    [x0, y0, x1, y1],
+                    &best_k,
+                    &mut covered,
+                    &mut ranges,
+                    &mut stats,
+                    scratch,
+                );
+            }
             for y in y0..y1 {
+                if self.per_cell[fi as usize] {
+                    break;
+                }
                 for x in x0..x1 {
                     let p = (y - y0) as usize * tw + (x - x0) as usize;
                     covered[p] |= self.march(
@@ -751,10 +836,9 @@ impl Ctx<'_, '_> {
             if self.params.exact_inverse {
                 self.shade_reference(fire, scratch);
             } else {
-                self.shade_batched(fire, scratch);
+                self.shade_batched(fire, scratch, avx2);
             }
             let gain = self.params.intensity * self.params.slice_spacing;
-            hit_now.fill(false);
             for s in 0..scratch.pix.len() {
                 let p = scratch.pix[s] as usize;
                 let c = scratch.col[s];
@@ -775,10 +859,10 @@ impl Ctx<'_, '_> {
                         ];
                     }
                     Blend::Cartoon => {
-                        // the first opaque sample of this fire along the ray (the march
-                        // already dropped samples behind an earlier fire's hit)
-                        if !hit_now[p] && c[3] >= 0.5 {
-                            hit_now[p] = true;
+                        // the nearest opaque sample along the ray, over this fire and the
+                        // earlier ones (a pixel has at most one sample per slice and fire;
+                        // the march already dropped samples behind an earlier fire's hit)
+                        if c[3] >= 0.5 && scratch.k[s] < best_k[p] {
                             best_k[p] = scratch.k[s];
                             *a = [c[0], c[1], c[2], 1.0];
                         }
@@ -839,6 +923,223 @@ impl Ctx<'_, '_> {
                 self.sample(fire, &mut ray, stats, out);
             }
         }
+        ray.covered
+    }
+
+    /// Finds one fire's samples in tile `[x0, y0, x1, y1)` cell by cell, for a lattice
+    /// that passes [`per_cell_ok`] (the fast path's common case).
+    ///
+    /// A pixel's ray is `o + z D` with `D · forward = 1`, so slice `k` is at `z = k ·
+    /// spacing`. Per candidate cell and pixel, the slices within the part of the cell that
+    /// can be visible (the affine disc and the visible box of [`visible_parts`], both with
+    /// [`OWNER_SLACK`]) become candidate samples; they are inverted [`CHORD_LANES`] at a
+    /// time with the cell's certified chord inverse
+    /// ([`crate::lattice::Cell::inverse_certified_lanes`]; Newton's method for the rare
+    /// lane it does not certify), and a sample is kept if it lies in the cell by
+    /// [`Ctx::owns`] — exactly one cell claims a sample near a shared face. Samples
+    /// behind a pixel's `best_k` are skipped. A pixel that gave no sample is then marched
+    /// ray by ray ([`Ctx::cover`]) until one sample is known to lie in a cell, to count it
+    /// as covered (those samples are not visible and are not kept).
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn march_cells(
+        &self,
+        fire: &FireInstance,
+        group: &[Cand],
+        [x0, y0, x1, y1]: [u32; 4],
+        best_k: &[i64],
+        covered: &mut [bool],
+        ranges: &mut [(u32, f32, f32); MAX_RANGES],
+        stats: &mut RenderStats,
+        out: &mut Scratch,
+    ) {
+        let size = self.params.size;
+        let tw = (x1 - x0) as usize;
+        let n = tw * (y1 - y0) as usize;
+        out.dirs.clear();
+        out.invs.clear();
+        for y in y0..y1 {
+            let sy = (1.0 - (y as f32 + 0.5) / size.height as f32 * 2.0) * self.tan;
+            for x in x0..x1 {
+                let sx =
+                    ((x as f32 + 0.5) / size.width as f32 * 2.0 - 1.0) * self.tan * self.aspect;
+                let d = add(self.fw, add(scale(self.rt, sx), scale(self.up, sy)));
+                out.dirs.push(d);
+                out.invs.push([1.0 / d[0], 1.0 / d[1], 1.0 / d[2]]);
+            }
+        }
+        out.hit.clear();
+        out.hit.resize(n, false);
+        let o = self.camera.position;
+        let spacing = self.params.slice_spacing;
+        let cells = fire.lattice.cells();
+        let tol = [
+            0.5 * CELL_TEX_TOL,
+            0.5 * CELL_TEX_TOL,
+            cells.len() as f32 * CELL_TEX_TOL,
+        ];
+        for cand in group {
+            let (cx0, cx1) = (cand.px[0].max(x0 as i32), cand.px[1].min(x1 as i32 - 1));
+            let (cy0, cy1) = (cand.px[2].max(y0 as i32), cand.px[3].min(y1 as i32 - 1));
+            if cand.vmin[0] > cand.vmax[0] {
+                continue; // nothing of this cell can be visible
+            }
+            for v in &mut out.cand_p {
+                v.clear();
+            }
+            out.cand_pix.clear();
+            out.cand_k.clear();
+            for y in cy0..=cy1 {
+                for x in cx0..=cx1 {
+                    let p = (y as u32 - y0) as usize * tw + (x as u32 - x0) as usize;
+                    let (d, inv) = (out.dirs[p], out.invs[p]);
+                    let Some((b0, b1)) = slab(inv, cand.vmin, cand.vmax) else {
+                        continue;
+                    };
+                    let (z0, z1) = match &cand.disc {
+                        Some(disc) => match disc.interval(d) {
+                            Some((t0, t1)) => (t0.max(b0), t1.min(b1)),
+                            None => continue,
+                        },
+                        None => (b0, b1),
+                    };
+                    let ka = (z0 / spacing).ceil() as i64;
+                    let kb = ((z1 / spacing).floor() as i64).min(best_k[p].saturating_sub(1));
+                    for k in ka..=kb {
+                        let z = k as f32 * spacing;
+                        out.cand_p[0].push(o[0] + z * d[0]);
+                        out.cand_p[1].push(o[1] + z * d[1]);
+                        out.cand_p[2].push(o[2] + z * d[2]);
+                        out.cand_pix.push(p as u16);
+                        out.cand_k.push(k);
+                    }
+                }
+            }
+            let m = out.cand_pix.len();
+            if m == 0 {
+                continue;
+            }
+            let j = cand.cell as usize;
+            let cell = &cells[j];
+            for start in (0..m).step_by(CHORD_LANES) {
+                let mut pts = [[0.0f32; CHORD_LANES]; 3];
+                for (a, lane) in pts.iter_mut().enumerate() {
+                    for (l, v) in lane.iter_mut().enumerate() {
+                        *v = out.cand_p[a][(start + l).min(m - 1)];
+                    }
+                }
+                let (ls, ok) = cell.inverse_certified_lanes(&pts, tol);
+                for l in 0..CHORD_LANES.min(m - start) {
+                    let pt = [pts[0][l], pts[1][l], pts[2][l]];
+                    let lv = if ok[l] {
+                        [ls[0][l], ls[1][l], ls[2][l]]
+                    } else {
+                        match cell.inverse(pt, cell.chord_guess(pt)) {
+                            Some(lv) => lv,
+                            None => continue,
+                        }
+                    };
+                    let lateral = (0.0..=1.0).contains(&lv[0]) && (0.0..=1.0).contains(&lv[1]);
+                    if !(lateral && self.owns(fire, j, lv[2], pt, tol)) {
+                        continue;
+                    }
+                    let pix = out.cand_pix[start + l];
+                    out.hit[pix as usize] = true;
+                    stats.samples += 1;
+                    let tex = fire.lattice.tex_of(j, lv);
+                    // the square-root-free `radial_u(tex) > 1` (see `Ctx::sample`)
+                    if tex[0] * tex[0] + tex[1] * tex[1] > 1.0 + f32::EPSILON {
+                        continue;
+                    }
+                    stats.shaded += 1;
+                    out.pix.push(pix);
+                    out.k.push(out.cand_k[start + l]);
+                    out.tex.push(tex);
+                }
+            }
+        }
+        // coverage of the pixels without a sample, ray by ray
+        for p in 0..n {
+            if out.hit[p] {
+                covered[p] = true;
+            } else if !covered[p] {
+                let (x, y) = (x0 + (p % tw) as u32, y0 + (p / tw) as u32);
+                covered[p] = self.cover(fire, group, x, y, best_k[p], ranges, stats, out);
+            }
+        }
+    }
+
+    /// Whether cell `j` of `fire` holds the sample at `p` with (certified or Newton)
+    /// local height `s`, as far as its end faces go: `0 ≤ s` at the bottom of the lattice
+    /// and `s ≤ 1` at its top; between cells `j` and `j + 1` the face is decided by cell
+    /// `j + 1`'s canonical inverse ([`canonical_s`]`(j + 1, p) ≥ 0` means above), the same
+    /// computation whichever cell asks, so no sample is claimed twice or dropped.
+    ///
+    /// Away from a face, `s` settles it: both inverses are within `tol[2]` of the exact
+    /// ones (the certificate), the exact heights of the two cells have opposite signs
+    /// about the face and scale by the ratio of the cells' thicknesses there (within 2×,
+    /// [`per_cell_ok`]), so `s ≤ 1 − 4 tol` in cell `j` implies the canonical
+    /// `s_{j+1} < 0` (and `s ≥ 4 tol` in cell `j + 1` implies `s_j > 1` for the
+    /// canonical-by-`j + 1` rule); only within that band is [`canonical_s`] computed.
+    /// A claimed sample has an exact `s` in `[−tol, 1 + 2 tol]`, inside the parts of the
+    /// cell marched ([`OWNER_SLACK`]).
+    #[inline(always)]
+    fn owns(&self, fire: &FireInstance, j: usize, s: f32, p: V3, tol: V3) -> bool {
+        let last = fire.lattice.cells().len() - 1;
+        let band = 0.5 * OWNER_SLACK * tol[2];
+        let above_bottom = if j == 0 {
+            s >= 0.0
+        } else if s >= band {
+            true
+        } else if s < -band {
+            false
+        } else {
+            canonical_s(fire, j, p, tol) >= 0.0
+        };
+        let below_top = if j == last {
+            s <= 1.0
+        } else if s <= 1.0 - band {
+            true
+        } else if s > 1.0 + band {
+            false
+        } else {
+            canonical_s(fire, j + 1, p, tol) < 0.0
+        };
+        above_bottom && below_top
+    }
+
+    /// Marches pixel `(x, y)`'s ray through one fire's cells only until a sample is
+    /// known to lie inside a cell (then the pixel is covered); keeps no sample.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn cover(
+        &self,
+        fire: &FireInstance,
+        group: &[Cand],
+        x: u32,
+        y: u32,
+        best_k: i64,
+        ranges: &mut [(u32, f32, f32); MAX_RANGES],
+        stats: &mut RenderStats,
+        out: &mut Scratch,
+    ) -> bool {
+        let Some(mut ray) = self.ray(group, x, y, best_k, 0, ranges) else {
+            return false;
+        };
+        let cells = fire.lattice.cells().len() as f32;
+        ray.tol = [
+            0.5 * INVERSE_TEX_TOL,
+            0.5 * INVERSE_TEX_TOL,
+            cells * INVERSE_TEX_TOL,
+        ];
+        let n0 = out.pix.len();
+        while !ray.covered && ray.k <= ray.k1 {
+            self.sample(fire, &mut ray, stats, out);
+        }
+        stats.shaded -= (out.pix.len() - n0) as u64;
+        out.pix.truncate(n0);
+        out.k.truncate(n0);
+        out.tex.truncate(n0);
         ray.covered
     }
 
@@ -1060,8 +1361,11 @@ impl Ctx<'_, '_> {
     /// zero-alpha sample adds exactly nothing to any blend — so its remaining octaves are
     /// skipped. Samples that stay in play get the same turbulence value as the scalar
     /// [`crate::noise::turbulence`] (same operations, same order), hence the same colour.
+    ///
+    /// `avx2`: the CPU has AVX2 (only passed as `true` from the AVX2 build of the tile
+    /// renderer); the noise then runs [`crate::noise::avx2`], which gives the same values.
     #[inline(always)]
-    fn shade_batched(&self, fire: &FireInstance, s: &mut Scratch) {
+    fn shade_batched(&self, fire: &FireInstance, s: &mut Scratch, avx2: bool) {
         let noise = &fire.noise;
         let n = s.tex.len();
         s.col.clear();
@@ -1083,9 +1387,11 @@ impl Ctx<'_, '_> {
         let profile = fire.profile;
         let octaves = noise.octaves as usize;
         let rem = turbulence_bounds(noise);
+        slice_order(&s.k, &mut s.buckets, &mut s.order);
         let act = &mut s.act;
         act.clear();
-        for (i, &tex) in s.tex.iter().enumerate() {
+        for &i in &s.order {
+            let tex = s.tex[i as usize];
             let u = radial_u(tex);
             let Some([lo, hi]) = profile.v_support(u) else {
                 continue; // empty column: transparent whatever the noise
@@ -1098,7 +1404,7 @@ impl Ctx<'_, '_> {
             let scale = noise_scale(fire.lattice.radius_at(z), length, noise.frequency);
             let p = noise_position(tex, time, scale, fire.offset);
             act.push(Live {
-                idx: i as u32,
+                idx: i,
                 p,
                 sum: 0.0,
                 z,
@@ -1118,7 +1424,7 @@ impl Ctx<'_, '_> {
                         qa[l] = pa * f;
                     }
                 }
-                let val = noise.kind.eval_lanes_cached(&q, &mut s.noise_cache);
+                let val = lanes_noise(noise.kind, &q, &mut s.noise_cache, avx2);
                 for (live, v) in batch.iter_mut().zip(val) {
                     live.sum += amp * v;
                 }
@@ -1135,6 +1441,64 @@ impl Ctx<'_, '_> {
             let [u, v] = profile_uv(s.tex[i], live.sum, noise.stability);
             s.col[i] = profile.sample(u, v);
         }
+    }
+}
+
+/// Cell `j`'s local height `s` of `p` as [`Ctx::owns`] decides faces with: the certified
+/// chord inverse from the centre, else Newton's method from the chord guess, else
+/// `−∞` (then `p` counts as below the face). A pure function of `(j, p)`.
+fn canonical_s(fire: &FireInstance, j: usize, p: V3, tol: V3) -> f32 {
+    let c = &fire.lattice.cells()[j];
+    c.inverse_chord_certified(p, tol)
+        .or_else(|| c.inverse(p, c.chord_guess(p)))
+        .map_or(f32::NEG_INFINITY, |l| l[2])
+}
+
+/// One octave of noise on [`LANES`] points, with the AVX2 build when `avx2` (the caller
+/// guarantees the CPU has it); the same values either way.
+#[inline(always)]
+fn lanes_noise(
+    kind: crate::noise::NoiseKind,
+    q: &[[f32; LANES]; 4],
+    cache: &mut NoiseCache,
+    avx2: bool,
+) -> [f32; LANES] {
+    #[cfg(target_arch = "x86_64")]
+    if avx2 {
+        // SAFETY: `avx2` is true only on CPUs with AVX2 (see `Ctx::tile`).
+        return unsafe { crate::noise::avx2::eval_lanes_cached(kind, q, cache) };
+    }
+    let _ = avx2;
+    kind.eval_lanes_cached(q, cache)
+}
+
+/// Orders sample indices by slice index `k` (stable, so by pixel within a slice): a
+/// counting sort. Neighbouring pixels' samples on one slice are close in noise space, so
+/// consecutive samples then mostly share their noise cell, which the lanes noise exploits.
+/// Falls back to march order when the slices span an unusually wide range.
+fn slice_order(k: &[i64], buckets: &mut Vec<u32>, order: &mut Vec<u32>) {
+    order.clear();
+    let (Some(&lo), Some(&hi)) = (k.iter().min(), k.iter().max()) else {
+        return;
+    };
+    let span = (hi - lo) as usize + 1;
+    if span > 1 << 16 {
+        order.extend(0..k.len() as u32);
+        return;
+    }
+    buckets.clear();
+    buckets.resize(span + 1, 0);
+    for &v in k {
+        buckets[(v - lo) as usize + 1] += 1;
+    }
+    for b in 1..=span {
+        buckets[b] += buckets[b - 1];
+    }
+    order.resize(k.len(), 0);
+    for (i, &v) in k.iter().enumerate() {
+        let slot = &mut buckets[(v - lo) as usize];
+        order[*slot as usize] = i as u32;
+        *slot += 1;
     }
 }
 
@@ -1228,6 +1592,14 @@ mod tests {
         scenes.push(mn);
         for p in [Preset::Campfire, Preset::Torch] {
             scenes.push(FireScene::preset(p).with_size(Size::new(64, 64).unwrap()));
+        }
+        // the Table 1 lattices take the per-cell march
+        for lattice in [35usize, 135] {
+            let scene = FireScene::table1(NoiseKind::Perlin4, 3, lattice);
+            let mut anim = scene.animator().unwrap();
+            let (pts, _) = anim.step();
+            let lat = Lattice::build(&BSpline::new(pts[0].clone(), 3).unwrap(), lattice).unwrap();
+            assert!(per_cell_ok(&lat), "lattice {lattice}");
         }
         for (i, scene) in scenes.iter().enumerate() {
             let [(fast, sf), (exact, se)] = fast_and_exact(scene, 0.5);
@@ -1354,6 +1726,7 @@ mod tests {
                 aspect: size.width as f32 / size.height as f32,
                 time: 1.25,
                 simd: true,
+                per_cell: vec![false],
             };
             // every sample of the whole image in one batch
             let cands: Vec<Cand> = lat
@@ -1423,11 +1796,21 @@ mod tests {
                 discs * 10 >= lit * 9,
                 "{discs} of {lit} in cells with a disc"
             );
-            ctx.shade_batched(&inst[0], &mut s);
             let visible = reference.iter().filter(|c| c[3] > 0.0).count();
             assert!(visible > 100 && visible < reference.len());
-            for (i, (a, b)) in s.col.iter().zip(&reference).enumerate() {
-                assert!(a == b, "sample {i} at {:?}: {a:?} vs {b:?}", s.tex[i]);
+            #[cfg(target_arch = "x86_64")]
+            let builds = [false, std::arch::is_x86_feature_detected!("avx2")];
+            #[cfg(not(target_arch = "x86_64"))]
+            let builds = [false];
+            for avx2 in builds {
+                ctx.shade_batched(&inst[0], &mut s, avx2);
+                for (i, (a, b)) in s.col.iter().zip(&reference).enumerate() {
+                    assert!(
+                        a == b,
+                        "sample {i} at {:?}: {a:?} vs {b:?} ({avx2})",
+                        s.tex[i]
+                    );
+                }
             }
         }
     }

@@ -21,6 +21,9 @@
 
 use serde::{Deserialize, Serialize};
 
+#[cfg(target_arch = "x86_64")]
+pub mod avx2;
+
 /// Perlin's reference permutation of 0..=255.
 pub const PERMUTATION: [u8; 256] = [
     151, 160, 137, 91, 90, 15, 131, 13, 201, 95, 96, 53, 194, 233, 7, 225, 140, 36, 103, 30, 69,

@@ -1,0 +1,305 @@
+//! AVX2 builds of the renderer's lanes noise ([`super::perlin4_lanes_cached`],
+//! [`super::perlin3_lanes_cached`]), written with intrinsics because LLVM keeps much of
+//! the portable `[f32; 8]` code in 128-bit registers and on the stack.
+//!
+//! The values are identical to the portable lanes code and hence to the scalar reference
+//! (tested): the same `f32` operations in the same order, never a fused multiply-add.
+//! What differs is the common case of the renderer, where the 8 points of a batch lie in
+//! one or two noise cells (samples are ordered by slice, then pixel): the cells' corner
+//! gradients are then looked up once and broadcast (and, for two cells, chosen per lane
+//! by a blend), instead of being gathered and decoded lane by lane. Batches that span
+//! three or more cells take the portable code (compiled for AVX2 as well, since it is
+//! inlined here).
+
+use super::{
+    corners3, corners4, mnoise_lanes, perlin3_lanes_cached, perlin4_lanes_cached, Lanes,
+    NoiseCache, NoiseKind, GRAD3, GRAD4,
+};
+use std::arch::x86_64::*;
+
+/// [`super::ffloor_lane`] on 8 lanes: truncation of the clamped value, corrected down.
+#[inline(always)]
+unsafe fn ffloor(x: __m256) -> __m256 {
+    let i = _mm256_cvtepi32_ps(trunc(x));
+    let lt = _mm256_cmp_ps::<_CMP_LT_OQ>(x, i);
+    _mm256_blendv_ps(i, _mm256_sub_ps(i, _mm256_set1_ps(1.0)), lt)
+}
+
+/// [`super::trunc_i32`] on 8 lanes (`max` returns its second operand for NaN, as
+/// `f32::max` returns the non-NaN one).
+#[inline(always)]
+unsafe fn trunc(x: __m256) -> __m256i {
+    let c = _mm256_min_ps(
+        _mm256_max_ps(x, _mm256_set1_ps(-2_147_483_648.0)),
+        _mm256_set1_ps(2_147_483_520.0),
+    );
+    _mm256_cvttps_epi32(c)
+}
+
+/// [`super::split_lanes`]: the cell (0..=255) and the fraction.
+#[inline(always)]
+unsafe fn split(x: __m256) -> (__m256i, __m256) {
+    let fl = ffloor(x);
+    let i = _mm256_and_si256(trunc(fl), _mm256_set1_epi32(255));
+    (i, _mm256_sub_ps(x, fl))
+}
+
+/// `t³ (t (6t − 15) + 10)`, as [`super::fade`] groups it.
+#[inline(always)]
+unsafe fn fade(t: __m256) -> __m256 {
+    let t3 = _mm256_mul_ps(_mm256_mul_ps(t, t), t);
+    let inner = _mm256_add_ps(
+        _mm256_mul_ps(
+            t,
+            _mm256_sub_ps(_mm256_mul_ps(t, _mm256_set1_ps(6.0)), _mm256_set1_ps(15.0)),
+        ),
+        _mm256_set1_ps(10.0),
+    );
+    _mm256_mul_ps(t3, inner)
+}
+
+/// `a + t (b − a)`, as [`super::lerp`].
+#[inline(always)]
+unsafe fn lerp(t: __m256, a: __m256, b: __m256) -> __m256 {
+    _mm256_add_ps(a, _mm256_mul_ps(t, _mm256_sub_ps(b, a)))
+}
+
+/// [`super::blend8`].
+#[inline(always)]
+unsafe fn blend8(c: &[__m256], fu: __m256, fv: __m256, fw: __m256) -> __m256 {
+    let x00 = lerp(fu, c[0], c[1]);
+    let x10 = lerp(fu, c[2], c[3]);
+    let x01 = lerp(fu, c[4], c[5]);
+    let x11 = lerp(fu, c[6], c[7]);
+    lerp(fw, lerp(fv, x00, x10), lerp(fv, x01, x11))
+}
+
+/// The cells of a batch when it spans at most two: lane 0's key `a`, another key `b`
+/// (`= a` when all lanes share one) and the mask of the lanes in `a` (all bits set per
+/// lane); `None` for three or more.
+#[inline(always)]
+unsafe fn two_cells(key: __m256i) -> Option<(u32, u32, __m256)> {
+    let first = _mm256_permutevar8x32_epi32(key, _mm256_setzero_si256());
+    let in_a = _mm256_cmpeq_epi32(key, first);
+    let bits = _mm256_movemask_ps(_mm256_castsi256_ps(in_a)) as u32;
+    let mut keys = [0u32; 8];
+    _mm256_storeu_si256(keys.as_mut_ptr() as *mut __m256i, key);
+    let a = keys[0];
+    if bits == 0xff {
+        return Some((a, a, _mm256_castsi256_ps(in_a)));
+    }
+    let b = keys[(!bits & 0xff).trailing_zeros() as usize];
+    let in_b = _mm256_cmpeq_epi32(key, _mm256_set1_epi32(b as i32));
+    let both = _mm256_movemask_ps(_mm256_castsi256_ps(_mm256_or_si256(in_a, in_b)));
+    (both == 0xff).then_some((a, b, _mm256_castsi256_ps(in_a)))
+}
+
+#[inline(always)]
+unsafe fn load(p: &Lanes) -> __m256 {
+    _mm256_loadu_ps(p.as_ptr())
+}
+
+#[inline(always)]
+unsafe fn store(v: __m256) -> Lanes {
+    let mut o = [0.0f32; 8];
+    _mm256_storeu_ps(o.as_mut_ptr(), v);
+    o
+}
+
+/// `g · (dx, dy, dz, dw)` summed left to right, as [`super::grad4`].
+#[inline(always)]
+unsafe fn dot4(g: &[f32; 4], d: [__m256; 4]) -> __m256 {
+    let s = _mm256_add_ps(
+        _mm256_mul_ps(_mm256_set1_ps(g[0]), d[0]),
+        _mm256_mul_ps(_mm256_set1_ps(g[1]), d[1]),
+    );
+    let s = _mm256_add_ps(s, _mm256_mul_ps(_mm256_set1_ps(g[2]), d[2]));
+    _mm256_add_ps(s, _mm256_mul_ps(_mm256_set1_ps(g[3]), d[3]))
+}
+
+/// `g · (dx, dy, dz)` summed left to right, as [`super::grad3`].
+#[inline(always)]
+unsafe fn dot3(g: &[f32; 3], d: [__m256; 3]) -> __m256 {
+    let s = _mm256_add_ps(
+        _mm256_mul_ps(_mm256_set1_ps(g[0]), d[0]),
+        _mm256_mul_ps(_mm256_set1_ps(g[1]), d[1]),
+    );
+    _mm256_add_ps(s, _mm256_mul_ps(_mm256_set1_ps(g[2]), d[2]))
+}
+
+/// [`super::perlin4_lanes_cached`], equal to it lane by lane.
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[target_feature(enable = "avx2")]
+#[inline]
+pub unsafe fn perlin4_cached(p: &[Lanes; 4], cache: &mut NoiseCache) -> Lanes {
+    let (xi, x) = split(load(&p[0]));
+    let (yi, y) = split(load(&p[1]));
+    let (zi, z) = split(load(&p[2]));
+    let (wi, w) = split(load(&p[3]));
+    let key = _mm256_or_si256(
+        _mm256_or_si256(xi, _mm256_slli_epi32::<8>(yi)),
+        _mm256_or_si256(_mm256_slli_epi32::<16>(zi), _mm256_slli_epi32::<24>(wi)),
+    );
+    let Some((ka, kb, in_a)) = two_cells(key) else {
+        return perlin4_lanes_cached(p, &mut cache.c4);
+    };
+    let hash = |k: u32| {
+        let (a, b, c, e) = (k & 255, (k >> 8) & 255, (k >> 16) & 255, k >> 24);
+        corners4(a as usize, b as usize, c as usize, e as usize)
+    };
+    let ha = cache.c4.get(ka, || hash(ka));
+    let hb = if kb == ka {
+        ha
+    } else {
+        cache.c4.get(kb, || hash(kb))
+    };
+    let one = _mm256_set1_ps(1.0);
+    let off = [
+        [x, _mm256_sub_ps(x, one)],
+        [y, _mm256_sub_ps(y, one)],
+        [z, _mm256_sub_ps(z, one)],
+        [w, _mm256_sub_ps(w, one)],
+    ];
+    let mut d = [_mm256_setzero_ps(); 16];
+    for (ci, dc) in d.iter_mut().enumerate() {
+        let o = [
+            off[0][ci & 1],
+            off[1][(ci >> 1) & 1],
+            off[2][(ci >> 2) & 1],
+            off[3][ci >> 3],
+        ];
+        *dc = dot4(&GRAD4[ha[ci] as usize & 31], o);
+        if kb != ka {
+            let db = dot4(&GRAD4[hb[ci] as usize & 31], o);
+            *dc = _mm256_blendv_ps(db, *dc, in_a);
+        }
+    }
+    let (fu, fv, fs, ft) = (fade(x), fade(y), fade(z), fade(w));
+    let c0 = blend8(&d[..8], fu, fv, fs);
+    let c1 = blend8(&d[8..], fu, fv, fs);
+    store(lerp(ft, c0, c1))
+}
+
+/// [`super::perlin3_lanes_cached`], equal to it lane by lane.
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[target_feature(enable = "avx2")]
+#[inline]
+pub unsafe fn perlin3_cached(p: &[Lanes; 3], cache: &mut NoiseCache) -> Lanes {
+    let (xi, x) = split(load(&p[0]));
+    let (yi, y) = split(load(&p[1]));
+    let (zi, z) = split(load(&p[2]));
+    let key = _mm256_or_si256(
+        _mm256_or_si256(xi, _mm256_slli_epi32::<8>(yi)),
+        _mm256_slli_epi32::<16>(zi),
+    );
+    let Some((ka, kb, in_a)) = two_cells(key) else {
+        return perlin3_lanes_cached(p, &mut cache.c3);
+    };
+    let hash = |k: u32| {
+        corners3(
+            (k & 255) as usize,
+            ((k >> 8) & 255) as usize,
+            (k >> 16) as usize,
+        )
+    };
+    let ha = cache.c3.get(ka, || hash(ka));
+    let hb = if kb == ka {
+        ha
+    } else {
+        cache.c3.get(kb, || hash(kb))
+    };
+    let one = _mm256_set1_ps(1.0);
+    let off = [
+        [x, _mm256_sub_ps(x, one)],
+        [y, _mm256_sub_ps(y, one)],
+        [z, _mm256_sub_ps(z, one)],
+    ];
+    let mut d = [_mm256_setzero_ps(); 8];
+    for (ci, dc) in d.iter_mut().enumerate() {
+        let o = [off[0][ci & 1], off[1][(ci >> 1) & 1], off[2][ci >> 2]];
+        *dc = dot3(&GRAD3[ha[ci] as usize & 15], o);
+        if kb != ka {
+            let db = dot3(&GRAD3[hb[ci] as usize & 15], o);
+            *dc = _mm256_blendv_ps(db, *dc, in_a);
+        }
+    }
+    store(blend8(&d, fade(x), fade(y), fade(z)))
+}
+
+/// [`NoiseKind::eval_lanes_cached`] with the AVX2 builds above; the same values.
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[target_feature(enable = "avx2")]
+#[inline]
+pub unsafe fn eval_lanes_cached(kind: NoiseKind, p: &[Lanes; 4], cache: &mut NoiseCache) -> Lanes {
+    match kind {
+        NoiseKind::Perlin3 => perlin3_cached(&[p[0], p[1], p[2]], cache),
+        NoiseKind::Perlin4 => perlin4_cached(p, cache),
+        NoiseKind::Mnoise => mnoise_lanes(&[p[0], p[1], p[2]]),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The AVX2 noise equals the scalar reference lane by lane, for batches in one, two
+    /// and several noise cells (the broadcast, blended and portable paths), near cell
+    /// borders and at integer points.
+    #[test]
+    fn avx2_noise_equals_scalar() {
+        if !std::arch::is_x86_feature_detected!("avx2") {
+            println!("skipped: this CPU has no AVX2");
+            return;
+        }
+        let mut rng = ignis_core::Rng::new(11);
+        let mut cache = NoiseCache::default();
+        let mut paths = [0usize; 3];
+        for round in 0..6000 {
+            let cells = 1 + round % 3;
+            let base: [f32; 4] = [0; 4].map(|_| rng.uniform(-40.0, 40.0).floor() as f32);
+            let mut p = [[0.0f32; 8]; 4];
+            for l in 0..8 {
+                // lanes spread over `cells` neighbouring cells along x
+                let cell = (l % cells) as f32;
+                for (a, axis) in p.iter_mut().enumerate() {
+                    let f = match round % 5 {
+                        0 => 0.0,
+                        1 => 1.0 - f32::EPSILON,
+                        _ => rng.uniform(0.0, 1.0) as f32,
+                    };
+                    axis[l] = base[a] + f + if a == 0 { cell } else { 0.0 };
+                }
+            }
+            paths[cells - 1] += 1;
+            let q3 = [p[0], p[1], p[2]];
+            // SAFETY: AVX2 was detected above.
+            let (n4, n3) = unsafe {
+                (
+                    perlin4_cached(&p, &mut cache),
+                    perlin3_cached(&q3, &mut cache),
+                )
+            };
+            for l in 0..8 {
+                let s4 = super::super::perlin4(p[0][l], p[1][l], p[2][l], p[3][l]);
+                let s3 = super::super::perlin3(p[0][l], p[1][l], p[2][l]);
+                assert!(
+                    n4[l] == s4,
+                    "perlin4 {cells} cells lane {l}: {} vs {s4}",
+                    n4[l]
+                );
+                assert!(
+                    n3[l] == s3,
+                    "perlin3 {cells} cells lane {l}: {} vs {s3}",
+                    n3[l]
+                );
+            }
+        }
+        assert!(paths.iter().all(|&n| n > 1000));
+    }
+}
