@@ -699,14 +699,20 @@ struct Scratch {
     /// Memoised permutation hashes of the noise cells met so far.
     noise_cache: NoiseCache,
     /// Per-cell march ([`Ctx::march_cells`]): per pixel of the tile, the scaled ray
-    /// direction and its reciprocal and whether a sample was found; the current cell's
-    /// candidate samples (world position, pixel, slice).
+    /// direction and its reciprocal and whether a sample was found.
     dirs: Vec<V3>,
     invs: Vec<V3>,
     hit: Vec<bool>,
-    cand_p: [Vec<f32>; 3],
-    cand_pix: Vec<u16>,
-    cand_k: Vec<i64>,
+}
+
+/// Up to [`CHORD_LANES`] candidate samples of one cell ([`Ctx::march_cells`]): world
+/// positions, pixels and slices.
+#[derive(Default)]
+struct Batch {
+    p: [[f32; CHORD_LANES]; 3],
+    pix: [u16; CHORD_LANES],
+    k: [i64; CHORD_LANES],
+    n: usize,
 }
 
 /// A sample whose noise is still being summed.
@@ -991,11 +997,8 @@ impl Ctx<'_, '_> {
             if cand.vmin[0] > cand.vmax[0] {
                 continue; // nothing of this cell can be visible
             }
-            for v in &mut out.cand_p {
-                v.clear();
-            }
-            out.cand_pix.clear();
-            out.cand_k.clear();
+            let j = cand.cell as usize;
+            let mut batch = Batch::default();
             for y in cy0..=cy1 {
                 for x in cx0..=cx1 {
                     let p = (y as u32 - y0) as usize * tw + (x as u32 - x0) as usize;
@@ -1014,55 +1017,28 @@ impl Ctx<'_, '_> {
                     let kb = ((z1 / spacing).floor() as i64).min(best_k[p].saturating_sub(1));
                     for k in ka..=kb {
                         let z = k as f32 * spacing;
-                        out.cand_p[0].push(o[0] + z * d[0]);
-                        out.cand_p[1].push(o[1] + z * d[1]);
-                        out.cand_p[2].push(o[2] + z * d[2]);
-                        out.cand_pix.push(p as u16);
-                        out.cand_k.push(k);
-                    }
-                }
-            }
-            let m = out.cand_pix.len();
-            if m == 0 {
-                continue;
-            }
-            let j = cand.cell as usize;
-            let cell = &cells[j];
-            for start in (0..m).step_by(CHORD_LANES) {
-                let mut pts = [[0.0f32; CHORD_LANES]; 3];
-                for (a, lane) in pts.iter_mut().enumerate() {
-                    for (l, v) in lane.iter_mut().enumerate() {
-                        *v = out.cand_p[a][(start + l).min(m - 1)];
-                    }
-                }
-                let (ls, ok) = cell.inverse_certified_lanes(&pts, tol);
-                for l in 0..CHORD_LANES.min(m - start) {
-                    let pt = [pts[0][l], pts[1][l], pts[2][l]];
-                    let lv = if ok[l] {
-                        [ls[0][l], ls[1][l], ls[2][l]]
-                    } else {
-                        match cell.inverse(pt, cell.chord_guess(pt)) {
-                            Some(lv) => lv,
-                            None => continue,
+                        let l = batch.n;
+                        for a in 0..3 {
+                            batch.p[a][l] = o[a] + z * d[a];
                         }
-                    };
-                    let lateral = (0.0..=1.0).contains(&lv[0]) && (0.0..=1.0).contains(&lv[1]);
-                    if !(lateral && self.owns(fire, j, lv[2], pt, tol)) {
-                        continue;
+                        batch.pix[l] = p as u16;
+                        batch.k[l] = k;
+                        batch.n += 1;
+                        if batch.n == CHORD_LANES {
+                            self.claim(fire, j, &batch, tol, stats, out);
+                            batch.n = 0;
+                        }
                     }
-                    let pix = out.cand_pix[start + l];
-                    out.hit[pix as usize] = true;
-                    stats.samples += 1;
-                    let tex = fire.lattice.tex_of(j, lv);
-                    // the square-root-free `radial_u(tex) > 1` (see `Ctx::sample`)
-                    if tex[0] * tex[0] + tex[1] * tex[1] > 1.0 + f32::EPSILON {
-                        continue;
-                    }
-                    stats.shaded += 1;
-                    out.pix.push(pix);
-                    out.k.push(out.cand_k[start + l]);
-                    out.tex.push(tex);
                 }
+            }
+            if batch.n > 0 {
+                // the unused lanes repeat a real point (their results are ignored)
+                for l in batch.n..CHORD_LANES {
+                    for a in 0..3 {
+                        batch.p[a][l] = batch.p[a][0];
+                    }
+                }
+                self.claim(fire, j, &batch, tol, stats, out);
             }
         }
         // coverage of the pixels without a sample, ray by ray
@@ -1073,6 +1049,49 @@ impl Ctx<'_, '_> {
                 let (x, y) = (x0 + (p % tw) as u32, y0 + (p / tw) as u32);
                 covered[p] = self.cover(fire, group, x, y, best_k[p], ranges, stats, out);
             }
+        }
+    }
+
+    /// Inverts a batch of candidate samples of cell `j` ([`Ctx::march_cells`]) and keeps
+    /// those the cell claims ([`Ctx::owns`]) and that lie in the unit cylinder.
+    #[inline(always)]
+    fn claim(
+        &self,
+        fire: &FireInstance,
+        j: usize,
+        batch: &Batch,
+        tol: V3,
+        stats: &mut RenderStats,
+        out: &mut Scratch,
+    ) {
+        let cell = &fire.lattice.cells()[j];
+        let (ls, ok) = cell.inverse_certified_lanes(&batch.p, tol);
+        for l in 0..batch.n {
+            let pt = [batch.p[0][l], batch.p[1][l], batch.p[2][l]];
+            let lv = if ok[l] {
+                [ls[0][l], ls[1][l], ls[2][l]]
+            } else {
+                match cell.inverse(pt, cell.chord_guess(pt)) {
+                    Some(lv) => lv,
+                    None => continue,
+                }
+            };
+            let lateral = (0.0..=1.0).contains(&lv[0]) && (0.0..=1.0).contains(&lv[1]);
+            if !(lateral && self.owns(fire, j, lv[2], pt, tol)) {
+                continue;
+            }
+            let pix = batch.pix[l];
+            out.hit[pix as usize] = true;
+            stats.samples += 1;
+            let tex = fire.lattice.tex_of(j, lv);
+            // the square-root-free `radial_u(tex) > 1` (see `Ctx::sample`)
+            if tex[0] * tex[0] + tex[1] * tex[1] > 1.0 + f32::EPSILON {
+                continue;
+            }
+            stats.shaded += 1;
+            out.pix.push(pix);
+            out.k.push(batch.k[l]);
+            out.tex.push(tex);
         }
     }
 
