@@ -724,7 +724,9 @@ struct Live {
     p: [f32; 4],
     /// Partial turbulence sum.
     sum: f32,
-    /// `tex_z`, kernel `f(tex_z)` (eq. 13) and the profile's visible `v` range.
+    /// `u` (eq. 12), `tex_z`, kernel `f(tex_z)` (eq. 13) and the profile's visible `v`
+    /// range.
+    u: f32,
     z: f32,
     kern: f32,
     lo: f32,
@@ -1433,6 +1435,7 @@ impl Ctx<'_, '_> {
                 idx: i,
                 p,
                 sum: 0.0,
+                u,
                 z,
                 kern,
                 lo,
@@ -1463,9 +1466,9 @@ impl Ctx<'_, '_> {
             }
         }
         for live in act.iter() {
-            let i = live.idx as usize;
-            let [u, v] = profile_uv(s.tex[i], live.sum, noise.stability);
-            s.col[i] = profile.sample(u, v);
+            // `profile_uv` of the sample, from the values computed above
+            let v = live.z + live.kern * live.sum;
+            s.col[live.idx as usize] = profile.sample(live.u, v);
         }
     }
 }
