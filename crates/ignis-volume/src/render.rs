@@ -912,12 +912,7 @@ impl Ctx<'_, '_> {
         let Some(mut ray) = self.ray(group, x, y, best_k, pix, ranges) else {
             return false;
         };
-        let cells = fire.lattice.cells().len() as f32;
-        ray.tol = [
-            0.5 * INVERSE_TEX_TOL,
-            0.5 * INVERSE_TEX_TOL,
-            cells * INVERSE_TEX_TOL,
-        ];
+        ray.tol = local_tol(fire, INVERSE_TEX_TOL);
         // the slices that may be visible, then the others only until one sample is known
         // to lie inside a cell (for `covered`; their alpha is zero)
         let (k0, k1) = (ray.k, ray.k1);
@@ -987,12 +982,7 @@ impl Ctx<'_, '_> {
         out.hit.resize(n, false);
         let o = self.camera.position;
         let spacing = self.params.slice_spacing;
-        let cells = fire.lattice.cells();
-        let tol = [
-            0.5 * CELL_TEX_TOL,
-            0.5 * CELL_TEX_TOL,
-            cells.len() as f32 * CELL_TEX_TOL,
-        ];
+        let tol = local_tol(fire, CELL_TEX_TOL);
         for cand in group {
             let (cx0, cx1) = (cand.px[0].max(x0 as i32), cand.px[1].min(x1 as i32 - 1));
             let (cy0, cy1) = (cand.px[2].max(y0 as i32), cand.px[3].min(y1 as i32 - 1));
@@ -1154,12 +1144,7 @@ impl Ctx<'_, '_> {
         let Some(mut ray) = self.ray(group, x, y, best_k, 0, ranges) else {
             return false;
         };
-        let cells = fire.lattice.cells().len() as f32;
-        ray.tol = [
-            0.5 * INVERSE_TEX_TOL,
-            0.5 * INVERSE_TEX_TOL,
-            cells * INVERSE_TEX_TOL,
-        ];
+        ray.tol = local_tol(fire, INVERSE_TEX_TOL);
         let n0 = out.pix.len();
         while !ray.covered && ray.k <= ray.k1 {
             self.sample(fire, &mut ray, stats, out);
@@ -1471,6 +1456,13 @@ impl Ctx<'_, '_> {
             s.col[live.idx as usize] = profile.sample(live.u, v);
         }
     }
+}
+
+/// A texture-space tolerance as per-component local-coordinate tolerances of `fire`'s
+/// cells (`tex_x = 2a − 1`, `tex_z = (j + s) / cells`).
+fn local_tol(fire: &FireInstance, tex_tol: f32) -> V3 {
+    let cells = fire.lattice.cells().len() as f32;
+    [0.5 * tex_tol, 0.5 * tex_tol, cells * tex_tol]
 }
 
 /// Cell `j`'s local height `s` of `p` as [`Ctx::owns`] decides faces with: the certified
