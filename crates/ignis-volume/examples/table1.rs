@@ -1,6 +1,7 @@
 //! Measures Fuller et al.'s Table 1 grid on this machine and optionally dumps preview
 //! images: `cargo run --release -p ignis-volume --example table1 [-- DIR]`
-//! (`TABLE1_ONLY=perlin4-35` or `TABLE1_ONLY=perlin4` restricts the grid).
+//! (`TABLE1_ONLY=perlin4-35` or `TABLE1_ONLY=perlin4` restricts the grid; `TABLE1_FRAMES=3`
+//! times 3 frames instead of 40, e.g. for counting instructions under callgrind).
 
 use ignis_volume::{render, BSpline, FireInstance, FireScene, Lattice, NoiseKind, Preset};
 use std::io::Write;
@@ -56,7 +57,11 @@ fn main() {
             }];
             let params = scene.render_params();
             let (img, stats) = render(&inst, &scene.camera, &params, 0.0).unwrap();
-            let n = 40;
+            // `TABLE1_FRAMES=3` renders fewer frames (e.g. under callgrind)
+            let n = std::env::var("TABLE1_FRAMES")
+                .ok()
+                .and_then(|v| v.parse().ok())
+                .unwrap_or(40);
             let (t, c) = (Instant::now(), cpu_seconds());
             for i in 0..n {
                 std::hint::black_box(
