@@ -251,6 +251,20 @@ pub fn scenario_cmd(a: &ScenarioArgs) -> Result<()> {
 }
 
 /// Writes `text` as the scenario `rel` in the demo directory.
+/// How a scenario file at `scenario` names the database at `db`: a scenario resolves
+/// relative paths against its own directory, so a database beside (or below) it is named
+/// relative to it (the demo folder can then be moved), anything else absolutely.
+fn relative_to_scenario(db: &Path, scenario: &Path) -> String {
+    let dir = scenario.parent().unwrap_or(Path::new(""));
+    match db.strip_prefix(dir) {
+        Ok(rel) if !dir.as_os_str().is_empty() => rel.to_string_lossy().into_owned(),
+        _ => std::path::absolute(db)
+            .unwrap_or_else(|_| db.to_path_buf())
+            .to_string_lossy()
+            .into_owned(),
+    }
+}
+
 fn write_scenario(ctx: &crate::demo::Demo, rel: &str, text: &str) -> Result<PathBuf> {
     let p = ctx.path(rel)?;
     std::fs::write(&p, text).with_context(|| format!("writing {}", p.display()))?;
@@ -373,7 +387,6 @@ pub fn demo(ctx: &mut crate::demo::Demo, dbp: &Path) -> Result<()> {
         &seq,
         &["end-growing", "auto", "direct", "low-pass"],
     )?;
-    let dbs = dbp.to_string_lossy();
     for (mode, extra) in [
         (
             "original",
@@ -385,6 +398,7 @@ pub fn demo(ctx: &mut crate::demo::Demo, dbp: &Path) -> Result<()> {
         ),
     ] {
         let rel = format!("eigen/scenario-{mode}.toml");
+        let dbs = relative_to_scenario(dbp, &ctx.path(&rel)?);
         write_scenario(
             ctx,
             &rel,
@@ -450,12 +464,12 @@ pub fn demo(ctx: &mut crate::demo::Demo, dbp: &Path) -> Result<()> {
         methods = vec!["end-growing", "direct", "low-pass"];
     }
     let methods = workable(&fdb, &motions, &seq, &methods)?;
-    let reals = real.to_string_lossy();
     for (mode, extra) in [
         ("original", "[colour]\nmode = \"original\"\n"),
         ("synthetic", "[colour]\nmode = \"synthetic\"\n"),
     ] {
         let rel = format!("eigen/footage-{mode}.toml");
+        let reals = relative_to_scenario(&real, &ctx.path(&rel)?);
         write_scenario(
             ctx,
             &rel,

@@ -69,7 +69,7 @@ impl Demo {
         });
     }
 
-    /// Absolute path for a file in the demo directory (its parent is created).
+    /// Path of a file in the demo directory (its parent is created).
     pub fn path(&self, rel: &str) -> Result<PathBuf> {
         let p = self.dir.join(rel);
         if let Some(parent) = p.parent() {

@@ -475,18 +475,41 @@ mod eigen {
 mod demo {
     use super::*;
 
+    /// With a relative output directory, as the README runs it (scenario files name their
+    /// database relative to themselves, so this once failed where absolute paths worked).
     #[test]
     fn quick_demo_writes_a_gallery() {
         let t = tempfile::tempdir().unwrap();
-        let o = ignis(&["demo", "--quick", "-q", "-o", t.path().to_str().unwrap()]);
+        let o = Command::new(env!("CARGO_BIN_EXE_ignis"))
+            .current_dir(t.path())
+            .args(["demo", "--quick", "-q", "-o", "gallery"])
+            .output()
+            .expect("runs ignis");
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-        let html = std::fs::read_to_string(t.path().join("index.html")).unwrap();
+        let dir = t.path().join("gallery");
+        let html = std::fs::read_to_string(dir.join("index.html")).unwrap();
         assert!(html.contains("classic/fire.mp4"));
+        assert!(html.contains("eigen/scenario-original.gif"));
         // every file the gallery names exists
         for part in html.split("href=\"").skip(1) {
             let f = &part[..part.find('"').unwrap()];
-            assert!(t.path().join(f).exists(), "gallery names missing {f}");
+            assert!(dir.join(f).exists(), "gallery names missing {f}");
         }
+        // the scenarios still render when the folder is moved
+        let moved = t.path().join("moved");
+        std::fs::rename(&dir, &moved).unwrap();
+        let scenario = moved.join("eigen/scenario-synthetic.toml");
+        let out = t.path().join("again.gif");
+        let o = ignis(&[
+            "eigen",
+            "animate",
+            scenario.to_str().unwrap(),
+            "-q",
+            "-o",
+            out.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        assert!(out.exists());
     }
 
     #[test]
