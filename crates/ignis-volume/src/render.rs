@@ -27,8 +27,8 @@
 //!   iteration ([`crate::lattice::Cell::inverse_certified_lanes`], to [`CELL_TEX_TOL`]);
 //!   one rule per shared face ([`Ctx::owns`]) gives each sample to exactly one cell.
 //! - Otherwise, ray by ray (and, in the per-cell case, for the coverage of pixels that
-//!   found no visible sample): along a ray the global lattice coordinates `(a, b, level + s)` are
-//!   extrapolated from the previous two samples (for the second sample, from the ray's
+//!   found no visible sample): along a ray the global lattice coordinates
+//!   `(a, b, level + s)` are extrapolated from the previous two samples (for the second sample, from the ray's
 //!   step mapped by the cell's inverse Jacobian), which gives the cell and a close guess;
 //!   a ray's first sample starts from a chord step from the cell centre (moving to the
 //!   neighbouring cell while that step says the point lies there).
@@ -601,8 +601,8 @@ struct Ctx<'a, 'b> {
 /// Whether [`Ctx::march_cells`] may find this lattice's samples: every cell has a
 /// certificate (nearly affine, so the certified chord inverse answers), and neighbouring
 /// cells are of similar thickness across their shared face (the rows `∇s` of their
-/// centres' inverse Jacobians differ in length by less than 1.5×, so by less than 2× anywhere on the face), which the face rule of
-/// [`Ctx::owns`] relies on.
+/// centres' inverse Jacobians differ in length by less than 1.5×, so by less than 2×
+/// anywhere on the face), which the face rule of [`Ctx::owns`] relies on.
 fn per_cell_ok(lattice: &Lattice) -> bool {
     let cells = lattice.cells();
     let grad_s = |c: &crate::lattice::Cell| c.affine_inverse().map(|a| norm64(a.m[2]));
@@ -828,24 +828,22 @@ impl Ctx<'_, '_> {
                     &mut stats,
                     scratch,
                 );
-            }
-            for y in y0..y1 {
-                if self.per_cell[fi as usize] {
-                    break;
-                }
-                for x in x0..x1 {
-                    let p = (y - y0) as usize * tw + (x - x0) as usize;
-                    covered[p] |= self.march(
-                        fire,
-                        group,
-                        x,
-                        y,
-                        best_k[p],
-                        p as u16,
-                        &mut ranges,
-                        &mut stats,
-                        scratch,
-                    );
+            } else {
+                for y in y0..y1 {
+                    for x in x0..x1 {
+                        let p = (y - y0) as usize * tw + (x - x0) as usize;
+                        covered[p] |= self.march(
+                            fire,
+                            group,
+                            x,
+                            y,
+                            best_k[p],
+                            p as u16,
+                            &mut ranges,
+                            &mut stats,
+                            scratch,
+                        );
+                    }
                 }
             }
             if self.params.exact_inverse {
