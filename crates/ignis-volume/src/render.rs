@@ -907,7 +907,7 @@ impl Ctx<'_, '_> {
         stats: &mut RenderStats,
         out: &mut Scratch,
     ) -> bool {
-        let Some(mut ray) = self.ray(group, x, y, best_k, pix, ranges) else {
+        let Some(mut ray) = self.ray(group, x, y, best_k, pix, ranges, true) else {
             return false;
         };
         ray.tol = local_tol(fire, INVERSE_TEX_TOL);
@@ -1139,7 +1139,7 @@ impl Ctx<'_, '_> {
         stats: &mut RenderStats,
         out: &mut Scratch,
     ) -> bool {
-        let Some(mut ray) = self.ray(group, x, y, best_k, 0, ranges) else {
+        let Some(mut ray) = self.ray(group, x, y, best_k, 0, ranges, false) else {
             return false;
         };
         ray.tol = local_tol(fire, INVERSE_TEX_TOL);
@@ -1155,7 +1155,9 @@ impl Ctx<'_, '_> {
     }
 
     /// Sets up pixel `(x, y)`'s ray: direction, the candidate cells it meets (with their
-    /// ray intervals, kept in `ranges`) and its slice range; `None` if it meets none.
+    /// ray intervals, kept in `ranges`), its slice range and, `with_visible`, the slices
+    /// that may be visible (else none); `None` if it meets no cell.
+    #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     fn ray<'r>(
         &self,
@@ -1165,6 +1167,7 @@ impl Ctx<'_, '_> {
         best_k: i64,
         pix: u16,
         ranges: &'r mut [(u32, f32, f32); MAX_RANGES],
+        with_visible: bool,
     ) -> Option<Ray<'r>> {
         let size = self.params.size;
         let sx = ((x as f32 + 0.5) / size.width as f32 * 2.0 - 1.0) * self.tan * self.aspect;
@@ -1194,8 +1197,8 @@ impl Ctx<'_, '_> {
                 ranges[nr] = (cell.cell, t0, t1);
                 nr += 1;
             }
-            if cell.vmin[0] > cell.vmax[0] {
-                continue; // nothing of this cell can be visible
+            if !with_visible || cell.vmin[0] > cell.vmax[0] {
+                continue; // not asked for, or nothing of this cell can be visible
             }
             let part = match &cell.disc {
                 Some(disc) => disc.interval(d),
