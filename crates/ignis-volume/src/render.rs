@@ -934,6 +934,17 @@ impl Ctx<'_, '_> {
         ray.covered
     }
 
+    /// Pixel `(x, y)`'s centre on the image plane at unit distance: the ray through it has
+    /// direction `forward + sx · right + sy · up`.
+    #[inline(always)]
+    fn screen(&self, x: u32, y: u32) -> [f32; 2] {
+        let size = self.params.size;
+        [
+            ((x as f32 + 0.5) / size.width as f32 * 2.0 - 1.0) * self.tan * self.aspect,
+            (1.0 - (y as f32 + 0.5) / size.height as f32 * 2.0) * self.tan,
+        ]
+    }
+
     /// Finds one fire's samples in tile `[x0, y0, x1, y1)` cell by cell, for a lattice
     /// that passes [`per_cell_ok`] (the fast path's common case).
     ///
@@ -961,16 +972,13 @@ impl Ctx<'_, '_> {
         stats: &mut RenderStats,
         out: &mut Scratch,
     ) {
-        let size = self.params.size;
         let tw = (x1 - x0) as usize;
         let n = tw * (y1 - y0) as usize;
         out.dirs.clear();
         out.invs.clear();
         for y in y0..y1 {
-            let sy = (1.0 - (y as f32 + 0.5) / size.height as f32 * 2.0) * self.tan;
             for x in x0..x1 {
-                let sx =
-                    ((x as f32 + 0.5) / size.width as f32 * 2.0 - 1.0) * self.tan * self.aspect;
+                let [sx, sy] = self.screen(x, y);
                 let d = add(self.fw, add(scale(self.rt, sx), scale(self.up, sy)));
                 out.dirs.push(d);
                 out.invs.push([1.0 / d[0], 1.0 / d[1], 1.0 / d[2]]);
@@ -1169,9 +1177,7 @@ impl Ctx<'_, '_> {
         ranges: &'r mut [(u32, f32, f32); MAX_RANGES],
         with_visible: bool,
     ) -> Option<Ray<'r>> {
-        let size = self.params.size;
-        let sx = ((x as f32 + 0.5) / size.width as f32 * 2.0 - 1.0) * self.tan * self.aspect;
-        let sy = (1.0 - (y as f32 + 0.5) / size.height as f32 * 2.0) * self.tan;
+        let [sx, sy] = self.screen(x, y);
         let d =
             normalize(add(self.fw, add(scale(self.rt, sx), scale(self.up, sy)))).unwrap_or(self.fw);
         let o = self.camera.position;
