@@ -64,16 +64,6 @@ unsafe fn lerp(t: __m256, a: __m256, b: __m256) -> __m256 {
     _mm256_add_ps(a, _mm256_mul_ps(t, _mm256_sub_ps(b, a)))
 }
 
-/// [`super::blend8`].
-#[inline(always)]
-unsafe fn blend8(c: &[__m256], fu: __m256, fv: __m256, fw: __m256) -> __m256 {
-    let x00 = lerp(fu, c[0], c[1]);
-    let x10 = lerp(fu, c[2], c[3]);
-    let x01 = lerp(fu, c[4], c[5]);
-    let x11 = lerp(fu, c[6], c[7]);
-    lerp(fw, lerp(fv, x00, x10), lerp(fv, x01, x11))
-}
-
 /// The cells of a batch when it spans at most two: lane 0's key `a`, another key `b`
 /// (`= a` when all lanes share one) and the mask of the lanes in `a` (all bits set per
 /// lane); `None` for three or more.
@@ -106,25 +96,60 @@ unsafe fn store(v: __m256) -> Lanes {
     o
 }
 
-/// `g · (dx, dy, dz, dw)` summed left to right, as [`super::grad4`].
+/// A gradient table with every component repeated over the 8 lanes, so a product with a
+/// lane vector takes its factor straight from memory.
+#[repr(C, align(32))]
+struct Wide<const C: usize, const N: usize>([[[f32; 8]; C]; N]);
+
+/// [`GRAD4`], wide.
+static GRAD4_WIDE: Wide<4, 32> = {
+    let mut w = [[[0.0f32; 8]; 4]; 32];
+    let mut h = 0;
+    while h < 32 {
+        let mut c = 0;
+        while c < 4 {
+            w[h][c] = [GRAD4[h][c]; 8];
+            c += 1;
+        }
+        h += 1;
+    }
+    Wide(w)
+};
+
+/// [`GRAD3`], wide.
+static GRAD3_WIDE: Wide<3, 16> = {
+    let mut w = [[[0.0f32; 8]; 3]; 16];
+    let mut h = 0;
+    while h < 16 {
+        let mut c = 0;
+        while c < 3 {
+            w[h][c] = [GRAD3[h][c]; 8];
+            c += 1;
+        }
+        h += 1;
+    }
+    Wide(w)
+};
+
+/// `g · (dx, dy, dz, dw)` summed left to right, as [`super::grad4`], with a wide gradient.
 #[inline(always)]
-unsafe fn dot4(g: &[f32; 4], d: [__m256; 4]) -> __m256 {
+unsafe fn dot4w(g: &[[f32; 8]; 4], d: [__m256; 4]) -> __m256 {
     let s = _mm256_add_ps(
-        _mm256_mul_ps(_mm256_set1_ps(g[0]), d[0]),
-        _mm256_mul_ps(_mm256_set1_ps(g[1]), d[1]),
+        _mm256_mul_ps(_mm256_load_ps(g[0].as_ptr()), d[0]),
+        _mm256_mul_ps(_mm256_load_ps(g[1].as_ptr()), d[1]),
     );
-    let s = _mm256_add_ps(s, _mm256_mul_ps(_mm256_set1_ps(g[2]), d[2]));
-    _mm256_add_ps(s, _mm256_mul_ps(_mm256_set1_ps(g[3]), d[3]))
+    let s = _mm256_add_ps(s, _mm256_mul_ps(_mm256_load_ps(g[2].as_ptr()), d[2]));
+    _mm256_add_ps(s, _mm256_mul_ps(_mm256_load_ps(g[3].as_ptr()), d[3]))
 }
 
-/// `g · (dx, dy, dz)` summed left to right, as [`super::grad3`].
+/// `g · (dx, dy, dz)` summed left to right, as [`super::grad3`], with a wide gradient.
 #[inline(always)]
-unsafe fn dot3(g: &[f32; 3], d: [__m256; 3]) -> __m256 {
+unsafe fn dot3w(g: &[[f32; 8]; 3], d: [__m256; 3]) -> __m256 {
     let s = _mm256_add_ps(
-        _mm256_mul_ps(_mm256_set1_ps(g[0]), d[0]),
-        _mm256_mul_ps(_mm256_set1_ps(g[1]), d[1]),
+        _mm256_mul_ps(_mm256_load_ps(g[0].as_ptr()), d[0]),
+        _mm256_mul_ps(_mm256_load_ps(g[1].as_ptr()), d[1]),
     );
-    _mm256_add_ps(s, _mm256_mul_ps(_mm256_set1_ps(g[2]), d[2]))
+    _mm256_add_ps(s, _mm256_mul_ps(_mm256_load_ps(g[2].as_ptr()), d[2]))
 }
 
 /// [`super::perlin4_lanes_cached`], equal to it lane by lane.
@@ -162,24 +187,51 @@ pub unsafe fn perlin4_cached(p: &[Lanes; 4], cache: &mut NoiseCache) -> Lanes {
         [z, _mm256_sub_ps(z, one)],
         [w, _mm256_sub_ps(w, one)],
     ];
-    let mut d = [_mm256_setzero_ps(); 16];
-    for (ci, dc) in d.iter_mut().enumerate() {
-        let o = [
+    // corner `ci`'s offsets (bit 0: x + 1, bit 1: y + 1, bit 2: z + 1, bit 3: w + 1)
+    let o = |ci: usize| {
+        [
             off[0][ci & 1],
             off[1][(ci >> 1) & 1],
             off[2][(ci >> 2) & 1],
             off[3][ci >> 3],
-        ];
-        *dc = dot4(&GRAD4[ha[ci] as usize & 31], o);
-        if kb != ka {
-            let db = dot4(&GRAD4[hb[ci] as usize & 31], o);
-            *dc = _mm256_blendv_ps(db, *dc, in_a);
-        }
-    }
-    let (fu, fv, fs, ft) = (fade(x), fade(y), fade(z), fade(w));
-    let c0 = blend8(&d[..8], fu, fv, fs);
-    let c1 = blend8(&d[8..], fu, fv, fs);
-    store(lerp(ft, c0, c1))
+        ]
+    };
+    let f = [fade(x), fade(y), fade(z), fade(w)];
+    let v = if kb == ka {
+        tree16(|ci| dot4w(&GRAD4_WIDE.0[ha[ci] as usize & 31], o(ci)), f)
+    } else {
+        tree16(
+            |ci| {
+                let (a, b) = (
+                    dot4w(&GRAD4_WIDE.0[ha[ci] as usize & 31], o(ci)),
+                    dot4w(&GRAD4_WIDE.0[hb[ci] as usize & 31], o(ci)),
+                );
+                _mm256_blendv_ps(b, a, in_a)
+            },
+            f,
+        )
+    };
+    store(v)
+}
+
+/// Corners `c(b..b + 8)` blended as [`super::perlin3`] (and each half of
+/// [`super::perlin4`]) does: along `x` by `fu`, then `y` by `fv`, then `z` by `fs`. `c` is
+/// called with constants, so after inlining every corner stays in registers.
+#[inline(always)]
+unsafe fn tree8(c: impl Fn(usize) -> __m256, b: usize, [fu, fv, fs]: [__m256; 3]) -> __m256 {
+    let x00 = lerp(fu, c(b), c(b + 1));
+    let x10 = lerp(fu, c(b + 2), c(b + 3));
+    let x01 = lerp(fu, c(b + 4), c(b + 5));
+    let x11 = lerp(fu, c(b + 6), c(b + 7));
+    lerp(fs, lerp(fv, x00, x10), lerp(fv, x01, x11))
+}
+
+/// The 16 corners `c(0..16)` blended as [`super::perlin4`] does: [`tree8`] over the
+/// corners at `w` and at `w + 1`, then along `w` by `ft`.
+#[inline(always)]
+unsafe fn tree16(c: impl Fn(usize) -> __m256, [fu, fv, fs, ft]: [__m256; 4]) -> __m256 {
+    let c0 = tree8(&c, 0, [fu, fv, fs]);
+    lerp(ft, c0, tree8(&c, 8, [fu, fv, fs]))
 }
 
 /// [`super::perlin3_lanes_cached`], equal to it lane by lane.
@@ -218,16 +270,24 @@ pub unsafe fn perlin3_cached(p: &[Lanes; 3], cache: &mut NoiseCache) -> Lanes {
         [y, _mm256_sub_ps(y, one)],
         [z, _mm256_sub_ps(z, one)],
     ];
-    let mut d = [_mm256_setzero_ps(); 8];
-    for (ci, dc) in d.iter_mut().enumerate() {
-        let o = [off[0][ci & 1], off[1][(ci >> 1) & 1], off[2][ci >> 2]];
-        *dc = dot3(&GRAD3[ha[ci] as usize & 15], o);
-        if kb != ka {
-            let db = dot3(&GRAD3[hb[ci] as usize & 15], o);
-            *dc = _mm256_blendv_ps(db, *dc, in_a);
-        }
-    }
-    store(blend8(&d, fade(x), fade(y), fade(z)))
+    let o = |ci: usize| [off[0][ci & 1], off[1][(ci >> 1) & 1], off[2][ci >> 2]];
+    let f = [fade(x), fade(y), fade(z)];
+    let v = if kb == ka {
+        tree8(|ci| dot3w(&GRAD3_WIDE.0[ha[ci] as usize & 15], o(ci)), 0, f)
+    } else {
+        tree8(
+            |ci| {
+                let (a, b) = (
+                    dot3w(&GRAD3_WIDE.0[ha[ci] as usize & 15], o(ci)),
+                    dot3w(&GRAD3_WIDE.0[hb[ci] as usize & 15], o(ci)),
+                );
+                _mm256_blendv_ps(b, a, in_a)
+            },
+            0,
+            f,
+        )
+    };
+    store(v)
 }
 
 /// [`NoiseKind::eval_lanes_cached`] with the AVX2 builds above; the same values.
