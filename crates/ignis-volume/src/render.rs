@@ -464,6 +464,40 @@ impl Disc {
         Some(((lo - m) as f32, (hi + m) as f32))
     }
 
+    /// The pixel row whose rays have directions `d = fw + sx · rt + sy · up` (the camera
+    /// basis): the interval of `sx` outside which a ray misses the region's infinite
+    /// elliptic cylinder `x_a² + x_b² ≤ r2` — `None` if every ray of the row does. Along
+    /// the row `M d = b₀ + sx b₁`; the line `alpha + t M d` comes within the cylinder when
+    /// `(A × B)² ≤ r2 |B|²` (`A`, `B` the `a, b` parts of `alpha`, `M d`, the condition
+    /// [`Disc::interval`]'s discriminant tests), a quadratic `Q(sx) ≤ 0`. When `Q` opens
+    /// upwards that is the interval between its roots; otherwise no bound is given
+    /// (`±∞`; e.g. the camera inside the cylinder). Rounding matters only where a ray
+    /// grazes the cylinder, whose radius has a margin (1e-3) over the visible part's: such
+    /// rays hold no visible sample.
+    #[inline(always)]
+    fn row_span(&self, fw: V3, rt: V3, up: V3, sy: f32) -> Option<(f64, f64)> {
+        let m = &self.m;
+        let row = |v: V3| {
+            [0, 1].map(|i| m[i][0] * v[0] as f64 + m[i][1] * v[1] as f64 + m[i][2] * v[2] as f64)
+        };
+        let (f, u, b1) = (row(fw), row(up), row(rt));
+        let b0 = [f[0] + sy as f64 * u[0], f[1] + sy as f64 * u[1]];
+        let a = self.alpha;
+        let (c0, c1) = (a[0] * b0[1] - a[1] * b0[0], a[0] * b1[1] - a[1] * b1[0]);
+        let qa = c1 * c1 - self.r2 * (b1[0] * b1[0] + b1[1] * b1[1]);
+        let qb = c0 * c1 - self.r2 * (b0[0] * b1[0] + b0[1] * b1[1]);
+        let qc = c0 * c0 - self.r2 * (b0[0] * b0[0] + b0[1] * b0[1]);
+        if !(qa > 0.0) {
+            return Some((f64::NEG_INFINITY, f64::INFINITY));
+        }
+        let disc = qb * qb - qa * qc;
+        if disc < 0.0 {
+            return None;
+        }
+        let sq = disc.sqrt();
+        Some(((-qb - sq) / qa, (-qb + sq) / qa))
+    }
+
     /// Whether world point `p` is in the region (for tests).
     #[cfg(test)]
     fn contains(&self, p: V3, o: V3) -> bool {
@@ -998,19 +1032,54 @@ impl Ctx<'_, '_> {
             let j = cand.cell as usize;
             let mut batch = Batch::default();
             for y in cy0..=cy1 {
-                for x in cx0..=cx1 {
+                // the row's pixels that can meet the disc's cylinder (with a pixel to spare)
+                let (rx0, rx1) = match &cand.disc {
+                    Some(disc) => {
+                        let Some((lo, hi)) =
+                            disc.row_span(self.fw, self.rt, self.up, self.screen(0, y as u32)[1])
+                        else {
+                            continue;
+                        };
+                        let px = |sx: f64| {
+                            (sx / (self.tan * self.aspect) as f64 + 1.0)
+                                * 0.5
+                                * self.params.size.width as f64
+                                - 0.5
+                        };
+                        let lim = |v: f64| v.clamp(cx0 as f64 - 1.0, cx1 as f64 + 1.0) as i32;
+                        (
+                            cx0.max(lim(px(lo).floor() - 1.0)),
+                            cx1.min(lim(px(hi).ceil() + 1.0)),
+                        )
+                    }
+                    None => (cx0, cx1),
+                };
+                // The part of the cell that can be visible is convex, so the pixels of a
+                // row whose rays meet it are consecutive: after the first miss that follows
+                // a hit the row is done.
+                let mut met = false;
+                for x in rx0..=rx1 {
                     let p = (y as u32 - y0) as usize * tw + (x as u32 - x0) as usize;
                     let (d, inv) = (out.dirs[p], out.invs[p]);
                     let Some((b0, b1)) = slab(inv, cand.vmin, cand.vmax) else {
+                        if met {
+                            break;
+                        }
                         continue;
                     };
                     let (z0, z1) = match &cand.disc {
                         Some(disc) => match disc.interval(d) {
                             Some((t0, t1)) => (t0.max(b0), t1.min(b1)),
-                            None => continue,
+                            None => {
+                                if met {
+                                    break;
+                                }
+                                continue;
+                            }
                         },
                         None => (b0, b1),
                     };
+                    met = true;
                     let ka = (z0 / spacing).ceil() as i64;
                     let kb = ((z1 / spacing).floor() as i64).min(best_k[p].saturating_sub(1));
                     for k in ka..=kb {
@@ -1857,6 +1926,21 @@ mod tests {
                 assert!(
                     inside(j) || (j > 0 && inside(j - 1)),
                     "visible sample at {tex:?} outside the visible part of cell {j}"
+                );
+                // and its ray's screen position within the row span of its cell's disc
+                // (`march_cells` widens that by a pixel, ≈ 4e-3 in `sx` here)
+                let d = sub(p, scene.camera.position);
+                let z = dot(d, ctx.fw);
+                let (sx, sy) = ((dot(d, ctx.rt) / z) as f64, dot(d, ctx.up) / z);
+                let spans = |j: usize| match &visible[j].disc {
+                    Some(disc) => disc
+                        .row_span(ctx.fw, ctx.rt, ctx.up, sy)
+                        .is_some_and(|(lo, hi)| lo - 1e-4 <= sx && sx <= hi + 1e-4),
+                    None => true,
+                };
+                assert!(
+                    spans(j) || (j > 0 && spans(j - 1)),
+                    "visible sample at {tex:?} outside the row span of cell {j}"
                 );
             }
             // nearly every visible sample was checked against a disc too
