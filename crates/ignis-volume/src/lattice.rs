@@ -519,6 +519,93 @@ impl Cell {
         (out, done)
     }
 
+    /// [`Cell::inverse_certified_lanes`] written with AVX2 intrinsics (LLVM keeps the
+    /// portable version's per-lane conditional updates scalar): the same `f32` operations
+    /// in the same order, lane by lane, so the same bits (tested).
+    ///
+    /// # Safety
+    /// The CPU must support AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    pub unsafe fn inverse_certified_lanes_avx2(
+        &self,
+        p: &[[f32; CHORD_LANES]; 3],
+        tol: V3,
+    ) -> ([[f32; CHORD_LANES]; 3], [bool; CHORD_LANES]) {
+        use std::arch::x86_64::*;
+        const L: usize = CHORD_LANES;
+        let Some(c) = self.cert.as_ref() else {
+            return ([[0.0; L]; 3], [false; L]);
+        };
+        let set = |v: f32| _mm256_set1_ps(v);
+        let mul = |a, b| _mm256_mul_ps(a, b);
+        let add = |a, b| _mm256_add_ps(a, b);
+        let sub = |a, b| _mm256_sub_ps(a, b);
+        let d = [0, 1, 2].map(|a| sub(_mm256_loadu_ps(p[a].as_ptr()), set(c.centre[a])));
+        let q = [0, 1, 2].map(|i| {
+            add(
+                add(mul(set(c.m[0][i]), d[0]), mul(set(c.m[1][i]), d[1])),
+                mul(set(c.m[2][i]), d[2]),
+            )
+        });
+        let sign = set(-0.0);
+        let (lim, nlim, half) = (
+            set(0.5 + Self::CERT_BOX),
+            set(-(0.5 + Self::CERT_BOX)),
+            set(0.5),
+        );
+        let mut x = q;
+        let mut out = [_mm256_setzero_ps(); 3];
+        let mut live = _mm256_castsi256_ps(_mm256_set1_epi32(-1));
+        let mut done = _mm256_setzero_ps();
+        let n = &c.n;
+        for _ in 0..3 {
+            let ab = mul(x[0], x[1]);
+            let (as_, bs) = (mul(x[0], x[2]), mul(x[1], x[2]));
+            let abs = mul(ab, x[2]);
+            let nx = [0, 1, 2].map(|i| {
+                sub(
+                    q[i],
+                    add(
+                        add(mul(ab, set(n[0][i])), mul(as_, set(n[1][i]))),
+                        add(mul(bs, set(n[2][i])), mul(abs, set(n[3][i]))),
+                    ),
+                )
+            });
+            let ad = [0, 1, 2].map(|i| _mm256_andnot_ps(sign, sub(x[i], nx[i])));
+            let mut inside = _mm256_castsi256_ps(_mm256_set1_epi32(-1));
+            let mut ok = inside;
+            for i in 0..3 {
+                let err = add(
+                    add(mul(set(c.q[0][i]), ad[0]), mul(set(c.q[1][i]), ad[1])),
+                    mul(set(c.q[2][i]), ad[2]),
+                );
+                let rho = add(ad[i], err);
+                let lo = _mm256_cmp_ps::<_CMP_GE_OQ>(sub(x[i], rho), nlim);
+                let hi = _mm256_cmp_ps::<_CMP_LE_OQ>(add(x[i], rho), lim);
+                inside = _mm256_and_ps(inside, _mm256_and_ps(lo, hi));
+                ok = _mm256_and_ps(ok, _mm256_cmp_ps::<_CMP_LE_OQ>(err, set(tol[i])));
+            }
+            let accept = _mm256_and_ps(live, _mm256_and_ps(inside, ok));
+            for i in 0..3 {
+                out[i] = _mm256_blendv_ps(out[i], add(nx[i], half), accept);
+                x[i] = _mm256_blendv_ps(x[i], nx[i], live);
+            }
+            done = _mm256_or_ps(done, accept);
+            live = _mm256_and_ps(live, _mm256_andnot_ps(ok, inside));
+            if _mm256_movemask_ps(live) == 0 {
+                break;
+            }
+        }
+        let mut res = [[0.0f32; L]; 3];
+        for i in 0..3 {
+            _mm256_storeu_ps(res[i].as_mut_ptr(), out[i]);
+        }
+        let bits = _mm256_movemask_ps(done);
+        (res, std::array::from_fn(|l| bits & (1 << l) != 0))
+    }
+
     /// [`Cell::inverse_certified_lanes`] for one point: within `tol` of the exact inverse
     /// (proven) or `None`. The same bits as the lanes version gives for `p`.
     pub fn inverse_chord_certified(&self, p: V3, tol: V3) -> Option<V3> {
@@ -1154,6 +1241,56 @@ mod tests {
             println!("{res} levels: {certified}/{n} cells certified, {answered} answers, worst error / bound {worst:.3}");
             assert!(answered > 1_000, "{answered}");
         }
+    }
+
+    /// The AVX2 lanes inverse gives the portable one's bits, lane by lane (certified or
+    /// not), on random points in and around the cells of a bent lattice.
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn avx2_lanes_inverse_equals_portable() {
+        if !std::arch::is_x86_feature_detected!("avx2") {
+            println!("skipped: this CPU has no AVX2");
+            return;
+        }
+        #[target_feature(enable = "avx2")]
+        unsafe fn avx2(c: &Cell, p: &[[f32; 8]; 3], tol: V3) -> ([[f32; 8]; 3], [bool; 8]) {
+            c.inverse_certified_lanes_avx2(p, tol)
+        }
+        let lat = Lattice::build(&bent(), 35).unwrap();
+        let n = lat.cells().len();
+        let mut rng = ignis_core::Rng::new(5);
+        let (mut certified, mut refused) = (0, 0);
+        for round in 0..4000 {
+            let c = &lat.cells()[round % n];
+            let tex_tol = [1e-5f32, 7.5e-6, 1e-3][round % 3];
+            let tol = [0.5 * tex_tol, 0.5 * tex_tol, n as f32 * tex_tol];
+            let mut p = [[0.0f32; 8]; 3];
+            for l in 0..8 {
+                let spread = if round % 4 == 0 { 2.0 } else { 0.3 };
+                let q = c.forward([0; 3].map(|_| rng.uniform(-spread, 1.0 + spread) as f32));
+                for a in 0..3 {
+                    p[a][l] = q[a];
+                }
+            }
+            // SAFETY: AVX2 was detected above.
+            let (la, oa) = unsafe { avx2(c, &p, tol) };
+            let (lp, op) = c.inverse_certified_lanes(&p, tol);
+            assert_eq!(oa, op, "round {round}");
+            for l in 0..8 {
+                if op[l] {
+                    certified += 1;
+                    for a in 0..3 {
+                        assert_eq!(la[a][l].to_bits(), lp[a][l].to_bits(), "round {round}");
+                    }
+                } else {
+                    refused += 1;
+                }
+            }
+        }
+        assert!(
+            certified > 10_000 && refused > 1_000,
+            "{certified} {refused}"
+        );
     }
 
     /// The affine model's error bound holds at random points of every certified cell.

@@ -487,7 +487,7 @@ impl Disc {
         let qa = c1 * c1 - self.r2 * (b1[0] * b1[0] + b1[1] * b1[1]);
         let qb = c0 * c1 - self.r2 * (b0[0] * b1[0] + b0[1] * b1[1]);
         let qc = c0 * c0 - self.r2 * (b0[0] * b0[0] + b0[1] * b0[1]);
-        if !(qa > 0.0) {
+        if qa.is_nan() || qa <= 0.0 {
             return Some((f64::NEG_INFINITY, f64::INFINITY));
         }
         let disc = qb * qb - qa * qc;
@@ -513,7 +513,7 @@ impl Disc {
 ///
 /// A sample at texture height `z` and radius `u` is shaded only if the profile column at
 /// `u` has some alpha within reach of `z` for a turbulence within its proven bound
-/// (`reachable` with no octave summed yet; otherwise its alpha is exactly zero and it adds
+/// ([`Window`] with no octave summed yet; otherwise its alpha is exactly zero and it adds
 /// nothing to any blend), and only if `u ≤ 1`. Over the cell's height range that holds
 /// only for `u ≤ reach`. The box: the trilinear image of the sub-square
 /// `|tex_x|, |tex_y| ≤ reach` lies in the convex hull of its 8 corners, whose bounding box
@@ -758,22 +758,49 @@ struct Live {
     p: [f32; 4],
     /// Partial turbulence sum.
     sum: f32,
-    /// `u` (eq. 12), `tex_z`, kernel `f(tex_z)` (eq. 13) and the profile's visible `v`
-    /// range.
+    /// `u` (eq. 12), `tex_z` and the kernel `f(tex_z)` (eq. 13).
     u: f32,
     z: f32,
     kern: f32,
-    lo: f32,
-    hi: f32,
+    /// The turbulence values that can make the sample visible ([`Window`]).
+    win: Window,
 }
 
-/// Whether `v = z + kern · t` can reach `[lo, hi]` for some turbulence `t` in
-/// `[sum − rem, sum + rem]` (closed, with a margin far above the `f32` rounding of these few
-/// operations, so a `false` is certain: the sample's alpha is exactly zero).
-#[inline(always)]
-fn reachable(z: f32, kern: f32, sum: f32, rem: f32, lo: f32, hi: f32) -> bool {
-    let eps = 1e-4 * (1.0 + kern * (sum.abs() + rem));
-    z + kern * (sum + rem) >= lo - eps && z + kern * (sum - rem) <= hi + eps
+/// The turbulence values `t` for which a sample's profile look-up `v = z + kern · t`
+/// (eq. 12–13) can have non-zero alpha: `v` in the column's visible range `[lo, hi]`
+/// ([`FireProfile::v_support`]) means `t ∈ [(lo − z)/kern, (hi − z)/kern]`, here widened
+/// by a margin of `2e-4 · (1 + 2 kern B)` in `v` (`B` the bound on the whole turbulence,
+/// which bounds `|sum| + rem` at every octave; far above the `f32` rounding of `v` and of
+/// these few operations), so a sample whose turbulence range misses the window is certain
+/// to get zero alpha. With `kern ≤ 0` the window is unbounded (no culling).
+#[derive(Clone, Copy, Debug)]
+struct Window {
+    min: f32,
+    max: f32,
+}
+
+impl Window {
+    #[inline(always)]
+    fn new(z: f32, kern: f32, [lo, hi]: [f32; 2], bound: f32) -> Window {
+        if kern.is_nan() || kern <= 0.0 {
+            return Window {
+                min: f32::NEG_INFINITY,
+                max: f32::INFINITY,
+            };
+        }
+        let eps = 2e-4 * (1.0 + 2.0 * kern * bound);
+        Window {
+            min: (lo - eps - z) / kern,
+            max: (hi + eps - z) / kern,
+        }
+    }
+
+    /// Whether a turbulence within `rem` of `sum` can lie in the window (`false` is
+    /// certain).
+    #[inline(always)]
+    fn reachable(&self, sum: f32, rem: f32) -> bool {
+        sum + rem >= self.min && sum - rem <= self.max
+    }
 }
 
 impl Ctx<'_, '_> {
@@ -859,6 +886,7 @@ impl Ctx<'_, '_> {
                     &best_k,
                     &mut covered,
                     &mut ranges,
+                    avx2,
                     &mut stats,
                     scratch,
                 );
@@ -1003,6 +1031,7 @@ impl Ctx<'_, '_> {
         best_k: &[i64],
         covered: &mut [bool],
         ranges: &mut [(u32, f32, f32); MAX_RANGES],
+        avx2: bool,
         stats: &mut RenderStats,
         out: &mut Scratch,
     ) {
@@ -1092,7 +1121,7 @@ impl Ctx<'_, '_> {
                         batch.k[l] = k;
                         batch.n += 1;
                         if batch.n == CHORD_LANES {
-                            self.claim(fire, j, &batch, tol, stats, out);
+                            self.claim(fire, j, &batch, tol, avx2, stats, out);
                             batch.n = 0;
                         }
                     }
@@ -1105,7 +1134,7 @@ impl Ctx<'_, '_> {
                         batch.p[a][l] = batch.p[a][0];
                     }
                 }
-                self.claim(fire, j, &batch, tol, stats, out);
+                self.claim(fire, j, &batch, tol, avx2, stats, out);
             }
         }
         // coverage of the pixels without a sample, ray by ray
@@ -1122,16 +1151,26 @@ impl Ctx<'_, '_> {
     /// Inverts a batch of candidate samples of cell `j` ([`Ctx::march_cells`]) and keeps
     /// those the cell claims ([`Ctx::owns`]) and that lie in the unit cylinder.
     #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
     fn claim(
         &self,
         fire: &FireInstance,
         j: usize,
         batch: &Batch,
         tol: V3,
+        avx2: bool,
         stats: &mut RenderStats,
         out: &mut Scratch,
     ) {
         let cell = &fire.lattice.cells()[j];
+        #[cfg(target_arch = "x86_64")]
+        let (ls, ok) = if avx2 {
+            // SAFETY: `avx2` is true only in the AVX2 build on CPUs with AVX2 (`Ctx::tile`).
+            unsafe { cell.inverse_certified_lanes_avx2(&batch.p, tol) }
+        } else {
+            cell.inverse_certified_lanes(&batch.p, tol)
+        };
+        #[cfg(not(target_arch = "x86_64"))]
         let (ls, ok) = cell.inverse_certified_lanes(&batch.p, tol);
         for l in 0..batch.n {
             let pt = [batch.p[0][l], batch.p[1][l], batch.p[2][l]];
@@ -1487,7 +1526,14 @@ impl Ctx<'_, '_> {
             };
             let z = tex[2];
             let kern = kernel(z, noise.stability);
-            if !reachable(z, kern, 0.0, rem[0], lo, hi) {
+            let win = Window::new(z, kern, [lo, hi], rem[0]);
+            // (with `kern = 0`, `v = z` exactly; a negative kernel is not culled)
+            let lit = if kern > 0.0 {
+                win.reachable(0.0, rem[0])
+            } else {
+                kern != 0.0 || (z >= lo && z <= hi)
+            };
+            if !lit {
                 continue;
             }
             let scale = noise_scale(fire.lattice.radius_at(z), length, noise.frequency);
@@ -1499,8 +1545,7 @@ impl Ctx<'_, '_> {
                 u,
                 z,
                 kern,
-                lo,
-                hi,
+                win,
             });
         }
         // turbulence (eq. 9), octave by octave, as `turbulence` computes it
@@ -1523,7 +1568,7 @@ impl Ctx<'_, '_> {
             f *= noise.lacunarity;
             if o + 1 < octaves {
                 let r = rem[o + 1];
-                act.retain(|a| reachable(a.z, a.kern, a.sum, r, a.lo, a.hi));
+                act.retain(|a| a.win.reachable(a.sum, r));
             }
         }
         for live in act.iter() {
