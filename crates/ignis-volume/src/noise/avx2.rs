@@ -7,14 +7,11 @@
 //! What differs is the common case of the renderer, where the 8 points of a batch lie in
 //! one or two noise cells (samples are ordered by slice, then pixel): the cells' corner
 //! gradients are then looked up once and broadcast (and, for two cells, chosen per lane
-//! by a blend), instead of being gathered and decoded lane by lane. Batches that span
-//! three or more cells take the portable code (compiled for AVX2 as well, since it is
-//! inlined here).
+//! by a blend), instead of being gathered and decoded lane by lane. A batch that spans
+//! three or more cells gets each cell's noise computed on all lanes the same way, and
+//! every lane keeps its own cell's.
 
-use super::{
-    corners3, corners4, mnoise_lanes, perlin3_lanes_cached, perlin4_lanes_cached, Lanes,
-    NoiseCache, NoiseKind, GRAD3, GRAD4,
-};
+use super::{corners3, corners4, mnoise_lanes, Lanes, NoiseCache, NoiseKind, GRAD3, GRAD4};
 use std::arch::x86_64::*;
 
 /// [`super::ffloor_lane`] on 8 lanes: truncation of the clamped value, corrected down.
@@ -167,18 +164,9 @@ pub unsafe fn perlin4_cached(p: &[Lanes; 4], cache: &mut NoiseCache) -> Lanes {
         _mm256_or_si256(xi, _mm256_slli_epi32::<8>(yi)),
         _mm256_or_si256(_mm256_slli_epi32::<16>(zi), _mm256_slli_epi32::<24>(wi)),
     );
-    let Some((ka, kb, in_a)) = two_cells(key) else {
-        return perlin4_lanes_cached(p, &mut cache.c4);
-    };
     let hash = |k: u32| {
         let (a, b, c, e) = (k & 255, (k >> 8) & 255, (k >> 16) & 255, k >> 24);
         corners4(a as usize, b as usize, c as usize, e as usize)
-    };
-    let ha = cache.c4.get(ka, || hash(ka));
-    let hb = if kb == ka {
-        ha
-    } else {
-        cache.c4.get(kb, || hash(kb))
     };
     let one = _mm256_set1_ps(1.0);
     let off = [
@@ -197,9 +185,18 @@ pub unsafe fn perlin4_cached(p: &[Lanes; 4], cache: &mut NoiseCache) -> Lanes {
         ]
     };
     let f = [fade(x), fade(y), fade(z), fade(w)];
+    let Some((ka, kb, in_a)) = two_cells(key) else {
+        // three or more cells: each cell's noise on all lanes, kept where it applies
+        return store(per_cell(key, |k| {
+            let h = cache.c4.get(k, || hash(k));
+            tree16(|ci| dot4w(&GRAD4_WIDE.0[h[ci] as usize & 31], o(ci)), f)
+        }));
+    };
+    let ha = cache.c4.get(ka, || hash(ka));
     let v = if kb == ka {
         tree16(|ci| dot4w(&GRAD4_WIDE.0[ha[ci] as usize & 31], o(ci)), f)
     } else {
+        let hb = cache.c4.get(kb, || hash(kb));
         tree16(
             |ci| {
                 let (a, b) = (
@@ -212,6 +209,25 @@ pub unsafe fn perlin4_cached(p: &[Lanes; 4], cache: &mut NoiseCache) -> Lanes {
         )
     };
     store(v)
+}
+
+/// A batch whose lanes lie in several noise cells (`key` per lane): `value(k)` computes
+/// the noise of every lane with cell `k`'s corner gradients, which is the right value for
+/// the lanes in cell `k` (the same operations as for a batch in that cell alone); each
+/// lane keeps its own cell's.
+#[inline(always)]
+unsafe fn per_cell(key: __m256i, mut value: impl FnMut(u32) -> __m256) -> __m256 {
+    let mut keys = [0u32; 8];
+    _mm256_storeu_si256(keys.as_mut_ptr() as *mut __m256i, key);
+    let mut left = 0xffu32;
+    let mut out = _mm256_setzero_ps();
+    while left != 0 {
+        let k = keys[left.trailing_zeros() as usize];
+        let mask = _mm256_castsi256_ps(_mm256_cmpeq_epi32(key, _mm256_set1_epi32(k as i32)));
+        out = _mm256_blendv_ps(out, value(k), mask);
+        left &= !(_mm256_movemask_ps(mask) as u32);
+    }
+    out
 }
 
 /// Corners `c(b..b + 8)` blended as [`super::perlin3`] (and each half of
@@ -248,21 +264,12 @@ pub unsafe fn perlin3_cached(p: &[Lanes; 3], cache: &mut NoiseCache) -> Lanes {
         _mm256_or_si256(xi, _mm256_slli_epi32::<8>(yi)),
         _mm256_slli_epi32::<16>(zi),
     );
-    let Some((ka, kb, in_a)) = two_cells(key) else {
-        return perlin3_lanes_cached(p, &mut cache.c3);
-    };
     let hash = |k: u32| {
         corners3(
             (k & 255) as usize,
             ((k >> 8) & 255) as usize,
             (k >> 16) as usize,
         )
-    };
-    let ha = cache.c3.get(ka, || hash(ka));
-    let hb = if kb == ka {
-        ha
-    } else {
-        cache.c3.get(kb, || hash(kb))
     };
     let one = _mm256_set1_ps(1.0);
     let off = [
@@ -272,9 +279,18 @@ pub unsafe fn perlin3_cached(p: &[Lanes; 3], cache: &mut NoiseCache) -> Lanes {
     ];
     let o = |ci: usize| [off[0][ci & 1], off[1][(ci >> 1) & 1], off[2][ci >> 2]];
     let f = [fade(x), fade(y), fade(z)];
+    let Some((ka, kb, in_a)) = two_cells(key) else {
+        // three or more cells: each cell's noise on all lanes, kept where it applies
+        return store(per_cell(key, |k| {
+            let h = cache.c3.get(k, || hash(k));
+            tree8(|ci| dot3w(&GRAD3_WIDE.0[h[ci] as usize & 15], o(ci)), 0, f)
+        }));
+    };
+    let ha = cache.c3.get(ka, || hash(ka));
     let v = if kb == ka {
         tree8(|ci| dot3w(&GRAD3_WIDE.0[ha[ci] as usize & 15], o(ci)), 0, f)
     } else {
+        let hb = cache.c3.get(kb, || hash(kb));
         tree8(
             |ci| {
                 let (a, b) = (
@@ -309,7 +325,7 @@ mod tests {
     use super::*;
 
     /// The AVX2 noise equals the scalar reference lane by lane, for batches in one, two
-    /// and several noise cells (the broadcast, blended and portable paths), near cell
+    /// and up to five noise cells (the broadcast, blended and per-cell paths), near cell
     /// borders and at integer points.
     #[test]
     fn avx2_noise_equals_scalar() {
@@ -319,9 +335,9 @@ mod tests {
         }
         let mut rng = ignis_core::Rng::new(11);
         let mut cache = NoiseCache::default();
-        let mut paths = [0usize; 3];
+        let mut paths = [0usize; 5];
         for round in 0..6000 {
-            let cells = 1 + round % 3;
+            let cells = 1 + round % 5;
             let base: [f32; 4] = [0; 4].map(|_| rng.uniform(-40.0, 40.0).floor() as f32);
             let mut p = [[0.0f32; 8]; 4];
             for l in 0..8 {
