@@ -768,13 +768,14 @@ struct Live {
 
 /// The turbulence values `t` for which a sample's profile look-up `v = z + kern · t`
 /// (eq. 12–13) can have non-zero alpha: `v` in the column's visible range `[lo, hi]`
-/// ([`FireProfile::v_support`]) means `t ∈ [(lo − z)/kern, (hi − z)/kern]`, here widened
-/// by a margin of `2e-4 · (1 + 2 kern B)` in `v` (`B` the bound on the whole turbulence,
-/// which bounds `|sum| + rem` at every octave; far above the `f32` rounding of `v` and of
-/// these few operations), so a sample whose turbulence range misses the window is certain
-/// to get zero alpha. With `kern ≤ 0` the window is unbounded (no culling).
+/// ([`FireProfile::v_support`]), i.e. `kern · t ∈ [lo − z, hi − z]`, here widened by a
+/// margin of `2e-4 · (1 + 2 kern B)` in `v` (`B` the bound on the whole turbulence,
+/// which bounds `|sum| + rem` at every octave; far above the `f32` rounding of `v` and
+/// of these few operations), so a sample whose turbulence range misses the window is
+/// certain to get zero alpha. A negative kernel gets no window (no culling).
 #[derive(Clone, Copy, Debug)]
 struct Window {
+    kern: f32,
     min: f32,
     max: f32,
 }
@@ -782,16 +783,18 @@ struct Window {
 impl Window {
     #[inline(always)]
     fn new(z: f32, kern: f32, [lo, hi]: [f32; 2], bound: f32) -> Window {
-        if kern.is_nan() || kern <= 0.0 {
+        if kern.is_nan() || kern < 0.0 {
             return Window {
+                kern: 0.0,
                 min: f32::NEG_INFINITY,
                 max: f32::INFINITY,
             };
         }
         let eps = 2e-4 * (1.0 + 2.0 * kern * bound);
         Window {
-            min: (lo - eps - z) / kern,
-            max: (hi + eps - z) / kern,
+            kern,
+            min: lo - eps - z,
+            max: hi + eps - z,
         }
     }
 
@@ -799,7 +802,7 @@ impl Window {
     /// certain).
     #[inline(always)]
     fn reachable(&self, sum: f32, rem: f32) -> bool {
-        sum + rem >= self.min && sum - rem <= self.max
+        self.kern * (sum + rem) >= self.min && self.kern * (sum - rem) <= self.max
     }
 }
 
@@ -1527,13 +1530,7 @@ impl Ctx<'_, '_> {
             let z = tex[2];
             let kern = kernel(z, noise.stability);
             let win = Window::new(z, kern, [lo, hi], rem[0]);
-            // (with `kern = 0`, `v = z` exactly; a negative kernel is not culled)
-            let lit = if kern > 0.0 {
-                win.reachable(0.0, rem[0])
-            } else {
-                kern != 0.0 || (z >= lo && z <= hi)
-            };
-            if !lit {
+            if !win.reachable(0.0, rem[0]) {
                 continue;
             }
             let scale = noise_scale(fire.lattice.radius_at(z), length, noise.frequency);
