@@ -472,6 +472,76 @@ mod eigen {
     }
 }
 
+mod volume {
+    use super::*;
+
+    #[test]
+    fn preset_renders_a_flipbook_with_its_layout() {
+        let t = tempfile::tempdir().unwrap();
+        let png = t.path().join("torch.png");
+        let o = ignis(&[
+            "volume",
+            "render",
+            "--preset",
+            "torch",
+            "--size",
+            "48x48",
+            "--frames",
+            "4",
+            "-q",
+            "-o",
+            png.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        assert!(std::fs::metadata(&png).unwrap().len() > 100);
+        let layout: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(t.path().join("torch.json")).unwrap())
+                .unwrap();
+        assert_eq!(layout["frame_count"], 4);
+        assert_eq!(layout["frame_width"], 48);
+    }
+
+    #[test]
+    fn bad_fire_file_names_the_field_and_writes_nothing() {
+        let t = tempfile::tempdir().unwrap();
+        let fire = t.path().join("fire.toml");
+        std::fs::write(
+            &fire,
+            "[[fire]]\ncurve = { points = [[0, 0, 0, 1], [0, 0, 1, -1], [0, 0, 2, 1], [0, 0, 3, 1]] }\n",
+        )
+        .unwrap();
+        let gif = t.path().join("fire.gif");
+        let o = ignis(&[
+            "volume",
+            "render",
+            fire.to_str().unwrap(),
+            "--frames",
+            "2",
+            "-o",
+            gif.to_str().unwrap(),
+        ]);
+        assert_fails(&o, "radius");
+        assert!(!gif.exists());
+    }
+
+    /// `ignis bench volume`: the Table 1 grid as JSON, with the covered pixels counted in a
+    /// frame of its own (≈ 90,000 for the scene).
+    #[test]
+    fn bench_reports_the_table1_grid() {
+        let o = ignis(&["bench", "volume", "--quick", "-q"]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        let rows = v["table1"].as_array().unwrap();
+        assert_eq!(rows.len(), 6);
+        for r in rows {
+            let covered = r["covered_pixels"].as_u64().unwrap();
+            assert!((80_000..100_000).contains(&covered), "{r}");
+            assert!(r["fps"].as_f64().unwrap() > 0.0, "{r}");
+        }
+        assert!(v["goal_met"].is_boolean());
+    }
+}
+
 mod demo {
     use super::*;
 

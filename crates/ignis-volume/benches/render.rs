@@ -25,7 +25,11 @@ fn table1(c: &mut Criterion) {
                 offset: scene.offset(0),
             }];
             let params = scene.render_params();
-            let (_, stats) = render(&inst, &scene.camera, &params, 0.5).unwrap();
+            let counting = ignis_volume::RenderParams {
+                count_coverage: true,
+                ..params
+            };
+            let (_, stats) = render(&inst, &scene.camera, &counting, 0.5).unwrap();
             g.throughput(Throughput::Elements(stats.covered_pixels));
             let name = format!(
                 "{} x{octaves} lattice {lattice} {}",

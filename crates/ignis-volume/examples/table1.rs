@@ -56,7 +56,13 @@ fn main() {
                 offset: scene.offset(0),
             }];
             let params = scene.render_params();
-            let (img, stats) = render(&inst, &scene.camera, &params, 0.0).unwrap();
+            // the covered pixels from one frame that counts them (extra work), then the
+            // timed frames as a user renders them
+            let counting = ignis_volume::RenderParams {
+                count_coverage: true,
+                ..params
+            };
+            let (img, stats) = render(&inst, &scene.camera, &counting, 0.0).unwrap();
             // `TABLE1_FRAMES=3` renders fewer frames (e.g. under callgrind)
             let n = std::env::var("TABLE1_FRAMES")
                 .ok()

@@ -410,6 +410,7 @@ impl FireScene {
             blend: self.blend,
             intensity: self.intensity,
             exact_inverse: false,
+            count_coverage: false,
         }
     }
 
@@ -449,6 +450,7 @@ impl FireScene {
             scene: self,
             sims,
             frame: 0,
+            count_coverage: false,
         })
     }
 
@@ -657,9 +659,16 @@ pub struct Animator<'a> {
     scene: &'a FireScene,
     sims: Vec<Option<ParticleSim>>,
     frame: u64,
+    count_coverage: bool,
 }
 
 impl Animator<'_> {
+    /// Whether the next frames count [`RenderStats::covered_pixels`] (extra work that does
+    /// not change the image; see [`RenderParams::count_coverage`]). Default off.
+    pub fn set_count_coverage(&mut self, on: bool) {
+        self.count_coverage = on;
+    }
+
     /// Index of the next frame.
     pub fn frame_index(&self) -> u64 {
         self.frame
@@ -732,7 +741,11 @@ impl Animator<'_> {
                 offset: s.offset(i),
             })
             .collect();
-        let (hdr, stats) = render(&inst, &s.camera, &s.render_params(), t)?;
+        let params = RenderParams {
+            count_coverage: self.count_coverage,
+            ..s.render_params()
+        };
+        let (hdr, stats) = render(&inst, &s.camera, &params, t)?;
         let image = finish(&hdr, &s.bloom)?;
         Ok(Frame {
             image,

@@ -212,8 +212,10 @@ mod render {
         for p in ignis_volume::Preset::ALL {
             let s = FireScene::preset(p).with_size(Size::new(32, 32).unwrap());
             let mut a = s.animator().unwrap();
+            a.set_count_coverage(true);
             let f = a.next_frame().unwrap();
             assert!(f.stats.covered_pixels > 0, "{}", p.name());
+            assert!(f.stats.shaded > 0, "{}", p.name());
             assert!(f.image.luminance().max() > 0.01, "{}", p.name());
         }
     }
