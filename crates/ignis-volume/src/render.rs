@@ -365,8 +365,16 @@ fn render_with(
     };
     let tiles: Vec<(Vec<[f32; 4]>, RenderStats)> = (0..tx * ty)
         .into_par_iter()
-        .map_init(Scratch::default, |scratch, t| {
-            ctx.tile(t % tx, t / tx, &bins[t as usize], scratch)
+        .map(|t| {
+            let cands = &bins[t as usize];
+            if cands.is_empty() {
+                return (Vec::new(), RenderStats::default());
+            }
+            SCRATCH.with(|s| match s.try_borrow_mut() {
+                Ok(mut scratch) => ctx.tile(t % tx, t / tx, cands, &mut scratch),
+                // (not reached: a tile starts no parallel work that could render here)
+                Err(_) => ctx.tile(t % tx, t / tx, cands, &mut Scratch::default()),
+            })
         })
         .collect();
     let mut data = vec![[0.0f32; 4]; size.pixels()];
@@ -716,6 +724,12 @@ struct Ray<'r> {
     /// Local-coordinate tolerance of the certified chord steps: [`INVERSE_TEX_TOL`] in
     /// texture space (`tex_x = 2a − 1`, `tex_z = (j + s)/cells`).
     tol: V3,
+}
+
+thread_local! {
+    /// Each rendering thread's working arrays, kept from tile to tile and frame to frame
+    /// (rayon's threads live on), so a warm renderer allocates nothing per sample or tile.
+    static SCRATCH: std::cell::RefCell<Scratch> = std::cell::RefCell::new(Scratch::default());
 }
 
 /// One fire's samples in one tile, in march order (pixel by pixel, front to back), plus
