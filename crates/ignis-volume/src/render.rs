@@ -377,22 +377,29 @@ fn render_with(
             })
         })
         .collect();
-    let mut data = vec![[0.0f32; 4]; size.pixels()];
     let mut stats = RenderStats::default();
-    for (t, (buf, s)) in tiles.into_iter().enumerate() {
+    for (_, s) in &tiles {
         stats.covered_pixels += s.covered_pixels;
         stats.samples += s.samples;
         stats.shaded += s.shaded;
-        if buf.is_empty() {
-            continue;
-        }
-        let (x0, y0) = ((t as u32 % tx) * TILE, (t as u32 / tx) * TILE);
-        let tw = TILE.min(w - x0) as usize;
-        for (row, chunk) in buf.chunks_exact(tw).enumerate() {
-            let start = (y0 as usize + row) * w as usize + x0 as usize;
-            data[start..start + tw].copy_from_slice(chunk);
-        }
     }
+    // the tiles into the frame, a band of tile rows per task (empty tiles stay zero)
+    let mut data = vec![[0.0f32; 4]; size.pixels()];
+    data.par_chunks_mut((TILE * w) as usize)
+        .zip(tiles.par_chunks(tx as usize))
+        .for_each(|(band, row)| {
+            for (i, (buf, _)) in row.iter().enumerate() {
+                if buf.is_empty() {
+                    continue;
+                }
+                let x0 = i * TILE as usize;
+                let tw = (TILE as usize).min(w as usize - x0);
+                for (r, chunk) in buf.chunks_exact(tw).enumerate() {
+                    let start = r * w as usize + x0;
+                    band[start..start + tw].copy_from_slice(chunk);
+                }
+            }
+        });
     Ok((RgbaFrame::from_vec(size, data)?, stats))
 }
 
@@ -1673,20 +1680,30 @@ fn slice_order(k: &[i64], buckets: &mut Vec<u32>, order: &mut Vec<u32>) {
 /// `a' = clamp(max(a, max(r, g, b)), 0, 1)` and `rgb' = rgb / a'` — so compositing the
 /// result "over" a background adds the fire's light to it where it is faint.
 pub fn finish(premultiplied: &RgbaFrame, bloom: &BloomParams) -> Result<RgbaFrame> {
-    let mut f = if bloom.passes > 0 {
-        bloom_rgba(premultiplied, bloom)?
-    } else {
-        premultiplied.clone()
-    };
-    for p in f.data_mut() {
+    let straight = |p: &[f32; 4]| {
         let a = p[3].max(p[0]).max(p[1]).max(p[2]).clamp(0.0, 1.0);
         if a > 0.0 {
-            *p = [p[0] / a, p[1] / a, p[2] / a, a];
+            [p[0] / a, p[1] / a, p[2] / a, a]
         } else {
-            *p = [0.0; 4];
+            [0.0; 4]
         }
+    };
+    const CHUNK: usize = 4096;
+    if bloom.passes > 0 {
+        let mut f = bloom_rgba(premultiplied, bloom)?;
+        f.data_mut()
+            .par_chunks_mut(CHUNK)
+            .for_each(|c| c.iter_mut().for_each(|p| *p = straight(p)));
+        Ok(f)
+    } else {
+        let data = premultiplied
+            .data()
+            .par_iter()
+            .with_min_len(CHUNK)
+            .map(straight)
+            .collect();
+        Ok(RgbaFrame::from_vec(premultiplied.size(), data)?)
     }
-    Ok(f)
 }
 
 #[cfg(test)]
