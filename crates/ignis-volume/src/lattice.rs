@@ -1046,6 +1046,13 @@ impl Lattice {
         self.radii[j] + f * (self.radii[j + 1] - self.radii[j])
     }
 
+    /// The radius, when it is the same at every level: then [`Lattice::radius_at`] returns
+    /// exactly it everywhere (`r + f · 0 = r`).
+    pub fn uniform_radius(&self) -> Option<f32> {
+        let r = self.radii[0];
+        (r.is_finite() && self.radii.iter().all(|&x| x == r)).then_some(r)
+    }
+
     /// Texture coordinates of local coordinates `l` in cell `j`.
     #[inline(always)]
     pub fn tex_of(&self, j: usize, l: V3) -> V3 {

@@ -1097,7 +1097,7 @@ impl Ctx<'_, '_> {
             }
             let j = cand.cell as usize;
             let mut batch = Batch::default();
-            for y in cy0..=cy1 {
+            for y in cy0..cy1 + 1 {
                 // the row's pixels that can meet the disc's cylinder (with a pixel to spare)
                 let (rx0, rx1) = match &cand.disc {
                     Some(disc) => {
@@ -1124,7 +1124,7 @@ impl Ctx<'_, '_> {
                 // row whose rays meet it are consecutive: after the first miss that follows
                 // a hit the row is done.
                 let mut met = false;
-                for x in rx0..=rx1 {
+                for x in rx0..rx1 + 1 {
                     let p = (y as u32 - y0) as usize * tw + (x as u32 - x0) as usize;
                     let (d, inv) = (out.dirs[p], out.invs[p]);
                     let Some((b0, b1)) = slab(inv, cand.vmin, cand.vmax) else {
@@ -1148,7 +1148,8 @@ impl Ctx<'_, '_> {
                     met = true;
                     let ka = (z0 / spacing).ceil() as i64;
                     let kb = ((z1 / spacing).floor() as i64).min(best_k[p].saturating_sub(1));
-                    for k in ka..=kb {
+                    // (`kb < i64::MAX`: it is at most `best_k − 1`)
+                    for k in ka..kb + 1 {
                         let z = k as f32 * spacing;
                         let l = batch.n;
                         for a in 0..3 {
@@ -1209,6 +1210,9 @@ impl Ctx<'_, '_> {
         };
         #[cfg(not(target_arch = "x86_64"))]
         let (ls, ok) = cell.inverse_certified_lanes(&batch.p, tol);
+        out.pix.reserve(CHORD_LANES);
+        out.k.reserve(CHORD_LANES);
+        out.tex.reserve(CHORD_LANES);
         for l in 0..batch.n {
             let pt = [batch.p[0][l], batch.p[1][l], batch.p[2][l]];
             let lv = if ok[l] {
@@ -1552,6 +1556,7 @@ impl Ctx<'_, '_> {
         let profile = fire.profile;
         let octaves = noise.octaves as usize;
         let rem = turbulence_bounds(noise);
+        let uniform = fire.lattice.uniform_radius();
         slice_order(&s.k, &mut s.buckets, &mut s.order);
         let act = &mut s.act;
         act.clear();
@@ -1567,7 +1572,8 @@ impl Ctx<'_, '_> {
             if !win.reachable(0.0, rem[0]) {
                 continue;
             }
-            let scale = noise_scale(fire.lattice.radius_at(z), length, noise.frequency);
+            let radius = uniform.unwrap_or_else(|| fire.lattice.radius_at(z));
+            let scale = noise_scale(radius, length, noise.frequency);
             let p = noise_position(tex, time, scale, fire.offset);
             act.push(Live {
                 idx: i,
