@@ -493,18 +493,34 @@ impl Disc {
     /// `(A × B)² ≤ r2 |B|²` (`A`, `B` the `a, b` parts of `alpha`, `M d`, the condition
     /// [`Disc::interval`]'s discriminant tests), a quadratic `Q(sx) ≤ 0`. When `Q` opens
     /// upwards that is the interval between its roots; otherwise no bound is given
-    /// (`±∞`; e.g. the camera inside the cylinder). Rounding matters only where a ray
-    /// grazes the cylinder, whose radius has a margin (1e-3) over the visible part's: such
-    /// rays hold no visible sample.
+    /// (`±∞`; e.g. the camera inside the cylinder).
+    ///
+    /// First, the whole row: its rays lie in the plane through `alpha` spanned by `b₀` and
+    /// `b₁`, with normal `N = b₀ × b₁`, which meets the region (the cylinder between
+    /// `x_s = ±h`, centred at 0) only if `|N · alpha| ≤ √r2 |N_ab| + h |N_s|` (the
+    /// region's support in direction `N`); else `None`. This rejects the rows that cross
+    /// the cell's height band only outside the cylinder.
+    ///
+    /// Rounding matters only where a ray grazes the region, whose radius and height have
+    /// margins (1e-3) over the visible part's: such rays hold no visible sample.
     #[inline(always)]
     fn row_span(&self, fw: V3, rt: V3, up: V3, sy: f32) -> Option<(f64, f64)> {
         let m = &self.m;
         let row = |v: V3| {
-            [0, 1].map(|i| m[i][0] * v[0] as f64 + m[i][1] * v[1] as f64 + m[i][2] * v[2] as f64)
+            [0, 1, 2].map(|i| m[i][0] * v[0] as f64 + m[i][1] * v[1] as f64 + m[i][2] * v[2] as f64)
         };
         let (f, u, b1) = (row(fw), row(up), row(rt));
-        let b0 = [f[0] + sy as f64 * u[0], f[1] + sy as f64 * u[1]];
+        let b0 = [0, 1, 2].map(|i| f[i] + sy as f64 * u[i]);
         let a = self.alpha;
+        let n = [
+            b0[1] * b1[2] - b0[2] * b1[1],
+            b0[2] * b1[0] - b0[0] * b1[2],
+            b0[0] * b1[1] - b0[1] * b1[0],
+        ];
+        let reach = self.r2.sqrt() * n[0].hypot(n[1]) + self.h * n[2].abs();
+        if (n[0] * a[0] + n[1] * a[1] + n[2] * a[2]).abs() > reach * (1.0 + 1e-9) {
+            return None;
+        }
         let (c0, c1) = (a[0] * b0[1] - a[1] * b0[0], a[0] * b1[1] - a[1] * b1[0]);
         let qa = c1 * c1 - self.r2 * (b1[0] * b1[0] + b1[1] * b1[1]);
         let qb = c0 * c1 - self.r2 * (b0[0] * b1[0] + b0[1] * b1[1]);
