@@ -1041,7 +1041,8 @@ impl Lattice {
     pub fn radius_at(&self, tex_z: f32) -> f32 {
         let c = self.levels.len();
         let x = (tex_z.clamp(0.0, 1.0)) * (c - 1) as f32;
-        let j = (x as usize).min(c - 2);
+        // (`x ∈ [0, c − 1]`, or NaN → 0 either way: the cheaper conversion via `i32`)
+        let j = (x as i32 as usize).min(c - 2);
         let f = x - j as f32;
         self.radii[j] + f * (self.radii[j + 1] - self.radii[j])
     }

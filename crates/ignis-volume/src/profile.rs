@@ -126,7 +126,7 @@ impl FireProfile {
             return true;
         }
         let x = u * (self.w - 1) as f32;
-        let i = (x as usize).min(self.w - 2);
+        let i = column(x, self.w);
         self.col_alpha[i] <= 0.0 && self.col_alpha[i + 1] <= 0.0
     }
 
@@ -141,7 +141,7 @@ impl FireProfile {
         }
         // the same column index as `sample`
         let x = u * (self.w - 1) as f32;
-        let i = (x as usize).min(self.w - 2);
+        let i = column(x, self.w);
         let r = self.v_support[i];
         (r[0] <= r[1]).then_some(r)
     }
@@ -154,8 +154,8 @@ impl FireProfile {
         }
         let x = u * (self.w - 1) as f32;
         let y = v * (self.h - 1) as f32;
-        let i = (x as usize).min(self.w - 2);
-        let j = (y as usize).min(self.h - 2);
+        let i = column(x, self.w);
+        let j = column(y, self.h);
         let (fx, fy) = (x - i as f32, y - j as f32);
         let t = &self.texels;
         let r0 = j * self.w + i;
@@ -169,6 +169,14 @@ impl FireProfile {
         }
         out
     }
+}
+
+/// `⌊x⌋` as a texel index below `n − 1`, for `x ∈ [0, n − 1]` (the callers check that
+/// the coordinate lies in `[0, 1]`): the same value as `(x as usize).min(n − 2)` through
+/// the cheaper conversion to `i32` (profiles are far narrower than `i32::MAX`).
+#[inline(always)]
+fn column(x: f32, n: usize) -> usize {
+    (x as i32 as usize).min(n - 2)
 }
 
 #[cfg(test)]
