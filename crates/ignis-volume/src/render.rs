@@ -798,8 +798,9 @@ struct Batch {
 struct Live {
     /// Index into the sample arrays.
     idx: u32,
-    /// Noise-space position (eq. 11 + 13).
-    p: [f32; 4],
+    /// Noise-space position (eq. 11 + 13) but for `w`, which is the same for every sample
+    /// of a fire (`time · frequency + offset`).
+    p: [f32; 3],
     /// Partial turbulence sum.
     sum: f32,
     /// `u` (eq. 12), `tex_z` and the kernel `f(tex_z)` (eq. 13).
@@ -816,10 +817,10 @@ struct Live {
 /// margin of `2e-4 · (1 + 2 kern B)` in `v` (`B` the bound on the whole turbulence,
 /// which bounds `|sum| + rem` at every octave; far above the `f32` rounding of `v` and
 /// of these few operations), so a sample whose turbulence range misses the window is
-/// certain to get zero alpha. A negative kernel gets no window (no culling).
+/// certain to get zero alpha. A negative kernel gets no window (no culling); a NaN one
+/// culls the sample, whose `v` (NaN) gives zero alpha anyway.
 #[derive(Clone, Copy, Debug)]
 struct Window {
-    kern: f32,
     min: f32,
     max: f32,
 }
@@ -827,26 +828,24 @@ struct Window {
 impl Window {
     #[inline(always)]
     fn new(z: f32, kern: f32, [lo, hi]: [f32; 2], bound: f32) -> Window {
-        if kern.is_nan() || kern < 0.0 {
+        if kern < 0.0 {
             return Window {
-                kern: 0.0,
                 min: f32::NEG_INFINITY,
                 max: f32::INFINITY,
             };
         }
         let eps = 2e-4 * (1.0 + 2.0 * kern * bound);
         Window {
-            kern,
             min: lo - eps - z,
             max: hi + eps - z,
         }
     }
 
-    /// Whether a turbulence within `rem` of `sum` can lie in the window (`false` is
-    /// certain).
+    /// Whether a turbulence within `rem` of `sum` can lie in the window of a sample with
+    /// kernel `kern` (`false` is certain).
     #[inline(always)]
-    fn reachable(&self, sum: f32, rem: f32) -> bool {
-        self.kern * (sum + rem) >= self.min && self.kern * (sum - rem) <= self.max
+    fn reachable(&self, kern: f32, sum: f32, rem: f32) -> bool {
+        kern * (sum + rem) >= self.min && kern * (sum - rem) <= self.max
     }
 }
 
@@ -1573,6 +1572,14 @@ impl Ctx<'_, '_> {
         let octaves = noise.octaves as usize;
         let rem = turbulence_bounds(noise);
         let uniform = fire.lattice.uniform_radius();
+        // the `w` of every sample's noise position (it depends on neither `tex` nor the
+        // radius)
+        let pw = noise_position(
+            [0.0; 3],
+            time,
+            noise_scale(1.0, length, noise.frequency),
+            fire.offset,
+        )[3];
         slice_order(&s.k, &mut s.buckets, &mut s.order);
         let act = &mut s.act;
         act.clear();
@@ -1585,15 +1592,15 @@ impl Ctx<'_, '_> {
             let z = tex[2];
             let kern = kernel(z, noise.stability);
             let win = Window::new(z, kern, [lo, hi], rem[0]);
-            if !win.reachable(0.0, rem[0]) {
+            if !win.reachable(kern, 0.0, rem[0]) {
                 continue;
             }
             let radius = uniform.unwrap_or_else(|| fire.lattice.radius_at(z));
             let scale = noise_scale(radius, length, noise.frequency);
-            let p = noise_position(tex, time, scale, fire.offset);
+            let [px, py, pz, _] = noise_position(tex, time, scale, fire.offset);
             act.push(Live {
                 idx: i,
-                p,
+                p: [px, py, pz],
                 sum: 0.0,
                 u,
                 z,
@@ -1606,7 +1613,7 @@ impl Ctx<'_, '_> {
         let mut f = 1.0f32;
         for o in 0..octaves {
             for batch in act.chunks_mut(LANES) {
-                let mut q = [[0.0f32; LANES]; 4];
+                let mut q = [[pw * f; LANES]; 4];
                 for (l, live) in batch.iter().enumerate() {
                     for (qa, pa) in q.iter_mut().zip(live.p) {
                         qa[l] = pa * f;
@@ -1621,7 +1628,7 @@ impl Ctx<'_, '_> {
             f *= noise.lacunarity;
             if o + 1 < octaves {
                 let r = rem[o + 1];
-                act.retain(|a| a.win.reachable(a.sum, r));
+                act.retain(|a| a.win.reachable(a.kern, a.sum, r));
             }
         }
         for live in act.iter() {
