@@ -1680,9 +1680,12 @@ fn lanes_noise(
 /// Falls back to march order when the slices span an unusually wide range.
 fn slice_order(k: &[i64], buckets: &mut Vec<u32>, order: &mut Vec<u32>) {
     order.clear();
-    let (Some(&lo), Some(&hi)) = (k.iter().min(), k.iter().max()) else {
+    if k.is_empty() {
         return;
-    };
+    }
+    let (lo, hi) = k
+        .iter()
+        .fold((i64::MAX, i64::MIN), |(lo, hi), &v| (lo.min(v), hi.max(v)));
     let span = (hi - lo) as usize + 1;
     if span > 1 << 16 {
         order.extend(0..k.len() as u32);
