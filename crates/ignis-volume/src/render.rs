@@ -1225,36 +1225,70 @@ impl Ctx<'_, '_> {
         };
         #[cfg(not(target_arch = "x86_64"))]
         let (ls, ok) = cell.inverse_certified_lanes(&batch.p, tol);
-        out.pix.reserve(CHORD_LANES);
-        out.k.reserve(CHORD_LANES);
-        out.tex.reserve(CHORD_LANES);
-        for l in 0..batch.n {
-            let pt = [batch.p[0][l], batch.p[1][l], batch.p[2][l]];
-            let lv = if ok[l] {
-                [ls[0][l], ls[1][l], ls[2][l]]
-            } else {
-                match cell.inverse(pt, cell.chord_guess(pt)) {
-                    Some(lv) => lv,
-                    None => continue,
-                }
-            };
-            let lateral = (0.0..=1.0).contains(&lv[0]) && (0.0..=1.0).contains(&lv[1]);
-            if !(lateral && self.owns(fire, j, lv[2], pt, tol)) {
-                continue;
-            }
-            let pix = batch.pix[l];
-            out.hit[pix as usize] = true;
-            stats.samples += 1;
-            let tex = fire.lattice.tex_of(j, lv);
-            // the square-root-free `radial_u(tex) > 1` (see `Ctx::sample`)
-            if tex[0] * tex[0] + tex[1] * tex[1] > 1.0 + f32::EPSILON {
-                continue;
-            }
-            stats.shaded += 1;
-            out.pix.push(pix);
-            out.k.push(batch.k[l]);
-            out.tex.push(tex);
+        // The common case for all lanes at once (straight-line code over the lanes): a
+        // certified lane inside the cell's sides and clear of its end faces by the band of
+        // `Ctx::owns` (which then answers `true` without computing anything more).
+        let last = fire.lattice.cells().len() - 1;
+        let band = 0.5 * OWNER_SLACK * tol[2];
+        let s_lo = if j == 0 { 0.0 } else { band };
+        let s_hi = if j == last { 1.0 } else { 1.0 - band };
+        let mut clear = [false; CHORD_LANES];
+        let mut tex = [[0.0f32; 3]; CHORD_LANES];
+        let mut inside = [false; CHORD_LANES];
+        for l in 0..CHORD_LANES {
+            let lv = [ls[0][l], ls[1][l], ls[2][l]];
+            clear[l] = ok[l]
+                & (lv[0] >= 0.0)
+                & (lv[0] <= 1.0)
+                & (lv[1] >= 0.0)
+                & (lv[1] <= 1.0)
+                & (lv[2] >= s_lo)
+                & (lv[2] <= s_hi);
+            tex[l] = fire.lattice.tex_of(j, lv);
+            // the square-root-free `radial_u(tex) ≤ 1` (see `Ctx::sample`)
+            inside[l] = !(tex[l][0] * tex[l][0] + tex[l][1] * tex[l][1] > 1.0 + f32::EPSILON);
         }
+        let (mut pix, mut ks, mut texs) = (
+            [0u16; CHORD_LANES],
+            [0i64; CHORD_LANES],
+            [[0.0f32; 3]; CHORD_LANES],
+        );
+        let (mut kept, mut samples) = (0, 0);
+        for l in 0..batch.n {
+            let (t, lit) = if clear[l] {
+                (tex[l], inside[l])
+            } else {
+                // the rest: an uncertified lane (Newton's method), or near an end face
+                let pt = [batch.p[0][l], batch.p[1][l], batch.p[2][l]];
+                let lv = if ok[l] {
+                    [ls[0][l], ls[1][l], ls[2][l]]
+                } else {
+                    match cell.inverse(pt, cell.chord_guess(pt)) {
+                        Some(lv) => lv,
+                        None => continue,
+                    }
+                };
+                let lateral = (0.0..=1.0).contains(&lv[0]) && (0.0..=1.0).contains(&lv[1]);
+                if !(lateral && self.owns(fire, j, lv[2], pt, tol)) {
+                    continue;
+                }
+                let t = fire.lattice.tex_of(j, lv);
+                (t, !(t[0] * t[0] + t[1] * t[1] > 1.0 + f32::EPSILON))
+            };
+            out.hit[batch.pix[l] as usize] = true;
+            samples += 1;
+            if lit {
+                pix[kept] = batch.pix[l];
+                ks[kept] = batch.k[l];
+                texs[kept] = t;
+                kept += 1;
+            }
+        }
+        stats.samples += samples;
+        stats.shaded += kept as u64;
+        out.pix.extend_from_slice(&pix[..kept]);
+        out.k.extend_from_slice(&ks[..kept]);
+        out.tex.extend_from_slice(&texs[..kept]);
     }
 
     /// Whether cell `j` of `fire` holds the sample at `p` with (certified or Newton)
