@@ -1245,8 +1245,7 @@ impl Ctx<'_, '_> {
                 & (lv[2] >= s_lo)
                 & (lv[2] <= s_hi);
             tex[l] = fire.lattice.tex_of(j, lv);
-            // the square-root-free `radial_u(tex) ≤ 1` (see `Ctx::sample`)
-            inside[l] = !(tex[l][0] * tex[l][0] + tex[l][1] * tex[l][1] > 1.0 + f32::EPSILON);
+            inside[l] = in_unit_cylinder(tex[l]);
         }
         let (mut pix, mut ks, mut texs) = (
             [0u16; CHORD_LANES],
@@ -1273,7 +1272,7 @@ impl Ctx<'_, '_> {
                     continue;
                 }
                 let t = fire.lattice.tex_of(j, lv);
-                (t, !(t[0] * t[0] + t[1] * t[1] > 1.0 + f32::EPSILON))
+                (t, in_unit_cylinder(t))
             };
             out.hit[batch.pix[l] as usize] = true;
             samples += 1;
@@ -1671,6 +1670,14 @@ impl Ctx<'_, '_> {
             s.col[live.idx as usize] = profile.sample(live.u, v);
         }
     }
+}
+
+/// `radial_u(tex) ≤ 1` (or NaN) without waiting for the square root, as [`Ctx::sample`]
+/// tests it: a correctly rounded `sqrt(q)` exceeds 1 exactly when `q > 1 + 2⁻²³`.
+#[inline(always)]
+fn in_unit_cylinder(tex: V3) -> bool {
+    let q = tex[0] * tex[0] + tex[1] * tex[1];
+    q.is_nan() || q <= 1.0 + f32::EPSILON
 }
 
 /// A texture-space tolerance as per-component local-coordinate tolerances of `fire`'s
