@@ -1276,8 +1276,8 @@ mod tests {
             for l in 0..8 {
                 let spread = if round % 4 == 0 { 2.0 } else { 0.3 };
                 let q = c.forward([0; 3].map(|_| rng.uniform(-spread, 1.0 + spread) as f32));
-                for a in 0..3 {
-                    p[a][l] = q[a];
+                for (axis, v) in p.iter_mut().zip(q) {
+                    axis[l] = v;
                 }
             }
             // SAFETY: AVX2 was detected above.

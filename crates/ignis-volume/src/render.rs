@@ -1539,9 +1539,7 @@ impl Ctx<'_, '_> {
         r.covered = true;
         stats.samples += 1;
         let tex = fire.lattice.tex_of(j, l);
-        // `radial_u(tex) > 1` without waiting for the square root: a correctly rounded
-        // `sqrt(q)` exceeds 1 exactly when `q ≥ 1 + 2⁻²²`, i.e. `q > 1 + 2⁻²³`
-        if tex[0] * tex[0] + tex[1] * tex[1] > 1.0 + f32::EPSILON {
+        if !in_unit_cylinder(tex) {
             return;
         }
         stats.shaded += 1;
@@ -1672,8 +1670,8 @@ impl Ctx<'_, '_> {
     }
 }
 
-/// `radial_u(tex) ≤ 1` (or NaN) without waiting for the square root, as [`Ctx::sample`]
-/// tests it: a correctly rounded `sqrt(q)` exceeds 1 exactly when `q > 1 + 2⁻²³`.
+/// `radial_u(tex) ≤ 1` (or NaN) without waiting for the square root: a correctly rounded
+/// `sqrt(q)` exceeds 1 exactly when `q ≥ 1 + 2⁻²²`, i.e. `q > 1 + 2⁻²³`.
 #[inline(always)]
 fn in_unit_cylinder(tex: V3) -> bool {
     let q = tex[0] * tex[0] + tex[1] * tex[1];
@@ -1914,14 +1912,15 @@ mod tests {
         }
     }
 
-    /// The square-root-free cylinder test in `sample` agrees with `radial_u(tex) > 1`.
+    /// The square-root-free cylinder test (`in_unit_cylinder`) agrees with
+    /// `radial_u(tex) ≤ 1`.
     #[test]
     fn squared_radius_test_matches_radial_u() {
         let mut q = 0.999_f32;
         while q < 1.001 {
             let tex = [q.sqrt(), 0.0, 0.5];
             let exact = radial_u([tex[0], tex[1], 0.0]) > 1.0;
-            let fast = tex[0] * tex[0] + tex[1] * tex[1] > 1.0 + f32::EPSILON;
+            let fast = !in_unit_cylinder(tex);
             assert_eq!(exact, fast, "{q}");
             q = f32::from_bits(q.to_bits() + 1);
         }
