@@ -98,35 +98,26 @@ unsafe fn store(v: __m256) -> Lanes {
 #[repr(C, align(32))]
 struct Wide<const C: usize, const N: usize>([[[f32; 8]; C]; N]);
 
-/// [`GRAD4`], wide.
-static GRAD4_WIDE: Wide<4, 32> = {
-    let mut w = [[[0.0f32; 8]; 4]; 32];
-    let mut h = 0;
-    while h < 32 {
-        let mut c = 0;
-        while c < 4 {
-            w[h][c] = [GRAD4[h][c]; 8];
-            c += 1;
+impl<const C: usize, const N: usize> Wide<C, N> {
+    const fn of(table: &[[f32; C]; N]) -> Self {
+        let mut w = [[[0.0f32; 8]; C]; N];
+        let mut h = 0;
+        while h < N {
+            let mut c = 0;
+            while c < C {
+                w[h][c] = [table[h][c]; 8];
+                c += 1;
+            }
+            h += 1;
         }
-        h += 1;
+        Wide(w)
     }
-    Wide(w)
-};
+}
 
+/// [`GRAD4`], wide.
+static GRAD4_WIDE: Wide<4, 32> = Wide::of(&GRAD4);
 /// [`GRAD3`], wide.
-static GRAD3_WIDE: Wide<3, 16> = {
-    let mut w = [[[0.0f32; 8]; 3]; 16];
-    let mut h = 0;
-    while h < 16 {
-        let mut c = 0;
-        while c < 3 {
-            w[h][c] = [GRAD3[h][c]; 8];
-            c += 1;
-        }
-        h += 1;
-    }
-    Wide(w)
-};
+static GRAD3_WIDE: Wide<3, 16> = Wide::of(&GRAD3);
 
 /// `g · (dx, dy, dz, dw)` summed left to right, as [`super::grad4`], with a wide gradient.
 #[inline(always)]
