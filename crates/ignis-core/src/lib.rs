@@ -5,6 +5,7 @@
 //! - [`palette`]: intensity → colour ramps (transfer functions) and presets.
 //! - [`colour`]: synthetic HLS colouring (eigenfires-thesis §6.1.2).
 //! - [`post`]: bloom (§6.2) and the alpha matte (§6.2).
+//! - [`loopq`]: seam and ghost, the loop/transition quality measured on written frames.
 //! - [`rng`]: the seeded RNG every generator uses.
 //!
 //! **Invariant:** this crate knows nothing of files, codecs, clap or GPUs. Pixel data is
@@ -13,6 +14,7 @@
 pub mod colour;
 pub mod error;
 pub mod frame;
+pub mod loopq;
 pub mod palette;
 pub mod post;
 pub mod rng;

@@ -14,6 +14,7 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use ignis_core::frame::MAX_PIXELS;
+use ignis_core::loopq::LoopQuality;
 use ignis_core::{RgbaFrame, Size};
 
 use super::{encode_png, persist, temp_file_for, Sink, WriteOptions};
@@ -66,6 +67,10 @@ pub struct FlipbookMeta {
     pub order: String,
     /// Always `"srgb"` (8-bit sRGB-encoded colour; alpha is linear).
     pub color_space: String,
+    /// Seam and ghost of the sheet's frames played as a loop, measured on the frames
+    /// written ([`ignis_core::loopq`]); present when `loop` is true.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub loop_quality: Option<LoopQuality>,
 }
 
 /// A flipbook read back by [`read_flipbook`]: its sidecar and its frames (linear light,
@@ -108,6 +113,7 @@ pub(crate) struct FlipbookSink {
     opts: FlipbookOptions,
     fps: f64,
     loop_: bool,
+    loop_quality: Option<LoopQuality>,
     /// Each frame as 8-bit sRGB RGBA in the sheet's alpha mode.
     frames: Vec<Vec<u8>>,
 }
@@ -129,6 +135,7 @@ impl FlipbookSink {
             opts: opts.flipbook,
             fps: opts.fps,
             loop_: opts.loop_,
+            loop_quality: None,
             frames: Vec::new(),
         })
     }
@@ -142,6 +149,10 @@ impl FlipbookSink {
 }
 
 impl Sink for FlipbookSink {
+    fn set_loop_quality(&mut self, quality: LoopQuality) {
+        self.loop_quality = Some(quality);
+    }
+
     fn push(&mut self, frame: &RgbaFrame) -> Result<()> {
         let (cw, ch) = self.cell();
         let area = (self.frames.len() as u64 + 1) * cw as u64 * ch as u64;
@@ -213,6 +224,7 @@ impl Sink for FlipbookSink {
             alpha: self.opts.alpha,
             order: "row-major, top-left first".into(),
             color_space: "srgb".into(),
+            loop_quality: self.loop_quality,
         };
         let png_tmp = temp_file_for(&self.path)?;
         {

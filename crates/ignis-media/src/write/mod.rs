@@ -30,7 +30,8 @@ mod sequence_out;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use ignis_core::{RgbaFrame, Size};
+use ignis_core::loopq::{self, LoopQuality};
+use ignis_core::{GrayFrame, RgbaFrame, Size};
 
 use crate::error::{MediaError, Result};
 
@@ -120,6 +121,9 @@ impl Default for WriteOptions {
 /// One output format's encoder.
 pub(crate) trait Sink: Send {
     fn push(&mut self, frame: &RgbaFrame) -> Result<()>;
+    /// The loop quality measured on every pushed frame, given just before `finish` when the
+    /// output loops; formats with a sidecar record it (flipbook JSON `loop_quality`).
+    fn set_loop_quality(&mut self, _quality: LoopQuality) {}
     /// Completes the output and renames it into place.
     fn finish(self: Box<Self>) -> Result<Vec<PathBuf>>;
 }
@@ -132,6 +136,10 @@ pub struct FrameWriter {
     frames: u64,
     path: PathBuf,
     format: Format,
+    loop_: bool,
+    background: [f32; 3],
+    /// Metric frames (128 px grey, [`ignis_core::loopq`]) of every pushed frame.
+    metric: Vec<GrayFrame>,
 }
 
 /// Creates a writer for frames of `size` at `path`.
@@ -168,6 +176,9 @@ pub fn create(path: &Path, size: Size, opts: &WriteOptions) -> Result<FrameWrite
         frames: 0,
         path: path.to_path_buf(),
         format,
+        loop_: opts.loop_,
+        background: opts.background,
+        metric: Vec::new(),
     })
 }
 
@@ -194,17 +205,47 @@ impl FrameWriter {
             self.sink = None; // drops the temporary output
             return Err(e);
         }
+        self.metric
+            .push(loopq::metric_frame_rgba(frame, self.background));
         self.frames += 1;
         Ok(())
     }
 
+    /// Seam and ghost of the frames pushed so far played as a loop (wrap included), as
+    /// [`ignis_core::loopq`] measures them on what this writer shows (composited over the
+    /// background). `None` with fewer than two frames.
+    pub fn loop_quality(&self) -> Option<LoopQuality> {
+        loopq::loop_quality(&self.metric).ok()
+    }
+
+    /// Seam and ghost of the frames pushed so far played once (no wrap step). `None` with
+    /// fewer than three frames.
+    pub fn sequence_quality(&self) -> Option<LoopQuality> {
+        loopq::sequence_quality(&self.metric).ok()
+    }
+
+    /// The metric frames (128 px wide grey) of every frame pushed so far.
+    pub fn metric_frames(&self) -> &[GrayFrame] {
+        &self.metric
+    }
+
     /// Completes the output and moves it into place; returns every path written (for a
     /// flipbook: the PNG then the JSON; for a sequence: each frame in order).
+    ///
+    /// A looping output's sidecar (flipbook JSON) records [`FrameWriter::loop_quality`].
     pub fn finish(mut self) -> Result<Vec<PathBuf>> {
-        let sink = self
+        let quality = if self.loop_ {
+            self.loop_quality()
+        } else {
+            None
+        };
+        let mut sink = self
             .sink
             .take()
             .ok_or_else(|| MediaError::encode(&self.path, "an earlier frame failed"))?;
+        if let Some(q) = quality {
+            sink.set_loop_quality(q);
+        }
         if self.frames == 0 {
             return Err(MediaError::bad(
                 "frames",

@@ -1,0 +1,407 @@
+//! Loop and transition quality measured on the frames a command actually writes: *seam* and
+//! *ghost*, the two measures of `../shared/tools/loop_metrics.py` (the reference
+//! implementation the team benchmarks against).
+//!
+//! Frames are first turned into *metric frames*: composited over the writer's background,
+//! sRGB-encoded, reduced to Rec. 601 luma (what `ffmpeg -vf format=gray` reads from a video)
+//! and area-averaged down to [`METRIC_WIDTH`] pixels wide (height scaled to keep the aspect,
+//! rounded to an even number like ffmpeg's `scale=128:-2`). Both measures are ratios, so the
+//! value range of the grey does not matter, only its shape.
+//!
+//! - **seam**: the largest RMS step between consecutive frames, the wrap from the last frame
+//!   back to the first included, over the median step (1.0 = the seam is as smooth as a
+//!   typical step; a plain cut between different flames is usually ≥ 2).
+//! - **ghost**: the softest frame relative to its neighbourhood: the minimum over t of the
+//!   frame's mean gradient magnitude over the median of frames t−15..=t+15 (cyclic); 1.0 =
+//!   no frame is softer than those around it; blends of unrelated flames fall to ~0.7.
+
+use crate::error::{CoreError, Result};
+use crate::frame::{GrayFrame, RgbaFrame, Size};
+use crate::palette::linear_to_srgb;
+
+/// Width of the frames both measures are computed on.
+pub const METRIC_WIDTH: u32 = 128;
+/// Half-width of the cyclic neighbourhood the ghost measure compares a frame with.
+pub const GHOST_RADIUS: usize = 15;
+/// Rec. 601 luma weights on sRGB-encoded components (ffmpeg's `format=gray`).
+const LUMA_601: [f32; 3] = [0.299, 0.587, 0.114];
+
+/// Seam and ghost of a sequence, with where each was found.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct LoopQuality {
+    /// Largest step (wrap included for loops) over the median step.
+    pub seam: f64,
+    /// Index of the largest step: step `i` goes from frame `i` to frame `i + 1` (the last,
+    /// for a loop, from the last frame back to frame 0).
+    pub seam_at: usize,
+    /// Softest frame's sharpness over the median sharpness of its ±15 neighbours.
+    pub ghost: f64,
+    /// Index of the softest frame.
+    pub ghost_at: usize,
+    /// The median RMS step of the sequence (metric frames, values in `0..=1`).
+    pub median_step: f64,
+}
+
+/// Size of the metric frame of a `size` frame: [`METRIC_WIDTH`] wide (or the frame's own
+/// width when narrower), height to scale rounded to an even number, at least 2.
+pub fn metric_size(size: Size) -> Size {
+    let w = METRIC_WIDTH.min(size.width).max(1);
+    let h = (f64::from(w) * f64::from(size.height) / (f64::from(size.width) * 2.0)).round() * 2.0;
+    Size {
+        width: w,
+        height: (h as u32).max(2),
+    }
+}
+
+/// The metric frame of a linear grey frame as a grey writer writes it (clamped to `0..=1`,
+/// sRGB-encoded), area-averaged down to [`metric_size`].
+pub fn metric_frame_gray(frame: &GrayFrame) -> GrayFrame {
+    let encoded = frame.map(linear_to_srgb);
+    area_resize(&encoded, metric_size(frame.size()))
+}
+
+/// The metric frame of a linear RGBA frame (straight alpha) as an opaque writer shows it:
+/// composited over `background` (linear RGB), sRGB-encoded, Rec. 601 luma, area-averaged
+/// down to [`metric_size`].
+pub fn metric_frame_rgba(frame: &RgbaFrame, background: [f32; 3]) -> GrayFrame {
+    let lut = srgb_lut();
+    let luma: Vec<f32> = frame
+        .data()
+        .iter()
+        .map(|p| {
+            let a = p[3].clamp(0.0, 1.0);
+            (0..3)
+                .map(|c| LUMA_601[c] * encode_lut(lut, p[c] * a + background[c] * (1.0 - a)))
+                .sum()
+        })
+        .collect();
+    let g = GrayFrame::from_vec(frame.size(), luma).expect("one value per pixel");
+    area_resize(&g, metric_size(frame.size()))
+}
+
+const LUT_SIZE: usize = 4096;
+
+/// [`linear_to_srgb`] sampled at `LUT_SIZE` points of `0..=1` (interpolated linearly between
+/// them: within 2e-4 of the exact curve above 0.001, a ninth of an 8-bit step).
+fn srgb_lut() -> &'static [f32; LUT_SIZE + 1] {
+    static LUT: std::sync::OnceLock<[f32; LUT_SIZE + 1]> = std::sync::OnceLock::new();
+    LUT.get_or_init(|| std::array::from_fn(|i| linear_to_srgb(i as f32 / LUT_SIZE as f32)))
+}
+
+fn encode_lut(lut: &[f32; LUT_SIZE + 1], v: f32) -> f32 {
+    let x = v.clamp(0.0, 1.0) * LUT_SIZE as f32;
+    let i = (x as usize).min(LUT_SIZE - 1);
+    let f = x - i as f32;
+    lut[i] + (lut[i + 1] - lut[i]) * f
+}
+
+/// RMS difference of consecutive frames; with `wrap`, a last step from the last frame back
+/// to the first (`frames.len()` steps), else `frames.len() - 1` steps.
+///
+/// Errors when the frames differ in size.
+pub fn steps(frames: &[GrayFrame], wrap: bool) -> Result<Vec<f64>> {
+    same_size(frames)?;
+    let n = frames.len();
+    let count = if wrap { n } else { n.saturating_sub(1) };
+    Ok((0..count)
+        .map(|i| rms_diff(&frames[i], &frames[(i + 1) % n]))
+        .collect())
+}
+
+/// RMS difference of two frames of the same size.
+pub fn rms_diff(a: &GrayFrame, b: &GrayFrame) -> f64 {
+    let s: f64 = a
+        .data()
+        .iter()
+        .zip(b.data())
+        .map(|(&x, &y)| {
+            let d = f64::from(x) - f64::from(y);
+            d * d
+        })
+        .sum();
+    (s / a.data().len().max(1) as f64).sqrt()
+}
+
+/// Mean absolute horizontal plus mean absolute vertical difference of neighbouring pixels
+/// (the measure `ghost` compares between frames).
+pub fn sharpness(frame: &GrayFrame) -> f64 {
+    let (w, h) = (frame.width() as usize, frame.height() as usize);
+    let d = frame.data();
+    let mut gx = 0.0f64;
+    let mut gy = 0.0f64;
+    for y in 0..h {
+        let row = &d[y * w..(y + 1) * w];
+        for x in 1..w {
+            gx += f64::from((row[x] - row[x - 1]).abs());
+        }
+        if y > 0 {
+            let up = &d[(y - 1) * w..y * w];
+            for x in 0..w {
+                gy += f64::from((row[x] - up[x]).abs());
+            }
+        }
+    }
+    let nx = (h * w.saturating_sub(1)).max(1) as f64;
+    let ny = (h.saturating_sub(1) * w).max(1) as f64;
+    gx / nx + gy / ny
+}
+
+/// The ghost measure of a sequence of sharpness values: for each frame its sharpness over
+/// the median of the 31 frames `t-15..=t+15` taken cyclically (with repeats when the
+/// sequence is shorter), minimum over frames. Returns (ghost, index).
+pub fn ghost(sharp: &[f64]) -> (f64, usize) {
+    let n = sharp.len();
+    let mut best = (f64::INFINITY, 0);
+    let mut window = Vec::with_capacity(2 * GHOST_RADIUS + 1);
+    for t in 0..n {
+        window.clear();
+        for o in -(GHOST_RADIUS as isize)..=GHOST_RADIUS as isize {
+            let i = (t as isize + o).rem_euclid(n as isize) as usize;
+            window.push(sharp[i]);
+        }
+        let rel = sharp[t] / median(&mut window).max(1e-9);
+        if rel < best.0 {
+            best = (rel, t);
+        }
+    }
+    best
+}
+
+/// Median as numpy computes it (mean of the two middle values for an even count); 0 for an
+/// empty slice. Reorders `v`.
+pub fn median(v: &mut [f64]) -> f64 {
+    let n = v.len();
+    if n == 0 {
+        return 0.0;
+    }
+    v.sort_unstable_by(f64::total_cmp);
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
+
+/// Seam and ghost of metric frames played as a loop (the wrap step included). At least two
+/// frames of one size.
+pub fn loop_quality(frames: &[GrayFrame]) -> Result<LoopQuality> {
+    quality(frames, true)
+}
+
+/// Seam and ghost of metric frames played once (no wrap step; the ghost neighbourhood is
+/// still cyclic, as in the reference). At least three frames of one size.
+pub fn sequence_quality(frames: &[GrayFrame]) -> Result<LoopQuality> {
+    quality(frames, false)
+}
+
+fn quality(frames: &[GrayFrame], wrap: bool) -> Result<LoopQuality> {
+    let need = if wrap { 2 } else { 3 };
+    if frames.len() < need {
+        return Err(CoreError::bad(
+            "frames",
+            format!(
+                "{} frame(s): seam and ghost need at least {need}",
+                frames.len()
+            ),
+        ));
+    }
+    let d = steps(frames, wrap)?;
+    let med = median(&mut d.clone());
+    let (seam_at, max) =
+        d.iter().enumerate().fold(
+            (0, f64::NEG_INFINITY),
+            |b, (i, &v)| if v > b.1 { (i, v) } else { b },
+        );
+    let sharp: Vec<f64> = frames.iter().map(sharpness).collect();
+    let (ghost, ghost_at) = ghost(&sharp);
+    Ok(LoopQuality {
+        // A still sequence has no steps to compare: call it perfectly smooth.
+        seam: if med > 0.0 {
+            max / med
+        } else if max > 0.0 {
+            f64::INFINITY
+        } else {
+            1.0
+        },
+        seam_at,
+        ghost,
+        ghost_at,
+        median_step: med,
+    })
+}
+
+fn same_size(frames: &[GrayFrame]) -> Result<()> {
+    if let Some(f) = frames.first() {
+        if let Some(g) = frames.iter().find(|g| g.size() != f.size()) {
+            return Err(CoreError::SizeMismatch(format!(
+                "metric frames of {} and {} in one sequence",
+                f.size(),
+                g.size()
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// Area-average resize (each output pixel the coverage-weighted mean of the input pixels
+/// under it); exact copy when the size is unchanged. Separable: rows, then columns.
+pub fn area_resize(src: &GrayFrame, size: Size) -> GrayFrame {
+    if src.size() == size {
+        return src.clone();
+    }
+    let (sw, sh) = (src.width() as usize, src.height() as usize);
+    let (dw, dh) = (size.width as usize, size.height as usize);
+    let wx = area_weights(sw, dw);
+    let wy = area_weights(sh, dh);
+    // Horizontal pass: sh × dw.
+    let mut tmp = vec![0f32; sh * dw];
+    for y in 0..sh {
+        let row = &src.data()[y * sw..(y + 1) * sw];
+        for (x, taps) in wx.iter().enumerate() {
+            tmp[y * dw + x] = taps.iter().map(|&(i, w)| row[i] * w).sum();
+        }
+    }
+    let mut out = vec![0f32; dw * dh];
+    for (y, taps) in wy.iter().enumerate() {
+        for &(i, w) in taps {
+            let src_row = &tmp[i * dw..(i + 1) * dw];
+            for (o, &v) in out[y * dw..(y + 1) * dw].iter_mut().zip(src_row) {
+                *o += v * w;
+            }
+        }
+    }
+    GrayFrame::from_vec(size, out).expect("one value per pixel")
+}
+
+/// For each of `dst` output cells, the input indices it covers and their weights (summing
+/// to 1). Upscaling degenerates to nearest-neighbour-like box sampling.
+fn area_weights(src: usize, dst: usize) -> Vec<Vec<(usize, f32)>> {
+    let scale = src as f64 / dst as f64;
+    (0..dst)
+        .map(|o| {
+            let (a, b) = (o as f64 * scale, (o + 1) as f64 * scale);
+            let mut taps = Vec::new();
+            let mut i = a.floor() as usize;
+            while (i as f64) < b && i < src {
+                let cover = (b.min(i as f64 + 1.0) - a.max(i as f64)).max(0.0);
+                if cover > 0.0 {
+                    taps.push((i, (cover / (b - a)) as f32));
+                }
+                i += 1;
+            }
+            taps
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn frame(size: Size, f: impl Fn(u32, u32) -> f32) -> GrayFrame {
+        GrayFrame::from_fn(size, f)
+    }
+
+    #[test]
+    fn metric_size_follows_ffmpeg_scale_128_minus_2() {
+        let s = |w, h| metric_size(Size::new(w, h).unwrap());
+        assert_eq!(s(480, 480), Size::new(128, 128).unwrap());
+        assert_eq!(s(960, 540), Size::new(128, 72).unwrap());
+        assert_eq!(s(1280, 720), Size::new(128, 72).unwrap());
+        assert_eq!(s(640, 1136), Size::new(128, 228).unwrap());
+        assert_eq!(s(64, 48), Size::new(64, 48).unwrap());
+    }
+
+    #[test]
+    fn area_resize_keeps_the_mean_and_constant_frames() {
+        let src = frame(Size::new(300, 170).unwrap(), |x, y| {
+            ((x * 7 + y * 3) % 11) as f32
+        });
+        let dst = area_resize(&src, Size::new(128, 72).unwrap());
+        assert!((src.mean() - dst.mean()).abs() < 1e-3 * src.mean());
+        let flat = frame(Size::new(301, 99).unwrap(), |_, _| 0.25);
+        assert!(area_resize(&flat, Size::new(128, 42).unwrap())
+            .data()
+            .iter()
+            .all(|&v| (v - 0.25).abs() < 1e-6));
+    }
+
+    #[test]
+    fn a_cut_has_a_large_seam_and_a_blend_a_low_ghost() {
+        let size = Size::new(64, 48).unwrap();
+        // Stripes of period 16 moving one pixel per frame, 40 frames: the wrap jumps back
+        // 39 pixels (7 modulo the period).
+        let frames: Vec<GrayFrame> = (0..40)
+            .map(|t| {
+                frame(
+                    size,
+                    move |x, _| if (x + 64 - t) % 16 < 8 { 1.0 } else { 0.0 },
+                )
+            })
+            .collect();
+        let q = loop_quality(&frames).unwrap();
+        assert_eq!(q.seam_at, 39);
+        assert!(q.seam > 2.0, "{q:?}");
+        // 7 or 8 stripe edges in view, depending on the shift.
+        assert!(q.ghost > 0.85, "{q:?}");
+        // Replace frame 20 by the blend of two frames half a period apart: flat grey.
+        let mut blended = frames.clone();
+        let mix: Vec<f32> = frames[5]
+            .data()
+            .iter()
+            .zip(frames[13].data())
+            .map(|(a, b)| 0.5 * (a + b))
+            .collect();
+        blended[20] = GrayFrame::from_vec(size, mix).unwrap();
+        let g = loop_quality(&blended).unwrap();
+        assert_eq!(g.ghost_at, 20);
+        assert!(g.ghost < 0.8, "{g:?}");
+    }
+
+    #[test]
+    fn sequence_quality_has_no_wrap_step() {
+        let size = Size::new(16, 16).unwrap();
+        let frames: Vec<GrayFrame> = (0..10)
+            .map(|t| frame(size, move |x, _| if x == t { 1.0 } else { 0.0 }))
+            .collect();
+        assert_eq!(steps(&frames, false).unwrap().len(), 9);
+        assert_eq!(steps(&frames, true).unwrap().len(), 10);
+        let q = sequence_quality(&frames).unwrap();
+        assert!((q.seam - 1.0).abs() < 1e-12);
+        assert!(loop_quality(&frames[..1]).is_err());
+    }
+
+    #[test]
+    fn median_matches_numpy() {
+        assert_eq!(median(&mut [3.0, 1.0, 2.0]), 2.0);
+        assert_eq!(median(&mut [4.0, 1.0, 3.0, 2.0]), 2.5);
+        assert_eq!(median(&mut []), 0.0);
+    }
+
+    #[test]
+    fn sizes_must_agree() {
+        let a = GrayFrame::new(Size::new(4, 4).unwrap());
+        let b = GrayFrame::new(Size::new(4, 5).unwrap());
+        assert!(loop_quality(&[a, b]).is_err());
+    }
+
+    #[test]
+    fn srgb_lut_is_close_to_the_curve() {
+        let lut = srgb_lut();
+        for i in 0..=10_000 {
+            let v = i as f32 / 10_000.0;
+            let tol = if v < 0.001 { 2e-3 } else { 2e-4 };
+            assert!((encode_lut(lut, v) - linear_to_srgb(v)).abs() < tol, "{v}");
+        }
+    }
+
+    #[test]
+    fn rgba_metric_frame_composites_and_encodes() {
+        let size = Size::new(256, 144).unwrap();
+        let f = RgbaFrame::filled(size, [1.0, 1.0, 1.0, 0.5]);
+        let m = metric_frame_rgba(&f, [0.0; 3]);
+        assert_eq!(m.size(), Size::new(128, 72).unwrap());
+        let want = linear_to_srgb(0.5);
+        assert!(m.data().iter().all(|&v| (v - want).abs() < 1e-5));
+    }
+}
