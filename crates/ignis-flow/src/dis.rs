@@ -22,8 +22,19 @@
 use crate::image::Img;
 use rayon::prelude::*;
 
-/// Largest supported patch side (stack buffers are sized for it).
+/// Largest supported patch side.
 pub(crate) const MAX_PATCH: usize = 32;
+
+/// `x.floor()` for |x| < 2³¹ without a libm call (baseline x86-64 has no `roundss`).
+#[inline(always)]
+pub(crate) fn ffloor(x: f32) -> f32 {
+    let t = x as i32 as f32;
+    if t > x {
+        t - 1.0
+    } else {
+        t
+    }
+}
 
 /// Parameters after validation, in the units the estimator uses.
 pub(crate) struct Dis {
@@ -133,26 +144,39 @@ struct Patches {
 
 /// Fills `out` (patch × patch) with `img` sampled bilinearly at the patch with top-left
 /// `(px, py)` displaced by `u`, edge-clamped. The fractional weights are shared by the
-/// whole patch.
+/// whole patch; patches that lie inside the image take a contiguous (vectorisable) path.
 #[inline]
 fn warp_patch(img: &Img, px: usize, py: usize, u: [f32; 2], patch: usize, out: &mut [f32]) {
     let (w, h) = (img.w as i64, img.h as i64);
     // Displacements are bounded by the caller; clamp anyway so the casts cannot overflow.
     let sx = (px as f32 + u[0]).clamp(-2.0 * MAX_PATCH as f32 - 1.0, w as f32 + 1.0);
     let sy = (py as f32 + u[1]).clamp(-2.0 * MAX_PATCH as f32 - 1.0, h as f32 + 1.0);
-    let (fx0, fy0) = (sx.floor(), sy.floor());
+    let (fx0, fy0) = (ffloor(sx), ffloor(sy));
     let (fx, fy) = (sx - fx0, sy - fy0);
     let (ix, iy) = (fx0 as i64, fy0 as i64);
-    let mut cols = [0usize; MAX_PATCH + 1];
-    for (k, c) in cols.iter_mut().enumerate().take(patch + 1) {
-        *c = (ix + k as i64).clamp(0, w - 1) as usize;
-    }
     let (w00, w01, w10, w11) = (
         (1.0 - fx) * (1.0 - fy),
         fx * (1.0 - fy),
         (1.0 - fx) * fy,
         fx * fy,
     );
+    let p = patch as i64;
+    if ix >= 0 && iy >= 0 && ix + p < w && iy + p < h {
+        let (ix, iy, w) = (ix as usize, iy as usize, w as usize);
+        for (j, o) in out[..patch * patch].chunks_exact_mut(patch).enumerate() {
+            let b0 = (iy + j) * w + ix;
+            let r0 = &img.data[b0..b0 + patch + 1];
+            let r1 = &img.data[b0 + w..b0 + w + patch + 1];
+            for k in 0..patch {
+                o[k] = w00 * r0[k] + w01 * r0[k + 1] + w10 * r1[k] + w11 * r1[k + 1];
+            }
+        }
+        return;
+    }
+    let mut cols = [0usize; MAX_PATCH + 1];
+    for (k, c) in cols.iter_mut().enumerate().take(patch + 1) {
+        *c = (ix + k as i64).clamp(0, w - 1) as usize;
+    }
     for j in 0..patch {
         let r0 = img.row((iy + j as i64).clamp(0, h - 1) as usize);
         let r1 = img.row((iy + j as i64 + 1).clamp(0, h - 1) as usize);
@@ -184,11 +208,12 @@ fn inverse_search(
         .par_iter()
         .flat_map_iter(|&py| {
             let xs = &xs;
+            // Scratch for one patch, reused along the row.
+            let mut t = vec![0.0f32; n];
+            let mut tx = vec![0.0f32; n];
+            let mut ty = vec![0.0f32; n];
+            let mut wb = vec![0.0f32; n];
             xs.iter().map(move |&px| {
-                let mut t = [0.0f32; MAX_PATCH * MAX_PATCH];
-                let mut tx = [0.0f32; MAX_PATCH * MAX_PATCH];
-                let mut ty = [0.0f32; MAX_PATCH * MAX_PATCH];
-                let mut wb = [0.0f32; MAX_PATCH * MAX_PATCH];
                 // Template and zero-mean gradients.
                 let (mut mx, mut my) = (0.0f32, 0.0f32);
                 for j in 0..patch {
@@ -326,10 +351,11 @@ fn densify(i0: &Img, i1: &Img, patches: &Patches, patch: usize) -> Vec<[f32; 2]>
 }
 
 /// Light variational refinement: `iterations` sweeps, each re-linearising the brightness
-/// constancy around the current field (`I1` warped by it) and taking one Jacobi step of
-/// `min Σ ψ·(Iz + Ix·du + Iy·dv)² + α·|∇(u + du)|²`, with `ψ = 1/√(Iz² + ε²)` a robust
-/// (Charbonnier) data weight and `α = smoothness`. Deterministic: each sweep reads the
-/// previous field only.
+/// constancy around the current field (`I1` and its gradients warped by it) and taking one
+/// Jacobi step of `min Σ ψ·(Iz + Ix·du + Iy·dv)² + α·|∇(u + du)|²`, with
+/// `ψ = 1/√(Iz² + ε²)` a robust (Charbonnier) data weight, `(Ix, Iy)` the mean of both
+/// images' gradients and `α = smoothness`. Deterministic: each sweep reads the previous
+/// field only.
 fn refine(
     i0: &Img,
     i1: &Img,
@@ -344,38 +370,44 @@ fn refine(
         return f;
     }
     const EPS: f32 = 2.0;
-    let mut warped = vec![0.0f32; w * h];
+    let (gx1, gy1) = i1.gradients();
     let mut next = vec![[0.0f32; 2]; w * h];
+    let (wm, hm) = ((w - 1) as f32, (h - 1) as f32);
     for _ in 0..iterations {
-        warped.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
-            for (x, o) in row.iter_mut().enumerate() {
-                let u = f[y * w + x];
-                *o = i1.sample(x as f32 + u[0], y as f32 + u[1]);
-            }
-        });
-        let iw = Img::new(w, h, std::mem::take(&mut warped));
-        let (gxw, gyw) = iw.gradients();
         let fr = &f;
         next.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
-            let up = y.saturating_sub(1) * w;
-            let dn = (y + 1).min(h - 1) * w;
-            let me = y * w;
+            let up = &fr[y.saturating_sub(1) * w..][..w];
+            let dn = &fr[(y + 1).min(h - 1) * w..][..w];
+            let me = &fr[y * w..][..w];
+            let (r0, rgx, rgy) = (i0.row(y), gx0.row(y), gy0.row(y));
             for (x, o) in row.iter_mut().enumerate() {
-                let l = me + x.saturating_sub(1);
-                let r = me + (x + 1).min(w - 1);
-                let i = me + x;
-                let avg = |c: usize| 0.25 * (fr[l][c] + fr[r][c] + fr[up + x][c] + fr[dn + x][c]);
-                let (ua, va) = (avg(0), avg(1));
-                let iz = iw.data[i] - i0.data[i];
-                let ix = 0.5 * (gx0.data[i] + gxw.data[i]);
-                let iy = 0.5 * (gy0.data[i] + gyw.data[i]);
+                let l = me[x.saturating_sub(1)];
+                let r = me[(x + 1).min(w - 1)];
+                let c = me[x];
+                let ua = 0.25 * (l[0] + r[0] + up[x][0] + dn[x][0]);
+                let va = 0.25 * (l[1] + r[1] + up[x][1] + dn[x][1]);
+                // Bilinear taps of I1 at x + u, shared by the image and its gradients.
+                let sx = (x as f32 + c[0]).clamp(0.0, wm);
+                let sy = (y as f32 + c[1]).clamp(0.0, hm);
+                let (fx0, fy0) = (ffloor(sx), ffloor(sy));
+                let (ax, ay) = (sx - fx0, sy - fy0);
+                let (x0, y0) = (fx0 as usize, fy0 as usize);
+                let (x1, y1) = ((x0 + 1).min(w - 1), (y0 + 1).min(h - 1));
+                let (i00, i01, i10, i11) = (y0 * w + x0, y0 * w + x1, y1 * w + x0, y1 * w + x1);
+                let bil = |d: &[f32]| {
+                    let top = d[i00] + (d[i01] - d[i00]) * ax;
+                    let bot = d[i10] + (d[i11] - d[i10]) * ax;
+                    top + (bot - top) * ay
+                };
+                let iz = bil(&i1.data) - r0[x];
+                let ix = 0.5 * (rgx[x] + bil(&gx1.data));
+                let iy = 0.5 * (rgy[x] + bil(&gy1.data));
                 let psi = 1.0 / (iz * iz + EPS * EPS).sqrt();
-                let (du, dv) = (ua - fr[i][0], va - fr[i][1]);
+                let (du, dv) = (ua - c[0], va - c[1]);
                 let k = psi * (ix * du + iy * dv + iz) / (smoothness + psi * (ix * ix + iy * iy));
                 *o = [ua - ix * k, va - iy * k];
             }
         });
-        warped = iw.data;
         std::mem::swap(&mut f, &mut next);
     }
     f

@@ -118,7 +118,7 @@ impl FlowField {
 
 /// Bilinear taps for coordinate `x` on an axis of `n` samples: `(i0, i1, weight of i1)`,
 /// clamped to the axis; a non-finite coordinate reads sample 0.
-#[inline]
+#[inline(always)]
 pub(crate) fn tap(x: f32, n: u32) -> (u32, u32, f32) {
     let max = (n - 1) as f32;
     let x = if x.is_finite() {
@@ -126,7 +126,7 @@ pub(crate) fn tap(x: f32, n: u32) -> (u32, u32, f32) {
     } else {
         0.0
     };
-    let i0 = x.floor();
+    let i0 = crate::dis::ffloor(x);
     let w = x - i0;
     let i0 = i0 as u32;
     let i1 = (i0 + 1).min(n - 1);
@@ -163,7 +163,7 @@ impl<'a> FieldMap<'a> {
     }
 
     /// Fills `out` with the (scaled) vectors of target row `y`.
-    #[inline]
+    #[inline(always)]
     pub(crate) fn row(&self, y: usize, out: &mut [[f32; 2]]) {
         let (y0, y1, wy) = self.ys[y];
         let w = self.field.size.width as usize;

@@ -25,6 +25,7 @@
 //! **Invariant:** depends on `ignis-core`, `rayon` and `thiserror` only; knows nothing of
 //! files, video or generators.
 
+pub mod bench;
 pub mod dis;
 pub mod error;
 mod field;

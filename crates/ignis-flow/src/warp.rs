@@ -32,12 +32,13 @@ pub fn warp_gray(src: &GrayFrame, f: &FlowField, t: f32) -> GrayFrame {
     let size = src.size();
     let w = size.width as usize;
     let map = FieldMap::new(f, size);
+    let view = View::new(src.data(), size);
     let mut out = vec![0.0f32; size.pixels()];
     out.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
         let mut fr = vec![[0.0f32; 2]; w];
         map.row(y, &mut fr);
         for (x, (o, v)) in row.iter_mut().zip(&fr).enumerate() {
-            *o = sample_gray(src, x as f32 + t * v[0], y as f32 + t * v[1]);
+            *o = sample_gray(view, x as f32 + t * v[0], y as f32 + t * v[1]);
         }
     });
     GrayFrame::from_vec(size, out).expect("sized from src")
@@ -49,44 +50,69 @@ pub fn warp_rgba(src: &RgbaFrame, f: &FlowField, t: f32) -> RgbaFrame {
     let size = src.size();
     let w = size.width as usize;
     let map = FieldMap::new(f, size);
+    let view = View::new(src.data(), size);
     let mut out = vec![[0.0f32; 4]; size.pixels()];
     out.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
         let mut fr = vec![[0.0f32; 2]; w];
         map.row(y, &mut fr);
         for (x, (o, v)) in row.iter_mut().zip(&fr).enumerate() {
-            *o = unpremultiply(sample_pm(src, x as f32 + t * v[0], y as f32 + t * v[1]));
+            *o = unpremultiply(sample_pm(view, x as f32 + t * v[0], y as f32 + t * v[1]));
         }
     });
     RgbaFrame::from_vec(size, out).expect("sized from src")
 }
 
-#[inline]
-fn sample_gray(src: &GrayFrame, x: f32, y: f32) -> f32 {
-    let (x0, x1, wx) = tap(x, src.width());
-    let (y0, y1, wy) = tap(y, src.height());
-    let (r0, r1) = (src.row(y0), src.row(y1));
-    let (x0, x1) = (x0 as usize, x1 as usize);
-    let top = r0[x0] + (r0[x1] - r0[x0]) * wx;
-    let bot = r1[x0] + (r1[x1] - r1[x0]) * wx;
-    top + (bot - top) * wy
+/// A frame's pixels with its size, so inner loops index a slice directly.
+#[derive(Clone, Copy)]
+struct View<'a, T> {
+    d: &'a [T],
+    w: u32,
+    h: u32,
+}
+
+impl<'a, T> View<'a, T> {
+    fn new(d: &'a [T], size: Size) -> Self {
+        View {
+            d,
+            w: size.width,
+            h: size.height,
+        }
+    }
+
+    /// The four bilinear taps at `(x, y)` (edge-clamped) and their weights.
+    #[inline(always)]
+    fn taps(&self, x: f32, y: f32) -> ([usize; 4], [f32; 4]) {
+        let (x0, x1, wx) = tap(x, self.w);
+        let (y0, y1, wy) = tap(y, self.h);
+        let w = self.w as usize;
+        let (r0, r1) = (y0 as usize * w, y1 as usize * w);
+        let (x0, x1) = (x0 as usize, x1 as usize);
+        (
+            [r0 + x0, r0 + x1, r1 + x0, r1 + x1],
+            [
+                (1.0 - wx) * (1.0 - wy),
+                wx * (1.0 - wy),
+                (1.0 - wx) * wy,
+                wx * wy,
+            ],
+        )
+    }
+}
+
+#[inline(always)]
+fn sample_gray(src: View<f32>, x: f32, y: f32) -> f32 {
+    let (i, k) = src.taps(x, y);
+    src.d[i[0]] * k[0] + src.d[i[1]] * k[1] + src.d[i[2]] * k[2] + src.d[i[3]] * k[3]
 }
 
 /// Premultiplied bilinear sample.
-#[inline]
-fn sample_pm(src: &RgbaFrame, x: f32, y: f32) -> [f32; 4] {
-    let (x0, x1, wx) = tap(x, src.width());
-    let (y0, y1, wy) = tap(y, src.height());
-    let (r0, r1) = (src.row(y0), src.row(y1));
-    let (x0, x1) = (x0 as usize, x1 as usize);
-    let taps = [
-        (r0[x0], (1.0 - wx) * (1.0 - wy)),
-        (r0[x1], wx * (1.0 - wy)),
-        (r1[x0], (1.0 - wx) * wy),
-        (r1[x1], wx * wy),
-    ];
+#[inline(always)]
+fn sample_pm(src: View<[f32; 4]>, x: f32, y: f32) -> [f32; 4] {
+    let (i, k) = src.taps(x, y);
     let mut o = [0.0f32; 4];
-    for (p, wt) in taps {
-        let a = p[3] * wt;
+    for (&i, &k) in i.iter().zip(&k) {
+        let p = src.d[i];
+        let a = p[3] * k;
         o[0] += p[0] * a;
         o[1] += p[1] * a;
         o[2] += p[2] * a;
@@ -95,7 +121,7 @@ fn sample_pm(src: &RgbaFrame, x: f32, y: f32) -> [f32; 4] {
     o
 }
 
-#[inline]
+#[inline(always)]
 fn unpremultiply(p: [f32; 4]) -> [f32; 4] {
     if p[3] > 1e-8 {
         let inv = 1.0 / p[3];
@@ -186,6 +212,7 @@ impl<'a> MorphPlan<'a> {
     }
 
     /// For row `y`: `(xa, ya, xb, yb, weight of A)` per pixel.
+    #[inline(always)]
     fn row(
         &self,
         y: usize,
@@ -231,16 +258,9 @@ impl<'a> MorphPlan<'a> {
     }
 }
 
-#[inline]
+#[inline(always)]
 fn sample_map(m: &[f32], size: Size, x: f32, y: f32) -> f32 {
-    let (x0, x1, wx) = tap(x, size.width);
-    let (y0, y1, wy) = tap(y, size.height);
-    let w = size.width as usize;
-    let (r0, r1) = (y0 as usize * w, y1 as usize * w);
-    let (x0, x1) = (x0 as usize, x1 as usize);
-    let top = m[r0 + x0] + (m[r0 + x1] - m[r0 + x0]) * wx;
-    let bot = m[r1 + x0] + (m[r1 + x1] - m[r1 + x0]) * wx;
-    top + (bot - top) * wy
+    sample_gray(View::new(m, size), x, y)
 }
 
 /// The in-between frame at time `t ∈ [0, 1]` from `a` (t = 0) to `b` (t = 1):
@@ -268,14 +288,15 @@ pub fn morph_gray(
     check_morph(size, b.size(), t)?;
     let plan = MorphPlan::new(size, fwd, bwd, t);
     let w = size.width as usize;
+    let (va_, vb_) = (View::new(a.data(), size), View::new(b.data(), size));
     let mut out = vec![0.0f32; size.pixels()];
     out.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
         let (mut fa, mut fb) = (vec![[0.0f32; 2]; w], vec![[0.0f32; 2]; w]);
         let mut pl = Vec::with_capacity(w);
         plan.row(y, size, &mut fa, &mut fb, &mut pl);
         for (o, p) in row.iter_mut().zip(&pl) {
-            let va = sample_gray(a, p[0], p[1]);
-            let vb = sample_gray(b, p[2], p[3]);
+            let va = sample_gray(va_, p[0], p[1]);
+            let vb = sample_gray(vb_, p[2], p[3]);
             *o = p[4] * va + (1.0 - p[4]) * vb;
         }
     });
@@ -294,14 +315,15 @@ pub fn morph_rgba(
     check_morph(size, b.size(), t)?;
     let plan = MorphPlan::new(size, fwd, bwd, t);
     let w = size.width as usize;
+    let (va_, vb_) = (View::new(a.data(), size), View::new(b.data(), size));
     let mut out = vec![[0.0f32; 4]; size.pixels()];
     out.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
         let (mut fa, mut fb) = (vec![[0.0f32; 2]; w], vec![[0.0f32; 2]; w]);
         let mut pl = Vec::with_capacity(w);
         plan.row(y, size, &mut fa, &mut fb, &mut pl);
         for (o, p) in row.iter_mut().zip(&pl) {
-            let va = sample_pm(a, p[0], p[1]);
-            let vb = sample_pm(b, p[2], p[3]);
+            let va = sample_pm(va_, p[0], p[1]);
+            let vb = sample_pm(vb_, p[2], p[3]);
             let k = p[4];
             let mut m = [0.0f32; 4];
             for c in 0..4 {
