@@ -101,6 +101,16 @@ fn flow_bench(quick: bool) -> Result<serde_json::Value> {
     let p = ignis_flow::FlowParams::default();
     let mut out = serde_json::Map::new();
     out.insert("threads".into(), rayon::current_num_threads().into());
+    // Wall-clock figures scale with how busy the machine is; say how busy it was.
+    if let Ok(l) = std::fs::read_to_string("/proc/loadavg") {
+        if let Some(one) = l
+            .split_whitespace()
+            .next()
+            .and_then(|v| v.parse::<f64>().ok())
+        {
+            out.insert("load_average_1min".into(), one.into());
+        }
+    }
     out.insert(
         "params".into(),
         json!({"max_side": p.max_side, "patch": p.patch, "stride": p.stride,

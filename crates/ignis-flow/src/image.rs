@@ -29,33 +29,7 @@ impl Img {
         if w == self.w && h == self.h {
             return self.clone();
         }
-        let xw = area_weights(self.w, w);
-        let yw = area_weights(self.h, h);
-        // Horizontal pass: h_src rows of w outputs.
-        let mut tmp = vec![0.0f32; w * self.h];
-        tmp.par_chunks_mut(w).enumerate().for_each(|(y, out)| {
-            let src = self.row(y);
-            for (o, (start, ws)) in out.iter_mut().zip(&xw) {
-                let mut s = 0.0;
-                for (k, &wt) in ws.iter().enumerate() {
-                    s += src[start + k] * wt;
-                }
-                *o = s;
-            }
-        });
-        // Vertical pass.
-        let mut data = vec![0.0f32; w * h];
-        data.par_chunks_mut(w).enumerate().for_each(|(y, out)| {
-            let (start, ws) = &yw[y];
-            out.fill(0.0);
-            for (k, &wt) in ws.iter().enumerate() {
-                let r = &tmp[(start + k) * w..(start + k + 1) * w];
-                for (o, &v) in out.iter_mut().zip(r) {
-                    *o += v * wt;
-                }
-            }
-        });
-        Img::new(w, h, data)
+        area_resize(&self.data, self.w, self.h, w, h)
     }
 
     /// Central-difference gradients (one-sided at the edges, halved like the interior).
@@ -92,6 +66,40 @@ impl Img {
         let bot = r1[x0 as usize] + (r1[x1 as usize] - r1[x0 as usize]) * wx;
         top + (bot - top) * wy
     }
+}
+
+/// [`Img::area_resize`] of a row-major `sw × sh` slice (no copy of the source).
+pub(crate) fn area_resize(src: &[f32], sw: usize, sh: usize, w: usize, h: usize) -> Img {
+    if w == sw && h == sh {
+        return Img::new(w, h, src.to_vec());
+    }
+    let xw = area_weights(sw, w);
+    let yw = area_weights(sh, h);
+    // Horizontal pass: sh rows of w outputs.
+    let mut tmp = vec![0.0f32; w * sh];
+    tmp.par_chunks_mut(w).enumerate().for_each(|(y, out)| {
+        let src = &src[y * sw..(y + 1) * sw];
+        for (o, (start, ws)) in out.iter_mut().zip(&xw) {
+            let mut s = 0.0;
+            for (k, &wt) in ws.iter().enumerate() {
+                s += src[start + k] * wt;
+            }
+            *o = s;
+        }
+    });
+    // Vertical pass.
+    let mut data = vec![0.0f32; w * h];
+    data.par_chunks_mut(w).enumerate().for_each(|(y, out)| {
+        let (start, ws) = &yw[y];
+        out.fill(0.0);
+        for (k, &wt) in ws.iter().enumerate() {
+            let r = &tmp[(start + k) * w..(start + k + 1) * w];
+            for (o, &v) in out.iter_mut().zip(r) {
+                *o += v * wt;
+            }
+        }
+    });
+    Img::new(w, h, data)
 }
 
 /// For each of `m` outputs over `n` inputs: the first input index and the weights of the

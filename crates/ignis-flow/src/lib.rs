@@ -146,23 +146,34 @@ fn prepare(a: &GrayFrame, b: &GrayFrame, p: &FlowParams) -> Result<(Size, Option
             b.size()
         )));
     }
-    for (name, f) in [("first", a), ("second", b)] {
-        if let Some(i) = f.data().iter().position(|v| !v.is_finite()) {
-            let w = f.width() as usize;
-            return Err(FlowError::BadInput(format!(
-                "the {name} frame has a NaN or infinite pixel at ({}, {}); clamp or replace \
-                 non-finite values before computing flow",
-                i % w,
-                i / w
-            )));
-        }
-    }
     let ws = p.working_size(a.size());
     let (w, h) = (a.width() as usize, a.height() as usize);
+    let (nw, nh) = (ws.width as usize, ws.height as usize);
     let (ia, ib) = rayon::join(
-        || Img::new(w, h, a.data().to_vec()).area_resize(ws.width as usize, ws.height as usize),
-        || Img::new(w, h, b.data().to_vec()).area_resize(ws.width as usize, ws.height as usize),
+        || image::area_resize(a.data(), w, h, nw, nh),
+        || image::area_resize(b.data(), w, h, nw, nh),
     );
+    // A non-finite pixel leaves a non-finite average (every covered pixel has a positive
+    // weight), so the small images are checked and the full frame searched only then.
+    for (name, small, f) in [("first", &ia, a), ("second", &ib, b)] {
+        if small.data.iter().any(|v| !v.is_finite()) {
+            return Err(FlowError::BadInput(
+                match f.data().iter().position(|v| !v.is_finite()) {
+                    Some(i) => format!(
+                        "the {name} frame has a NaN or infinite pixel at ({}, {}); clamp or \
+                         replace non-finite values before computing flow",
+                        i % w,
+                        i / w
+                    ),
+                    None => format!(
+                        "the {name} frame's values overflow when averaged (magnitudes near \
+                         {:e}); scale the frame to a sane range first",
+                        f32::MAX
+                    ),
+                },
+            ));
+        }
+    }
     let hi = ia
         .data
         .iter()
@@ -323,6 +334,17 @@ mod tests {
         nan.set(3, 2, f32::NAN);
         let e = flow(&flat, &nan, &p).unwrap_err().to_string();
         assert!(e.contains("(3, 2)") && e.contains("second"), "{e}");
+        // Values at the edge of f32 are averaged without overflow: a finite field.
+        let huge = GrayFrame::from_fn(s, |x, y| if (x + y) % 3 == 0 { f32::MAX } else { 0.0 });
+        let small = FlowParams {
+            max_side: 8,
+            ..p.clone()
+        };
+        let f = flow(&huge, &flat, &small).unwrap();
+        assert!(f
+            .data()
+            .iter()
+            .all(|v| v[0].is_finite() && v[1].is_finite()));
         let other = GrayFrame::new(Size::new(8, 16).unwrap());
         assert!(matches!(
             flow(&flat, &other, &p),

@@ -32,15 +32,19 @@ pub fn warp_gray(src: &GrayFrame, f: &FlowField, t: f32) -> GrayFrame {
     let size = src.size();
     let w = size.width as usize;
     let map = FieldMap::new(f, size);
-    let view = View::new(src.data(), size);
+    let d = src.data();
     let mut out = vec![0.0f32; size.pixels()];
-    out.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
-        let mut fr = vec![[0.0f32; 2]; w];
-        map.row(y, &mut fr);
-        for (x, (o, v)) in row.iter_mut().zip(&fr).enumerate() {
-            *o = sample_gray(view, x as f32 + t * v[0], y as f32 + t * v[1]);
-        }
-    });
+    out.par_chunks_mut(w).enumerate().for_each_init(
+        || RowScratch::new(w),
+        |s, (y, row)| {
+            map.row(y, &mut s.fa);
+            RowScratch::along(&mut s.xs, &mut s.ys, &s.fa, y, t);
+            s.ka.fill(&s.xs, &s.ys, size.width, size.height);
+            for (i, o) in row.iter_mut().enumerate() {
+                *o = s.ka.gray(d, i);
+            }
+        },
+    );
     GrayFrame::from_vec(size, out).expect("sized from src")
 }
 
@@ -50,15 +54,19 @@ pub fn warp_rgba(src: &RgbaFrame, f: &FlowField, t: f32) -> RgbaFrame {
     let size = src.size();
     let w = size.width as usize;
     let map = FieldMap::new(f, size);
-    let view = View::new(src.data(), size);
+    let d = src.data();
     let mut out = vec![[0.0f32; 4]; size.pixels()];
-    out.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
-        let mut fr = vec![[0.0f32; 2]; w];
-        map.row(y, &mut fr);
-        for (x, (o, v)) in row.iter_mut().zip(&fr).enumerate() {
-            *o = unpremultiply(sample_pm(view, x as f32 + t * v[0], y as f32 + t * v[1]));
-        }
-    });
+    out.par_chunks_mut(w).enumerate().for_each_init(
+        || RowScratch::new(w),
+        |s, (y, row)| {
+            map.row(y, &mut s.fa);
+            RowScratch::along(&mut s.xs, &mut s.ys, &s.fa, y, t);
+            s.ka.fill(&s.xs, &s.ys, size.width, size.height);
+            for (i, o) in row.iter_mut().enumerate() {
+                *o = unpremultiply(s.ka.pm(d, i));
+            }
+        },
+    );
     RgbaFrame::from_vec(size, out).expect("sized from src")
 }
 
@@ -99,26 +107,123 @@ impl<'a, T> View<'a, T> {
     }
 }
 
+/// Bilinear taps of one row of sample positions, computed in a separate (vectorisable)
+/// pass before the gathers: base index, the x and y steps to the other taps (0 at the
+/// clamped edge) and the weights of the second taps.
+struct RowTaps {
+    base: Vec<u32>,
+    sx: Vec<u32>,
+    sy: Vec<u32>,
+    wx: Vec<f32>,
+    wy: Vec<f32>,
+}
+
+impl RowTaps {
+    fn new(n: usize) -> RowTaps {
+        RowTaps {
+            base: vec![0; n],
+            sx: vec![0; n],
+            sy: vec![0; n],
+            wx: vec![0.0; n],
+            wy: vec![0.0; n],
+        }
+    }
+
+    /// Taps for positions `(xs[i], ys[i])` in a `w × h` frame, edge-clamped (positions
+    /// are finite: fields and `t` are checked finite by their constructors).
+    #[inline(always)]
+    fn fill(&mut self, xs: &[f32], ys: &[f32], w: u32, h: u32) {
+        let (wm, hm) = ((w - 1) as f32, (h - 1) as f32);
+        let n = xs.len();
+        let (base, sx, sy) = (&mut self.base[..n], &mut self.sx[..n], &mut self.sy[..n]);
+        let (wx, wy) = (&mut self.wx[..n], &mut self.wy[..n]);
+        for i in 0..n {
+            let x = xs[i].max(0.0).min(wm);
+            let y = ys[i].max(0.0).min(hm);
+            // Non-negative after the clamp, so truncation is floor.
+            let (x0, y0) = (x as u32, y as u32);
+            wx[i] = x - x0 as f32;
+            wy[i] = y - y0 as f32;
+            sx[i] = (x0 < w - 1) as u32;
+            sy[i] = if y0 < h - 1 { w } else { 0 };
+            base[i] = y0 * w + x0;
+        }
+    }
+
+    /// Grey bilinear sample `i`.
+    #[inline(always)]
+    fn gray(&self, d: &[f32], i: usize) -> f32 {
+        let b = self.base[i] as usize;
+        let (sx, sy) = (self.sx[i] as usize, self.sy[i] as usize);
+        let (wx, wy) = (self.wx[i], self.wy[i]);
+        let top = d[b] + (d[b + sx] - d[b]) * wx;
+        let bot = d[b + sy] + (d[b + sy + sx] - d[b + sy]) * wx;
+        top + (bot - top) * wy
+    }
+
+    /// Premultiplied colour bilinear sample `i`.
+    #[inline(always)]
+    fn pm(&self, d: &[[f32; 4]], i: usize) -> [f32; 4] {
+        let b = self.base[i] as usize;
+        let (sx, sy) = (self.sx[i] as usize, self.sy[i] as usize);
+        let (wx, wy) = (self.wx[i], self.wy[i]);
+        let taps = [
+            (d[b], (1.0 - wx) * (1.0 - wy)),
+            (d[b + sx], wx * (1.0 - wy)),
+            (d[b + sy], (1.0 - wx) * wy),
+            (d[b + sy + sx], wx * wy),
+        ];
+        let mut o = [0.0f32; 4];
+        for (p, k) in taps {
+            let a = p[3] * k;
+            o[0] += p[0] * a;
+            o[1] += p[1] * a;
+            o[2] += p[2] * a;
+            o[3] += a;
+        }
+        o
+    }
+}
+
+/// Per-thread scratch of a warp or morph row.
+struct RowScratch {
+    fa: Vec<[f32; 2]>,
+    fb: Vec<[f32; 2]>,
+    xs: Vec<f32>,
+    ys: Vec<f32>,
+    ka: RowTaps,
+    kb: RowTaps,
+    wa: Vec<f32>,
+}
+
+impl RowScratch {
+    fn new(n: usize) -> RowScratch {
+        RowScratch {
+            fa: vec![[0.0; 2]; n],
+            fb: vec![[0.0; 2]; n],
+            xs: vec![0.0; n],
+            ys: vec![0.0; n],
+            ka: RowTaps::new(n),
+            kb: RowTaps::new(n),
+            wa: vec![0.0; n],
+        }
+    }
+
+    /// Taps into `ka` for `x + t·v(x)` along row `y` of the vectors `v`.
+    #[inline(always)]
+    fn along(xs: &mut [f32], ys: &mut [f32], v: &[[f32; 2]], y: usize, t: f32) {
+        let yf = y as f32;
+        for (x, ((px, py), v)) in xs.iter_mut().zip(ys.iter_mut()).zip(v).enumerate() {
+            *px = x as f32 + t * v[0];
+            *py = yf + t * v[1];
+        }
+    }
+}
+
 #[inline(always)]
 fn sample_gray(src: View<f32>, x: f32, y: f32) -> f32 {
     let (i, k) = src.taps(x, y);
     src.d[i[0]] * k[0] + src.d[i[1]] * k[1] + src.d[i[2]] * k[2] + src.d[i[3]] * k[3]
-}
-
-/// Premultiplied bilinear sample.
-#[inline(always)]
-fn sample_pm(src: View<[f32; 4]>, x: f32, y: f32) -> [f32; 4] {
-    let (i, k) = src.taps(x, y);
-    let mut o = [0.0f32; 4];
-    for (&i, &k) in i.iter().zip(&k) {
-        let p = src.d[i];
-        let a = p[3] * k;
-        o[0] += p[0] * a;
-        o[1] += p[1] * a;
-        o[2] += p[2] * a;
-        o[3] += a;
-    }
-    o
 }
 
 #[inline(always)]
@@ -250,38 +355,43 @@ impl<'a> MorphPlan<'a> {
         }
     }
 
-    /// For row `y`: `[xa, ya, xb, yb, weight of A]` per pixel into `out`.
+    /// For row `y`: the taps into A (`s.ka`) and B (`s.kb`) and the weight of A
+    /// (`s.wa`) per pixel.
     #[inline(always)]
-    fn row(&self, y: usize, fa: &mut [[f32; 2]], fb: &mut [[f32; 2]], out: &mut [[f32; 5]]) {
-        self.fwd.row(y, fa);
-        self.bwd.row(y, fb);
+    fn row(&self, y: usize, s: &mut RowScratch) {
+        self.fwd.row(y, &mut s.fa);
+        self.bwd.row(y, &mut s.fb);
         let t = self.t;
-        let yf = y as f32;
-        for (x, ((va, vb), o)) in fa.iter().zip(fb.iter()).zip(out.iter_mut()).enumerate() {
-            let xf = x as f32;
-            *o = [
-                xf - t * va[0],
-                yf - t * va[1],
-                xf - (1.0 - t) * vb[0],
-                yf - (1.0 - t) * vb[1],
-                1.0 - t,
-            ];
-        }
-        if let Some(occ) = &self.occ {
-            let (w, h) = (self.size.width as f32, self.size.height as f32);
-            let (rax, ray) = (occ.ca_size.width as f32 / w, occ.ca_size.height as f32 / h);
-            let (rbx, rby) = (occ.cb_size.width as f32 / w, occ.cb_size.height as f32 / h);
-            let (va, vb) = (
-                View::new(&occ.ca, occ.ca_size),
-                View::new(&occ.cb, occ.cb_size),
+        let (w, h) = (self.size.width, self.size.height);
+        RowScratch::along(&mut s.xs, &mut s.ys, &s.fa, y, -t);
+        s.ka.fill(&s.xs, &s.ys, w, h);
+        let occ = self.occ.as_ref();
+        if let Some(occ) = occ {
+            let (rx, ry) = (
+                occ.ca_size.width as f32 / w as f32,
+                occ.ca_size.height as f32 / h as f32,
             );
-            for o in out.iter_mut() {
-                let ca = sample_gray(va, (o[0] + 0.5) * rax - 0.5, (o[1] + 0.5) * ray - 0.5);
-                let cb = sample_gray(vb, (o[2] + 0.5) * rbx - 0.5, (o[3] + 0.5) * rby - 0.5);
-                let wa = (1.0 - t) * ca.max(1e-3);
-                let wb = t * cb.max(1e-3);
-                let s = wa + wb;
-                o[4] = if s > 0.0 { wa / s } else { 1.0 - t };
+            let va = View::new(&occ.ca, occ.ca_size);
+            for ((wa, &x), &y) in s.wa.iter_mut().zip(&s.xs).zip(&s.ys) {
+                *wa = sample_gray(va, (x + 0.5) * rx - 0.5, (y + 0.5) * ry - 0.5);
+            }
+        }
+        RowScratch::along(&mut s.xs, &mut s.ys, &s.fb, y, -(1.0 - t));
+        s.kb.fill(&s.xs, &s.ys, w, h);
+        match occ {
+            None => s.wa.fill(1.0 - t),
+            Some(occ) => {
+                let (rx, ry) = (
+                    occ.cb_size.width as f32 / w as f32,
+                    occ.cb_size.height as f32 / h as f32,
+                );
+                let vb = View::new(&occ.cb, occ.cb_size);
+                for ((wa, &x), &y) in s.wa.iter_mut().zip(&s.xs).zip(&s.ys) {
+                    let cb = sample_gray(vb, (x + 0.5) * rx - 0.5, (y + 0.5) * ry - 0.5);
+                    let a = (1.0 - t) * wa.max(1e-3);
+                    let b = t * cb.max(1e-3);
+                    *wa = a / (a + b);
+                }
             }
         }
     }
@@ -324,18 +434,18 @@ pub fn morph_gray_with(
     check_morph(size, b.size(), t, p)?;
     let plan = MorphPlan::new(size, fwd, bwd, t, p);
     let w = size.width as usize;
-    let (va_, vb_) = (View::new(a.data(), size), View::new(b.data(), size));
+    let (da, db) = (a.data(), b.data());
     let mut out = vec![0.0f32; size.pixels()];
-    out.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
-        let (mut fa, mut fb) = (vec![[0.0f32; 2]; w], vec![[0.0f32; 2]; w]);
-        let mut pl = vec![[0.0f32; 5]; w];
-        plan.row(y, &mut fa, &mut fb, &mut pl);
-        for (o, p) in row.iter_mut().zip(&pl) {
-            let va = sample_gray(va_, p[0], p[1]);
-            let vb = sample_gray(vb_, p[2], p[3]);
-            *o = p[4] * va + (1.0 - p[4]) * vb;
-        }
-    });
+    out.par_chunks_mut(w).enumerate().for_each_init(
+        || RowScratch::new(w),
+        |s, (y, row)| {
+            plan.row(y, s);
+            for (i, o) in row.iter_mut().enumerate() {
+                let k = s.wa[i];
+                *o = k * s.ka.gray(da, i) + (1.0 - k) * s.kb.gray(db, i);
+            }
+        },
+    );
     Ok(GrayFrame::from_vec(size, out).expect("sized from a"))
 }
 
@@ -363,23 +473,23 @@ pub fn morph_rgba_with(
     check_morph(size, b.size(), t, p)?;
     let plan = MorphPlan::new(size, fwd, bwd, t, p);
     let w = size.width as usize;
-    let (va_, vb_) = (View::new(a.data(), size), View::new(b.data(), size));
+    let (da, db) = (a.data(), b.data());
     let mut out = vec![[0.0f32; 4]; size.pixels()];
-    out.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
-        let (mut fa, mut fb) = (vec![[0.0f32; 2]; w], vec![[0.0f32; 2]; w]);
-        let mut pl = vec![[0.0f32; 5]; w];
-        plan.row(y, &mut fa, &mut fb, &mut pl);
-        for (o, p) in row.iter_mut().zip(&pl) {
-            let va = sample_pm(va_, p[0], p[1]);
-            let vb = sample_pm(vb_, p[2], p[3]);
-            let k = p[4];
-            let mut m = [0.0f32; 4];
-            for c in 0..4 {
-                m[c] = k * va[c] + (1.0 - k) * vb[c];
+    out.par_chunks_mut(w).enumerate().for_each_init(
+        || RowScratch::new(w),
+        |s, (y, row)| {
+            plan.row(y, s);
+            for (i, o) in row.iter_mut().enumerate() {
+                let k = s.wa[i];
+                let (va, vb) = (s.ka.pm(da, i), s.kb.pm(db, i));
+                let mut m = [0.0f32; 4];
+                for c in 0..4 {
+                    m[c] = k * va[c] + (1.0 - k) * vb[c];
+                }
+                *o = unpremultiply(m);
             }
-            *o = unpremultiply(m);
-        }
-    });
+        },
+    );
     Ok(RgbaFrame::from_vec(size, out).expect("sized from a"))
 }
 
