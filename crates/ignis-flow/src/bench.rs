@@ -22,6 +22,9 @@ pub struct Timing {
     pub size: Size,
     pub median_ms: f64,
     pub min_ms: f64,
+    /// Process CPU time (all threads) per repetition, when the caller's clock gives one:
+    /// on a busy machine wall time overstates the cost, CPU time much less.
+    pub cpu_ms: Option<f64>,
     pub goal_ms: f64,
     pub mean_error_px: f64,
 }
@@ -71,16 +74,26 @@ fn colour(g: &GrayFrame) -> RgbaFrame {
     RgbaFrame::from_vec(g.size(), data).expect("same size")
 }
 
-fn time<T>(reps: usize, mut f: impl FnMut() -> T) -> (f64, f64, T) {
+/// Median and minimum wall time, CPU time per repetition, and the last result.
+fn time<T>(
+    reps: usize,
+    cpu: &dyn Fn() -> Option<f64>,
+    mut f: impl FnMut() -> T,
+) -> (f64, f64, Option<f64>, T) {
     let mut out = f(); // warm-up (page faults, thread pool start)
     let mut ms = Vec::with_capacity(reps);
+    let c0 = cpu();
     for _ in 0..reps {
         let t = Instant::now();
         out = f();
         ms.push(t.elapsed().as_secs_f64() * 1e3);
     }
+    let cpu_ms = match (c0, cpu()) {
+        (Some(a), Some(b)) => Some((b - a) / reps as f64),
+        _ => None,
+    };
     ms.sort_by(|a, b| a.total_cmp(b));
-    (ms[ms.len() / 2], ms[0], out)
+    (ms[ms.len() / 2], ms[0], cpu_ms, out)
 }
 
 fn mean_error(f: &crate::FlowField, d: [f32; 2]) -> f64 {
@@ -89,8 +102,9 @@ fn mean_error(f: &crate::FlowField, d: [f32; 2]) -> f64 {
 }
 
 /// Times the three goal cases with default parameters; `quick` uses 3 repetitions
-/// instead of 15.
-pub fn figures(quick: bool) -> crate::Result<Vec<Timing>> {
+/// instead of 15. `cpu` reads the process CPU time in ms (or `None` where the caller has
+/// no such clock).
+pub fn figures(quick: bool, cpu: &dyn Fn() -> Option<f64>) -> crate::Result<Vec<Timing>> {
     let reps = if quick { 3 } else { 15 };
     let p = FlowParams::default();
     let mut out = Vec::new();
@@ -98,12 +112,13 @@ pub fn figures(quick: bool) -> crate::Result<Vec<Timing>> {
     let s512 = Size::new(512, 512)?;
     let d = [2.5, -1.5];
     let (a, b) = (texture(s512, 1, [0.0; 2], 1.5), texture(s512, 1, d, 1.5));
-    let (med, min, f) = time(reps, || flow(&a, &b, &p));
+    let (med, min, cpu_ms, f) = time(reps, cpu, || flow(&a, &b, &p));
     out.push(Timing {
         name: "flow_512",
         size: s512,
         median_ms: med,
         min_ms: min,
+        cpu_ms,
         goal_ms: GOAL_FLOW_512_MS,
         mean_error_px: mean_error(&f?, d),
     });
@@ -111,18 +126,19 @@ pub fn figures(quick: bool) -> crate::Result<Vec<Timing>> {
     let hd = Size::new(1920, 1080)?;
     let d = [7.5, -4.0];
     let (a, b) = (texture(hd, 2, [0.0; 2], 4.0), texture(hd, 2, d, 4.0));
-    let (med, min, f) = time(reps, || flow(&a, &b, &p));
+    let (med, min, cpu_ms, f) = time(reps, cpu, || flow(&a, &b, &p));
     out.push(Timing {
         name: "flow_1080p",
         size: hd,
         median_ms: med,
         min_ms: min,
+        cpu_ms,
         goal_ms: GOAL_FLOW_1080P_MS,
         mean_error_px: mean_error(&f?, d),
     });
 
     let (ca, cb) = (colour(&a), colour(&b));
-    let (med, min, r) = time(reps, || -> crate::Result<_> {
+    let (med, min, cpu_ms, r) = time(reps, cpu, || -> crate::Result<_> {
         let (la, lb) = rayon::join(|| luma(&ca), || luma(&cb));
         let (f, g) = flow_pair_reduced(&la, &lb, &p)?;
         let mid = morph_rgba(&ca, &cb, &f, &g, 0.5)?;
@@ -135,6 +151,7 @@ pub fn figures(quick: bool) -> crate::Result<Vec<Timing>> {
         size: hd,
         median_ms: med,
         min_ms: min,
+        cpu_ms,
         goal_ms: GOAL_MORPH_1080P_MS,
         mean_error_px: mean_error(&f, [d[0] / scale, d[1] / scale]) * scale as f64,
     });

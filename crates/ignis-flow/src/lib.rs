@@ -195,13 +195,9 @@ fn prepare(a: &GrayFrame, b: &GrayFrame, p: &FlowParams) -> Result<(Size, Option
     Ok((ws, Some((ia, ib))))
 }
 
-/// The flow from `a` to `b` at the working size [`FlowParams::working_size`].
-pub fn flow_reduced(a: &GrayFrame, b: &GrayFrame, p: &FlowParams) -> Result<FlowField> {
-    let (ws, imgs) = prepare(a, b, p)?;
-    let Some((ia, ib)) = imgs else {
-        return Ok(FlowField::zero(ws));
-    };
-    let (fw, fh, v) = dis::dis(&ia, &ib, &p.dis());
+/// DIS on prepared images, returned at the working size `ws`.
+fn dis_field(ia: &Img, ib: &Img, ws: Size, p: &FlowParams) -> FlowField {
+    let (fw, fh, v) = dis::dis(ia, ib, &p.dis());
     let f = FlowField::from_parts(
         Size {
             width: fw as u32,
@@ -209,7 +205,16 @@ pub fn flow_reduced(a: &GrayFrame, b: &GrayFrame, p: &FlowParams) -> Result<Flow
         },
         v,
     );
-    Ok(f.resized(ws))
+    f.resized(ws)
+}
+
+/// The flow from `a` to `b` at the working size [`FlowParams::working_size`].
+pub fn flow_reduced(a: &GrayFrame, b: &GrayFrame, p: &FlowParams) -> Result<FlowField> {
+    let (ws, imgs) = prepare(a, b, p)?;
+    Ok(match imgs {
+        Some((ia, ib)) => dis_field(&ia, &ib, ws, p),
+        None => FlowField::zero(ws),
+    })
 }
 
 /// The flow from `a` to `b` (`a(x) ≈ b(x + F(x))`) at `a`'s size. `a` and `b` must have
@@ -225,8 +230,11 @@ pub fn flow_pair_reduced(
     b: &GrayFrame,
     p: &FlowParams,
 ) -> Result<(FlowField, FlowField)> {
-    let (f, g) = rayon::join(|| flow_reduced(a, b, p), || flow_reduced(b, a, p));
-    Ok((f?, g?))
+    let (ws, imgs) = prepare(a, b, p)?;
+    Ok(match imgs {
+        Some((ia, ib)) => rayon::join(|| dis_field(&ia, &ib, ws, p), || dis_field(&ib, &ia, ws, p)),
+        None => (FlowField::zero(ws), FlowField::zero(ws)),
+    })
 }
 
 /// Both directions `(a→b, b→a)` at `a`'s size, computed in parallel.

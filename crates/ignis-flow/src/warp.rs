@@ -63,7 +63,9 @@ pub fn warp_rgba(src: &RgbaFrame, f: &FlowField, t: f32) -> RgbaFrame {
             RowScratch::along(&mut s.xs, &mut s.ys, &s.fa, y, t);
             s.ka.fill(&s.xs, &s.ys, size.width, size.height);
             for (i, o) in row.iter_mut().enumerate() {
-                *o = unpremultiply(s.ka.pm(d, i));
+                let mut acc = [0.0f32; 4];
+                s.ka.add_pm(d, i, 1.0, &mut acc);
+                *o = unpremultiply(acc);
             }
         },
     );
@@ -161,27 +163,26 @@ impl RowTaps {
         top + (bot - top) * wy
     }
 
-    /// Premultiplied colour bilinear sample `i`.
+    /// Adds `scale ×` the premultiplied colour bilinear sample `i` to `acc`.
     #[inline(always)]
-    fn pm(&self, d: &[[f32; 4]], i: usize) -> [f32; 4] {
+    fn add_pm(&self, d: &[[f32; 4]], i: usize, scale: f32, acc: &mut [f32; 4]) {
         let b = self.base[i] as usize;
         let (sx, sy) = (self.sx[i] as usize, self.sy[i] as usize);
         let (wx, wy) = (self.wx[i], self.wy[i]);
+        let (ux, uy) = (1.0 - wx, 1.0 - wy);
         let taps = [
-            (d[b], (1.0 - wx) * (1.0 - wy)),
-            (d[b + sx], wx * (1.0 - wy)),
-            (d[b + sy], (1.0 - wx) * wy),
+            (d[b], ux * uy),
+            (d[b + sx], wx * uy),
+            (d[b + sy], ux * wy),
             (d[b + sy + sx], wx * wy),
         ];
-        let mut o = [0.0f32; 4];
         for (p, k) in taps {
-            let a = p[3] * k;
-            o[0] += p[0] * a;
-            o[1] += p[1] * a;
-            o[2] += p[2] * a;
-            o[3] += a;
+            let a = p[3] * k * scale;
+            acc[0] += p[0] * a;
+            acc[1] += p[1] * a;
+            acc[2] += p[2] * a;
+            acc[3] += a;
         }
-        o
     }
 }
 
@@ -481,12 +482,10 @@ pub fn morph_rgba_with(
             plan.row(y, s);
             for (i, o) in row.iter_mut().enumerate() {
                 let k = s.wa[i];
-                let (va, vb) = (s.ka.pm(da, i), s.kb.pm(db, i));
-                let mut m = [0.0f32; 4];
-                for c in 0..4 {
-                    m[c] = k * va[c] + (1.0 - k) * vb[c];
-                }
-                *o = unpremultiply(m);
+                let mut acc = [0.0f32; 4];
+                s.ka.add_pm(da, i, k, &mut acc);
+                s.kb.add_pm(db, i, 1.0 - k, &mut acc);
+                *o = unpremultiply(acc);
             }
         },
     );
