@@ -605,3 +605,23 @@ mod demo {
         }
     }
 }
+
+mod flow {
+    use super::*;
+
+    /// `ignis bench flow --quick`: the three speed cases as JSON, each with a goal flag and
+    /// the recovered shift within 0.5 px (so the timed code computed the right thing).
+    #[test]
+    fn bench_reports_flow_goals() {
+        let o = ignis(&["bench", "flow", "--quick", "-q"]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        for case in ["flow_512", "flow_1080p", "morph_1080p"] {
+            let c = &v[case];
+            assert!(c["goal_met"].is_boolean(), "{case}: {c}");
+            assert!(c["median_ms"].as_f64().unwrap() > 0.0, "{case}: {c}");
+            assert!(c["mean_error_px"].as_f64().unwrap() < 0.5, "{case}: {c}");
+        }
+        assert!(v["morph_vs_blend"].is_array() || v["morph_vs_blend"].is_string());
+    }
+}
