@@ -71,6 +71,9 @@ impl FlowField {
     /// The vector at `(x, y)` (field pixels), bilinearly interpolated; positions outside the
     /// field are clamped to its edge, non-finite positions read as the edge at 0.
     pub fn at(&self, x: f32, y: f32) -> [f32; 2] {
+        if self.data.is_empty() {
+            return [0.0; 2];
+        }
         let (x0, x1, wx) = tap(x, self.size.width);
         let (y0, y1, wy) = tap(y, self.size.height);
         let w = self.size.width as usize;
@@ -93,6 +96,9 @@ impl FlowField {
     pub fn resized(&self, size: Size) -> FlowField {
         if size == self.size {
             return self.clone();
+        }
+        if self.data.is_empty() || size.pixels() == 0 {
+            return FlowField::zero(size);
         }
         let map = FieldMap::new(self, size);
         let w = size.width as usize;

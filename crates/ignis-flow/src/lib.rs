@@ -146,6 +146,15 @@ fn prepare(a: &GrayFrame, b: &GrayFrame, p: &FlowParams) -> Result<(Size, Option
             b.size()
         )));
     }
+    if a.size().pixels() == 0 {
+        return Err(FlowError::bad(
+            "frame size",
+            format!(
+                "{} has a zero side; frames need at least 1x1 pixels",
+                a.size()
+            ),
+        ));
+    }
     let ws = p.working_size(a.size());
     let (w, h) = (a.width() as usize, a.height() as usize);
     let (nw, nh) = (ws.width as usize, ws.height as usize);
@@ -353,6 +362,30 @@ mod tests {
             .data()
             .iter()
             .all(|v| v[0].is_finite() && v[1].is_finite()));
+        // Sizes built without `Size::new` (public fields) are refused or passed through.
+        let empty = GrayFrame::new(Size {
+            width: 0,
+            height: 5,
+        });
+        assert!(flow(&empty, &empty, &p).is_err());
+        let ez = FlowField::zero(empty.size());
+        assert_eq!(ez.at(1.0, 1.0), [0.0, 0.0]);
+        assert_eq!(ez.resized(s), FlowField::zero(s));
+        assert_eq!(warp_gray(&empty, &ez, 1.0), empty);
+        assert_eq!(morph_gray(&empty, &empty, &ez, &ez, 0.5).unwrap(), empty);
+        let mid = morph_rgba_with(
+            &flat.to_rgba(),
+            &flat.to_rgba(),
+            &ez,
+            &ez,
+            0.5,
+            &MorphParams {
+                occlusion_px: Some(1.0),
+            },
+        )
+        .unwrap();
+        assert_eq!(mid.size(), s);
+        assert_eq!(warp_gray(&flat, &ez, 1.0), flat);
         let other = GrayFrame::new(Size::new(8, 16).unwrap());
         assert!(matches!(
             flow(&flat, &other, &p),

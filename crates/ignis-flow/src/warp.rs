@@ -30,6 +30,9 @@ pub fn luma(frame: &RgbaFrame) -> GrayFrame {
 /// it has another (vectors scaled). A non-finite `t` reads every pixel from `src(0, 0)`.
 pub fn warp_gray(src: &GrayFrame, f: &FlowField, t: f32) -> GrayFrame {
     let size = src.size();
+    if size.pixels() == 0 || f.data().is_empty() {
+        return src.clone();
+    }
     let w = size.width as usize;
     let map = FieldMap::new(f, size);
     let d = src.data();
@@ -52,6 +55,9 @@ pub fn warp_gray(src: &GrayFrame, f: &FlowField, t: f32) -> GrayFrame {
 /// module doc); otherwise as [`warp_gray`].
 pub fn warp_rgba(src: &RgbaFrame, f: &FlowField, t: f32) -> RgbaFrame {
     let size = src.size();
+    if size.pixels() == 0 || f.data().is_empty() {
+        return src.clone();
+    }
     let w = size.width as usize;
     let map = FieldMap::new(f, size);
     let d = src.data();
@@ -310,6 +316,19 @@ fn check_morph(a: Size, b: Size, t: f32, p: &MorphParams) -> Result<()> {
     p.validate()
 }
 
+/// A zero field of one pixel standing in for a field with no pixels (only reachable
+/// through a `Size` built without [`Size::new`]).
+fn nonempty(f: &FlowField) -> std::borrow::Cow<'_, FlowField> {
+    if f.data().is_empty() {
+        std::borrow::Cow::Owned(FlowField::zero(Size {
+            width: 1,
+            height: 1,
+        }))
+    } else {
+        std::borrow::Cow::Borrowed(f)
+    }
+}
+
 /// Consistency maps of both sides, on their fields' grids.
 struct Occlusion {
     ca: Vec<f32>,
@@ -433,7 +452,11 @@ pub fn morph_gray_with(
 ) -> Result<GrayFrame> {
     let size = a.size();
     check_morph(size, b.size(), t, p)?;
-    let plan = MorphPlan::new(size, fwd, bwd, t, p);
+    if size.pixels() == 0 {
+        return Ok(a.clone());
+    }
+    let (fwd, bwd) = (nonempty(fwd), nonempty(bwd));
+    let plan = MorphPlan::new(size, &fwd, &bwd, t, p);
     let w = size.width as usize;
     let (da, db) = (a.data(), b.data());
     let mut out = vec![0.0f32; size.pixels()];
@@ -472,7 +495,11 @@ pub fn morph_rgba_with(
 ) -> Result<RgbaFrame> {
     let size = a.size();
     check_morph(size, b.size(), t, p)?;
-    let plan = MorphPlan::new(size, fwd, bwd, t, p);
+    if size.pixels() == 0 {
+        return Ok(a.clone());
+    }
+    let (fwd, bwd) = (nonempty(fwd), nonempty(bwd));
+    let plan = MorphPlan::new(size, &fwd, &bwd, t, p);
     let w = size.width as usize;
     let (da, db) = (a.data(), b.data());
     let mut out = vec![[0.0f32; 4]; size.pixels()];
