@@ -98,12 +98,102 @@ pub fn remove_stale(dir: &Path) -> usize {
     remove_stale_with(dir, |_| false)
 }
 
-/// Cleans `dir` after killed runs: a stale `.<name>.ignis-tmp-<pid>.old` (a previous
-/// output moved aside by [`replace_dir`]'s fallback) is renamed back to `<name>` when
-/// nothing has that name any more (recovery), every other stale temporary is removed.
-/// Returns how many entries were removed or recovered.
+/// Moves several complete temporary files into place as one unit (e.g. a flipbook's PNG
+/// and its JSON): a journal `.<first target>.ignis-tmp-<pid>.commit` listing every
+/// (temporary, target) pair is written and synced first, then the renames are done, then
+/// the journal is removed. If the process dies in between, [`recover_and_clean`] (run by
+/// the next writer or reader in that directory) finishes the renames from the journal, so
+/// the files are either all old or all new once anything looks at them again.
+/// Every path must be in the same directory `dir`, named by plain file names.
+pub fn commit_files(dir: &Path, pairs: &[(String, String)]) -> std::io::Result<()> {
+    use std::io::Write;
+    let Some((_, first)) = pairs.first() else {
+        return Ok(());
+    };
+    for (t, f) in pairs {
+        if [t, f]
+            .iter()
+            .any(|n| n.contains(['/', '\t', '\n']) || n.is_empty())
+        {
+            return Err(std::io::Error::other(format!(
+                "commit_files: `{t}` → `{f}` are not plain file names"
+            )));
+        }
+    }
+    let text: String = pairs.iter().map(|(t, f)| format!("{t}\t{f}\n")).collect();
+    let journal = dir.join(temp_name(first, "commit"));
+    let partial = dir.join(temp_name(first, "commit-partial"));
+    {
+        let mut j = std::fs::File::create(&partial)?;
+        j.write_all(text.as_bytes())?;
+        j.sync_all()?;
+    }
+    std::fs::rename(&partial, &journal)?;
+    sync_dir(dir);
+    for (t, f) in pairs {
+        if let Err(e) = std::fs::rename(dir.join(t), dir.join(f)) {
+            // Nothing renamed yet can be undone safely only for the first pair; leave the
+            // journal so the next run completes or cleans it.
+            return Err(e);
+        }
+    }
+    sync_dir(dir);
+    std::fs::remove_file(&journal)?;
+    Ok(())
+}
+
+fn sync_dir(dir: &Path) {
+    if let Ok(d) = std::fs::File::open(dir) {
+        let _ = d.sync_all();
+    }
+}
+
+/// Finishes the interrupted [`commit_files`] of dead owners in `dir`; returns how many
+/// journals were completed.
+fn roll_forward(dir: &Path) -> usize {
+    let Ok(rd) = std::fs::read_dir(dir) else {
+        return 0;
+    };
+    let mut n = 0;
+    for e in rd.flatten() {
+        let name = e.file_name();
+        let Some(name) = name.to_str() else { continue };
+        if !name.ends_with(".commit") || owner(name).is_none_or(pid_alive) {
+            continue;
+        }
+        let p = e.path();
+        // A journal is a few lines; anything large is not ours.
+        let text = match std::fs::metadata(&p) {
+            Ok(m) if m.is_file() && m.len() < 1 << 16 => {
+                std::fs::read_to_string(&p).unwrap_or_default()
+            }
+            _ => continue,
+        };
+        for line in text.lines() {
+            let Some((t, f)) = line.split_once('\t') else {
+                continue;
+            };
+            // Only our own temporaries are renamed, only to plain names in `dir`.
+            if owner(t).is_none() || f.contains('/') || f.is_empty() {
+                continue;
+            }
+            if std::fs::symlink_metadata(dir.join(t)).is_ok() {
+                let _ = std::fs::rename(dir.join(t), dir.join(f));
+            }
+        }
+        let _ = std::fs::remove_file(&p);
+        n += 1;
+    }
+    n
+}
+
+/// Cleans `dir` after killed runs: interrupted [`commit_files`] are completed first; a
+/// stale `.<name>.ignis-tmp-<pid>.old` (a previous output moved aside by
+/// [`replace_dir`]'s fallback) is renamed back to `<name>` when nothing has that name any
+/// more (recovery); every other stale temporary is removed. Returns how many entries were
+/// completed, removed or recovered.
 pub fn recover_and_clean(dir: &Path) -> usize {
-    let mut recovered = 0;
+    let mut recovered = roll_forward(dir);
     let n = remove_stale_with(dir, |name| {
         if !name.ends_with(".old") {
             return false;
@@ -239,6 +329,42 @@ mod tests {
         // Recovery: the target is gone, so the stale `.old` comes back under its name.
         assert_eq!(recover_and_clean(d), 1);
         assert!(d.join("b.png").exists());
+    }
+
+    /// Issue 18 defect 6: a multi-file commit interrupted after its journal is completed by
+    /// the next run; a completed one leaves nothing behind.
+    #[test]
+    fn interrupted_commit_is_rolled_forward() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        std::fs::write(d.join("f.png"), b"old png").unwrap();
+        std::fs::write(d.join("f.json"), b"old json").unwrap();
+        let (tp, tj) = (
+            temp_name("f.png", "partial"),
+            temp_name("f.json", "partial"),
+        );
+        std::fs::write(d.join(&tp), b"new png").unwrap();
+        std::fs::write(d.join(&tj), b"new json").unwrap();
+        commit_files(d, &[(tp, "f.png".into()), (tj, "f.json".into())]).unwrap();
+        assert_eq!(std::fs::read(d.join("f.json")).unwrap(), b"new json");
+        assert_eq!(std::fs::read_dir(d).unwrap().count(), 2);
+        // A dead writer's state: journal written, the PNG renamed, the JSON not yet.
+        let mut child = std::process::Command::new("true").spawn().unwrap();
+        let dead = child.id();
+        child.wait().unwrap();
+        let tj = format!(".f.json.ignis-tmp-{dead}.partial");
+        let tp = format!(".f.png.ignis-tmp-{dead}.partial");
+        std::fs::write(d.join("f.png"), b"newer png").unwrap();
+        std::fs::write(d.join(&tj), b"newer json").unwrap();
+        std::fs::write(
+            d.join(format!(".f.png.ignis-tmp-{dead}.commit")),
+            format!("{tp}\tf.png\n{tj}\tf.json\n"),
+        )
+        .unwrap();
+        recover_and_clean(d);
+        assert_eq!(std::fs::read(d.join("f.json")).unwrap(), b"newer json");
+        assert_eq!(std::fs::read(d.join("f.png")).unwrap(), b"newer png");
+        assert_eq!(std::fs::read_dir(d).unwrap().count(), 2);
     }
 
     /// Issue 18 defect 6: replacing a directory is one exchange; nothing is left beside it.
