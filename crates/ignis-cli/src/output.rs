@@ -190,6 +190,23 @@ impl StagedDir {
     }
 }
 
+/// Moves every entry of `from` into `to`, merging directories that exist in both.
+fn move_into(from: &std::path::Path, to: &std::path::Path) -> Result<()> {
+    for e in std::fs::read_dir(from).with_context(|| format!("reading {}", from.display()))? {
+        let e = e?;
+        let dst = to.join(e.file_name());
+        let both_dirs =
+            e.file_type()?.is_dir() && std::fs::symlink_metadata(&dst).is_ok_and(|m| m.is_dir());
+        if both_dirs {
+            move_into(&e.path(), &dst)?;
+        } else {
+            std::fs::rename(e.path(), &dst)
+                .with_context(|| format!("writing {}", dst.display()))?;
+        }
+    }
+    Ok(())
+}
+
 impl Drop for StagedDir {
     fn drop(&mut self) {
         if let Some(t) = self.tmp.take() {
