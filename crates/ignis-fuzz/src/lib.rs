@@ -123,7 +123,8 @@ impl Mutator {
     /// One to three mutations of `input`.
     pub fn mutate(&mut self, input: &[u8]) -> Vec<u8> {
         let mut out = input.to_vec();
-        let n = 1 + self.rng.below(3);
+        // Mostly one mutation, so more inputs get past the parser to the checks behind it.
+        let n = [1, 1, 1, 2, 3][self.rng.below(5) as usize];
         for _ in 0..n {
             out = self.once(&out);
         }
@@ -133,7 +134,8 @@ impl Mutator {
     fn once(&mut self, b: &[u8]) -> Vec<u8> {
         let mut out = b.to_vec();
         let len = out.len().max(1) as u32;
-        match self.rng.below(8) {
+        // Field edits (numbers, strings, types) twice as often as raw byte changes.
+        match [0, 1, 2, 3, 4, 4, 4, 5, 5, 6, 7][self.rng.below(11) as usize] {
             0 if !out.is_empty() => {
                 let i = self.rng.below(len) as usize % out.len();
                 out[i] ^= 1 << self.rng.below(8);
