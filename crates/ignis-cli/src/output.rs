@@ -177,13 +177,7 @@ impl StagedDir {
                     .with_context(|| format!("writing {}", self.target.display()))?;
                 return Ok(());
             }
-            for e in std::fs::read_dir(&tmp)? {
-                let e = e?;
-                let to = self.target.join(e.file_name());
-                std::fs::rename(e.path(), &to)
-                    .with_context(|| format!("writing {}", to.display()))?;
-            }
-            Ok(())
+            move_into(&tmp, &self.target)
         })();
         let _ = std::fs::remove_dir_all(&tmp);
         r
