@@ -581,6 +581,15 @@ mod npy_files {
             npy::read_mat_f32(&dir.path().join("missing.npy")),
             Err(PcaError::Io { .. })
         ));
+        // Found by ignis-fuzz (issue 18): a shape whose byte size wraps around.
+        let mut b = b"\x93NUMPY\x01\x00v\x00{'descr': '<f8', 'fortran_order': False, 'shape': (18446744073709551615,), }".to_vec();
+        b.resize(10 + 0x76 - 1, b' ');
+        b.push(b'\n');
+        b.extend_from_slice(&[0u8; 64]);
+        let e = npy::parse_header(&p, &b).unwrap_err();
+        assert!(e.to_string().contains("too large"), "{e}");
+        std::fs::write(&p, &b).unwrap();
+        assert!(npy::read_f32(&p).is_err());
     }
     /// numpy reads what we write and we read what numpy writes (skips without python3 + numpy).
     #[test]
