@@ -246,7 +246,10 @@ pub fn template(db: &EigenfireDb, db_path: &str) -> String {
 pub fn scenario_cmd(a: &ScenarioArgs) -> Result<()> {
     let db = EigenfireDb::open(&a.db)
         .with_context(|| format!("opening the database {}", a.db.display()))?;
-    print!("{}", template(&db, &a.db.to_string_lossy()));
+    // The scenario resolves paths against its own directory, which is unknown here (the
+    // text goes to stdout): name the database absolutely so it resolves from anywhere.
+    let abs = std::path::absolute(&a.db).unwrap_or_else(|_| a.db.clone());
+    print!("{}", template(&db, &abs.to_string_lossy()));
     Ok(())
 }
 

@@ -37,7 +37,12 @@ pub fn shared_data(name: &str) -> Option<PathBuf> {
 }
 
 pub struct Demo {
+    /// Where results are written now: a hidden staging directory beside the output,
+    /// moved into place by [`Demo::finish`] (a failed demo leaves nothing new).
     pub dir: PathBuf,
+    /// The output directory the user named.
+    final_dir: PathBuf,
+    staged: Option<crate::output::StagedDir>,
     pub global: Global,
     /// Seed for every generator in the demo.
     pub seed: u64,
@@ -48,10 +53,12 @@ pub struct Demo {
 
 impl Demo {
     pub fn new(dir: &Path, global: Global, seed: u64, quick: bool) -> Result<Demo> {
-        std::fs::create_dir_all(dir)
+        let staged = crate::output::StagedDir::new(dir)
             .with_context(|| format!("creating demo directory {}", dir.display()))?;
         Ok(Demo {
-            dir: dir.to_path_buf(),
+            dir: staged.path().to_path_buf(),
+            final_dir: dir.to_path_buf(),
+            staged: Some(staged),
             global,
             seed,
             quick,
@@ -82,7 +89,7 @@ impl Demo {
     /// Adds a written result to the current section.
     pub fn item(&mut self, rel: &str, caption: &str, settings: &str) {
         self.global
-            .say(format!("  wrote {}", self.dir.join(rel).display()));
+            .say(format!("  wrote {}", self.final_dir.join(rel).display()));
         if self.sections.is_empty() {
             self.section("Results", "");
         }
@@ -94,8 +101,9 @@ impl Demo {
         });
     }
 
-    /// Writes `index.html` (atomically) and returns its path.
-    pub fn finish(&self) -> Result<PathBuf> {
+    /// Writes `index.html`, moves everything into the output directory and returns the
+    /// index's path.
+    pub fn finish(mut self) -> Result<PathBuf> {
         let mut html = String::from(
             "<!doctype html><html><head><meta charset=\"utf-8\"><title>Ignis demo</title><style>\
              body{background:#111;color:#ddd;font-family:sans-serif;margin:2em}\
@@ -132,10 +140,11 @@ impl Demo {
         }
         html.push_str("</body></html>\n");
         let path = self.dir.join("index.html");
-        let tmp = self.dir.join(".index.html.tmp");
-        std::fs::write(&tmp, html).with_context(|| format!("writing {}", tmp.display()))?;
-        std::fs::rename(&tmp, &path).with_context(|| format!("writing {}", path.display()))?;
-        Ok(path)
+        std::fs::write(&path, html).with_context(|| format!("writing {}", path.display()))?;
+        if let Some(s) = self.staged.take() {
+            s.commit()?;
+        }
+        Ok(self.final_dir.join("index.html"))
     }
 }
 

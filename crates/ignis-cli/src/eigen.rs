@@ -313,8 +313,11 @@ impl Progress for Bars<'_> {
 fn media_source(path: &Path) -> Result<ClipSource<'static>> {
     let info = ignis_media::probe(path).with_context(|| format!("reading {}", path.display()))?;
     let p = path.to_path_buf();
+    // Stored in the manifest and used later (original colouring) from any directory: an
+    // absolute path.
+    let abs = std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf());
     Ok(ClipSource {
-        source: path.display().to_string(),
+        source: abs.display().to_string(),
         fps: info.fps,
         size: info.size,
         frame_count: info.frame_count.map(|n| n as usize),
@@ -609,7 +612,10 @@ pub fn write_plots(
 fn plot_cmd(a: PlotArgs, g: &Global) -> Result<()> {
     let db = open_db(&a.db)?;
     let sp = g.spinner("plotting");
-    let files = write_plots(&db, &a.output, a.eigenfires, !a.no_compression)?;
+    // All figures or none: staged beside the output directory, moved in at the end.
+    let staged = crate::output::StagedDir::new(&a.output)?;
+    let files = write_plots(&db, staged.path(), a.eigenfires, !a.no_compression)?;
+    staged.commit()?;
     sp.finish_and_clear();
     for (f, c) in files {
         g.say(format!("wrote {} — {c}", a.output.join(f).display()));
@@ -760,13 +766,14 @@ fn preprocess(a: PreprocessArgs, g: &Global) -> Result<()> {
     let stages = ignis_eigen::train::preprocess_clip(&clip, &pre, &a.frames, &mut bars)
         .with_context(|| format!("pre-processing {}", input.display()))?;
     bars.finish_stage();
-    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+    let staged = crate::output::StagedDir::new(&out)?;
     for (frame, st) in &stages {
         for (name, img) in &st.images {
-            let p = out.join(format!("frame{frame:05}-{name}.png"));
+            let p = staged.path().join(format!("frame{frame:05}-{name}.png"));
             ignis_media::write_png(&p, img).with_context(|| format!("writing {}", p.display()))?;
         }
     }
+    staged.commit()?;
     g.say(format!(
         "wrote {} stage images for {} frames to {}",
         stages.iter().map(|s| s.1.images.len()).sum::<usize>(),

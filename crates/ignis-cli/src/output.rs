@@ -122,3 +122,89 @@ impl PaletteArg {
         }
     }
 }
+
+/// A directory of several outputs (plots, stage images) written as one unit: files go into
+/// a fresh hidden `.<name>.ignis-tmp-<pid>.dir` beside the target, which [`StagedDir::commit`]
+/// renames into place (or, when the target exists, whose files it moves in). A failed
+/// command drops it, leaving nothing new; a killed one leaves a PID-tagged directory the
+/// next run removes.
+pub struct StagedDir {
+    target: PathBuf,
+    tmp: Option<PathBuf>,
+}
+
+impl StagedDir {
+    pub fn new(target: &std::path::Path) -> Result<StagedDir> {
+        if std::fs::metadata(target).is_ok_and(|m| !m.is_dir()) {
+            anyhow::bail!(
+                "{} exists and is not a directory; choose another output directory",
+                target.display()
+            );
+        }
+        let parent = match target.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+            _ => PathBuf::from("."),
+        };
+        std::fs::create_dir_all(&parent)
+            .with_context(|| format!("creating {}", parent.display()))?;
+        ignis_core::tempfiles::recover_and_clean(&parent);
+        let name = target
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "out".into());
+        let tmp = parent.join(ignis_core::tempfiles::temp_name(&name, "dir"));
+        if tmp.exists() {
+            let _ = std::fs::remove_dir_all(&tmp);
+        }
+        std::fs::create_dir(&tmp).with_context(|| format!("creating {}", tmp.display()))?;
+        Ok(StagedDir {
+            target: target.to_path_buf(),
+            tmp: Some(tmp),
+        })
+    }
+
+    /// Where to write the files now.
+    pub fn path(&self) -> &std::path::Path {
+        self.tmp.as_deref().expect("not committed")
+    }
+
+    /// Moves the staged files into the target directory.
+    pub fn commit(mut self) -> Result<()> {
+        let tmp = self.tmp.take().expect("not committed");
+        let r = (|| -> Result<()> {
+            if std::fs::symlink_metadata(&self.target).is_err() {
+                std::fs::rename(&tmp, &self.target)
+                    .with_context(|| format!("writing {}", self.target.display()))?;
+                return Ok(());
+            }
+            move_into(&tmp, &self.target)
+        })();
+        let _ = std::fs::remove_dir_all(&tmp);
+        r
+    }
+}
+
+/// Moves every entry of `from` into `to`, merging directories that exist in both.
+fn move_into(from: &std::path::Path, to: &std::path::Path) -> Result<()> {
+    for e in std::fs::read_dir(from).with_context(|| format!("reading {}", from.display()))? {
+        let e = e?;
+        let dst = to.join(e.file_name());
+        let both_dirs =
+            e.file_type()?.is_dir() && std::fs::symlink_metadata(&dst).is_ok_and(|m| m.is_dir());
+        if both_dirs {
+            move_into(&e.path(), &dst)?;
+        } else {
+            std::fs::rename(e.path(), &dst)
+                .with_context(|| format!("writing {}", dst.display()))?;
+        }
+    }
+    Ok(())
+}
+
+impl Drop for StagedDir {
+    fn drop(&mut self) {
+        if let Some(t) = self.tmp.take() {
+            let _ = std::fs::remove_dir_all(t);
+        }
+    }
+}

@@ -183,14 +183,43 @@ pub fn render(a: &RenderArgs, g: &Global) -> Result<Vec<PathBuf>> {
         pb.inc(1);
     }
     pb.finish_and_clear();
-    let mut files = writer
-        .finish()
-        .with_context(|| format!("finishing {}", a.out.output.display()))?;
-    if let Some(p) = &a.collisions {
-        let tmp = p.with_extension("jsonl.tmp");
-        std::fs::write(&tmp, hits).with_context(|| format!("writing {}", tmp.display()))?;
-        std::fs::rename(&tmp, p).with_context(|| format!("writing {}", p.display()))?;
-        files.push(p.clone());
+    // The collision log is written to a PID-tagged temporary first: if that fails, the
+    // writer is dropped and nothing is written; then the frames, then the log renamed.
+    let staged = match &a.collisions {
+        Some(p) => {
+            let dir = match p.parent() {
+                Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+                _ => std::path::PathBuf::from("."),
+            };
+            ignis_core::tempfiles::recover_and_clean(&dir);
+            let name = p
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_else(|| "collisions.jsonl".into());
+            let tmp = dir.join(ignis_core::tempfiles::temp_name(&name, "partial"));
+            if let Err(e) = std::fs::write(&tmp, &hits) {
+                let _ = std::fs::remove_file(&tmp);
+                return Err(e).with_context(|| format!("writing {}", p.display()));
+            }
+            Some((tmp, p.clone()))
+        }
+        None => None,
+    };
+    let mut files = match writer.finish() {
+        Ok(f) => f,
+        Err(e) => {
+            if let Some((tmp, _)) = &staged {
+                let _ = std::fs::remove_file(tmp);
+            }
+            return Err(e).with_context(|| format!("finishing {}", a.out.output.display()));
+        }
+    };
+    if let Some((tmp, p)) = staged {
+        if let Err(e) = std::fs::rename(&tmp, &p) {
+            let _ = std::fs::remove_file(&tmp);
+            return Err(e).with_context(|| format!("writing {}", p.display()));
+        }
+        files.push(p);
     }
     for f in &files {
         g.say(format!("wrote {}", f.display()));

@@ -470,6 +470,42 @@ mod eigen {
         assert_fails(&o, "unknown clip `torch`");
         assert!(!out2.exists());
     }
+
+    /// Issue 18 defects 12 and 7: a scenario printed for a relative database path renders
+    /// from another directory; a failed `eigen plot` leaves nothing new.
+    #[test]
+    fn relative_paths_resolve_and_failures_leave_nothing() {
+        let t = tempfile::tempdir().unwrap();
+        let sub = t.path().join("sub");
+        std::fs::create_dir(&sub).unwrap();
+        train_db(&sub);
+        let run = |args: &[&str]| {
+            Command::new(env!("CARGO_BIN_EXE_ignis"))
+                .args(args)
+                .current_dir(t.path())
+                .output()
+                .unwrap()
+        };
+        let o = run(&["eigen", "scenario", "sub/fire.db"]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        std::fs::create_dir_all(t.path().join("out/scenes")).unwrap();
+        std::fs::write(t.path().join("out/scenes/s.toml"), &o.stdout).unwrap();
+        let o = run(&[
+            "eigen",
+            "animate",
+            "out/scenes/s.toml",
+            "--dry-run",
+            "-o",
+            "x.gif",
+        ]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        // Plot into a path whose parent is a file: refused, nothing new.
+        std::fs::write(t.path().join("afile"), "x").unwrap();
+        let before = files_in(t.path());
+        let o = run(&["eigen", "plot", "sub/fire.db", "-o", "afile/plots"]);
+        assert!(!o.status.success());
+        assert_eq!(files_in(t.path()), before);
+    }
 }
 
 mod volume {
@@ -623,5 +659,87 @@ mod flow {
             assert!(c["mean_error_px"].as_f64().unwrap() < 0.5, "{case}: {c}");
         }
         assert!(v["morph_vs_blend"].is_array() || v["morph_vs_blend"].is_string());
+    }
+}
+
+/// Issue 18: bad arguments are errors (no panic, nothing written).
+mod hardening {
+    use super::*;
+
+    #[test]
+    fn bad_arguments_are_errors_and_write_nothing() {
+        let t = tempfile::tempdir().unwrap();
+        let p = |s: &str| t.path().join(s).to_str().unwrap().to_string();
+        // Defect 5: a huge pattern width.
+        let o = ignis(&[
+            "classic",
+            "--size",
+            "32x24",
+            "--frames",
+            "3",
+            "-o",
+            &p("out/%65536d.png"),
+        ]);
+        assert_fails(&o, "at most 20");
+        // Defect 9: frame rates out of range.
+        for fps in ["1e30", "1e-30"] {
+            let o = ignis(&[
+                "classic",
+                "--size",
+                "32x24",
+                "--frames",
+                "3",
+                "--fps",
+                fps,
+                "-o",
+                &p("q.mp4"),
+            ]);
+            assert_fails(&o, "fps");
+        }
+        // Defects 4 and 10: runaway volume work and a NaN tint.
+        let o = ignis(&[
+            "volume",
+            "render",
+            "--preset",
+            "candle",
+            "--size",
+            "32x32",
+            "--frames",
+            "1",
+            "--slice-spacing",
+            "1e-7",
+            "-o",
+            &p("v.gif"),
+        ]);
+        assert_fails(&o, "slice_spacing");
+        let o = ignis(&[
+            "volume",
+            "render",
+            "--preset",
+            "candle",
+            "--size",
+            "32x32",
+            "--frames",
+            "1",
+            "--blend",
+            "tint:nan,0,0",
+            "-o",
+            &p("v.gif"),
+        ]);
+        assert_fails(&o, "tint");
+        // Defect 13: a device node is not replaced.
+        let o = ignis(&[
+            "classic",
+            "--size",
+            "32x24",
+            "--frames",
+            "2",
+            "--format",
+            "mp4",
+            "-o",
+            "/dev/null",
+        ]);
+        assert_fails(&o, "device");
+        assert!(files_in(t.path()).is_empty(), "{:?}", files_in(t.path()));
     }
 }

@@ -7,8 +7,10 @@
 //! - [`post`]: bloom (§6.2) and the alpha matte (§6.2).
 //! - [`loopq`]: seam and ghost, the loop/transition quality measured on written frames.
 //! - [`rng`]: the seeded RNG every generator uses.
+//! - [`tempfiles`]: names of writers' hidden temporaries and removal of stale ones.
 //!
-//! **Invariant:** this crate knows nothing of files, codecs, clap or GPUs. Pixel data is
+//! **Invariant:** this crate knows nothing of files (beyond naming and removing the
+//! writers' own stale temporaries, [`tempfiles`]), codecs, clap or GPUs. Pixel data is
 //! linear light everywhere; only `ignis-media` converts to 8-bit sRGB.
 
 pub mod colour;
@@ -18,6 +20,7 @@ pub mod loopq;
 pub mod palette;
 pub mod post;
 pub mod rng;
+pub mod tempfiles;
 
 pub use error::{CoreError, Result};
 pub use frame::{GrayFrame, RgbaFrame, Size};

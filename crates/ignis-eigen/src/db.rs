@@ -147,6 +147,267 @@ pub fn sha256_hex(bytes: &[u8]) -> String {
     d.iter().map(|b| format!("{b:02x}")).collect()
 }
 
+/// Name of the manifest's checksum sidecar, in `sha256sum` format
+/// (`<hex>  manifest.json`), so `sha256sum -c manifest.sha256` checks it too. A sidecar
+/// rather than a field: fields can be added to the manifest without changing how it is
+/// hashed.
+pub const MANIFEST_SUM: &str = "manifest.sha256";
+
+/// The sidecar's text for manifest bytes `bytes`.
+pub fn manifest_sum_text(bytes: &[u8]) -> String {
+    format!("{}  manifest.json\n", sha256_hex(bytes))
+}
+
+/// Whether `rel` is a plain relative name inside the database directory: `/`-separated
+/// parts of letters, digits, `-`, `_` and `.`, none empty, none starting with `.` (so no
+/// `..`, no absolute path, no hidden file), at most two parts (`mean.npy`,
+/// `packs/pack_001.npy`).
+pub fn check_rel_name(rel: &str) -> std::result::Result<(), String> {
+    let parts: Vec<&str> = rel.split('/').collect();
+    let ok = !rel.is_empty()
+        && rel.len() <= 255
+        && parts.len() <= 2
+        && parts.iter().all(|p| {
+            !p.is_empty()
+                && !p.starts_with('.')
+                && p.chars()
+                    .all(|c| c.is_ascii_alphanumeric() || "-_.".contains(c))
+        });
+    if ok {
+        Ok(())
+    } else {
+        Err(format!(
+            "file name `{rel}` is not a plain name inside the database (no absolute paths, \
+             no `..`, no hidden files); retrain the database or restore its manifest"
+        ))
+    }
+}
+
+/// Opens `db/rel` for reading only if it is a regular file reached without symbolic links
+/// (below `db`) and never blocks (a FIFO or device is refused, not opened for a read that
+/// could hang).
+pub fn open_regular(db: &Path, rel: &str) -> std::result::Result<std::fs::File, String> {
+    check_rel_name(rel)?;
+    let mut p = db.to_path_buf();
+    for part in rel.split('/') {
+        p.push(part);
+        let md =
+            std::fs::symlink_metadata(&p).map_err(|e| format!("missing or unreadable ({e})"))?;
+        if md.file_type().is_symlink() {
+            return Err(format!(
+                "`{}` is a symbolic link; database files must be regular files inside the database",
+                p.display()
+            ));
+        }
+    }
+    let mut o = std::fs::OpenOptions::new();
+    o.read(true);
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::OpenOptionsExt;
+        o.custom_flags(libc::O_NOFOLLOW | libc::O_NONBLOCK);
+    }
+    let f = o
+        .open(&p)
+        .map_err(|e| format!("missing or unreadable ({e})"))?;
+    let md = f.metadata().map_err(|e| e.to_string())?;
+    if !md.is_file() {
+        return Err(format!(
+            "`{}` is not a regular file (a FIFO, device or directory); database files must be regular files",
+            p.display()
+        ));
+    }
+    Ok(f)
+}
+
+impl Manifest {
+    /// Checks every field against the others (counts, rows, packs, sizes, file names,
+    /// numbers finite and in range). [`EigenfireDb::open`] calls it, then checks the files
+    /// against it; `Err` names the first problem found.
+    pub fn validate(&self) -> std::result::Result<(), String> {
+        fn size_ok(what: &str, s: Size) -> std::result::Result<(), String> {
+            Size::new(s.width, s.height)
+                .map(|_| ())
+                .map_err(|e| format!("{what} {}x{}: {e}", s.width, s.height))
+        }
+        let fin = |what: &str, v: f64| -> std::result::Result<(), String> {
+            if v.is_finite() {
+                Ok(())
+            } else {
+                Err(format!("{what} is {v}, expected a finite number"))
+            }
+        };
+        if self.format != FORMAT {
+            return Err(format!("format is `{}`, expected `{FORMAT}`", self.format));
+        }
+        if self.version > VERSION {
+            return Err(format!(
+                "format version {} is newer than this program reads ({VERSION})",
+                self.version
+            ));
+        }
+        size_ok("train_size", self.train_size)?;
+        size_ok("frame_size", self.frame_size)?;
+        let (m, k) = (self.frames, self.components);
+        if m == 0 || k == 0 || k > m {
+            return Err(format!(
+                "frames = {m}, components = {k}: need 1 <= components <= frames"
+            ));
+        }
+        if self.pack_size == 0 {
+            return Err("pack_size is 0, expected at least 1".into());
+        }
+        if self.e_detect == 0 || self.e_detect > k || self.e_render == 0 || self.e_render > k {
+            return Err(format!(
+                "e_detect = {}, e_render = {}: each must be in 1..={k} (components)",
+                self.e_detect, self.e_render
+            ));
+        }
+        fin("total_variance", self.total_variance)?;
+        if self.total_variance < 0.0 {
+            return Err(format!(
+                "total_variance is {}, expected >= 0",
+                self.total_variance
+            ));
+        }
+        if self.clips.is_empty() {
+            return Err("no clips".into());
+        }
+        let mut row = 0usize;
+        for (i, c) in self.clips.iter().enumerate() {
+            let bad = |r: String| Err(format!("clips[{i}] (`{}`): {r}", c.name));
+            if c.name.is_empty()
+                || c.name.starts_with('.')
+                || !c
+                    .name
+                    .chars()
+                    .all(|ch| ch.is_ascii_alphanumeric() || "-_.".contains(ch))
+            {
+                return bad(
+                    "the name may contain only letters, digits, `-`, `_` and `.` (not first)"
+                        .into(),
+                );
+            }
+            if self.clips[..i].iter().any(|d| d.name == c.name) {
+                return bad("two clips have this name".into());
+            }
+            if c.stride == 0 {
+                return bad("stride is 0, expected at least 1".into());
+            }
+            if c.start >= c.end {
+                return bad(format!("range {}..{} is empty", c.start, c.end));
+            }
+            let expect = (c.end - c.start).div_ceil(c.stride);
+            if c.frames != expect {
+                return bad(format!(
+                    "frames = {}, but {}..{} every {} is {expect} frames",
+                    c.frames, c.start, c.end, c.stride
+                ));
+            }
+            if c.first_row != row {
+                return bad(format!(
+                    "first_row = {}, expected {row} (clips' rows are consecutive)",
+                    c.first_row
+                ));
+            }
+            row = match row.checked_add(c.frames) {
+                Some(r) if r <= m => r,
+                _ => return bad(format!("rows past frames = {m}")),
+            };
+            if !(c.fps.is_finite() && c.fps > 0.0) {
+                return bad(format!("fps is {}, expected a finite number > 0", c.fps));
+            }
+            size_ok("source_size", c.source_size).or_else(|r| bad(r))?;
+            let p = c.pose;
+            if !(p.fuel_x.is_finite()
+                && p.base_y.is_finite()
+                && p.scale.is_finite()
+                && p.scale > 0.0)
+            {
+                return bad(format!("pose {p:?} is not finite with scale > 0"));
+            }
+            let t = &c.thresholds;
+            for (w, v) in [
+                ("mean", t.mean),
+                ("min", t.min),
+                ("max", t.max),
+                ("theta_min", t.theta_min),
+                ("theta_average", t.theta_average),
+            ] {
+                fin(&format!("thresholds.{w}"), v).or_else(|r| bad(r))?;
+            }
+            if let Some(&pk) = t.peaks.iter().find(|&&pk| pk >= c.frames) {
+                return bad(format!(
+                    "thresholds.peaks has {pk}, past the clip's {} frames",
+                    c.frames
+                ));
+            }
+            if let Some(f) = &c.frames_file {
+                check_rel_name(&f.file)?;
+                if !f.file.starts_with("frames/") {
+                    return bad(format!("frames_file `{}` is not in frames/", f.file));
+                }
+            }
+        }
+        if row != m {
+            return Err(format!(
+                "the clips hold {row} frames, the manifest says frames = {m}"
+            ));
+        }
+        let mut first = 0;
+        for (i, p) in self.packs.iter().enumerate() {
+            let want = self.pack_size.min(k.saturating_sub(first));
+            if p.first != first || p.count != want || want == 0 {
+                return Err(format!(
+                    "packs[{i}] holds {}..{}, expected {first}..{} (pack_size {})",
+                    p.first,
+                    p.first.saturating_add(p.count),
+                    first + want,
+                    self.pack_size
+                ));
+            }
+            check_rel_name(&p.entry.file)?;
+            if !p.entry.file.starts_with("packs/") {
+                return Err(format!(
+                    "packs[{i}] file `{}` is not in packs/",
+                    p.entry.file
+                ));
+            }
+            first += p.count;
+        }
+        if first != k {
+            return Err(format!(
+                "packs hold {first} Eigenfires, the manifest says {k}"
+            ));
+        }
+        let mut names: Vec<&str> = Vec::new();
+        let files = [&self.mean, &self.eigenvalues, &self.weights, &self.angles]
+            .into_iter()
+            .chain(self.packs.iter().map(|p| &p.entry))
+            .chain(self.clips.iter().filter_map(|c| c.frames_file.as_ref()));
+        for f in files {
+            check_rel_name(&f.file)?;
+            if f.sha256.len() != 64 || !f.sha256.bytes().all(|b| b.is_ascii_hexdigit()) {
+                return Err(format!(
+                    "`{}`: sha256 `{}` is not 64 hex digits",
+                    f.file, f.sha256
+                ));
+            }
+            if names.contains(&f.file.as_str())
+                || f.file == "manifest.json"
+                || f.file == MANIFEST_SUM
+            {
+                return Err(format!("`{}` is listed twice", f.file));
+            }
+            names.push(&f.file);
+        }
+        self.preprocess
+            .validate()
+            .map_err(|e| format!("preprocess: {e}"))?;
+        Ok(())
+    }
+}
+
 /// Hashes a file and returns its manifest entry.
 pub fn file_entry(dir: &Path, rel: &str) -> Result<FileEntry> {
     let p = dir.join(rel);
@@ -158,59 +419,48 @@ pub fn file_entry(dir: &Path, rel: &str) -> Result<FileEntry> {
     })
 }
 
-/// Atomically replaces `target` by the directory `tmp` (same parent): the old database is
-/// renamed aside, the new one renamed in, then the old one deleted.
+/// Atomically replaces `target` by the directory `tmp` (same parent): one
+/// `renameat2(RENAME_EXCHANGE)` where available (the name always holds a complete
+/// database), else two renames with recovery on the next run; see
+/// [`ignis_core::tempfiles::replace_dir`]. Refuses to replace a non-empty directory that
+/// is not an Eigenfire database, and anything that is not a directory.
 pub fn commit_dir(tmp: &Path, target: &Path) -> Result<()> {
-    let aside = target.with_file_name(format!(
-        ".{}.old-{}",
-        target
-            .file_name()
-            .map(|s| s.to_string_lossy().into_owned())
-            .unwrap_or_default(),
-        std::process::id()
-    ));
-    let had_old = target.exists();
-    if had_old {
-        if !target.join("manifest.json").exists()
-            && target
-                .read_dir()
-                .map(|mut d| d.next().is_some())
-                .unwrap_or(true)
-        {
+    if let Ok(md) = std::fs::symlink_metadata(target) {
+        let not_db = !md.is_dir()
+            || (!target.join("manifest.json").exists()
+                && target
+                    .read_dir()
+                    .map(|mut d| d.next().is_some())
+                    .unwrap_or(true));
+        if not_db {
             return Err(EigenError::bad(
                 "output",
                 format!(
-                    "{} exists and is not an Eigenfire database; refusing to replace it",
+                    "{} exists and is not an Eigenfire database; refusing to replace it \
+                     (choose another output name)",
                     target.display()
                 ),
             ));
         }
-        std::fs::rename(target, &aside).map_err(|e| EigenError::io(target, e))?;
     }
-    if let Err(e) = std::fs::rename(tmp, target) {
-        if had_old {
-            let _ = std::fs::rename(&aside, target);
-        }
-        return Err(EigenError::io(target, e));
-    }
-    if had_old {
-        let _ = std::fs::remove_dir_all(&aside);
-    }
-    Ok(())
+    ignis_core::tempfiles::replace_dir(tmp, target).map_err(|e| EigenError::io(target, e))
 }
 
-/// A temporary directory beside `target` for an atomic write.
+/// A temporary directory beside `target` for an atomic write
+/// (`.<name>.ignis-tmp-<pid>.dir`). Stale temporaries of killed runs in that directory are
+/// removed first (and a database moved aside by an interrupted replacement is recovered).
 pub fn temp_dir_for(target: &Path) -> Result<PathBuf> {
     let parent = match target.parent() {
         Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
         _ => PathBuf::from("."),
     };
     std::fs::create_dir_all(&parent).map_err(|e| EigenError::io(&parent, e))?;
+    ignis_core::tempfiles::recover_and_clean(&parent);
     let name = target
         .file_name()
         .map(|s| s.to_string_lossy().into_owned())
         .unwrap_or_else(|| "db".into());
-    let tmp = parent.join(format!(".{name}.tmp-{}", std::process::id()));
+    let tmp = parent.join(ignis_core::tempfiles::temp_name(&name, "dir"));
     if tmp.exists() {
         std::fs::remove_dir_all(&tmp).map_err(|e| EigenError::io(&tmp, e))?;
     }
@@ -268,7 +518,7 @@ impl std::fmt::Debug for EigenfireDb {
 
 fn map_checked(db: &Path, entry: &FileEntry, verify: bool) -> std::result::Result<Mapped, String> {
     let p = db.join(&entry.file);
-    let f = std::fs::File::open(&p).map_err(|e| format!("missing or unreadable ({e})"))?;
+    let f = open_regular(db, &entry.file)?;
     let len = f.metadata().map_err(|e| e.to_string())?.len();
     if len != entry.bytes {
         return Err(format!(
@@ -316,34 +566,56 @@ impl EigenfireDb {
             file: file.into(),
             reason,
         };
-        let mpath = dir.join("manifest.json");
-        let text = std::fs::read_to_string(&mpath).map_err(|e| {
-            dberr(
-                "manifest.json",
-                format!("cannot read ({e}); is this an Eigenfire database?"),
-            )
-        })?;
-        let manifest: Manifest = serde_json::from_str(&text)
-            .map_err(|e| dberr("manifest.json", format!("malformed: {e}")))?;
-        if manifest.format != FORMAT {
-            return Err(dberr(
-                "manifest.json",
-                format!("format is `{}`, expected `{FORMAT}`", manifest.format),
-            ));
-        }
-        if manifest.version > VERSION {
+        // Read with a bound (a manifest is a few kB; 16 MiB allows thousands of clips).
+        let read_small = |name: &str| -> Result<Vec<u8>> {
+            use std::io::Read;
+            let f = open_regular(dir, name)
+                .map_err(|r| dberr(name, format!("{r}; is this an Eigenfire database?")))?;
+            let mut bytes = Vec::new();
+            f.take(16 << 20)
+                .read_to_end(&mut bytes)
+                .map_err(|e| dberr(name, format!("cannot read ({e})")))?;
+            if bytes.len() >= 16 << 20 {
+                return Err(dberr(
+                    name,
+                    "larger than 16 MiB; not an Eigenfire manifest".into(),
+                ));
+            }
+            Ok(bytes)
+        };
+        let bytes = read_small("manifest.json")?;
+        let sum = read_small(MANIFEST_SUM)?;
+        if sum != manifest_sum_text(&bytes).as_bytes() {
             return Err(dberr(
                 "manifest.json",
                 format!(
-                    "format version {} is newer than this program reads ({VERSION})",
-                    manifest.version
+                    "checksum mismatch: the manifest was edited or is corrupt (sha256 {}, \
+                     {MANIFEST_SUM} says `{}`); restore it or retrain the database",
+                    sha256_hex(&bytes),
+                    String::from_utf8_lossy(&sum[..sum.len().min(64)])
                 ),
             ));
         }
+        let manifest: Manifest = serde_json::from_slice(&bytes)
+            .map_err(|e| dberr("manifest.json", format!("malformed: {e}")))?;
+        manifest
+            .validate()
+            .map_err(|r| dberr("manifest.json", format!("invalid: {r}")))?;
         let n = manifest.train_size.pixels();
         let (m, k) = (manifest.frames, manifest.components);
         let load = |e: &FileEntry, shape: &[usize]| -> Result<Mapped> {
             let mp = map_checked(dir, e, true).map_err(|r| dberr(&e.file, r))?;
+            let want = if std::ptr::eq(e, &manifest.eigenvalues) {
+                npy::Dtype::F64
+            } else {
+                npy::Dtype::F32
+            };
+            if mp.header.dtype != want {
+                return Err(dberr(
+                    &e.file,
+                    format!("dtype {:?}, expected {want:?}", mp.header.dtype),
+                ));
+            }
             if mp.header.len() != shape.iter().product::<usize>() {
                 return Err(dberr(
                     &e.file,
@@ -364,22 +636,6 @@ impl EigenfireDb {
             std::borrow::Cow::Owned(v) => Some(v),
         };
         let angles = load(&manifest.angles, &[m])?.f32().into_owned();
-        let mut first = 0;
-        for p in &manifest.packs {
-            if p.first != first || p.count == 0 {
-                return Err(dberr(
-                    &p.entry.file,
-                    "packs are not contiguous in the manifest".into(),
-                ));
-            }
-            first += p.count;
-        }
-        if first != k {
-            return Err(dberr(
-                "manifest.json",
-                format!("packs hold {first} Eigenfires, the manifest says {k}"),
-            ));
-        }
         let packs = manifest.packs.iter().map(|_| OnceLock::new()).collect();
         let frames = manifest.clips.iter().map(|_| OnceLock::new()).collect();
         Ok(EigenfireDb {
@@ -729,7 +985,19 @@ impl EigenfireDb {
                 ),
             )
         })?;
-        let r = self.frames[c].get_or_init(|| map_checked(&self.dir, e, true));
+        let want = clip
+            .frames
+            .saturating_mul(self.manifest.frame_size.pixels());
+        let r = self.frames[c].get_or_init(|| {
+            let mp = map_checked(&self.dir, e, true)?;
+            if mp.header.len() != want || mp.header.dtype != npy::Dtype::F32 {
+                return Err(format!(
+                    "shape {:?} does not match the manifest ({} frames of {})",
+                    mp.header.shape, clip.frames, self.manifest.frame_size
+                ));
+            }
+            Ok(mp)
+        });
         r.as_ref().map_err(|reason| EigenError::Database {
             db: self.dir.clone(),
             file: e.file.clone(),
@@ -887,5 +1155,137 @@ mod tests {
             let e = r.unwrap_err().to_string();
             assert!(e.contains("pack_002.npy"), "{e}");
         }
+    }
+
+    /// Rewrites `db/manifest.json` through `f`; `resum` also rewrites its checksum (to get
+    /// past it and reach validation).
+    fn edit(db: &Path, resum: bool, f: impl FnOnce(&mut serde_json::Value)) {
+        let mp = db.join("manifest.json");
+        let mut v: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(&mp).unwrap()).unwrap();
+        f(&mut v);
+        let text = serde_json::to_string_pretty(&v).unwrap();
+        std::fs::write(&mp, &text).unwrap();
+        if resum {
+            std::fs::write(db.join(MANIFEST_SUM), manifest_sum_text(text.as_bytes())).unwrap();
+        }
+    }
+
+    /// Issue 18 defects 1 and 2: every edited field is refused on open, by the checksum or
+    /// (with the checksum rewritten) by validation, without a panic or a huge allocation.
+    #[test]
+    fn edited_manifest_fields_are_refused_on_open() {
+        let tmp = tempfile::tempdir().unwrap();
+        let db = small_db(tmp.path());
+        let dir = db.path().to_path_buf();
+        drop(db);
+        let orig_m = std::fs::read(dir.join("manifest.json")).unwrap();
+        let orig_s = std::fs::read(dir.join(MANIFEST_SUM)).unwrap();
+        let restore = || {
+            std::fs::write(dir.join("manifest.json"), &orig_m).unwrap();
+            std::fs::write(dir.join(MANIFEST_SUM), &orig_s).unwrap();
+        };
+        let big = serde_json::json!(1_000_000_000u64);
+        type Edit = Box<dyn Fn(&mut serde_json::Value)>;
+        let pack1 = "packs/pack_001.npy";
+        let cases: Vec<(&str, Edit)> = vec![
+            ("stride", Box::new(|v| v["clips"][0]["stride"] = 0.into())),
+            (
+                "first_row",
+                Box::new(|v| v["clips"][0]["first_row"] = 1.into()),
+            ),
+            (
+                "first_row",
+                Box::new({
+                    let b = big.clone();
+                    move |v| v["clips"][0]["first_row"] = b.clone()
+                }),
+            ),
+            (
+                "frames",
+                Box::new(|v| {
+                    let f = v["clips"][0]["frames"].as_u64().unwrap();
+                    v["clips"][0]["frames"] = (f + 1).into()
+                }),
+            ),
+            (
+                "frames",
+                Box::new({
+                    let b = big.clone();
+                    move |v| v["clips"][0]["frames"] = b.clone()
+                }),
+            ),
+            ("pack_size", Box::new(|v| v["pack_size"] = 0.into())),
+            (
+                "frame_size",
+                Box::new(|v| {
+                    v["frame_size"] = serde_json::json!({"width": 100000, "height": 100000})
+                }),
+            ),
+            (
+                "fps",
+                Box::new(|v| v["clips"][0]["fps"] = serde_json::json!(-1.0)),
+            ),
+            ("e_render", Box::new(|v| v["e_render"] = 100000.into())),
+            (
+                "/etc/shadow",
+                Box::new(|v| v["mean"]["file"] = "/etc/shadow".into()),
+            ),
+            (
+                "plain name",
+                Box::new(|v| v["packs"][0]["file"] = "../other.db/packs/pack_001.npy".into()),
+            ),
+            (
+                "listed twice",
+                Box::new(move |v| v["mean"]["file"] = pack1.into()),
+            ),
+        ];
+        for (want, f) in &cases {
+            // Without the checksum rewritten, the edit itself is named.
+            edit(&dir, false, f);
+            let e = EigenfireDb::open(&dir).unwrap_err().to_string();
+            assert!(
+                e.contains("checksum mismatch") && e.contains("edited"),
+                "{want}: {e}"
+            );
+            restore();
+            edit(&dir, true, f);
+            let e = EigenfireDb::open(&dir).unwrap_err().to_string();
+            assert!(e.contains(want), "expected `{want}` in: {e}");
+            restore();
+        }
+        // A stored-frames file pointing at a pack: shape refused on use, not a panic.
+        EigenfireDb::open(&dir).unwrap();
+        // A missing checksum sidecar is an error naming it.
+        std::fs::remove_file(dir.join(MANIFEST_SUM)).unwrap();
+        let e = EigenfireDb::open(&dir).unwrap_err().to_string();
+        assert!(e.contains(MANIFEST_SUM), "{e}");
+        restore();
+    }
+
+    /// Issue 18 defect 2: symbolic links and FIFOs are refused, never followed or opened
+    /// for a read that would block.
+    #[cfg(unix)]
+    #[test]
+    fn links_and_fifos_in_a_database_are_refused() {
+        let tmp = tempfile::tempdir().unwrap();
+        let db = small_db(tmp.path());
+        let dir = db.path().to_path_buf();
+        drop(db);
+        let mean = dir.join("mean.npy");
+        let saved = tmp.path().join("mean.saved");
+        std::fs::rename(&mean, &saved).unwrap();
+        std::os::unix::fs::symlink(&saved, &mean).unwrap();
+        let e = EigenfireDb::open(&dir).unwrap_err().to_string();
+        assert!(e.contains("symbolic link"), "{e}");
+        std::fs::remove_file(&mean).unwrap();
+        let c = std::ffi::CString::new(mean.to_str().unwrap()).unwrap();
+        // SAFETY: a valid path string.
+        assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o644) }, 0);
+        let e = EigenfireDb::open(&dir).unwrap_err().to_string();
+        assert!(e.contains("not a regular file"), "{e}");
+        std::fs::remove_file(&mean).unwrap();
+        std::fs::rename(&saved, &mean).unwrap();
+        EigenfireDb::open(&dir).unwrap();
     }
 }

@@ -173,8 +173,16 @@ impl MaskParams {
                 "must be within 0..=50 pixels",
             ));
         }
-        if !(self.canny[0] >= 0.0 && self.canny[0] <= self.canny[1]) {
-            return Err(EigenError::bad("mask.canny", "needs 0 <= low <= high"));
+        // imageproc's hysteresis walks off the image when low = 0 (every zero-gradient
+        // border pixel counts as an edge), so low must be positive.
+        if !(self.canny[0] > 0.0 && self.canny[0] <= self.canny[1] && self.canny[1] <= 1e6) {
+            return Err(EigenError::bad(
+                "mask.canny",
+                format!(
+                    "{:?}: needs 0 < low <= high <= 1e6, e.g. [50, 100]",
+                    self.canny
+                ),
+            ));
         }
         Ok(())
     }
@@ -280,6 +288,25 @@ pub fn mask_area(mask: &GrayImage) -> usize {
 
 #[cfg(test)]
 mod tests {
+
+    /// Issue 18 defect 5: a zero low threshold is refused; the smallest accepted one runs.
+    #[test]
+    fn canny_thresholds_are_checked() {
+        let mut p = MaskParams::default();
+        p.canny = [0.0, 100.0];
+        assert!(p.validate().is_err());
+        p.canny = [f32::NAN, 100.0];
+        assert!(p.validate().is_err());
+        p.canny = [1e-6, 1e-6];
+        p.validate().unwrap();
+        let mut m = GrayImage::new(9, 7);
+        for (i, v) in m.iter_mut().enumerate() {
+            *v = ((i * 37) % 256) as u8;
+        }
+        let e = mask_edges(&m, &p);
+        assert_eq!(e.dimensions(), (9, 7));
+    }
+
     use super::*;
     use ignis_core::palette::srgb_to_linear;
     use ignis_core::Size;

@@ -744,7 +744,10 @@ fn train_into(
     let text = serde_json::to_string_pretty(&manifest)
         .map_err(|e| EigenError::bad("manifest", e.to_string()))?;
     let mp = tmp.join("manifest.json");
-    std::fs::write(&mp, text).map_err(|e| EigenError::io(&mp, e))?;
+    std::fs::write(&mp, &text).map_err(|e| EigenError::io(&mp, e))?;
+    let sp = tmp.join(db::MANIFEST_SUM);
+    std::fs::write(&sp, db::manifest_sum_text(text.as_bytes()))
+        .map_err(|e| EigenError::io(&sp, e))?;
     progress.finish_stage();
     Ok((manifest, weights))
 }

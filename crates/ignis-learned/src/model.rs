@@ -24,6 +24,17 @@ use std::path::Path;
 /// The model file format version this build reads and writes.
 pub const MODEL_VERSION: u32 = 1;
 const MAGIC: &str = "IGNIS-LEARNED-FLAME";
+/// Largest model file [`FlameModel::load`] reads (models are a few MB).
+pub const MAX_MODEL_BYTES: u64 = 1 << 30;
+
+/// SHA-256 of `bytes`, lowercase hex (the checksum in a model's header line).
+fn sha256_hex(bytes: &[u8]) -> String {
+    use sha2::Digest;
+    sha2::Sha256::digest(bytes)
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect()
+}
 
 /// Settings of [`train`].
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -351,16 +362,33 @@ impl FlameModel {
             .file_name()
             .map(|n| n.to_string_lossy().into_owned())
             .unwrap_or_default();
-        let tmp = dir.join(format!(".{name}.tmp{}", std::process::id()));
-        let mut f = std::fs::File::create(&tmp).map_err(io)?;
+        if std::fs::metadata(path).is_ok_and(|m| !m.is_file()) {
+            return Err(LearnedError::bad(
+                "output",
+                format!(
+                    "{} exists and is not a regular file (a device, FIFO or directory); \
+                     choose a regular file path",
+                    path.display()
+                ),
+            ));
+        }
         let body = serde_json::to_vec(&file)
             .map_err(|e| LearnedError::Numerical(format!("serialising: {e}")))?;
-        f.write_all(format!("{MAGIC} {MODEL_VERSION}\n").as_bytes())
-            .map_err(io)?;
-        f.write_all(&body).map_err(io)?;
-        f.sync_all().map_err(io)?;
-        drop(f);
-        std::fs::rename(&tmp, path).map_err(|e| {
+        // `.<name>.ignis-tmp-<pid>.partial`: removed on any failure here, and by a later
+        // save in this directory if this process is killed.
+        ignis_core::tempfiles::recover_and_clean(dir);
+        let tmp = dir.join(ignis_core::tempfiles::temp_name(&name, "partial"));
+        let written = (|| {
+            let mut f = std::fs::File::create(&tmp)?;
+            f.write_all(
+                format!("{MAGIC} {MODEL_VERSION} sha256:{}\n", sha256_hex(&body)).as_bytes(),
+            )?;
+            f.write_all(&body)?;
+            f.sync_all()?;
+            drop(f);
+            std::fs::rename(&tmp, path)
+        })();
+        written.map_err(|e| {
             let _ = std::fs::remove_file(&tmp);
             io(e)
         })
@@ -369,14 +397,43 @@ impl FlameModel {
     /// Reads a model written by [`FlameModel::save`]; a file of another format version is
     /// a [`LearnedError::BadModelFile`] naming both versions.
     pub fn load(path: &Path) -> Result<FlameModel> {
-        let bytes = std::fs::read(path).map_err(|source| LearnedError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
         let bad = |reason: String| LearnedError::BadModelFile {
             path: path.to_path_buf(),
             reason,
         };
+        let ioerr = |source| LearnedError::Io {
+            path: path.to_path_buf(),
+            source,
+        };
+        // Only a regular file, opened without blocking (a FIFO would hang a read), and of
+        // a bounded size.
+        let mut o = std::fs::OpenOptions::new();
+        o.read(true);
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::OpenOptionsExt;
+            o.custom_flags(libc::O_NONBLOCK);
+        }
+        let file = o.open(path).map_err(ioerr)?;
+        let md = file.metadata().map_err(ioerr)?;
+        if !md.is_file() {
+            return Err(bad(
+                "not a regular file (a FIFO, device or directory)".into()
+            ));
+        }
+        if md.len() > MAX_MODEL_BYTES {
+            return Err(bad(format!(
+                "{} bytes; a model is at most {MAX_MODEL_BYTES} bytes",
+                md.len()
+            )));
+        }
+        let mut bytes = Vec::new();
+        {
+            use std::io::Read;
+            file.take(MAX_MODEL_BYTES + 1)
+                .read_to_end(&mut bytes)
+                .map_err(ioerr)?;
+        }
         let nl = bytes
             .iter()
             .position(|&b| b == b'\n')
@@ -398,8 +455,31 @@ impl FlameModel {
                  retrain it with `ignis learned train`"
             )));
         }
-        let f: ModelFile = serde_json::from_slice(&bytes[nl + 1..])
-            .map_err(|e| bad(format!("corrupt model body: {e}")))?;
+        let body = bytes.get(nl + 1..).unwrap_or_default();
+        let want = parts
+            .next()
+            .and_then(|t| t.strip_prefix("sha256:"))
+            .ok_or_else(|| {
+                bad(
+                    "the header has no checksum (written by an older Ignis?); retrain it with \
+                     `ignis learned train`"
+                        .into(),
+                )
+            })?;
+        let got = sha256_hex(body);
+        if got != want {
+            return Err(bad(format!(
+                "checksum mismatch (corrupt or edited): sha256 {got}, the header says {want}; \
+                 restore the file or retrain it with `ignis learned train`"
+            )));
+        }
+        let f: ModelFile =
+            serde_json::from_slice(body).map_err(|e| bad(format!("corrupt model body: {e}")))?;
+        if f.arp.order() == 0 {
+            return Err(bad(
+                "the ARP has order 0 (no dynamics to synthesise from); retrain the model".into(),
+            ));
+        }
         f.shape.validate()?;
         let (ns2, ne, n) = (
             (f.shape.norm_size * f.shape.norm_size) as usize,

@@ -20,6 +20,9 @@ use crate::shape::{render_into, Placement, RenderScratch};
 use ignis_core::{GrayFrame, Rng, Size};
 use serde::{Deserialize, Serialize};
 
+/// Largest wind offset (flame heights): beyond it the flame leaves any frame.
+pub const MAX_WIND: f64 = 10.0;
+
 /// Wind (path offset) over time.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub enum Wind {
@@ -61,11 +64,14 @@ impl Wind {
         let bad = || {
             LearnedError::bad(
                 "wind",
-                format!("`{s}` is not a number or frame:offset keys like 0:0,100:0.5"),
+                format!(
+                    "`{s}` is not a number or frame:offset keys like 0:0,100:0.5 \
+                     (offsets within ±{MAX_WIND}, in flame heights)"
+                ),
             )
         };
         if let Ok(v) = s.trim().parse::<f64>() {
-            return if v.is_finite() {
+            return if v.is_finite() && v.abs() <= MAX_WIND {
                 Ok(Wind::Constant(v))
             } else {
                 Err(bad())
@@ -80,6 +86,7 @@ impl Wind {
             );
             if !f.is_finite()
                 || !v.is_finite()
+                || v.abs() > MAX_WIND
                 || keys.last().is_some_and(|&(lf, _): &(f64, f64)| f <= lf)
             {
                 return Err(bad());
@@ -116,12 +123,28 @@ impl Default for Controls {
 
 impl Controls {
     pub fn validate(&self) -> Result<()> {
+        let winds: Vec<f64> = match &self.wind {
+            Wind::Constant(w) => vec![*w],
+            Wind::Keys(k) => k.iter().flat_map(|&(f, v)| [f, v]).collect(),
+        };
+        let ok = match &self.wind {
+            Wind::Constant(w) => w.is_finite() && w.abs() <= MAX_WIND,
+            Wind::Keys(k) => k
+                .iter()
+                .all(|&(f, v)| f.is_finite() && v.is_finite() && v.abs() <= MAX_WIND),
+        };
+        if !ok {
+            return Err(LearnedError::bad(
+                "wind",
+                format!("{winds:?}: offsets must be finite and within ±{MAX_WIND} flame heights"),
+            ));
+        }
         for (name, v) in [
             ("height", self.height),
             ("width", self.width),
             ("scale", self.scale),
         ] {
-            if !(0.1..=10.0).contains(&v) {
+            if !(0.1..=10.0).contains(&v) || v.is_nan() {
                 return Err(LearnedError::bad(name, format!("{v} is outside 0.1..=10")));
             }
         }
@@ -262,5 +285,14 @@ mod tests {
         assert_eq!(w.at(500.0), 1.0);
         assert!(Wind::parse("10:0,5:1").is_err());
         assert!(Wind::parse("abc").is_err());
+        // Issue 18 defect 10: offsets past ±MAX_WIND are refused.
+        for w in ["1e30", "-11", "0:0,10:1e30", "inf"] {
+            assert!(Wind::parse(w).is_err(), "{w}");
+        }
+        let c = Controls {
+            wind: Wind::Constant(1e30),
+            ..Default::default()
+        };
+        assert!(c.validate().is_err());
     }
 }

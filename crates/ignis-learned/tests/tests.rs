@@ -197,6 +197,45 @@ mod flame {
             .unwrap();
         assert_ne!(a, other);
         assert!(a.iter().all(|f| f.max() > 0.1));
+
+        // Issue 18 defects 11 and 5: a flipped digit is a checksum error; an empty ARP
+        // (checksum rewritten) is refused on load, not a panic in synthesis; nothing is
+        // left beside the model.
+        let bytes = std::fs::read(&path).unwrap();
+        let nl = bytes.iter().position(|&b| b == b'\n').unwrap();
+        let digit = bytes[nl..].iter().position(|b| b.is_ascii_digit()).unwrap() + nl;
+        let mut flipped = bytes.clone();
+        flipped[digit] = if flipped[digit] == b'9' {
+            b'8'
+        } else {
+            flipped[digit] + 1
+        };
+        let bad = dir.path().join("bad.flame");
+        std::fs::write(&bad, &flipped).unwrap();
+        let e = FlameModel::load(&bad).unwrap_err().to_string();
+        assert!(e.contains("checksum mismatch"), "{e}");
+        let mut body: serde_json::Value = serde_json::from_slice(&bytes[nl + 1..]).unwrap();
+        body["arp"]["a"] = serde_json::json!([]);
+        body["init"] = serde_json::json!([]);
+        let body = serde_json::to_vec(&body).unwrap();
+        let hex: String = {
+            use sha2::Digest;
+            sha2::Sha256::digest(&body)
+                .iter()
+                .map(|b| format!("{b:02x}"))
+                .collect()
+        };
+        let mut file = format!("IGNIS-LEARNED-FLAME 1 sha256:{hex}\n").into_bytes();
+        file.extend_from_slice(&body);
+        std::fs::write(&bad, &file).unwrap();
+        let e = FlameModel::load(&bad).unwrap_err().to_string();
+        assert!(e.contains("order 0"), "{e}");
+        let mut names: Vec<_> = std::fs::read_dir(dir.path())
+            .unwrap()
+            .map(|e| e.unwrap().file_name().into_string().unwrap())
+            .collect();
+        names.sort();
+        assert_eq!(names, ["bad.flame", "candle.flame"]);
     }
 
     #[test]

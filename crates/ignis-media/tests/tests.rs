@@ -905,3 +905,152 @@ mod bad_input {
         assert!(dir_entries(dir.path()).is_empty());
     }
 }
+
+/// Issue 18 regressions (defects 5, 6, 8, 9, 13, 14).
+mod hardening {
+    use super::*;
+
+    fn size() -> Size {
+        Size::new(8, 6).unwrap()
+    }
+
+    /// Defect 9: frame rates outside 0.001..=1000 are refused for every format.
+    #[test]
+    fn fps_out_of_range_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        for fps in [1e30, 1e-30, f64::NAN, -1.0, 1000.5] {
+            for name in ["q.mp4", "q.gif", "q.png", "seq/"] {
+                let opts = WriteOptions {
+                    fps,
+                    ..Default::default()
+                };
+                let e = create(&dir.path().join(name), size(), &opts).err().unwrap();
+                assert!(
+                    matches!(e, MediaError::BadParameter { name: "fps", .. }),
+                    "{fps} {name}: {e}"
+                );
+            }
+        }
+        assert!(dir_entries(dir.path()).is_empty());
+    }
+
+    /// Defect 13: a device node (or FIFO) as output is refused, not replaced.
+    #[cfg(unix)]
+    #[test]
+    fn device_nodes_are_not_replaced() {
+        use std::os::unix::fs::FileTypeExt;
+        for fmt in [Format::Mp4, Format::Gif, Format::Flipbook] {
+            let opts = WriteOptions {
+                format: Some(fmt),
+                ..Default::default()
+            };
+            let e = create(Path::new("/dev/null"), size(), &opts).err().unwrap();
+            assert!(e.to_string().contains("a device"), "{e}");
+        }
+        assert!(std::fs::metadata("/dev/null")
+            .unwrap()
+            .file_type()
+            .is_char_device());
+        let dir = tempfile::tempdir().unwrap();
+        let fifo = dir.path().join("f.mp4");
+        let c = std::ffi::CString::new(fifo.to_str().unwrap()).unwrap();
+        // SAFETY: a valid path string.
+        assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o644) }, 0);
+        let e = create(&fifo, size(), &WriteOptions::default())
+            .err()
+            .unwrap();
+        assert!(e.to_string().contains("a FIFO"), "{e}");
+        assert!(ignis_media::write_png(&fifo, &RgbaFrame::new(size())).is_err());
+    }
+
+    /// Defect 5: a huge printf width is an error, not a formatting panic.
+    #[test]
+    fn huge_pattern_width_is_an_error() {
+        let dir = tempfile::tempdir().unwrap();
+        for pat in [
+            "out/%65536d.png",
+            "out/%99999999999999999999999d.png",
+            "out/%21d.exr",
+        ] {
+            let e = create(&dir.path().join(pat), size(), &WriteOptions::default())
+                .err()
+                .unwrap();
+            assert!(e.to_string().contains("at most 20"), "{pat}: {e}");
+        }
+        let e = probe(&dir.path().join("%65536d.png")).err().unwrap();
+        assert!(e.to_string().contains("pattern"), "{e}");
+    }
+
+    /// Defect 8: EXR sequences are the same bytes every run, whatever the thread count,
+    /// with scan lines in increasing Y.
+    #[test]
+    fn exr_bytes_are_deterministic() {
+        let frames: Vec<_> = (0..2)
+            .map(|t| test_frame(Size::new(70, 40).unwrap(), t, true))
+            .collect();
+        let write = |threads: usize| {
+            let dir = tempfile::tempdir().unwrap();
+            let p = dir.path().join("e/%02d.exr");
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            pool.install(|| write_all(&p, &frames, &WriteOptions::default()));
+            let b = std::fs::read(dir.path().join("e/01.exr")).unwrap();
+            assert_eq!(read_all(&p).len(), 2);
+            b
+        };
+        let a = write(1);
+        assert_eq!(a, write(2));
+        assert_eq!(a, write(1));
+        // lineOrder attribute: type "lineOrder", size 1, value 0 = INCREASING_Y.
+        let key = b"lineOrder\0lineOrder\0\x01\0\0\0";
+        let at = a
+            .windows(key.len())
+            .position(|w| w == key)
+            .expect("lineOrder attribute");
+        assert_eq!(a[at + key.len()], 0);
+    }
+
+    /// Defects 6 and 14: a sequence written into an existing directory replaces it in one
+    /// step (old files with other names kept), and nothing hidden is left beside it;
+    /// stale temporaries of a dead writer are removed by the next run.
+    #[test]
+    fn sequence_into_existing_directory_is_swapped_in() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("out/");
+        let f0: Vec<_> = (0..3).map(|t| test_frame(size(), t, true)).collect();
+        write_all(&out, &f0, &WriteOptions::default());
+        std::fs::write(out.join("notes.txt"), "keep").unwrap();
+        // A dead writer's leftovers, in the parent and in the directory.
+        let mut child = std::process::Command::new("true").spawn().unwrap();
+        let dead = child.id();
+        child.wait().unwrap();
+        let stale = dir.path().join(format!(".out.ignis-tmp-{dead}.abc.dir"));
+        std::fs::create_dir(&stale).unwrap();
+        std::fs::write(stale.join("0000.png"), "x").unwrap();
+        let f1: Vec<_> = (5..7).map(|t| test_frame(size(), t, true)).collect();
+        write_all(&out, &f1, &WriteOptions::default());
+        assert_eq!(dir_entries(dir.path()), ["out"]);
+        assert_eq!(
+            dir_entries(&out),
+            ["0000.png", "0001.png", "0002.png", "notes.txt"]
+        );
+        let back = read_all(&out.join("%04d.png"));
+        assert_eq!(&back[..2], &f1[..]);
+        assert_eq!(back[2], f0[2]);
+        assert_eq!(
+            std::fs::read_to_string(out.join("notes.txt")).unwrap(),
+            "keep"
+        );
+        // Flipbook: exactly the PNG and the JSON, from one commit.
+        let fb = dir.path().join("fb.png");
+        write_all(&fb, &f1, &WriteOptions::default());
+        write_all(&fb, &f0, &WriteOptions::default());
+        assert_eq!(dir_entries(dir.path()), ["fb.json", "fb.png", "out"]);
+        assert_eq!(
+            read_flipbook(&dir.path().join("fb.json")).unwrap().frames,
+            f0
+        );
+    }
+}

@@ -82,7 +82,40 @@ pub fn available_bytes() -> u64 {
     ) {
         avail = avail.min(max.saturating_sub(cur));
     }
-    avail
+    avail.min(address_space_left())
+}
+
+/// Address space this process may still map under `RLIMIT_AS` (`ulimit -v`): the soft
+/// limit minus the current `VmSize`; `u64::MAX` when unlimited or unknown. Past it every
+/// allocation fails, whatever memory the machine has free.
+pub fn address_space_left() -> u64 {
+    #[cfg(unix)]
+    {
+        let mut r = libc::rlimit {
+            rlim_cur: 0,
+            rlim_max: 0,
+        };
+        // SAFETY: `r` is a valid rlimit to fill.
+        if unsafe { libc::getrlimit(libc::RLIMIT_AS, &mut r) } != 0
+            || r.rlim_cur == libc::RLIM_INFINITY
+        {
+            return u64::MAX;
+        }
+        let used = std::fs::read_to_string("/proc/self/status")
+            .ok()
+            .and_then(|s| {
+                s.lines()
+                    .find(|l| l.starts_with("VmSize:"))
+                    .and_then(|l| l.split_whitespace().nth(1))
+                    .and_then(|v| v.parse::<u64>().ok())
+            })
+            .map_or(0, |kb| kb.saturating_mul(1024));
+        (r.rlim_cur as u64).saturating_sub(used)
+    }
+    #[cfg(not(unix))]
+    {
+        u64::MAX
+    }
 }
 
 /// Refuses `needed` bytes when over the budget.

@@ -167,6 +167,19 @@ pub fn parse_header(path: &Path, bytes: &[u8]) -> Result<Header, PcaError> {
         .map(|s| s.trim_end_matches('L').parse::<usize>())
         .collect::<Result<Vec<_>, _>>()
         .map_err(|_| unsupported(path, format!("bad shape ({shape_s})")))?;
+    // The byte size must be representable (a shape like (2^64 - 1,) would wrap around and
+    // pass later size checks).
+    let bytes = shape
+        .iter()
+        .try_fold(dtype.size(), |a, &d| a.checked_mul(d))
+        .and_then(|b| b.checked_add(start + hlen))
+        .filter(|&b| b <= isize::MAX as usize);
+    if bytes.is_none() {
+        return Err(unsupported(
+            path,
+            format!("shape ({shape_s}) is too large to address"),
+        ));
+    }
     Ok(Header {
         dtype,
         fortran_order,

@@ -391,8 +391,15 @@ fn run(
     drop(buf);
     debug_time("projection B = Q^T A");
 
-    let svd = bmat
-        .thin_svd()
+    // faer's SVD splits its work by the global parallelism (rayon's current thread count),
+    // and the split changes the rounding: run it on a one-thread pool so the result does
+    // not depend on the caller's thread count (the sketch is small: k × N).
+    let one = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .map_err(|e| PcaError::Numerical(format!("cannot start a thread pool: {e}")))?;
+    let svd = one
+        .install(|| bmat.thin_svd())
         .map_err(|e| PcaError::Numerical(format!("SVD failed: {e:?} (NaN or infinite input?)")))?;
     let sv = svd.S().column_vector();
     let largest = if sv.nrows() > 0 {

@@ -277,6 +277,70 @@ mod randomized {
     }
 }
 
+/// Issue 18 defect 8: the streaming (randomized) fit gives the same bits whatever the
+/// thread count.
+#[test]
+fn streaming_fit_does_not_depend_on_the_thread_count() {
+    let a = decaying(3000, 60, 10, 4);
+    let fit = || {
+        fit_streaming(
+            &mut MatSource { data: a.as_ref() },
+            12,
+            &StreamingOptions {
+                block_frames: 16,
+                seed: 3,
+                ..Default::default()
+            },
+        )
+        .unwrap()
+    };
+    let pool = |n| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build()
+            .unwrap()
+    };
+    let one = pool(1).install(fit);
+    let two = pool(2).install(fit);
+    let three = pool(3).install(fit);
+    for p in [&two, &three] {
+        assert_eq!(p.eigenvalues, one.eigenvalues);
+        assert_eq!(p.mean, one.mean);
+        assert!(p.components == one.components);
+    }
+}
+
+/// Issue 18 defect 5: an address-space limit (`ulimit -v`) caps the memory the checks see.
+#[cfg(target_os = "linux")]
+#[test]
+fn address_space_limit_caps_available_memory() {
+    // In a child process (setrlimit is process-wide): limit to 4 GiB, then the budget is
+    // below it.
+    if std::env::var_os("IGNIS_PCA_RLIMIT_CHILD").is_some() {
+        let r = libc::rlimit {
+            rlim_cur: 4 << 30,
+            rlim_max: libc::RLIM_INFINITY,
+        };
+        // SAFETY: a valid rlimit.
+        assert_eq!(unsafe { libc::setrlimit(libc::RLIMIT_AS, &r) }, 0);
+        let left = ignis_pca::memory::address_space_left();
+        assert!(left < 4 << 30, "{left}");
+        assert!(ignis_pca::available_bytes() <= left);
+        return;
+    }
+    let exe = std::env::current_exe().unwrap();
+    let st = std::process::Command::new(exe)
+        .args([
+            "address_space_limit_caps_available_memory",
+            "--exact",
+            "--nocapture",
+        ])
+        .env("IGNIS_PCA_RLIMIT_CHILD", "1")
+        .status()
+        .unwrap();
+    assert!(st.success());
+}
+
 mod bad_input {
     use super::*;
 
@@ -517,6 +581,15 @@ mod npy_files {
             npy::read_mat_f32(&dir.path().join("missing.npy")),
             Err(PcaError::Io { .. })
         ));
+        // Found by ignis-fuzz (issue 18): a shape whose byte size wraps around.
+        let mut b = b"\x93NUMPY\x01\x00v\x00{'descr': '<f8', 'fortran_order': False, 'shape': (18446744073709551615,), }".to_vec();
+        b.resize(10 + 0x76 - 1, b' ');
+        b.push(b'\n');
+        b.extend_from_slice(&[0u8; 64]);
+        let e = npy::parse_header(&p, &b).unwrap_err();
+        assert!(e.to_string().contains("too large"), "{e}");
+        std::fs::write(&p, &b).unwrap();
+        assert!(npy::read_f32(&p).is_err());
     }
     /// numpy reads what we write and we read what numpy writes (skips without python3 + numpy).
     #[test]

@@ -17,6 +17,10 @@ pub enum VolumeError {
         path: std::path::PathBuf,
         reason: String,
     },
+    /// The estimated work or memory of a render is past a documented limit
+    /// ([`crate::render::MAX_SAMPLES`], [`crate::render::MAX_CANDIDATES`]).
+    #[error("too much work: {0}")]
+    LimitExceeded(String),
     /// A frame-level error from `ignis-core` (size limits, bloom settings).
     #[error(transparent)]
     Core(#[from] ignis_core::CoreError),

@@ -42,10 +42,12 @@ impl Obstacle {
     pub fn validate(&self, field: &str) -> Result<()> {
         match *self {
             Obstacle::Sphere { centre, radius } => {
-                if !(radius > 0.0 && radius.is_finite()) || centre.iter().any(|v| !v.is_finite()) {
+                if !(radius > 0.0 && radius <= 1e6)
+                    || centre.iter().any(|v| !(v.is_finite() && v.abs() <= 1e6))
+                {
                     return Err(VolumeError::bad(
                         format!("{field}.radius"),
-                        "must be a positive finite number",
+                        "the radius must be in (0, 1e6] and the centre within ±1e6 world units",
                     ));
                 }
             }
@@ -330,10 +332,13 @@ impl SimParams {
                 "temperatures must be positive kelvin",
             ));
         }
-        if !(self.lifetime > 0.0 && self.lifetime <= 60.0) {
+        if !(self.lifetime >= 1e-3 && self.lifetime <= 60.0) {
             return Err(VolumeError::bad(
                 f("lifetime"),
-                format!("{} s; use (0, 60]", self.lifetime),
+                format!(
+                    "{} s; use 0.001 to 60 (shorter lifetimes emit particles without bound)",
+                    self.lifetime
+                ),
             ));
         }
         if self.control_points < degree + 1 || self.control_points > 64 {
@@ -346,8 +351,15 @@ impl SimParams {
                 ),
             ));
         }
-        if !(self.radius >= 0.0 && self.tip_radius >= 0.0) {
-            return Err(VolumeError::bad(f("radius"), "radii must not be negative"));
+        let max_r = crate::spline::MAX_RADIUS;
+        if !((0.0..=max_r).contains(&self.radius) && (0.0..=max_r).contains(&self.tip_radius)) {
+            return Err(VolumeError::bad(
+                f("radius"),
+                format!(
+                    "radius {} and tip_radius {}: each must be in 0..={max_r:e} world units",
+                    self.radius, self.tip_radius
+                ),
+            ));
         }
         if !(1..=64).contains(&self.substeps) {
             return Err(VolumeError::bad(f("substeps"), "use 1 to 64"));

@@ -178,6 +178,17 @@ impl RenderParams {
                 ),
             ));
         }
+        if let Blend::Tint(t) = self.blend {
+            if !t
+                .iter()
+                .all(|c| c.is_finite() && (0.0..=1000.0).contains(c))
+            {
+                return Err(VolumeError::bad(
+                    "render.blend",
+                    format!("tint {t:?}: each of R, G, B must be a number in 0..=1000, e.g. tint:0.3,0.5,1"),
+                ));
+            }
+        }
         if !(self.intensity >= 0.0 && self.intensity.is_finite()) {
             return Err(VolumeError::bad(
                 "render.intensity",
@@ -214,6 +225,14 @@ pub struct RenderStats {
 }
 
 const TILE: u32 = 16;
+
+/// Most samples (estimated before marching: for every cell, the pixels its projection
+/// covers times its bounding box's diagonal over the slice spacing) one frame may take;
+/// past it [`render`] refuses with [`VolumeError::LimitExceeded`] instead of running for
+/// hours. 2·10⁹ is ~50× a Table 1 frame at 1920×1080.
+pub const MAX_SAMPLES: f64 = 2e9;
+/// Most (tile, cell) candidates one frame may bin (each ~100 bytes: 3·10⁷ ≈ 3 GB).
+pub const MAX_CANDIDATES: u64 = 30_000_000;
 
 /// Error bound, per texture coordinate, of the fast path's certified chord inverse
 /// ([`crate::lattice::Cell::inverse_certified`]) against the exact inverse: proven in
@@ -284,6 +303,13 @@ fn render_with(
     let (tx, ty) = (w.div_ceil(TILE), h.div_ceil(TILE));
     // bin cells into tiles
     let mut bins: Vec<Vec<Cand>> = vec![Vec::new(); (tx * ty) as usize];
+    let (mut est_samples, mut candidates) = (0f64, 0u64);
+    let too_much = |what: String| {
+        VolumeError::LimitExceeded(format!(
+            "{what}; raise render.slice_spacing (the paper uses 0.2 for a unit-radius fire), \
+             shrink the fire (radius, points, lifetime) or the output size"
+        ))
+    };
     for (fi, f) in fires.iter().enumerate() {
         let visible = visible_parts(f, camera.position, params.exact_inverse);
         for (ci, c) in f.lattice.cells().iter().enumerate() {
@@ -331,6 +357,32 @@ fn render_with(
                     (px[3] as i64).div_euclid(TILE as i64),
                 )
             };
+            let (cx0, cx1) = (px[0].max(0) as f64, (px[1] as f64).min(w as f64));
+            let (cy0, cy1) = (px[2].max(0) as f64, (px[3] as f64).min(h as f64));
+            let covered = if behind {
+                w as f64 * h as f64
+            } else {
+                (cx1 - cx0).max(0.0) * (cy1 - cy0).max(0.0)
+            };
+            let d = sub(c.max, c.min);
+            let diag = (dot(d, d) as f64).sqrt();
+            est_samples += covered * (diag / params.slice_spacing as f64).ceil();
+            if !(est_samples <= MAX_SAMPLES) {
+                return Err(too_much(format!(
+                    "a frame needs more than {MAX_SAMPLES:e} samples (slice spacing {}, {} cells)",
+                    params.slice_spacing,
+                    f.lattice.cells().len()
+                )));
+            }
+            let ntiles = ((y1.min(ty as i64 - 1) - y0.max(0) + 1).max(0)
+                * (x1.min(tx as i64 - 1) - x0.max(0) + 1).max(0)) as u64;
+            candidates += ntiles;
+            if candidates > MAX_CANDIDATES {
+                return Err(too_much(format!(
+                    "a frame needs more than {MAX_CANDIDATES} tile candidates ({} cells)",
+                    f.lattice.cells().len()
+                )));
+            }
             for y in y0.max(0)..=y1.min(ty as i64 - 1) {
                 for x in x0.max(0)..=x1.min(tx as i64 - 1) {
                     bins[(y as u32 * tx + x as u32) as usize].push(Cand {

@@ -756,3 +756,58 @@ impl Animator<'_> {
         })
     }
 }
+
+#[cfg(test)]
+mod hardening_tests {
+    use super::*;
+
+    fn scene(toml: &str) -> Result<FireScene> {
+        FireScene::from_toml(toml, Path::new("."), &mut |_| Err("no images".into()))
+    }
+
+    /// Issue 18 defect 4: work past the documented limits is refused before rendering
+    /// (quickly, without a large allocation), with the number and the fix.
+    #[test]
+    fn runaway_work_is_refused_before_rendering() {
+        let mut s = FireScene::preset(Preset::Candle).with_size(Size::new(32, 32).unwrap());
+        for spacing in [1e-7f32, 1e-9] {
+            s.slice_spacing = spacing;
+            let mut a = s.animator().unwrap();
+            let e = a.next_frame().err().expect("refused");
+            assert!(matches!(e, VolumeError::LimitExceeded(_)), "{e}");
+            let e = e.to_string();
+            assert!(e.contains("samples") && e.contains("slice_spacing"), "{e}");
+        }
+        let fire = |body: &str| format!("[render]\nsize = \"48x48\"\n[[fire]]\n{body}\n");
+        let many: Vec<String> = (0..100_000).map(|i| format!("[0,0,{i},1]")).collect();
+        let cases = [
+            fire("[fire.simulation]\nradius = 1e5"),
+            fire("[fire.simulation]\ntip_radius = 1e9"),
+            fire("[fire.simulation]\nlifetime = 1e-9"),
+            fire("curve = { points = [[0,0,0,1e9], [0,0,1,1], [0,0,2,1], [0,0,3,1]] }"),
+            fire(&format!("curve = {{ points = [{}] }}", many.join(","))),
+            format!(
+                "{}[[obstacle]]\ntype = \"sphere\"\ncentre = [0, 0, 0]\nradius = 1e30\n",
+                fire("curve = { points = [[0,0,0,1], [0,0,1,1], [0,0,2,1], [0,0,3,1]] }")
+            ),
+            "[render]\nblend = { tint = [nan, 0, 0] }\n[[fire]]\ncurve = { points = [[0,0,0,1], [0,0,1,1], [0,0,2,1], [0,0,3,1]] }\n".to_string(),
+        ];
+        for (i, c) in cases.iter().enumerate() {
+            assert!(scene(c).is_err(), "case {i} accepted");
+        }
+    }
+
+    /// Issue 18 defect 10: a tint must be finite and non-negative.
+    #[test]
+    fn bad_tints_are_refused() {
+        for t in [
+            [f32::NAN, 0.0, 0.0],
+            [f32::INFINITY, 0.0, 0.0],
+            [-1.0, 0.0, 0.0],
+        ] {
+            let mut p = FireScene::preset(Preset::Candle).render_params();
+            p.blend = Blend::Tint(t);
+            assert!(p.validate().is_err(), "{t:?}");
+        }
+    }
+}

@@ -29,6 +29,13 @@ pub fn open_uniform_knots(n: usize, p: usize) -> Vec<f64> {
         .collect()
 }
 
+/// Most control points of one curve.
+pub const MAX_POINTS: usize = 1024;
+/// Largest control-point coordinate, world units.
+pub const MAX_COORD: f32 = 1e6;
+/// Largest fire radius, world units (a unit-radius fire is the usual scale).
+pub const MAX_RADIUS: f32 = 1e4;
+
 impl BSpline {
     /// A curve of `degree ≥ 1` through `points` (`[x, y, z, radius]`); needs at least
     /// `degree + 1` points and non-negative finite radii.
@@ -49,7 +56,25 @@ impl BSpline {
                 ),
             ));
         }
+        if points.len() > MAX_POINTS {
+            return Err(VolumeError::bad(
+                "points",
+                format!(
+                    "{} control points; at most {MAX_POINTS} (the lattice has at most 4096 levels)",
+                    points.len()
+                ),
+            ));
+        }
         for (i, p) in points.iter().enumerate() {
+            if p[..3].iter().any(|v| v.abs() > MAX_COORD) || p[3] > MAX_RADIUS {
+                return Err(VolumeError::bad(
+                    format!("points[{i}]"),
+                    format!(
+                        "{p:?}: coordinates must be within ±{MAX_COORD:e} and the radius at most \
+                         {MAX_RADIUS:e} world units (a unit-radius fire is the usual scale)"
+                    ),
+                ));
+            }
             if p.iter().any(|v| !v.is_finite()) {
                 return Err(VolumeError::bad(
                     format!("points[{i}]"),

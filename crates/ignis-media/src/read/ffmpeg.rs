@@ -63,13 +63,31 @@ fn parse_rate(r: Option<&str>) -> Option<f64> {
     (v.is_finite() && v > 0.0).then_some(v)
 }
 
+/// The argument that names the local file `path` to ffmpeg/ffprobe: `file:` + the
+/// absolute path, so that a name like `http://...`, `my:clip.mp4` or `-report.mp4` is
+/// always a local file, never a URL, a protocol or an option. Use it together with
+/// [`PROTOCOL_WHITELIST`].
+pub(crate) fn file_url(path: &Path) -> Result<std::ffi::OsString> {
+    let abs = std::path::absolute(path).map_err(|e| MediaError::io(path, e))?;
+    let mut s = std::ffi::OsString::from("file:");
+    s.push(abs.as_os_str());
+    Ok(s)
+}
+
+/// `-protocol_whitelist file`: ffmpeg/ffprobe may open local files only (no network, and
+/// no nested protocols from playlists or concat lists).
+pub(crate) const PROTOCOL_WHITELIST: [&str; 2] = ["-protocol_whitelist", "file"];
+
 /// Probes `path` with `ffprobe` (container headers only).
 pub(crate) fn probe(path: &Path, _hint: Option<&str>) -> Result<SourceInfo> {
+    let url = file_url(path)?;
     let out = Command::new(ffmpeg_sidecar::ffprobe::ffprobe_path())
         .args(["-v", "error", "-select_streams", "v:0", "-show_entries"])
         .arg("stream=codec_name,profile,width,height,avg_frame_rate,r_frame_rate,nb_frames")
         .args(["-of", "json"])
-        .arg(path)
+        .args(PROTOCOL_WHITELIST)
+        .arg("-i")
+        .arg(url)
         .output()
         .map_err(|e| {
             MediaError::unsupported(
@@ -137,7 +155,8 @@ impl FfmpegSource {
             // Half a frame early, so rounding of timestamps cannot skip frame `start`.
             cmd.seek(format!("{:.6}", (start as f64 - 0.5) / info.fps));
         }
-        cmd.input(&info.path);
+        cmd.args(PROTOCOL_WHITELIST);
+        cmd.input(file_url(&info.path)?);
         cmd.args(["-map", "0:v:0", "-an", "-sn", "-dn"]);
         if let Some(e) = end {
             cmd.arg("-frames:v").arg((e - start).to_string());
@@ -225,5 +244,47 @@ mod tests {
         assert!((parse_rate(Some("30000/1001")).unwrap() - 29.97).abs() < 0.01);
         assert_eq!(parse_rate(Some("0/0")), None);
         assert_eq!(parse_rate(None), None);
+    }
+
+    /// Issue 18 defect 3: names that look like URLs, protocols or options are local files.
+    #[test]
+    fn odd_file_names_are_local_files_never_urls_or_options() {
+        if !ffmpeg_available() {
+            println!("skipped: ffmpeg/ffprobe not on PATH");
+            return;
+        }
+        let tmp = tempfile::tempdir().unwrap();
+        let size = Size::new(8, 6).unwrap();
+        let opts = crate::WriteOptions {
+            format: Some(crate::Format::Gif),
+            ..Default::default()
+        };
+        let src = tmp.path().join("src.gif");
+        let mut w = crate::write::create(&src, size, &opts).unwrap();
+        for _ in 0..2 {
+            w.push(&RgbaFrame::new(size)).unwrap();
+        }
+        w.finish().unwrap();
+        std::fs::create_dir_all(tmp.path().join("http:/127.0.0.1:9")).unwrap();
+        for name in ["-report.gif", "my:clip.gif", "http:/127.0.0.1:9/x.gif"] {
+            let p = tmp.path().join(name);
+            std::fs::copy(&src, &p).unwrap();
+            // Relative to the directory, exactly as a user would type it.
+            let rel = Path::new(name);
+            let info = probe(&p, None).unwrap_or_else(|e| panic!("{name}: {e}"));
+            assert_eq!(info.size, size, "{name}");
+            let mut s = FfmpegSource::start(&info, 0, Some(1)).unwrap();
+            let f = s.next_frame().expect("one frame").unwrap();
+            assert_eq!(f.size(), size);
+            assert!(file_url(rel)
+                .unwrap()
+                .to_string_lossy()
+                .starts_with("file:/"));
+        }
+        // `http://host/x` typed as a path is a local file that does not exist here: an
+        // error, never a network request.
+        let e = probe(Path::new("http://127.0.0.1:9/none.gif"), None).unwrap_err();
+        assert!(e.to_string().contains("ffprobe"), "{e}");
+        assert!(!tmp.path().join("-report.log").exists());
     }
 }

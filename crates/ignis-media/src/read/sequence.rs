@@ -150,7 +150,13 @@ impl Pattern {
         if !rest[digits..].starts_with('d') {
             return None;
         }
-        let width = rest[..digits].parse().unwrap_or(0);
+        // At most 20 digits (u64::MAX); a wider field is not a frame number.
+        let width: usize = match rest[..digits].parse() {
+            Ok(w) if w <= 20 => w,
+            Ok(_) => return None,
+            Err(_) if digits == 0 => 0,
+            Err(_) => return None,
+        };
         let suffix = &rest[digits + 1..];
         if suffix.contains('%') {
             return None;

@@ -17,7 +17,7 @@ use ignis_core::frame::MAX_PIXELS;
 use ignis_core::loopq::LoopQuality;
 use ignis_core::{RgbaFrame, Size};
 
-use super::{encode_png, persist, temp_file_for, Sink, WriteOptions};
+use super::{encode_png, temp_file_for, Sink, WriteOptions};
 use crate::convert;
 use crate::error::{MediaError, Result};
 
@@ -242,11 +242,11 @@ impl Sink for FlipbookSink {
                 .and_then(|_| w.flush())
                 .map_err(|e| MediaError::io(json_tmp.path(), e))?;
         }
-        persist(png_tmp, &self.path)?;
-        if let Err(e) = persist(json_tmp, &json_path) {
-            let _ = std::fs::remove_file(&self.path);
-            return Err(e);
-        }
+        // PNG and JSON as one unit (a journal completes an interrupted commit).
+        super::commit_temps(
+            &super::parent_dir(&self.path),
+            vec![(png_tmp, self.path.clone()), (json_tmp, json_path.clone())],
+        )?;
         Ok(vec![self.path.clone(), json_path])
     }
 }
@@ -254,6 +254,8 @@ impl Sink for FlipbookSink {
 /// Reads a flipbook back from its JSON sidecar: the metadata and every frame (linear
 /// light, straight alpha; a premultiplied sheet is un-premultiplied).
 pub fn read_flipbook(json_path: &Path) -> Result<Flipbook> {
+    // Complete a PNG + JSON commit a killed writer left half done.
+    ignis_core::tempfiles::recover_and_clean(&super::parent_dir(json_path));
     let text = std::fs::read(json_path).map_err(|e| MediaError::io(json_path, e))?;
     let meta: FlipbookMeta = serde_json::from_slice(&text)
         .map_err(|e| MediaError::decode(json_path, None, format!("not a flipbook sidecar: {e}")))?;

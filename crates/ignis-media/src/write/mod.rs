@@ -16,11 +16,17 @@
 //! treat delays under 2 cs as 10 cs, so rates above 50 fps play at 50.
 //!
 //! Every writer is atomic: output goes to a hidden temporary name in the destination's
-//! directory (`.name.XXXX.partial`) and is renamed into place by [`FrameWriter::finish`].
-//! An error, or dropping the writer without `finish`, deletes the temporary output and
-//! leaves nothing under the final name. Sequences go into a temporary directory renamed at
-//! the end, or, when the destination directory already exists, into hidden per-file
-//! temporaries renamed one by one at the end (old frames with other names are left alone).
+//! directory (`.name.ignis-tmp-PID.XXXX.partial`) and is renamed into place by
+//! [`FrameWriter::finish`]. An error, or dropping the writer without `finish`, deletes the
+//! temporary output and leaves nothing under the final name; temporaries of a killed run
+//! carry its PID and are removed by the next run in that directory
+//! ([`ignis_core::tempfiles`]). A flipbook's PNG and JSON are committed as one unit (a
+//! journal completes an interrupted commit). Sequences go into a fresh temporary directory
+//! renamed into place at the end; when the destination directory already exists, its other
+//! files are linked into the new one and the two are swapped in one atomic exchange (a
+//! directory with subdirectories, or the working directory, gets the frames renamed in one
+//! by one instead). Outputs that exist and are not regular files (devices, FIFOs) are
+//! refused; frame rates must be in [`MIN_FPS`]..=[`MAX_FPS`].
 
 mod flipbook;
 mod gif_out;
@@ -91,6 +97,11 @@ impl Format {
     }
 }
 
+/// Smallest frame rate any writer accepts (MP4's time scale is 1000 × fps, at least 1).
+pub const MIN_FPS: f64 = 0.001;
+/// Largest frame rate any writer accepts.
+pub const MAX_FPS: f64 = 1000.0;
+
 /// How to write. `Default`: format from the path, 30 fps, looping, black background.
 #[derive(Clone, Debug, PartialEq)]
 pub struct WriteOptions {
@@ -151,10 +162,28 @@ pub fn create(path: &Path, size: Size, opts: &WriteOptions) -> Result<FrameWrite
             format!("{} must be a finite number > 0, e.g. 30", opts.fps),
         ));
     }
+    if opts.fps < MIN_FPS || opts.fps > MAX_FPS {
+        return Err(MediaError::bad(
+            "fps",
+            format!(
+                "{} is outside {MIN_FPS}..={MAX_FPS} frames per second (MP4 stores 1/1000-frame \
+                 time steps); use e.g. 30",
+                opts.fps
+            ),
+        ));
+    }
     let format = match opts.format {
         Some(f) => f,
         None => Format::from_path(path)?,
     };
+    match format {
+        Format::Mp4 | Format::Gif => check_regular_target(path)?,
+        Format::Flipbook => {
+            check_regular_target(path)?;
+            check_regular_target(&path.with_extension("json"))?;
+        }
+        Format::PngSequence | Format::ExrSequence => {}
+    }
     let mut output_size = size;
     let sink: Box<dyn Sink> = match format {
         Format::PngSequence | Format::ExrSequence => Box::new(sequence_out::SequenceSink::new(
@@ -277,14 +306,94 @@ pub(crate) fn temp_file_for(path: &Path) -> Result<tempfile::NamedTempFile> {
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_default();
+    ignis_core::tempfiles::recover_and_clean(&dir);
     let mut b = tempfile::Builder::new();
-    let prefix = format!(".{name}.");
+    // `.<name>.ignis-tmp-<pid>.XXXXXX.partial`: removed by the next run once this process
+    // is gone (ignis_core::tempfiles).
+    let prefix = ignis_core::tempfiles::temp_name(&name, "");
     b.prefix(&prefix).suffix(".partial");
     // tempfile creates 0600 files; outputs are ordinary files others must read (web
     // servers, game engines, render farms), so use the usual 0644.
     #[cfg(unix)]
     b.permissions(std::os::unix::fs::PermissionsExt::from_mode(0o644));
     b.tempfile_in(&dir).map_err(|e| MediaError::io(&dir, e))
+}
+
+/// Refuses an output path that exists and is not a regular file (a character or block
+/// device, FIFO, socket or directory): renaming over it would replace e.g. `/dev/null`.
+pub(crate) fn check_regular_target(path: &Path) -> Result<()> {
+    match std::fs::metadata(path) {
+        Ok(m) if !m.is_file() => {
+            let ft = m.file_type();
+            let kind = {
+                #[cfg(unix)]
+                {
+                    use std::os::unix::fs::FileTypeExt;
+                    if ft.is_char_device() || ft.is_block_device() {
+                        "a device"
+                    } else if ft.is_fifo() {
+                        "a FIFO"
+                    } else if ft.is_socket() {
+                        "a socket"
+                    } else if ft.is_dir() {
+                        "a directory"
+                    } else {
+                        "not a regular file"
+                    }
+                }
+                #[cfg(not(unix))]
+                {
+                    let _ = ft;
+                    "not a regular file"
+                }
+            };
+            Err(MediaError::bad(
+                "output",
+                format!(
+                    "{} is {kind}; outputs are written as regular files and this one would be \
+                     replaced, not written through. Choose a regular file path (to stream, write \
+                     a file and copy it)",
+                    path.display()
+                ),
+            ))
+        }
+        _ => Ok(()),
+    }
+}
+
+/// Moves several finished temporaries (all in `dir`) into place as one unit; see
+/// [`ignis_core::tempfiles::commit_files`] (a journal makes an interrupted commit complete
+/// on the next run).
+pub(crate) fn commit_temps(
+    dir: &Path,
+    files: Vec<(tempfile::NamedTempFile, PathBuf)>,
+) -> Result<()> {
+    let mut pairs = Vec::new();
+    let mut kept = Vec::new();
+    for (tmp, fin) in files {
+        tmp.as_file()
+            .sync_all()
+            .map_err(|e| MediaError::io(tmp.path(), e))?;
+        let name = |p: &Path| p.file_name().map(|n| n.to_string_lossy().into_owned());
+        let (Some(t), Some(f)) = (name(tmp.path()), name(&fin)) else {
+            return Err(MediaError::bad(
+                "path",
+                format!("{} has no file name", fin.display()),
+            ));
+        };
+        pairs.push((t, f));
+        kept.push(tmp.into_temp_path());
+    }
+    match ignis_core::tempfiles::commit_files(dir, &pairs) {
+        Ok(()) => {
+            for k in kept {
+                // Renamed away: nothing to delete.
+                let _ = k.keep();
+            }
+            Ok(())
+        }
+        Err(e) => Err(MediaError::io(dir, e)),
+    }
 }
 
 /// Flushes and renames a temporary file into place.
@@ -318,6 +427,7 @@ pub(crate) fn encode_png(w: impl Write, size: Size, rgba: &[u8]) -> image::Image
 
 /// Writes one still as an 8-bit sRGB PNG with straight alpha, atomically.
 pub fn write_png(path: &Path, frame: &RgbaFrame) -> Result<()> {
+    check_regular_target(path)?;
     let tmp = temp_file_for(path)?;
     let rgba = crate::convert::to_srgba8(frame);
     {

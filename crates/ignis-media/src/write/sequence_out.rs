@@ -17,12 +17,11 @@ pub(crate) struct SequenceSink {
     exr: bool,
     pattern: Pattern,
     final_dir: PathBuf,
-    /// A fresh temporary directory renamed to `final_dir` at the end, when `final_dir` did
-    /// not exist; otherwise files are staged under hidden names inside `final_dir`.
+    /// The fresh temporary directory the frames are staged in (see `commit_sequence`);
+    /// `None` once finished. Dropping it removes every staged frame.
     temp_dir: Option<tempfile::TempDir>,
     /// (staged path, final path) of each frame written.
     written: Vec<(PathBuf, PathBuf)>,
-    finished: bool,
 }
 
 impl SequenceSink {
@@ -34,7 +33,10 @@ impl SequenceSink {
             .unwrap_or_default();
         let (final_dir, pattern) = if name.contains('%') {
             let p = Pattern::parse(&name).ok_or_else(|| {
-                MediaError::bad("path", format!("`{name}` is not a pattern like %04d.{ext}"))
+                MediaError::bad(
+                    "path",
+                    format!("`{name}` is not a pattern like %04d.{ext} (one `%Nd`, N at most 20)"),
+                )
             })?;
             (parent_dir(path), p)
         } else {
@@ -47,33 +49,43 @@ impl SequenceSink {
                 },
             )
         };
-        let temp_dir = if final_dir.is_dir() {
-            None
-        } else {
-            let parent = parent_dir(&final_dir);
-            std::fs::create_dir_all(&parent).map_err(|e| MediaError::io(&parent, e))?;
-            let dir_name = final_dir
-                .file_name()
-                .map(|n| n.to_string_lossy().into_owned())
-                .unwrap_or_default();
-            let mut b = tempfile::Builder::new();
-            let prefix = format!(".{dir_name}.");
-            b.prefix(&prefix).suffix(".partial");
-            // an ordinary directory (0755), not tempfile's private 0700
-            #[cfg(unix)]
-            b.permissions(std::os::unix::fs::PermissionsExt::from_mode(0o755));
-            Some(
-                b.tempdir_in(&parent)
-                    .map_err(|e| MediaError::io(&parent, e))?,
-            )
-        };
+        if let Ok(m) = std::fs::metadata(&final_dir) {
+            if !m.is_dir() {
+                return Err(MediaError::bad(
+                    "output",
+                    format!(
+                        "{} exists and is not a directory; a frame sequence needs a directory \
+                         (choose another output path)",
+                        final_dir.display()
+                    ),
+                ));
+            }
+        }
+        // Frames always go into a fresh hidden directory beside the destination
+        // (`.<dir>.ignis-tmp-<pid>.XXXXXX.dir`, removed by a later run if this one is killed).
+        let parent = parent_dir(&final_dir);
+        std::fs::create_dir_all(&parent).map_err(|e| MediaError::io(&parent, e))?;
+        ignis_core::tempfiles::recover_and_clean(&parent);
+        let dir_name = final_dir
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "frames".into());
+        let mut b = tempfile::Builder::new();
+        let prefix = ignis_core::tempfiles::temp_name(&dir_name, "");
+        b.prefix(&prefix).suffix(".dir");
+        // an ordinary directory (0755), not tempfile's private 0700
+        #[cfg(unix)]
+        b.permissions(std::os::unix::fs::PermissionsExt::from_mode(0o755));
+        let temp_dir = Some(
+            b.tempdir_in(&parent)
+                .map_err(|e| MediaError::io(&parent, e))?,
+        );
         Ok(SequenceSink {
             exr,
             pattern,
             final_dir,
             temp_dir,
             written: Vec::new(),
-            finished: false,
         })
     }
 
@@ -83,11 +95,28 @@ impl SequenceSink {
         if self.exr {
             let mut pre = frame.clone();
             convert::premultiply(&mut pre);
-            let flat: Vec<f32> = pre.data().iter().flatten().copied().collect();
-            let img = image::Rgba32FImage::from_raw(frame.width(), frame.height(), flat)
-                .expect("frame size");
-            img.write_to(&mut w, image::ImageFormat::OpenExr)
-                .map_err(|e| MediaError::encode(staged, e.to_string()))?;
+            // Scan lines in increasing Y, written sequentially: the same bytes every run
+            // (a parallel writer stores chunks in completion order).
+            use exr::prelude::*;
+            let (fw, fh) = (frame.width() as usize, frame.height() as usize);
+            let px = pre.data();
+            let enc = Encoding {
+                compression: Compression::RLE,
+                blocks: Blocks::ScanLines,
+                line_order: LineOrder::Increasing,
+            };
+            Image::from_encoded_channels(
+                (fw, fh),
+                enc,
+                SpecificChannels::rgba(|p: Vec2<usize>| {
+                    let [r, g, b, a] = px[p.y() * fw + p.x()];
+                    (r, g, b, a)
+                }),
+            )
+            .write()
+            .non_parallel()
+            .to_buffered(&mut w)
+            .map_err(|e| MediaError::encode(staged, e.to_string()))?;
         } else {
             let rgba = convert::to_srgba8(frame);
             encode_png(&mut w, frame.size(), &rgba)
@@ -103,7 +132,12 @@ impl Sink for SequenceSink {
         let final_path = self.final_dir.join(&name);
         let staged = match &self.temp_dir {
             Some(t) => t.path().join(&name),
-            None => self.final_dir.join(format!(".{name}.partial")),
+            None => {
+                return Err(MediaError::encode(
+                    &self.final_dir,
+                    "the writer has finished",
+                ))
+            }
         };
         // Record first so that a half-written file is cleaned up on drop.
         self.written.push((staged.clone(), final_path));
@@ -112,32 +146,88 @@ impl Sink for SequenceSink {
 
     fn finish(mut self: Box<Self>) -> Result<Vec<PathBuf>> {
         let finals: Vec<PathBuf> = self.written.iter().map(|(_, f)| f.clone()).collect();
-        match self.temp_dir.take() {
-            Some(t) => {
-                let staged_dir = t.keep();
-                if let Err(e) = std::fs::rename(&staged_dir, &self.final_dir) {
-                    let _ = std::fs::remove_dir_all(&staged_dir);
-                    return Err(MediaError::io(&self.final_dir, e));
-                }
-            }
-            None => {
-                for (staged, fin) in &self.written {
-                    std::fs::rename(staged, fin).map_err(|e| MediaError::io(fin, e))?;
-                }
-            }
-        }
-        self.finished = true;
+        let Some(t) = self.temp_dir.take() else {
+            return Err(MediaError::encode(
+                &self.final_dir,
+                "the writer has finished",
+            ));
+        };
+        let staged_dir = t.keep();
+        let r = commit_sequence(&staged_dir, &self.final_dir, &self.written);
+        let _ = std::fs::remove_dir_all(&staged_dir);
+        r?;
         Ok(finals)
     }
 }
 
-impl Drop for SequenceSink {
-    fn drop(&mut self) {
-        if !self.finished && self.temp_dir.is_none() {
-            for (staged, _) in &self.written {
-                let _ = std::fs::remove_file(staged);
-            }
-        }
-        // A `TempDir` still held removes itself.
+/// Whether the existing directory `dir` can be replaced as a whole: it holds no
+/// subdirectory and is not the working directory or one of its ancestors.
+fn swappable(dir: &Path) -> bool {
+    let (Ok(d), Ok(cwd)) = (
+        std::fs::canonicalize(dir),
+        std::env::current_dir().and_then(std::fs::canonicalize),
+    ) else {
+        return false;
+    };
+    if cwd.starts_with(&d) {
+        return false;
     }
+    let Ok(rd) = std::fs::read_dir(dir) else {
+        return false;
+    };
+    rd.flatten()
+        .all(|e| e.file_type().map(|t| !t.is_dir()).unwrap_or(false))
+}
+
+/// Moves the staged frames into `final_dir` in one step: a new directory is renamed into
+/// place; an existing one is replaced by an atomic exchange after the files of the old
+/// directory that this sequence does not overwrite are hard-linked (or copied) into the
+/// staged one, so they stay. A directory that cannot be swapped (it has subdirectories, or
+/// is the working directory) gets the frames renamed in one by one.
+fn commit_sequence(
+    staged_dir: &Path,
+    final_dir: &Path,
+    written: &[(PathBuf, PathBuf)],
+) -> Result<()> {
+    if std::fs::symlink_metadata(final_dir).is_err() {
+        return std::fs::rename(staged_dir, final_dir).map_err(|e| MediaError::io(final_dir, e));
+    }
+    if !swappable(final_dir) {
+        for (staged, fin) in written {
+            std::fs::rename(staged, fin).map_err(|e| MediaError::io(fin, e))?;
+        }
+        return Ok(());
+    }
+    let rd = std::fs::read_dir(final_dir).map_err(|e| MediaError::io(final_dir, e))?;
+    for e in rd {
+        let e = e.map_err(|e| MediaError::io(final_dir, e))?;
+        let name = e.file_name();
+        let to = staged_dir.join(&name);
+        if std::fs::symlink_metadata(&to).is_ok() {
+            continue; // replaced by a new frame
+        }
+        let from = e.path();
+        let is_link = e.file_type().map(|t| t.is_symlink()).unwrap_or(false);
+        let r = if is_link {
+            std::fs::read_link(&from).and_then(|l| {
+                #[cfg(unix)]
+                {
+                    std::os::unix::fs::symlink(l, &to)
+                }
+                #[cfg(not(unix))]
+                {
+                    let _ = l;
+                    std::fs::copy(&from, &to).map(|_| ())
+                }
+            })
+        } else {
+            std::fs::hard_link(&from, &to).or_else(|_| std::fs::copy(&from, &to).map(|_| ()))
+        };
+        r.map_err(|e| MediaError::io(&from, e))?;
+    }
+    if let Ok(m) = std::fs::metadata(final_dir) {
+        let _ = std::fs::set_permissions(staged_dir, m.permissions());
+    }
+    ignis_core::tempfiles::replace_dir(staged_dir, final_dir)
+        .map_err(|e| MediaError::io(final_dir, e))
 }
