@@ -651,3 +651,126 @@ pub fn demo(ctx: &mut crate::demo::Demo, dbp: &Path) -> Result<()> {
     }
     Ok(())
 }
+
+/// A scenario's default look: original colouring, bloom, alpha matte, §7.1.2 frames.
+pub fn default_look() -> ignis_eigen::scenario::Look {
+    ignis_eigen::scenario::Look {
+        mode: ignis_eigen::scenario::ColourMode::Original,
+        tint: ignis_core::colour::Tint::Solid([1.0, 0.42, 0.08]),
+        threshold: ignis_eigen::colour::THESIS_THRESHOLD,
+        bloom: Some(ignis_core::post::BloomParams::default()),
+        smoke: None,
+        matte: true,
+        fast_path: true,
+        originals: Default::default(),
+        masks: Default::default(),
+        mask_mode: ignis_eigen::colour::MaskMode::Add,
+    }
+}
+
+/// `ignis bench eigen-animate`'s footage case: a loop of 120 database frames of a 1080p
+/// clip (Ignis's synthetic campfire written as MP4, trained with the default settings)
+/// rendered with original colouring, bloom and the alpha matte, reading the source video
+/// (decode included; encoding the output is not: frames are dropped). `quick`: 480x270,
+/// 30 frames.
+pub fn bench_footage(quick: bool) -> Result<serde_json::Value> {
+    use ignis_eigen::train::{ClipInput, ClipSpec, NoProgress, TrainParams};
+    use std::time::Instant;
+    let (size, frames, loop_len) = if quick {
+        (
+            Size {
+                width: 480,
+                height: 270,
+            },
+            36,
+            30,
+        )
+    } else {
+        (
+            Size {
+                width: 1920,
+                height: 1080,
+            },
+            128,
+            120,
+        )
+    };
+    let dir = std::env::temp_dir().join(format!("ignis-bench-footage-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    let run = || -> Result<serde_json::Value> {
+        let clip = dir.join("fire.mp4");
+        let sp = ignis_eigen::synthetic::SyntheticParams {
+            size,
+            frames,
+            style: ignis_eigen::synthetic::FlameStyle::Campfire,
+            seed: 5,
+        };
+        let mut w = ignis_media::create(&clip, size, &ignis_media::WriteOptions::default())?;
+        for t in 0..frames {
+            w.push(&ignis_eigen::synthetic::synthetic_frame(&sp, t)?)?;
+        }
+        w.finish()?;
+        let t_train = Instant::now();
+        let mut spec = ClipSpec::new("fire");
+        spec.path = Some(clip.clone());
+        let input = ClipInput {
+            spec,
+            source: crate::eigen::media_source(&clip)?,
+        };
+        let dbp = dir.join("fire.db");
+        let tp = TrainParams {
+            pack_size: 64,
+            ..Default::default()
+        };
+        ignis_eigen::train(
+            std::slice::from_ref(&input),
+            &ignis_eigen::PreprocessParams::default(),
+            &tp,
+            &dbp,
+            &mut NoProgress,
+        )?;
+        let train_s = t_train.elapsed().as_secs_f64();
+        let db = EigenfireDb::open(&dbp)?;
+        let (mut plan, _, _) = render::loop_plan(
+            &db,
+            "fire",
+            4..4 + loop_len,
+            ignis_eigen::transition::Transition::Auto,
+            db.manifest().e_render,
+            0,
+        )?;
+        // The case is about database frames: the range itself, every frame from the footage.
+        plan.frames
+            .retain(|f| matches!(f.source, ignis_eigen::transition::FrameRef::Db(_)));
+        let look = default_look();
+        let mut n = 0usize;
+        let t = Instant::now();
+        render::render_plan_with(
+            &db,
+            &plan,
+            &look,
+            &render::RenderOptions::default(),
+            &mut MediaSources::default(),
+            &mut |f| {
+                n += (f.width() == size.width) as usize;
+                Ok(())
+            },
+            &mut |_| {},
+        )?;
+        let s = t.elapsed().as_secs_f64();
+        let fps = n as f64 / s;
+        Ok(serde_json::json!({
+            "case": format!("{size} loop of {n} database frames, original colouring + bloom + alpha, reading the source MP4 (decode included)"),
+            "frames": n,
+            "seconds": s,
+            "frames_per_s": fps,
+            "goal": if quick { "judged at full size (1920x1080)".to_string() } else { ">= 60 frames/s".to_string() },
+            "met": !quick && fps >= 60.0,
+            "train_s": train_s,
+            "threads": rayon::current_num_threads(),
+        }))
+    };
+    let r = run();
+    let _ = std::fs::remove_dir_all(&dir);
+    r
+}

@@ -313,7 +313,7 @@ impl Progress for Bars<'_> {
 }
 
 /// A clip source over `ignis_media`.
-fn media_source(path: &Path) -> Result<ClipSource<'static>> {
+pub(crate) fn media_source(path: &Path) -> Result<ClipSource<'static>> {
     let info = ignis_media::probe(path).with_context(|| format!("reading {}", path.display()))?;
     let p = path.to_path_buf();
     Ok(ClipSource {
@@ -659,19 +659,7 @@ fn loop_cmd(a: &LoopArgs, g: &Global) -> Result<ignis_eigen::transition::Join> {
     }
     let opts = a.footage.options()?;
     let mut sources = a.footage.sources(&db)?;
-    // A scenario's default look: original colouring, bloom, alpha matte, §7.1.2.
-    let mut look = ignis_eigen::scenario::Look {
-        mode: ColourMode::Original,
-        tint: ignis_core::colour::Tint::Solid([1.0, 0.42, 0.08]),
-        threshold: ignis_eigen::colour::THESIS_THRESHOLD,
-        bloom: Some(ignis_core::post::BloomParams::default()),
-        smoke: None,
-        matte: true,
-        fast_path: true,
-        originals: Default::default(),
-        masks: Default::default(),
-        mask_mode: ignis_eigen::colour::MaskMode::Add,
-    };
+    let mut look = crate::animate::default_look();
     if let Some(p) = &a.palette {
         look.mode = ColourMode::Palette(p.load()?);
         look.bloom = None;

@@ -130,8 +130,12 @@ fn run(cli: Cli) -> Result<()> {
                 "eigen-train" => ignis_pca::bench_figures(a.quick),
                 "eigen-animate" => {
                     let sp = g.spinner("training the benchmark database, then timing");
-                    let v = ignis_eigen::bench::animate_figures(a.quick, a.keep_db.as_deref())?;
+                    let mut v = ignis_eigen::bench::animate_figures(a.quick, a.keep_db.as_deref())?;
                     sp.finish_and_clear();
+                    let sp = g.spinner("footage case: writing, training and rendering a clip");
+                    let f = animate::bench_footage(a.quick)?;
+                    sp.finish_and_clear();
+                    v["footage"] = f;
                     v
                 }
                 "volume" => volume::bench(&g, a.quick)?,

@@ -337,8 +337,9 @@ const MERGE_GROWTH: f64 = 2.2;
 /// each pixel the threshold `τ` at which it joins the seeds' region `R(τ)`. Walking `τ`
 /// down, the first level where the area more than doubles within 12 levels
 /// ([`MERGE_GROWTH`]) is where the flame's region merges into the lit surroundings; above
-/// it, the `τ` whose region boundary has the largest mean luminance step between
-/// neighbours (the flame's edge) is chosen. Returns the mask `R(τ)` (255 inside).
+/// it, the mean luminance step between neighbours across each region's boundary is
+/// measured, and the lowest `τ` whose step is within 20 % of the strongest (the flame's
+/// edge) is chosen. Returns the mask `R(τ)` (255 inside).
 /// Deterministic; O(pixels). The thresholds adapt to each frame: nothing is tuned to a
 /// clip.
 pub fn isolate_flame(luma: &[u8], w: u32, h: u32, floor: f32) -> GrayImage {
@@ -450,9 +451,14 @@ pub fn isolate_flame(luma: &[u8], w: u32, h: u32, floor: f32) -> GrayImage {
         }
         t -= 1;
     }
-    let best = (stop..=top.max(stop))
+    // The flame's edge: the strongest boundary above the merge; among boundaries nearly
+    // as strong (within 20 %), the lowest, so the whole bright body is inside.
+    let strongest = (stop..=top.max(stop))
         .filter(|&t| area[t] > 0)
-        .max_by(|&a, &b| mean[a].total_cmp(&mean[b]).then(b.cmp(&a)))
+        .map(|t| mean[t])
+        .fold(0.0f64, f64::max);
+    let best = (stop..=top.max(stop))
+        .find(|&t| area[t] > 0 && mean[t] >= 0.8 * strongest)
         .unwrap_or(top);
     for (o, &e) in out.as_mut().iter_mut().zip(&entry) {
         if e >= 0 && e as usize >= best {

@@ -243,8 +243,9 @@ pub fn source_grey(frame: &RgbaFrame, pose: &ClipPose, p: &PreprocessParams) -> 
     }
 }
 
-/// A soft matte from a binary mask: dilated by and blurred over about 1 % of the frame's
-/// longer side (at least 2 px), so the flame's glow fades out instead of being cut.
+/// A soft matte from a binary mask: 1 inside the mask, and outside it the mask dilated by
+/// and blurred over about 1 % of the frame's longer side (at least 2 px), so the flame's
+/// glow fades out instead of being cut.
 pub fn feather(mask: &GrayImage, longer: u32) -> GrayFrame {
     let r = ((longer as f32 * 0.01).round() as u8).clamp(2, 40);
     let d = imageproc::morphology::dilate(mask, imageproc::distance_transform::Norm::L2, r);
@@ -253,8 +254,15 @@ pub fn feather(mask: &GrayImage, longer: u32) -> GrayFrame {
         width: mask.width(),
         height: mask.height(),
     };
-    GrayFrame::from_vec(size, b.as_raw().iter().map(|&v| v as f32 / 255.0).collect())
-        .expect("same size")
+    GrayFrame::from_vec(
+        size,
+        b.as_raw()
+            .iter()
+            .zip(mask.as_raw())
+            .map(|(&v, &m)| if m > 0 { 1.0 } else { v as f32 / 255.0 })
+            .collect(),
+    )
+    .expect("same size")
 }
 
 /// Every stage of the pipeline for one frame, for `ignis eigen preprocess`.
