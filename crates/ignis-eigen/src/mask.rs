@@ -103,6 +103,11 @@ pub struct MaskParams {
     pub isolate: Isolate,
     /// Darkest sRGB-encoded luminance an isolated flame reaches, `0..1`. Default 0.3.
     pub isolate_floor: f32,
+    /// With isolation, mask pixels at least this saturated (sRGB HSV S) are kept as
+    /// flame wherever they are: a flame's own light is saturated (orange, red, blue), the
+    /// surfaces it lights are paler (the lit jar of candle.mp4: 3 % of its lit pixels
+    /// reach 0.5; the fire of fireball.mp4: all). Default 0.5.
+    pub isolate_saturation: f32,
 }
 
 /// When [`isolate_flame`] runs.
@@ -150,6 +155,7 @@ impl Default for MaskParams {
             canny: [50.0, 100.0],
             isolate: Isolate::Auto,
             isolate_floor: 0.3,
+            isolate_saturation: 0.5,
         }
     }
 }
@@ -189,6 +195,12 @@ impl MaskParams {
             return Err(EigenError::bad(
                 "mask.smooth_sigma",
                 "must be within 0..=50 pixels",
+            ));
+        }
+        if !(0.0..=1.0).contains(&self.isolate_saturation) {
+            return Err(EigenError::bad(
+                "mask.isolate_saturation",
+                "must be within 0..=1",
             ));
         }
         if !(0.0..1.0).contains(&self.isolate_floor) {
@@ -280,8 +292,9 @@ pub fn smooth_mask(mask: &GrayImage, sigma: f32) -> GrayImage {
     b
 }
 
-/// The full mask of §3.2.1: HSV layers (intersected with [`isolate_flame`] when
-/// `isolate`), then morphology, then smoothing.
+/// The full mask of §3.2.1: HSV layers (when `isolate`, restricted to the
+/// [`isolate_flame`] region and the saturated — emissive — pixels), then morphology,
+/// then smoothing.
 pub fn flame_mask(frame: &RgbaFrame, p: &MaskParams, isolate: bool) -> GrayImage {
     let mut m = hsv_mask(frame, &p.layers);
     if isolate {
@@ -291,8 +304,19 @@ pub fn flame_mask(frame: &RgbaFrame, p: &MaskParams, isolate: bool) -> GrayImage
             frame.height(),
             p.isolate_floor,
         );
-        for (a, b) in m.as_mut().iter_mut().zip(keep.as_raw()) {
-            *a = if *a > 0 && *b > 0 { 255 } else { 0 };
+        for ((a, b), px) in m.as_mut().iter_mut().zip(keep.as_raw()).zip(frame.data()) {
+            // A flame's own light is saturated (orange, red, blue); what it lights is paler.
+            let (_, sat, _) = rgb_to_hsv(
+                linear_to_srgb(px[0]),
+                linear_to_srgb(px[1]),
+                linear_to_srgb(px[2]),
+            );
+            let emissive = sat >= p.isolate_saturation;
+            *a = if *a > 0 && (*b > 0 || emissive) {
+                255
+            } else {
+                0
+            };
         }
     }
     for step in &p.morphology {
@@ -338,8 +362,9 @@ const MERGE_GROWTH: f64 = 2.2;
 /// down, the first level where the area more than doubles within 12 levels
 /// ([`MERGE_GROWTH`]) is where the flame's region merges into the lit surroundings; above
 /// it, the mean luminance step between neighbours across each region's boundary is
-/// measured, and the lowest `τ` whose step is within 20 % of the strongest (the flame's
-/// edge) is chosen. Returns the mask `R(τ)` (255 inside).
+/// measured, and the `τ` with the strongest step (the flame's edge) is chosen. Returns
+/// the mask of every pixel at least as bright as `τ` (255 inside), so a reflection or a
+/// second tongue not connected to the seeds is kept too.
 /// Deterministic; O(pixels). The thresholds adapt to each frame: nothing is tuned to a
 /// clip.
 pub fn isolate_flame(luma: &[u8], w: u32, h: u32, floor: f32) -> GrayImage {
@@ -451,17 +476,15 @@ pub fn isolate_flame(luma: &[u8], w: u32, h: u32, floor: f32) -> GrayImage {
         }
         t -= 1;
     }
-    // The flame's edge: the strongest boundary above the merge; among boundaries nearly
-    // as strong (within 20 %), the lowest, so the whole bright body is inside.
-    let strongest = (stop..=top.max(stop))
-        .filter(|&t| area[t] > 0)
-        .map(|t| mean[t])
-        .fold(0.0f64, f64::max);
+    // The flame's edge: the strongest boundary above the merge.
     let best = (stop..=top.max(stop))
-        .find(|&t| area[t] > 0 && mean[t] >= 0.8 * strongest)
+        .filter(|&t| area[t] > 0)
+        .max_by(|&a, &b| mean[a].total_cmp(&mean[b]).then(b.cmp(&a)))
         .unwrap_or(top);
-    for (o, &e) in out.as_mut().iter_mut().zip(&entry) {
-        if e >= 0 && e as usize >= best {
+    // Everything at least that bright, connected to the seeds or not (a flame's
+    // reflection, a second tongue): the lit surroundings are dimmer than the merge level.
+    for (o, &v) in out.as_mut().iter_mut().zip(luma) {
+        if v as usize >= best {
             *o = 255;
         }
     }
