@@ -108,6 +108,10 @@ pub struct MaskParams {
     /// surfaces it lights are paler (the lit jar of candle.mp4: 3 % of its lit pixels
     /// reach 0.5; the fire of fireball.mp4: all). Default 0.5.
     pub isolate_saturation: f32,
+    /// With isolation, how much weaker than the strongest edge (`0..1`, a fraction) the
+    /// flame's outer edge may be and still be chosen over the edge of its white-hot core.
+    /// Default 0.1.
+    pub isolate_edge_tolerance: f32,
 }
 
 /// When [`isolate_flame`] runs.
@@ -156,6 +160,7 @@ impl Default for MaskParams {
             isolate: Isolate::Auto,
             isolate_floor: 0.3,
             isolate_saturation: 0.5,
+            isolate_edge_tolerance: 0.1,
         }
     }
 }
@@ -195,6 +200,12 @@ impl MaskParams {
             return Err(EigenError::bad(
                 "mask.smooth_sigma",
                 "must be within 0..=50 pixels",
+            ));
+        }
+        if !(0.0..1.0).contains(&self.isolate_edge_tolerance) {
+            return Err(EigenError::bad(
+                "mask.isolate_edge_tolerance",
+                "must be within 0..1",
             ));
         }
         if !(0.0..=1.0).contains(&self.isolate_saturation) {
@@ -303,6 +314,7 @@ pub fn flame_mask(frame: &RgbaFrame, p: &MaskParams, isolate: bool) -> GrayImage
             frame.width(),
             frame.height(),
             p.isolate_floor,
+            p.isolate_edge_tolerance,
         );
         for ((a, b), px) in m.as_mut().iter_mut().zip(keep.as_raw()).zip(frame.data()) {
             // A flame's own light is saturated (orange, red, blue); what it lights is paler.
@@ -367,7 +379,7 @@ const MERGE_GROWTH: f64 = 2.2;
 /// second tongue not connected to the seeds is kept too.
 /// Deterministic; O(pixels). The thresholds adapt to each frame: nothing is tuned to a
 /// clip.
-pub fn isolate_flame(luma: &[u8], w: u32, h: u32, floor: f32) -> GrayImage {
+pub fn isolate_flame(luma: &[u8], w: u32, h: u32, floor: f32, tolerance: f32) -> GrayImage {
     let (w, h) = (w as usize, h as usize);
     let mut out = GrayImage::new(w as u32, h as u32);
     let floor = (floor * 255.0).round() as usize;
@@ -476,10 +488,15 @@ pub fn isolate_flame(luma: &[u8], w: u32, h: u32, floor: f32) -> GrayImage {
         }
         t -= 1;
     }
-    // The flame's edge: the strongest boundary above the merge.
-    let best = (stop..=top.max(stop))
+    // The flame's edge: the strongest boundary above the merge; of the boundaries within
+    // `tolerance` of it, the lowest (the outer edge of the flame rather than the edge of
+    // its white-hot core).
+    let strongest = (stop..=top.max(stop))
         .filter(|&t| area[t] > 0)
-        .max_by(|&a, &b| mean[a].total_cmp(&mean[b]).then(b.cmp(&a)))
+        .map(|t| mean[t])
+        .fold(0.0f64, f64::max);
+    let best = (stop..=top.max(stop))
+        .find(|&t| area[t] > 0 && mean[t] >= (1.0 - tolerance as f64) * strongest)
         .unwrap_or(top);
     // Everything at least that bright, connected to the seeds or not (a flame's
     // reflection, a second tongue): the lit surroundings are dimmer than the merge level.

@@ -256,8 +256,14 @@ fn candle_mask_covers_the_flame_not_the_jar() {
         .filter(|(i, _)| i % stride == 0)
         .map(|(_, f)| f.unwrap())
         .collect();
-    let p = PreprocessParams::default();
+    let mut p = PreprocessParams::default();
     assert_eq!(p.mask.isolate, Isolate::Auto);
+    if let Some(t) = std::env::var("IGNIS_MASK_TOL")
+        .ok()
+        .and_then(|v| v.parse().ok())
+    {
+        p.mask.isolate_edge_tolerance = t;
+    }
     // The automatic decision, as training makes it (from a sample of the frames).
     let values: Vec<Vec<u8>> = frames.iter().map(value8).collect();
     let st = static_fraction(&values, p.mask.isolate_floor);
