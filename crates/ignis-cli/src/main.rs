@@ -77,11 +77,11 @@ struct DemoArgs {
 
 #[derive(clap::Args, Debug)]
 #[command(
-    after_help = "Examples:\n  ignis bench classic\n  ignis bench classic --quick\n  ignis bench eigen-train\n  ignis bench eigen-animate --keep-db /tmp/bench.db\n  ignis bench learned\n  ignis bench volume"
+    after_help = "Examples:\n  ignis bench classic\n  ignis bench classic --quick\n  ignis bench eigen-train\n  ignis bench eigen-animate --keep-db /tmp/bench.db\n  ignis bench eigen-footage   (only eigen-animate's footage case: a 1080p loop read from the source video)\n  ignis bench learned\n  ignis bench volume"
 )]
 struct BenchArgs {
     /// What to measure.
-    #[arg(value_parser = ["classic", "eigen-train", "eigen-animate", "learned", "volume"])]
+    #[arg(value_parser = ["classic", "eigen-train", "eigen-animate", "eigen-footage", "learned", "volume"])]
     target: String,
     /// Fewer repetitions (a smoke test; figures are noisier).
     #[arg(long)]
@@ -137,6 +137,12 @@ fn run(cli: Cli) -> Result<()> {
                     sp.finish_and_clear();
                     v["footage"] = f;
                     v
+                }
+                "eigen-footage" => {
+                    let sp = g.spinner("writing, training and rendering a clip");
+                    let f = animate::bench_footage(a.quick)?;
+                    sp.finish_and_clear();
+                    serde_json::json!({"bench": "eigen-footage", "quick": a.quick, "footage": f})
                 }
                 "volume" => volume::bench(&g, a.quick)?,
                 "learned" => learned::bench(&g, a.quick)?,
