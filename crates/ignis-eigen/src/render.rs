@@ -177,8 +177,9 @@ pub fn clip_view(db: &EigenfireDb, clip: &ClipEntry) -> View {
 }
 
 /// What [`render_plan_with`] shows and its default size: when every clip of the plan
-/// occupies the same part of the common frame, that part at the clip's own source size
-/// (a single-clip database: the source frame exactly); else the whole common frame.
+/// occupies the same part of the common frame at scale 1 (automatic framing), that part
+/// at the clip's own source size (a single-clip database: the source frame exactly);
+/// else the whole common frame.
 pub fn output_view(db: &EigenfireDb, plan: &Plan) -> (View, Size) {
     let clips = plan_clips(db, plan);
     let f = db.manifest().frame_size;
@@ -191,6 +192,11 @@ pub fn output_view(db: &EigenfireDb, plan: &Plan) -> (View, Size) {
     let Some(first) = clips.first() else {
         return (full, f);
     };
+    // A fixed common frame (the thesis's 410x670) scales its clips: its frames are the
+    // pre-processed frames themselves (§7.1.2), shown whole.
+    if clips.iter().any(|c| c.pose.scale != 1.0) {
+        return (full, f);
+    }
     let v = clip_view(db, first);
     if clips
         .iter()
