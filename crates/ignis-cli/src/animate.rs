@@ -6,7 +6,7 @@
 
 use crate::global::Global;
 use anyhow::{Context, Result};
-use ignis_core::RgbaFrame;
+use ignis_core::{RgbaFrame, Size};
 use ignis_eigen::render::{self, SourceFrames, SyntheticSources};
 use ignis_eigen::scenario::{Plan, Scenario};
 use ignis_eigen::{ClipEntry, EigenError, EigenfireDb};
@@ -20,7 +20,90 @@ pub struct AnimateArgs {
     #[arg(long)]
     pub dry_run: bool,
     #[command(flatten)]
+    pub footage: FootageArgs,
+    #[command(flatten)]
     pub out: crate::output::OutputArgs,
+}
+
+/// Output size and where the footage comes from (`eigen animate`, `eigen loop`).
+#[derive(clap::Args, Debug, Clone, Default)]
+pub struct FootageArgs {
+    /// Output size WIDTHxHEIGHT (default: the source clip's own size; a database of
+    /// clips of different sizes shown together: the common frame). Example: --size 1280x720
+    #[arg(long, value_parser = parse_size)]
+    pub size: Option<Size>,
+    /// The source video of CLIP is now at PATH (repeatable): CLIP=PATH. It must have the
+    /// frame size and frame count the database was trained on. Example:
+    /// --relink candle=/footage/candle.mp4
+    #[arg(long, value_parser = parse_relink)]
+    pub relink: Vec<(String, PathBuf)>,
+    /// Do not read the source videos for the grey frames: database frames are
+    /// reconstructed from the Eigenfires (or taken from stored frames). Original colouring
+    /// becomes synthetic colouring (it needs the footage).
+    #[arg(long)]
+    pub from_database: bool,
+}
+
+/// `WIDTHxHEIGHT`, any numbers (the size is checked with a clear message later).
+pub fn parse_size(s: &str) -> std::result::Result<Size, String> {
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .ok_or_else(|| format!("`{s}` is not WIDTHxHEIGHT (e.g. 1280x720)"))?;
+    let n = |v: &str| {
+        v.trim()
+            .parse::<u32>()
+            .map_err(|_| format!("`{v}` in `{s}` is not a whole number of pixels"))
+    };
+    Ok(Size {
+        width: n(w)?,
+        height: n(h)?,
+    })
+}
+
+fn parse_relink(s: &str) -> std::result::Result<(String, PathBuf), String> {
+    let (c, p) = s
+        .split_once('=')
+        .ok_or_else(|| format!("`{s}` is not CLIP=PATH (e.g. candle=/footage/candle.mp4)"))?;
+    if c.is_empty() || p.is_empty() {
+        return Err(format!(
+            "`{s}` is not CLIP=PATH (e.g. candle=/footage/candle.mp4)"
+        ));
+    }
+    Ok((c.to_string(), PathBuf::from(p)))
+}
+
+impl FootageArgs {
+    /// The render options, with `--size` checked.
+    pub fn options(&self) -> Result<render::RenderOptions> {
+        if let Some(s) = self.size {
+            render::check_output_size(s).context("--size")?;
+        }
+        Ok(render::RenderOptions {
+            size: self.size,
+            from_database: self.from_database,
+        })
+    }
+
+    /// The footage reader, with `--relink` checked against the database's clips.
+    pub fn sources(&self, db: &EigenfireDb) -> Result<MediaSources> {
+        for (c, _) in &self.relink {
+            db.clip(c).context("--relink")?;
+        }
+        Ok(MediaSources {
+            relink: self.relink.iter().cloned().collect(),
+            checked: Default::default(),
+        })
+    }
+
+    /// `look` adjusted for `--from-database`; says what changed.
+    pub fn adjust_look(&self, look: &mut ignis_eigen::scenario::Look, g: &Global) {
+        if self.from_database && matches!(look.mode, ignis_eigen::scenario::ColourMode::Original) {
+            look.mode = ignis_eigen::scenario::ColourMode::Synthetic;
+            g.say(
+                "--from-database: original colouring needs the footage; using synthetic colouring",
+            );
+        }
+    }
 }
 
 #[derive(clap::Args, Debug)]
@@ -29,8 +112,80 @@ pub struct ScenarioArgs {
     pub db: PathBuf,
 }
 
-/// [`SourceFrames`] over `ignis-media`, falling back to redrawing synthetic clips.
-pub struct MediaSources;
+/// [`SourceFrames`] over `ignis-media`, falling back to redrawing synthetic clips. A
+/// clip's recorded source is checked once against the fingerprint taken at training
+/// (size, SHA-256, frame count); `relink` gives a clip's footage a new place (checked
+/// for the trained frame size and count).
+#[derive(Default)]
+pub struct MediaSources {
+    pub relink: std::collections::HashMap<String, PathBuf>,
+    pub checked: std::collections::HashSet<String>,
+}
+
+impl MediaSources {
+    fn check(&mut self, clip: &ClipEntry, p: &Path) -> ignis_eigen::Result<()> {
+        if self.checked.contains(&clip.name) {
+            return Ok(());
+        }
+        let relinked = self.relink.contains_key(&clip.name);
+        if !p.is_file() {
+            return Err(EigenError::clip(
+                &clip.name,
+                format!(
+                    "the source video {} is missing; give its new place with --relink {}=PATH, or render reconstructed frames with --from-database",
+                    p.display(),
+                    clip.name
+                ),
+            ));
+        }
+        let info = ignis_media::probe(p).map_err(|e| EigenError::Decode {
+            clip: clip.name.clone(),
+            reason: format!("{}: {e}", p.display()),
+        })?;
+        let frames = info.frame_count.map(|n| n as usize);
+        if relinked {
+            let count_ok = match (
+                clip.source_check.as_ref().and_then(|c| c.frame_count),
+                frames,
+            ) {
+                (Some(a), Some(b)) => a == b,
+                _ => frames.is_none_or(|n| n >= clip.end),
+            };
+            if info.size != clip.source_size || !count_ok {
+                return Err(EigenError::clip(
+                    &clip.name,
+                    format!(
+                        "--relink {}: {} is {}{}, the clip was trained on {}{}; relink the clip's own footage",
+                        clip.name,
+                        p.display(),
+                        info.size,
+                        frames.map_or(String::new(), |n| format!(" with {n} frames")),
+                        clip.source_size,
+                        clip.source_check
+                            .as_ref()
+                            .and_then(|c| c.frame_count)
+                            .map_or(String::new(), |n| format!(" with {n} frames")),
+                    ),
+                ));
+            }
+        } else if let Some(c) = &clip.source_check {
+            c.verify(&clip.name, p, frames)?;
+        } else if info.size != clip.source_size {
+            return Err(EigenError::clip(
+                &clip.name,
+                format!(
+                    "the source video {} is {}, the clip was trained on {}; it changed since training: --relink {}=PATH to the original, or --from-database",
+                    p.display(),
+                    info.size,
+                    clip.source_size,
+                    clip.name
+                ),
+            ));
+        }
+        self.checked.insert(clip.name.clone());
+        Ok(())
+    }
+}
 
 impl SourceFrames for MediaSources {
     fn read(
@@ -39,10 +194,18 @@ impl SourceFrames for MediaSources {
         path: Option<&Path>,
         frames: &[usize],
     ) -> ignis_eigen::Result<Vec<Option<RgbaFrame>>> {
-        if path.is_none() && SyntheticSources::params(clip).is_some() {
+        let relinked = self.relink.get(&clip.name).cloned();
+        if path.is_none() && relinked.is_none() && SyntheticSources::params(clip).is_some() {
             return SyntheticSources.read(clip, None, frames);
         }
-        let p = path.map_or_else(|| PathBuf::from(&clip.source), Path::to_path_buf);
+        let p = match (path, &relinked) {
+            (Some(p), _) => p.to_path_buf(),
+            (None, Some(r)) => r.clone(),
+            (None, None) => PathBuf::from(&clip.source),
+        };
+        if path.is_none() {
+            self.check(clip, &p)?;
+        }
         let fail = |why: String| EigenError::Decode {
             clip: clip.name.clone(),
             reason: format!(
@@ -159,7 +322,11 @@ pub fn animate_cmd(a: &AnimateArgs, g: &Global) -> Result<Plan> {
     if a.dry_run {
         return Ok(plan);
     }
-    let size = render::output_size(&db);
+    let opts = a.footage.options()?;
+    let mut sources = a.footage.sources(&db)?;
+    let mut look = sc.look.clone();
+    a.footage.adjust_look(&mut look, g);
+    let size = opts.size.unwrap_or_else(|| render::output_size(&db, &plan));
     let mut w = a.out.create(size)?;
     let bar = g.progress(plan.frames.len() as u64, "rendering");
     let mut sink = |f: RgbaFrame| -> ignis_eigen::Result<()> {
@@ -168,11 +335,12 @@ pub fn animate_cmd(a: &AnimateArgs, g: &Global) -> Result<Plan> {
             reason: format!("{}: {e}", a.out.output.display()),
         })
     };
-    render::render_plan(
+    render::render_plan_with(
         &db,
         &plan,
-        &sc.look,
-        &mut MediaSources,
+        &look,
+        &opts,
+        &mut sources,
         &mut sink,
         &mut |n| bar.set_position(n as u64),
     )
@@ -182,17 +350,9 @@ pub fn animate_cmd(a: &AnimateArgs, g: &Global) -> Result<Plan> {
     g.say(format!(
         "{} frames at {size}, colour {}{}{}",
         plan.frames.len(),
-        sc.look.mode.name(),
-        if sc.look.bloom.is_some() {
-            " + bloom"
-        } else {
-            ""
-        },
-        if sc.look.smoke.is_some() {
-            " + smoke"
-        } else {
-            ""
-        },
+        look.mode.name(),
+        if look.bloom.is_some() { " + bloom" } else { "" },
+        if look.smoke.is_some() { " + smoke" } else { "" },
     ));
     Ok(plan)
 }
@@ -493,4 +653,127 @@ pub fn demo(ctx: &mut crate::demo::Demo, dbp: &Path) -> Result<()> {
         )?;
     }
     Ok(())
+}
+
+/// A scenario's default look: original colouring, bloom, alpha matte, §7.1.2 frames.
+pub fn default_look() -> ignis_eigen::scenario::Look {
+    ignis_eigen::scenario::Look {
+        mode: ignis_eigen::scenario::ColourMode::Original,
+        tint: ignis_core::colour::Tint::Solid([1.0, 0.42, 0.08]),
+        threshold: ignis_eigen::colour::THESIS_THRESHOLD,
+        bloom: Some(ignis_core::post::BloomParams::default()),
+        smoke: None,
+        matte: true,
+        fast_path: true,
+        originals: Default::default(),
+        masks: Default::default(),
+        mask_mode: ignis_eigen::colour::MaskMode::Add,
+    }
+}
+
+/// `ignis bench eigen-animate`'s footage case: a loop of 120 database frames of a 1080p
+/// clip (Ignis's synthetic campfire written as MP4, trained with the default settings)
+/// rendered with original colouring, bloom and the alpha matte, reading the source video
+/// (decode included; encoding the output is not: frames are dropped). `quick`: 480x270,
+/// 30 frames.
+pub fn bench_footage(quick: bool) -> Result<serde_json::Value> {
+    use ignis_eigen::train::{ClipInput, ClipSpec, NoProgress, TrainParams};
+    use std::time::Instant;
+    let (size, frames, loop_len) = if quick {
+        (
+            Size {
+                width: 480,
+                height: 270,
+            },
+            36,
+            30,
+        )
+    } else {
+        (
+            Size {
+                width: 1920,
+                height: 1080,
+            },
+            128,
+            120,
+        )
+    };
+    let dir = std::env::temp_dir().join(format!("ignis-bench-footage-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    let run = || -> Result<serde_json::Value> {
+        let clip = dir.join("fire.mp4");
+        let sp = ignis_eigen::synthetic::SyntheticParams {
+            size,
+            frames,
+            style: ignis_eigen::synthetic::FlameStyle::Campfire,
+            seed: 5,
+        };
+        let mut w = ignis_media::create(&clip, size, &ignis_media::WriteOptions::default())?;
+        for t in 0..frames {
+            w.push(&ignis_eigen::synthetic::synthetic_frame(&sp, t)?)?;
+        }
+        w.finish()?;
+        let t_train = Instant::now();
+        let mut spec = ClipSpec::new("fire");
+        spec.path = Some(clip.clone());
+        let input = ClipInput {
+            spec,
+            source: crate::eigen::media_source(&clip)?,
+        };
+        let dbp = dir.join("fire.db");
+        let tp = TrainParams {
+            pack_size: 64,
+            ..Default::default()
+        };
+        ignis_eigen::train(
+            std::slice::from_ref(&input),
+            &ignis_eigen::PreprocessParams::default(),
+            &tp,
+            &dbp,
+            &mut NoProgress,
+        )?;
+        let train_s = t_train.elapsed().as_secs_f64();
+        let db = EigenfireDb::open(&dbp)?;
+        let (mut plan, _, _) = render::loop_plan(
+            &db,
+            "fire",
+            4..4 + loop_len,
+            ignis_eigen::transition::Transition::Auto,
+            db.manifest().e_render,
+            0,
+        )?;
+        // The case is about database frames: the range itself, every frame from the footage.
+        plan.frames
+            .retain(|f| matches!(f.source, ignis_eigen::transition::FrameRef::Db(_)));
+        let look = default_look();
+        let mut n = 0usize;
+        let t = Instant::now();
+        render::render_plan_with(
+            &db,
+            &plan,
+            &look,
+            &render::RenderOptions::default(),
+            &mut MediaSources::default(),
+            &mut |f| {
+                n += (f.width() == size.width) as usize;
+                Ok(())
+            },
+            &mut |_| {},
+        )?;
+        let s = t.elapsed().as_secs_f64();
+        let fps = n as f64 / s;
+        Ok(serde_json::json!({
+            "case": format!("{size} loop of {n} database frames, original colouring + bloom + alpha, reading the source MP4 (decode included)"),
+            "frames": n,
+            "seconds": s,
+            "frames_per_s": fps,
+            "goal": if quick { "judged at full size (1920x1080)".to_string() } else { ">= 60 frames/s".to_string() },
+            "met": !quick && fps >= 60.0,
+            "train_s": train_s,
+            "threads": rayon::current_num_threads(),
+        }))
+    };
+    let r = run();
+    let _ = std::fs::remove_dir_all(&dir);
+    r
 }

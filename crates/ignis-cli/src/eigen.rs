@@ -41,7 +41,7 @@ pub enum Command {
     /// Make a seamless loop of a clip range (§5.1): the range, then a transition from its
     /// end back to its start (End Growing, Direct Bridging or low-pass morphs).
     #[command(
-        after_help = "Examples:\n  ignis eigen loop fire.db --clip candle --range 100..220 -o loop.gif\n  ignis eigen loop fire.db --clip candle --range 100..220 --method low-pass --eigenfires 50 --palette candle -o loop.png\n\nThe range is in source frame numbers (as `reconstruct --frame`); -o loop.png writes a flipbook."
+        after_help = "Examples:\n  ignis eigen loop fire.db --clip candle --range 100..220 -o loop.mp4\n  ignis eigen loop fire.db --clip candle --range 100..220 --size 640x360 -o loop.gif\n  ignis eigen loop fire.db --clip candle --range 100..220 --method low-pass --eigenfires 50 --palette candle -o loop.png\n  ignis eigen loop fire.db --clip candle --range 100..220 --relink candle=/new/place/candle.mp4 -o loop.mp4\n\nThe range is in source frame numbers (as `reconstruct --frame`); -o loop.png writes a flipbook.\nFrames are at the source clip's size, in the footage's own colours with an alpha matte from the\npre-processing mask, database frames read from the source video (§7.1.2); --palette colours\nthe grey frames with a ramp instead; --from-database reconstructs every frame."
     )]
     Loop(LoopArgs),
     /// Create a new flame by setting Eigenfire weights by hand (§5.2), starting from the
@@ -112,9 +112,12 @@ pub struct LoopArgs {
     /// to start and end where the footage is calm (0 = exactly the range).
     #[arg(long, default_value_t = 8)]
     pub search: usize,
-    /// Colour ramp: a preset or a gradient PNG (left = cold, right = hot).
-    #[arg(long, default_value = "candle")]
-    pub palette: crate::output::PaletteArg,
+    /// Colour the grey frames with a ramp (a preset or a gradient PNG, left = cold,
+    /// right = hot) instead of the footage's own colours.
+    #[arg(long)]
+    pub palette: Option<crate::output::PaletteArg>,
+    #[command(flatten)]
+    pub footage: crate::animate::FootageArgs,
     #[command(flatten)]
     pub out: crate::output::OutputArgs,
 }
@@ -310,7 +313,7 @@ impl Progress for Bars<'_> {
 }
 
 /// A clip source over `ignis_media`.
-fn media_source(path: &Path) -> Result<ClipSource<'static>> {
+pub(crate) fn media_source(path: &Path) -> Result<ClipSource<'static>> {
     let info = ignis_media::probe(path).with_context(|| format!("reading {}", path.display()))?;
     let p = path.to_path_buf();
     // Stored in the manifest and used later (original colouring) from any directory: an
@@ -402,7 +405,7 @@ pub fn train(a: TrainArgs, g: &Global) -> Result<()> {
         pre.train_size = Some(s);
     }
     if let Some(s) = a.frame_size {
-        pre.pose.frame_size = s;
+        pre.pose.frame_size = Some(s);
     }
     if a.keep.is_some() {
         tp.keep = a.keep;
@@ -475,6 +478,7 @@ fn info(a: InfoArgs, g: &Global) -> Result<()> {
             "frames": m.frames,
             "train_size": m.train_size.to_string(),
             "frame_size": m.frame_size.to_string(),
+            "framing": m.framing,
             "components": m.components,
             "usable_components": db.usable_components(),
             "e_detect": m.e_detect,
@@ -497,6 +501,9 @@ fn info(a: InfoArgs, g: &Global) -> Result<()> {
         "  frames       {} (training size {}, pre-processed size {})",
         m.frames, m.train_size, m.frame_size
     );
+    if !m.framing.is_empty() {
+        println!("  framing      {}", m.framing);
+    }
     println!(
         "  Eigenfires   {} stored in {} packs of {}, {} usable",
         m.components,
@@ -519,7 +526,7 @@ fn info(a: InfoArgs, g: &Global) -> Result<()> {
     println!("  size on disk {:.2} MB", db.bytes_on_disk() as f64 / 1e6);
     for c in &m.clips {
         println!(
-            "  clip {:<12} {} frames {}..{} step {} @ {:.2} fps, {} → scale {:.3}; θ_min {:.4}, θ_average {:.4} (E={}, {} peaks)",
+            "  clip {:<12} {} frames {}..{} step {} @ {:.2} fps, {} → scale {:.3}{}; θ_min {:.4}, θ_average {:.4} (E={}, {} peaks)",
             c.name,
             c.frames,
             c.start,
@@ -528,6 +535,12 @@ fn info(a: InfoArgs, g: &Global) -> Result<()> {
             c.fps,
             c.source_size,
             c.pose.scale,
+            match (c.pose.isolate, c.static_lit) {
+                (true, Some(f)) => format!(", flame isolated ({:.0}% of the lit pixels static: lit surroundings)", f * 100.0),
+                (false, Some(f)) => format!(", whole lit area kept ({:.0}% static)", f * 100.0),
+                (true, None) => ", flame isolated".to_string(),
+                (false, None) => String::new(),
+            },
             c.thresholds.theta_min,
             c.thresholds.theta_average,
             c.thresholds.e,
@@ -642,41 +655,64 @@ fn reconstruct(a: ReconstructArgs, g: &Global) -> Result<()> {
 
 /// `ignis eigen loop`; returns the join (for the demo's caption).
 fn loop_cmd(a: &LoopArgs, g: &Global) -> Result<ignis_eigen::transition::Join> {
-    use ignis_eigen::animate;
+    use ignis_eigen::scenario::ColourMode;
+    use ignis_eigen::{animate, render};
     let db = open_db(&a.db)?;
     let method = animate::parse_method(&a.method)?;
     let e = a.eigenfires.unwrap_or(db.manifest().e_render);
     if e == 0 {
         bail!("--eigenfires must be at least 1");
     }
-    let palette = a.palette.load()?;
+    let opts = a.footage.options()?;
+    let mut sources = a.footage.sources(&db)?;
+    let mut look = crate::animate::default_look();
+    if let Some(p) = &a.palette {
+        look.mode = ColourMode::Palette(p.load()?);
+        look.bloom = None;
+    }
+    a.footage.adjust_look(&mut look, g);
     let rows = animate::clip_rows(&db, &a.clip, a.range.clone())
         .with_context(|| format!("clip `{}` range {}..{}", a.clip, a.range.start, a.range.end))?;
     let sp = g.spinner("finding the transition");
-    let (frames, join, used) =
-        animate::render_loop(&db, &a.clip, a.range.clone(), method, e, a.search).with_context(
-            || {
-                format!(
-                    "looping clip `{}` frames {}..{} with {}",
-                    a.clip, a.range.start, a.range.end, a.method
-                )
-            },
-        )?;
+    let (plan, join, used) = render::loop_plan(&db, &a.clip, a.range.clone(), method, e, a.search)
+        .with_context(|| {
+            format!(
+                "looping clip `{}` frames {}..{} with {}",
+                a.clip, a.range.start, a.range.end, a.method
+            )
+        })?;
     sp.finish_and_clear();
     let plain = animate::plain_cut_ratio(&db, rows.clone())?;
-    let size = frames[0].size();
+    let size = opts.size.unwrap_or_else(|| render::output_size(&db, &plan));
     let mut w = a.out.create(size)?;
-    for f in &frames {
-        a.out.push(&mut w, &palette.apply(f))?;
-    }
+    let bar = g.progress(plan.frames.len() as u64, "rendering");
+    let mut sink = |f: ignis_core::RgbaFrame| -> ignis_eigen::Result<()> {
+        w.push(&f)
+            .map_err(|e| ignis_eigen::EigenError::BadParameter {
+                name: "output".into(),
+                reason: format!("{}: {e}", a.out.output.display()),
+            })
+    };
+    render::render_plan_with(
+        &db,
+        &plan,
+        &look,
+        &opts,
+        &mut sources,
+        &mut sink,
+        &mut |n| bar.set_position(n as u64),
+    )
+    .with_context(|| format!("rendering the loop of clip `{}`", a.clip))?;
+    bar.finish_and_clear();
     a.out.finish(w, g)?;
     g.say(format!(
-        "method {}: {} range frame(s) + {} transition frame(s) = {} frames at {}, E = {} (the transition replaces the range's last {} and first {} frame(s)); seam ratio {:.2} (plain cut {:.2})",
+        "method {}: {} range frame(s) + {} transition frame(s) = {} frames at {}, colour {}, E = {} (the transition replaces the range's last {} and first {} frame(s)); seam ratio {:.2} (plain cut {:.2})",
         join.method,
-        frames.len() - join.frames.len(),
+        plan.frames.len() - join.frames.len(),
         join.frames.len(),
-        frames.len(),
+        plan.frames.len(),
         size,
+        look.mode.name(),
         e.min(db.usable_components()),
         join.trim_t1,
         join.trim_t2,
@@ -745,7 +781,7 @@ fn preprocess(a: PreprocessArgs, g: &Global) -> Result<()> {
         pre.train_size = Some(s);
     }
     if let Some(s) = a.frame_size {
-        pre.pose.frame_size = s;
+        pre.pose.frame_size = Some(s);
     }
     if a.print_config {
         print!("{}", pre.to_toml());

@@ -77,12 +77,12 @@ struct DemoArgs {
 
 #[derive(clap::Args, Debug)]
 #[command(
-    after_help = "Examples:\n  ignis bench classic\n  ignis bench classic --quick\n  ignis bench eigen-train\n  ignis bench eigen-animate --keep-db /tmp/bench.db\n  ignis bench learned\n  ignis bench volume\n  ignis bench flow --quick"
+    after_help = "Examples:\n  ignis bench classic\n  ignis bench classic --quick\n  ignis bench eigen-train\n  ignis bench eigen-animate --keep-db /tmp/bench.db\n  ignis bench eigen-footage   (only eigen-animate's footage case: a 1080p loop read from the source video)\n  ignis bench learned\n  ignis bench volume\n  ignis bench flow --quick"
 )]
 struct BenchArgs {
     /// What to measure (`flow`: dense optical flow and the motion-compensated morph,
     /// against the issues' speed goals, plus mid-frame prediction on ../shared/data).
-    #[arg(value_parser = ["classic", "eigen-train", "eigen-animate", "learned", "volume", "flow"])]
+    #[arg(value_parser = ["classic", "eigen-train", "eigen-animate", "eigen-footage", "learned", "volume", "flow"])]
     target: String,
     /// Fewer repetitions (a smoke test; figures are noisier).
     #[arg(long)]
@@ -218,9 +218,19 @@ fn run(cli: Cli) -> Result<()> {
                 "eigen-train" => ignis_pca::bench_figures(a.quick),
                 "eigen-animate" => {
                     let sp = g.spinner("training the benchmark database, then timing");
-                    let v = ignis_eigen::bench::animate_figures(a.quick, a.keep_db.as_deref())?;
+                    let mut v = ignis_eigen::bench::animate_figures(a.quick, a.keep_db.as_deref())?;
                     sp.finish_and_clear();
+                    let sp = g.spinner("footage case: writing, training and rendering a clip");
+                    let f = animate::bench_footage(a.quick)?;
+                    sp.finish_and_clear();
+                    v["footage"] = f;
                     v
+                }
+                "eigen-footage" => {
+                    let sp = g.spinner("writing, training and rendering a clip");
+                    let f = animate::bench_footage(a.quick)?;
+                    sp.finish_and_clear();
+                    serde_json::json!({"bench": "eigen-footage", "quick": a.quick, "footage": f})
                 }
                 "volume" => volume::bench(&g, a.quick)?,
                 "learned" => learned::bench(&g, a.quick)?,

@@ -508,6 +508,93 @@ mod eigen {
     }
 }
 
+mod footage {
+    use super::*;
+
+    fn ffmpeg_clip(path: &Path, seconds: &str) {
+        let o = Command::new("ffmpeg")
+            .args(["-v", "error", "-y", "-f", "lavfi", "-i"])
+            .arg(format!("testsrc2=size=64x48:rate=10:duration={seconds}"))
+            .args(["-pix_fmt", "yuv420p"])
+            .arg(path)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    }
+
+    fn json_size(p: &Path) -> (u64, u64) {
+        let v: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap();
+        (
+            v["frame_width"].as_u64().unwrap(),
+            v["frame_height"].as_u64().unwrap(),
+        )
+    }
+
+    /// Output at the source size by default, `--size`, bad sizes, and a source video that
+    /// changed, moved (`--relink`) or went missing (`--from-database`).
+    #[test]
+    fn source_size_and_source_integrity() {
+        if !has_ffmpeg() {
+            return;
+        }
+        let t = tempfile::tempdir().unwrap();
+        let clip = t.path().join("wide.mp4");
+        ffmpeg_clip(&clip, "1.2");
+        let keep = t.path().join("moved.mp4");
+        std::fs::copy(&clip, &keep).unwrap();
+        let db = t.path().join("fire.db");
+        let o = ignis(&[
+            "eigen",
+            "train",
+            clip.to_str().unwrap(),
+            "-q",
+            "-o",
+            db.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let info = ignis(&["eigen", "info", db.to_str().unwrap()]);
+        assert!(String::from_utf8_lossy(&info.stdout).contains("framing"));
+        let dbs = db.to_str().unwrap();
+        let lp = |extra: &[&str], out: &Path| {
+            let mut a = vec!["eigen", "loop", dbs, "--clip", "wide", "--range", "1..11"];
+            a.extend_from_slice(extra);
+            a.extend_from_slice(&["-q", "-o", out.to_str().unwrap()]);
+            ignis(&a)
+        };
+        let out = t.path().join("loop.png");
+        let o = lp(&[], &out);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        assert_eq!(json_size(&t.path().join("loop.json")), (64, 48));
+        let out2 = t.path().join("small.png");
+        let o = lp(&["--size", "32x24"], &out2);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        assert_eq!(json_size(&t.path().join("small.json")), (32, 24));
+        let bad = t.path().join("bad.png");
+        assert_fails(&lp(&["--size", "0x0"], &bad), "zero side");
+        assert_fails(&lp(&["--size", "90000x10"], &bad), "beyond the limits");
+        assert!(!bad.exists());
+        // The source changed since training: a clear error naming the clip.
+        ffmpeg_clip(&clip, "1.5");
+        let o = lp(&[], &bad);
+        assert_fails(&o, "changed since training");
+        assert_fails(&o, "wide");
+        assert!(!bad.exists());
+        // --relink to the original footage's new place.
+        let relink = format!("wide={}", keep.display());
+        let o = lp(&["--relink", &relink], &out);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let o = lp(&["--relink", "torch=x.mp4"], &bad);
+        assert_fails(&o, "torch");
+        // A missing source: an error, and reconstructed frames with --from-database.
+        std::fs::remove_file(&clip).unwrap();
+        assert_fails(&lp(&[], &bad), "missing");
+        let o = lp(&["--from-database"], &out);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        assert_eq!(json_size(&t.path().join("loop.json")), (64, 48));
+    }
+}
+
 mod volume {
     use super::*;
 

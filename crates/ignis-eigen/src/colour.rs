@@ -50,7 +50,27 @@ pub const THESIS_THRESHOLD: f32 = 0.0130;
 /// fractional on the one-pixel border). Because the warp is linear, the luminance of the
 /// result equals the grey warp of the luminance up to rounding.
 pub fn warp_rgba(src: &RgbaFrame, pose: &ClipPose, angle: f32, p: &PoseParams) -> RgbaFrame {
-    let out = p.frame_size;
+    let out = p.frame();
+    if let Some((ox, oy)) = crate::pose::whole_pixel_offset(pose, angle, p) {
+        // Scale 1, no rotation, whole-pixel offset: bilinear sampling is an exact copy.
+        let (sw, sh) = (src.width() as i64, src.height() as i64);
+        let mut data = vec![[0.0f32; 4]; out.pixels()];
+        let ow = out.width as usize;
+        data.par_chunks_mut(ow).enumerate().for_each(|(v, row)| {
+            let sy = v as i64 - oy;
+            if sy < 0 || sy >= sh {
+                return;
+            }
+            let srow = &src.data()[(sy * sw) as usize..((sy + 1) * sw) as usize];
+            for (u, o) in row.iter_mut().enumerate() {
+                let sx = u as i64 - ox;
+                if sx >= 0 && sx < sw {
+                    *o = srow[sx as usize];
+                }
+            }
+        });
+        return RgbaFrame::from_vec(out, data).expect("frame_size pixels");
+    }
     let cx = out.width as f32 / 2.0;
     let by = out.height as f32 * (1.0 - p.base_margin);
     let (s, c) = angle.sin_cos();
@@ -398,12 +418,13 @@ mod tests {
         )
         .unwrap();
         let pose = ClipPose {
+            isolate: false,
             fuel_x: 30.5,
             base_y: 44.0,
             scale: 0.8,
         };
         let p = PoseParams {
-            frame_size: size(40, 60),
+            frame_size: Some(size(40, 60)),
             ..Default::default()
         };
         let angle = 0.3;

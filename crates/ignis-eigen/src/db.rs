@@ -107,6 +107,91 @@ pub struct ClipEntry {
     pub thresholds: Thresholds,
     /// `frames/<name>.npy` when the full-resolution pre-processed frames are stored.
     pub frames_file: Option<FileEntry>,
+    /// What the source video was at training (size in bytes, SHA-256, frame count), so a
+    /// changed or replaced source is caught before its frames are used; `None` for
+    /// sources that are not files (synthetic clips).
+    #[serde(default)]
+    pub source_check: Option<SourceCheck>,
+    /// Fraction of the clip's lit pixels that were static (lit surroundings), which
+    /// decided flame isolation (`pose.isolate`).
+    #[serde(default)]
+    pub static_lit: Option<f64>,
+}
+
+/// A source file's fingerprint.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct SourceCheck {
+    pub bytes: u64,
+    pub sha256: String,
+    /// Frames in the source when its container says.
+    #[serde(default)]
+    pub frame_count: Option<usize>,
+}
+
+/// The fingerprint of `source` when it is a file (`None` otherwise).
+pub fn source_check(source: &str, frame_count: Option<usize>) -> Result<Option<SourceCheck>> {
+    let p = Path::new(source);
+    if !p.is_file() {
+        return Ok(None);
+    }
+    let (bytes, sha256) = file_fingerprint(p)?;
+    Ok(Some(SourceCheck {
+        bytes,
+        sha256,
+        frame_count,
+    }))
+}
+
+/// Size and SHA-256 of a file, read in 1 MiB blocks.
+pub fn file_fingerprint(p: &Path) -> Result<(u64, String)> {
+    use std::io::Read;
+    let mut f = std::fs::File::open(p).map_err(|e| EigenError::io(p, e))?;
+    let mut h = Sha256::new();
+    let mut buf = vec![0u8; 1 << 20];
+    let mut n = 0u64;
+    loop {
+        let k = f.read(&mut buf).map_err(|e| EigenError::io(p, e))?;
+        if k == 0 {
+            break;
+        }
+        h.update(&buf[..k]);
+        n += k as u64;
+    }
+    Ok((n, h.finalize().iter().map(|b| format!("{b:02x}")).collect()))
+}
+
+impl SourceCheck {
+    /// Compares `path` (now) with the fingerprint; an error names the clip, what changed
+    /// and the ways out.
+    pub fn verify(&self, clip: &str, path: &Path, frame_count: Option<usize>) -> Result<()> {
+        if !path.is_file() {
+            return Err(EigenError::clip(
+                clip,
+                format!(
+                    "the source video {} is missing; give its new place with --relink {clip}=PATH, or render reconstructed frames with --from-database",
+                    path.display()
+                ),
+            ));
+        }
+        let (bytes, sha) = file_fingerprint(path)?;
+        let frames_differ = matches!((self.frame_count, frame_count), (Some(a), Some(b)) if a != b);
+        if bytes != self.bytes || sha != self.sha256 || frames_differ {
+            return Err(EigenError::clip(
+                clip,
+                format!(
+                    "the source video {} changed since training ({} bytes, sha256 {}…{}; at training {} bytes, sha256 {}…{}); relink the original with --relink {clip}=PATH, retrain, or render reconstructed frames with --from-database",
+                    path.display(),
+                    bytes,
+                    &sha[..8],
+                    frame_count.map_or(String::new(), |n| format!(", {n} frames")),
+                    self.bytes,
+                    &self.sha256[..8.min(self.sha256.len())],
+                    self.frame_count.map_or(String::new(), |n| format!(", {n} frames")),
+                ),
+            ));
+        }
+        Ok(())
+    }
 }
 
 /// The readable description of a database.
@@ -139,6 +224,9 @@ pub struct Manifest {
     pub weights: FileEntry,
     pub angles: FileEntry,
     pub packs: Vec<PackEntry>,
+    /// What common frame and training size were chosen and why.
+    #[serde(default)]
+    pub framing: String,
 }
 
 /// SHA-256 of a byte slice, lowercase hex.

@@ -61,7 +61,7 @@ impl EigenError {
             reason: reason.into(),
         }
     }
-    pub(crate) fn clip(clip: &str, reason: impl Into<String>) -> Self {
+    pub fn clip(clip: &str, reason: impl Into<String>) -> Self {
         EigenError::BadClip {
             clip: clip.into(),
             reason: reason.into(),

@@ -97,6 +97,31 @@ pub struct MaskParams {
     /// stage image; the edges are for inspection and do not change the mask. Default
     /// `[50, 100]`.
     pub canny: [f32; 2],
+    /// Flame isolation on cluttered footage (a lit jar, a lit wall): `auto` (default)
+    /// turns it on for a clip whose mask is mostly static lit surroundings (see
+    /// [`static_fraction`]), `on` always, `off` never. See [`isolate_flame`].
+    pub isolate: Isolate,
+    /// Darkest sRGB-encoded luminance an isolated flame reaches, `0..1`. Default 0.3.
+    pub isolate_floor: f32,
+    /// With isolation, mask pixels at least this saturated (sRGB HSV S) are kept as
+    /// flame wherever they are: a flame's own light is saturated (orange, red, blue), the
+    /// surfaces it lights are paler (the lit jar of candle.mp4: 3 % of its lit pixels
+    /// reach 0.5; the fire of fireball.mp4: all). Default 0.5.
+    pub isolate_saturation: f32,
+    /// With isolation, how much weaker than the strongest edge (`0..1`, a fraction) the
+    /// flame's outer edge may be and still be chosen over the edge of its white-hot core.
+    /// Default 0.1.
+    pub isolate_edge_tolerance: f32,
+}
+
+/// When [`isolate_flame`] runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum Isolate {
+    #[default]
+    Auto,
+    On,
+    Off,
 }
 
 impl Default for MaskParams {
@@ -132,6 +157,10 @@ impl Default for MaskParams {
             ],
             smooth_sigma: 1.0,
             canny: [50.0, 100.0],
+            isolate: Isolate::Auto,
+            isolate_floor: 0.3,
+            isolate_saturation: 0.5,
+            isolate_edge_tolerance: 0.1,
         }
     }
 }
@@ -172,6 +201,21 @@ impl MaskParams {
                 "mask.smooth_sigma",
                 "must be within 0..=50 pixels",
             ));
+        }
+        if !(0.0..1.0).contains(&self.isolate_edge_tolerance) {
+            return Err(EigenError::bad(
+                "mask.isolate_edge_tolerance",
+                "must be within 0..1",
+            ));
+        }
+        if !(0.0..=1.0).contains(&self.isolate_saturation) {
+            return Err(EigenError::bad(
+                "mask.isolate_saturation",
+                "must be within 0..=1",
+            ));
+        }
+        if !(0.0..1.0).contains(&self.isolate_floor) {
+            return Err(EigenError::bad("mask.isolate_floor", "must be within 0..1"));
         }
         // imageproc's hysteresis walks off the image when low = 0 (every zero-gradient
         // border pixel counts as an edge), so low must be positive.
@@ -267,14 +311,251 @@ pub fn smooth_mask(mask: &GrayImage, sigma: f32) -> GrayImage {
     b
 }
 
-/// The full mask of §3.2.1: HSV layers, then morphology, then smoothing.
-pub fn flame_mask(frame: &RgbaFrame, p: &MaskParams) -> GrayImage {
+/// The full mask of §3.2.1: HSV layers (when `isolate`, restricted to the
+/// [`isolate_flame`] region and the saturated — emissive — pixels), then morphology,
+/// then smoothing.
+pub fn flame_mask(frame: &RgbaFrame, p: &MaskParams, isolate: bool) -> GrayImage {
     let mut m = hsv_mask(frame, &p.layers);
+    if isolate {
+        let keep = isolate_flame(
+            &luma8(frame),
+            frame.width(),
+            frame.height(),
+            p.isolate_floor,
+            p.isolate_edge_tolerance,
+        );
+        for ((a, b), px) in m.as_mut().iter_mut().zip(keep.as_raw()).zip(frame.data()) {
+            // A flame's own light is saturated (orange, red, blue); what it lights is paler.
+            let (_, sat, _) = rgb_to_hsv(
+                linear_to_srgb(px[0]),
+                linear_to_srgb(px[1]),
+                linear_to_srgb(px[2]),
+            );
+            let emissive = sat >= p.isolate_saturation;
+            *a = if *a > 0 && (*b > 0 || emissive) {
+                255
+            } else {
+                0
+            };
+        }
+    }
     for step in &p.morphology {
         m = morph(&m, *step);
     }
     smooth_mask(&m, p.smooth_sigma)
 }
+
+/// sRGB-encoded luminance of a linear frame, 8-bit.
+pub fn luma8(frame: &RgbaFrame) -> Vec<u8> {
+    frame
+        .data()
+        .iter()
+        .map(|p| {
+            let l = 0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2];
+            (linear_to_srgb(l.clamp(0.0, 1.0)) * 255.0).round() as u8
+        })
+        .collect()
+}
+
+/// sRGB-encoded HSV value (max channel) of a linear frame, 8-bit.
+pub fn value8(frame: &RgbaFrame) -> Vec<u8> {
+    frame
+        .data()
+        .iter()
+        .map(|p| (linear_to_srgb(p[0].max(p[1]).max(p[2]).clamp(0.0, 1.0)) * 255.0).round() as u8)
+        .collect()
+}
+
+/// Levels of luminance (8-bit) over which [`isolate_flame`] measures the region's growth.
+const GROWTH_STEP: usize = 12;
+/// Growth over [`GROWTH_STEP`] levels that marks the flame region merging into lit
+/// surroundings.
+const MERGE_GROWTH: f64 = 2.2;
+
+/// Flame isolation: the part of the frame lit by the flame itself, not by its light.
+///
+/// A flame is the brightest thing in its frame and ends at a sharp edge; what it lights
+/// (a jar, a wall, the ground) is dimmer and fades smoothly. From seeds at the frame's
+/// brightest pixels (within 8 levels of the maximum of `luma`, sRGB-encoded luminance),
+/// a priority flood visits pixels in decreasing luminance down to `floor`, which gives
+/// each pixel the threshold `τ` at which it joins the seeds' region `R(τ)`. Walking `τ`
+/// down, the first level where the area more than doubles within 12 levels
+/// ([`MERGE_GROWTH`]) is where the flame's region merges into the lit surroundings; above
+/// it, the mean luminance step between neighbours across each region's boundary is
+/// measured, and the `τ` with the strongest step (the flame's edge) is chosen. Returns
+/// the mask of every pixel at least as bright as `τ` (255 inside), so a reflection or a
+/// second tongue not connected to the seeds is kept too.
+/// Deterministic; O(pixels). The thresholds adapt to each frame: nothing is tuned to a
+/// clip.
+pub fn isolate_flame(luma: &[u8], w: u32, h: u32, floor: f32, tolerance: f32) -> GrayImage {
+    let (w, h) = (w as usize, h as usize);
+    let mut out = GrayImage::new(w as u32, h as u32);
+    let floor = (floor * 255.0).round() as usize;
+    let vmax = luma.iter().copied().max().unwrap_or(0) as usize;
+    if vmax < floor || luma.len() != w * h {
+        return out;
+    }
+    // Entry level of each pixel (-1: never reached).
+    let mut entry = vec![-1i16; w * h];
+    let mut queued = vec![false; w * h];
+    let mut buckets: Vec<Vec<u32>> = vec![Vec::new(); 256];
+    let seed = vmax.saturating_sub(8).max(floor);
+    for (i, &v) in luma.iter().enumerate() {
+        if v as usize >= seed {
+            queued[i] = true;
+            buckets[v as usize].push(i as u32);
+        }
+    }
+    let mut cur = 255usize;
+    loop {
+        let Some(i) = buckets[cur].pop() else {
+            if cur <= floor {
+                break;
+            }
+            cur -= 1;
+            continue;
+        };
+        let i = i as usize;
+        entry[i] = cur as i16;
+        let (x, y) = (i % w, i / w);
+        let mut push = |j: usize| {
+            if !queued[j] {
+                queued[j] = true;
+                let v = luma[j] as usize;
+                if v >= floor {
+                    buckets[v.min(cur)].push(j as u32);
+                }
+            }
+        };
+        if x > 0 {
+            push(i - 1);
+        }
+        if x + 1 < w {
+            push(i + 1);
+        }
+        if y > 0 {
+            push(i - w);
+        }
+        if y + 1 < h {
+            push(i + w);
+        }
+    }
+    // Area of R(τ) and the mean luminance step across its boundary, for every τ.
+    let mut joined = [0u64; 257];
+    for &e in &entry {
+        if e >= 0 {
+            joined[e as usize] += 1;
+        }
+    }
+    let mut area = [0u64; 257];
+    for t in (0..256).rev() {
+        area[t] = area[t + 1] + joined[t];
+    }
+    // A neighbour pair with entry levels a < b (−1 = never) is on the boundary of R(τ)
+    // for a < τ <= b: difference arrays over τ.
+    let mut dsum = [0f64; 258];
+    let mut dcount = [0i64; 258];
+    let mut pair = |i: usize, j: usize| {
+        let (a, b) = (entry[i], entry[j]);
+        if a != b {
+            let (lo, hi) = (a.min(b), a.max(b));
+            let d = (luma[i] as f64 - luma[j] as f64).abs();
+            let (from, to) = ((lo + 1) as usize, (hi + 1) as usize);
+            dsum[from] += d;
+            dsum[to] -= d;
+            dcount[from] += 1;
+            dcount[to] -= 1;
+        }
+    };
+    for y in 0..h {
+        for x in 0..w {
+            let i = y * w + x;
+            if x + 1 < w {
+                pair(i, i + 1);
+            }
+            if y + 1 < h {
+                pair(i, i + w);
+            }
+        }
+    }
+    let mut mean = [0f64; 257];
+    let (mut s, mut c) = (0f64, 0i64);
+    for t in 0..257 {
+        s += dsum[t];
+        c += dcount[t];
+        mean[t] = if c > 0 { s / c as f64 } else { 0.0 };
+    }
+    // The merge level: walking τ down from below the seeds.
+    let top = vmax.saturating_sub(8).max(floor);
+    let mut stop = floor;
+    let mut t = vmax.saturating_sub(24);
+    while t >= floor + GROWTH_STEP && t > 0 {
+        if area[t - GROWTH_STEP] as f64 > MERGE_GROWTH * area[t].max(1) as f64 {
+            stop = t;
+            break;
+        }
+        t -= 1;
+    }
+    // The flame's edge: the strongest boundary above the merge; of the boundaries within
+    // `tolerance` of it, the lowest (the outer edge of the flame rather than the edge of
+    // its white-hot core).
+    let strongest = (stop..=top.max(stop))
+        .filter(|&t| area[t] > 0)
+        .map(|t| mean[t])
+        .fold(0.0f64, f64::max);
+    let best = (stop..=top.max(stop))
+        .find(|&t| area[t] > 0 && mean[t] >= (1.0 - tolerance as f64) * strongest)
+        .unwrap_or(top);
+    // Everything at least that bright, connected to the seeds or not (a flame's
+    // reflection, a second tongue): the lit surroundings are dimmer than the merge level.
+    for (o, &v) in out.as_mut().iter_mut().zip(luma) {
+        if v as usize >= best {
+            *o = 255;
+        }
+    }
+    out
+}
+
+/// Fraction of the lit pixels (V ≥ `floor`) of `samples` (8-bit sRGB values, one `Vec`
+/// per sampled frame, same size) that stay within 0.08 of their temporal median: lit
+/// surroundings are static, a flame is not. [`Isolate::Auto`] isolates the flame when
+/// this exceeds [`STATIC_LIT`].
+pub fn static_fraction(samples: &[Vec<u8>], floor: f32) -> f64 {
+    let Some(n) = samples.first().map(Vec::len) else {
+        return 0.0;
+    };
+    let floor = (floor * 255.0).round() as u8;
+    let (mut lit, mut still) = (0u64, 0u64);
+    let mut col = Vec::with_capacity(samples.len());
+    for i in 0..n {
+        col.clear();
+        col.extend(samples.iter().filter_map(|s| s.get(i).copied()));
+        if col.iter().all(|&v| v < floor) {
+            continue;
+        }
+        let mut sorted = col.clone();
+        sorted.sort_unstable();
+        let med = sorted[sorted.len() / 2] as i32;
+        for &v in &col {
+            if v >= floor {
+                lit += 1;
+                if (v as i32 - med).abs() < 20 {
+                    still += 1;
+                }
+            }
+        }
+    }
+    if lit == 0 {
+        0.0
+    } else {
+        still as f64 / lit as f64
+    }
+}
+
+/// [`static_fraction`] above which [`Isolate::Auto`] isolates the flame. A flame on
+/// black scores near 0 (fireball.mp4: 0.00); footage with lit surroundings 0.4–0.6
+/// (candle.mp4 0.43, campfire.mp4 0.59).
+pub const STATIC_LIT: f64 = 0.2;
 
 /// Canny edges of the mask (for the `edges` stage image).
 pub fn mask_edges(mask: &GrayImage, p: &MaskParams) -> GrayImage {

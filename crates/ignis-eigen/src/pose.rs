@@ -26,10 +26,13 @@ use serde::{Deserialize, Serialize};
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct PoseParams {
-    /// The common frame size every clip is brought to, `"WIDTHxHEIGHT"`. Default 410x670
-    /// (thesis §4.2).
-    #[serde(with = "size_str")]
-    pub frame_size: Size,
+    /// The common frame size every clip is brought to, `"WIDTHxHEIGHT"`, or `"auto"`
+    /// (default): the smallest frame that holds every clip at its own resolution, each
+    /// clip placed bottom-centred at scale 1 (see [`auto_framing`]), so nothing is
+    /// clipped or resampled. A fixed size (the thesis's 410x670, §4.2) centres and scales
+    /// each clip on its fuel instead.
+    #[serde(with = "size_str::auto")]
+    pub frame_size: Option<Size>,
     /// Fraction of the frame height the clip's tall (90th-percentile) flame fills,
     /// `0.1..=1`. Default 0.85.
     pub fill: f32,
@@ -44,10 +47,7 @@ pub struct PoseParams {
 impl Default for PoseParams {
     fn default() -> Self {
         PoseParams {
-            frame_size: Size {
-                width: 410,
-                height: 670,
-            },
+            frame_size: None,
             fill: 0.85,
             base_margin: 0.05,
             rotate: false,
@@ -55,9 +55,23 @@ impl Default for PoseParams {
     }
 }
 
+/// The thesis's common frame size (§4.2), used where a fixed size is needed and none
+/// was resolved.
+pub const THESIS_FRAME: Size = Size {
+    width: 410,
+    height: 670,
+};
+
 impl PoseParams {
+    /// The frame size (the thesis's 410x670 while `auto` is unresolved).
+    pub fn frame(&self) -> Size {
+        self.frame_size.unwrap_or(THESIS_FRAME)
+    }
+
     pub fn validate(&self) -> Result<()> {
-        Size::new(self.frame_size.width, self.frame_size.height)?;
+        if let Some(f) = self.frame_size {
+            Size::new(f.width, f.height)?;
+        }
         if !(0.1..=1.0).contains(&self.fill) {
             return Err(EigenError::bad("pose.fill", "must be within 0.1..=1"));
         }
@@ -78,6 +92,60 @@ pub struct ClipPose {
     pub base_y: f32,
     /// Output pixels per source pixel.
     pub scale: f32,
+    /// Flame isolation on this clip ([`crate::mask::isolate_flame`]).
+    #[serde(default)]
+    pub isolate: bool,
+}
+
+/// Automatic framing: the common frame is the smallest that holds every clip (`sizes`)
+/// at its own resolution; each clip sits bottom-centred in it at scale 1, on whole
+/// pixels (the warp is then an exact copy). Returns the frame and one pose per clip
+/// (with `base_margin` 0).
+pub fn auto_framing(sizes: &[Size]) -> (Size, Vec<ClipPose>) {
+    let fw = sizes.iter().map(|s| s.width).max().unwrap_or(1).max(1);
+    let fh = sizes.iter().map(|s| s.height).max().unwrap_or(1).max(1);
+    let poses = sizes
+        .iter()
+        .map(|s| {
+            let ox = (fw - s.width) / 2;
+            ClipPose {
+                fuel_x: fw as f32 / 2.0 - ox as f32,
+                base_y: s.height as f32,
+                scale: 1.0,
+                isolate: false,
+            }
+        })
+        .collect();
+    (
+        Size {
+            width: fw,
+            height: fh,
+        },
+        poses,
+    )
+}
+
+/// Where a clip of `source` size lands in the common frame under `pose` (`x, y, w, h`,
+/// in frame pixels, clamped to the frame): the view an output of that clip shows.
+pub fn clip_rect(source: Size, pose: &ClipPose, p: &PoseParams) -> (u32, u32, u32, u32) {
+    let f = p.frame();
+    let cx = f.width as f32 / 2.0;
+    let by = f.height as f32 * (1.0 - p.base_margin);
+    let x0 = (cx - pose.fuel_x * pose.scale).round().max(0.0);
+    let y0 = (by - pose.base_y * pose.scale).round().max(0.0);
+    let x1 = (cx + (source.width as f32 - pose.fuel_x) * pose.scale)
+        .round()
+        .min(f.width as f32);
+    let y1 = (by + (source.height as f32 - pose.base_y) * pose.scale)
+        .round()
+        .min(f.height as f32);
+    let (x0, y0) = (x0.min(f.width as f32 - 1.0), y0.min(f.height as f32 - 1.0));
+    (
+        x0 as u32,
+        y0 as u32,
+        ((x1 - x0).max(1.0)) as u32,
+        ((y1 - y0).max(1.0)) as u32,
+    )
 }
 
 /// What one mask says about the flame's placement.
@@ -147,7 +215,7 @@ pub fn clip_pose(clip: &str, extents: &[Option<MaskExtent>], p: &PoseParams) -> 
     let mut by: Vec<f32> = e.iter().map(|m| m.base_y).collect();
     let mut hs: Vec<f32> = e.iter().map(|m| m.height).collect();
     let mut ws: Vec<f32> = e.iter().map(|m| m.width).collect();
-    let (fw, fh) = (p.frame_size.width as f32, p.frame_size.height as f32);
+    let (fw, fh) = (p.frame().width as f32, p.frame().height as f32);
     let h90 = percentile(&mut hs, 0.9).max(1.0);
     let w90 = percentile(&mut ws, 0.9).max(1.0);
     let scale = (p.fill * fh / h90).min(0.95 * fw / w90);
@@ -155,6 +223,7 @@ pub fn clip_pose(clip: &str, extents: &[Option<MaskExtent>], p: &PoseParams) -> 
         fuel_x: percentile(&mut fx, 0.5),
         base_y: percentile(&mut by, 0.5),
         scale,
+        isolate: false,
     })
 }
 
@@ -203,11 +272,41 @@ pub fn lean_angle(nodes: &[ContourNode], keep: &[bool]) -> Option<(f32, [f32; 2]
     Some(((-m).atan() as f32, root))
 }
 
+/// When `pose` at `angle` maps source pixels onto frame pixels one to one (scale 1, no
+/// rotation, whole-pixel offset), the offset `(ox, oy)`: frame pixel `(u, v)` shows
+/// source pixel `(u − ox, v − oy)`. Bilinear sampling is then an exact copy.
+pub fn whole_pixel_offset(pose: &ClipPose, angle: f32, p: &PoseParams) -> Option<(i64, i64)> {
+    if angle != 0.0 || pose.scale != 1.0 {
+        return None;
+    }
+    let out = p.frame();
+    let cx = out.width as f32 / 2.0;
+    let by = out.height as f32 * (1.0 - p.base_margin);
+    // sx − 0.5 = u + (fuel_x − cx), sy − 0.5 = v + (base_y − by)
+    let (dx, dy) = (pose.fuel_x - cx, pose.base_y - by);
+    if dx.fract() != 0.0 || dy.fract() != 0.0 {
+        return None;
+    }
+    Some((-(dx as i64), -(dy as i64)))
+}
+
 /// Warps a source frame into the common frame size: translation and scale from `pose`,
 /// then (if `angle` ≠ 0) a rotation by `−angle` around the fuel so the flame stands
 /// upright. Bilinear sampling; outside the source is black.
 pub fn warp(src: &GrayFrame, pose: &ClipPose, angle: f32, p: &PoseParams) -> GrayFrame {
-    let out = p.frame_size;
+    let out = p.frame();
+    if let Some((ox, oy)) = whole_pixel_offset(pose, angle, p) {
+        let (sw, sh) = (src.width() as i64, src.height() as i64);
+        let d = src.data();
+        return GrayFrame::from_fn(out, |u, v| {
+            let (sx, sy) = (u as i64 - ox, v as i64 - oy);
+            if sx >= 0 && sy >= 0 && sx < sw && sy < sh {
+                d[(sy * sw + sx) as usize]
+            } else {
+                0.0
+            }
+        });
+    }
     let cx = out.width as f32 / 2.0;
     let by = out.height as f32 * (1.0 - p.base_margin);
     let (s, c) = angle.sin_cos();
@@ -313,7 +412,7 @@ mod tests {
             (15.0, 35.0, 30.0, 10.0)
         );
         let p = PoseParams {
-            frame_size: Size::new(20, 40).unwrap(),
+            frame_size: Some(Size::new(20, 40).unwrap()),
             ..Default::default()
         };
         let pose = clip_pose("c", &[Some(e), None], &p).unwrap();
@@ -328,7 +427,7 @@ mod tests {
         let r = resize(&g, Size::new(10, 10).unwrap());
         assert!((r.mean() - g.mean()).abs() < 1e-3);
         let w = warp(&g, &pose, 0.0, &p);
-        assert_eq!(w.size(), p.frame_size);
+        assert_eq!(w.size(), p.frame());
     }
 }
 
@@ -356,6 +455,25 @@ pub mod size_str {
     }
     pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Size, D::Error> {
         conv(Raw::deserialize(d)?)
+    }
+
+    /// `Option<Size>` where `None` is written `"auto"` (and `"auto"` or nothing reads as
+    /// `None`).
+    pub mod auto {
+        use super::*;
+        pub fn serialize<S: Serializer>(s: &Option<Size>, ser: S) -> Result<S::Ok, S::Error> {
+            match s {
+                Some(s) => ser.serialize_str(&s.to_string()),
+                None => ser.serialize_str("auto"),
+            }
+        }
+        pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Option<Size>, D::Error> {
+            match Option::<Raw>::deserialize(d)? {
+                None => Ok(None),
+                Some(Raw::S(s)) if s.trim() == "auto" => Ok(None),
+                Some(r) => conv(r).map(Some),
+            }
+        }
     }
 
     /// The same for `Option<Size>`.

@@ -30,10 +30,14 @@ pub struct PreprocessParams {
     pub hermite: HermiteParams,
     /// Centring, scaling, rotation, common frame size (§3.4).
     pub pose: PoseParams,
-    /// Size of the frames the PCA is trained on (§7.1.2); `None` trains at
-    /// `pose.frame_size`. Default 102x168 (a quarter of 410x670 per side).
-    #[serde(default = "default_train_size", with = "crate::pose::size_str::option")]
+    /// Size of the frames the PCA is trained on (§7.1.2), or `"auto"` (default): the
+    /// common frame's aspect with about `train_pixels` pixels (never more than the frame
+    /// itself). With a fixed `pose.frame_size`, `"auto"` trains at that size.
+    #[serde(default, with = "crate::pose::size_str::auto")]
     pub train_size: Option<Size>,
+    /// Pixels of an automatic training size. Default 17136 (the thesis's 102x168).
+    #[serde(default = "default_train_pixels")]
+    pub train_pixels: usize,
     /// Frames sampled (evenly over the range) to find each clip's pose. Default 24.
     #[serde(default = "default_pose_samples")]
     pub pose_samples: usize,
@@ -46,17 +50,15 @@ impl Default for PreprocessParams {
             contours: ContourParams::default(),
             hermite: HermiteParams::default(),
             pose: PoseParams::default(),
-            train_size: default_train_size(),
+            train_size: None,
+            train_pixels: default_train_pixels(),
             pose_samples: default_pose_samples(),
         }
     }
 }
 
-fn default_train_size() -> Option<Size> {
-    Some(Size {
-        width: 102,
-        height: 168,
-    })
+fn default_train_pixels() -> usize {
+    102 * 168
 }
 fn default_pose_samples() -> usize {
     24
@@ -70,8 +72,29 @@ impl PreprocessParams {
             train_size,
             ..Default::default()
         };
-        p.pose.frame_size = frame_size;
+        p.pose.frame_size = Some(frame_size);
         p
+    }
+
+    /// The training size for a common frame of `frame` pixels: `train_size` when given,
+    /// else the frame's aspect with about `train_pixels` pixels when the frame is
+    /// automatic, else the frame itself.
+    pub fn auto_train_size(&self, frame: Size) -> Size {
+        if let Some(t) = self.train_size {
+            return t;
+        }
+        if self.pose.frame_size.is_some() {
+            return frame;
+        }
+        let k = (self.train_pixels as f64 / frame.pixels() as f64)
+            .sqrt()
+            .min(1.0);
+        let w = ((frame.width as f64 * k).round() as u32).clamp(1, frame.width);
+        let h = ((frame.height as f64 * k).round() as u32).clamp(1, frame.height);
+        Size {
+            width: w,
+            height: h,
+        }
     }
 
     /// Parses TOML (tables `[mask]`, `[contours]`, `[hermite]`, `[pose]`, keys
@@ -97,15 +120,21 @@ impl PreprocessParams {
         if let Some(s) = self.train_size {
             Size::new(s.width, s.height)?;
         }
+        if self.train_pixels < 64 || self.train_pixels > 4_000_000 {
+            return Err(EigenError::bad(
+                "train_pixels",
+                "must be within 64..=4000000",
+            ));
+        }
         if self.pose_samples == 0 {
             return Err(EigenError::bad("pose_samples", "must be at least 1"));
         }
         Ok(())
     }
 
-    /// The size of the training frames.
+    /// The size of the training frames (for resolved settings, as stored in a manifest).
     pub fn training_size(&self) -> Size {
-        self.train_size.unwrap_or(self.pose.frame_size)
+        self.auto_train_size(self.pose.frame())
     }
 }
 
@@ -120,9 +149,12 @@ pub struct FrameMask {
     pub extent: Option<MaskExtent>,
 }
 
-/// §3.2: mask, contour tree, hole removal, fill.
-pub fn frame_mask(frame: &RgbaFrame, p: &PreprocessParams) -> FrameMask {
-    let m = flame_mask(frame, &p.mask);
+/// §3.2: mask (with flame isolation when `isolate`), contour tree, hole removal, fill.
+/// With `pose.rotate`, the lean angle is measured only on a single upright flame (one
+/// outer contour at least 1.5× as tall as wide): a sheet or wall of fire is never
+/// rotated.
+pub fn frame_mask(frame: &RgbaFrame, p: &PreprocessParams, isolate: bool) -> FrameMask {
+    let m = flame_mask(frame, &p.mask, isolate);
     let nodes = contour_tree(&m);
     let area = frame.width() as f64 * frame.height() as f64;
     let keep = remove_holes(&nodes, &p.contours, area);
@@ -133,13 +165,20 @@ pub fn frame_mask(frame: &RgbaFrame, p: &PreprocessParams) -> FrameMask {
         &keep,
         p.contours.simplify_epsilon,
     );
-    let angle = if p.pose.rotate {
+    let extent = mask_extent(&filled);
+    let outer = nodes
+        .iter()
+        .zip(&keep)
+        .filter(|(n, &k)| k && !n.is_hole)
+        .count();
+    let upright_single = outer == 1 && extent.is_some_and(|e| e.height >= 1.5 * e.width);
+    let angle = if p.pose.rotate && upright_single {
         lean_angle(&nodes, &keep).map(|a| a.0)
     } else {
         None
     };
     FrameMask {
-        extent: mask_extent(&filled),
+        extent,
         mask: filled,
         angle,
     }
@@ -160,20 +199,70 @@ pub struct Processed {
 
 /// Runs the whole per-frame pipeline with a clip pose already found.
 pub fn preprocess_frame(frame: &RgbaFrame, pose: &ClipPose, p: &PreprocessParams) -> Processed {
-    let fm = frame_mask(frame, p);
-    let gray = hermite_darken(&frame.luminance(), Some(&fm.mask), &p.hermite);
-    let angle = fm.angle.unwrap_or(0.0);
-    let out = warp(&gray, pose, angle, &p.pose);
-    let train = match p.train_size {
-        Some(s) => resize(&out, s),
-        None => out.clone(),
-    };
+    let src = source_grey(frame, pose, p);
+    let out = warp(&src.grey, pose, src.angle, &p.pose);
+    let train = resize(&out, p.training_size());
     Processed {
         frame: out,
         train,
-        angle,
+        angle: src.angle,
+        mask_pixels: src.mask_pixels,
+    }
+}
+
+/// A pre-processed frame at the source's own size and position (before pose
+/// normalisation): what §7.1.2 output shows for a database frame.
+#[derive(Clone, Debug)]
+pub struct SourceGrey {
+    /// Hermite-cleaned luminance, the isolated flame's surroundings removed.
+    pub grey: GrayFrame,
+    /// Soft flame matte from the mask (1 inside, feathered over a few pixels).
+    pub matte: GrayFrame,
+    /// Rotation pose normalisation applies (radians).
+    pub angle: f32,
+    pub mask_pixels: usize,
+}
+
+/// §3.2–3.3 at the source size: mask, Hermite darkening, and, on a clip with flame
+/// isolation, everything outside the feathered mask removed (Hermite alone keeps
+/// anything brighter than `i_max`, e.g. a lit jar).
+pub fn source_grey(frame: &RgbaFrame, pose: &ClipPose, p: &PreprocessParams) -> SourceGrey {
+    let fm = frame_mask(frame, p, pose.isolate);
+    let mut grey = hermite_darken(&frame.luminance(), Some(&fm.mask), &p.hermite);
+    let matte = feather(&fm.mask, frame.width().max(frame.height()));
+    if pose.isolate {
+        for (g, &m) in grey.data_mut().iter_mut().zip(matte.data()) {
+            *g *= m;
+        }
+    }
+    SourceGrey {
+        grey,
+        matte,
+        angle: fm.angle.unwrap_or(0.0),
         mask_pixels: mask_area(&fm.mask),
     }
+}
+
+/// A soft matte from a binary mask: 1 inside the mask, and outside it the mask dilated by
+/// and blurred over about 1 % of the frame's longer side (at least 2 px), so the flame's
+/// glow fades out instead of being cut.
+pub fn feather(mask: &GrayImage, longer: u32) -> GrayFrame {
+    let r = ((longer as f32 * 0.01).round() as u8).clamp(2, 40);
+    let d = imageproc::morphology::dilate(mask, imageproc::distance_transform::Norm::L2, r);
+    let b = imageproc::filter::gaussian_blur_f32(&d, r as f32 * 0.5);
+    let size = Size {
+        width: mask.width(),
+        height: mask.height(),
+    };
+    GrayFrame::from_vec(
+        size,
+        b.as_raw()
+            .iter()
+            .zip(mask.as_raw())
+            .map(|(&v, &m)| if m > 0 { 1.0 } else { v as f32 / 255.0 })
+            .collect(),
+    )
+    .expect("same size")
 }
 
 /// Every stage of the pipeline for one frame, for `ignis eigen preprocess`.
@@ -200,7 +289,7 @@ fn mask_rgba(m: &GrayImage) -> RgbaFrame {
 /// removed ones dim), `5-filled`, `6-gray`, `7-hermite`, `8-normalised`, `9-train`.
 pub fn preprocess_stages(frame: &RgbaFrame, pose: &ClipPose, p: &PreprocessParams) -> FrameStages {
     let raw = hsv_mask(frame, &p.mask.layers);
-    let m = flame_mask(frame, &p.mask);
+    let m = flame_mask(frame, &p.mask, pose.isolate);
     let nodes = contour_tree(&m);
     let keep = remove_holes(
         &nodes,
@@ -216,7 +305,7 @@ pub fn preprocess_stages(frame: &RgbaFrame, pose: &ClipPose, p: &PreprocessParam
         p.contours.simplify_epsilon,
     );
     let gray = frame.luminance();
-    let herm = hermite_darken(&gray, Some(&filled), &p.hermite);
+    let herm = source_grey(frame, pose, p).grey;
     let processed = preprocess_frame(frame, pose, p);
     let images = vec![
         ("1-hsv", mask_rgba(&raw)),
@@ -270,7 +359,7 @@ mod tests {
             Size::new(48, 80).unwrap(),
             Some(Size::new(24, 40).unwrap()),
         );
-        let fm = frame_mask(&frames[0], &p);
+        let fm = frame_mask(&frames[0], &p, false);
         let e = fm.extent.expect("flame found");
         let pose = crate::pose::clip_pose("synthetic", &[Some(e)], &p.pose).unwrap();
         let st = preprocess_stages(&frames[0], &pose, &p);

@@ -107,14 +107,173 @@ pub fn resize_rgba(src: RgbaFrame, size: Size) -> RgbaFrame {
     RgbaFrame::from_vec(size, data).expect("same size")
 }
 
-/// Size of the frames [`render_plan`] writes: the pre-processed frame size when every
-/// clip has its stored frames (§7.1.2), else the training size.
-pub fn output_size(db: &EigenfireDb) -> Size {
-    if has_stored_frames(db) {
-        db.manifest().frame_size
-    } else {
-        db.train_size()
+/// Largest output side [`check_output_size`] accepts.
+pub const MAX_OUTPUT_SIDE: u32 = 8192;
+/// Largest output frame [`check_output_size`] accepts (pixels).
+pub const MAX_OUTPUT_PIXELS: usize = 8192 * 4608;
+
+/// Checks a requested output size (`--size`): both sides at least 1 (and even sides are
+/// up to the writer) and within [`MAX_OUTPUT_SIDE`] / [`MAX_OUTPUT_PIXELS`].
+pub fn check_output_size(s: Size) -> Result<()> {
+    if s.width == 0 || s.height == 0 {
+        return Err(EigenError::bad(
+            "size",
+            format!("{s} has a zero side; give WIDTHxHEIGHT with both at least 1 (e.g. 1280x720), or leave --size out for the source size"),
+        ));
     }
+    if s.width > MAX_OUTPUT_SIDE || s.height > MAX_OUTPUT_SIDE || s.pixels() > MAX_OUTPUT_PIXELS {
+        return Err(EigenError::bad(
+            "size",
+            format!("{s} is beyond the limits (each side at most {MAX_OUTPUT_SIDE}, at most {MAX_OUTPUT_PIXELS} pixels in all); give a smaller --size"),
+        ));
+    }
+    Ok(())
+}
+
+/// Options of [`render_plan_with`].
+#[derive(Clone, Debug, Default)]
+pub struct RenderOptions {
+    /// Output size; `None` = [`output_view`]'s size (the source clip's own size).
+    pub size: Option<Size>,
+    /// Never read source footage for the grey frames: database frames are the stored
+    /// pre-processed frames or reconstructions (`--from-database`). Original colouring
+    /// still reads the footage; choose another colouring with it.
+    pub from_database: bool,
+}
+
+/// A rectangle of the common frame, in frame pixels.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct View {
+    pub x: u32,
+    pub y: u32,
+    pub w: u32,
+    pub h: u32,
+}
+
+/// The clips a plan shows (those of its database frames; every clip when it has none).
+fn plan_clips<'a>(db: &'a EigenfireDb, plan: &Plan) -> Vec<&'a ClipEntry> {
+    let mut names: Vec<&ClipEntry> = Vec::new();
+    for f in &plan.frames {
+        if let FrameRef::Db(r) = &f.source {
+            if let Some((c, _)) = db.row_origin(*r) {
+                if !names.iter().any(|n| n.name == c.name) {
+                    names.push(c);
+                }
+            }
+        }
+    }
+    if names.is_empty() {
+        names = db.clips().iter().collect();
+    }
+    names
+}
+
+/// The part of the common frame `clip` occupies.
+pub fn clip_view(db: &EigenfireDb, clip: &ClipEntry) -> View {
+    let mut pp = db.manifest().preprocess.pose.clone();
+    pp.frame_size = Some(db.manifest().frame_size);
+    let (x, y, w, h) = crate::pose::clip_rect(clip.source_size, &clip.pose, &pp);
+    View { x, y, w, h }
+}
+
+/// What [`render_plan_with`] shows and its default size: when every clip of the plan
+/// occupies the same part of the common frame at scale 1 (automatic framing), that part
+/// at the clip's own source size (a single-clip database: the source frame exactly);
+/// else the whole common frame.
+pub fn output_view(db: &EigenfireDb, plan: &Plan) -> (View, Size) {
+    let clips = plan_clips(db, plan);
+    let f = db.manifest().frame_size;
+    let full = View {
+        x: 0,
+        y: 0,
+        w: f.width,
+        h: f.height,
+    };
+    let Some(first) = clips.first() else {
+        return (full, f);
+    };
+    // A fixed common frame (the thesis's 410x670) scales its clips: its frames are the
+    // pre-processed frames themselves (§7.1.2), shown whole.
+    if clips.iter().any(|c| c.pose.scale != 1.0) {
+        return (full, f);
+    }
+    let v = clip_view(db, first);
+    if clips
+        .iter()
+        .all(|c| clip_view(db, c) == v && c.source_size == first.source_size)
+    {
+        (v, first.source_size)
+    } else {
+        (full, f)
+    }
+}
+
+/// Size of the frames [`render_plan`] writes by default (see [`output_view`]).
+pub fn output_size(db: &EigenfireDb, plan: &Plan) -> Size {
+    output_view(db, plan).1
+}
+
+/// `src` (a frame-space image at any resolution: the common frame or the training size)
+/// cut to `view` and brought to `out`: an exact crop, then an area resize when `src` is at
+/// the frame's resolution; bilinear sampling otherwise (reconstructions).
+fn view_gray(src: &GrayFrame, frame: Size, view: View, out: Size) -> GrayFrame {
+    if src.size() == frame {
+        let w = frame.width as usize;
+        let crop = if view.x == 0 && view.y == 0 && view.w == frame.width && view.h == frame.height
+        {
+            src.clone()
+        } else {
+            let d = src.data();
+            GrayFrame::from_fn(
+                Size {
+                    width: view.w,
+                    height: view.h,
+                },
+                |u, v| d[(view.y + v) as usize * w + (view.x + u) as usize],
+            )
+        };
+        return crate::pose::resize(&crop, out);
+    }
+    let kx = src.width() as f32 / frame.width as f32;
+    let ky = src.height() as f32 / frame.height as f32;
+    let (sx, sy) = (
+        view.w as f32 / out.width as f32,
+        view.h as f32 / out.height as f32,
+    );
+    GrayFrame::from_fn(out, |u, v| {
+        let x = (view.x as f32 + (u as f32 + 0.5) * sx) * kx - 0.5;
+        let y = (view.y as f32 + (v as f32 + 0.5) * sy) * ky - 0.5;
+        crate::pose::bilinear(
+            src,
+            x.clamp(0.0, src.width() as f32 - 1.0),
+            y.clamp(0.0, src.height() as f32 - 1.0),
+        )
+    })
+}
+
+/// [`view_gray`] for colour frames at the frame's resolution.
+fn view_rgba(src: RgbaFrame, frame: Size, view: View, out: Size) -> RgbaFrame {
+    let src = if view.x == 0 && view.y == 0 && view.w == frame.width && view.h == frame.height {
+        src
+    } else {
+        let w = frame.width as usize;
+        let d = src.data();
+        let data = (0..view.h as usize)
+            .flat_map(|v| {
+                let row = (view.y as usize + v) * w + view.x as usize;
+                d[row..row + view.w as usize].iter().copied()
+            })
+            .collect();
+        RgbaFrame::from_vec(
+            Size {
+                width: view.w,
+                height: view.h,
+            },
+            data,
+        )
+        .expect("view inside the frame")
+    };
+    resize_rgba(src, out)
 }
 
 /// The database row whose original footage colours `f`: the row itself, or for synthetic
@@ -136,26 +295,41 @@ fn colour_row(db: &EigenfireDb, f: &PlanFrame, e: usize) -> usize {
     }
 }
 
-/// Colour layers per database row, warped onto the pre-processed frames.
+/// Layers per database row, in the output view.
 #[derive(Default)]
 struct Layers {
     original: HashMap<usize, RgbaFrame>,
     smoke: HashMap<usize, RgbaFrame>,
     mask: HashMap<usize, GrayFrame>,
+    /// The pre-processed frame made from the source footage (§7.1.2) and its matte.
+    grey: HashMap<usize, (GrayFrame, GrayFrame)>,
 }
 
-/// Loads the originals, smoke images and custom masks the plan needs, one clip at a time.
+/// Where the layers go: the common frame, the view of it and the output size.
+#[derive(Clone, Copy)]
+struct Geometry {
+    frame: Size,
+    view: View,
+    out: Size,
+}
+
+/// Loads the originals, smoke images, custom masks and source-made grey frames that
+/// the rows `colour_rows` (colouring) and `grey_rows` (grey frames from the footage)
+/// need, one clip at a time, reading only those source frames.
 fn load_layers(
     db: &EigenfireDb,
-    rows: &[usize],
+    colour_rows: &[usize],
+    grey_rows: &[usize],
     look: &Look,
-    size: Size,
+    geo: Geometry,
     sources: &mut dyn SourceFrames,
 ) -> Result<Layers> {
     let mut layers = Layers::default();
     let want_original = matches!(look.mode, ColourMode::Original);
-    let pose_p = &db.manifest().preprocess.pose;
-    let mut uniq: Vec<usize> = rows.to_vec();
+    let mut pose_p = db.manifest().preprocess.pose.clone();
+    pose_p.frame_size = Some(geo.frame);
+    let pre = &db.manifest().preprocess;
+    let mut uniq: Vec<usize> = colour_rows.iter().chain(grey_rows).copied().collect();
     uniq.sort_unstable();
     uniq.dedup();
     for clip in db.clips() {
@@ -169,24 +343,47 @@ fn load_layers(
         if mine.is_empty() {
             continue;
         }
-        let warp = |f: &RgbaFrame, r: usize| {
-            resize_rgba(warp_rgba(f, &clip.pose, db.angle(r), pose_p), size)
+        let warp_c = |f: &RgbaFrame, r: usize| {
+            view_rgba(
+                warp_rgba(f, &clip.pose, db.angle(r), &pose_p),
+                geo.frame,
+                geo.view,
+                geo.out,
+            )
         };
-        if want_original {
-            // The frame, and for smoke its next frame (the previous at the clip's end).
-            let neighbour = |f: usize| {
-                if f + 1 < clip.end {
-                    f + 1
-                } else {
-                    f.saturating_sub(1)
-                }
-            };
-            let mut need: Vec<usize> = mine.iter().map(|m| m.1).collect();
-            if look.smoke.is_some() {
-                need.extend(mine.iter().map(|m| neighbour(m.1)));
+        let warp_g = |g: &GrayFrame, r: usize| {
+            view_gray(
+                &crate::pose::warp(g, &clip.pose, db.angle(r), &pose_p),
+                geo.frame,
+                geo.view,
+                geo.out,
+            )
+        };
+        let is_colour = |r: usize| want_original && colour_rows.contains(&r);
+        let is_grey = |r: usize| grey_rows.contains(&r);
+        // The frame, and for smoke its next frame (the previous at the clip's end).
+        let neighbour = |f: usize| {
+            if f + 1 < clip.end {
+                f + 1
+            } else {
+                f.saturating_sub(1)
             }
-            need.sort_unstable();
-            need.dedup();
+        };
+        let mut need: Vec<usize> = mine
+            .iter()
+            .filter(|m| is_colour(m.0) || is_grey(m.0))
+            .map(|m| m.1)
+            .collect();
+        if look.smoke.is_some() {
+            need.extend(
+                mine.iter()
+                    .filter(|m| is_colour(m.0))
+                    .map(|m| neighbour(m.1)),
+            );
+        }
+        need.sort_unstable();
+        need.dedup();
+        if !need.is_empty() {
             let path = look.originals.get(&clip.name).map(PathBuf::as_path);
             let got = sources.read(clip, path, &need)?;
             let by_frame: HashMap<usize, RgbaFrame> = need
@@ -196,29 +393,56 @@ fn load_layers(
                 .collect();
             let shown = || path.map_or(clip.source.clone(), |p| p.display().to_string());
             for &(r, f) in &mine {
+                if !(is_colour(r) || is_grey(r)) {
+                    continue;
+                }
                 let cur = by_frame.get(&f).ok_or_else(|| {
                     EigenError::clip(
                         &clip.name,
-                        format!("original colouring needs frame {f} of {}, which it does not have; give the clip's footage under [originals]", shown()),
+                        format!("rendering needs frame {f} of {}, which it does not have; give the clip's footage under [originals] (or --relink)", shown()),
                     )
                 })?;
-                let cur_w = warp(cur, r);
-                if let Some(sp) = &look.smoke {
-                    let nf = neighbour(f);
-                    if let Some(next) = by_frame.get(&nf) {
-                        let s = synthetic_smoke(&cur_w, &warp(next, r), sp)?;
-                        layers.smoke.insert(r, s);
-                    }
+                if cur.size() != clip.source_size {
+                    return Err(EigenError::clip(
+                        &clip.name,
+                        format!(
+                            "frame {f} of {} is {}, the database was trained on {}; give the original footage",
+                            shown(),
+                            cur.size(),
+                            clip.source_size
+                        ),
+                    ));
                 }
-                layers.original.insert(r, cur_w);
+                if is_grey(r) {
+                    let sg = crate::preprocess::source_grey(cur, &clip.pose, pre);
+                    layers
+                        .grey
+                        .insert(r, (warp_g(&sg.grey, r), warp_g(&sg.matte, r)));
+                }
+                if is_colour(r) {
+                    let cur_w = warp_c(cur, r);
+                    if let Some(sp) = &look.smoke {
+                        let nf = neighbour(f);
+                        if let Some(next) = by_frame.get(&nf) {
+                            let s = synthetic_smoke(&cur_w, &warp_c(next, r), sp)?;
+                            layers.smoke.insert(r, s);
+                        }
+                    }
+                    layers.original.insert(r, cur_w);
+                }
             }
         }
         if let Some(mp) = look.masks.get(&clip.name) {
-            let need: Vec<usize> = mine.iter().map(|m| m.1).collect();
-            let got = sources.read(clip, Some(mp), &need)?;
-            for (&(r, _), g) in mine.iter().zip(got) {
+            let need: Vec<(usize, usize)> = mine
+                .iter()
+                .copied()
+                .filter(|m| colour_rows.contains(&m.0))
+                .collect();
+            let frames: Vec<usize> = need.iter().map(|m| m.1).collect();
+            let got = sources.read(clip, Some(mp), &frames)?;
+            for (&(r, _), g) in need.iter().zip(got) {
                 if let Some(g) = g {
-                    layers.mask.insert(r, warp(&g, r).luminance());
+                    layers.mask.insert(r, warp_g(&g.luminance(), r));
                 }
             }
         }
@@ -226,12 +450,7 @@ fn load_layers(
     Ok(layers)
 }
 
-/// Renders `plan` with `look`: grey frame (the stored pre-processed frame for an unedited
-/// database frame when `look.fast_path`, §7.1.2; else a reconstruction with
-/// `plan.e_render` Eigenfires and the frame's weight edits), bloom (§6.2), colouring
-/// (original, Algorithm 2 with smoke and custom masks; synthetic; palette; grey) and the
-/// alpha matte. Frames go to `sink` in order; `progress(done)` counts them. Frames are
-/// rendered in parallel batches; the result does not depend on the thread count.
+/// [`render_plan_with`] with the default options (source size, footage read).
 pub fn render_plan(
     db: &EigenfireDb,
     plan: &Plan,
@@ -240,9 +459,45 @@ pub fn render_plan(
     sink: &mut dyn FnMut(RgbaFrame) -> Result<()>,
     progress: &mut dyn FnMut(usize),
 ) -> Result<()> {
-    let size = output_size(db);
+    render_plan_with(
+        db,
+        plan,
+        look,
+        &RenderOptions::default(),
+        sources,
+        sink,
+        progress,
+    )
+}
+
+/// Renders `plan` with `look` at the size of [`output_view`] (or `opts.size`): grey frame
+/// — for an unedited database frame when `look.fast_path`, the pre-processed original
+/// (§7.1.2): the stored frame, or the source footage's frame pre-processed again at its
+/// own resolution; else a reconstruction with `plan.e_render` Eigenfires and the frame's
+/// weight edits, upsampled, with the fine detail of the nearest footage frame where the
+/// footage is read (so real and synthetic frames are equally sharp) —, bloom (§6.2),
+/// colouring (original, Algorithm 2 with smoke and custom masks; synthetic; palette;
+/// grey) and the alpha matte (the grey frame and its bloom, limited to the
+/// pre-processing mask's feathered matte on frames made from the footage). Frames go to
+/// `sink` in order; `progress(done)` counts them. Footage is read per batch of 16 frames
+/// (no whole-clip copy). The result does not depend on the thread count.
+pub fn render_plan_with(
+    db: &EigenfireDb,
+    plan: &Plan,
+    look: &Look,
+    opts: &RenderOptions,
+    sources: &mut dyn SourceFrames,
+    sink: &mut dyn FnMut(RgbaFrame) -> Result<()>,
+    progress: &mut dyn FnMut(usize),
+) -> Result<()> {
+    let frame = db.manifest().frame_size;
+    let (view, default_size) = output_view(db, plan);
+    let out = opts.size.unwrap_or(default_size);
+    check_output_size(out)?;
+    let geo = Geometry { frame, view, out };
     let stored = has_stored_frames(db);
-    let needs_rows = matches!(look.mode, ColourMode::Original) || !look.masks.is_empty();
+    let original = matches!(look.mode, ColourMode::Original);
+    let needs_rows = original || !look.masks.is_empty();
     let rows: Vec<usize> = if needs_rows {
         plan.frames
             .iter()
@@ -251,18 +506,26 @@ pub fn render_plan(
     } else {
         Vec::new()
     };
-    let layers = if needs_rows {
-        load_layers(db, &rows, look, size, sources)?
-    } else {
-        Layers::default()
-    };
     let k = db.n_components();
-    // §7.1.2: an unedited database frame is the stored pre-processed frame.
-    let stored_frame = |f: &PlanFrame| -> Option<(String, usize)> {
-        match (&f.source, f.edits.is_empty() && look.fast_path && stored) {
-            (FrameRef::Db(r), true) => db.row_origin(*r).map(|(c, fr)| (c.name.clone(), fr)),
+    let unedited_db = |f: &PlanFrame| -> Option<usize> {
+        match (&f.source, f.edits.is_empty() && look.fast_path) {
+            (FrameRef::Db(r), true) => Some(*r),
             _ => None,
         }
+    };
+    // §7.1.2 from the stored pre-processed frame.
+    let stored_frame = |f: &PlanFrame| -> Option<(String, usize)> {
+        if !stored {
+            return None;
+        }
+        unedited_db(f).and_then(|r| db.row_origin(r).map(|(c, fr)| (c.name.clone(), fr)))
+    };
+    // §7.1.2 from the footage itself.
+    let from_source = |f: &PlanFrame| -> Option<usize> {
+        if stored || opts.from_database {
+            return None;
+        }
+        unedited_db(f)
     };
     // The weights to reconstruct a frame from: its own (or the morph's), edits applied.
     let weights_of = |f: &PlanFrame| -> Vec<f32> {
@@ -278,17 +541,40 @@ pub fn render_plan(
         }
         w
     };
-    // Grey frames of a batch: stored frames read directly, the rest reconstructed in one
-    // matrix product (`reconstruct_batch`).
-    let greys_of = |range: std::ops::Range<usize>| -> Result<Vec<GrayFrame>> {
-        let frames = &plan.frames[range];
-        let fast: Vec<Option<(String, usize)>> = frames.iter().map(stored_frame).collect();
-        let ws: Vec<Vec<f32>> = frames
+    const BATCH: usize = 16;
+    let mut done = 0;
+    for start in (0..plan.frames.len()).step_by(BATCH) {
+        let end = (start + BATCH).min(plan.frames.len());
+        let frames = &plan.frames[start..end];
+        let colour_rows: Vec<usize> = if needs_rows {
+            rows[start..end].to_vec()
+        } else {
+            Vec::new()
+        };
+        // Reconstructions borrow the fine detail of their nearest footage frame.
+        let mut grey_rows: Vec<usize> = frames.iter().filter_map(&from_source).collect();
+        if !stored && !opts.from_database {
+            for (j, f) in frames.iter().enumerate() {
+                if from_source(f).is_none() && stored_frame(f).is_none() {
+                    grey_rows.push(if needs_rows {
+                        rows[start + j]
+                    } else {
+                        colour_row(db, f, plan.e_detect)
+                    });
+                }
+            }
+        }
+        let layers = if needs_rows || !grey_rows.is_empty() {
+            load_layers(db, &colour_rows, &grey_rows, look, geo, sources)?
+        } else {
+            Layers::default()
+        };
+        // Grey frames: from the footage, stored, or reconstructed in one matrix product.
+        let slow: Vec<&PlanFrame> = frames
             .iter()
-            .zip(&fast)
-            .filter(|(_, s)| s.is_none())
-            .map(|(f, _)| weights_of(f))
+            .filter(|f| from_source(f).is_none() && stored_frame(f).is_none())
             .collect();
+        let ws: Vec<Vec<f32>> = slow.iter().map(|f| weights_of(f)).collect();
         let refs: Vec<&[f32]> = ws.iter().map(Vec::as_slice).collect();
         let mut recon = if refs.is_empty() {
             Vec::new()
@@ -296,66 +582,85 @@ pub fn render_plan(
             db.reconstruct_batch(&refs, plan.e_render)?
         }
         .into_iter();
-        fast.into_iter()
-            .map(|s| match s {
-                Some((clip, frame)) => db.preprocessed_frame(&clip, frame),
-                None => Ok(crate::pose::resize(
-                    &recon.next().expect("one reconstruction per slow frame"),
-                    size,
-                )),
-            })
-            .collect()
-    };
-    let render_one = |i: usize, grey: GrayFrame| -> Result<RgbaFrame> {
-        let bloomed = match &look.bloom {
-            Some(b) => Some(bloom(&grey, b)?),
-            None => None,
-        };
-        let lit = bloomed.as_ref().unwrap_or(&grey);
-        let mut out = match &look.mode {
-            ColourMode::Grey => lit.to_rgba(),
-            ColourMode::Palette(p) => p.apply(lit),
-            ColourMode::Synthetic => synthetic_colour(lit, &look.tint)?,
-            ColourMode::Original => {
-                let r = rows[i];
-                let dest = match &bloomed {
-                    Some(b) => Some(synthetic_colour(b, &look.tint)?),
+        let mut greys: Vec<(GrayFrame, Option<&GrayFrame>)> = Vec::with_capacity(frames.len());
+        for (j, f) in frames.iter().enumerate() {
+            if let Some(r) = from_source(f) {
+                let (g, m) = &layers.grey[&r];
+                greys.push((g.clone(), Some(m)));
+            } else if let Some((clip, fr)) = stored_frame(f) {
+                let g = db.preprocessed_frame(&clip, fr)?;
+                greys.push((view_gray(&g, frame, view, out), None));
+            } else {
+                let r = recon.next().expect("one reconstruction per slow frame");
+                let mut g = view_gray(&r, frame, view, out);
+                let near = if needs_rows {
+                    rows[start + j]
+                } else {
+                    colour_row(db, f, plan.e_detect)
+                };
+                if let Some((real, _)) = layers.grey.get(&near) {
+                    add_detail(&mut g, real, db.train_size(), geo);
+                }
+                greys.push((g, None));
+            }
+        }
+        let render_one =
+            |i: usize, grey: GrayFrame, matte: Option<&GrayFrame>| -> Result<RgbaFrame> {
+                let bloomed = match &look.bloom {
+                    Some(b) => Some(bloom(&grey, b)?),
                     None => None,
                 };
-                let smoke = layers.smoke.get(&r);
-                let params = OriginalColour {
-                    threshold: look.threshold,
-                    smoke: smoke.is_some(),
+                let lit = bloomed.as_ref().unwrap_or(&grey);
+                let mut out = match &look.mode {
+                    ColourMode::Grey => lit.to_rgba(),
+                    ColourMode::Palette(p) => p.apply(lit),
+                    ColourMode::Synthetic => synthetic_colour(lit, &look.tint)?,
+                    ColourMode::Original => {
+                        let r = rows[i];
+                        let dest = match &bloomed {
+                            Some(b) => Some(synthetic_colour(b, &look.tint)?),
+                            None => None,
+                        };
+                        let smoke = layers.smoke.get(&r);
+                        let params = OriginalColour {
+                            threshold: look.threshold,
+                            smoke: smoke.is_some(),
+                        };
+                        original_colouring(
+                            &grey,
+                            &layers.original[&r],
+                            dest.as_ref(),
+                            smoke,
+                            layers.mask.get(&r).map(|m| (m, look.mask_mode)),
+                            &params,
+                        )?
+                    }
                 };
-                original_colouring(
-                    &grey,
-                    &layers.original[&r],
-                    dest.as_ref(),
-                    smoke,
-                    layers.mask.get(&r).map(|m| (m, look.mask_mode)),
-                    &params,
-                )?
-            }
-        };
-        if look.matte {
-            let a = alpha_matte(&grey, lit)?;
-            for (px, &av) in out.data_mut().iter_mut().zip(a.data()) {
-                px[3] = av;
-            }
-        } else {
-            out.data_mut().iter_mut().for_each(|px| px[3] = 1.0);
-        }
-        Ok(out)
-    };
-    const BATCH: usize = 16;
-    let mut done = 0;
-    for start in (0..plan.frames.len()).step_by(BATCH) {
-        let end = (start + BATCH).min(plan.frames.len());
-        let greys = greys_of(start..end)?;
+                if look.matte {
+                    let a = alpha_matte(&grey, lit)?;
+                    match matte {
+                        Some(m) => {
+                            for ((px, &av), &mv) in
+                                out.data_mut().iter_mut().zip(a.data()).zip(m.data())
+                            {
+                                px[3] = av.max(mv.min(px[3]));
+                            }
+                        }
+                        None => {
+                            for (px, &av) in out.data_mut().iter_mut().zip(a.data()) {
+                                px[3] = av;
+                            }
+                        }
+                    }
+                } else {
+                    out.data_mut().iter_mut().for_each(|px| px[3] = 1.0);
+                }
+                Ok(out)
+            };
         let batch: Vec<Result<RgbaFrame>> = greys
             .into_par_iter()
             .enumerate()
-            .map(|(j, g)| render_one(start + j, g))
+            .map(|(j, (g, m))| render_one(start + j, g, m))
             .collect();
         for f in batch {
             sink(f?)?;
@@ -364,4 +669,86 @@ pub fn render_plan(
         }
     }
     Ok(())
+}
+
+/// Detail transfer for a reconstructed frame: adds the fine detail of `real` (a
+/// pre-processed footage frame at the output size) that the training resolution cannot
+/// hold — `real` minus `real` brought to the training resolution and back — so a
+/// reconstruction is as sharp as the footage frames around it. The detail is weighted by
+/// the reconstruction's own brightness (no detail where it has no flame).
+fn add_detail(g: &mut GrayFrame, real: &GrayFrame, train: Size, geo: Geometry) {
+    if real.size() != g.size() {
+        return;
+    }
+    // The training frame covers the whole common frame; the view's share of it.
+    let tw =
+        ((train.width as f32 * geo.view.w as f32 / geo.frame.width as f32).round() as u32).max(1);
+    let th =
+        ((train.height as f32 * geo.view.h as f32 / geo.frame.height as f32).round() as u32).max(1);
+    let small = crate::pose::resize(
+        real,
+        Size {
+            width: tw,
+            height: th,
+        },
+    );
+    let back = crate::pose::resize(&small, real.size());
+    for ((o, &r), &b) in g.data_mut().iter_mut().zip(real.data()).zip(back.data()) {
+        let w = (*o * 4.0).clamp(0.0, 1.0);
+        *o = (*o + w * (r - b)).max(0.0);
+    }
+}
+
+/// The plan of a seamless loop of `clip` over source frames `range` (what
+/// [`crate::animate::render_loop`] renders): the range's frames without those the
+/// transition replaces, then the transition back to the start. Returns the plan, the join
+/// and the range actually used (see [`crate::animate::best_loop`]).
+pub fn loop_plan(
+    db: &EigenfireDb,
+    clip: &str,
+    range: std::ops::Range<usize>,
+    method: crate::transition::Transition,
+    e_render: usize,
+    search: usize,
+) -> Result<(Plan, crate::transition::Join, std::ops::Range<usize>)> {
+    use crate::animate::{best_loop, clip_rows, recognition_params, weight_space};
+    let rows = clip_rows(db, clip, range)?;
+    let (w, k, spans) = weight_space(db)?;
+    let terr = |e: crate::transition::TransitionError| EigenError::bad("loop", e.to_string());
+    let space = crate::transition::WeightSpace::new(w, k, spans).map_err(terr)?;
+    let rec = recognition_params(db);
+    let (rows, join) = best_loop(&space, rows, search, &method, &rec).map_err(terr)?;
+    let c = db.clip(clip)?;
+    let used = c.start + (rows.start - c.first_row) * c.stride
+        ..c.start + (rows.end - c.first_row) * c.stride;
+    let body_start = rows.start + join.trim_t2;
+    let body_end = rows.end.saturating_sub(join.trim_t1).max(body_start);
+    let mut frames: Vec<PlanFrame> = (body_start..body_end)
+        .map(|r| PlanFrame {
+            source: FrameRef::Db(r),
+            edits: Vec::new(),
+        })
+        .collect();
+    frames.extend(join.frames.iter().map(|f| PlanFrame {
+        source: f.clone(),
+        edits: Vec::new(),
+    }));
+    if frames.is_empty() {
+        return Err(EigenError::bad(
+            "range",
+            "the loop has no frames left (the transition replaced the whole range); use a longer range",
+        ));
+    }
+    let e = e_render.clamp(1, db.usable_components().max(1));
+    let plan = Plan {
+        frames,
+        joins: Vec::new(),
+        wrap_seam: join.seam_ratio,
+        worst_step: join.seam_ratio,
+        e_render: e,
+        e_render_requested: e_render,
+        e_detect: db.manifest().e_detect,
+        loops: true,
+    };
+    Ok((plan, join, used))
 }

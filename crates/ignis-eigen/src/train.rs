@@ -12,7 +12,8 @@
 use crate::analysis::{thresholds, ESelect};
 use crate::db::{self, ClipEntry, FileEntry, Manifest, PackEntry};
 use crate::error::{EigenError, Result};
-use crate::pose::{clip_pose, ClipPose};
+use crate::mask::{static_fraction, value8, Isolate, STATIC_LIT};
+use crate::pose::{auto_framing, clip_pose, ClipPose};
 use crate::preprocess::{
     frame_mask, preprocess_frame, preprocess_stages, FrameStages, PreprocessParams,
 };
@@ -263,6 +264,43 @@ struct Planned {
     end: usize,
     frames: usize,
     pose: ClipPose,
+    /// [`static_fraction`] of the sampled frames.
+    static_lit: f64,
+}
+
+/// Settings with the automatic sizes resolved for clips of `sizes`: the common frame
+/// size, the training size, and (automatic framing) one pose per clip; plus a sentence
+/// saying what was chosen and why (`ignis eigen info` prints it).
+pub fn resolve_sizes(
+    pre: &PreprocessParams,
+    sizes: &[Size],
+) -> (PreprocessParams, Option<Vec<ClipPose>>, String) {
+    let mut r = pre.clone();
+    match pre.pose.frame_size {
+        None => {
+            let (f, poses) = auto_framing(sizes);
+            let t = pre.auto_train_size(f);
+            r.pose.frame_size = Some(f);
+            r.pose.base_margin = 0.0;
+            r.train_size = Some(t);
+            let list: Vec<String> = sizes.iter().map(|s| s.to_string()).collect();
+            let why = format!(
+                "frame {f}: the smallest frame holding every clip at its own resolution ({}), each bottom-centred at scale 1 (nothing clipped or resampled); training {t}: the frame's aspect at about {} pixels",
+                list.join(", "),
+                pre.train_pixels
+            );
+            (r, Some(poses), why)
+        }
+        Some(f) => {
+            let t = pre.auto_train_size(f);
+            r.train_size = Some(t);
+            let why = format!(
+                "frame {f} (fixed in the settings): each clip centred on its fuel and scaled so its tall flame fills {:.0}% of the height; training {t}",
+                pre.pose.fill * 100.0
+            );
+            (r, None, why)
+        }
+    }
 }
 
 fn check_name(name: &str) -> Result<()> {
@@ -363,6 +401,7 @@ pub fn check_memory(n: usize, m: usize, p: &TrainParams) -> Result<()> {
 fn plan_clip(
     c: &ClipInput<'_>,
     pre: &PreprocessParams,
+    auto_pose: Option<ClipPose>,
     progress: &mut dyn Progress,
 ) -> Result<Planned> {
     let name = &c.spec.name;
@@ -376,13 +415,34 @@ fn plan_clip(
     progress.stage(&format!("scan {name}"), expected.unwrap_or(0) as u64);
     let (mut count, mut last) = (0usize, None);
     let mut extents = Vec::new();
+    let mut extents_isolated = Vec::new();
+    let mut values = Vec::new();
+    let need_extents = c.spec.pose.is_none() && auto_pose.is_none();
     for (i, f) in training_frames(c, start, end)? {
         let f = f.map_err(|reason| EigenError::Decode {
             clip: name.clone(),
             reason: format!("frame {i}: {reason}"),
         })?;
-        if c.spec.pose.is_none() && count % every == 0 {
-            extents.push(frame_mask(&f, pre).extent);
+        if count % every == 0 {
+            if f.size() != c.source.size {
+                return Err(EigenError::clip(
+                    name,
+                    format!(
+                        "frame {i} is {}, the source says {}; a clip must keep one frame size",
+                        f.size(),
+                        c.source.size
+                    ),
+                ));
+            }
+            if values.len() < 4 * pre.pose_samples {
+                values.push(value8(&f));
+            }
+            if need_extents {
+                extents.push(frame_mask(&f, pre, false).extent);
+                if pre.mask.isolate != Isolate::Off {
+                    extents_isolated.push(frame_mask(&f, pre, true).extent);
+                }
+            }
         }
         count += 1;
         last = Some(i);
@@ -418,15 +478,28 @@ fn plan_clip(
             ));
         }
     }
-    let pose = match c.spec.pose {
-        Some(p) => p,
-        None => clip_pose(name, &extents, &pre.pose)?,
+    let static_lit = static_fraction(&values, pre.mask.isolate_floor);
+    let isolate = match pre.mask.isolate {
+        Isolate::On => true,
+        Isolate::Off => false,
+        Isolate::Auto => static_lit > STATIC_LIT,
     };
+    let mut pose = match (c.spec.pose, auto_pose) {
+        (Some(p), _) => p,
+        (None, Some(p)) => p,
+        (None, None) => clip_pose(
+            name,
+            if isolate { &extents_isolated } else { &extents },
+            &pre.pose,
+        )?,
+    };
+    pose.isolate = isolate;
     Ok(Planned {
         start,
         end,
         frames: count,
         pose,
+        static_lit,
     })
 }
 
@@ -463,6 +536,10 @@ pub fn train(
         }
         plan_range(c)?;
     }
+    let sizes: Vec<Size> = clips.iter().map(|c| c.source.size).collect();
+    let (resolved, auto_poses, framing) = resolve_sizes(pre, &sizes);
+    let pre = &resolved;
+    pre.validate()?;
     let train_size = pre.training_size();
     let n = train_size.pixels();
     // Early refusal from what is known before decoding.
@@ -477,13 +554,17 @@ pub fn train(
 
     let plans = clips
         .iter()
-        .map(|c| plan_clip(c, pre, progress))
+        .enumerate()
+        .map(|(i, c)| {
+            let ap = auto_poses.as_ref().map(|p| p[i]);
+            plan_clip(c, pre, ap, progress)
+        })
         .collect::<Result<Vec<_>>>()?;
     let m: usize = plans.iter().map(|q| q.frames).sum();
     check_memory(n, m, p)?;
 
     let tmp = db::temp_dir_for(out)?;
-    let result = train_into(clips, &plans, pre, p, &tmp, n, m, progress);
+    let result = train_into(clips, &plans, pre, p, &tmp, (n, m), &framing, progress);
     match result {
         Ok((manifest, weights)) => {
             progress.stage("commit", 0);
@@ -509,11 +590,11 @@ fn train_into(
     pre: &PreprocessParams,
     p: &TrainParams,
     tmp: &Path,
-    n: usize,
-    m: usize,
+    (n, m): (usize, usize),
+    framing: &str,
     progress: &mut dyn Progress,
 ) -> Result<(Manifest, Vec<f32>)> {
-    let frame_size = pre.pose.frame_size;
+    let frame_size = pre.pose.frame();
     let mut angles = Vec::with_capacity(m);
     let mut frames_files = Vec::new();
     // The data matrix, in memory (column j = training frame j) or on disk (row j).
@@ -717,6 +798,8 @@ fn train_into(
             pose: plan.pose,
             thresholds: thresholds(wref, first_row..first_row + plan.frames, e_detect),
             frames_file: ff,
+            source_check: db::source_check(&c.source.source, c.source.frame_count)?,
+            static_lit: Some(plan.static_lit),
         });
         first_row += plan.frames;
     }
@@ -740,6 +823,7 @@ fn train_into(
         weights: entry("weights.npy")?,
         angles: entry("angles.npy")?,
         packs,
+        framing: framing.to_string(),
     };
     let text = serde_json::to_string_pretty(&manifest)
         .map_err(|e| EigenError::bad("manifest", e.to_string()))?;
@@ -763,7 +847,9 @@ pub fn preprocess_clip(
 ) -> Result<Vec<(usize, FrameStages)>> {
     pre.validate()?;
     check_name(&c.spec.name)?;
-    let plan = plan_clip(c, pre, progress)?;
+    let (resolved, auto_poses, _) = resolve_sizes(pre, &[c.source.size]);
+    let pre = &resolved;
+    let plan = plan_clip(c, pre, auto_poses.map(|p| p[0]), progress)?;
     let wanted: Vec<usize> = if which.is_empty() {
         vec![0, plan.frames / 2, plan.frames - 1]
     } else {

@@ -389,7 +389,7 @@ mod bad_input {
     fn data_matrix_too_large_is_refused_before_decoding() {
         // 8000 x 8000 training frames x 100 000 frames: 25.6 TB.
         let mut pre = small_pre();
-        pre.pose.frame_size = Size::new(8000, 8000).unwrap();
+        pre.pose.frame_size = Some(Size::new(8000, 8000).unwrap());
         pre.train_size = None;
         let c = clip("huge", FlameStyle::Candle, 100_000);
         let e = err_of(&[c], &pre, &TrainParams::default());
