@@ -1,0 +1,634 @@
+//! Loop search and loop closing (issue 15): find the best loop of about a requested length in
+//! a clip, and choose how to close it, by what the written frames will measure.
+//!
+//! Sources: eigenfires-thesis.txt §5.1 (loops from a database clip); Schödl et al., *Video
+//! Textures* (SIGGRAPH 2000) §3.2–3.3 (the dynamics-preserving transition cost: frame
+//! distances filtered over neighbouring pairs); `shared/tools/loop_metrics.py` (the seam
+//! and ghost measures and the crossfade / Video Textures peers).
+//!
+//! Two stages:
+//! 1. [`search`]: distances between frames in PCA weight space (first E Eigenfires),
+//!    O(n²·E), and for every loop `start..end` of length within ±[`SearchParams::tolerance`]
+//!    of the target the filtered cost of jumping from `end - 1` back to `start`:
+//!    `Σ_{o=-2..=1} w_o · D[end + o][start + o] / 8` with `w = 1, 3, 3, 1` (the weights of
+//!    loop_metrics.py): frame `end` (the one the footage would show next) must look like
+//!    frame `start`, and so must their neighbours, so motion carries across the seam.
+//!    Ranked, near-duplicates suppressed.
+//! 2. [`evaluate`]: each candidate closed every way ([`Closing`]: a plain cut, a crossfade
+//!    or a motion-compensated morph over m frames) is built on the *metric frames* of the
+//!    footage (128-px grey, what `ignis_core::loopq` measures the written output on) and
+//!    its seam and ghost are computed exactly as they will be measured; [`choose`] picks the
+//!    lowest [`score`]. So the choice adapts to the footage (its own median step, its own
+//!    bursts) instead of constants tuned to a few clips.
+//!
+//! Layout of a closed loop `start..end` with `m` transition frames (indices into the
+//! window): the body `start + m .. end`, then transition frame `t` (0..m) made from frame
+//! `end + t` going into frame `start + t` with weight `(t + 1) / (m + 1)` on the latter
+//! (the crossfade of loop_metrics.py, rotated to start after the head it replaces). Played
+//! repeatedly, the last transition frame is followed by `start + m`. It needs frames up to
+//! `end + m - 1`.
+//!
+//! This crate knows no flow or codec: the morph comes in through [`PairMorph`] (the CLI
+//! implements it with `ignis_flow`); [`Crossfade`] is the plain blend.
+
+use ignis_core::loopq::{self, LoopQuality};
+use ignis_core::GrayFrame;
+use rayon::prelude::*;
+
+use crate::error::{EigenError, Result};
+
+/// Filter taps over neighbouring frame pairs (offsets −2..=1), as loop_metrics.py.
+pub const FILTER: [f64; 4] = [1.0, 3.0, 3.0, 1.0];
+/// Transition lengths tried by [`evaluate`] (0 = plain cut).
+pub const TRANSITION_LENGTHS: [usize; 10] = [0, 2, 3, 4, 6, 8, 10, 12, 16, 20];
+/// Weight of the ghost shortfall in [`score`].
+pub const GHOST_WEIGHT: f64 = 2.0;
+
+/// What [`search`] looks for.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SearchParams {
+    /// Target loop length in frames.
+    pub length: usize,
+    /// Allowed relative deviation of the length (0.2 = ±20%).
+    pub tolerance: f64,
+    /// Eigenfires used for distances (clamped to the weights' width).
+    pub e: usize,
+    /// How many ranked candidates to return.
+    pub candidates: usize,
+}
+
+impl SearchParams {
+    /// ±20%, 24 candidates.
+    pub fn new(length: usize, e: usize) -> SearchParams {
+        SearchParams {
+            length,
+            tolerance: 0.2,
+            e,
+            candidates: 24,
+        }
+    }
+    /// Shortest and longest loop allowed.
+    pub fn bounds(&self) -> (usize, usize) {
+        let l = self.length as f64;
+        let lo = ((l * (1.0 - self.tolerance)).round() as usize).max(2);
+        let hi = ((l * (1.0 + self.tolerance)).round() as usize).max(lo);
+        (lo, hi)
+    }
+}
+
+/// A loop `start..end` (window indices; `end` excluded) and its filtered transition cost.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct Candidate {
+    pub start: usize,
+    pub end: usize,
+    /// Filtered distance (weight-space units) of the jump from `end - 1` back to `start`.
+    pub cost: f64,
+}
+
+impl Candidate {
+    pub fn len(&self) -> usize {
+        self.end - self.start
+    }
+    pub fn is_empty(&self) -> bool {
+        self.end <= self.start
+    }
+}
+
+/// Euclidean distances between all rows of the n×k row-major `x`, on the first `e` columns,
+/// as an n×n row-major matrix. Rows are computed in parallel; each entry is a sum over the
+/// same columns in the same order, so the result does not depend on the thread count.
+pub fn distances(x: &[f32], n: usize, k: usize, e: usize) -> Vec<f32> {
+    let e = e.clamp(1, k.max(1)).min(k);
+    let mut d = vec![0f32; n * n];
+    d.par_chunks_mut(n.max(1)).enumerate().for_each(|(i, row)| {
+        let a = &x[i * k..i * k + e];
+        for (j, out) in row.iter_mut().enumerate() {
+            let b = &x[j * k..j * k + e];
+            // Four partial sums: vectorises, and the order is fixed.
+            let mut s = [0f32; 4];
+            let mut ca = a.chunks_exact(4);
+            let mut cb = b.chunks_exact(4);
+            for (p, q) in (&mut ca).zip(&mut cb) {
+                for l in 0..4 {
+                    let t = p[l] - q[l];
+                    s[l] += t * t;
+                }
+            }
+            let mut tail = 0f32;
+            for (p, q) in ca.remainder().iter().zip(cb.remainder()) {
+                tail += (p - q) * (p - q);
+            }
+            *out = ((s[0] + s[1]) + (s[2] + s[3]) + tail).sqrt();
+        }
+    });
+    d
+}
+
+/// Shortest window [`search`] accepts for `p`: the shortest loop plus the filter's two
+/// frames before the start and one after the end.
+pub fn min_window(p: &SearchParams) -> usize {
+    p.bounds().0 + 3
+}
+
+/// Ranked loop candidates of the n×k row-major weights `x` (one row per frame of the
+/// window, consecutive source frames). Errors when the window cannot hold a loop of the
+/// requested length.
+pub fn search(x: &[f32], n: usize, k: usize, p: &SearchParams) -> Result<Vec<Candidate>> {
+    if p.length < 2 {
+        return Err(EigenError::bad(
+            "length",
+            format!(
+                "{} frame(s) is too short for a loop; ask for at least 2",
+                p.length
+            ),
+        ));
+    }
+    if k == 0 || x.len() != n * k {
+        return Err(EigenError::bad(
+            "weights",
+            format!("{} values do not form {n} rows of {k}", x.len()),
+        ));
+    }
+    let (lo, hi) = p.bounds();
+    if n < min_window(p) {
+        return Err(EigenError::bad(
+            "length",
+            format!(
+                "a loop of about {} frames (at least {lo} with the ±{:.0}% tolerance) does not fit in {n} frames: \
+                 the search needs {} (2 frames before the loop and 1 after it); ask for a shorter --length or a longer window",
+                p.length,
+                p.tolerance * 100.0,
+                min_window(p)
+            ),
+        ));
+    }
+    let d = distances(x, n, k, p.e);
+    let at = |i: usize, j: usize| f64::from(d[i * n + j]);
+    // start ≥ 2, end + 1 ≤ n - 1.
+    let mut all: Vec<Candidate> = Vec::new();
+    for start in 2..n {
+        for len in lo..=hi {
+            let end = start + len;
+            if end + 1 >= n {
+                break;
+            }
+            let cost = (0..4)
+                .map(|t| FILTER[t] * at(end + t - 2, start + t - 2))
+                .sum::<f64>()
+                / 8.0;
+            all.push(Candidate { start, end, cost });
+        }
+    }
+    all.sort_by(|a, b| {
+        a.cost
+            .total_cmp(&b.cost)
+            .then(a.start.cmp(&b.start))
+            .then(a.end.cmp(&b.end))
+    });
+    // Suppress near-duplicates: a candidate within 3 frames (both ends) of a kept one.
+    let mut out: Vec<Candidate> = Vec::new();
+    for c in all {
+        if out.len() >= p.candidates.max(1) {
+            break;
+        }
+        let near = out
+            .iter()
+            .any(|o| o.start.abs_diff(c.start) <= 3 && o.end.abs_diff(c.end) <= 3);
+        if !near {
+            out.push(c);
+        }
+    }
+    Ok(out)
+}
+
+/// How a loop is closed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(tag = "method", content = "frames", rename_all = "kebab-case")]
+pub enum Closing {
+    /// The loop's last frame cuts straight to its first.
+    Cut,
+    /// The tail blends into the head over m frames (what the crossfade peers do).
+    Crossfade(usize),
+    /// The tail morphs into the head over m frames along the optical flow.
+    Morph(usize),
+}
+
+impl Closing {
+    /// Transition frames.
+    pub fn frames(&self) -> usize {
+        match *self {
+            Closing::Cut => 0,
+            Closing::Crossfade(m) | Closing::Morph(m) => m,
+        }
+    }
+}
+
+impl std::fmt::Display for Closing {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Closing::Cut => f.write_str("plain cut"),
+            Closing::Crossfade(m) => write!(f, "crossfade over {m} frames"),
+            Closing::Morph(m) => write!(f, "motion-compensated morph over {m} frames"),
+        }
+    }
+}
+
+/// One output frame of a closed loop (window indices).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Planned {
+    /// A footage frame as it is.
+    Src(usize),
+    /// Frame `from` going into frame `to`, `w` of the way (0 = `from`, 1 = `to`).
+    Mix { from: usize, to: usize, w: f32 },
+}
+
+/// The output frames of `c` closed with `closing` (see the module doc for the layout).
+pub fn plan(c: &Candidate, closing: Closing) -> Vec<Planned> {
+    let m = closing.frames().min(c.len());
+    let mut out: Vec<Planned> = (c.start + m..c.end).map(Planned::Src).collect();
+    for t in 0..m {
+        out.push(Planned::Mix {
+            from: c.end + t,
+            to: c.start + t,
+            w: (t + 1) as f32 / (m + 1) as f32,
+        });
+    }
+    out
+}
+
+/// The last window frame a plan reads (exclusive bound).
+pub fn plan_end(c: &Candidate, closing: Closing) -> usize {
+    c.end + closing.frames()
+}
+
+/// An in-between of two frames: `prepare` once per pair, then frames at any weight.
+pub trait PairMorph: Sync {
+    /// Whether this is a motion-compensated morph (else a blend).
+    fn motion(&self) -> bool;
+    /// Prepared state for the pair (`a`, `b`); the returned function gives the frame `w`
+    /// of the way from `a` to `b`.
+    fn prepare<'a>(
+        &'a self,
+        a: &'a GrayFrame,
+        b: &'a GrayFrame,
+    ) -> Box<dyn Fn(f32) -> GrayFrame + Send + Sync + 'a>;
+}
+
+/// The plain blend `(1 - w)·a + w·b`.
+pub struct Crossfade;
+
+impl PairMorph for Crossfade {
+    fn motion(&self) -> bool {
+        false
+    }
+    fn prepare<'a>(
+        &'a self,
+        a: &'a GrayFrame,
+        b: &'a GrayFrame,
+    ) -> Box<dyn Fn(f32) -> GrayFrame + Send + Sync + 'a> {
+        Box::new(move |w| blend(a, b, w))
+    }
+}
+
+/// `(1 - w)·a + w·b` (same sizes).
+pub fn blend(a: &GrayFrame, b: &GrayFrame, w: f32) -> GrayFrame {
+    let data = a
+        .data()
+        .iter()
+        .zip(b.data())
+        .map(|(&x, &y)| x + (y - x) * w)
+        .collect();
+    GrayFrame::from_vec(a.size(), data).expect("same size")
+}
+
+/// A candidate closed one way, with its seam and ghost on the metric frames.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct Evaluated {
+    pub candidate: Candidate,
+    pub closing: Closing,
+    pub quality: LoopQuality,
+    /// Largest step of the transition (the steps into and out of it included; a cut's
+    /// single jump) over the median step.
+    pub transition_step: f64,
+    pub score: f64,
+}
+
+/// The ranking [`choose`] uses: seam plus [`GHOST_WEIGHT`] × the ghost's shortfall below 1.
+/// Both are ratios to the footage's own statistics (its median step, its neighbours'
+/// sharpness), so one weighting serves any footage.
+pub fn score(q: &LoopQuality) -> f64 {
+    q.seam + GHOST_WEIGHT * (1.0 - q.ghost).max(0.0)
+}
+
+/// Precomputed per-frame statistics of the window's metric frames.
+pub struct MetricWindow<'a> {
+    frames: &'a [GrayFrame],
+    /// `steps[i]` = RMS step from frame i to i + 1.
+    steps: Vec<f64>,
+    sharp: Vec<f64>,
+}
+
+impl<'a> MetricWindow<'a> {
+    /// Errors when the frames differ in size or there are fewer than two.
+    pub fn new(frames: &'a [GrayFrame]) -> Result<MetricWindow<'a>> {
+        if frames.len() < 2 {
+            return Err(EigenError::bad(
+                "frames",
+                format!("{} metric frame(s); a loop needs at least 2", frames.len()),
+            ));
+        }
+        let steps = loopq::steps(frames, false)?;
+        let sharp = frames.par_iter().map(loopq::sharpness).collect();
+        Ok(MetricWindow {
+            frames,
+            steps,
+            sharp,
+        })
+    }
+    pub fn len(&self) -> usize {
+        self.frames.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.frames.is_empty()
+    }
+    /// The footage's own median step over the window.
+    pub fn median_step(&self) -> f64 {
+        loopq::median(&mut self.steps.clone())
+    }
+}
+
+/// Evaluates every candidate closed every way in [`TRANSITION_LENGTHS`] (cut, crossfade,
+/// and morph when `morph` is motion-compensated) that fits in the window; sorted by
+/// [`score`] (ties: fewer transition frames, then the search's order). Deterministic.
+pub fn evaluate(win: &MetricWindow, cands: &[Candidate], morph: &dyn PairMorph) -> Vec<Evaluated> {
+    let mut out: Vec<(usize, Evaluated)> = cands
+        .par_iter()
+        .enumerate()
+        .flat_map_iter(|(rank, c)| {
+            evaluate_one(win, c, morph)
+                .into_iter()
+                .map(move |e| (rank, e))
+        })
+        .collect();
+    out.sort_by(|(ra, a), (rb, b)| {
+        a.score
+            .total_cmp(&b.score)
+            .then(a.closing.frames().cmp(&b.closing.frames()))
+            .then(ra.cmp(rb))
+    });
+    out.into_iter().map(|(_, e)| e).collect()
+}
+
+fn evaluate_one(win: &MetricWindow, c: &Candidate, morph: &dyn PairMorph) -> Vec<Evaluated> {
+    let n = win.len();
+    let max_m = TRANSITION_LENGTHS
+        .iter()
+        .copied()
+        .filter(|&m| c.end + m <= n && m < c.len())
+        .max()
+        .unwrap_or(0);
+    let blend_pairs: Vec<_> = (0..max_m)
+        .map(|t| Crossfade.prepare(&win.frames[c.end + t], &win.frames[c.start + t]))
+        .collect();
+    let morph_pairs: Vec<_> = if morph.motion() {
+        (0..max_m)
+            .map(|t| morph.prepare(&win.frames[c.end + t], &win.frames[c.start + t]))
+            .collect()
+    } else {
+        Vec::new()
+    };
+    let mut out = Vec::new();
+    for &m in TRANSITION_LENGTHS.iter().filter(|&&m| m <= max_m) {
+        let mut closings = vec![if m == 0 {
+            Closing::Cut
+        } else {
+            Closing::Crossfade(m)
+        }];
+        if m > 0 && morph.motion() {
+            closings.push(Closing::Morph(m));
+        }
+        for closing in closings {
+            let pairs = match closing {
+                Closing::Morph(_) => &morph_pairs,
+                _ => &blend_pairs,
+            };
+            let mids: Vec<GrayFrame> = (0..m)
+                .map(|t| pairs[t]((t + 1) as f32 / (m + 1) as f32))
+                .collect();
+            out.push(measure(win, c, closing, &mids));
+        }
+    }
+    out
+}
+
+/// Seam and ghost of `c` closed with `closing` whose transition frames are `mids`.
+fn measure(win: &MetricWindow, c: &Candidate, closing: Closing, mids: &[GrayFrame]) -> Evaluated {
+    let m = mids.len();
+    let body = c.start + m..c.end;
+    // Steps: body (natural), last body → first mid, mids, last mid → first body (wrap).
+    let mut steps: Vec<f64> = win.steps[body.start..body.end - 1].to_vec();
+    let mut trans = Vec::with_capacity(m + 1);
+    if m == 0 {
+        trans.push(loopq::rms_diff(
+            &win.frames[body.end - 1],
+            &win.frames[body.start],
+        ));
+    } else {
+        trans.push(loopq::rms_diff(&win.frames[body.end - 1], &mids[0]));
+        for t in 1..m {
+            trans.push(loopq::rms_diff(&mids[t - 1], &mids[t]));
+        }
+        trans.push(loopq::rms_diff(&mids[m - 1], &win.frames[body.start]));
+    }
+    steps.extend_from_slice(&trans);
+    let med = loopq::median(&mut steps.clone());
+    let (seam_at, max) =
+        steps.iter().enumerate().fold(
+            (0, f64::NEG_INFINITY),
+            |b, (i, &v)| if v > b.1 { (i, v) } else { b },
+        );
+    let mut sharp: Vec<f64> = win.sharp[body.clone()].to_vec();
+    sharp.extend(mids.iter().map(loopq::sharpness));
+    let (ghost, ghost_at) = loopq::ghost(&sharp);
+    let ratio = |v: f64| if med > 0.0 { v / med } else { 1.0 };
+    let quality = LoopQuality {
+        seam: ratio(max),
+        seam_at,
+        ghost,
+        ghost_at,
+        median_step: med,
+    };
+    Evaluated {
+        candidate: *c,
+        closing,
+        quality,
+        transition_step: ratio(trans.iter().copied().fold(0.0, f64::max)),
+        score: score(&quality),
+    }
+}
+
+/// The best evaluated closing with a sentence saying why it won, or `None` for an empty list.
+pub fn choose(evaluated: &[Evaluated]) -> Option<(Evaluated, String)> {
+    let best = *evaluated.first()?;
+    let best_of = |f: &dyn Fn(&Closing) -> bool| evaluated.iter().find(|e| f(&e.closing));
+    let mut why = format!(
+        "{} at {}..{} scores {:.3} (seam {:.2} + {GHOST_WEIGHT} × ghost shortfall {:.2})",
+        best.closing,
+        best.candidate.start,
+        best.candidate.end,
+        best.score,
+        best.quality.seam,
+        (1.0 - best.quality.ghost).max(0.0)
+    );
+    let others: Vec<String> = [
+        ("plain cut", best_of(&|c| matches!(c, Closing::Cut))),
+        (
+            "crossfade",
+            best_of(&|c| matches!(c, Closing::Crossfade(_))),
+        ),
+        ("morph", best_of(&|c| matches!(c, Closing::Morph(_)))),
+    ]
+    .into_iter()
+    .filter_map(|(name, e)| {
+        let e = e?;
+        (std::mem::discriminant(&e.closing) != std::mem::discriminant(&best.closing)).then(|| {
+            format!(
+                "best {name} {:.3} (seam {:.2}, ghost {:.2})",
+                e.score, e.quality.seam, e.quality.ghost
+            )
+        })
+    })
+    .collect();
+    if !others.is_empty() {
+        why.push_str("; ");
+        why.push_str(&others.join(", "));
+    }
+    Some((best, why))
+}
+
+/// Parses a loop length: `4s` / `2.5s` (seconds, at `fps`) or a whole number of frames.
+pub fn parse_length(s: &str, fps: f64) -> Result<usize> {
+    let bad = |why: String| EigenError::bad("length", format!("`{s}`: {why} (e.g. 4s or 120)"));
+    let t = s.trim();
+    let frames = if let Some(sec) = t.strip_suffix('s') {
+        let v: f64 = sec
+            .trim()
+            .parse()
+            .map_err(|_| bad("the seconds are not a number".into()))?;
+        if !v.is_finite() || v <= 0.0 {
+            return Err(bad("the seconds must be above 0".into()));
+        }
+        if !(fps.is_finite() && fps > 0.0) {
+            return Err(bad(format!(
+                "the clip's fps ({fps}) is unknown; give frames"
+            )));
+        }
+        (v * fps).round()
+    } else {
+        t.parse::<usize>()
+            .map_err(|_| bad("not a whole number of frames or seconds".into()))? as f64
+    };
+    if frames < 2.0 {
+        return Err(bad(format!("{frames} frame(s) is too short for a loop")));
+    }
+    Ok(frames as usize)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ignis_core::{Rng, Size};
+
+    /// Weights of a noisy periodic motion with period `p`: the search must find loops of a
+    /// whole number of periods.
+    fn periodic(n: usize, k: usize, p: usize, seed: u64) -> Vec<f32> {
+        let mut rng = Rng::new(seed);
+        let mut x = vec![0f32; n * k];
+        for i in 0..n {
+            let ph = (i % p) as f32 / p as f32 * std::f32::consts::TAU;
+            for j in 0..k {
+                x[i * k + j] = (ph * (j as f32 + 1.0)).sin() * 10.0 / (j as f32 + 1.0)
+                    + (rng.f32() - 0.5) * 0.2;
+            }
+        }
+        x
+    }
+
+    #[test]
+    fn finds_whole_periods() {
+        let (n, k) = (300, 8);
+        let x = periodic(n, k, 25, 3);
+        let c = search(&x, n, k, &SearchParams::new(60, 8)).unwrap();
+        assert!(!c.is_empty());
+        // 60 ± 20% = 48..=72: the only whole number of periods is 50.
+        assert_eq!(c[0].len(), 50, "{:?}", &c[..3]);
+        assert!(c[0].cost < 1.0, "{:?}", c[0]);
+        let d = distances(&x, n, k, 8);
+        assert_eq!(d[7 * n + 7], 0.0);
+        assert!((d[3 * n + 40] - d[40 * n + 3]).abs() < 1e-6);
+    }
+
+    #[test]
+    fn bad_lengths_are_errors() {
+        let x = periodic(50, 4, 10, 1);
+        let e = search(&x, 50, 4, &SearchParams::new(60, 4)).unwrap_err();
+        assert!(e.to_string().contains("does not fit in 50 frames"), "{e}");
+        assert!(search(&x, 50, 4, &SearchParams::new(1, 4)).is_err());
+        assert_eq!(parse_length("2s", 30.0).unwrap(), 60);
+        assert_eq!(parse_length("48", 30.0).unwrap(), 48);
+        assert!(parse_length("-1s", 30.0).is_err());
+        assert!(parse_length("abc", 30.0).is_err());
+        assert!(parse_length("1", 30.0).is_err());
+    }
+
+    #[test]
+    fn plan_layout_and_measure() {
+        let c = Candidate {
+            start: 5,
+            end: 25,
+            cost: 0.0,
+        };
+        let p = plan(&c, Closing::Crossfade(4));
+        assert_eq!(p.len(), 20);
+        assert_eq!(p[0], Planned::Src(9));
+        assert_eq!(
+            p[16],
+            Planned::Mix {
+                from: 25,
+                to: 5,
+                w: 0.2
+            }
+        );
+        assert_eq!(plan(&c, Closing::Cut).len(), 20);
+        // Metric frames: a bright bar moving one pixel per frame, period 20.
+        let size = Size::new(32, 8).unwrap();
+        let frames: Vec<GrayFrame> = (0..60)
+            .map(|i| {
+                let mut f = GrayFrame::new(size);
+                for y in 0..8 {
+                    f.data_mut()[y * 32 + 4 + i % 20] = 1.0;
+                }
+                f
+            })
+            .collect();
+        let win = MetricWindow::new(&frames).unwrap();
+        let ev = evaluate(&win, &[c], &Crossfade);
+        // A whole period: the plain cut is perfect, and wins over every crossfade.
+        assert_eq!(ev[0].closing, Closing::Cut, "{:?}", ev[0]);
+        assert!((ev[0].quality.seam - 1.0).abs() < 1e-9);
+        // The same, measured by loopq on the planned frames.
+        let built: Vec<GrayFrame> = plan(&c, Closing::Cut)
+            .iter()
+            .map(|p| match p {
+                Planned::Src(i) => frames[*i].clone(),
+                Planned::Mix { .. } => unreachable!(),
+            })
+            .collect();
+        let q = loopq::loop_quality(&built).unwrap();
+        assert!((q.seam - ev[0].quality.seam).abs() < 1e-9);
+        assert!((q.ghost - ev[0].quality.ghost).abs() < 1e-9);
+        // Every other closing was tried too.
+        assert!(ev.iter().any(|e| e.closing == Closing::Crossfade(4)));
+        assert!(choose(&ev).unwrap().1.contains("plain cut"));
+    }
+}
