@@ -4,6 +4,7 @@
 //! reporting live here; every capability is a library call.
 
 mod animate;
+mod bench_loops;
 mod classic;
 mod convert;
 mod demo;
@@ -11,6 +12,7 @@ mod eigen;
 mod global;
 mod info;
 mod learned;
+mod loop_cmd;
 mod output;
 mod volume;
 
@@ -55,6 +57,8 @@ enum Cmd {
     /// Procedural volumetric fire (Fuller et al.): profile + B-spline + lattice + noise.
     #[command(subcommand)]
     Volume(volume::Command),
+    /// A seamless loop of a fire clip, found, closed and written at the clip's own size.
+    Loop(loop_cmd::Args),
     /// Headline performance figures of a method as one JSON object.
     Bench(BenchArgs),
 }
@@ -77,12 +81,18 @@ struct DemoArgs {
 
 #[derive(clap::Args, Debug)]
 #[command(
-    after_help = "Examples:\n  ignis bench classic\n  ignis bench classic --quick\n  ignis bench eigen-train\n  ignis bench eigen-animate --keep-db /tmp/bench.db\n  ignis bench learned\n  ignis bench volume"
+    after_help = "Examples:\n  ignis bench classic\n  ignis bench classic --quick\n  ignis bench eigen-train\n  ignis bench eigen-animate --keep-db /tmp/bench.db\n  ignis bench learned\n  ignis bench volume\n  ignis bench loops\n  ignis bench loops fire1.mp4 fire2.mov --cache /tmp/ignis-cache"
 )]
 struct BenchArgs {
     /// What to measure.
-    #[arg(value_parser = ["classic", "eigen-train", "eigen-animate", "learned", "volume"])]
+    #[arg(value_parser = ["classic", "eigen-train", "eigen-animate", "learned", "volume", "loops"])]
     target: String,
+    /// loops: the clips (default ../shared/data/{candle,campfire,fireball}.mp4; missing
+    /// ones are reported as skipped).
+    clips: Vec<PathBuf>,
+    /// loops: the cache of clip databases (default as `ignis loop`).
+    #[arg(long, value_name = "DIR")]
+    cache: Option<PathBuf>,
     /// Fewer repetitions (a smoke test; figures are noisier).
     #[arg(long)]
     quick: bool,
@@ -109,6 +119,7 @@ fn run(cli: Cli) -> Result<()> {
         Cmd::Eigen(c) => eigen::run(c, &g),
         Cmd::Volume(c) => volume::run(c, &g),
         Cmd::Learned(c) => learned::run(c, &g),
+        Cmd::Loop(a) => loop_cmd::run(&a, &g),
         Cmd::Demo(a) => {
             let t = std::time::Instant::now();
             let mut d = demo::Demo::new(&a.output, g.clone(), a.seed, a.quick)?;
@@ -136,6 +147,14 @@ fn run(cli: Cli) -> Result<()> {
                 }
                 "volume" => volume::bench(&g, a.quick)?,
                 "learned" => learned::bench(&g, a.quick)?,
+                "loops" => {
+                    let clips = if a.clips.is_empty() {
+                        bench_loops::default_clips()
+                    } else {
+                        a.clips.clone()
+                    };
+                    bench_loops::bench(&clips, a.cache.as_deref(), &g)?
+                }
                 other => anyhow::bail!("unknown bench target `{other}`"),
             };
             println!("{}", serde_json::to_string_pretty(&v)?);

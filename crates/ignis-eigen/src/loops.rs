@@ -133,7 +133,21 @@ pub fn min_window(p: &SearchParams) -> usize {
 /// Ranked loop candidates of the n×k row-major weights `x` (one row per frame of the
 /// window, consecutive source frames). Errors when the window cannot hold a loop of the
 /// requested length.
-pub fn search(x: &[f32], n: usize, k: usize, p: &SearchParams) -> Result<Vec<Candidate>> {
+///
+/// With `body_steps` (the footage's own RMS steps between consecutive frames of the window,
+/// `n - 1` values, e.g. from [`MetricWindow::steps`]) the ranking also counts the loop's
+/// body: a candidate's rank is the larger of its transition ratio (filtered cost over the
+/// median weight-space step) and its body ratio (largest step inside the loop over the
+/// median step), an estimate of the seam a plain cut would measure — so the search prefers
+/// calm stretches of bursty footage. Half of the returned candidates are then the best of
+/// that ranking, half the best by transition cost alone.
+pub fn search(
+    x: &[f32],
+    n: usize,
+    k: usize,
+    p: &SearchParams,
+    body_steps: Option<&[f64]>,
+) -> Result<Vec<Candidate>> {
     if p.length < 2 {
         return Err(EigenError::bad(
             "length",
@@ -148,6 +162,18 @@ pub fn search(x: &[f32], n: usize, k: usize, p: &SearchParams) -> Result<Vec<Can
             "weights",
             format!("{} values do not form {n} rows of {k}", x.len()),
         ));
+    }
+    if let Some(b) = body_steps {
+        if b.len() + 1 != n {
+            return Err(EigenError::bad(
+                "steps",
+                format!(
+                    "{} body steps for {n} frames (expected {})",
+                    b.len(),
+                    n.saturating_sub(1)
+                ),
+            ));
+        }
     }
     let (lo, hi) = p.bounds();
     if n < min_window(p) {
@@ -165,8 +191,13 @@ pub fn search(x: &[f32], n: usize, k: usize, p: &SearchParams) -> Result<Vec<Can
     let d = distances(x, n, k, p.e);
     let at = |i: usize, j: usize| f64::from(d[i * n + j]);
     // start ≥ 2, end + 1 ≤ n - 1.
-    let mut all: Vec<Candidate> = Vec::new();
+    let mut all: Vec<(Candidate, f64)> = Vec::new();
+    let w_med = loopq::median(&mut (0..n - 1).map(|i| at(i, i + 1)).collect::<Vec<_>>()).max(1e-12);
+    let b_med = body_steps.map(|b| loopq::median(&mut b.to_vec()).max(1e-12));
     for start in 2..n {
+        // Running maximum of the body steps start..end-1 as the end grows.
+        let mut body_max = 0.0f64;
+        let mut upto = start;
         for len in lo..=hi {
             let end = start + len;
             if end + 1 >= n {
@@ -176,27 +207,51 @@ pub fn search(x: &[f32], n: usize, k: usize, p: &SearchParams) -> Result<Vec<Can
                 .map(|t| FILTER[t] * at(end + t - 2, start + t - 2))
                 .sum::<f64>()
                 / 8.0;
-            all.push(Candidate { start, end, cost });
+            let rank = match (body_steps, b_med) {
+                (Some(b), Some(m)) => {
+                    while upto + 1 < end {
+                        body_max = body_max.max(b[upto]);
+                        upto += 1;
+                    }
+                    (cost / w_med).max(body_max / m)
+                }
+                _ => cost,
+            };
+            all.push((Candidate { start, end, cost }, rank));
         }
     }
-    all.sort_by(|a, b| {
-        a.cost
-            .total_cmp(&b.cost)
-            .then(a.start.cmp(&b.start))
-            .then(a.end.cmp(&b.end))
-    });
-    // Suppress near-duplicates: a candidate within 3 frames (both ends) of a kept one.
+    let want = p.candidates.max(1);
+    let pick = |all: &mut Vec<(Candidate, f64)>,
+                key: fn(&(Candidate, f64)) -> f64,
+                want: usize,
+                out: &mut Vec<Candidate>| {
+        all.sort_by(|a, b| {
+            key(a)
+                .total_cmp(&key(b))
+                .then(a.0.start.cmp(&b.0.start))
+                .then(a.0.end.cmp(&b.0.end))
+        });
+        let mut added = 0;
+        for (c, _) in all.iter() {
+            if added >= want {
+                break;
+            }
+            // Suppress near-duplicates: within 3 frames (both ends) of a kept one.
+            let near = out
+                .iter()
+                .any(|o| o.start.abs_diff(c.start) <= 3 && o.end.abs_diff(c.end) <= 3);
+            if !near {
+                out.push(*c);
+                added += 1;
+            }
+        }
+    };
     let mut out: Vec<Candidate> = Vec::new();
-    for c in all {
-        if out.len() >= p.candidates.max(1) {
-            break;
-        }
-        let near = out
-            .iter()
-            .any(|o| o.start.abs_diff(c.start) <= 3 && o.end.abs_diff(c.end) <= 3);
-        if !near {
-            out.push(c);
-        }
+    if body_steps.is_some() {
+        pick(&mut all, |a| a.1, want.div_ceil(2), &mut out);
+        pick(&mut all, |a| a.0.cost, want / 2, &mut out);
+    } else {
+        pick(&mut all, |a| a.0.cost, want, &mut out);
     }
     Ok(out)
 }
@@ -350,6 +405,10 @@ impl<'a> MetricWindow<'a> {
     }
     pub fn is_empty(&self) -> bool {
         self.frames.is_empty()
+    }
+    /// RMS steps between consecutive frames (`len() - 1` values).
+    pub fn steps(&self) -> &[f64] {
+        &self.steps
     }
     /// The footage's own median step over the window.
     pub fn median_step(&self) -> f64 {
@@ -558,7 +617,7 @@ mod tests {
     fn finds_whole_periods() {
         let (n, k) = (300, 8);
         let x = periodic(n, k, 25, 3);
-        let c = search(&x, n, k, &SearchParams::new(60, 8)).unwrap();
+        let c = search(&x, n, k, &SearchParams::new(60, 8), None).unwrap();
         assert!(!c.is_empty());
         // 60 ± 20% = 48..=72: the only whole number of periods is 50.
         assert_eq!(c[0].len(), 50, "{:?}", &c[..3]);
@@ -571,9 +630,9 @@ mod tests {
     #[test]
     fn bad_lengths_are_errors() {
         let x = periodic(50, 4, 10, 1);
-        let e = search(&x, 50, 4, &SearchParams::new(60, 4)).unwrap_err();
+        let e = search(&x, 50, 4, &SearchParams::new(60, 4), None).unwrap_err();
         assert!(e.to_string().contains("does not fit in 50 frames"), "{e}");
-        assert!(search(&x, 50, 4, &SearchParams::new(1, 4)).is_err());
+        assert!(search(&x, 50, 4, &SearchParams::new(1, 4), None).is_err());
         assert_eq!(parse_length("2s", 30.0).unwrap(), 60);
         assert_eq!(parse_length("48", 30.0).unwrap(), 48);
         assert!(parse_length("-1s", 30.0).is_err());
