@@ -369,9 +369,53 @@ fn build_entry(
 // Search, choice, render
 // ---------------------------------------------------------------------------------------
 
-/// The morph used for closings: motion-compensated when the flow is available.
+/// The motion-compensated morph of `ignis_flow` (DIS flow both ways at a reduced working
+/// size, occlusion-aware warp-and-blend).
+pub struct FlowMorph {
+    pub params: ignis_flow::FlowParams,
+}
+
+impl FlowMorph {
+    /// Flow at most `max_side` pixels on the longest side.
+    pub fn new(max_side: u32) -> FlowMorph {
+        FlowMorph {
+            params: ignis_flow::FlowParams {
+                max_side,
+                ..Default::default()
+            },
+        }
+    }
+}
+
+impl PairMorph for FlowMorph {
+    fn motion(&self) -> bool {
+        true
+    }
+    fn prepare<'a>(
+        &'a self,
+        a: &'a GrayFrame,
+        b: &'a GrayFrame,
+    ) -> Box<dyn Fn(f32) -> GrayFrame + Send + Sync + 'a> {
+        // Metric frames of one window: same size, finite; the flow cannot fail on them.
+        // Should it anyway, the pair is blended (and measured as such).
+        match ignis_flow::flow_pair_reduced(a, b, &self.params) {
+            Ok((f, g)) => Box::new(move |w| {
+                ignis_flow::morph_gray(a, b, &f, &g, w).unwrap_or_else(|_| loops::blend(a, b, w))
+            }),
+            Err(_) => Box::new(move |w| loops::blend(a, b, w)),
+        }
+    }
+}
+
+/// Longest side of the flow's working size for full-resolution frames.
+pub const RENDER_FLOW_SIDE: u32 = 384;
+
+/// Candidates also closed with the (costlier) morph.
+pub const MORPH_CANDIDATES: usize = 4;
+
+/// The morph used for closings.
 pub fn morpher() -> Box<dyn PairMorph> {
-    Box::new(loops::Crossfade)
+    Box::new(FlowMorph::new(256))
 }
 
 /// A searched and chosen loop over a window of a source.
@@ -415,10 +459,7 @@ pub fn search_and_choose(
     let search_s = t.elapsed().as_secs_f64();
     let t = Instant::now();
     let m = morpher();
-    if method == Method::Morph && !m.motion() {
-        bail!("--method morph needs the optical flow, which this build lacks; use auto, cut or crossfade");
-    }
-    let evaluated: Vec<Evaluated> = loops::evaluate(&win, &cands, m.as_ref())
+    let evaluated: Vec<Evaluated> = loops::evaluate(&win, &cands, m.as_ref(), MORPH_CANDIDATES)
         .into_iter()
         .filter(|e| method.admits(&e.closing))
         .collect();
@@ -492,7 +533,7 @@ pub fn render(
                 let a = next(from)?;
                 let b = &head[to - c.start];
                 let f = match best.closing {
-                    Closing::Morph(_) => morph_rgba(&a, b, w),
+                    Closing::Morph(_) => morph_rgba(&a, b, w)?,
                     _ => blend_rgba(&a, b, w),
                 };
                 sink(&f)?;
@@ -513,8 +554,13 @@ pub fn blend_rgba(a: &RgbaFrame, b: &RgbaFrame, w: f32) -> RgbaFrame {
     RgbaFrame::from_vec(a.size(), data).expect("same size")
 }
 
-fn morph_rgba(a: &RgbaFrame, b: &RgbaFrame, w: f32) -> RgbaFrame {
-    blend_rgba(a, b, w)
+/// The motion-compensated in-between `w` of the way from `a` to `b`, flow computed on the
+/// luma at most [`RENDER_FLOW_SIDE`] pixels on the longest side and resampled.
+fn morph_rgba(a: &RgbaFrame, b: &RgbaFrame, w: f32) -> Result<RgbaFrame> {
+    let p = FlowMorph::new(RENDER_FLOW_SIDE).params;
+    let (la, lb) = rayon::join(|| ignis_flow::luma(a), || ignis_flow::luma(b));
+    let (f, g) = ignis_flow::flow_pair_reduced(&la, &lb, &p)?;
+    Ok(ignis_flow::morph_rgba(a, b, &f, &g, w)?)
 }
 
 /// Text lines for the candidate table.

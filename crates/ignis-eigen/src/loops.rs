@@ -42,7 +42,7 @@ pub const FILTER: [f64; 4] = [1.0, 3.0, 3.0, 1.0];
 /// Transition lengths tried by [`evaluate`] (0 = plain cut).
 pub const TRANSITION_LENGTHS: [usize; 10] = [0, 2, 3, 4, 6, 8, 10, 12, 16, 20];
 /// Weight of the ghost shortfall in [`score`].
-pub const GHOST_WEIGHT: f64 = 2.0;
+pub const GHOST_WEIGHT: f64 = 3.0;
 
 /// What [`search`] looks for.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -416,28 +416,65 @@ impl<'a> MetricWindow<'a> {
     }
 }
 
-/// Evaluates every candidate closed every way in [`TRANSITION_LENGTHS`] (cut, crossfade,
-/// and morph when `morph` is motion-compensated) that fits in the window; sorted by
-/// [`score`] (ties: fewer transition frames, then the search's order). Deterministic.
-pub fn evaluate(win: &MetricWindow, cands: &[Candidate], morph: &dyn PairMorph) -> Vec<Evaluated> {
+/// Evaluates every candidate closed every way in [`TRANSITION_LENGTHS`] that fits in the
+/// window: a cut and crossfades for all, and — when `morph` is motion-compensated, which
+/// costs a flow per pair — morphs for the `morph_candidates` candidates whose best cut or
+/// crossfade scores best. Sorted by [`score`] (ties: fewer transition frames, then the
+/// search's order). Deterministic.
+pub fn evaluate(
+    win: &MetricWindow,
+    cands: &[Candidate],
+    morph: &dyn PairMorph,
+    morph_candidates: usize,
+) -> Vec<Evaluated> {
     let mut out: Vec<(usize, Evaluated)> = cands
         .par_iter()
         .enumerate()
         .flat_map_iter(|(rank, c)| {
-            evaluate_one(win, c, morph)
+            evaluate_one(win, c, &Crossfade)
                 .into_iter()
                 .map(move |e| (rank, e))
         })
         .collect();
-    out.sort_by(|(ra, a), (rb, b)| {
+    sort_evaluated(&mut out);
+    if morph.motion() {
+        let mut picked: Vec<usize> = Vec::new();
+        for (rank, _) in &out {
+            if picked.len() >= morph_candidates {
+                break;
+            }
+            if !picked.contains(rank) {
+                picked.push(*rank);
+            }
+        }
+        let morphs: Vec<(usize, Evaluated)> = picked
+            .par_iter()
+            .flat_map_iter(|&rank| {
+                evaluate_one(win, &cands[rank], morph)
+                    .into_iter()
+                    .map(move |e| (rank, e))
+            })
+            .collect();
+        out.extend(morphs);
+        sort_evaluated(&mut out);
+    }
+    out.into_iter().map(|(_, e)| e).collect()
+}
+
+fn sort_evaluated(v: &mut [(usize, Evaluated)]) {
+    v.sort_by(|(ra, a), (rb, b)| {
         a.score
             .total_cmp(&b.score)
             .then(a.closing.frames().cmp(&b.closing.frames()))
             .then(ra.cmp(rb))
+            .then(
+                matches!(a.closing, Closing::Morph(_)).cmp(&matches!(b.closing, Closing::Morph(_))),
+            )
     });
-    out.into_iter().map(|(_, e)| e).collect()
 }
 
+/// `c` closed every way `morph` offers: with [`Crossfade`], a cut and crossfades; with a
+/// motion-compensated morph, morphs only.
 fn evaluate_one(win: &MetricWindow, c: &Candidate, morph: &dyn PairMorph) -> Vec<Evaluated> {
     let n = win.len();
     let max_m = TRANSITION_LENGTHS
@@ -446,36 +483,21 @@ fn evaluate_one(win: &MetricWindow, c: &Candidate, morph: &dyn PairMorph) -> Vec
         .filter(|&m| c.end + m <= n && m < c.len())
         .max()
         .unwrap_or(0);
-    let blend_pairs: Vec<_> = (0..max_m)
-        .map(|t| Crossfade.prepare(&win.frames[c.end + t], &win.frames[c.start + t]))
+    let pairs: Vec<_> = (0..max_m)
+        .map(|t| morph.prepare(&win.frames[c.end + t], &win.frames[c.start + t]))
         .collect();
-    let morph_pairs: Vec<_> = if morph.motion() {
-        (0..max_m)
-            .map(|t| morph.prepare(&win.frames[c.end + t], &win.frames[c.start + t]))
-            .collect()
-    } else {
-        Vec::new()
-    };
     let mut out = Vec::new();
     for &m in TRANSITION_LENGTHS.iter().filter(|&&m| m <= max_m) {
-        let mut closings = vec![if m == 0 {
-            Closing::Cut
-        } else {
-            Closing::Crossfade(m)
-        }];
-        if m > 0 && morph.motion() {
-            closings.push(Closing::Morph(m));
-        }
-        for closing in closings {
-            let pairs = match closing {
-                Closing::Morph(_) => &morph_pairs,
-                _ => &blend_pairs,
-            };
-            let mids: Vec<GrayFrame> = (0..m)
-                .map(|t| pairs[t]((t + 1) as f32 / (m + 1) as f32))
-                .collect();
-            out.push(measure(win, c, closing, &mids));
-        }
+        let closing = match (m, morph.motion()) {
+            (0, true) => continue,
+            (0, false) => Closing::Cut,
+            (m, false) => Closing::Crossfade(m),
+            (m, true) => Closing::Morph(m),
+        };
+        let mids: Vec<GrayFrame> = (0..m)
+            .map(|t| pairs[t]((t + 1) as f32 / (m + 1) as f32))
+            .collect();
+        out.push(measure(win, c, closing, &mids));
     }
     out
 }
@@ -509,7 +531,16 @@ fn measure(win: &MetricWindow, c: &Candidate, closing: Closing, mids: &[GrayFram
     let mut sharp: Vec<f64> = win.sharp[body.clone()].to_vec();
     sharp.extend(mids.iter().map(loopq::sharpness));
     let (ghost, ghost_at) = loopq::ghost(&sharp);
-    let ratio = |v: f64| if med > 0.0 { v / med } else { 1.0 };
+    // As loopq: a still loop is perfectly smooth, a step out of stillness infinitely rough.
+    let ratio = |v: f64| {
+        if med > 0.0 {
+            v / med
+        } else if v > 0.0 {
+            f64::INFINITY
+        } else {
+            1.0
+        }
+    };
     let quality = LoopQuality {
         seam: ratio(max),
         seam_at,
@@ -671,7 +702,7 @@ mod tests {
             })
             .collect();
         let win = MetricWindow::new(&frames).unwrap();
-        let ev = evaluate(&win, &[c], &Crossfade);
+        let ev = evaluate(&win, &[c], &Crossfade, 0);
         // A whole period: the plain cut is perfect, and wins over every crossfade.
         assert_eq!(ev[0].closing, Closing::Cut, "{:?}", ev[0]);
         assert!((ev[0].quality.seam - 1.0).abs() < 1e-9);
