@@ -95,7 +95,10 @@ fn search_timing(n: usize) -> Result<Value> {
         n,
         k,
         &SearchParams::new(120, k),
-        Some(&vec![1.0; n - 1]),
+        Some(loops::BodyStats {
+            steps: &vec![1.0; n - 1],
+            softness: &vec![1.0; n],
+        }),
     )?;
     let s = t.elapsed().as_secs_f64();
     Ok(
@@ -164,11 +167,21 @@ pub fn bench(clips: &[PathBuf], cache: Option<&Path>, g: &Global) -> Result<Valu
                 }
                 None => None,
             };
+            // A flipbook when the sheet fits the writer's limit, else a PNG sequence.
+            let stem = clip
+                .file_stem()
+                .unwrap_or_default()
+                .to_string_lossy()
+                .to_string();
+            let cells = (length as f64 * 1.2).ceil() as u64 * info.size.pixels() as u64;
+            let flipbook = cells <= 1 << 26;
+            let output = if flipbook {
+                tmp.join(format!("{stem}-{secs}s.png"))
+            } else {
+                tmp.join(format!("{stem}-{secs}s/%04d.png"))
+            };
             let out = crate::output::OutputArgs {
-                output: tmp.join(format!(
-                    "{}-{secs}s.png",
-                    clip.file_stem().unwrap_or_default().to_string_lossy()
-                )),
+                output,
                 format: None,
                 fps: c.fps,
                 columns: None,
@@ -179,7 +192,7 @@ pub fn bench(clips: &[PathBuf], cache: Option<&Path>, g: &Global) -> Result<Valu
             };
             let quiet = Global { quiet: true };
             let t = Instant::now();
-            let d = loop_cmd::make_loop(
+            let d = match loop_cmd::make_loop(
                 clip,
                 window.start,
                 c.db.weights_row_major(),
@@ -192,7 +205,14 @@ pub fn bench(clips: &[PathBuf], cache: Option<&Path>, g: &Global) -> Result<Valu
                 &out,
                 3,
                 &quiet,
-            )?;
+            ) {
+                Ok(d) => d,
+                Err(e) => {
+                    entry["ignis"] = json!({"error": format!("{e:#}")});
+                    results.push(entry);
+                    continue;
+                }
+            };
             let total_s = t.elapsed().as_secs_f64();
             let b = &d.chosen.best;
             let best_peer_ghost = vtq.map_or(xf.ghost, |q| q.ghost.max(xf.ghost));
@@ -202,6 +222,7 @@ pub fn bench(clips: &[PathBuf], cache: Option<&Path>, g: &Global) -> Result<Valu
                 "predicted": q_json(&b.quality),
                 "quality": q_json(&d.measured),
                 "frames": d.frames, "size": d.size.to_string(),
+                "written_as": if flipbook { "flipbook" } else { "png sequence (a flipbook would exceed the writer's 2^26-pixel sheet)" },
                 "why": d.chosen.why,
                 "seconds": {"search": d.chosen.search_s, "closings": d.chosen.evaluate_s,
                             "render_and_write": d.render_s, "total": total_s},
@@ -210,8 +231,6 @@ pub fn bench(clips: &[PathBuf], cache: Option<&Path>, g: &Global) -> Result<Valu
                 "seam_le_xfade": d.measured.seam <= xf.seam,
                 "ghost_ge_best_peer": d.measured.ghost >= best_peer_ghost,
             });
-            let _ = std::fs::remove_file(&out.output);
-            let _ = std::fs::remove_file(out.output.with_extension("json"));
             results.push(entry);
         }
     }

@@ -454,7 +454,7 @@ pub fn search_and_choose(
         n,
         k,
         &SearchParams::new(length, e),
-        Some(win.steps()),
+        Some(win.body_stats()),
     )?;
     let search_s = t.elapsed().as_secs_f64();
     let t = Instant::now();
@@ -815,4 +815,161 @@ fn find_source(recorded: &str, db: &Path) -> Result<PathBuf> {
     bail!(
         "the clip's source {recorded} is not found (the loop is rendered from the source video); run from the directory training ran in"
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bench_loops::{video_texture, xfade, K};
+
+    fn clip(name: &str) -> Option<PathBuf> {
+        let p = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../../shared/data")
+            .join(name);
+        if !p.exists() {
+            eprintln!("skipped: ../shared/data/{name} not present");
+            return None;
+        }
+        if ignis_media::probe(&p).is_err() {
+            eprintln!("skipped: {name} cannot be read here (no ffmpeg?)");
+            return None;
+        }
+        Some(p)
+    }
+
+    fn out_args(path: PathBuf) -> crate::output::OutputArgs {
+        crate::output::OutputArgs {
+            output: path,
+            format: None,
+            fps: 30.0,
+            columns: None,
+            rows: None,
+            padding: 0,
+            premultiplied: false,
+            no_loop: false,
+        }
+    }
+
+    /// The loop goal on each dev clip, on a 120-frame window of its middle (cheap
+    /// training): the 2-s loop written at the source size has a seam no worse than the
+    /// crossfade peer's and a ghost no worse than the best peer's, the peers computed on
+    /// the same window's metric frames as `shared/tools/loop_metrics.py` does.
+    #[test]
+    fn loop_goals_on_dev_clips() {
+        let quiet = Global { quiet: true };
+        let cache = tempfile::tempdir().unwrap();
+        for (name, window) in [
+            ("candle.mp4", 340..460),
+            ("campfire.mp4", 200..320),
+            ("fireball.mp4", 165..285),
+        ] {
+            let Some(path) = clip(name) else { continue };
+            let c = cached(
+                &path,
+                window.clone(),
+                "32x48".parse().unwrap(),
+                40,
+                cache.path(),
+                &quiet,
+            )
+            .unwrap();
+            let length = loops::parse_length("2s", c.fps).unwrap();
+            let n = c.metric.len();
+            let a = (n - length - K) / 2;
+            let xf = loopq::loop_quality(&xfade(&c.metric, a, a + length + K, K)).unwrap();
+            let (vtf, _, _) = video_texture(&c.metric, length, K).unwrap();
+            let vt = loopq::loop_quality(&vtf).unwrap();
+            let out = cache.path().join(format!("{name}.png"));
+            let d = make_loop(
+                &path,
+                window.start,
+                c.db.weights_row_major(),
+                c.db.n_components(),
+                c.db.manifest().e_detect.max(1),
+                &c.metric,
+                length,
+                Method::Auto,
+                c.fps,
+                &out_args(out.clone()),
+                3,
+                &quiet,
+            )
+            .unwrap();
+            assert_eq!(
+                d.size,
+                ignis_media::probe(&path).unwrap().size,
+                "{name}: source size"
+            );
+            // The flipbook's JSON records what was measured.
+            let meta: serde_json::Value =
+                serde_json::from_slice(&std::fs::read(out.with_extension("json")).unwrap())
+                    .unwrap();
+            let seam = meta["loop_quality"]["seam"].as_f64().unwrap();
+            assert!((seam - d.measured.seam).abs() < 1e-9);
+            eprintln!(
+                "{name}: ignis seam {:.3} ghost {:.3} ({}); xfade {:.3} / {:.3}; vt {:.3} / {:.3}",
+                d.measured.seam,
+                d.measured.ghost,
+                d.chosen.best.closing,
+                xf.seam,
+                xf.ghost,
+                vt.seam,
+                vt.ghost
+            );
+            assert!(
+                d.measured.seam <= xf.seam,
+                "{name}: seam {} > crossfade's {}",
+                d.measured.seam,
+                xf.seam
+            );
+            assert!(
+                d.measured.ghost >= xf.ghost.max(vt.ghost),
+                "{name}: ghost {} < best peer's {}",
+                d.measured.ghost,
+                xf.ghost.max(vt.ghost)
+            );
+        }
+    }
+
+    /// A damaged cache entry is detected and rebuilt; a good one is reused.
+    #[test]
+    fn corrupt_cache_entry_is_rebuilt() {
+        let Some(path) = clip("candle.mp4") else {
+            return;
+        };
+        let quiet = Global { quiet: true };
+        let cache = tempfile::tempdir().unwrap();
+        let size: Size = "16x24".parse().unwrap();
+        let c = cached(&path, 0..40, size, 8, cache.path(), &quiet).unwrap();
+        assert!(c.built);
+        let dir = c.dir.clone();
+        drop(c);
+        let again = cached(&path, 0..40, size, 8, cache.path(), &quiet).unwrap();
+        assert!(!again.built, "a good entry is reused");
+        let metric = dir.join("metric.f32");
+        let mut bytes = std::fs::read(&metric).unwrap();
+        bytes[100] ^= 0x55;
+        std::fs::write(&metric, &bytes).unwrap();
+        let settings = CacheSettings {
+            version: CACHE_VERSION,
+            train_size: size.to_string(),
+            keep: 8,
+            start: 0,
+            end: 40,
+        };
+        match open_entry(&dir, &file_sha256(&path).unwrap(), &settings) {
+            Ok(_) => panic!("a damaged metric.f32 was accepted"),
+            Err(e) => assert!(e.to_string().contains("checksum"), "{e}"),
+        }
+        let rebuilt = cached(&path, 0..40, size, 8, cache.path(), &quiet).unwrap();
+        assert!(rebuilt.built, "the damaged entry was rebuilt");
+        assert_eq!(rebuilt.metric.len(), 40);
+        // A truncated database file is caught too.
+        std::fs::write(dir.join("entry.json"), b"{").unwrap();
+        assert!(
+            cached(&path, 0..40, size, 8, cache.path(), &quiet)
+                .unwrap()
+                .built
+        );
+    }
 }

@@ -58,13 +58,13 @@ pub struct SearchParams {
 }
 
 impl SearchParams {
-    /// ±20%, 24 candidates.
+    /// ±20%, 160 candidates.
     pub fn new(length: usize, e: usize) -> SearchParams {
         SearchParams {
             length,
             tolerance: 0.2,
             e,
-            candidates: 24,
+            candidates: 160,
         }
     }
     /// Shortest and longest loop allowed.
@@ -136,9 +136,10 @@ pub fn min_window(p: &SearchParams) -> usize {
 ///
 /// With `body_steps` (the footage's own RMS steps between consecutive frames of the window,
 /// `n - 1` values, e.g. from [`MetricWindow::steps`]) the ranking also counts the loop's
-/// body: a candidate's rank is the larger of its transition ratio (filtered cost over the
-/// median weight-space step) and its body ratio (largest step inside the loop over the
-/// median step), an estimate of the seam a plain cut would measure — so the search prefers
+/// body: a candidate's rank is the larger of its jump (filtered cost over the median
+/// weight-space step, times the median pixel step) and the largest step inside the loop,
+/// over the loop's own median step — an estimate of the seam a plain cut would measure —
+/// plus [`GHOST_WEIGHT`] × the shortfall of the softest frame inside it (as [`score`]) — so the search prefers
 /// calm stretches of bursty footage. Half of the returned candidates are then the best of
 /// that ranking, half the best by transition cost alone.
 pub fn search(
@@ -146,8 +147,10 @@ pub fn search(
     n: usize,
     k: usize,
     p: &SearchParams,
-    body_steps: Option<&[f64]>,
+    body: Option<BodyStats>,
 ) -> Result<Vec<Candidate>> {
+    let body_steps = body.map(|b| b.steps);
+    let soft = body.map(|b| b.softness);
     if p.length < 2 {
         return Err(EigenError::bad(
             "length",
@@ -163,13 +166,14 @@ pub fn search(
             format!("{} values do not form {n} rows of {k}", x.len()),
         ));
     }
-    if let Some(b) = body_steps {
-        if b.len() + 1 != n {
+    if let Some(b) = body {
+        if b.steps.len() + 1 != n || b.softness.len() != n {
             return Err(EigenError::bad(
                 "steps",
                 format!(
-                    "{} body steps for {n} frames (expected {})",
-                    b.len(),
+                    "{} body steps and {} softness values for {n} frames (expected {} and {n})",
+                    b.steps.len(),
+                    b.softness.len(),
                     n.saturating_sub(1)
                 ),
             ));
@@ -195,9 +199,16 @@ pub fn search(
     let w_med = loopq::median(&mut (0..n - 1).map(|i| at(i, i + 1)).collect::<Vec<_>>()).max(1e-12);
     let b_med = body_steps.map(|b| loopq::median(&mut b.to_vec()).max(1e-12));
     for start in 2..n {
-        // Running maximum of the body steps start..end-1 as the end grows.
+        // Running maximum of the body steps start..end-1 as the end grows, and the median
+        // step of the shortest loop from `start` (the seam's denominator: a still stretch
+        // has a tiny one, so a loop there would measure a huge seam).
         let mut body_max = 0.0f64;
+        let mut body_soft = f64::INFINITY;
         let mut upto = start;
+        let local_med = body_steps.map(|b| {
+            let e = (start + lo - 1).min(b.len());
+            loopq::median(&mut b[start.min(e)..e].to_vec()).max(1e-12)
+        });
         for len in lo..=hi {
             let end = start + len;
             if end + 1 >= n {
@@ -211,9 +222,20 @@ pub fn search(
                 (Some(b), Some(m)) => {
                     while upto + 1 < end {
                         body_max = body_max.max(b[upto]);
+                        if let Some(sf) = soft {
+                            body_soft = body_soft.min(sf[upto]);
+                        }
                         upto += 1;
                     }
-                    (cost / w_med).max(body_max / m)
+                    // The jump in pixel-step units (weight-space ratio × the median step),
+                    // and the body's largest step, over the loop's own median step.
+                    let local = local_med.unwrap_or(m);
+                    let shortfall = if body_soft.is_finite() {
+                        (1.0 - body_soft).max(0.0)
+                    } else {
+                        0.0
+                    };
+                    (cost / w_med * m).max(body_max) / local + GHOST_WEIGHT * shortfall
                 }
                 _ => cost,
             };
@@ -375,12 +397,22 @@ pub fn score(q: &LoopQuality) -> f64 {
     q.seam + GHOST_WEIGHT * (1.0 - q.ghost).max(0.0)
 }
 
+/// The footage's own statistics a [`search`] ranks loop bodies by.
+#[derive(Clone, Copy, Debug)]
+pub struct BodyStats<'a> {
+    /// RMS steps between consecutive frames (`n - 1`).
+    pub steps: &'a [f64],
+    /// Each frame's sharpness over the median of its ±15 neighbours in the footage (`n`).
+    pub softness: &'a [f64],
+}
+
 /// Precomputed per-frame statistics of the window's metric frames.
 pub struct MetricWindow<'a> {
     frames: &'a [GrayFrame],
     /// `steps[i]` = RMS step from frame i to i + 1.
     steps: Vec<f64>,
     sharp: Vec<f64>,
+    softness: Vec<f64>,
 }
 
 impl<'a> MetricWindow<'a> {
@@ -393,11 +425,20 @@ impl<'a> MetricWindow<'a> {
             ));
         }
         let steps = loopq::steps(frames, false)?;
-        let sharp = frames.par_iter().map(loopq::sharpness).collect();
+        let sharp: Vec<f64> = frames.par_iter().map(loopq::sharpness).collect();
+        let n = sharp.len();
+        let r = loopq::GHOST_RADIUS;
+        let softness = (0..n)
+            .map(|t| {
+                let (a, b) = (t.saturating_sub(r), (t + r + 1).min(n));
+                sharp[t] / loopq::median(&mut sharp[a..b].to_vec()).max(1e-9)
+            })
+            .collect();
         Ok(MetricWindow {
             frames,
             steps,
             sharp,
+            softness,
         })
     }
     pub fn len(&self) -> usize {
@@ -409,6 +450,13 @@ impl<'a> MetricWindow<'a> {
     /// RMS steps between consecutive frames (`len() - 1` values).
     pub fn steps(&self) -> &[f64] {
         &self.steps
+    }
+    /// The statistics [`search`] ranks bodies by.
+    pub fn body_stats(&self) -> BodyStats<'_> {
+        BodyStats {
+            steps: &self.steps,
+            softness: &self.softness,
+        }
     }
     /// The footage's own median step over the window.
     pub fn median_step(&self) -> f64 {
