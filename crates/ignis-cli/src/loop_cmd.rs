@@ -940,11 +940,11 @@ mod tests {
         let quiet = Global { quiet: true };
         let cache = tempfile::tempdir().unwrap();
         let size: Size = "16x24".parse().unwrap();
-        let c = cached(&path, 0..40, size, 8, cache.path(), &quiet).unwrap();
+        let c = cached(&path, 0..30, size, 8, cache.path(), &quiet).unwrap();
         assert!(c.built);
         let dir = c.dir.clone();
         drop(c);
-        let again = cached(&path, 0..40, size, 8, cache.path(), &quiet).unwrap();
+        let again = cached(&path, 0..30, size, 8, cache.path(), &quiet).unwrap();
         assert!(!again.built, "a good entry is reused");
         let metric = dir.join("metric.f32");
         let mut bytes = std::fs::read(&metric).unwrap();
@@ -955,21 +955,37 @@ mod tests {
             train_size: size.to_string(),
             keep: 8,
             start: 0,
-            end: 40,
+            end: 30,
         };
         match open_entry(&dir, &file_sha256(&path).unwrap(), &settings) {
             Ok(_) => panic!("a damaged metric.f32 was accepted"),
             Err(e) => assert!(e.to_string().contains("checksum"), "{e}"),
         }
-        let rebuilt = cached(&path, 0..40, size, 8, cache.path(), &quiet).unwrap();
+        let rebuilt = cached(&path, 0..30, size, 8, cache.path(), &quiet).unwrap();
         assert!(rebuilt.built, "the damaged entry was rebuilt");
-        assert_eq!(rebuilt.metric.len(), 40);
-        // A truncated database file is caught too.
+        assert_eq!(rebuilt.metric.len(), 30);
+        // A damaged database pack or entry.json is caught too (not rebuilt here: training
+        // is the slow part).
+        drop(rebuilt);
+        let sha = file_sha256(&path).unwrap();
+        let pack = std::fs::read_dir(dir.join("fire.db/packs"))
+            .unwrap()
+            .next()
+            .unwrap()
+            .unwrap()
+            .path();
+        let mut p = std::fs::read(&pack).unwrap();
+        let last = p.len() - 1;
+        p[last] ^= 0x55;
+        std::fs::write(&pack, &p).unwrap();
+        assert!(
+            open_entry(&dir, &sha, &settings).is_err(),
+            "a damaged pack was accepted"
+        );
         std::fs::write(dir.join("entry.json"), b"{").unwrap();
         assert!(
-            cached(&path, 0..40, size, 8, cache.path(), &quiet)
-                .unwrap()
-                .built
+            open_entry(&dir, &sha, &settings).is_err(),
+            "a damaged entry.json was accepted"
         );
     }
 }
