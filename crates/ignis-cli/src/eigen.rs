@@ -41,7 +41,7 @@ pub enum Command {
     /// Make a seamless loop of a clip range (§5.1): the range, then a transition from its
     /// end back to its start (End Growing, Direct Bridging or low-pass morphs).
     #[command(
-        after_help = "Examples:\n  ignis eigen loop fire.db --clip candle --range 100..220 -o loop.mp4\n  ignis eigen loop fire.db --clip candle --range 100..220 --size 640x360 -o loop.gif\n  ignis eigen loop fire.db --clip candle --range 100..220 --method low-pass --eigenfires 50 --palette candle -o loop.png\n  ignis eigen loop fire.db --clip candle --range 100..220 --relink candle=/new/place/candle.mp4 -o loop.mp4\n\nThe range is in source frame numbers (as `reconstruct --frame`); -o loop.png writes a flipbook.\nFrames are at the source clip's size, in the footage's own colours with an alpha matte from the\npre-processing mask, database frames read from the source video (§7.1.2); --palette colours\nthe grey frames with a ramp instead; --from-database reconstructs every frame."
+        after_help = "Examples:\n  ignis eigen loop fire.db --clip candle --range 100..220 -o loop.mp4\n  ignis eigen loop fire.db --clip candle --length 4s -o loop.png\n  ignis eigen loop fire.db --clip candle --length 120 --range 0..400 -o loop.mp4\n  ignis eigen loop fire.db --clip candle --range 100..220 --size 640x360 -o loop.gif\n  ignis eigen loop fire.db --clip candle --range 100..220 --method low-pass --eigenfires 50 --palette candle -o loop.png\n  ignis eigen loop fire.db --clip candle --range 100..220 --relink candle=/new/place/candle.mp4 -o loop.mp4\n\nThe range is in source frame numbers (as `reconstruct --frame`); -o loop.png writes a flipbook.\nWith --length the clip (or the --range window) is searched for the best loop of about that length.\nFrames are at the source clip's size, in the footage's own colours with an alpha matte from the\npre-processing mask, database frames read from the source video (§7.1.2); --palette colours\nthe grey frames with a ramp instead; --from-database reconstructs every frame."
     )]
     Loop(LoopArgs),
     /// Create a new flame by setting Eigenfire weights by hand (§5.2), starting from the
@@ -62,7 +62,7 @@ pub enum Command {
     Scenario(crate::animate::ScenarioArgs),
 }
 
-fn parse_range(s: &str) -> std::result::Result<std::ops::Range<usize>, String> {
+pub(crate) fn parse_range(s: &str) -> std::result::Result<std::ops::Range<usize>, String> {
     let (a, b) = s
         .split_once("..")
         .ok_or_else(|| format!("`{s}` is not a range START..END (e.g. 100..220)"))?;
@@ -98,13 +98,24 @@ pub struct LoopArgs {
     /// Clip name (see `ignis eigen info`).
     #[arg(long)]
     pub clip: String,
-    /// Source frames START..END of the clip to loop (END excluded).
+    /// Source frames START..END of the clip: alone, exactly this range is looped (closed
+    /// with --method); with --length, the window the loop is searched in.
     #[arg(long, value_parser = parse_range)]
-    pub range: std::ops::Range<usize>,
-    /// Transition back to the start: auto (best of the three), end-growing, direct
-    /// (Direct Bridging) or low-pass.
-    #[arg(long, default_value = "auto", value_parser = ["auto", "end-growing", "direct", "low-pass"])]
+    pub range: Option<std::ops::Range<usize>>,
+    /// Search the clip (or the --range window) for the best loop of about this length:
+    /// seconds (`4s`, at the clip's fps) or frames (`120`), ±20%; rendered from the source
+    /// video at its own resolution and colours (needs the clip trained with --stride 1 and
+    /// its source file where training found it).
+    #[arg(long)]
+    pub length: Option<String>,
+    /// Transition back to the start. With --range alone: auto (best of the three),
+    /// end-growing, direct (Direct Bridging) or low-pass. With --length: auto (best by
+    /// measured seam and ghost), cut, crossfade or morph.
+    #[arg(long, default_value = "auto", value_parser = ["auto", "end-growing", "direct", "low-pass", "cut", "crossfade", "morph"])]
     pub method: String,
+    /// With --length: candidates to print.
+    #[arg(long, default_value_t = 5)]
+    pub top: usize,
     /// E for rendering reconstructed frames (default: the database's E for rendering).
     #[arg(long)]
     pub eigenfires: Option<usize>,
@@ -278,6 +289,7 @@ pub fn run(cmd: Command, g: &Global) -> Result<()> {
         Command::Plot(a) => plot_cmd(a, g),
         Command::Reconstruct(a) => reconstruct(a, g),
         Command::Preprocess(a) => preprocess(a, g),
+        Command::Loop(a) if a.length.is_some() => crate::loop_cmd::eigen_length_loop(&a, g),
         Command::Loop(a) => loop_cmd(&a, g).map(|_| ()),
         Command::Synth(a) => synth_cmd(&a, g).map(|_| ()),
         Command::Animate(a) => crate::animate::animate_cmd(&a, g).map(|_| ()),
@@ -286,9 +298,15 @@ pub fn run(cmd: Command, g: &Global) -> Result<()> {
 }
 
 /// indicatif bars for the library's progress stages.
-struct Bars<'g> {
+pub(crate) struct Bars<'g> {
     g: &'g Global,
     bar: Option<indicatif::ProgressBar>,
+}
+
+impl<'g> Bars<'g> {
+    pub(crate) fn new(g: &'g Global) -> Bars<'g> {
+        Bars { g, bar: None }
+    }
 }
 
 impl Progress for Bars<'_> {
@@ -459,7 +477,7 @@ pub fn train(a: TrainArgs, g: &Global) -> Result<()> {
     Ok(())
 }
 
-fn open_db(p: &Path) -> Result<EigenfireDb> {
+pub(crate) fn open_db(p: &Path) -> Result<EigenfireDb> {
     EigenfireDb::open(p).with_context(|| format!("opening {}", p.display()))
 }
 
@@ -671,14 +689,17 @@ fn loop_cmd(a: &LoopArgs, g: &Global) -> Result<ignis_eigen::transition::Join> {
         look.bloom = None;
     }
     a.footage.adjust_look(&mut look, g);
-    let rows = animate::clip_rows(&db, &a.clip, a.range.clone())
-        .with_context(|| format!("clip `{}` range {}..{}", a.clip, a.range.start, a.range.end))?;
+    let range = a.range.clone().context(
+        "give --range START..END (loop exactly that range) or --length (search for a loop)",
+    )?;
+    let rows = animate::clip_rows(&db, &a.clip, range.clone())
+        .with_context(|| format!("clip `{}` range {}..{}", a.clip, range.start, range.end))?;
     let sp = g.spinner("finding the transition");
-    let (plan, join, used) = render::loop_plan(&db, &a.clip, a.range.clone(), method, e, a.search)
+    let (plan, join, used) = render::loop_plan(&db, &a.clip, range.clone(), method, e, a.search)
         .with_context(|| {
             format!(
                 "looping clip `{}` frames {}..{} with {}",
-                a.clip, a.range.start, a.range.end, a.method
+                a.clip, range.start, range.end, a.method
             )
         })?;
     sp.finish_and_clear();
@@ -719,10 +740,10 @@ fn loop_cmd(a: &LoopArgs, g: &Global) -> Result<ignis_eigen::transition::Join> {
         join.seam_ratio,
         plain,
     ));
-    if used != a.range {
+    if used != range {
         g.say(format!(
             "loop points moved to {}..{} (--search {}; --search 0 keeps {}..{})",
-            used.start, used.end, a.search, a.range.start, a.range.end
+            used.start, used.end, a.search, range.start, range.end
         ));
     }
     g.say(format!("why: {}", join.why));

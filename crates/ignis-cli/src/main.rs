@@ -4,6 +4,7 @@
 //! reporting live here; every capability is a library call.
 
 mod animate;
+mod bench_loops;
 mod classic;
 mod convert;
 mod demo;
@@ -11,6 +12,7 @@ mod eigen;
 mod global;
 mod info;
 mod learned;
+mod loop_cmd;
 mod output;
 mod volume;
 
@@ -55,6 +57,8 @@ enum Cmd {
     /// Procedural volumetric fire (Fuller et al.): profile + B-spline + lattice + noise.
     #[command(subcommand)]
     Volume(volume::Command),
+    /// A seamless loop of a fire clip, found, closed and written at the clip's own size.
+    Loop(loop_cmd::Args),
     /// Headline performance figures of a method as one JSON object.
     Bench(BenchArgs),
 }
@@ -77,13 +81,20 @@ struct DemoArgs {
 
 #[derive(clap::Args, Debug)]
 #[command(
-    after_help = "Examples:\n  ignis bench classic\n  ignis bench classic --quick\n  ignis bench eigen-train\n  ignis bench eigen-animate --keep-db /tmp/bench.db\n  ignis bench eigen-footage   (only eigen-animate's footage case: a 1080p loop read from the source video)\n  ignis bench learned\n  ignis bench volume\n  ignis bench flow --quick"
+    after_help = "Examples:\n  ignis bench classic\n  ignis bench classic --quick\n  ignis bench eigen-train\n  ignis bench eigen-animate --keep-db /tmp/bench.db\n  ignis bench eigen-footage   (only eigen-animate's footage case: a 1080p loop read from the source video)\n  ignis bench learned\n  ignis bench volume\n  ignis bench flow --quick\n  ignis bench loops\n  ignis bench loops fire1.mp4 fire2.mov --cache /tmp/ignis-cache"
 )]
 struct BenchArgs {
     /// What to measure (`flow`: dense optical flow and the motion-compensated morph,
-    /// against the issues' speed goals, plus mid-frame prediction on ../shared/data).
-    #[arg(value_parser = ["classic", "eigen-train", "eigen-animate", "eigen-footage", "learned", "volume", "flow"])]
+    /// against the issues' speed goals, plus mid-frame prediction on ../shared/data;
+    /// `loops`: Ignis's loops against the crossfade and Video Textures peers).
+    #[arg(value_parser = ["classic", "eigen-train", "eigen-animate", "eigen-footage", "learned", "volume", "flow", "loops"])]
     target: String,
+    /// loops: the clips (default ../shared/data/{candle,campfire,fireball}.mp4; missing
+    /// ones are reported as skipped).
+    clips: Vec<PathBuf>,
+    /// loops: the cache of clip databases (default as `ignis loop`).
+    #[arg(long, value_name = "DIR")]
+    cache: Option<PathBuf>,
     /// Fewer repetitions (a smoke test; figures are noisier).
     #[arg(long)]
     quick: bool,
@@ -197,6 +208,7 @@ fn run(cli: Cli) -> Result<()> {
         Cmd::Eigen(c) => eigen::run(c, &g),
         Cmd::Volume(c) => volume::run(c, &g),
         Cmd::Learned(c) => learned::run(c, &g),
+        Cmd::Loop(a) => loop_cmd::run(&a, &g),
         Cmd::Demo(a) => {
             let t = std::time::Instant::now();
             let mut d = demo::Demo::new(&a.output, g.clone(), a.seed, a.quick)?;
@@ -239,6 +251,14 @@ fn run(cli: Cli) -> Result<()> {
                     let v = flow_bench(a.quick)?;
                     sp.finish_and_clear();
                     v
+                }
+                "loops" => {
+                    let clips = if a.clips.is_empty() {
+                        bench_loops::default_clips()
+                    } else {
+                        a.clips.clone()
+                    };
+                    bench_loops::bench(&clips, a.cache.as_deref(), &g)?
                 }
                 other => anyhow::bail!("unknown bench target `{other}`"),
             };

@@ -830,3 +830,34 @@ mod hardening {
         assert!(files_in(t.path()).is_empty(), "{:?}", files_in(t.path()));
     }
 }
+
+/// `ignis loop` refuses lengths that do not fit before doing any work, and writes nothing.
+#[test]
+fn loop_bad_lengths() {
+    let Some(clip) = data("candle.mp4") else {
+        return;
+    };
+    if !has_ffmpeg() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("loop.png");
+    let cache = dir.path().join("cache");
+    let (o, c) = (out.to_str().unwrap(), cache.to_str().unwrap());
+    let clip = clip.to_str().unwrap();
+    // Longer than the clip.
+    let r = ignis(&["loop", clip, "--length", "100s", "--cache", c, "-o", o]);
+    assert_fails(&r, "does not fit");
+    // A window too short for any loop of that length.
+    let r = ignis(&[
+        "loop", clip, "--length", "30", "--range", "0..20", "--cache", c, "-o", o,
+    ]);
+    assert_fails(&r, "does not fit");
+    let r = ignis(&["loop", clip, "--length", "0.01s", "--cache", c, "-o", o]);
+    assert_fails(&r, "too short");
+    let r = ignis(&[
+        "loop", clip, "--length", "2s", "--range", "0..9999", "--cache", c, "-o", o,
+    ]);
+    assert_fails(&r, "ends past");
+    assert!(!out.exists() && !cache.exists(), "nothing written");
+}

@@ -24,6 +24,7 @@ pub mod contour;
 pub mod db;
 pub mod error;
 pub mod hermite;
+pub mod loops;
 pub mod mask;
 pub mod plot;
 pub mod pose;
