@@ -8,6 +8,7 @@ mod classic;
 mod convert;
 mod demo;
 mod eigen;
+mod frames;
 mod global;
 mod info;
 mod learned;

@@ -1,7 +1,8 @@
 //! PNG (8-bit sRGB, straight alpha) and EXR (linear f32, premultiplied) sequences.
 //!
 //! A directory destination is filled with `0000.png`, `0001.png`, … (or `.exr`); a pattern
-//! destination `frames/f_%04d.png` numbers from 0 the same way.
+//! destination `frames/f_%04d.png` numbers from 0 the same way (or from
+//! [`super::WriteOptions::first_frame`]).
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -23,10 +24,12 @@ pub(crate) struct SequenceSink {
     /// (staged path, final path) of each frame written.
     written: Vec<(PathBuf, PathBuf)>,
     finished: bool,
+    /// Number of the first frame's file.
+    first: u64,
 }
 
 impl SequenceSink {
-    pub(crate) fn new(path: &Path, exr: bool) -> Result<SequenceSink> {
+    pub(crate) fn new(path: &Path, exr: bool, first: u64) -> Result<SequenceSink> {
         let ext = if exr { "exr" } else { "png" };
         let name = path
             .file_name()
@@ -74,6 +77,7 @@ impl SequenceSink {
             temp_dir,
             written: Vec::new(),
             finished: false,
+            first,
         })
     }
 
@@ -99,7 +103,7 @@ impl SequenceSink {
 
 impl Sink for SequenceSink {
     fn push(&mut self, frame: &RgbaFrame) -> Result<()> {
-        let name = self.pattern.format(self.written.len() as u64);
+        let name = self.pattern.format(self.first + self.written.len() as u64);
         let final_path = self.final_dir.join(&name);
         let staged = match &self.temp_dir {
             Some(t) => t.path().join(&name),
