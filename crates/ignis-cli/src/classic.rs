@@ -185,6 +185,40 @@ pub fn bench(quick: bool) -> Result<serde_json::Value> {
             out.insert(name, ((ns * 1000.0).round() / 1000.0).into());
         }
     }
+    // a seamless loop of 120 frames at 320×200 (settling included) against the plain
+    // animation with its default warm-up, both drawn through the palette as a render does
+    let loop_frames = if quick { 24 } else { 120 };
+    let palette = ignis_core::Palette::preset("classic")?;
+    let lp = ClassicParams {
+        size: Size::new(320, 200)?,
+        seed: 1,
+        ..Default::default()
+    };
+    let mut times = [0.0f64; 2];
+    for (i, looping) in [false, true].into_iter().enumerate() {
+        let t = Instant::now();
+        let mut fire = if looping {
+            ClassicFire::new_looping(lp.clone(), loop_frames)?
+        } else {
+            ClassicFire::new(lp.clone())?
+        };
+        fire.settle_loop(60, 40 * 200);
+        for _ in 0..loop_frames {
+            fire.step_par();
+            std::hint::black_box(fire.rgba(&palette));
+        }
+        times[i] = t.elapsed().as_secs_f64();
+    }
+    out.insert(
+        "loop".into(),
+        serde_json::json!({
+            "case": format!("320x200, {loop_frames} frames through the palette"),
+            "plain_ms": (times[0] * 1e4).round() / 10.0,
+            "looping_ms": (times[1] * 1e4).round() / 10.0,
+            "overhead": ((times[1] / times[0] - 1.0) * 1000.0).round() / 1000.0,
+            "goal_overhead": 0.1,
+        }),
+    );
     Ok(serde_json::Value::Object(out))
 }
 
