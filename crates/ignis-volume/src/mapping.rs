@@ -129,21 +129,17 @@ pub fn loop_mix(time: f32, period: f32) -> LoopMix {
 }
 
 /// [`shade`] for a looping animation: the same mapping with the turbulence mixed from two
-/// copies of the noise field ([`LoopMix`]). `mix = None` is exactly [`shade`] at `time`.
+/// copies of the noise field ([`LoopMix`], which carries the noise time).
 #[inline]
 pub fn shade_looped(
     tex: [f32; 3],
     radius: f32,
     length: f32,
-    time: f32,
-    mix: Option<LoopMix>,
+    m: LoopMix,
     noise: &NoiseParams,
     offset: [f32; 4],
     profile: &FireProfile,
 ) -> [f32; 4] {
-    let Some(m) = mix else {
-        return shade(tex, radius, length, time, noise, offset, profile);
-    };
     let u = radial_u(tex);
     if profile.column_empty(u) {
         return [0.0; 4];

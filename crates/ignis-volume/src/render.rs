@@ -67,8 +67,8 @@
 use crate::error::{Result, VolumeError};
 use crate::lattice::{add, cross, dot, normalize, scale, sub, Lattice, Track, CHORD_LANES, V3};
 use crate::mapping::{
-    kernel, loop_mix, noise_position, noise_scale, profile_uv, radial_u, shade_looped, LoopMix,
-    NoiseParams,
+    kernel, loop_mix, noise_position, noise_scale, profile_uv, radial_u, shade, shade_looped,
+    LoopMix, NoiseParams,
 };
 use crate::noise::{NoiseCache, LANES};
 use crate::profile::FireProfile;
@@ -1590,12 +1590,23 @@ impl Ctx<'_, '_> {
         let mix = self.params.mix(&fire.noise, self.time);
         s.col.clear();
         s.col.extend(s.tex.iter().map(|&tex| {
+            let (radius, length) = (fire.lattice.radius_at(tex[2]), fire.lattice.length());
+            let Some(m) = mix else {
+                return shade(
+                    tex,
+                    radius,
+                    length,
+                    time,
+                    &fire.noise,
+                    fire.offset,
+                    fire.profile,
+                );
+            };
             shade_looped(
                 tex,
-                fire.lattice.radius_at(tex[2]),
-                fire.lattice.length(),
-                time,
-                mix,
+                radius,
+                length,
+                m,
                 &fire.noise,
                 fire.offset,
                 fire.profile,
