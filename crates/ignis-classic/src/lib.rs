@@ -21,6 +21,18 @@
 //! depend on its own and the next row's *old* values, so each band keeps a copy of the old
 //! row just below it.
 //!
+//! Seamless loops ([`ClassicFire::new_looping`]): the fire is a contracting recurrence
+//! driven by its source line (every frame averages each pixel with its neighbours and
+//! fades it, so the buffer forgets its past and becomes a function of the recent source
+//! lines). So the loop is made by driving it with a source line and sparklies that repeat
+//! every `N` frames, and stepping until the buffer itself repeats exactly
+//! ([`ClassicFire::settle_loop`]). This is chosen over finding and closing the best loop
+//! point of an unlooped run because it is exact (frame `N` equals frame 0 byte for byte)
+//! and leaves every frame a true frame of the article's simulation: no cut and no blend.
+//! The random source becomes a random walk bridged back to its start over the loop and
+//! folded into `0..=heat` (folding is what the clamped walk's reflection at the ends
+//! does); the Perlin source walks a noise lattice periodic in time.
+//!
 //! Buffer convention: row 0 is the top; the fire burns upwards from the source line at the
 //! bottom. With [`SourceEdge::Top`] the same simulation runs and the rows are mirrored when a
 //! frame is taken, so the fire hangs down from the top.
@@ -195,6 +207,36 @@ pub struct ClassicFire {
     source: Vec<u8>,
     frame: u64,
     noise: Perlin1,
+    /// A looping fire's state ([`ClassicFire::new_looping`]).
+    looping: Option<Looping>,
+}
+
+/// What makes a looping fire's inputs repeat every `period` frames.
+#[derive(Clone, Debug)]
+struct Looping {
+    period: u64,
+    /// Random source: the walk's start line and its total over one period (bridged away).
+    start: Vec<i64>,
+    total: Vec<i64>,
+    /// Random source: the walk's sum of steps so far this period.
+    walk: Vec<i64>,
+    /// Perlin source: lattice cells of time per period (octave 0) and noise time per frame.
+    cells: i64,
+    speed: f32,
+}
+
+/// Streams of the looping fire's per-frame random numbers.
+const WALK_STREAM: u64 = 0x3a1c_0000_0000;
+const SPARK_STREAM: u64 = 0x5a2c_0000_0000;
+
+/// `v` folded into `0..=top` (reflections at both ends), as a clamped random walk that
+/// bounces off the ends would be.
+fn fold(v: i64, top: i64) -> u8 {
+    if top == 0 {
+        return 0;
+    }
+    let m = v.rem_euclid(2 * top);
+    (if m > top { 2 * top - m } else { m }) as u8
 }
 
 impl ClassicFire {
@@ -218,7 +260,81 @@ impl ClassicFire {
             frame: 0,
             noise,
             params,
+            looping: None,
         })
+    }
+
+    /// A cold fire whose source line and sparklies repeat every `period` frames (≥ 2), so
+    /// that once [`ClassicFire::settle_loop`] has run, frames repeat with that period.
+    pub fn new_looping(params: ClassicParams, period: u32) -> Result<ClassicFire, ClassicError> {
+        if period < 2 {
+            return Err(bad(
+                "loop",
+                format!("{period} frame(s) cannot loop; ask for at least 2 frames"),
+            ));
+        }
+        let mut fire = ClassicFire::new(params)?;
+        let n = fire.source.len();
+        let p = &fire.params;
+        let start: Vec<i64> = fire.source.iter().map(|&v| v as i64).collect();
+        let mut total = vec![0i64; n];
+        if let SourceMode::Random { drift } = p.source {
+            for k in 0..period as u64 {
+                let mut r = Rng::derive(p.seed, WALK_STREAM + k);
+                for t in total.iter_mut() {
+                    *t += r.range_i32(-(drift as i32), drift as i32) as i64;
+                }
+            }
+        }
+        // the Perlin source's time lattice must repeat within the table's 256 cells at
+        // every octave (frequency up to 4×), so at most 64 cells of time per loop
+        let (cells, speed) = match p.source {
+            SourceMode::Perlin { speed, .. } => {
+                let c = ((period as f32 * speed).round() as i64).clamp(1, 64);
+                (c, c as f32 / period as f32)
+            }
+            SourceMode::Random { .. } => (1, 0.0),
+        };
+        fire.looping = Some(Looping {
+            period: period as u64,
+            start,
+            total,
+            walk: vec![0; n],
+            cells,
+            speed,
+        });
+        Ok(fire)
+    }
+
+    /// Steps a looping fire whole periods at a time until the buffer repeats exactly (at
+    /// least `min_frames` frames, at most `max_frames`). Returns the frames stepped, or
+    /// `None` if the buffer did not repeat within `max_frames` (it still loops, with a
+    /// seam). The next frame is then the loop's frame 0. A fire made with
+    /// [`ClassicFire::new`] is just stepped `min_frames` frames.
+    pub fn settle_loop(&mut self, min_frames: u64, max_frames: u64) -> Option<u64> {
+        let Some(period) = self.looping.as_ref().map(|l| l.period) else {
+            for _ in 0..min_frames {
+                self.step_par();
+            }
+            return Some(min_frames);
+        };
+        let mut stepped = 0u64;
+        let mut last: Option<Vec<u8>> = None;
+        loop {
+            for _ in 0..period {
+                self.step_par();
+            }
+            stepped += period;
+            if stepped >= min_frames {
+                if last.as_deref() == Some(&self.buf[..]) {
+                    return Some(stepped);
+                }
+                last = Some(self.buf.clone());
+            }
+            if stepped >= max_frames {
+                return None;
+            }
+        }
     }
 
     pub fn params(&self) -> &ClassicParams {
@@ -293,9 +409,14 @@ impl ClassicFire {
     fn after_burn(&mut self) {
         let (w, e) = (self.w, self.params.edge as usize);
         let heat = self.params.heat;
+        let k = self.looping.as_ref().map(|l| self.frame % l.period);
         if let Some(sp) = self.params.sparkle {
+            // a loop's sparklies repeat with it: their random numbers come from the
+            // frame's place in the loop
+            let mut looped_rng = k.map(|k| Rng::derive(self.params.seed, SPARK_STREAM + k));
             for y in e..self.h - e {
-                let x = e + self.rng.below((w - 2 * e) as u32) as usize;
+                let rng = looped_rng.as_mut().unwrap_or(&mut self.rng);
+                let x = e + rng.below((w - 2 * e) as u32) as usize;
                 let p = &mut self.buf[y * w + x];
                 // "Sparklies in the darker flame": only pixels already burning (> 0) are
                 // brightened, so the black sky above the flames stays black.
@@ -305,15 +426,39 @@ impl ClassicFire {
             }
         }
         let line = &mut self.source;
-        match self.params.source {
-            SourceMode::Random { drift } => {
+        match (self.params.source, self.looping.as_mut(), k) {
+            (SourceMode::Random { drift }, Some(l), Some(k)) => {
+                // the walk bridged back to its start over the period: after step `j`
+                // (1..=N) of the period it is `start + C(j) − j·total/N`, exactly `start`
+                // again at `j = N`
+                if k == 0 {
+                    l.walk.iter_mut().for_each(|v| *v = 0);
+                }
+                let d = drift as i32;
+                let mut r = Rng::derive(self.params.seed, WALK_STREAM + k);
+                let (j, n) = (k as i64 + 1, l.period as i64);
+                for (i, p) in line.iter_mut().enumerate() {
+                    l.walk[i] += r.range_i32(-d, d) as i64;
+                    let v = l.start[i] * n + l.walk[i] * n - j * l.total[i];
+                    *p = fold(v.div_euclid(n), heat as i64);
+                }
+            }
+            (SourceMode::Perlin { scale, .. }, Some(l), Some(k)) => {
+                let t = k as f32 * l.speed;
+                for (i, p) in line.iter_mut().enumerate() {
+                    let x = (i + e) as f32 / scale;
+                    let n = self.noise.turbulence_periodic(x, t, Some(l.cells));
+                    *p = ((0.5 + 0.5 * n).clamp(0.0, 1.0) * heat as f32).round() as u8;
+                }
+            }
+            (SourceMode::Random { drift }, _, _) => {
                 let d = drift as i32;
                 for p in line.iter_mut() {
                     let v = *p as i32 + self.rng.range_i32(-d, d);
                     *p = v.clamp(0, heat as i32) as u8;
                 }
             }
-            SourceMode::Perlin { scale, speed } => {
+            (SourceMode::Perlin { scale, speed }, _, _) => {
                 let t = self.frame as f32 * speed;
                 for (i, p) in line.iter_mut().enumerate() {
                     let x = (i + e) as f32 / scale;
@@ -491,31 +636,50 @@ impl Perlin1 {
         }
     }
 
-    fn noise(&self, x: f32, y: f32) -> f32 {
+    /// The noise at `(x, y)`; with `period = Some(p)` (1..=256) its lattice repeats every
+    /// `p` cells in `y`, so the noise does too.
+    fn noise(&self, x: f32, y: f32, period: Option<i64>) -> f32 {
         let fade = |t: f32| t * t * t * (t * (t * 6.0 - 15.0) + 10.0);
         let (xf, yf) = (x.floor(), y.floor());
-        let (xi, yi) = ((xf as i64 & 255) as usize, (yf as i64 & 255) as usize);
+        let xi = (xf as i64 & 255) as usize;
+        let (yi, yj) = match period {
+            None => ((yf as i64 & 255) as usize, (yf as i64 & 255) as usize + 1),
+            Some(p) => (
+                (yf as i64).rem_euclid(p) as usize,
+                (yf as i64 + 1).rem_euclid(p) as usize,
+            ),
+        };
         let (x, y) = (x - xf, y - yf);
         let (u, v) = (fade(x), fade(y));
         let p = &self.perm;
-        let (a, b) = (p[xi] as usize + yi, p[xi + 1] as usize + yi);
+        let (a, b) = (p[xi] as usize, p[xi + 1] as usize);
         let lerp = |t: f32, a: f32, b: f32| a + t * (b - a);
         lerp(
             v,
-            lerp(u, Self::grad(p[a], x, y), Self::grad(p[b], x - 1.0, y)),
             lerp(
                 u,
-                Self::grad(p[a + 1], x, y - 1.0),
-                Self::grad(p[b + 1], x - 1.0, y - 1.0),
+                Self::grad(p[a + yi], x, y),
+                Self::grad(p[b + yi], x - 1.0, y),
+            ),
+            lerp(
+                u,
+                Self::grad(p[a + yj], x, y - 1.0),
+                Self::grad(p[b + yj], x - 1.0, y - 1.0),
             ),
         )
     }
 
     /// Three octaves (gain 0.5, lacunarity 2), roughly in `−1..=1`.
     fn turbulence(&self, x: f32, t: f32) -> f32 {
+        self.turbulence_periodic(x, t, None)
+    }
+
+    /// [`Perlin1::turbulence`], periodic in `t` with `cells` (1..=64) when given: octave
+    /// `i` samples `t · 2^i` on a lattice of `cells · 2^i` cells.
+    fn turbulence_periodic(&self, x: f32, t: f32, cells: Option<i64>) -> f32 {
         let (mut sum, mut amp, mut f) = (0.0, 1.0, 1.0);
-        for _ in 0..3 {
-            sum += amp * self.noise(x * f, t * f);
+        for o in 0..3 {
+            sum += amp * self.noise(x * f, t * f, cells.map(|c| c << o));
             amp *= 0.5;
             f *= 2.0;
         }
@@ -614,5 +778,46 @@ mod tests {
         assert!(max_jump <= 40, "smooth source line, max jump {max_jump}");
         let spread = *line.iter().max().unwrap() as i32 - *line.iter().min().unwrap() as i32;
         assert!(spread > 40, "it varies along the line, spread {spread}");
+    }
+
+    /// A looping fire settles into an exact loop: after `settle_loop`, stepping `N` more
+    /// frames gives the same buffer, for both source modes, sparklies on.
+    #[test]
+    fn looping_fire_repeats_exactly() {
+        for source in [
+            SourceMode::Random { drift: 48 },
+            SourceMode::Perlin {
+                scale: 12.0,
+                speed: 0.08,
+            },
+        ] {
+            for n in [3u32, 17] {
+                let p = ClassicParams {
+                    source,
+                    ..params(48, 36)
+                };
+                let mut f = ClassicFire::new_looping(p, n).unwrap();
+                let settled = f.settle_loop(60, 4000);
+                assert!(settled.is_some(), "{source:?} N={n} never repeats");
+                let first = f.buffer().to_vec();
+                assert!(first.iter().any(|&v| v > 0), "burning");
+                let mut seen_change = false;
+                for _ in 0..n {
+                    f.step_par();
+                    seen_change |= f.buffer() != &first[..];
+                }
+                assert!(seen_change, "{source:?} N={n}: the fire moves");
+                assert_eq!(f.buffer(), &first[..], "{source:?} N={n}");
+            }
+        }
+        assert!(ClassicFire::new_looping(params(32, 32), 1).is_err());
+    }
+
+    #[test]
+    fn fold_reflects_at_both_ends() {
+        assert_eq!(fold(-3, 10), 3);
+        assert_eq!(fold(12, 10), 8);
+        assert_eq!(fold(25, 10), 5);
+        assert_eq!(fold(7, 10), 7);
     }
 }

@@ -1,5 +1,6 @@
 //! `ignis classic`: the classic pixel-buffer fire (McNally 1999) to any output.
 
+use crate::frames::FrameArgs;
 use crate::global::Global;
 use crate::output::{OutputArgs, PaletteArg};
 use anyhow::{Context, Result};
@@ -12,7 +13,11 @@ use std::time::Instant;
 #[command(
     after_help = "Examples:\n  ignis classic --size 320x200 --frames 300 --fps 30 --palette classic --seed 7 -o fire.mp4\n  \
 ignis classic --source perlin --palette blue-gas -o sheet.png          # flipbook + sheet.json\n  \
-ignis classic --frames 48 -o frames/%04d.exr                           # linear EXR sequence"
+ignis classic --frames 48 -o frames/%04d.exr                           # linear EXR sequence\n  \
+ignis classic --frames 120 --loop -o loop.mp4                          # a seamless loop as MP4\n  \
+ignis classic --frames 1000 --chunk 0..100 -o frames/%04d.png          # job 1 of 10 on a farm\n\n\
+Loops (the default for GIFs and flipbooks): the source line and sparklies repeat every N frames and the\n\
+fire is stepped until its buffer repeats exactly, so frame N equals frame 0 byte for byte."
 )]
 pub struct Args {
     /// Buffer size WIDTHxHEIGHT.
@@ -64,6 +69,8 @@ pub struct Args {
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     #[command(flatten)]
+    pub frames_args: FrameArgs,
+    #[command(flatten)]
     pub out: OutputArgs,
 }
 
@@ -103,17 +110,36 @@ impl Args {
 
 /// Runs `ignis classic`; returns the files written.
 pub fn run(args: &Args, g: &Global) -> Result<Vec<PathBuf>> {
-    if args.frames == 0 {
-        anyhow::bail!("--frames 0: nothing to write; ask for at least 1 frame");
+    let plan = args.frames_args.plan(args.frames, &args.out)?;
+    let mut fire = if plan.looping {
+        ClassicFire::new_looping(args.params(), args.frames)
+    } else {
+        ClassicFire::new(args.params())
     }
-    let mut fire = ClassicFire::new(args.params()).context("classic fire settings")?;
+    .context("classic fire settings")?;
     let palette = args.palette.load()?;
-    let mut writer = args.out.create(args.size)?;
-    for _ in 0..args.warmup {
+    // warm up; a loop is stepped on (whole loops at a time) until the buffer repeats
+    let cap = (16 * args.frames as u64)
+        .max(40 * args.size.height as u64)
+        .max(4000);
+    if fire.settle_loop(args.warmup as u64, cap).is_none() {
+        g.say(format!(
+            "note: the fire did not settle into an exact {}-frame loop within {cap} frames; \
+             it loops with a seam (see the flipbook's loop_quality)",
+            args.frames
+        ));
+    }
+    // a chunk steps (without drawing) to its first frame
+    for _ in 0..plan.range.start {
         fire.step_par();
     }
-    let pb = g.progress(args.frames as u64, "classic");
-    for _ in 0..args.frames {
+    let mut opts = args.out.write_options();
+    opts.loop_ = plan.mark_loop;
+    opts.first_frame = plan.range.start as u64;
+    let mut writer = ignis_media::create(&args.out.output, args.size, &opts)
+        .with_context(|| format!("creating {}", args.out.output.display()))?;
+    let pb = g.progress(plan.range.len() as u64, "classic");
+    for _ in plan.range.clone() {
         fire.step_par();
         args.out.push(&mut writer, &fire.rgba(&palette))?;
         pb.inc(1);
@@ -159,6 +185,40 @@ pub fn bench(quick: bool) -> Result<serde_json::Value> {
             out.insert(name, ((ns * 1000.0).round() / 1000.0).into());
         }
     }
+    // a seamless loop of 120 frames at 320×200 (settling included) against the plain
+    // animation with its default warm-up, both drawn through the palette as a render does
+    let loop_frames = if quick { 24 } else { 120 };
+    let palette = ignis_core::Palette::preset("classic")?;
+    let lp = ClassicParams {
+        size: Size::new(320, 200)?,
+        seed: 1,
+        ..Default::default()
+    };
+    let mut times = [0.0f64; 2];
+    for (i, looping) in [false, true].into_iter().enumerate() {
+        let t = Instant::now();
+        let mut fire = if looping {
+            ClassicFire::new_looping(lp.clone(), loop_frames)?
+        } else {
+            ClassicFire::new(lp.clone())?
+        };
+        fire.settle_loop(60, 40 * 200);
+        for _ in 0..loop_frames {
+            fire.step_par();
+            std::hint::black_box(fire.rgba(&palette));
+        }
+        times[i] = t.elapsed().as_secs_f64();
+    }
+    out.insert(
+        "loop".into(),
+        serde_json::json!({
+            "case": format!("320x200, {loop_frames} frames through the palette"),
+            "plain_ms": (times[0] * 1e4).round() / 10.0,
+            "looping_ms": (times[1] * 1e4).round() / 10.0,
+            "overhead": ((times[1] / times[0] - 1.0) * 1000.0).round() / 1000.0,
+            "goal_overhead": 0.1,
+        }),
+    );
     Ok(serde_json::Value::Object(out))
 }
 

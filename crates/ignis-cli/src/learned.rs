@@ -2,6 +2,7 @@
 //! flame video, learn its dynamics, and synthesise new, steerable flames of any length.
 //! A thin layer over `ignis_learned` (the library) and `ignis_media` (decoding, writing).
 
+use crate::frames::FrameArgs;
 use crate::global::Global;
 use crate::output::{OutputArgs, PaletteArg};
 use anyhow::{bail, Context, Result};
@@ -27,7 +28,10 @@ ignis learned train candle.mp4 --particles 300 --order 3 --seed 2 -o candle.flam
     #[command(
         after_help = "Examples:\n  ignis learned synth candle.flame --frames 3000 --wind 0.3 --height 1.2 --seed 1 -o flame.mp4\n  \
 ignis learned synth candle.flame --wind 0:0,150:1.5,300:-1 --palette blue-gas -o gusty.gif\n  \
-ignis learned synth candle.flame --frames 64 --size 128x128 -o sheet.png     # flipbook + sheet.json"
+ignis learned synth candle.flame --frames 64 --size 128x128 -o sheet.png     # looping flipbook + sheet.json\n  \
+ignis learned synth candle.flame --frames 1000 --chunk 100..200 -o out/%04d.png  # one farm job\n\n\
+Loops (the default for GIFs and flipbooks) are a sample of the learned process conditioned on returning to its\n\
+start state (an exact Kalman bridge), so the step across the seam is one of the process's own."
     )]
     Synth(SynthArgs),
     /// Describe a model: parameters, fit summary, likelihoods, spectral radius; optionally
@@ -118,6 +122,8 @@ pub struct SynthArgs {
     /// Seed; the same model, settings and seed give the same bytes.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    #[command(flatten)]
+    pub frames_args: FrameArgs,
     #[command(flatten)]
     pub out: OutputArgs,
 }
@@ -334,15 +340,23 @@ pub fn synth(a: &SynthArgs, g: &Global) -> Result<Vec<PathBuf>> {
     if !(a.gain > 0.0 && a.gain.is_finite()) {
         bail!("--gain {} must be a positive number", a.gain);
     }
-    if a.frames == 0 {
-        bail!("--frames must be at least 1");
-    }
+    let plan = a.frames_args.plan(a.frames, &a.out)?;
     let palette = a.palette.load()?;
-    let mut synth = Synthesiser::new(&model, controls, a.seed)?;
-    let mut writer = a.out.create(a.size)?;
+    let mut synth = if plan.looping {
+        Synthesiser::looping(&model, controls, a.seed, a.frames)?
+    } else {
+        Synthesiser::new(&model, controls, a.seed)?
+    };
+    // a chunk steps only the (cheap) process to its first frame
+    synth.skip(plan.range.start as u64);
+    let mut opts = a.out.write_options();
+    opts.loop_ = plan.mark_loop;
+    opts.first_frame = plan.range.start as u64;
+    let mut writer = ignis_media::create(&a.out.output, a.size, &opts)
+        .with_context(|| format!("creating {}", a.out.output.display()))?;
     let mut frame = GrayFrame::new(a.size);
-    let bar = g.progress(a.frames as u64, "synthesising");
-    for _ in 0..a.frames {
+    let bar = g.progress(plan.range.len() as u64, "synthesising");
+    for _ in plan.range.clone() {
         synth.next_frame_into(&mut frame);
         if a.gain != 1.0 {
             frame.data_mut().iter_mut().for_each(|v| *v *= a.gain);
@@ -358,7 +372,7 @@ pub fn synth(a: &SynthArgs, g: &Global) -> Result<Vec<PathBuf>> {
         .with_context(|| format!("writing {}", a.out.output.display()))?;
     g.say(format!(
         "wrote {} frames to {}",
-        a.frames,
+        plan.range.len(),
         a.out.output.display()
     ));
     Ok(files)

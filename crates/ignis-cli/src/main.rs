@@ -9,6 +9,7 @@ mod classic;
 mod convert;
 mod demo;
 mod eigen;
+mod frames;
 mod global;
 mod info;
 mod learned;

@@ -59,6 +59,7 @@ impl OutputArgs {
                 },
             },
             background: [0.0; 3],
+            first_frame: 0,
         }
     }
 

@@ -861,3 +861,139 @@ fn loop_bad_lengths() {
     assert_fails(&r, "ends past");
     assert!(!out.exists() && !cache.exists(), "nothing written");
 }
+
+/// Issue 16: seamless loops and render-farm chunks of the procedural generators.
+mod loops_and_chunks {
+    use super::*;
+
+    fn run_ok(args: &[&str]) {
+        let o = ignis(args);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    }
+
+    /// Frames 0..40 written in chunks 0..13, 13..27, 27..40 into one directory equal the
+    /// full render's files byte for byte, named by their frame numbers.
+    fn chunks_equal_full(generator: &[&str]) {
+        let t = tempfile::tempdir().unwrap();
+        let full = t.path().join("full");
+        let parts = t.path().join("parts");
+        let pat = |d: &Path| d.join("%04d.png").to_string_lossy().into_owned();
+        let mut a: Vec<&str> = generator.to_vec();
+        let full_pat = pat(&full);
+        a.extend(["--frames", "40", "-q", "-o", &full_pat]);
+        run_ok(&a);
+        let parts_pat = pat(&parts);
+        for chunk in ["0..13", "13..27", "27..40"] {
+            let mut a: Vec<&str> = generator.to_vec();
+            a.extend(["--frames", "40", "--chunk", chunk, "-q", "-o", &parts_pat]);
+            run_ok(&a);
+        }
+        let names = files_in(&full);
+        assert_eq!(names.len(), 40);
+        assert_eq!(names, files_in(&parts), "{generator:?}");
+        for n in &names {
+            let (x, y) = (
+                std::fs::read(full.join(n)).unwrap(),
+                std::fs::read(parts.join(n)).unwrap(),
+            );
+            assert!(x == y, "{generator:?}: {n} differs");
+        }
+    }
+
+    #[test]
+    fn classic_chunks_equal_the_full_render() {
+        chunks_equal_full(&["classic", "--size", "32x24", "--warmup", "10"]);
+        chunks_equal_full(&["classic", "--size", "32x24", "--loop", "--source", "perlin"]);
+    }
+
+    #[test]
+    fn volume_chunks_equal_the_full_render() {
+        // a simulated fire (torch) replays its simulation; a looping one its blend
+        chunks_equal_full(&["volume", "render", "--preset", "torch", "--size", "24x24"]);
+        chunks_equal_full(&[
+            "volume", "render", "--preset", "candle", "--size", "24x24", "--loop",
+        ]);
+    }
+
+    /// A looping flipbook says `"loop": true` and carries its measured seam; `--no-loop`
+    /// says false; a chunk of a loop is not itself a loop.
+    #[test]
+    fn flipbooks_say_loop_only_when_they_are_one() {
+        let t = tempfile::tempdir().unwrap();
+        let json = |name: &str| -> serde_json::Value {
+            serde_json::from_str(&std::fs::read_to_string(t.path().join(name)).unwrap()).unwrap()
+        };
+        let out = |name: &str| t.path().join(name).to_string_lossy().into_owned();
+        for (gen, name) in [
+            (vec!["classic", "--size", "48x36"], "c"),
+            (
+                vec!["volume", "render", "--preset", "wall", "--size", "32x32"],
+                "v",
+            ),
+        ] {
+            for (extra, suffix, expect) in [
+                (vec![], "loop", true),
+                (vec!["--no-loop"], "free", false),
+                (vec!["--chunk", "2..10"], "chunk", false),
+            ] {
+                let path = out(&format!("{name}-{suffix}.png"));
+                let mut a = gen.clone();
+                a.extend(["--frames", "12", "-q", "-o", &path]);
+                a.extend(extra);
+                run_ok(&a);
+                let j = json(&format!("{name}-{suffix}.json"));
+                assert_eq!(j["loop"], expect, "{name} {suffix}");
+                if expect {
+                    let seam = j["loop_quality"]["seam"].as_f64().unwrap();
+                    assert!(seam < 2.0, "{name}: seam {seam}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn bad_loops_chunks_and_sizes_are_refused_and_nothing_is_written() {
+        let t = tempfile::tempdir().unwrap();
+        let o = t.path().join("x.gif");
+        let o = o.to_str().unwrap();
+        for (args, needle) in [
+            (
+                vec!["classic", "--frames", "1", "--loop"],
+                "at least 2 frames",
+            ),
+            (
+                vec![
+                    "volume", "render", "--preset", "torch", "--frames", "1", "--loop",
+                ],
+                "at least 2 frames",
+            ),
+            (
+                vec!["classic", "--frames", "40", "--chunk", "30..50"],
+                "inside 0..40",
+            ),
+            (
+                vec!["classic", "--frames", "40", "--chunk", "20..20"],
+                "inside 0..40",
+            ),
+            (
+                vec![
+                    "volume", "render", "--preset", "torch", "--frames", "40", "--chunk", "5-9",
+                ],
+                "A..B",
+            ),
+            (
+                vec!["volume", "render", "--preset", "torch", "--size", "0x64"],
+                "zero side",
+            ),
+            (
+                vec!["classic", "--loop", "--no-loop"],
+                "cannot be used with",
+            ),
+        ] {
+            let mut a = args.clone();
+            a.extend(["-q", "-o", o]);
+            assert_fails(&ignis(&a), needle);
+            assert!(files_in(t.path()).is_empty(), "{args:?} wrote something");
+        }
+    }
+}

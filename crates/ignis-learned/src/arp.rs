@@ -185,6 +185,86 @@ impl Arp {
     }
 }
 
+impl Arp {
+    /// A seamless loop: `len` new states after `init` (`K` states, oldest first), sampled
+    /// from the process *conditioned on ending where it started* — the last `K` states
+    /// equal `init` — so the states played in a loop follow each other, across the seam
+    /// too, exactly as the process's own steps do (the step from the last state to the
+    /// first is the process's step from `init` to the first).
+    ///
+    /// Exact for this linear-Gaussian process, by Matheron's rule (the Kalman bridge in
+    /// one pass): with the companion state `z_t = (x_t, …, x_{t−K+1})`,
+    /// `z_{t+1} = F z_t + c + G w_t`, sample freely (`z̃`), then correct every state by
+    /// `Cov(z_t, z_N) Cov(z_N)⁻¹ (z_0 − z̃_N)`. `Cov(z_N) = P_N` comes from
+    /// `P_{t+1} = F P_t Fᵀ + G Gᵀ`; the corrections from two vector recursions,
+    /// `μ_N = P_N⁻¹ r`, `μ_t = Fᵀ μ_{t+1}` and `δ_{t+1} = F δ_t + G Gᵀ μ_{t+1}`, `δ_0 = 0`.
+    /// Costs `len` products of `nK × nK` matrices on top of the free sample.
+    ///
+    /// Fails if `len` is below `max(2, K)` or the bridge's covariance is singular.
+    pub fn simulate_loop(&self, init: &[Vec<f64>], len: usize, seed: u64) -> Result<Vec<Vec<f64>>> {
+        let (n, k) = (self.dim(), self.order());
+        if len < k.max(2) {
+            return Err(LearnedError::bad(
+                "loop",
+                format!(
+                    "{len} frame(s) cannot loop a process of order {k}; ask for at least {} frames",
+                    k.max(2)
+                ),
+            ));
+        }
+        let mut xs = self.simulate(init, len, seed)?;
+        let m = n * k;
+        let f = self.companion();
+        let mut q = Mat::<f64>::zeros(m, m);
+        {
+            let b = self.b_mat();
+            let bbt = &b * b.transpose();
+            for i in 0..n {
+                for j in 0..n {
+                    q[(i, j)] = bbt[(i, j)];
+                }
+            }
+        }
+        let mut p = Mat::<f64>::zeros(m, m);
+        for _ in 0..len {
+            p = &f * &p * f.transpose() + &q;
+        }
+        // r = z_0 − z̃_N, newest first
+        let init = &init[init.len() - k..];
+        let r = Mat::from_fn(m, 1, |i, _| {
+            let (lag, c) = (i / n, i % n);
+            init[k - 1 - lag][c] - xs[len - 1 - lag][c]
+        });
+        let ridge = 1e-12 * (0..m).map(|i| p[(i, i)]).sum::<f64>() / m as f64;
+        for i in 0..m {
+            p[(i, i)] += ridge;
+        }
+        use faer::prelude::Solve;
+        let mut mu = p.partial_piv_lu().solve(&r);
+        if (0..m).any(|i| !mu[(i, 0)].is_finite()) {
+            return Err(LearnedError::Numerical(
+                "the loop's bridge covariance is singular".into(),
+            ));
+        }
+        // μ_t for t = N … 1 (μ_N first), then δ forwards
+        let mut mus = Vec::with_capacity(len);
+        mus.push(mu.clone());
+        for _ in 1..len {
+            mu = f.transpose() * &mu;
+            mus.push(mu.clone());
+        }
+        mus.reverse(); // mus[t - 1] = μ_t
+        let mut delta = Mat::<f64>::zeros(m, 1);
+        for (t, x) in xs.iter_mut().enumerate() {
+            delta = &f * &delta + &q * &mus[t];
+            for (c, v) in x.iter_mut().enumerate() {
+                *v += delta[(c, 0)];
+            }
+        }
+        Ok(xs)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -225,6 +305,42 @@ mod tests {
         assert_ne!(
             a.simulate(&init, 50, 3).unwrap(),
             a.simulate(&init, 50, 4).unwrap()
+        );
+    }
+
+    /// The bridge ends exactly where it started (its last K states are `init`), and its
+    /// steps look like the free process's: the seam step is no different from the others
+    /// on average over many seeds.
+    #[test]
+    fn loop_returns_to_its_start() {
+        let a = ar2();
+        let init = vec![vec![0.4, -0.3], vec![0.1, 0.2]];
+        for len in [2usize, 5, 40] {
+            let xs = a.simulate_loop(&init, len, 9).unwrap();
+            assert_eq!(xs.len(), len);
+            assert!((xs[len - 1][0] - init[1][0]).abs() < 1e-9, "{len}");
+            assert!((xs[len - 1][1] - init[1][1]).abs() < 1e-9, "{len}");
+            assert!((xs[len - 2][0] - init[0][0]).abs() < 1e-9, "{len}");
+            assert!((xs[len - 2][1] - init[0][1]).abs() < 1e-9, "{len}");
+        }
+        assert!(a.simulate_loop(&init, 1, 9).is_err());
+        // mean squared step across the seam (last → first, i.e. init[1] → x_1 after the
+        // loop closes) vs mean squared step inside, over many seeds
+        let (mut seam, mut inside, mut n_in) = (0.0, 0.0, 0usize);
+        let len = 24;
+        for seed in 0..400 {
+            let xs = a.simulate_loop(&init, len, seed).unwrap();
+            let d = |p: &[f64], q: &[f64]| (p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2);
+            seam += d(&xs[len - 1], &xs[0]);
+            for w in xs.windows(2) {
+                inside += d(&w[0], &w[1]);
+                n_in += 1;
+            }
+        }
+        let ratio = (seam / 400.0) / (inside / n_in as f64);
+        assert!(
+            (0.6..1.4).contains(&ratio),
+            "seam/inside mean squared step {ratio}"
         );
     }
 }

@@ -48,6 +48,14 @@ pub fn figures(quick: bool) -> crate::Result<Value> {
         synth.next_frame_into(&mut out);
     }
     let gray_fps = frames as f64 / t.elapsed().as_secs_f64();
+    // the same frames as a seamless loop: the bridge sample, then rendering
+    let t = Instant::now();
+    let mut looping = Synthesiser::looping(model, Controls::default(), 1, frames as u32)?;
+    let loop_setup_s = t.elapsed().as_secs_f64();
+    for _ in 0..frames {
+        looping.next_frame_into(&mut out);
+    }
+    let loop_fps = frames as f64 / t.elapsed().as_secs_f64();
     let palette = Palette::preset("candle")?;
     let t = Instant::now();
     let mut checksum = 0.0f32;
@@ -76,6 +84,11 @@ pub fn figures(quick: bool) -> crate::Result<Value> {
         "synth_render_gray_256_fps_1thread": gray_fps,
         "synth_render_palette_256_fps_1thread": rgba_fps,
         "arp_steps_per_s": steps_per_s,
+        "loop_frames": frames,
+        "loop_bridge_s": loop_setup_s,
+        "loop_render_gray_256_fps_1thread": loop_fps,
+        "loop_overhead": gray_fps / loop_fps - 1.0,
+        "goal_loop_overhead": 0.1,
         "goal_train_s": 5.0,
         "goal_fps": 200.0,
         "checksum": checksum,

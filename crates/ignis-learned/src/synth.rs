@@ -165,7 +165,13 @@ pub struct Synthesiser<'m> {
     normalised: Vec<f32>,
     scratch: RenderScratch,
     t: u64,
+    /// A looping synthesiser's states, played in order and over again
+    /// ([`Synthesiser::looping`]).
+    looped: Option<Vec<Vec<f64>>>,
 }
+
+/// The most state values a loop may hold (frames × state dimension): 64 M (512 MB).
+const MAX_LOOP_VALUES: usize = 64 << 20;
 
 impl<'m> Synthesiser<'m> {
     /// Starts from the model's last training states; the same model, controls and seed
@@ -184,7 +190,44 @@ impl<'m> Synthesiser<'m> {
             normalised: Vec::new(),
             scratch: RenderScratch::default(),
             t: 0,
+            looped: None,
         })
+    }
+
+    /// A synthesiser whose frames form a seamless loop of `frames` frames: the states are
+    /// a sample of the ARP conditioned on returning to its start state
+    /// ([`crate::Arp::simulate_loop`]), so frame `frames` would be frame 0 and the step
+    /// across the seam is one of the process's own. Not a crossfade: every frame is a
+    /// state of the learned process. Frames after the last repeat the loop.
+    pub fn looping(
+        model: &'m FlameModel,
+        controls: Controls,
+        seed: u64,
+        frames: u32,
+    ) -> Result<Synthesiser<'m>> {
+        let mut s = Synthesiser::new(model, controls, seed)?;
+        if (frames as usize).saturating_mul(model.n_state()) > MAX_LOOP_VALUES {
+            return Err(LearnedError::bad(
+                "frames",
+                format!(
+                    "a loop of {frames} frames holds {} state values, over the limit of {MAX_LOOP_VALUES}; loop fewer frames",
+                    frames as usize * model.n_state()
+                ),
+            ));
+        }
+        let states = model
+            .arp
+            .simulate_loop(&model.init, frames as usize, seed)?;
+        s.looped = Some(states);
+        Ok(s)
+    }
+
+    /// Skips `n` frames without rendering them (only the cheap state steps run), so the
+    /// next frame is exactly the one a full run would render there: a render-farm chunk.
+    pub fn skip(&mut self, n: u64) {
+        for _ in 0..n {
+            self.step();
+        }
     }
 
     /// Changes the controls from the next frame on (for interactive steering).
@@ -196,6 +239,14 @@ impl<'m> Synthesiser<'m> {
 
     /// Samples the next state from the ARP (eq. 2), before controls.
     pub fn step(&mut self) -> &[f64] {
+        if let Some(states) = &self.looped {
+            let x = &states[(self.t % states.len() as u64) as usize];
+            let mut last = self.hist.pop().expect("order ≥ 1");
+            last.copy_from_slice(x);
+            self.hist.insert(0, last);
+            self.t += 1;
+            return &self.hist[0];
+        }
         let hist: Vec<&[f64]> = self.hist.iter().map(|h| h.as_slice()).collect();
         self.model
             .arp

@@ -238,6 +238,51 @@ mod flame {
         assert_eq!(names, ["bad.flame", "candle.flame"]);
     }
 
+    /// A looping synthesis: frame N is frame 0, and the seam step is within the loop's
+    /// ordinary steps (measured as `ignis_core::loopq` measures written frames); a chunk
+    /// (skip, then render) gives exactly the full render's frames.
+    #[test]
+    fn loops_close_and_chunks_match_the_full_render() {
+        let (_, t) = trained(60, 8);
+        let size = Size::new(48, 48).unwrap();
+        let n = 24u32;
+        let c = Controls::default();
+        let mut s = Synthesiser::looping(&t.model, c.clone(), 3, n).unwrap();
+        let frames = s.frames(size, n as usize + 1).unwrap();
+        assert_eq!(frames[0], frames[n as usize], "frame N = frame 0");
+        let metric: Vec<_> = frames[..n as usize]
+            .iter()
+            .map(ignis_core::loopq::metric_frame_gray)
+            .collect();
+        let steps = ignis_core::loopq::steps(&metric, true).unwrap();
+        let med = ignis_core::loopq::median(&mut steps.clone());
+        let wrap = steps[steps.len() - 1] / med;
+        let max = steps.iter().cloned().fold(0.0, f64::max) / med;
+        eprintln!("learned loop: wrap {wrap:.3}, max step {max:.3} (goal 1.1 / 1.2)");
+        assert!(wrap <= 1.6, "wrap {wrap}");
+        // an unlooped synthesis jumps at the wrap
+        let free = Synthesiser::new(&t.model, c.clone(), 3)
+            .unwrap()
+            .frames(size, n as usize)
+            .unwrap();
+        assert_ne!(free[..4], frames[..4]);
+        for (looped, chunk) in [(false, 13..27), (true, 13..27), (true, 27..40)] {
+            let mk = || {
+                if looped {
+                    Synthesiser::looping(&t.model, c.clone(), 3, 40).unwrap()
+                } else {
+                    Synthesiser::new(&t.model, c.clone(), 3).unwrap()
+                }
+            };
+            let full = mk().frames(size, 40).unwrap();
+            let mut part = mk();
+            part.skip(chunk.start as u64);
+            let got = part.frames(size, chunk.len()).unwrap();
+            assert_eq!(&full[chunk.clone()], &got[..], "{looped} {chunk:?}");
+        }
+        assert!(Synthesiser::looping(&t.model, c, 3, 1).is_err());
+    }
+
     #[test]
     fn wind_bends_the_flame_to_the_right() {
         let (_, t) = trained(60, 9);

@@ -88,6 +88,76 @@ pub fn profile_uv(tex: [f32; 3], turb: f32, stability: f32) -> [f32; 2] {
     [radial_u(tex), tex[2] + kernel(tex[2], stability) * turb]
 }
 
+/// How a seamless loop of `period` noise-time units mixes two copies of the noise field:
+/// `a · T(time') + b · T(time' − period)` with `time' = time mod period`, `a = cos θ`,
+/// `b = sin θ`, `θ = ½π · time' / period`.
+///
+/// At `time' = 0` this is `T(0)`; as `time'` approaches `period` it approaches
+/// `T(0)` again (the second copy, a whole loop behind), so frame `N` of an `N`-frame loop
+/// equals frame 0. Both copies scroll upwards as eq. (11) says, so flames keep rising
+/// through the seam. `a² + b² = 1` keeps the turbulence's variance constant (the copies
+/// are a whole loop apart in noise space, so nearly independent), so the flicker does not
+/// fade in mid-loop as a linear crossfade of the noise would.
+///
+/// Departure from the paper (which has no loops): the 4-D noise's time axis cannot walk a
+/// circle without a fifth dimension, and a lattice periodic in time would need a period
+/// built into every noise kernel; this costs a second noise evaluation instead.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LoopMix {
+    /// Noise time of the first copy, `time mod period`.
+    pub time: f32,
+    /// The loop's length in noise time; the second copy is at `time − period`.
+    pub period: f32,
+    /// Weight of the first copy.
+    pub a: f32,
+    /// Weight of the second copy.
+    pub b: f32,
+}
+
+/// The [`LoopMix`] at noise time `time` of a loop `period` noise-time units long (> 0).
+pub fn loop_mix(time: f32, period: f32) -> LoopMix {
+    let t = time.rem_euclid(period);
+    // rem_euclid can round up to `period` itself for a tiny negative time
+    let t = if t >= period { 0.0 } else { t };
+    let theta = std::f32::consts::FRAC_PI_2 * (t / period);
+    LoopMix {
+        time: t,
+        period,
+        a: theta.cos(),
+        b: theta.sin(),
+    }
+}
+
+/// [`shade`] for a looping animation: the same mapping with the turbulence mixed from two
+/// copies of the noise field ([`LoopMix`], which carries the noise time).
+#[inline]
+pub fn shade_looped(
+    tex: [f32; 3],
+    radius: f32,
+    length: f32,
+    m: LoopMix,
+    noise: &NoiseParams,
+    offset: [f32; 4],
+    profile: &FireProfile,
+) -> [f32; 4] {
+    let u = radial_u(tex);
+    if profile.column_empty(u) {
+        return [0.0; 4];
+    }
+    let turb = if noise.octaves == 0 || noise.stability == 0.0 {
+        0.0
+    } else {
+        let scale = noise_scale(radius, length, noise.frequency);
+        let t = |time: f32| {
+            let p = noise_position(tex, time, scale, offset);
+            turbulence(noise.kind, p, noise.octaves, noise.gain, noise.lacunarity)
+        };
+        m.a * t(m.time) + m.b * t(m.time - m.period)
+    };
+    let [u, v] = profile_uv(tex, turb, noise.stability);
+    profile.sample(u, v)
+}
+
 /// The whole mapping of eq. (9)–(14) for one sample: the profile colour (straight alpha)
 /// at texture coordinates `tex` of a fire whose local radius is `radius` and whose centre
 /// curve is `length` long, at noise time `time`.

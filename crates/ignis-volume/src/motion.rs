@@ -227,7 +227,7 @@ impl Script {
 }
 
 /// Pushes control points out of obstacles keeping a clearance of their radius.
-fn deflect_points(
+pub(crate) fn deflect_points(
     pts: &mut [[f32; 4]],
     dt: f32,
     obstacles: &[Obstacle],

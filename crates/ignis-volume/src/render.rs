@@ -67,7 +67,8 @@
 use crate::error::{Result, VolumeError};
 use crate::lattice::{add, cross, dot, normalize, scale, sub, Lattice, Track, CHORD_LANES, V3};
 use crate::mapping::{
-    kernel, noise_position, noise_scale, profile_uv, radial_u, shade, NoiseParams,
+    kernel, loop_mix, noise_position, noise_scale, profile_uv, radial_u, shade, shade_looped,
+    LoopMix, NoiseParams,
 };
 use crate::noise::{NoiseCache, LANES};
 use crate::profile::FireProfile;
@@ -165,10 +166,28 @@ pub struct RenderParams {
     /// nothing to the image (those samples have zero alpha; about 7% of a Table 1 frame),
     /// so it is off by default and `covered_pixels` is then 0.
     pub count_coverage: bool,
+    /// A seamless loop: the length of the loop in seconds (`frames / fps`), or `None`.
+    /// The noise is then periodic in time with this period ([`LoopMix`]), so a frame at
+    /// `time + loop_period` equals the one at `time`. Default `None`.
+    pub loop_period: Option<f32>,
 }
 
 impl RenderParams {
+    /// The loop mix of a fire with this noise at scene time `time` (seconds).
+    fn mix(&self, noise: &NoiseParams, time: f32) -> Option<LoopMix> {
+        self.loop_period
+            .map(|p| loop_mix(time * noise.time_scale, p * noise.time_scale))
+    }
+
     pub fn validate(&self) -> Result<()> {
+        if let Some(p) = self.loop_period {
+            if !(p > 0.0 && p.is_finite()) {
+                return Err(VolumeError::bad(
+                    "loop_period",
+                    format!("{p}; a loop must last a positive number of seconds"),
+                ));
+            }
+        }
         if !(self.slice_spacing > 0.0 && self.slice_spacing.is_finite()) {
             return Err(VolumeError::bad(
                 "render.slice_spacing",
@@ -311,7 +330,12 @@ fn render_with(
         ))
     };
     for (fi, f) in fires.iter().enumerate() {
-        let visible = visible_parts(f, camera.position, params.exact_inverse);
+        let visible = visible_parts(
+            f,
+            camera.position,
+            params.exact_inverse,
+            params.mix(&f.noise, time),
+        );
         for (ci, c) in f.lattice.cells().iter().enumerate() {
             let vis = visible[ci];
             let mut lo = [f32::INFINITY; 2];
@@ -615,7 +639,15 @@ impl Disc {
 /// Both extend [`OWNER_SLACK`] beyond the cell's end faces in `s` (`s ∈ [−σ, 1 + σ]`), so
 /// they also hold every sample the per-cell march ([`Ctx::march_cells`]) assigns to the
 /// cell (whose computed `s` may be off by the certified inverse's error).
-fn visible_parts(fire: &FireInstance, camera: V3, full: bool) -> Vec<Visible> {
+///
+/// `mix`: a looping render's [`LoopMix`], whose turbulence is bounded by `(a + b)` times
+/// the bound of one copy.
+fn visible_parts(
+    fire: &FireInstance,
+    camera: V3,
+    full: bool,
+    mix: Option<LoopMix>,
+) -> Vec<Visible> {
     let cells = fire.lattice.cells();
     let whole = |c: &crate::lattice::Cell| Visible {
         min: c.min,
@@ -628,7 +660,7 @@ fn visible_parts(fire: &FireInstance, camera: V3, full: bool) -> Vec<Visible> {
     }
     let turbulent = noise.octaves > 0 && noise.stability != 0.0;
     let r = if turbulent {
-        turbulence_bounds(noise)[0]
+        turbulence_bounds(noise)[0] * mix.map_or(1.0, |m| m.a + m.b)
     } else {
         0.0
     };
@@ -855,6 +887,10 @@ struct Live {
     p: [f32; 3],
     /// Partial turbulence sum.
     sum: f32,
+    /// A looping render's second copy of the noise ([`LoopMix`]): its `z` (its `x`, `y`
+    /// are `p`'s) and its partial sum. Unused otherwise.
+    pz2: f32,
+    sum2: f32,
     /// `u` (eq. 12), `tex_z` and the kernel `f(tex_z)` (eq. 13).
     u: f32,
     z: f32,
@@ -1603,13 +1639,26 @@ impl Ctx<'_, '_> {
     /// Shades every collected sample with [`shade`], one by one: the reference.
     fn shade_reference(&self, fire: &FireInstance, s: &mut Scratch) {
         let time = self.time * fire.noise.time_scale;
+        let mix = self.params.mix(&fire.noise, self.time);
         s.col.clear();
         s.col.extend(s.tex.iter().map(|&tex| {
-            shade(
+            let (radius, length) = (fire.lattice.radius_at(tex[2]), fire.lattice.length());
+            let Some(m) = mix else {
+                return shade(
+                    tex,
+                    radius,
+                    length,
+                    time,
+                    &fire.noise,
+                    fire.offset,
+                    fire.profile,
+                );
+            };
+            shade_looped(
                 tex,
-                fire.lattice.radius_at(tex[2]),
-                fire.lattice.length(),
-                time,
+                radius,
+                length,
+                m,
                 &fire.noise,
                 fire.offset,
                 fire.profile,
@@ -1649,20 +1698,34 @@ impl Ctx<'_, '_> {
             }
             return;
         }
-        let time = self.time * noise.time_scale;
+        let mix = self.params.mix(noise, self.time);
+        // the first copy's noise time; a loop's second copy is a whole loop behind, and
+        // the pair's turbulence `a·sum + b·sum2` is bounded by `(a + b)` times one's
+        let (time, time2, wa, wb) = match mix {
+            Some(m) => (m.time, m.time - m.period, m.a, m.b),
+            None => (self.time * noise.time_scale, 0.0, 1.0, 0.0),
+        };
+        let looped = mix.is_some();
+        let turb = |a: &Live| {
+            if looped {
+                wa * a.sum + wb * a.sum2
+            } else {
+                a.sum
+            }
+        };
         let length = fire.lattice.length();
         let profile = fire.profile;
         let octaves = noise.octaves as usize;
-        let rem = turbulence_bounds(noise);
+        let mut rem = turbulence_bounds(noise);
+        if looped {
+            rem = rem.map(|r| r * (wa + wb));
+        }
         let uniform = fire.lattice.uniform_radius();
         // the `w` of every sample's noise position (it depends on neither `tex` nor the
         // radius)
-        let pw = noise_position(
-            [0.0; 3],
-            time,
-            noise_scale(1.0, length, noise.frequency),
-            fire.offset,
-        )[3];
+        let wscale = noise_scale(1.0, length, noise.frequency);
+        let pw = noise_position([0.0; 3], time, wscale, fire.offset)[3];
+        let pw2 = noise_position([0.0; 3], time2, wscale, fire.offset)[3];
         slice_order(&s.k, &mut s.buckets, &mut s.order);
         let act = &mut s.act;
         act.clear();
@@ -1681,10 +1744,17 @@ impl Ctx<'_, '_> {
             let radius = uniform.unwrap_or_else(|| fire.lattice.radius_at(z));
             let scale = noise_scale(radius, length, noise.frequency);
             let [px, py, pz, _] = noise_position(tex, time, scale, fire.offset);
+            let pz2 = if looped {
+                noise_position(tex, time2, scale, fire.offset)[2]
+            } else {
+                0.0
+            };
             act.push(Live {
                 idx: i,
                 p: [px, py, pz],
                 sum: 0.0,
+                pz2,
+                sum2: 0.0,
                 u,
                 z,
                 kern,
@@ -1706,17 +1776,27 @@ impl Ctx<'_, '_> {
                 for (live, v) in batch.iter_mut().zip(val) {
                     live.sum += amp * v;
                 }
+                if looped {
+                    q[3] = [pw2 * f; LANES];
+                    for (l, live) in batch.iter().enumerate() {
+                        q[2][l] = live.pz2 * f;
+                    }
+                    let val = lanes_noise(noise.kind, &q, &mut s.noise_cache, avx2);
+                    for (live, v) in batch.iter_mut().zip(val) {
+                        live.sum2 += amp * v;
+                    }
+                }
             }
             amp *= noise.gain;
             f *= noise.lacunarity;
             if o + 1 < octaves {
                 let r = rem[o + 1];
-                act.retain(|a| a.win.reachable(a.kern, a.sum, r));
+                act.retain(|a| a.win.reachable(a.kern, turb(a), r));
             }
         }
         for live in act.iter() {
             // `profile_uv` of the sample, from the values computed above
-            let v = live.z + live.kern * live.sum;
+            let v = live.z + live.kern * turb(live);
             s.col[live.idx as usize] = profile.sample(live.u, v);
         }
     }
@@ -1835,7 +1915,11 @@ mod tests {
     use crate::{BSpline, FireScene, NoiseKind, Preset};
 
     /// Renders the first frame of `scene` (all fires) with and without `exact_inverse`.
-    fn fast_and_exact(scene: &FireScene, time: f32) -> [(RgbaFrame, RenderStats); 2] {
+    fn fast_and_exact(
+        scene: &FireScene,
+        time: f32,
+        loop_period: Option<f32>,
+    ) -> [(RgbaFrame, RenderStats); 2] {
         let mut anim = scene.animator().unwrap();
         let (pts, _) = anim.step();
         let lats: Vec<Lattice> = pts
@@ -1857,6 +1941,7 @@ mod tests {
             })
             .collect();
         let mut params = scene.render_params();
+        params.loop_period = loop_period;
         assert!(!params.exact_inverse);
         params.count_coverage = true;
         let fast = render(&inst, &scene.camera, &params, time).unwrap();
@@ -1908,8 +1993,13 @@ mod tests {
             let lat = Lattice::build(&BSpline::new(pts[0].clone(), 3).unwrap(), lattice).unwrap();
             assert!(per_cell_ok(&lat), "lattice {lattice}");
         }
-        for (i, scene) in scenes.iter().enumerate() {
-            let [(fast, sf), (exact, se)] = fast_and_exact(scene, 0.5);
+        // and every scene looping (two noise copies mixed) at a time near the mix's middle
+        let runs = scenes
+            .iter()
+            .map(|s| (s, None))
+            .chain(scenes.iter().map(|s| (s, Some(1.3f32))));
+        for (i, (scene, loop_period)) in runs.enumerate() {
+            let [(fast, sf), (exact, se)] = fast_and_exact(scene, 0.5, loop_period);
             assert!(se.covered_pixels > 200, "scene {i}: {se:?}");
             let (worst, peak) = max_difference(&fast, &exact);
             println!("scene {i}: max difference {worst:.2e}, peak {peak:.3}");
@@ -1952,7 +2042,7 @@ mod tests {
             let (pts, _) = anim.step();
             let lat = Lattice::build(&BSpline::new(pts[0].clone(), 3).unwrap(), lattice).unwrap();
             assert!(per_cell_ok(&lat));
-            let [(fast, sf), (exact, se)] = fast_and_exact(&scene, 0.3);
+            let [(fast, sf), (exact, se)] = fast_and_exact(&scene, 0.3, None);
             let (worst, peak) = max_difference(&fast, &exact);
             assert!(peak > 0.1 && se.shaded > 1000, "{se:?}");
             assert!(worst < 1e-4, "lattice {lattice}: max difference {worst}");
@@ -2116,7 +2206,7 @@ mod tests {
             let reference = s.col.clone();
             // every visible sample lies in its cell's visible box (what the fast path
             // marches)
-            let visible = visible_parts(&inst[0], scene.camera.position, false);
+            let visible = visible_parts(&inst[0], scene.camera.position, false, None);
             let n = lat.cells().len();
             let mut discs = 0;
             for (tex, c) in s.tex.iter().zip(&reference) {

@@ -35,7 +35,9 @@
 use crate::error::{Result, VolumeError};
 use crate::lattice::Lattice;
 use crate::mapping::NoiseParams;
-use crate::motion::{Collision, Keyframe, Obstacle, ParticleSim, Script, SimParams};
+use crate::motion::{
+    deflect_points, Collision, Keyframe, Obstacle, ParticleSim, Script, SimParams,
+};
 use crate::noise::NoiseKind;
 use crate::profile::FireProfile;
 use crate::render::{finish, render, Blend, Camera, FireInstance, RenderParams, RenderStats};
@@ -411,6 +413,7 @@ impl FireScene {
             intensity: self.intensity,
             exact_inverse: false,
             count_coverage: false,
+            loop_period: None,
         }
     }
 
@@ -451,7 +454,65 @@ impl FireScene {
             sims,
             frame: 0,
             count_coverage: false,
+            looping: None,
         })
+    }
+
+    /// A checked animator for a seamless loop of `frames` frames: frame `frames` (which
+    /// is never rendered) would equal frame 0, so the frames play as a loop with no jump.
+    ///
+    /// - The noise is periodic with the loop ([`crate::mapping::LoopMix`]).
+    /// - A script repeats a whole number of times per loop: its period (keys that do not
+    ///   end on the first pose are closed by returning to it) is stretched to the nearest
+    ///   whole fraction of the loop, and its keys are joined by a periodic cubic spline.
+    /// - A simulation's tail is blended into its head in control-point space: the loop's
+    ///   first [`loop_blend_frames`] frames move from the simulation's state one loop later
+    ///   to its own, so frame `frames − 1` is followed by the simulation's own successor.
+    ///
+    /// Fails for fewer than 2 frames.
+    pub fn looping_animator(&self, frames: u32) -> Result<Animator<'_>> {
+        if frames < 2 {
+            return Err(VolumeError::bad(
+                "loop",
+                format!(
+                    "{frames} frame(s) cannot loop; ask for at least 2 frames or turn the loop off"
+                ),
+            ));
+        }
+        let mut a = self.animator()?;
+        let n = frames as u64;
+        let blend = loop_blend_frames(frames) as usize;
+        let dt = 1.0 / self.fps;
+        let loop_len = frames as f32 * dt;
+        let mut scripts = Vec::with_capacity(self.fires.len());
+        let mut heads = Vec::with_capacity(self.fires.len());
+        for (i, f) in self.fires.iter().enumerate() {
+            let mut script = None;
+            let mut head = Vec::new();
+            match &f.motion {
+                Motion::Static(_) => {}
+                Motion::Script(sc) => script = Some(LoopScript::new(sc, loop_len)),
+                Motion::Simulation(_) => {
+                    // the states one loop later: frames n .. n + blend of the simulation
+                    let mut sim = a.sims[i].clone().expect("a simulation per simulated fire");
+                    for k in 1..n + blend as u64 {
+                        sim.advance(dt, &self.obstacles, i);
+                        if k >= n {
+                            head.push(sim.control_points());
+                        }
+                    }
+                }
+            }
+            scripts.push(script);
+            heads.push(head);
+        }
+        a.looping = Some(Looping {
+            frames: n,
+            blend,
+            scripts,
+            heads,
+        });
+        Ok(a)
     }
 
     /// The built-in scenes.
@@ -660,6 +721,7 @@ pub struct Animator<'a> {
     sims: Vec<Option<ParticleSim>>,
     frame: u64,
     count_coverage: bool,
+    looping: Option<Looping>,
 }
 
 impl Animator<'_> {
@@ -672,6 +734,15 @@ impl Animator<'_> {
     /// Index of the next frame.
     pub fn frame_index(&self) -> u64 {
         self.frame
+    }
+
+    /// Skips `n` frames without rendering them: only the motion (scripts, simulations,
+    /// collisions) is stepped, so the next frame is exactly the one a full run would
+    /// render there. This is how a render-farm chunk starts in the middle.
+    pub fn skip(&mut self, n: u64) {
+        for _ in 0..n {
+            self.step();
+        }
     }
 
     /// Advances the motion one frame; returns control points and contacts.
@@ -696,7 +767,19 @@ impl Animator<'_> {
                     hits.extend(h);
                 }
                 Motion::Script(sc) => {
-                    let (p, h) = sc.at_with_collisions(t, dt, &s.obstacles, i);
+                    let ls = self.looping.as_ref().and_then(|l| l.scripts[i].as_ref());
+                    let (p, h) = match ls {
+                        Some(ls) => {
+                            // loop time from the frame number, so it is exact at every loop
+                            let n = self.looping.as_ref().map_or(1, |l| l.frames);
+                            let tl = (self.frame % n) as f32 * dt;
+                            let mut p = ls.at(tl);
+                            let mut h = Vec::new();
+                            deflect_points(&mut p, dt, &s.obstacles, i, &mut h);
+                            (p, h)
+                        }
+                        None => sc.at_with_collisions(t, dt, &s.obstacles, i),
+                    };
                     pts.push(p);
                     hits.extend(h);
                 }
@@ -707,7 +790,19 @@ impl Animator<'_> {
                     if self.frame > 0 {
                         hits.extend(sim.advance(dt, &s.obstacles, i));
                     }
-                    pts.push(sim.control_points());
+                    let mut cp = sim.control_points();
+                    if let Some(l) = &self.looping {
+                        let k = self.frame as usize;
+                        if let Some(head) = l.heads[i].get(k).filter(|_| k < l.blend) {
+                            // smoothstep from the state one loop later to this one
+                            let x = k as f32 / l.blend as f32;
+                            let w = x * x * (3.0 - 2.0 * x);
+                            for (c, h) in cp.iter_mut().zip(head) {
+                                *c = [0, 1, 2, 3].map(|a| h[a] + w * (c[a] - h[a]));
+                            }
+                        }
+                    }
+                    pts.push(cp);
                 }
             }
         }
@@ -743,6 +838,7 @@ impl Animator<'_> {
             .collect();
         let params = RenderParams {
             count_coverage: self.count_coverage,
+            loop_period: self.looping.as_ref().map(|l| l.frames as f32 / s.fps),
             ..s.render_params()
         };
         let (hdr, stats) = render(&inst, &s.camera, &params, t)?;
@@ -755,6 +851,100 @@ impl Animator<'_> {
             control_points: pts,
         })
     }
+}
+
+/// How many frames at the start of an `frames`-frame loop blend a simulation's state one
+/// loop later into its own (a third of the loop, at least 1).
+pub fn loop_blend_frames(frames: u32) -> u32 {
+    (frames / 3).max(1)
+}
+
+/// A script made periodic with a loop: its keys closed (back to the first pose), played a
+/// whole number of times per loop, and interpolated with a periodic cubic Hermite spline
+/// (Catmull–Rom tangents) so the motion never stops at a key — smoothstep, which a
+/// one-shot script uses, halts at every key and makes the loop's frame-to-frame steps
+/// uneven.
+#[derive(Clone, Debug)]
+struct LoopScript {
+    /// Key times and poses; the last pose is the first, one period later.
+    keys: Vec<Keyframe>,
+    /// Script seconds per loop second.
+    rate: f32,
+}
+
+impl LoopScript {
+    fn new(sc: &Script, loop_len: f32) -> LoopScript {
+        let mut keys = sc.keyframes.clone();
+        let (t0, t1) = (keys[0].time, keys[keys.len() - 1].time);
+        if keys.len() > 1 && keys[0].points != keys[keys.len() - 1].points {
+            // close the keys: back to the first pose after the mean gap
+            let gap = (t1 - t0) / (keys.len() - 1) as f32;
+            let back = Keyframe {
+                time: t1 + gap,
+                points: keys[0].points.clone(),
+            };
+            keys.push(back);
+        }
+        let period = keys[keys.len() - 1].time - t0;
+        let rate = if keys.len() > 1 && period > 0.0 {
+            let repeats = (loop_len / period).round().max(1.0);
+            repeats * period / loop_len
+        } else {
+            0.0
+        };
+        LoopScript { keys, rate }
+    }
+
+    /// Control points at loop time `t` seconds.
+    fn at(&self, t: f32) -> Vec<[f32; 4]> {
+        let k = &self.keys;
+        let m = k.len() - 1;
+        if m == 0 || self.rate == 0.0 {
+            return k[0].points.clone();
+        }
+        let (t0, period) = (k[0].time, k[m].time - k[0].time);
+        let ts = t0 + (t * self.rate).rem_euclid(period);
+        let i = k.partition_point(|f| f.time <= ts).clamp(1, m) - 1;
+        // key `j` of the periodic sequence (any integer), with its time
+        let key = |j: isize| -> (f32, &Vec<[f32; 4]>) {
+            let w = j.rem_euclid(m as isize) as usize;
+            let laps = j.div_euclid(m as isize) as f32;
+            (k[w].time + laps * period, &k[w].points)
+        };
+        let i = i as isize;
+        let (ta, pa) = key(i);
+        let (tb, pb) = key(i + 1);
+        let (tp, pp) = key(i - 1);
+        let (tn, pn) = key(i + 2);
+        let h = tb - ta;
+        let s = ((ts - ta) / h).clamp(0.0, 1.0);
+        let (s2, s3) = (s * s, s * s * s);
+        let h00 = 2.0 * s3 - 3.0 * s2 + 1.0;
+        let h10 = s3 - 2.0 * s2 + s;
+        let h01 = -2.0 * s3 + 3.0 * s2;
+        let h11 = s3 - s2;
+        (0..pa.len())
+            .map(|c| {
+                [0, 1, 2, 3].map(|a| {
+                    let ma = (pb[c][a] - pp[c][a]) / (tb - tp);
+                    let mb = (pn[c][a] - pa[c][a]) / (tn - ta);
+                    h00 * pa[c][a] + h10 * h * ma + h01 * pb[c][a] + h11 * h * mb
+                })
+            })
+            .collect()
+    }
+}
+
+/// A looping animator's state ([`FireScene::looping_animator`]).
+#[derive(Clone, Debug)]
+struct Looping {
+    frames: u64,
+    blend: usize,
+    /// Per fire: its script made periodic (scripted fires only).
+    scripts: Vec<Option<LoopScript>>,
+    /// Per fire: a simulation's control points one loop later, for the loop's first
+    /// `blend` frames (simulated fires only).
+    heads: Vec<Vec<Vec<[f32; 4]>>>,
 }
 
 #[cfg(test)]

@@ -115,6 +115,9 @@ pub struct WriteOptions {
     pub flipbook: FlipbookOptions,
     /// Linear-light colour that formats without alpha (MP4, GIF) composite over. Default black.
     pub background: [f32; 3],
+    /// Sequences: the number in the first file's name (a render-farm chunk of a longer
+    /// render keeps the full render's frame numbers). Default 0.
+    pub first_frame: u64,
 }
 
 impl Default for WriteOptions {
@@ -125,6 +128,7 @@ impl Default for WriteOptions {
             loop_: true,
             flipbook: FlipbookOptions::default(),
             background: [0.0; 3],
+            first_frame: 0,
         }
     }
 }
@@ -189,6 +193,7 @@ pub fn create(path: &Path, size: Size, opts: &WriteOptions) -> Result<FrameWrite
         Format::PngSequence | Format::ExrSequence => Box::new(sequence_out::SequenceSink::new(
             path,
             format == Format::ExrSequence,
+            opts.first_frame,
         )?),
         Format::Gif => Box::new(gif_out::GifSink::new(path, size, opts)?),
         Format::Mp4 => {

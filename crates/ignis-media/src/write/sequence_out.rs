@@ -1,7 +1,8 @@
 //! PNG (8-bit sRGB, straight alpha) and EXR (linear f32, premultiplied) sequences.
 //!
 //! A directory destination is filled with `0000.png`, `0001.png`, … (or `.exr`); a pattern
-//! destination `frames/f_%04d.png` numbers from 0 the same way.
+//! destination `frames/f_%04d.png` numbers from 0 the same way (or from
+//! [`super::WriteOptions::first_frame`]).
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -22,10 +23,12 @@ pub(crate) struct SequenceSink {
     temp_dir: Option<tempfile::TempDir>,
     /// (staged path, final path) of each frame written.
     written: Vec<(PathBuf, PathBuf)>,
+    /// Number of the first frame's file.
+    first: u64,
 }
 
 impl SequenceSink {
-    pub(crate) fn new(path: &Path, exr: bool) -> Result<SequenceSink> {
+    pub(crate) fn new(path: &Path, exr: bool, first: u64) -> Result<SequenceSink> {
         let ext = if exr { "exr" } else { "png" };
         let name = path
             .file_name()
@@ -86,6 +89,7 @@ impl SequenceSink {
             final_dir,
             temp_dir,
             written: Vec::new(),
+            first,
         })
     }
 
@@ -128,7 +132,7 @@ impl SequenceSink {
 
 impl Sink for SequenceSink {
     fn push(&mut self, frame: &RgbaFrame) -> Result<()> {
-        let name = self.pattern.format(self.written.len() as u64);
+        let name = self.pattern.format(self.first + self.written.len() as u64);
         let final_path = self.final_dir.join(&name);
         let staged = match &self.temp_dir {
             Some(t) => t.path().join(&name),
