@@ -590,15 +590,16 @@ mod roundtrip {
             (m.image.as_str(), m.frame_width, m.frame_height),
             ("fire.png", 12, 10)
         );
-        assert_eq!((m.columns, m.rows, m.frame_count, m.padding), (4, 3, 10, 2));
+        // 10 frames: 2 × 5 wastes no cell and gives the squarer sheet (32×70, not 80×28).
+        assert_eq!((m.columns, m.rows, m.frame_count, m.padding), (2, 5, 10, 2));
         assert_eq!((m.fps, m.loop_, m.alpha), (24.0, true, AlphaMode::Straight));
         assert_eq!(m.order, "row-major, top-left first");
         // The sheet has exactly the size the JSON implies, and the padding bleeds edges.
         let sheet = read_image(&path).unwrap();
-        assert_eq!(sheet.size(), size(4 * 16, 3 * 14));
-        assert_eq!(sheet.get(16, 14), frames[5].get(0, 0)); // cell (1,1) corner = frame 5 (0,0)
-        assert_eq!(sheet.get(16 + 2, 14 + 2), frames[5].get(0, 0));
-        assert_eq!(sheet.get(16 + 15, 14 + 8), frames[5].get(11, 6));
+        assert_eq!(sheet.size(), size(2 * 16, 5 * 14));
+        assert_eq!(sheet.get(16, 14), frames[3].get(0, 0)); // cell (1,1) corner = frame 3 (0,0)
+        assert_eq!(sheet.get(16 + 2, 14 + 2), frames[3].get(0, 0));
+        assert_eq!(sheet.get(16 + 15, 14 + 8), frames[3].get(11, 6));
         assert_eq!(fb.frames, frames);
         let text = std::fs::read_to_string(&json).unwrap();
         for key in [

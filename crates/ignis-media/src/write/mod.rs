@@ -22,8 +22,10 @@
 //! the end, or, when the destination directory already exists, into hidden per-file
 //! temporaries renamed one by one at the end (old frames with other names are left alone).
 
+pub mod engine;
 mod flipbook;
 mod gif_out;
+pub mod motion;
 mod mp4_out;
 mod sequence_out;
 
@@ -35,7 +37,12 @@ use ignis_core::{GrayFrame, RgbaFrame, Size};
 
 use crate::error::{MediaError, Result};
 
-pub use flipbook::{read_flipbook, AlphaMode, Flipbook, FlipbookMeta, FlipbookOptions};
+pub use engine::Engine;
+pub use flipbook::{
+    plan_layout, read_flipbook, retime, AlphaMode, Flipbook, FlipbookMeta, FlipbookOptions,
+    HeatMeta, Layout, MotionMeta, Retime,
+};
+pub use motion::MotionSource;
 
 /// An output format.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
