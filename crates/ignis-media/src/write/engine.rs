@@ -102,7 +102,7 @@ pub(crate) struct SettingsInput {
     pub loop_: bool,
     pub variants: u32,
     pub alpha: AlphaMode,
-    /// Motion-vector strength in frame-UV units, when a motion sheet is written.
+    /// Motion-vector strength in tile-UV units, when a motion sheet is written.
     pub mv_scale: Option<f32>,
 }
 

@@ -102,7 +102,7 @@ pub struct MotionMeta {
     /// File name of the 16-bit RGB PNG, relative to the JSON.
     pub image: String,
     /// Strength: a channel value `v` (0..1) is the motion `(v * 2 - 1) * scale`, in
-    /// frame-UV units (fractions of one frame's width / height) per frame.
+    /// tile-UV units (fractions of one cell's width / height) per frame.
     pub scale: f32,
     /// 16-bit code of zero motion (32768; 128 in 8 bits).
     pub neutral: u16,
@@ -479,14 +479,13 @@ impl FlipbookSink {
         self.path.with_file_name(format!("{stem}{suffix}"))
     }
 
-    /// Forward motion of every frame of `frames` (one loop per row), frame-UV units with
-    /// the engine's `v` direction, and the largest component.
+    /// Forward motion of every frame of `frames` (one loop per row), in pixels (+y down).
     fn motion(
         &self,
         src: &MotionSource,
         frames: &[RgbaFrame],
         per: usize,
-    ) -> Result<(Vec<Vec<[f32; 2]>>, f32)> {
+    ) -> Result<Vec<Vec<[f32; 2]>>> {
         if per < 2 {
             return Err(MediaError::bad(
                 "motion-vectors",
@@ -496,14 +495,7 @@ impl FlipbookSink {
                 ),
             ));
         }
-        let (w, h) = (self.size.width as f32, self.size.height as f32);
-        let vsign = if self.opts.engine.conventions().v_up {
-            -1.0
-        } else {
-            1.0
-        };
         let mut out = Vec::with_capacity(frames.len());
-        let mut max_abs = 0f32;
         for row in frames.chunks(per) {
             let mut row_mv: Vec<Vec<[f32; 2]>> = Vec::with_capacity(per);
             for k in 0..per {
@@ -514,40 +506,37 @@ impl FlipbookSink {
                 } else {
                     None // the last frame of a one-shot keeps the motion that led into it
                 };
-                let mv = match next {
-                    Some(j) => {
-                        let f = (src.0)(&row[k], &row[j]).map_err(|e| {
-                            MediaError::encode(&self.path, format!("optical flow: {e}"))
-                        })?;
-                        if f.len() != self.size.pixels() {
-                            return Err(MediaError::encode(
-                                &self.path,
-                                format!(
-                                    "optical flow gave {} vectors for {} pixels",
-                                    f.len(),
-                                    self.size.pixels()
-                                ),
-                            ));
-                        }
-                        f.iter()
-                            .map(|&[dx, dy]| {
-                                let m = [dx / w, vsign * dy / h];
-                                let m = [
-                                    if m[0].is_finite() { m[0] } else { 0.0 },
-                                    if m[1].is_finite() { m[1] } else { 0.0 },
-                                ];
-                                max_abs = max_abs.max(m[0].abs()).max(m[1].abs());
-                                m
-                            })
-                            .collect()
+                let flow = |a: &RgbaFrame, b: &RgbaFrame| -> Result<Vec<[f32; 2]>> {
+                    let f = (src.0)(a, b).map_err(|e| {
+                        MediaError::encode(&self.path, format!("optical flow: {e}"))
+                    })?;
+                    if f.len() != self.size.pixels() {
+                        return Err(MediaError::encode(
+                            &self.path,
+                            format!(
+                                "optical flow gave {} vectors for {} pixels",
+                                f.len(),
+                                self.size.pixels()
+                            ),
+                        ));
                     }
-                    None => row_mv[k - 1].clone(),
+                    let ok = |v: f32| if v.is_finite() { v } else { 0.0 };
+                    Ok(f.into_iter().map(|[dx, dy]| [ok(dx), ok(dy)]).collect())
+                };
+                let mv = match next {
+                    Some(j) => flow(&row[k], &row[j])?,
+                    // The last frame of a one-shot: the motion that led into it, at its own
+                    // pixels (the backward flow, reversed).
+                    None => flow(&row[k], &row[k - 1])?
+                        .into_iter()
+                        .map(|[dx, dy]| [-dx, -dy])
+                        .collect(),
                 };
                 row_mv.push(mv);
             }
             out.extend(row_mv);
         }
-        Ok((out, max_abs))
+        Ok(out)
     }
 }
 
@@ -678,14 +667,31 @@ impl Sink for FlipbookSink {
 
         // Motion vectors.
         let mut mv_meta = None;
-        if let Some((mv, max_abs)) = &motion {
-            let scale = motion::mv_scale_for(*max_abs);
+        if let Some(mv) = &motion {
+            // Tile-UV units: the engines add the offset to a UV spanning one cell.
+            let (cw, ch) = (layout.cell_width as f32, layout.cell_height as f32);
+            let vsign = if self.opts.engine.conventions().v_up {
+                -1.0
+            } else {
+                1.0
+            };
+            let to_uv = |[dx, dy]: [f32; 2]| [dx / cw, vsign * dy / ch];
+            let max_abs = mv
+                .iter()
+                .flatten()
+                .map(|&p| {
+                    let [u, v] = to_uv(p);
+                    u.abs().max(v.abs())
+                })
+                .fold(0f32, f32::max);
+            let scale = motion::mv_scale_for(max_abs);
             let n0 = motion::MV_NEUTRAL;
             let mut sheet = vec![[n0, n0, 0u16]; sheet_px];
             for (i, f) in mv.iter().enumerate() {
                 let px: Vec<[u16; 3]> = f
                     .iter()
-                    .map(|&[u, v]| {
+                    .map(|&p| {
+                        let [u, v] = to_uv(p);
                         [
                             motion::encode_mv16(u, scale),
                             motion::encode_mv16(v, scale),
@@ -718,7 +724,7 @@ impl Sink for FlipbookSink {
                 direction: if self.loop_ {
                     "forward: frame k to k+1 at frame k's pixels; the last frame of each loop to its first"
                 } else {
-                    "forward: frame k to k+1 at frame k's pixels; the last frame repeats the motion into it"
+                    "forward: frame k to k+1 at frame k's pixels; the last frame: the motion into it (reversed backward flow)"
                 }
                 .into(),
             });
@@ -934,8 +940,8 @@ pub fn read_flipbook(json_path: &Path) -> Result<Flipbook> {
                     for x in r.x..r.x + fw {
                         let p = img.get_pixel(x, y).0;
                         f.push([
-                            motion::decode_mv16(p[0], mm.scale) * fw as f32,
-                            vsign * motion::decode_mv16(p[1], mm.scale) * fh as f32,
+                            motion::decode_mv16(p[0], mm.scale) * cw as f32,
+                            vsign * motion::decode_mv16(p[1], mm.scale) * ch as f32,
                         ]);
                     }
                 }

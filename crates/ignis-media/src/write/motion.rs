@@ -4,8 +4,8 @@
 //!
 //! Convention (Unity VFX Graph's "Flipbook Motion Blend", which Unreal's and SideFX's
 //! material functions share): the cell of frame `k` holds the forward motion of frame `k`,
-//! `F_k(x)` with `frame_k(x) ≈ frame_{k+1}(x + F_k(x))`, in frame-UV units (a fraction of
-//! one frame's width and height). Between frames `k` and `k+1` at blend `t ∈ [0, 1)`:
+//! `F_k(x)` with `frame_k(x) ≈ frame_{k+1}(x + F_k(x))`, in tile-UV units (a fraction of
+//! one cell's width and height: the UV range an engine maps onto one sub-image). Between frames `k` and `k+1` at blend `t ∈ [0, 1)`:
 //!
 //! ```text
 //! prev = frame_k    (uv - F_k(uv)     * t)
@@ -56,7 +56,7 @@ impl PartialEq for MotionSource {
 /// The 16-bit code of zero motion.
 pub const MV_NEUTRAL: u16 = 32768;
 
-/// Encodes one motion component `m` (frame-UV units) at strength `scale` as 16 bits:
+/// Encodes one motion component `m` (tile-UV units) at strength `scale` as 16 bits:
 /// `32768 + round(m / scale * 32767)`, clamped to `[1, 65535]` (symmetric around zero).
 pub fn encode_mv16(m: f32, scale: f32) -> u16 {
     let q = (m / scale * 32767.0).round().clamp(-32767.0, 32767.0);
