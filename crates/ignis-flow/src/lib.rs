@@ -1,0 +1,326 @@
+//! `ignis-flow`: the workspace's one dense optical flow, and the warps and
+//! motion-compensated morphs built on it (loop/transition morphs, motion-vector export).
+//!
+//! - [`flow`] / [`flow_pair`]: DIS (Kroeger et al., ECCV 2016; see [`mod@dis`]) on grey
+//!   frames, computed at a reduced working size (longest side ≤ [`FlowParams::max_side`])
+//!   and returned at the first frame's size with the vectors scaled; [`flow_reduced`] /
+//!   [`flow_pair_reduced`] return the working-size field (cheaper; every function here
+//!   accepts fields of any size).
+//! - [`warp_gray`] / [`warp_rgba`]: `out(x) = src(x + t·F(x))`.
+//! - [`morph_gray`] / [`morph_rgba`]: the in-between frame along both flows, with
+//!   occlusion-aware weights from forward–backward consistency.
+//! - [`luma`]: the grey input for flow from a colour frame.
+//!
+//! Convention: for `flow(a, b)`, `a(x) ≈ b(x + F(x))`, vectors in pixels of the field's
+//! own size, pixel centres at integer coordinates, row 0 at the top. Frames are linear
+//! light; flow is estimated on the square root of the intensity normalised by the pair's
+//! maximum, so dim detail counts as well as the bright core.
+//!
+//! Why hand-written: the `opencv` crate's DIS would need `libopencv-dev` and clang, and the
+//! README promises `cargo test --workspace --release` works with only the Rust toolchain.
+//! DIS is small (a pyramid, a per-patch 2×2 Gauss–Newton, a weighted average), fast on a
+//! CPU and deterministic when each patch and each output row is computed independently,
+//! which is what this crate does: the same inputs give the same bytes on any thread count.
+//!
+//! **Invariant:** depends on `ignis-core`, `rayon` and `thiserror` only; knows nothing of
+//! files, video or generators.
+
+pub mod bench;
+pub mod dis;
+pub mod error;
+mod field;
+mod image;
+mod warp;
+
+pub use error::{FlowError, Result};
+pub use field::FlowField;
+pub use ignis_core::{GrayFrame, RgbaFrame, Size};
+pub use warp::{luma, morph_gray, morph_rgba, warp_gray, warp_rgba};
+
+use image::Img;
+
+/// Parameters of [`flow`]. The defaults suit fire footage and synthetic frames alike.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FlowParams {
+    /// Longest side of the working size, in pixels: larger frames are area-averaged down
+    /// to it and the field upsampled back. Range 8..=16384; default 512.
+    pub max_side: u32,
+    /// Patch side in working pixels. Range 4..=32; default 8.
+    pub patch: u32,
+    /// Distance between patch origins in working pixels. Range 1..=`patch`; default 4.
+    pub stride: u32,
+    /// Finest pyramid level computed (0 = the working size, 1 = half of it, …); the field
+    /// is upsampled from there. Range 0..=6; default 1.
+    pub finest_scale: u32,
+    /// Gauss–Newton iterations per patch and scale. Range 1..=200; default 16.
+    pub iterations: u32,
+    /// Variational refinement sweeps per scale; 0 turns it off. Range 0..=100; default 5.
+    pub refine_iterations: u32,
+    /// Smoothness weight α of the refinement (intensities scaled to 0..255). Range
+    /// (0, 1e6]; default 30.
+    pub smoothness: f32,
+}
+
+impl Default for FlowParams {
+    fn default() -> Self {
+        FlowParams {
+            max_side: 512,
+            patch: 8,
+            stride: 4,
+            finest_scale: 1,
+            iterations: 16,
+            refine_iterations: 5,
+            smoothness: 30.0,
+        }
+    }
+}
+
+impl FlowParams {
+    /// Checks every field against its documented range.
+    pub fn validate(&self) -> Result<()> {
+        let range = |name: &'static str, v: u32, lo: u32, hi: u32| {
+            if v < lo || v > hi {
+                Err(FlowError::bad(
+                    name,
+                    format!("{v} is outside {lo}..={hi}; the default works for most footage"),
+                ))
+            } else {
+                Ok(())
+            }
+        };
+        range("max_side", self.max_side, 8, ignis_core::frame::MAX_SIDE)?;
+        range("patch", self.patch, 4, dis::MAX_PATCH as u32)?;
+        range("stride", self.stride, 1, self.patch)?;
+        range("finest_scale", self.finest_scale, 0, 6)?;
+        range("iterations", self.iterations, 1, 200)?;
+        range("refine_iterations", self.refine_iterations, 0, 100)?;
+        if !(self.smoothness.is_finite() && self.smoothness > 0.0 && self.smoothness <= 1e6) {
+            return Err(FlowError::bad(
+                "smoothness",
+                format!("{} must be in (0, 1e6]; default 30", self.smoothness),
+            ));
+        }
+        Ok(())
+    }
+
+    /// The working size for frames of `size`: longest side at most `max_side`, aspect kept.
+    pub fn working_size(&self, size: Size) -> Size {
+        let long = size.width.max(size.height);
+        if long <= self.max_side {
+            return size;
+        }
+        let s = self.max_side as f64 / long as f64;
+        let side = |v: u32| ((v as f64 * s).round() as u32).clamp(1, self.max_side);
+        Size {
+            width: side(size.width),
+            height: side(size.height),
+        }
+    }
+
+    fn dis(&self) -> dis::Dis {
+        dis::Dis {
+            patch: self.patch as usize,
+            stride: self.stride as usize,
+            iterations: self.iterations,
+            finest: self.finest_scale,
+            refine_iterations: self.refine_iterations,
+            smoothness: self.smoothness,
+        }
+    }
+}
+
+/// Checks the pair and returns both frames at the working size, normalised and
+/// perceptually compressed to 0..255, or `None` when the pair holds no texture at all.
+fn prepare(a: &GrayFrame, b: &GrayFrame, p: &FlowParams) -> Result<(Size, Option<(Img, Img)>)> {
+    p.validate()?;
+    if a.size() != b.size() {
+        return Err(FlowError::SizeMismatch(format!(
+            "flow between a {} and a {} frame; resize one so both have the same size",
+            a.size(),
+            b.size()
+        )));
+    }
+    for (name, f) in [("first", a), ("second", b)] {
+        if let Some(i) = f.data().iter().position(|v| !v.is_finite()) {
+            let w = f.width() as usize;
+            return Err(FlowError::BadInput(format!(
+                "the {name} frame has a NaN or infinite pixel at ({}, {}); clamp or replace \
+                 non-finite values before computing flow",
+                i % w,
+                i / w
+            )));
+        }
+    }
+    let ws = p.working_size(a.size());
+    let (w, h) = (a.width() as usize, a.height() as usize);
+    let (ia, ib) = rayon::join(
+        || Img::new(w, h, a.data().to_vec()).area_resize(ws.width as usize, ws.height as usize),
+        || Img::new(w, h, b.data().to_vec()).area_resize(ws.width as usize, ws.height as usize),
+    );
+    let hi = ia
+        .data
+        .iter()
+        .chain(&ib.data)
+        .fold(0.0f32, |m, &v| m.max(v));
+    if hi <= 1e-12 {
+        return Ok((ws, None));
+    }
+    let k = 1.0 / hi;
+    let norm = |img: Img| {
+        let data = img
+            .data
+            .iter()
+            .map(|&v| 255.0 * (v.max(0.0) * k).sqrt())
+            .collect();
+        Img::new(img.w, img.h, data)
+    };
+    let (ia, ib) = rayon::join(|| norm(ia), || norm(ib));
+    Ok((ws, Some((ia, ib))))
+}
+
+/// The flow from `a` to `b` at the working size [`FlowParams::working_size`].
+pub fn flow_reduced(a: &GrayFrame, b: &GrayFrame, p: &FlowParams) -> Result<FlowField> {
+    let (ws, imgs) = prepare(a, b, p)?;
+    let Some((ia, ib)) = imgs else {
+        return Ok(FlowField::zero(ws));
+    };
+    let (fw, fh, v) = dis::dis(&ia, &ib, &p.dis());
+    let f = FlowField::from_parts(
+        Size {
+            width: fw as u32,
+            height: fh as u32,
+        },
+        v,
+    );
+    Ok(f.resized(ws))
+}
+
+/// The flow from `a` to `b` (`a(x) ≈ b(x + F(x))`) at `a`'s size. `a` and `b` must have
+/// the same size ([`FlowError::SizeMismatch`] otherwise) and finite pixels
+/// ([`FlowError::BadInput`]). Frames with no texture at all give the zero field.
+pub fn flow(a: &GrayFrame, b: &GrayFrame, p: &FlowParams) -> Result<FlowField> {
+    Ok(flow_reduced(a, b, p)?.resized(a.size()))
+}
+
+/// Both directions `(a→b, b→a)` at the working size, computed in parallel.
+pub fn flow_pair_reduced(
+    a: &GrayFrame,
+    b: &GrayFrame,
+    p: &FlowParams,
+) -> Result<(FlowField, FlowField)> {
+    let (f, g) = rayon::join(|| flow_reduced(a, b, p), || flow_reduced(b, a, p));
+    Ok((f?, g?))
+}
+
+/// Both directions `(a→b, b→a)` at `a`'s size, computed in parallel.
+pub fn flow_pair(a: &GrayFrame, b: &GrayFrame, p: &FlowParams) -> Result<(FlowField, FlowField)> {
+    let (f, g) = flow_pair_reduced(a, b, p)?;
+    let size = a.size();
+    let (f, g) = rayon::join(|| f.resized(size), || g.resized(size));
+    Ok((f, g))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn params_are_validated() {
+        assert!(FlowParams::default().validate().is_ok());
+        let bad = [
+            FlowParams {
+                patch: 2,
+                ..Default::default()
+            },
+            FlowParams {
+                patch: 64,
+                ..Default::default()
+            },
+            FlowParams {
+                stride: 9,
+                ..Default::default()
+            },
+            FlowParams {
+                stride: 0,
+                ..Default::default()
+            },
+            FlowParams {
+                max_side: 4,
+                ..Default::default()
+            },
+            FlowParams {
+                max_side: u32::MAX,
+                ..Default::default()
+            },
+            FlowParams {
+                iterations: 0,
+                ..Default::default()
+            },
+            FlowParams {
+                iterations: 100_000,
+                ..Default::default()
+            },
+            FlowParams {
+                finest_scale: 40,
+                ..Default::default()
+            },
+            FlowParams {
+                smoothness: f32::NAN,
+                ..Default::default()
+            },
+            FlowParams {
+                smoothness: 0.0,
+                ..Default::default()
+            },
+        ];
+        for p in bad {
+            let e = p.validate().unwrap_err();
+            assert!(matches!(e, FlowError::BadParameter { .. }), "{e}");
+        }
+    }
+
+    #[test]
+    fn working_size_keeps_aspect() {
+        let p = FlowParams::default();
+        assert_eq!(
+            p.working_size(Size::new(1920, 1080).unwrap()),
+            Size::new(512, 288).unwrap()
+        );
+        assert_eq!(
+            p.working_size(Size::new(300, 200).unwrap()),
+            Size::new(300, 200).unwrap()
+        );
+        assert_eq!(
+            p.working_size(Size::new(16_384, 1).unwrap()),
+            Size::new(512, 1).unwrap()
+        );
+    }
+
+    #[test]
+    fn tiny_flat_and_nan_frames_never_panic() {
+        let p = FlowParams::default();
+        for (w, h) in [(1, 1), (1, 9), (9, 1), (3, 3), (5, 17)] {
+            let s = Size::new(w, h).unwrap();
+            let a = GrayFrame::from_fn(s, |x, y| ((x * 7 + y * 3) % 5) as f32);
+            let b = GrayFrame::from_fn(s, |x, y| ((x * 5 + y * 7) % 4) as f32);
+            let f = flow(&a, &b, &p).unwrap();
+            assert_eq!(f.size(), s);
+            assert!(f
+                .data()
+                .iter()
+                .all(|v| v[0].is_finite() && v[1].is_finite()));
+        }
+        let s = Size::new(16, 16).unwrap();
+        let flat = GrayFrame::new(s);
+        assert_eq!(flow(&flat, &flat, &p).unwrap(), FlowField::zero(s));
+        let mut nan = GrayFrame::new(s);
+        nan.set(3, 2, f32::NAN);
+        let e = flow(&flat, &nan, &p).unwrap_err().to_string();
+        assert!(e.contains("(3, 2)") && e.contains("second"), "{e}");
+        let other = GrayFrame::new(Size::new(8, 16).unwrap());
+        assert!(matches!(
+            flow(&flat, &other, &p),
+            Err(FlowError::SizeMismatch(_))
+        ));
+    }
+}

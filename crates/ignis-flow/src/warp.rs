@@ -1,0 +1,421 @@
+//! Warps along a flow field and the motion-compensated morph between two frames.
+//!
+//! Fields of any size are accepted: they are read through a bilinear map onto the frame's
+//! pixel centres with the vectors scaled per axis (exactly what [`FlowField::resized`]
+//! would give, without building the full-size field), so a field computed at a reduced
+//! size can be passed straight in. Colour is interpolated on **premultiplied** values so
+//! transparent pixels never bleed their colour; outputs use straight alpha like every
+//! [`RgbaFrame`]. Samples outside the frame are clamped to its edge.
+
+use crate::error::{FlowError, Result};
+use crate::field::{tap, FieldMap, FlowField};
+use ignis_core::{GrayFrame, RgbaFrame, Size};
+use rayon::prelude::*;
+
+/// Rec. 709 luminance weights (linear light).
+const LUMA: [f32; 3] = [0.2126, 0.7152, 0.0722];
+
+/// The input for [`crate::flow`] from a colour frame: linear Rec. 709 luminance times alpha
+/// (what is visible over black), so transparent pixels carry no texture.
+pub fn luma(frame: &RgbaFrame) -> GrayFrame {
+    let data = frame
+        .data()
+        .par_iter()
+        .map(|p| (LUMA[0] * p[0] + LUMA[1] * p[1] + LUMA[2] * p[2]) * p[3])
+        .collect();
+    GrayFrame::from_vec(frame.size(), data).expect("same size as a valid frame")
+}
+
+/// `out(x) = src(x + t·F(x))`, bilinear, edge-clamped; `F` is resampled to `src`'s size if
+/// it has another (vectors scaled). A non-finite `t` reads every pixel from `src(0, 0)`.
+pub fn warp_gray(src: &GrayFrame, f: &FlowField, t: f32) -> GrayFrame {
+    let size = src.size();
+    let w = size.width as usize;
+    let map = FieldMap::new(f, size);
+    let view = View::new(src.data(), size);
+    let mut out = vec![0.0f32; size.pixels()];
+    out.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
+        let mut fr = vec![[0.0f32; 2]; w];
+        map.row(y, &mut fr);
+        for (x, (o, v)) in row.iter_mut().zip(&fr).enumerate() {
+            *o = sample_gray(view, x as f32 + t * v[0], y as f32 + t * v[1]);
+        }
+    });
+    GrayFrame::from_vec(size, out).expect("sized from src")
+}
+
+/// `out(x) = src(x + t·F(x))` for colour, interpolated on premultiplied values (see the
+/// module doc); otherwise as [`warp_gray`].
+pub fn warp_rgba(src: &RgbaFrame, f: &FlowField, t: f32) -> RgbaFrame {
+    let size = src.size();
+    let w = size.width as usize;
+    let map = FieldMap::new(f, size);
+    let view = View::new(src.data(), size);
+    let mut out = vec![[0.0f32; 4]; size.pixels()];
+    out.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
+        let mut fr = vec![[0.0f32; 2]; w];
+        map.row(y, &mut fr);
+        for (x, (o, v)) in row.iter_mut().zip(&fr).enumerate() {
+            *o = unpremultiply(sample_pm(view, x as f32 + t * v[0], y as f32 + t * v[1]));
+        }
+    });
+    RgbaFrame::from_vec(size, out).expect("sized from src")
+}
+
+/// A frame's pixels with its size, so inner loops index a slice directly.
+#[derive(Clone, Copy)]
+struct View<'a, T> {
+    d: &'a [T],
+    w: u32,
+    h: u32,
+}
+
+impl<'a, T> View<'a, T> {
+    fn new(d: &'a [T], size: Size) -> Self {
+        View {
+            d,
+            w: size.width,
+            h: size.height,
+        }
+    }
+
+    /// The four bilinear taps at `(x, y)` (edge-clamped) and their weights.
+    #[inline(always)]
+    fn taps(&self, x: f32, y: f32) -> ([usize; 4], [f32; 4]) {
+        let (x0, x1, wx) = tap(x, self.w);
+        let (y0, y1, wy) = tap(y, self.h);
+        let w = self.w as usize;
+        let (r0, r1) = (y0 as usize * w, y1 as usize * w);
+        let (x0, x1) = (x0 as usize, x1 as usize);
+        (
+            [r0 + x0, r0 + x1, r1 + x0, r1 + x1],
+            [
+                (1.0 - wx) * (1.0 - wy),
+                wx * (1.0 - wy),
+                (1.0 - wx) * wy,
+                wx * wy,
+            ],
+        )
+    }
+}
+
+#[inline(always)]
+fn sample_gray(src: View<f32>, x: f32, y: f32) -> f32 {
+    let (i, k) = src.taps(x, y);
+    src.d[i[0]] * k[0] + src.d[i[1]] * k[1] + src.d[i[2]] * k[2] + src.d[i[3]] * k[3]
+}
+
+/// Premultiplied bilinear sample.
+#[inline(always)]
+fn sample_pm(src: View<[f32; 4]>, x: f32, y: f32) -> [f32; 4] {
+    let (i, k) = src.taps(x, y);
+    let mut o = [0.0f32; 4];
+    for (&i, &k) in i.iter().zip(&k) {
+        let p = src.d[i];
+        let a = p[3] * k;
+        o[0] += p[0] * a;
+        o[1] += p[1] * a;
+        o[2] += p[2] * a;
+        o[3] += a;
+    }
+    o
+}
+
+#[inline(always)]
+fn unpremultiply(p: [f32; 4]) -> [f32; 4] {
+    if p[3] > 1e-8 {
+        let inv = 1.0 / p[3];
+        [p[0] * inv, p[1] * inv, p[2] * inv, p[3]]
+    } else {
+        [0.0; 4]
+    }
+}
+
+/// Scale (in frame pixels) of the forward–backward error at which a side's weight halves.
+const FB_SIGMA: f32 = 1.0;
+
+/// Forward–backward consistency weight of every pixel of the field `f` (from frame A to
+/// frame B) against `g` (B to A), on `f`'s grid: `1 / (1 + (e/σ)²)` with
+/// `e = |f(x) + g(x + f(x))|` measured in pixels of `frame` size.
+fn consistency(f: &FlowField, g: &FlowField, frame: Size) -> Vec<f32> {
+    let fs = f.size();
+    let gs = g.size();
+    // f's vectors in g's pixels, and errors back in frame pixels.
+    let (fgx, fgy) = (
+        gs.width as f32 / fs.width as f32,
+        gs.height as f32 / fs.height as f32,
+    );
+    let (ex, ey) = (
+        frame.width as f32 / gs.width as f32,
+        frame.height as f32 / gs.height as f32,
+    );
+    let w = fs.width as usize;
+    let mut out = vec![0.0f32; fs.pixels()];
+    out.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
+        for (x, o) in row.iter_mut().enumerate() {
+            let v = f.data()[y * w + x];
+            // Position of this pixel centre in g's grid, then moved along f.
+            let gx = (x as f32 + 0.5) * fgx - 0.5 + v[0] * fgx;
+            let gy = (y as f32 + 0.5) * fgy - 0.5 + v[1] * fgy;
+            let back = g.at(gx, gy);
+            let dx = (v[0] * fgx + back[0]) * ex;
+            let dy = (v[1] * fgy + back[1]) * ey;
+            let e2 = (dx * dx + dy * dy) / (FB_SIGMA * FB_SIGMA);
+            *o = 1.0 / (1.0 + e2);
+        }
+    });
+    out
+}
+
+/// Checks `t` and the frames' sizes for the morphs.
+fn check_morph(a: Size, b: Size, t: f32) -> Result<()> {
+    if a != b {
+        return Err(FlowError::SizeMismatch(format!(
+            "morph between a {a} and a {b} frame; resize one so both have the same size"
+        )));
+    }
+    if !(0.0..=1.0).contains(&t) {
+        return Err(FlowError::bad(
+            "t",
+            format!("{t} is outside 0..=1; 0 gives the first frame, 1 the second"),
+        ));
+    }
+    Ok(())
+}
+
+/// Per-pixel sampling plan of a morph: where to read A and B and with what weights.
+struct MorphPlan<'a> {
+    fwd: FieldMap<'a>,
+    bwd: FieldMap<'a>,
+    ca: Vec<f32>,
+    cb: Vec<f32>,
+    ca_size: Size,
+    cb_size: Size,
+    t: f32,
+}
+
+impl<'a> MorphPlan<'a> {
+    fn new(size: Size, fwd: &'a FlowField, bwd: &'a FlowField, t: f32) -> MorphPlan<'a> {
+        let (ca, cb) = rayon::join(
+            || consistency(fwd, bwd, size),
+            || consistency(bwd, fwd, size),
+        );
+        MorphPlan {
+            fwd: FieldMap::new(fwd, size),
+            bwd: FieldMap::new(bwd, size),
+            ca,
+            cb,
+            ca_size: fwd.size(),
+            cb_size: bwd.size(),
+            t,
+        }
+    }
+
+    /// For row `y`: `(xa, ya, xb, yb, weight of A)` per pixel.
+    #[inline(always)]
+    fn row(
+        &self,
+        y: usize,
+        size: Size,
+        fa: &mut [[f32; 2]],
+        fb: &mut [[f32; 2]],
+        out: &mut Vec<[f32; 5]>,
+    ) {
+        self.fwd.row(y, fa);
+        self.bwd.row(y, fb);
+        out.clear();
+        let t = self.t;
+        let (rax, ray) = (
+            self.ca_size.width as f32 / size.width as f32,
+            self.ca_size.height as f32 / size.height as f32,
+        );
+        let (rbx, rby) = (
+            self.cb_size.width as f32 / size.width as f32,
+            self.cb_size.height as f32 / size.height as f32,
+        );
+        let yf = y as f32;
+        for (x, (va, vb)) in fa.iter().zip(fb.iter()).enumerate() {
+            let xf = x as f32;
+            let (xa, ya) = (xf - t * va[0], yf - t * va[1]);
+            let (xb, yb) = (xf - (1.0 - t) * vb[0], yf - (1.0 - t) * vb[1]);
+            let ca = sample_map(
+                &self.ca,
+                self.ca_size,
+                (xa + 0.5) * rax - 0.5,
+                (ya + 0.5) * ray - 0.5,
+            );
+            let cb = sample_map(
+                &self.cb,
+                self.cb_size,
+                (xb + 0.5) * rbx - 0.5,
+                (yb + 0.5) * rby - 0.5,
+            );
+            let wa = (1.0 - t) * ca.max(1e-3);
+            let wb = t * cb.max(1e-3);
+            let s = wa + wb;
+            out.push([xa, ya, xb, yb, if s > 0.0 { wa / s } else { 1.0 - t }]);
+        }
+    }
+}
+
+#[inline(always)]
+fn sample_map(m: &[f32], size: Size, x: f32, y: f32) -> f32 {
+    sample_gray(View::new(m, size), x, y)
+}
+
+/// The in-between frame at time `t ∈ [0, 1]` from `a` (t = 0) to `b` (t = 1):
+/// `wA·a(x − t·F_ab(x)) + wB·b(x − (1−t)·F_ba(x))`, with `fwd = F_ab`, `bwd = F_ba`
+/// (e.g. from [`crate::flow_pair`]).
+///
+/// Occlusion-aware weights: `wA ∝ (1−t)·cA` and `wB ∝ t·cB`, normalised to sum 1, where
+/// `cA = 1/(1 + e²)` is the forward–backward consistency of `F_ab` at the point read from
+/// `a` (`e = |F_ab(p) + F_ba(p + F_ab(p))|` in frame pixels; likewise `cB` for `F_ba` at
+/// the point read from `b`). Where both flows are consistent this is the plain
+/// `(1−t)·A + t·B`; where one side's motion is not confirmed by the other flow (an
+/// occlusion or a mismatch) the other side dominates.
+///
+/// `a` and `b` must have the same size (else [`FlowError::SizeMismatch`]); the fields may
+/// have any size and are resampled to the frames' (vectors scaled). `t` outside `0..=1`
+/// is a [`FlowError::BadParameter`].
+pub fn morph_gray(
+    a: &GrayFrame,
+    b: &GrayFrame,
+    fwd: &FlowField,
+    bwd: &FlowField,
+    t: f32,
+) -> Result<GrayFrame> {
+    let size = a.size();
+    check_morph(size, b.size(), t)?;
+    let plan = MorphPlan::new(size, fwd, bwd, t);
+    let w = size.width as usize;
+    let (va_, vb_) = (View::new(a.data(), size), View::new(b.data(), size));
+    let mut out = vec![0.0f32; size.pixels()];
+    out.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
+        let (mut fa, mut fb) = (vec![[0.0f32; 2]; w], vec![[0.0f32; 2]; w]);
+        let mut pl = Vec::with_capacity(w);
+        plan.row(y, size, &mut fa, &mut fb, &mut pl);
+        for (o, p) in row.iter_mut().zip(&pl) {
+            let va = sample_gray(va_, p[0], p[1]);
+            let vb = sample_gray(vb_, p[2], p[3]);
+            *o = p[4] * va + (1.0 - p[4]) * vb;
+        }
+    });
+    Ok(GrayFrame::from_vec(size, out).expect("sized from a"))
+}
+
+/// [`morph_gray`] for colour frames, blended on premultiplied values.
+pub fn morph_rgba(
+    a: &RgbaFrame,
+    b: &RgbaFrame,
+    fwd: &FlowField,
+    bwd: &FlowField,
+    t: f32,
+) -> Result<RgbaFrame> {
+    let size = a.size();
+    check_morph(size, b.size(), t)?;
+    let plan = MorphPlan::new(size, fwd, bwd, t);
+    let w = size.width as usize;
+    let (va_, vb_) = (View::new(a.data(), size), View::new(b.data(), size));
+    let mut out = vec![[0.0f32; 4]; size.pixels()];
+    out.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
+        let (mut fa, mut fb) = (vec![[0.0f32; 2]; w], vec![[0.0f32; 2]; w]);
+        let mut pl = Vec::with_capacity(w);
+        plan.row(y, size, &mut fa, &mut fb, &mut pl);
+        for (o, p) in row.iter_mut().zip(&pl) {
+            let va = sample_pm(va_, p[0], p[1]);
+            let vb = sample_pm(vb_, p[2], p[3]);
+            let k = p[4];
+            let mut m = [0.0f32; 4];
+            for c in 0..4 {
+                m[c] = k * va[c] + (1.0 - k) * vb[c];
+            }
+            *o = unpremultiply(m);
+        }
+    });
+    Ok(RgbaFrame::from_vec(size, out).expect("sized from a"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ramp(w: u32, h: u32) -> GrayFrame {
+        GrayFrame::from_fn(Size::new(w, h).unwrap(), |x, y| x as f32 + 10.0 * y as f32)
+    }
+
+    #[test]
+    fn warp_by_a_constant_shift_reads_the_shifted_pixel() {
+        let g = ramp(8, 6);
+        let f = FlowField::from_vec(g.size(), vec![[1.0, 2.0]; 48]).unwrap();
+        let o = warp_gray(&g, &f, 1.0);
+        assert_eq!(o.get(2, 1), g.get(3, 3));
+        let o = warp_gray(&g, &f, 0.5);
+        assert!((o.get(2, 1) - (2.5 + 20.0)).abs() < 1e-5);
+        // A half-size field scales its vectors.
+        let half = FlowField::from_vec(Size::new(4, 3).unwrap(), vec![[0.5, 1.0]; 12]).unwrap();
+        assert_eq!(warp_gray(&g, &half, 1.0).get(2, 1), g.get(3, 3));
+    }
+
+    #[test]
+    fn transparent_pixels_do_not_bleed() {
+        let s = Size::new(2, 1).unwrap();
+        let src = RgbaFrame::from_vec(s, vec![[1.0, 0.0, 0.0, 1.0], [0.0, 1.0, 0.0, 0.0]]).unwrap();
+        let f = FlowField::from_vec(s, vec![[0.5, 0.0]; 2]).unwrap();
+        let o = warp_rgba(&src, &f, 1.0);
+        let p = o.get(0, 0);
+        assert!(
+            (p[0] - 1.0).abs() < 1e-6 && p[1] == 0.0 && (p[3] - 0.5).abs() < 1e-6,
+            "{p:?}"
+        );
+    }
+
+    #[test]
+    fn morph_endpoints_and_errors() {
+        let a = ramp(6, 5);
+        let b = a.map(|v| v + 1.0);
+        let z = FlowField::zero(a.size());
+        let m0 = morph_gray(&a, &b, &z, &z, 0.0).unwrap();
+        let m1 = morph_gray(&a, &b, &z, &z, 1.0).unwrap();
+        assert_eq!(m0, a);
+        assert_eq!(m1, b);
+        let mid = morph_gray(&a, &b, &z, &z, 0.5).unwrap();
+        assert!((mid.get(3, 2) - (a.get(3, 2) + 0.5)).abs() < 1e-5);
+        assert!(morph_gray(&a, &b, &z, &z, 1.5).is_err());
+        assert!(morph_gray(&a, &b, &z, &z, f32::NAN).is_err());
+        assert!(morph_gray(&a, &ramp(5, 5), &z, &z, 0.5).is_err());
+    }
+
+    #[test]
+    fn consistency_weights() {
+        let s = Size::new(8, 4).unwrap();
+        let fwd = FlowField::from_vec(s, vec![[3.0, 0.0]; 32]).unwrap();
+        let bwd = FlowField::from_vec(s, vec![[-3.0, 0.0]; 32]).unwrap();
+        // Opposite flows agree: full weight everywhere.
+        assert!(consistency(&fwd, &bwd, s)
+            .iter()
+            .all(|&v| (v - 1.0).abs() < 1e-6));
+        // A 3-px disagreement: 1 / (1 + 9).
+        let z = FlowField::zero(s);
+        assert!(consistency(&fwd, &z, s)
+            .iter()
+            .all(|&v| (v - 0.1).abs() < 1e-6));
+        // Measured in frame pixels: the same fields at half size for a frame twice as big.
+        let big = Size::new(16, 8).unwrap();
+        let c = consistency(&fwd, &z, big);
+        assert!(
+            c.iter().all(|&v| (v - 1.0 / 37.0).abs() < 1e-6),
+            "{:?}",
+            c[0]
+        );
+        // Consistent flows: the morph is the plain formula.
+        let a = GrayFrame::from_fn(s, |x, _| x as f32);
+        let b = GrayFrame::from_fn(s, |x, _| x as f32 - 3.0);
+        let m = morph_gray(&a, &b, &fwd, &bwd, 0.5).unwrap();
+        let ws = warp_gray(&a, &fwd, -0.5);
+        let wb = warp_gray(&b, &bwd, -0.5);
+        for i in 0..32 {
+            let want = 0.5 * ws.data()[i] + 0.5 * wb.data()[i];
+            assert!((m.data()[i] - want).abs() < 1e-5);
+        }
+    }
+}
