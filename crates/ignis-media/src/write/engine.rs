@@ -106,6 +106,13 @@ pub(crate) struct SettingsInput {
     pub mv_scale: Option<f32>,
 }
 
+impl SettingsInput {
+    /// The strength as the JSON shows it (the f32 value's shortest decimal).
+    fn scale(&self) -> Option<f64> {
+        self.mv_scale.and_then(|s| format!("{s}").parse().ok())
+    }
+}
+
 /// The engine's own parameter names and the values this flipbook needs (JSON object).
 pub(crate) fn settings(engine: Engine, s: &SettingsInput) -> Value {
     let premul = s.alpha == AlphaMode::Premultiplied;
@@ -116,7 +123,7 @@ pub(crate) fn settings(engine: Engine, s: &SettingsInput) -> Value {
             "frames": s.frames,
             "fps": s.fps,
             "loop": s.loop_,
-            "motion_vector_scale": s.mv_scale,
+            "motion_vector_scale": s.scale(),
         }),
         Engine::Unity => json!({
             "Texture Sheet Animation": {
@@ -131,7 +138,7 @@ pub(crate) fn settings(engine: Engine, s: &SettingsInput) -> Value {
             "VFX Graph": {
                 "Flipbook Size": { "x": s.columns, "y": s.rows },
                 "UV Mode": if s.mv_scale.is_some() { "FlipbookMotionBlend" } else { "Flipbook" },
-                "Motion Vector Scale": s.mv_scale,
+                "Motion Vector Scale": s.scale(),
             },
             "Shader Graph Flipbook": { "Width": s.columns, "Height": s.rows, "Invert Y": true },
             "Import": { "Color sRGB": true, "Alpha Is Transparency": !premul, "Motion vectors sRGB": false, "Compression": "None" },
@@ -140,7 +147,7 @@ pub(crate) fn settings(engine: Engine, s: &SettingsInput) -> Value {
             "SubImages_Horizontal": s.columns,
             "SubImages_Vertical": s.rows,
             "SubUV": { "SubImage Index": "frame + blend (0 .. frames)", "FrameRate": s.fps, "Frames": s.frames },
-            "Motion Vector Strength": s.mv_scale,
+            "Motion Vector Strength": s.scale(),
             "Texture": { "Color sRGB": true, "Motion vectors sRGB": false, "Motion vectors Compression Settings": "VectorDisplacementmap (RGBA8) or HDR (RGBA16F), uncompressed" },
         }),
         Engine::Godot => json!({
@@ -149,14 +156,14 @@ pub(crate) fn settings(engine: Engine, s: &SettingsInput) -> Value {
             "particles_anim_loop": s.loop_,
             "blend_mode": if premul { "premul_alpha" } else { "mix" },
             "anim_speed_fps": s.fps,
-            "motion_vector_scale": s.mv_scale,
+            "motion_vector_scale": s.scale(),
         }),
         Engine::Sidefx => json!({
             "Rows": s.rows,
             "Columns": s.columns,
             "Total Frames": s.frames,
             "FPS": s.fps,
-            "Motion Vector Strength": s.mv_scale,
+            "Motion Vector Strength": s.scale(),
             "Green Flipped": true,
         }),
     }
