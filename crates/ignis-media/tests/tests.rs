@@ -1337,3 +1337,163 @@ mod engines {
         );
     }
 }
+
+/// Every shader in `engines/` through a real compiler front end (see engines/README.md).
+mod shaders {
+    use std::path::PathBuf;
+
+    fn engines() -> PathBuf {
+        PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../engines"))
+    }
+
+    fn read(rel: &str) -> String {
+        std::fs::read_to_string(engines().join(rel)).unwrap()
+    }
+
+    fn validate(module: &naga::Module, what: &str) {
+        naga::valid::Validator::new(
+            naga::valid::ValidationFlags::all(),
+            naga::valid::Capabilities::all(),
+        )
+        .validate(module)
+        .unwrap_or_else(|e| panic!("{what}: {e:?}"));
+    }
+
+    #[test]
+    fn every_engine_file_is_checked() {
+        let mut files = Vec::new();
+        for dir in std::fs::read_dir(engines()).unwrap() {
+            let dir = dir.unwrap().path();
+            if dir.is_dir() {
+                for f in std::fs::read_dir(&dir).unwrap() {
+                    files.push(f.unwrap().path());
+                }
+            }
+        }
+        let mut names: Vec<String> = files
+            .iter()
+            .map(|p| p.strip_prefix(engines()).unwrap().display().to_string())
+            .collect();
+        names.sort();
+        // A new shader needs a check below before it can ship.
+        assert_eq!(
+            names,
+            [
+                "godot/flipbook_motion_blend.gdshader",
+                "unity/FlipbookMotionBlend.hlsl",
+                "unreal/FlipbookMotionBlend.ush",
+                "wgsl/flipbook_motion_blend.wgsl",
+            ]
+        );
+    }
+
+    #[test]
+    fn wgsl_parses_and_validates() {
+        let src = read("wgsl/flipbook_motion_blend.wgsl");
+        let module = naga::front::wgsl::parse_str(&src).unwrap_or_else(|e| panic!("{}", e.emit_to_string(&src)));
+        validate(&module, "wgsl");
+        assert!(module.entry_points.iter().any(|e| e.name == "fs_main"));
+    }
+
+    /// The Godot shading language → Vulkan-style GLSL 450 (the mapping in engines/README.md).
+    fn godot_to_glsl(src: &str) -> String {
+        let mut samplers = Vec::new();
+        let mut block = Vec::new();
+        let mut body = Vec::new();
+        for line in src.lines() {
+            let t = line.trim();
+            if t.starts_with("shader_type") || t.starts_with("render_mode") {
+                continue;
+            }
+            if let Some(rest) = t.strip_prefix("uniform ") {
+                let decl = rest.split([':', '=', ';']).next().unwrap().trim();
+                let (ty, name) = decl.split_once(' ').unwrap();
+                if ty == "sampler2D" {
+                    samplers.push(name.trim().to_string());
+                } else {
+                    block.push(format!("    {ty} {};", name.trim()));
+                }
+                continue;
+            }
+            body.push(line.to_string());
+        }
+        let mut out = String::from("#version 450\nlayout(location = 0) in vec2 UV;\nlayout(location = 0) out vec4 COLOR;\n");
+        out += &format!("layout(set = 0, binding = 0) uniform Params {{\n{}\n}};\n", block.join("\n"));
+        for (i, s) in samplers.iter().enumerate() {
+            out += &format!(
+                "layout(set = 0, binding = {}) uniform texture2D {s}_t;\nlayout(set = 0, binding = {}) uniform sampler {s}_s;\n",
+                1 + 2 * i,
+                2 + 2 * i
+            );
+        }
+        let mut text = body.join("\n").replace("void fragment()", "void main()");
+        for s in &samplers {
+            text = text.replace(&format!("texture({s},"), &format!("texture(sampler2D({s}_t, {s}_s),"));
+        }
+        out + &text
+    }
+
+    #[test]
+    fn godot_shader_as_glsl() {
+        let glsl = godot_to_glsl(&read("godot/flipbook_motion_blend.gdshader"));
+        let mut frontend = naga::front::glsl::Frontend::default();
+        let opts = naga::front::glsl::Options::from(naga::ShaderStage::Fragment);
+        let module = frontend
+            .parse(&opts, &glsl)
+            .unwrap_or_else(|e| panic!("{}\n{}", e.emit_to_string(&glsl), glsl));
+        validate(&module, "godot");
+    }
+
+    fn glslang() -> Option<PathBuf> {
+        let ok = std::process::Command::new("glslangValidator")
+            .arg("--version")
+            .output()
+            .is_ok_and(|o| o.status.success());
+        if !ok {
+            println!("skipped: glslangValidator not on PATH (Debian package glslang-tools)");
+        }
+        ok.then(|| PathBuf::from("glslangValidator"))
+    }
+
+    fn check_hlsl(source: &str, entry: &str) {
+        let Some(tool) = glslang() else { return };
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("shader.frag.hlsl");
+        std::fs::write(&path, source).unwrap();
+        let out = std::process::Command::new(tool)
+            .args(["-D", "-S", "frag", "-e", entry, "-V"])
+            .arg(&path)
+            .args(["-o"])
+            .arg(dir.path().join("out.spv"))
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}\n{}\n{source}",
+            String::from_utf8_lossy(&out.stdout),
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+
+    #[test]
+    fn unity_custom_function_hlsl() {
+        let src = read("unity/FlipbookMotionBlend.hlsl")
+            + "\nTexture2D Col; Texture2D Mv; SamplerState Smp;\n\
+               float4 main(float2 uv : TEXCOORD0) : SV_Target {\n\
+               float4 o; FlipbookMotionBlend_float(Col, Mv, Smp, uv, float2(8, 8), 64, 0.05, 3.25, 1, o); return o; }\n";
+        check_hlsl(&src, "main");
+    }
+
+    #[test]
+    fn unreal_custom_node_hlsl() {
+        let body = read("unreal/FlipbookMotionBlend.ush");
+        let src = format!(
+            "#define Texture2DSample(t, s, uv) t.Sample(s, uv)\n\
+             Texture2D ColorSheet; SamplerState ColorSheetSampler;\n\
+             Texture2D MotionSheet; SamplerState MotionSheetSampler;\n\
+             float4 CustomExpression0(float2 UV, float2 SubImages, float Frames, float Strength, float SubImageIndex, float Loop)\n{{\n{body}\n}}\n\
+             float4 main(float2 uv : TEXCOORD0) : SV_Target {{ return CustomExpression0(uv, float2(8, 8), 64, 0.05, 3.25, 1); }}\n"
+        );
+        check_hlsl(&src, "main");
+    }
+}
