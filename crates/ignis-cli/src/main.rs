@@ -4,6 +4,7 @@
 //! reporting live here; every capability is a library call.
 
 mod animate;
+mod bench_export;
 mod classic;
 mod convert;
 mod demo;
@@ -77,11 +78,11 @@ struct DemoArgs {
 
 #[derive(clap::Args, Debug)]
 #[command(
-    after_help = "Examples:\n  ignis bench classic\n  ignis bench classic --quick\n  ignis bench eigen-train\n  ignis bench eigen-animate --keep-db /tmp/bench.db\n  ignis bench learned\n  ignis bench volume"
+    after_help = "Examples:\n  ignis bench classic\n  ignis bench classic --quick\n  ignis bench eigen-train\n  ignis bench eigen-animate --keep-db /tmp/bench.db\n  ignis bench learned\n  ignis bench volume\n  ignis bench export         # motion-vector blend vs cross-fade, flow timings"
 )]
 struct BenchArgs {
     /// What to measure.
-    #[arg(value_parser = ["classic", "eigen-train", "eigen-animate", "learned", "volume"])]
+    #[arg(value_parser = ["classic", "eigen-train", "eigen-animate", "learned", "volume", "export"])]
     target: String,
     /// Fewer repetitions (a smoke test; figures are noisier).
     #[arg(long)]
@@ -136,6 +137,7 @@ fn run(cli: Cli) -> Result<()> {
                 }
                 "volume" => volume::bench(&g, a.quick)?,
                 "learned" => learned::bench(&g, a.quick)?,
+                "export" => bench_export::figures(&g, a.quick)?,
                 other => anyhow::bail!("unknown bench target `{other}`"),
             };
             println!("{}", serde_json::to_string_pretty(&v)?);

@@ -161,13 +161,28 @@ impl OutputArgs {
     }
 }
 
-/// Motion vectors from the workspace's dense optical flow (DIS on the frames' luma).
+/// Motion vectors from the workspace's dense optical flow (DIS on the frames' luma), kept
+/// where the forward and backward flows agree: a vector `F(x)` is weighted by
+/// `exp(-(|F(x) + B(x + F(x))| / 1 px)²)`, so flicker, occlusions and textureless areas
+/// (where flow is guesswork) get no motion and the engine's blend falls back to a
+/// cross-fade there instead of dragging pixels along a wrong vector.
 pub fn flow_source() -> MotionSource {
     MotionSource::new(|a, b| {
         let p = ignis_flow::FlowParams::default();
-        ignis_flow::flow(&ignis_flow::luma(a), &ignis_flow::luma(b), &p)
-            .map(|f| f.into_vec())
-            .map_err(|e| e.to_string())
+        let (f, g) = ignis_flow::flow_pair(&ignis_flow::luma(a), &ignis_flow::luma(b), &p)
+            .map_err(|e| e.to_string())?;
+        let w = f.size().width as usize;
+        Ok(f.data()
+            .iter()
+            .enumerate()
+            .map(|(i, &[dx, dy])| {
+                let (x, y) = ((i % w) as f32, (i / w) as f32);
+                let [bx, by] = g.at(x + dx, y + dy);
+                let e2 = (dx + bx).powi(2) + (dy + by).powi(2);
+                let k = (-e2).exp();
+                [dx * k, dy * k]
+            })
+            .collect())
     })
 }
 

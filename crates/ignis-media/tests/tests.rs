@@ -1390,7 +1390,8 @@ mod shaders {
     #[test]
     fn wgsl_parses_and_validates() {
         let src = read("wgsl/flipbook_motion_blend.wgsl");
-        let module = naga::front::wgsl::parse_str(&src).unwrap_or_else(|e| panic!("{}", e.emit_to_string(&src)));
+        let module = naga::front::wgsl::parse_str(&src)
+            .unwrap_or_else(|e| panic!("{}", e.emit_to_string(&src)));
         validate(&module, "wgsl");
         assert!(module.entry_points.iter().any(|e| e.name == "fs_main"));
     }
@@ -1418,7 +1419,10 @@ mod shaders {
             body.push(line.to_string());
         }
         let mut out = String::from("#version 450\nlayout(location = 0) in vec2 UV;\nlayout(location = 0) out vec4 COLOR;\n");
-        out += &format!("layout(set = 0, binding = 0) uniform Params {{\n{}\n}};\n", block.join("\n"));
+        out += &format!(
+            "layout(set = 0, binding = 0) uniform Params {{\n{}\n}};\n",
+            block.join("\n")
+        );
         for (i, s) in samplers.iter().enumerate() {
             out += &format!(
                 "layout(set = 0, binding = {}) uniform texture2D {s}_t;\nlayout(set = 0, binding = {}) uniform sampler {s}_s;\n",
@@ -1428,7 +1432,10 @@ mod shaders {
         }
         let mut text = body.join("\n").replace("void fragment()", "void main()");
         for s in &samplers {
-            text = text.replace(&format!("texture({s},"), &format!("texture(sampler2D({s}_t, {s}_s),"));
+            text = text.replace(
+                &format!("texture({s},"),
+                &format!("texture(sampler2D({s}_t, {s}_s),"),
+            );
         }
         out + &text
     }
