@@ -647,10 +647,7 @@ mod export {
         assert_eq!(m["motion_vectors"]["green"], "up");
         assert_eq!(m["padding"], 2);
         let tiles = &m["engine_settings"]["Texture Sheet Animation"]["Tiles"];
-        assert_eq!(
-            tiles["X"].as_u64().unwrap() * tiles["Y"].as_u64().unwrap() >= 6,
-            true
-        );
+        assert!(tiles["X"].as_u64().unwrap() * tiles["Y"].as_u64().unwrap() >= 6);
     }
 
     /// The real flow (ignis_flow) through the flipbook writer: a textured disc moving by
@@ -699,9 +696,9 @@ mod export {
             w.finish().unwrap();
             let fb = ignis_media::read_flipbook(&path.with_extension("json")).unwrap();
             let mv = fb.motion.unwrap();
-            for k in 0..3usize {
+            for (k, field) in mv.iter().take(3).enumerate() {
                 let (cx, cy) = (20 + 3 * k, 16 + 2 * k);
-                let [dx, dy] = mv[k][cy * 64 + cx];
+                let [dx, dy] = field[cy * 64 + cx];
                 assert!(
                     (dx - 3.0).abs() < 0.5 && (dy - 2.0).abs() < 0.5,
                     "{engine:?} frame {k}: ({dx}, {dy})"

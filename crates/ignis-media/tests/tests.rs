@@ -1271,7 +1271,7 @@ mod engines {
             for k in 0..n {
                 w.push(&disc(k)).unwrap();
             }
-            w.finish().err().expect("must fail")
+            w.finish().expect_err("must fail")
         };
         // 30 frames of 24×20 cannot fit a 64-pixel sheet.
         let e = try_write(

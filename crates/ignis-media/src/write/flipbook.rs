@@ -290,7 +290,7 @@ pub fn plan_layout(n: u32, frame: Size, opts: &FlipbookOptions) -> Result<(Layou
                 "variants set the grid (one row per loop); drop --columns / --rows",
             ));
         }
-        if n % v != 0 {
+        if !n.is_multiple_of(v) {
             return Err(MediaError::bad(
                 "variants",
                 format!("{n} frames do not split into {v} loops of equal length"),
@@ -621,7 +621,7 @@ impl Sink for FlipbookSink {
                 .collect()
         };
         let fps = self.fps * per as f64 / per_in as f64;
-        let retimed = (m != n).then(|| Retime {
+        let retimed = (m != n).then_some(Retime {
             from_frames: per_in as u32,
             from_fps: self.fps,
         });
