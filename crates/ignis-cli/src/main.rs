@@ -15,7 +15,7 @@ mod learned;
 mod output;
 mod volume;
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 use clap::{FromArgMatches, Parser, Subcommand};
 use global::Global;
 use std::path::PathBuf;
@@ -78,11 +78,13 @@ struct DemoArgs {
 
 #[derive(clap::Args, Debug)]
 #[command(
-    after_help = "Examples:\n  ignis bench classic\n  ignis bench classic --quick\n  ignis bench eigen-train\n  ignis bench eigen-animate --keep-db /tmp/bench.db\n  ignis bench learned\n  ignis bench volume\n  ignis bench export         # motion-vector blend vs cross-fade, flow timings"
+    after_help = "Examples:\n  ignis bench classic\n  ignis bench classic --quick\n  ignis bench eigen-train\n  ignis bench eigen-animate --keep-db /tmp/bench.db\n  ignis bench learned\n  ignis bench volume\n  ignis bench flow --quick\n  ignis bench export         # motion-vector blend vs cross-fade, flow timings"
 )]
 struct BenchArgs {
-    /// What to measure.
-    #[arg(value_parser = ["classic", "eigen-train", "eigen-animate", "learned", "volume", "export"])]
+    /// What to measure (`flow`: dense optical flow and the motion-compensated morph,
+    /// against the issues' speed goals, plus mid-frame prediction on ../shared/data;
+    /// `export`: flipbook motion-vector blending vs a cross-fade, and flipbook timing).
+    #[arg(value_parser = ["classic", "eigen-train", "eigen-animate", "learned", "volume", "flow", "export"])]
     target: String,
     /// Fewer repetitions (a smoke test; figures are noisier).
     #[arg(long)]
@@ -91,6 +93,66 @@ struct BenchArgs {
     /// on later runs (training 2,197 frames takes about half a minute).
     #[arg(long, value_name = "DIR")]
     keep_db: Option<std::path::PathBuf>,
+}
+
+/// `ignis bench flow`: the speed goals of `ignis-flow` on synthetic pairs, and how well
+/// the motion-compensated mid frame predicts the real middle frame of the shared footage
+/// (when `../shared/data` is present) against the plain 50/50 blend.
+fn flow_bench(quick: bool) -> Result<serde_json::Value> {
+    use serde_json::json;
+    let p = ignis_flow::FlowParams::default();
+    let mut out = serde_json::Map::new();
+    out.insert("threads".into(), rayon::current_num_threads().into());
+    out.insert(
+        "params".into(),
+        json!({"max_side": p.max_side, "patch": p.patch, "stride": p.stride,
+               "finest_scale": p.finest_scale, "iterations": p.iterations,
+               "refine_iterations": p.refine_iterations}),
+    );
+    for t in ignis_flow::bench::figures(quick)? {
+        out.insert(
+            t.name.into(),
+            json!({"size": t.size.to_string(), "median_ms": t.median_ms, "min_ms": t.min_ms,
+                   "goal_ms": t.goal_ms, "goal_met": t.goal_met(),
+                   "mean_error_px": t.mean_error_px}),
+        );
+    }
+    let starts: &[u64] = if quick {
+        &[100]
+    } else {
+        &[30, 100, 200, 300, 400]
+    };
+    let mut rows = Vec::new();
+    for clip in ["candle.mp4", "campfire.mp4", "fireball.mp4"] {
+        let Some(path) = demo::shared_data(clip) else {
+            continue;
+        };
+        for &s in starts {
+            let opts = ignis_media::ReadOptions {
+                range: Some(ignis_media::FrameRange::frames(s, Some(s + 3))),
+                ..Default::default()
+            };
+            let fr: Vec<ignis_core::RgbaFrame> = ignis_media::open(&path, &opts)?
+                .collect::<std::result::Result<_, _>>()
+                .with_context(|| format!("decoding {}", path.display()))?;
+            if fr.len() < 3 {
+                continue;
+            }
+            let e = ignis_flow::bench::mid_frame_error(&fr[0], &fr[1], &fr[2], &p)?;
+            rows.push(json!({"clip": clip, "frames": format!("{s}..{}", s + 3),
+                             "morph_mae": e.morph_mae, "blend_mae": e.blend_mae,
+                             "ratio": e.ratio()}));
+        }
+    }
+    if rows.is_empty() {
+        out.insert(
+            "morph_vs_blend".into(),
+            "skipped: ../shared/data not found".into(),
+        );
+    } else {
+        out.insert("morph_vs_blend".into(), rows.into());
+    }
+    Ok(out.into())
 }
 
 /// Parses a subcommand's arguments from an argv (first element = program name); used
@@ -138,6 +200,12 @@ fn run(cli: Cli) -> Result<()> {
                 "volume" => volume::bench(&g, a.quick)?,
                 "learned" => learned::bench(&g, a.quick)?,
                 "export" => bench_export::figures(&g, a.quick)?,
+                "flow" => {
+                    let sp = g.spinner("timing flow and morphs");
+                    let v = flow_bench(a.quick)?;
+                    sp.finish_and_clear();
+                    v
+                }
                 other => anyhow::bail!("unknown bench target `{other}`"),
             };
             println!("{}", serde_json::to_string_pretty(&v)?);

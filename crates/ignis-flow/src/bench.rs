@@ -140,3 +140,50 @@ pub fn figures(quick: bool) -> crate::Result<Vec<Timing>> {
     });
     Ok(out)
 }
+
+/// How well the motion-compensated mid frame of `(a, b)` predicts the real frame `mid`
+/// between them, against the plain 50/50 blend: mean absolute error of the grey
+/// (alpha-weighted luma) frames, linear light.
+#[derive(Clone, Copy, Debug)]
+pub struct MidFrameError {
+    pub morph_mae: f64,
+    pub blend_mae: f64,
+}
+
+impl MidFrameError {
+    /// `morph_mae / blend_mae`: below 1 means the morph predicts the real frame better.
+    pub fn ratio(&self) -> f64 {
+        self.morph_mae / self.blend_mae.max(1e-12)
+    }
+}
+
+/// The errors of [`MidFrameError`] for three consecutive frames `a, mid, b`.
+pub fn mid_frame_error(
+    a: &RgbaFrame,
+    mid: &RgbaFrame,
+    b: &RgbaFrame,
+    p: &FlowParams,
+) -> crate::Result<MidFrameError> {
+    let (la, lm, lb) = (luma(a), luma(mid), luma(b));
+    if la.size() != lm.size() || la.size() != lb.size() {
+        return Err(crate::FlowError::SizeMismatch(format!(
+            "frames of {}, {} and {}; give three frames of one clip",
+            la.size(),
+            lm.size(),
+            lb.size()
+        )));
+    }
+    let (f, g) = flow_pair_reduced(&la, &lb, p)?;
+    let m = crate::morph_gray(&la, &lb, &f, &g, 0.5)?;
+    let n = lm.data().len() as f64;
+    let mut em = 0.0f64;
+    let mut eb = 0.0f64;
+    for (((&x, &y), &z), &t) in m.data().iter().zip(la.data()).zip(lb.data()).zip(lm.data()) {
+        em += (x - t).abs() as f64;
+        eb += (0.5 * (y + z) - t).abs() as f64;
+    }
+    Ok(MidFrameError {
+        morph_mae: em / n,
+        blend_mae: eb / n,
+    })
+}

@@ -11,7 +11,8 @@
 //! patch whose final zero-mean SSD is worse than at its start keeps its start. The dense
 //! field is the average of the displacements of every patch covering a pixel, each
 //! weighted by `1 / max(1, |I1(x + u) − I0(x) − mean residual|)` (intensities scaled to
-//! 0..255 as in the paper). A light refinement follows at each scale (see [`refine`]).
+//! 0..255 as in the paper). An optional light refinement follows at each scale (see
+//! [`refine`]; off by default).
 //!
 //! Departures from the paper: the brightness is mean-normalised per patch (the paper's
 //! optional variant, kept on because fire flickers); the variational refinement is a
