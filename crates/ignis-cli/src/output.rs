@@ -69,7 +69,9 @@ pub struct OutputArgs {
     #[arg(long)]
     pub fit_frames: bool,
     /// Flipbook: lay the frames as N rows of equal length, each row played as its own loop
-    /// (Unity's Single Row mode); the frame count must divide by N.
+    /// (Unity's Single Row mode; motion vectors wrap within each row); the frame count must
+    /// divide by N. The frames are split in the order the command makes them, so rows are
+    /// seamless only when the command renders each row as a loop.
     #[arg(long, default_value_t = 1, value_name = "N")]
     pub variants: u32,
     /// Do not mark GIFs and flipbooks as looping.
@@ -156,6 +158,16 @@ impl OutputArgs {
             .with_context(|| format!("finishing {}", self.output.display()))?;
         for f in &files {
             g.say(format!("wrote {}", f.display()));
+            if f.extension().is_some_and(|e| e == "json") {
+                if let Ok(m) = ignis_media::read_flipbook_meta(f) {
+                    if let Some(r) = &m.retimed {
+                        g.say(format!(
+                            "retimed {} frames at {} fps to {} frames at {} fps to fill the {}×{} grid",
+                            r.from_frames, r.from_fps, m.frame_count, m.fps, m.columns, m.rows
+                        ));
+                    }
+                }
+            }
         }
         Ok(files)
     }

@@ -855,13 +855,18 @@ impl Sink for FlipbookSink {
     }
 }
 
+/// Reads only a flipbook's JSON sidecar.
+pub fn read_flipbook_meta(json_path: &Path) -> Result<FlipbookMeta> {
+    let text = std::fs::read(json_path).map_err(|e| MediaError::io(json_path, e))?;
+    serde_json::from_slice(&text)
+        .map_err(|e| MediaError::decode(json_path, None, format!("not a flipbook sidecar: {e}")))
+}
+
 /// Reads a flipbook back from its JSON sidecar: the metadata, every frame (linear light,
 /// straight alpha; a premultiplied sheet is un-premultiplied) and the motion vectors when
 /// the sheet has them (pixels, +y down).
 pub fn read_flipbook(json_path: &Path) -> Result<Flipbook> {
-    let text = std::fs::read(json_path).map_err(|e| MediaError::io(json_path, e))?;
-    let meta: FlipbookMeta = serde_json::from_slice(&text)
-        .map_err(|e| MediaError::decode(json_path, None, format!("not a flipbook sidecar: {e}")))?;
+    let meta = read_flipbook_meta(json_path)?;
     let dir = super::parent_dir(json_path);
     let sheet = crate::read::read_image(&dir.join(&meta.image))?;
     let fw = meta.frame_width;

@@ -39,8 +39,8 @@ use crate::error::{MediaError, Result};
 
 pub use engine::Engine;
 pub use flipbook::{
-    plan_layout, read_flipbook, retime, AlphaMode, Flipbook, FlipbookMeta, FlipbookOptions,
-    HeatMeta, Layout, MotionMeta, Retime,
+    plan_layout, read_flipbook, read_flipbook_meta, retime, AlphaMode, Flipbook, FlipbookMeta,
+    FlipbookOptions, HeatMeta, Layout, MotionMeta, Retime,
 };
 pub use motion::MotionSource;
 
