@@ -2,11 +2,19 @@
 
 use anyhow::{Context, Result};
 use ignis_core::{Palette, Size};
-use ignis_media::{AlphaMode, FlipbookOptions, Format, FrameWriter, WriteOptions};
+use ignis_media::{
+    AlphaMode, Engine, FlipbookOptions, Format, FrameWriter, MotionSource, WriteOptions,
+};
 use std::path::PathBuf;
 
 /// Where and how to write frames. The format follows the output path unless `--format`
 /// says otherwise.
+///
+/// Flipbook examples (any generating command):
+///   --engine unity --motion-vectors -o fire.png      Unity VFX Graph motion blend
+///   --engine unreal --max-size 4096 --pot -o fire.png
+///   --engine godot --emission --hdr -o fire.png          + fire.heat.png, fire.exr
+///   --fit-frames --columns 8 -o fire.png             retime to fill every cell
 #[derive(clap::Args, Debug, Clone)]
 pub struct OutputArgs {
     /// Output: `x.mp4`, `x.gif`, `x.png` (flipbook + `x.json`), a directory `dir/` or a
@@ -28,9 +36,44 @@ pub struct OutputArgs {
     /// Flipbook: edge-bleed padding around each cell, in pixels.
     #[arg(long, default_value_t = 0)]
     pub padding: u32,
-    /// Flipbook: write premultiplied instead of straight alpha.
+    /// Flipbook: write premultiplied instead of straight alpha (the godot preset always
+    /// writes premultiplied).
     #[arg(long)]
     pub premultiplied: bool,
+    /// Flipbook: engine preset (UV origin, motion-vector green direction, alpha, ≥ 2 px
+    /// extruded padding, and the engine's own settings in the JSON's `engine_settings`),
+    /// e.g. `--engine unity`. See README "Engine-ready flipbooks".
+    #[arg(long, default_value = "generic", value_parser = ["unity", "unreal", "godot", "sidefx", "generic"])]
+    pub engine: String,
+    /// Flipbook: also write `x.mv.png`, a 16-bit motion-vector sheet (RG, 0.5 = still) from
+    /// dense optical flow between consecutive frames, for engines' motion-vector frame
+    /// blending; the JSON's `motion_vectors.scale` is the material's strength.
+    #[arg(long)]
+    pub motion_vectors: bool,
+    /// Flipbook: also write `x.heat.png`, an emission/temperature sheet (16-bit linear
+    /// grey: the luminance of the premultiplied colour) for colour ramps in the engine.
+    #[arg(long)]
+    pub emission: bool,
+    /// Flipbook: also write `x.exr`, the colour sheet in linear f32 (HDR, premultiplied).
+    #[arg(long)]
+    pub hdr: bool,
+    /// Flipbook: largest sheet side in pixels, e.g. 4096; the grid is chosen to fit, or the
+    /// command fails before writing anything.
+    #[arg(long, value_name = "PIXELS")]
+    pub max_size: Option<u32>,
+    /// Flipbook: power-of-two sheet sides (power-of-two grids; extra pixels become padding).
+    #[arg(long)]
+    pub pot: bool,
+    /// Flipbook: resample the animation in time so it fills every cell of the grid (fps
+    /// raised to keep the duration; reported in the JSON's `retimed`).
+    #[arg(long)]
+    pub fit_frames: bool,
+    /// Flipbook: lay the frames as N rows of equal length, each row played as its own loop
+    /// (Unity's Single Row mode; motion vectors wrap within each row); the frame count must
+    /// divide by N. The frames are split in the order the command makes them, so rows are
+    /// seamless only when the command renders each row as a loop.
+    #[arg(long, default_value_t = 1, value_name = "N")]
+    pub variants: u32,
     /// Do not mark GIFs and flipbooks as looping.
     #[arg(long)]
     pub no_loop: bool,
@@ -55,16 +98,47 @@ impl OutputArgs {
                 alpha: if self.premultiplied {
                     AlphaMode::Premultiplied
                 } else {
-                    AlphaMode::Straight
+                    self.engine().conventions().alpha
                 },
+                engine: self.engine(),
+                max_size: self.max_size,
+                pot: self.pot,
+                fit_frames: self.fit_frames,
+                variants: self.variants,
+                motion: self.motion_vectors.then(flow_source),
+                heat: self.emission,
+                hdr: self.hdr,
             },
             background: [0.0; 3],
             first_frame: 0,
         }
     }
 
+    /// The engine preset named by `--engine`.
+    pub fn engine(&self) -> Engine {
+        Engine::from_name(&self.engine).unwrap_or_default()
+    }
+
     /// Opens the writer (atomic: nothing appears under the final name until `finish`).
     pub fn create(&self, size: Size) -> Result<FrameWriter> {
+        let flipbook_only = self.motion_vectors
+            || self.emission
+            || self.hdr
+            || self.max_size.is_some()
+            || self.pot
+            || self.fit_frames
+            || self.variants != 1
+            || self.engine() != Engine::Generic;
+        let format = match self.write_options().format {
+            Some(f) => f,
+            None => Format::from_path(&self.output)?,
+        };
+        if flipbook_only && format != Format::Flipbook {
+            anyhow::bail!(
+                "--engine, --motion-vectors, --emission, --hdr, --max-size, --pot, --fit-frames and \
+                 --variants apply to flipbooks; write to a .png file (e.g. -o fire.png)"
+            );
+        }
         ignis_media::create(&self.output, size, &self.write_options())
             .with_context(|| format!("creating {}", self.output.display()))
     }
@@ -85,9 +159,44 @@ impl OutputArgs {
             .with_context(|| format!("finishing {}", self.output.display()))?;
         for f in &files {
             g.say(format!("wrote {}", f.display()));
+            if f.extension().is_some_and(|e| e == "json") {
+                if let Ok(m) = ignis_media::read_flipbook_meta(f) {
+                    if let Some(r) = &m.retimed {
+                        g.say(format!(
+                            "retimed {} frames at {} fps to {} frames at {} fps to fill the {}×{} grid",
+                            r.from_frames, r.from_fps, m.frame_count, m.fps, m.columns, m.rows
+                        ));
+                    }
+                }
+            }
         }
         Ok(files)
     }
+}
+
+/// Motion vectors from the workspace's dense optical flow (DIS on the frames' luma), kept
+/// where the forward and backward flows agree: a vector `F(x)` is weighted by
+/// `exp(-(|F(x) + B(x + F(x))| / 1 px)²)`, so flicker, occlusions and textureless areas
+/// (where flow is guesswork) get no motion and the engine's blend falls back to a
+/// cross-fade there instead of dragging pixels along a wrong vector.
+pub fn flow_source() -> MotionSource {
+    MotionSource::new(|a, b| {
+        let p = ignis_flow::FlowParams::default();
+        let (f, g) = ignis_flow::flow_pair(&ignis_flow::luma(a), &ignis_flow::luma(b), &p)
+            .map_err(|e| e.to_string())?;
+        let w = f.size().width as usize;
+        Ok(f.data()
+            .iter()
+            .enumerate()
+            .map(|(i, &[dx, dy])| {
+                let (x, y) = ((i % w) as f32, (i / w) as f32);
+                let [bx, by] = g.at(x + dx, y + dy);
+                let e2 = (dx + bx).powi(2) + (dy + by).powi(2);
+                let k = (-e2).exp();
+                [dx * k, dy * k]
+            })
+            .collect())
+    })
 }
 
 /// `--palette`: a preset name or a gradient PNG.

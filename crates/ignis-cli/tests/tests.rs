@@ -997,3 +997,143 @@ mod loops_and_chunks {
         }
     }
 }
+
+mod export {
+    use super::*;
+
+    #[test]
+    fn engine_flipbook_with_motion_vectors_emission_and_hdr() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("fire.png");
+        let o = ignis(&[
+            "-q",
+            "classic",
+            "--size",
+            "48x32",
+            "--frames",
+            "6",
+            "--engine",
+            "unity",
+            "--motion-vectors",
+            "--emission",
+            "--hdr",
+            "--max-size",
+            "256",
+            "-o",
+            out.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        assert_eq!(
+            files_in(dir.path()),
+            [
+                "fire.exr",
+                "fire.heat.png",
+                "fire.json",
+                "fire.mv.png",
+                "fire.png"
+            ]
+        );
+        let m: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(dir.path().join("fire.json")).unwrap()).unwrap();
+        assert_eq!(m["engine"], "unity");
+        assert_eq!(m["motion_vectors"]["green"], "up");
+        assert_eq!(m["padding"], 2);
+        let tiles = &m["engine_settings"]["Texture Sheet Animation"]["Tiles"];
+        assert!(tiles["X"].as_u64().unwrap() * tiles["Y"].as_u64().unwrap() >= 6);
+    }
+
+    /// The real flow (ignis_flow) through the flipbook writer: a textured disc moving by
+    /// (3, 2) px per frame reads back, for every preset, as (3, 2) px at its centre.
+    #[test]
+    fn real_flow_recovers_a_moving_disc_in_every_preset() {
+        use ignis_media::{Engine, FlipbookOptions, MotionSource, RgbaFrame, Size, WriteOptions};
+        let size = Size::new(64, 48).unwrap();
+        let disc = |k: u32| {
+            let (cx, cy) = (20.0 + 3.0 * k as f32, 16.0 + 2.0 * k as f32);
+            let mut f = RgbaFrame::new(size);
+            for y in 0..size.height {
+                for x in 0..size.width {
+                    let (dx, dy) = (x as f32 - cx, y as f32 - cy);
+                    let r = (dx * dx + dy * dy).sqrt();
+                    if r < 9.0 {
+                        let v = 0.5 + 0.4 * (dx * 0.9).sin() * (dy * 0.7).cos();
+                        f.set(x, y, [v, v * 0.6, v * 0.3, 1.0]);
+                    }
+                }
+            }
+            f
+        };
+        let flow = MotionSource::new(|a: &RgbaFrame, b: &RgbaFrame| {
+            let p = ignis_flow::FlowParams::default();
+            ignis_flow::flow(&ignis_flow::luma(a), &ignis_flow::luma(b), &p)
+                .map(|f| f.into_vec())
+                .map_err(|e| e.to_string())
+        });
+        let dir = tempfile::tempdir().unwrap();
+        for engine in Engine::ALL {
+            let path = dir.path().join(format!("{}.png", engine.name()));
+            let opts = WriteOptions {
+                loop_: false,
+                flipbook: FlipbookOptions {
+                    engine,
+                    motion: Some(flow.clone()),
+                    ..Default::default()
+                },
+                ..Default::default()
+            };
+            let mut w = ignis_media::create(&path, size, &opts).unwrap();
+            for k in 0..4 {
+                w.push(&disc(k)).unwrap();
+            }
+            w.finish().unwrap();
+            let fb = ignis_media::read_flipbook(&path.with_extension("json")).unwrap();
+            let mv = fb.motion.unwrap();
+            for (k, field) in mv.iter().take(3).enumerate() {
+                let (cx, cy) = (20 + 3 * k, 16 + 2 * k);
+                let [dx, dy] = field[cy * 64 + cx];
+                assert!(
+                    (dx - 3.0).abs() < 0.5 && (dy - 2.0).abs() < 0.5,
+                    "{engine:?} frame {k}: ({dx}, {dy})"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn bad_export_options_are_refused_and_nothing_is_written() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("f.png");
+        let o = out.to_str().unwrap();
+        let run = |extra: &[&str], frames: &str| {
+            let mut a = vec![
+                "-q", "classic", "--size", "48x32", "--frames", frames, "-o", o,
+            ];
+            a.extend_from_slice(extra);
+            ignis(&a)
+        };
+        assert_fails(&run(&["--max-size", "100"], "40"), "max-size");
+        assert_fails(&run(&["--variants", "0"], "4"), "variants");
+        assert_fails(&run(&["--motion-vectors"], "1"), "at least two frames");
+        let mp4 = dir.path().join("f.mp4");
+        assert_fails(
+            &ignis(&[
+                "-q",
+                "classic",
+                "--size",
+                "48x32",
+                "--frames",
+                "2",
+                "--engine",
+                "unity",
+                "-o",
+                mp4.to_str().unwrap(),
+            ]),
+            "apply to flipbooks",
+        );
+        assert!(
+            files_in(dir.path()).is_empty(),
+            "{:?}",
+            files_in(dir.path())
+        );
+    }
+}

@@ -590,15 +590,16 @@ mod roundtrip {
             (m.image.as_str(), m.frame_width, m.frame_height),
             ("fire.png", 12, 10)
         );
-        assert_eq!((m.columns, m.rows, m.frame_count, m.padding), (4, 3, 10, 2));
+        // 10 frames: 2 × 5 wastes no cell and gives the squarer sheet (32×70, not 80×28).
+        assert_eq!((m.columns, m.rows, m.frame_count, m.padding), (2, 5, 10, 2));
         assert_eq!((m.fps, m.loop_, m.alpha), (24.0, true, AlphaMode::Straight));
         assert_eq!(m.order, "row-major, top-left first");
         // The sheet has exactly the size the JSON implies, and the padding bleeds edges.
         let sheet = read_image(&path).unwrap();
-        assert_eq!(sheet.size(), size(4 * 16, 3 * 14));
-        assert_eq!(sheet.get(16, 14), frames[5].get(0, 0)); // cell (1,1) corner = frame 5 (0,0)
-        assert_eq!(sheet.get(16 + 2, 14 + 2), frames[5].get(0, 0));
-        assert_eq!(sheet.get(16 + 15, 14 + 8), frames[5].get(11, 6));
+        assert_eq!(sheet.size(), size(2 * 16, 5 * 14));
+        assert_eq!(sheet.get(16, 14), frames[3].get(0, 0)); // cell (1,1) corner = frame 3 (0,0)
+        assert_eq!(sheet.get(16 + 2, 14 + 2), frames[3].get(0, 0));
+        assert_eq!(sheet.get(16 + 15, 14 + 8), frames[3].get(11, 6));
         assert_eq!(fb.frames, frames);
         let text = std::fs::read_to_string(&json).unwrap();
         for key in [
@@ -1052,5 +1053,602 @@ mod hardening {
             read_flipbook(&dir.path().join("fb.json")).unwrap().frames,
             f0
         );
+    }
+}
+/// Engine presets read back by decoders written from each engine's documented convention
+/// (tile counts from the engine's own JSON keys, the engine's UV origin, its green
+/// direction), not from `read_flipbook`.
+mod engines {
+    use super::*;
+    use ignis_media::write::motion::MV_NEUTRAL;
+    use serde_json::Value;
+
+    const W: u32 = 24;
+    const H: u32 = 20;
+    const STEP: [f32; 2] = [4.0, 2.0];
+    const FRAMES: u32 = 5;
+
+    fn centre(k: u32) -> [f32; 2] {
+        [5.5 + STEP[0] * k as f32, 5.5 + STEP[1] * k as f32]
+    }
+
+    /// Frame `k`: a disc of radius 3 (linear colour (1, 0.5, 0.2), alpha 0.5) centred at
+    /// `centre(k)` on transparent black.
+    fn disc(k: u32) -> RgbaFrame {
+        let mut f = RgbaFrame::new(Size::new(W, H).unwrap());
+        let [cx, cy] = centre(k);
+        for y in 0..H {
+            for x in 0..W {
+                let d = ((x as f32 + 0.5 - cx).powi(2) + (y as f32 + 0.5 - cy).powi(2)).sqrt();
+                if d <= 3.0 {
+                    f.set(x, y, [1.0, 0.5, 0.2, 0.5]);
+                }
+            }
+        }
+        f
+    }
+
+    /// A flow for these discs: the shift of the disc's centroid from `a` to `b` where
+    /// `a`'s disc is, zero elsewhere (what a dense flow of them gives). Tests with
+    /// `ignis_flow` itself live in the CLI's tests.
+    fn disc_flow() -> MotionSource {
+        fn centroid(f: &RgbaFrame) -> [f32; 2] {
+            let (mut sx, mut sy, mut n) = (0.0, 0.0, 0.0);
+            for y in 0..f.height() {
+                for x in 0..f.width() {
+                    let a = f.get(x, y)[3];
+                    sx += a * x as f32;
+                    sy += a * y as f32;
+                    n += a;
+                }
+            }
+            [sx / n, sy / n]
+        }
+        MotionSource::new(|a: &RgbaFrame, b: &RgbaFrame| {
+            let (ca, cb) = (centroid(a), centroid(b));
+            let d = [cb[0] - ca[0], cb[1] - ca[1]];
+            Ok(a.data()
+                .iter()
+                .map(|p| if p[3] > 0.0 { d } else { [0.0, 0.0] })
+                .collect())
+        })
+    }
+
+    struct Sheet {
+        meta: Value,
+        colour: image::RgbaImage,
+        mv: image::ImageBuffer<image::Rgb<u16>, Vec<u16>>,
+    }
+
+    fn write(dir: &Path, engine: Engine) -> Sheet {
+        let path = dir.join(format!("{}.png", engine.name()));
+        let opts = WriteOptions {
+            loop_: false,
+            flipbook: FlipbookOptions {
+                engine,
+                columns: Some(4), // 4 × 2 cells: cells 5..7 stay empty
+                alpha: engine.conventions().alpha,
+                motion: Some(disc_flow()),
+                ..Default::default()
+            },
+            ..Default::default()
+        };
+        let frames: Vec<_> = (0..FRAMES).map(disc).collect();
+        write_all(&path, &frames, &opts);
+        let meta: Value =
+            serde_json::from_slice(&std::fs::read(path.with_extension("json")).unwrap()).unwrap();
+        let mv_name = meta["motion_vectors"]["image"].as_str().unwrap();
+        Sheet {
+            colour: image::open(&path).unwrap().into_rgba8(),
+            mv: image::open(dir.join(mv_name)).unwrap().into_rgb16(),
+            meta,
+        }
+    }
+
+    /// What one engine's decoder needs: tiles across/down from the engine's keys, whether
+    /// its UV origin is bottom-left, and whether its motion `v` points up.
+    struct Convention {
+        tiles: (u32, u32),
+        v_up: bool,
+    }
+
+    fn convention(engine: Engine, m: &Value) -> Convention {
+        let s = &m["engine_settings"];
+        let n = |v: &Value| v.as_u64().unwrap() as u32;
+        match engine {
+            // Unity: Texture Sheet Animation Tiles X/Y; UV origin bottom-left.
+            Engine::Unity => Convention {
+                tiles: (
+                    n(&s["Texture Sheet Animation"]["Tiles"]["X"]),
+                    n(&s["Texture Sheet Animation"]["Tiles"]["Y"]),
+                ),
+                v_up: true,
+            },
+            // Unreal: SubImages_Horizontal/Vertical, sub-image 0 top-left, UV origin top-left.
+            Engine::Unreal => Convention {
+                tiles: (n(&s["SubImages_Horizontal"]), n(&s["SubImages_Vertical"])),
+                v_up: false,
+            },
+            // Godot: particles_anim_h_frames / v_frames, UV origin top-left.
+            Engine::Godot => Convention {
+                tiles: (
+                    n(&s["particles_anim_h_frames"]),
+                    n(&s["particles_anim_v_frames"]),
+                ),
+                v_up: false,
+            },
+            // SideFX Labs: Columns / Rows, Houdini UVs (bottom-left), green flipped.
+            Engine::Sidefx => Convention {
+                tiles: (n(&s["Columns"]), n(&s["Rows"])),
+                v_up: true,
+            },
+            Engine::Generic => Convention {
+                tiles: (n(&s["columns"]), n(&s["rows"])),
+                v_up: false,
+            },
+        }
+    }
+
+    /// The image pixel an engine samples for sub-image `k` at tile-UV `(tu, tv)` (in the
+    /// engine's own UV orientation).
+    fn engine_pixel(c: &Convention, sheet: (u32, u32), k: u32, tu: f32, tv: f32) -> (u32, u32) {
+        let (tx, ty) = c.tiles;
+        let (col, row_from_top) = (k % tx, k / tx);
+        let u = (col as f32 + tu) / tx as f32;
+        let (v, y_img) = if c.v_up {
+            // Rows counted from the bottom in UV space; image rows from the top.
+            let v = ((ty - 1 - row_from_top) as f32 + tv) / ty as f32;
+            (v, (1.0 - v) * sheet.1 as f32)
+        } else {
+            let v = (row_from_top as f32 + tv) / ty as f32;
+            (v, v * sheet.1 as f32)
+        };
+        let _ = v;
+        (
+            ((u * sheet.0 as f32).floor() as u32).min(sheet.0 - 1),
+            (y_img.floor() as u32).min(sheet.1 - 1),
+        )
+    }
+
+    /// Tile UV of frame pixel `(x, y)` (its centre) in the engine's orientation.
+    fn tile_uv(m: &Value, c: &Convention, x: f32, y: f32) -> (f32, f32) {
+        let n = |k: &str| m[k].as_u64().unwrap() as f32;
+        let (cw, ch) = (n("cell_width"), n("cell_height"));
+        let (fx, fy) = (n("frame_x"), n("frame_y"));
+        let tu = (fx + x) / cw;
+        let tv_down = (fy + y) / ch;
+        (tu, if c.v_up { 1.0 - tv_down } else { tv_down })
+    }
+
+    #[test]
+    fn every_preset_decodes_frame_and_motion() {
+        let dir = tempfile::tempdir().unwrap();
+        for engine in Engine::ALL {
+            let s = write(dir.path(), engine);
+            let c = convention(engine, &s.meta);
+            assert_eq!(c.tiles, (4, 2), "{engine:?}");
+            let dims = s.colour.dimensions();
+            let scale = s.meta["motion_vectors"]["scale"].as_f64().unwrap() as f32;
+            let (cw, ch) = (
+                s.meta["cell_width"].as_f64().unwrap() as f32,
+                s.meta["cell_height"].as_f64().unwrap() as f32,
+            );
+            for k in 0..FRAMES {
+                // Frame k's disc centre is opaque-ish in sub-image k; the neighbours' centres
+                // are empty there (a wrong cell or a flipped Y would read them).
+                let at = |kk: u32| {
+                    let [x, y] = centre(kk);
+                    let (tu, tv) = tile_uv(&s.meta, &c, x, y);
+                    engine_pixel(&c, dims, k, tu, tv)
+                };
+                let (px, py) = at(k);
+                assert_eq!(s.colour.get_pixel(px, py)[3], 128, "{engine:?} frame {k}");
+                for other in [k.wrapping_sub(1), k + 1] {
+                    if other < FRAMES {
+                        let (qx, qy) = at(other);
+                        assert_eq!(s.colour.get_pixel(qx, qy)[3], 0, "{engine:?} frame {k}");
+                    }
+                }
+                // Motion at the disc centre: (r*2-1)*scale in tile UV → pixels, the
+                // engine's v direction turned into image rows.
+                let p = s.mv.get_pixel(px, py);
+                let f = |v: u16| (v as f32 / 65535.0) * 2.0 - 1.0;
+                let du = f(p[0]) * scale * cw;
+                let dv = f(p[1]) * scale * ch;
+                let dy = if c.v_up { -dv } else { dv };
+                assert!(
+                    (du - STEP[0]).abs() < 0.5 && (dy - STEP[1]).abs() < 0.5,
+                    "{engine:?} frame {k}: ({du}, {dy})"
+                );
+                // No motion away from the disc (the frame's far corner).
+                let (tu, tv) = tile_uv(&s.meta, &c, W as f32 - 0.5, 0.5);
+                let (qx, qy) = engine_pixel(&c, dims, k, tu, tv);
+                let q = s.mv.get_pixel(qx, qy);
+                assert_eq!((q[0], q[1]), (MV_NEUTRAL, MV_NEUTRAL), "{engine:?}");
+            }
+            // Empty cells: exactly zero motion (32768 = 128 in 8 bits) and transparent.
+            for k in FRAMES..8 {
+                for (tu, tv) in [(0.01, 0.01), (0.5, 0.5), (0.99, 0.99)] {
+                    let (px, py) = engine_pixel(&c, dims, k, tu, tv);
+                    let q = s.mv.get_pixel(px, py);
+                    assert_eq!((q[0], q[1], q[2]), (MV_NEUTRAL, MV_NEUTRAL, 0));
+                    assert_eq!(s.colour.get_pixel(px, py).0, [0, 0, 0, 0]);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn padding_alpha_and_colour_spaces_as_declared() {
+        use ignis_core::palette::linear_to_srgb;
+        let dir = tempfile::tempdir().unwrap();
+        for engine in Engine::ALL {
+            let s = write(dir.path(), engine);
+            let m = &s.meta;
+            let n = |k: &str| m[k].as_u64().unwrap() as u32;
+            let (cw, ch, fx, fy) = (
+                n("cell_width"),
+                n("cell_height"),
+                n("frame_x"),
+                n("frame_y"),
+            );
+            assert_eq!(fx, engine.conventions().min_padding, "{engine:?}");
+            // Extruded: every padding pixel repeats the nearest frame pixel (colour and
+            // motion), in every cell.
+            for k in 0..8u32 {
+                let (ox, oy) = ((k % 4) * cw, (k / 4) * ch);
+                for cy in 0..ch {
+                    for cx in 0..cw {
+                        let sx = cx.saturating_sub(fx).min(W - 1) + fx;
+                        let sy = cy.saturating_sub(fy).min(H - 1) + fy;
+                        assert_eq!(
+                            s.colour.get_pixel(ox + cx, oy + cy),
+                            s.colour.get_pixel(ox + sx, oy + sy)
+                        );
+                        assert_eq!(
+                            s.mv.get_pixel(ox + cx, oy + cy),
+                            s.mv.get_pixel(ox + sx, oy + sy)
+                        );
+                    }
+                }
+            }
+            // Alpha as the JSON says, colour sRGB-encoded as declared.
+            assert_eq!(m["color_space"], "srgb");
+            assert_eq!(m["motion_vectors"]["color_space"], "linear");
+            let [x, y] = centre(0);
+            let p = s.colour.get_pixel(fx + x as u32, fy + y as u32).0;
+            let premul = m["alpha"] == "premultiplied";
+            assert_eq!(premul, engine == Engine::Godot);
+            let a = if premul { 0.5 } else { 1.0 };
+            let code = |v: f32| (linear_to_srgb(v * a) * 255.0).round() as u8;
+            assert_eq!(p, [code(1.0), code(0.5), code(0.2), 128], "{engine:?}");
+            if engine == Engine::Godot {
+                assert_eq!(m["engine_settings"]["blend_mode"], "premul_alpha");
+            }
+        }
+    }
+
+    #[test]
+    fn heat_hdr_variants_and_retime() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("v.png");
+        let frames: Vec<_> = (0..6).map(|k| disc(k % 3)).collect();
+        let opts = WriteOptions {
+            flipbook: FlipbookOptions {
+                variants: 2,
+                heat: true,
+                hdr: true,
+                motion: Some(disc_flow()),
+                ..Default::default()
+            },
+            ..Default::default()
+        };
+        let files = write_all(&path, &frames, &opts);
+        let names: Vec<String> = files
+            .iter()
+            .map(|p| p.file_name().unwrap().to_string_lossy().into_owned())
+            .collect();
+        assert_eq!(
+            names,
+            ["v.png", "v.mv.png", "v.heat.png", "v.exr", "v.json"]
+        );
+        let fb = read_flipbook(&dir.path().join("v.json")).unwrap();
+        assert_eq!((fb.meta.columns, fb.meta.rows, fb.meta.variants), (3, 2, 2));
+        // Each row loops on its own: the last frame of a row moves back to its first.
+        let mv = fb.motion.unwrap();
+        let [x, y] = centre(2);
+        let i = (y as usize) * W as usize + x as usize;
+        let back = [-2.0 * STEP[0], -2.0 * STEP[1]];
+        assert!(
+            (mv[2][i][0] - back[0]).abs() < 0.01 && (mv[2][i][1] - back[1]).abs() < 0.01,
+            "{:?}",
+            mv[2][i]
+        );
+        let [x, y] = centre(0);
+        // Heat: linear luminance of the premultiplied colour, scaled by the JSON's scale.
+        let heat = image::open(dir.path().join("v.heat.png"))
+            .unwrap()
+            .into_luma16();
+        let scale = fb.meta.heat.as_ref().unwrap().scale;
+        let lum = (0.2126 + 0.7152 * 0.5 + 0.0722 * 0.2) * 0.5;
+        assert!((scale - lum).abs() < 1e-6);
+        assert_eq!(heat.get_pixel(x as u32, y as u32)[0], 65535);
+        // HDR: linear premultiplied f32.
+        let exr = image::open(dir.path().join("v.exr"))
+            .unwrap()
+            .into_rgba32f();
+        let p = exr.get_pixel(x as u32, y as u32).0;
+        assert!(
+            (p[0] - 0.5).abs() < 1e-6 && (p[3] - 0.5).abs() < 1e-6,
+            "{p:?}"
+        );
+
+        // Retime: 7 frames fill a 4 × 2 grid → 8 frames at 8/7 the fps.
+        let path = dir.path().join("r.png");
+        let frames: Vec<_> = (0..7).map(|k| disc(k % 5)).collect();
+        let opts = WriteOptions {
+            fps: 28.0,
+            flipbook: FlipbookOptions {
+                pot: true,
+                fit_frames: true,
+                ..Default::default()
+            },
+            ..Default::default()
+        };
+        write_all(&path, &frames, &opts);
+        let fb = read_flipbook(&dir.path().join("r.json")).unwrap();
+        assert_eq!(fb.meta.frame_count, 8);
+        assert_eq!(fb.meta.fps, 32.0);
+        assert_eq!(fb.meta.retimed.as_ref().unwrap().from_frames, 7);
+    }
+
+    #[test]
+    fn bad_export_options_write_nothing() {
+        let dir = tempfile::tempdir().unwrap();
+        let size = Size::new(W, H).unwrap();
+        let try_write = |name: &str, n: u32, fb: FlipbookOptions| {
+            let opts = WriteOptions {
+                flipbook: fb,
+                ..Default::default()
+            };
+            let path = dir.path().join(name);
+            let mut w = match create(&path, size, &opts) {
+                Ok(w) => w,
+                Err(e) => return e,
+            };
+            for k in 0..n {
+                w.push(&disc(k)).unwrap();
+            }
+            w.finish().expect_err("must fail")
+        };
+        // 30 frames of 24×20 cannot fit a 64-pixel sheet.
+        let e = try_write(
+            "big.png",
+            30,
+            FlipbookOptions {
+                max_size: Some(64),
+                ..Default::default()
+            },
+        );
+        assert!(matches!(e, MediaError::LimitExceeded(_)), "{e}");
+        assert!(e.to_string().contains("max-size"), "{e}");
+        // One frame does not fit 16 pixels: refused at create.
+        let e = try_write(
+            "tiny.png",
+            1,
+            FlipbookOptions {
+                max_size: Some(16),
+                ..Default::default()
+            },
+        );
+        assert!(matches!(e, MediaError::LimitExceeded(_)), "{e}");
+        let e = try_write(
+            "v0.png",
+            2,
+            FlipbookOptions {
+                variants: 0,
+                ..Default::default()
+            },
+        );
+        assert!(
+            matches!(
+                e,
+                MediaError::BadParameter {
+                    name: "variants",
+                    ..
+                }
+            ),
+            "{e}"
+        );
+        let e = try_write(
+            "one.png",
+            1,
+            FlipbookOptions {
+                motion: Some(disc_flow()),
+                ..Default::default()
+            },
+        );
+        assert!(
+            matches!(
+                e,
+                MediaError::BadParameter {
+                    name: "motion-vectors",
+                    ..
+                }
+            ),
+            "{e}"
+        );
+        assert!(
+            dir_entries(dir.path()).is_empty(),
+            "{:?}",
+            dir_entries(dir.path())
+        );
+    }
+}
+
+/// Every shader in `engines/` through a real compiler front end (see engines/README.md).
+mod shaders {
+    use std::path::PathBuf;
+
+    fn engines() -> PathBuf {
+        PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../engines"))
+    }
+
+    fn read(rel: &str) -> String {
+        std::fs::read_to_string(engines().join(rel)).unwrap()
+    }
+
+    fn validate(module: &naga::Module, what: &str) {
+        naga::valid::Validator::new(
+            naga::valid::ValidationFlags::all(),
+            naga::valid::Capabilities::all(),
+        )
+        .validate(module)
+        .unwrap_or_else(|e| panic!("{what}: {e:?}"));
+    }
+
+    #[test]
+    fn every_engine_file_is_checked() {
+        let mut files = Vec::new();
+        for dir in std::fs::read_dir(engines()).unwrap() {
+            let dir = dir.unwrap().path();
+            if dir.is_dir() {
+                for f in std::fs::read_dir(&dir).unwrap() {
+                    files.push(f.unwrap().path());
+                }
+            }
+        }
+        let mut names: Vec<String> = files
+            .iter()
+            .map(|p| p.strip_prefix(engines()).unwrap().display().to_string())
+            .collect();
+        names.sort();
+        // A new shader needs a check below before it can ship.
+        assert_eq!(
+            names,
+            [
+                "godot/flipbook_motion_blend.gdshader",
+                "unity/FlipbookMotionBlend.hlsl",
+                "unreal/FlipbookMotionBlend.ush",
+                "wgsl/flipbook_motion_blend.wgsl",
+            ]
+        );
+    }
+
+    #[test]
+    fn wgsl_parses_and_validates() {
+        let src = read("wgsl/flipbook_motion_blend.wgsl");
+        let module = naga::front::wgsl::parse_str(&src)
+            .unwrap_or_else(|e| panic!("{}", e.emit_to_string(&src)));
+        validate(&module, "wgsl");
+        assert!(module.entry_points.iter().any(|e| e.name == "fs_main"));
+    }
+
+    /// The Godot shading language → Vulkan-style GLSL 450 (the mapping in engines/README.md).
+    fn godot_to_glsl(src: &str) -> String {
+        let mut samplers = Vec::new();
+        let mut block = Vec::new();
+        let mut body = Vec::new();
+        for line in src.lines() {
+            let t = line.trim();
+            if t.starts_with("shader_type") || t.starts_with("render_mode") {
+                continue;
+            }
+            if let Some(rest) = t.strip_prefix("uniform ") {
+                let decl = rest.split([':', '=', ';']).next().unwrap().trim();
+                let (ty, name) = decl.split_once(' ').unwrap();
+                if ty == "sampler2D" {
+                    samplers.push(name.trim().to_string());
+                } else {
+                    block.push(format!("    {ty} {};", name.trim()));
+                }
+                continue;
+            }
+            body.push(line.to_string());
+        }
+        let mut out = String::from("#version 450\nlayout(location = 0) in vec2 UV;\nlayout(location = 0) out vec4 COLOR;\n");
+        out += &format!(
+            "layout(set = 0, binding = 0) uniform Params {{\n{}\n}};\n",
+            block.join("\n")
+        );
+        for (i, s) in samplers.iter().enumerate() {
+            out += &format!(
+                "layout(set = 0, binding = {}) uniform texture2D {s}_t;\nlayout(set = 0, binding = {}) uniform sampler {s}_s;\n",
+                1 + 2 * i,
+                2 + 2 * i
+            );
+        }
+        let mut text = body.join("\n").replace("void fragment()", "void main()");
+        for s in &samplers {
+            text = text.replace(
+                &format!("texture({s},"),
+                &format!("texture(sampler2D({s}_t, {s}_s),"),
+            );
+        }
+        out + &text
+    }
+
+    #[test]
+    fn godot_shader_as_glsl() {
+        let glsl = godot_to_glsl(&read("godot/flipbook_motion_blend.gdshader"));
+        let mut frontend = naga::front::glsl::Frontend::default();
+        let opts = naga::front::glsl::Options::from(naga::ShaderStage::Fragment);
+        let module = frontend
+            .parse(&opts, &glsl)
+            .unwrap_or_else(|e| panic!("{}\n{}", e.emit_to_string(&glsl), glsl));
+        validate(&module, "godot");
+    }
+
+    fn glslang() -> Option<PathBuf> {
+        let ok = std::process::Command::new("glslangValidator")
+            .arg("--version")
+            .output()
+            .is_ok_and(|o| o.status.success());
+        if !ok {
+            println!("skipped: glslangValidator not on PATH (Debian package glslang-tools)");
+        }
+        ok.then(|| PathBuf::from("glslangValidator"))
+    }
+
+    fn check_hlsl(source: &str, entry: &str) {
+        let Some(tool) = glslang() else { return };
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("shader.frag.hlsl");
+        std::fs::write(&path, source).unwrap();
+        let out = std::process::Command::new(tool)
+            .args(["-D", "-S", "frag", "-e", entry, "-V"])
+            .arg(&path)
+            .args(["-o"])
+            .arg(dir.path().join("out.spv"))
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}\n{}\n{source}",
+            String::from_utf8_lossy(&out.stdout),
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+
+    #[test]
+    fn unity_custom_function_hlsl() {
+        let src = read("unity/FlipbookMotionBlend.hlsl")
+            + "\nTexture2D Col; Texture2D Mv; SamplerState Smp;\n\
+               float4 main(float2 uv : TEXCOORD0) : SV_Target {\n\
+               float4 o; FlipbookMotionBlend_float(Col, Mv, Smp, uv, float2(8, 8), 64, 0.05, 3.25, 1, o); return o; }\n";
+        check_hlsl(&src, "main");
+    }
+
+    #[test]
+    fn unreal_custom_node_hlsl() {
+        let body = read("unreal/FlipbookMotionBlend.ush");
+        let src = format!(
+            "#define Texture2DSample(t, s, uv) t.Sample(s, uv)\n\
+             Texture2D ColorSheet; SamplerState ColorSheetSampler;\n\
+             Texture2D MotionSheet; SamplerState MotionSheetSampler;\n\
+             float4 CustomExpression0(float2 UV, float2 SubImages, float Frames, float Strength, float SubImageIndex, float Loop)\n{{\n{body}\n}}\n\
+             float4 main(float2 uv : TEXCOORD0) : SV_Target {{ return CustomExpression0(uv, float2(8, 8), 64, 0.05, 3.25, 1); }}\n"
+        );
+        check_hlsl(&src, "main");
     }
 }

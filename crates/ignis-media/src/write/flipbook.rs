@@ -1,22 +1,35 @@
 //! Flipbooks: every frame on one sprite-sheet PNG, left to right, top to bottom, starting
 //! top-left (the layout Unity's Texture Sheet Animation, Unreal's SubUV and Godot's
-//! particle animation expect), plus a JSON sidecar next to it (`fire.png` → `fire.json`).
+//! particle animation expect), plus a JSON sidecar next to it (`fire.png` → `fire.json`),
+//! and on request sheets of the same layout beside it: motion vectors (`fire.mv.png`,
+//! [`super::motion`]), heat (`fire.heat.png`) and HDR colour (`fire.exr`).
 //!
-//! Each cell is the frame plus `padding` pixels on every side, filled by repeating the
-//! frame's edge pixels ("bleeding") so texture filtering and mipmaps do not pull in
-//! neighbouring frames. Cells after the last frame are transparent black.
+//! Each cell is the frame plus padding on every side, filled by repeating the frame's
+//! edge pixels ("extruded") so texture filtering and mipmaps do not pull in neighbouring
+//! frames. Cells after the last frame are transparent black (zero motion, zero heat).
+//!
+//! The grid is chosen to waste the fewest cells within `max_size` (sheets no more than 4:1
+//! unless nothing else fits); `pot` makes both sheet sides powers of two (power-of-two
+//! grids, the extra pixels going into the padding); `fit_frames` fills the wasted cells by
+//! resampling the animation in time (linear cross-fade between neighbouring frames; the
+//! fps is raised so the duration is unchanged; the JSON's `retimed` reports it).
+//! `variants = N` lays N loops (pushed one after another) as the N rows of the sheet,
+//! each row its own loop (Unity's Single Row mode).
 //!
 //! The PNG is 8-bit sRGB. Alpha is `straight` by default; `premultiplied` multiplies
 //! colour by alpha in linear light before sRGB encoding (what an sRGB texture sampled with
-//! `One, OneMinusSrcAlpha` blending needs).
+//! `One, OneMinusSrcAlpha` blending needs). Motion and heat sheets are 16-bit linear; the
+//! EXR is linear `f32`, premultiplied (the OpenEXR convention).
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use ignis_core::frame::MAX_PIXELS;
+use ignis_core::frame::{MAX_PIXELS, MAX_SIDE};
 use ignis_core::loopq::LoopQuality;
 use ignis_core::{RgbaFrame, Size};
 
+use super::engine::{self, Engine};
+use super::motion::{self, MotionSource};
 use super::{encode_png, temp_file_for, Sink, WriteOptions};
 use crate::convert;
 use crate::error::{MediaError, Result};
@@ -32,17 +45,93 @@ pub enum AlphaMode {
     Premultiplied,
 }
 
-/// Sprite-sheet layout. `Default`: near-square grid, no padding, straight alpha.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+/// Sprite-sheet layout and extra sheets. `Default`: fewest-waste grid, no padding,
+/// straight alpha, generic engine, colour sheet only.
+#[derive(Clone, Debug, PartialEq)]
 pub struct FlipbookOptions {
-    /// Columns; `None` = `ceil(sqrt(frames))` (or from `rows`).
+    /// Columns; `None` = chosen (fewest wasted cells).
     pub columns: Option<u32>,
-    /// Rows; `None` = `ceil(frames / columns)`.
+    /// Rows; `None` = chosen (or from `columns`).
     pub rows: Option<u32>,
-    /// Pixels of edge bleed around each frame, inside its cell (default 0).
+    /// Pixels of edge bleed around each frame, inside its cell (default 0; engine presets
+    /// raise it to their minimum).
     pub padding: u32,
     /// Straight or premultiplied colour in the PNG (default straight).
     pub alpha: AlphaMode,
+    /// Engine preset: motion-vector orientation, minimum padding and the JSON's
+    /// `engine_settings` ([`Engine`]). Default generic.
+    pub engine: Engine,
+    /// Largest sheet side in pixels (default: no limit beyond 16384).
+    pub max_size: Option<u32>,
+    /// Power-of-two sheet sides (default false).
+    pub pot: bool,
+    /// Fill every cell of the grid by resampling the animation in time (default false).
+    pub fit_frames: bool,
+    /// Number of loops laid as rows (default 1; 0 is an error).
+    pub variants: u32,
+    /// Write a motion-vector sheet (`x.mv.png`) from this flow (default none).
+    pub motion: Option<MotionSource>,
+    /// Write a heat sheet (`x.heat.png`, 16-bit grey luminance, linear; default false).
+    pub heat: bool,
+    /// Write an HDR colour sheet (`x.exr`, linear f32 premultiplied; default false).
+    pub hdr: bool,
+}
+
+impl Default for FlipbookOptions {
+    fn default() -> Self {
+        FlipbookOptions {
+            columns: None,
+            rows: None,
+            padding: 0,
+            alpha: AlphaMode::Straight,
+            engine: Engine::Generic,
+            max_size: None,
+            pot: false,
+            fit_frames: false,
+            variants: 1,
+            motion: None,
+            heat: false,
+            hdr: false,
+        }
+    }
+}
+
+/// The motion-vector sheet's description in the JSON.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct MotionMeta {
+    /// File name of the 16-bit RGB PNG, relative to the JSON.
+    pub image: String,
+    /// Strength: a channel value `v` (0..1) is the motion `(v * 2 - 1) * scale`, in
+    /// tile-UV units (fractions of one cell's width / height) per frame.
+    pub scale: f32,
+    /// 16-bit code of zero motion (32768; 128 in 8 bits).
+    pub neutral: u16,
+    /// `"up"`: green grows with the engine's `v` upwards (image up); `"down"`: image down.
+    pub green: String,
+    /// Always `"linear"` (import with sRGB off, uncompressed).
+    pub color_space: String,
+    /// What the vectors are.
+    pub direction: String,
+}
+
+/// A linear data sheet (heat) in the JSON.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct HeatMeta {
+    /// File name of the 16-bit grey PNG, relative to the JSON.
+    pub image: String,
+    /// Linear luminance (of the premultiplied colour) that grey 1.0 stands for.
+    pub scale: f32,
+    /// Always `"linear"`.
+    pub color_space: String,
+}
+
+/// How the animation was resampled in time to fill the grid.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Retime {
+    /// Frames (per variant) before.
+    pub from_frames: u32,
+    /// Fps before (the JSON's `fps` is the new rate: same duration).
+    pub from_fps: f64,
 }
 
 /// The JSON sidecar of a flipbook.
@@ -59,7 +148,7 @@ pub struct FlipbookMeta {
     pub fps: f64,
     #[serde(rename = "loop")]
     pub loop_: bool,
-    /// Bleed pixels on each side of each frame; a cell is `frame + 2 * padding` wide/high.
+    /// Bleed pixels on each side of each frame (the smallest, when `pot` adds more).
     pub padding: u32,
     /// `"straight"` or `"premultiplied"`.
     pub alpha: AlphaMode,
@@ -67,44 +156,262 @@ pub struct FlipbookMeta {
     pub order: String,
     /// Always `"srgb"` (8-bit sRGB-encoded colour; alpha is linear).
     pub color_space: String,
+    /// Cell size in pixels (frame + padding); the sheet is `columns × rows` cells.
+    #[serde(default)]
+    pub cell_width: u32,
+    #[serde(default)]
+    pub cell_height: u32,
+    /// Where the frame starts inside its cell (= `padding` unless `pot` widened the cell).
+    #[serde(default)]
+    pub frame_x: u32,
+    #[serde(default)]
+    pub frame_y: u32,
+    /// Loops laid as rows (1 = one animation over the whole sheet).
+    #[serde(default = "one")]
+    pub variants: u32,
+    /// The engine preset the sheet was written for.
+    #[serde(default)]
+    pub engine: Engine,
+    /// The engine's own parameter names and values (see README's engine table).
+    #[serde(default, skip_serializing_if = "serde_json::Value::is_null")]
+    pub engine_settings: serde_json::Value,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub motion_vectors: Option<MotionMeta>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub heat: Option<HeatMeta>,
+    /// File name of the HDR EXR colour sheet (linear f32, premultiplied), if written.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub hdr_image: Option<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub retimed: Option<Retime>,
     /// Seam and ghost of the sheet's frames played as a loop, measured on the frames
     /// written ([`ignis_core::loopq`]); present when `loop` is true.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub loop_quality: Option<LoopQuality>,
 }
 
-/// A flipbook read back by [`read_flipbook`]: its sidecar and its frames (linear light,
-/// straight alpha, whatever the sheet's alpha mode).
+fn one() -> u32 {
+    1
+}
+
+/// A flipbook read back by [`read_flipbook`]: its sidecar, its frames (linear light,
+/// straight alpha, whatever the sheet's alpha mode) and, when the sheet has them, each
+/// frame's forward motion in pixels (+y down, whatever the engine's green convention).
 #[derive(Clone, Debug)]
 pub struct Flipbook {
     pub meta: FlipbookMeta,
     pub frames: Vec<RgbaFrame>,
+    pub motion: Option<Vec<Vec<[f32; 2]>>>,
 }
 
-pub(crate) fn grid(n: u32, opts: &FlipbookOptions) -> Result<(u32, u32)> {
-    let div_ceil = |a: u32, b: u32| a.div_ceil(b.max(1));
-    let (c, r) = match (opts.columns, opts.rows) {
+/// Where the cells are on a sheet.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Layout {
+    pub columns: u32,
+    pub rows: u32,
+    pub cell_width: u32,
+    pub cell_height: u32,
+    /// Offset of the frame inside its cell.
+    pub frame_x: u32,
+    pub frame_y: u32,
+    pub sheet_width: u32,
+    pub sheet_height: u32,
+}
+
+impl Layout {
+    fn cells(&self) -> u64 {
+        self.columns as u64 * self.rows as u64
+    }
+}
+
+/// The layout of `n` frames (per variant: `n / variants`) of `frame` size and the frame
+/// count after retiming (= `n` unless `fit_frames` fills wasted cells).
+pub fn plan_layout(n: u32, frame: Size, opts: &FlipbookOptions) -> Result<(Layout, u32)> {
+    let v = opts.variants;
+    if v == 0 {
+        return Err(MediaError::bad(
+            "variants",
+            "0 variants: use 1 for one animation, or N ≥ 2 for N loops as rows",
+        ));
+    }
+    if n == 0 {
+        return Err(MediaError::bad(
+            "frames",
+            "a flipbook needs at least one frame",
+        ));
+    }
+    let max = opts.max_size.unwrap_or(MAX_SIDE).min(MAX_SIDE);
+    if max == 0 {
+        return Err(MediaError::bad("max-size", "must be ≥ 1 pixel, e.g. 4096"));
+    }
+    let pad = opts.padding.max(opts.engine.conventions().min_padding);
+    let (cw, ch) = (
+        frame.width as u64 + 2 * pad as u64,
+        frame.height as u64 + 2 * pad as u64,
+    );
+    let make = |c: u32, r: u32| -> Option<Layout> {
+        let (mut sw, mut sh) = (c as u64 * cw, r as u64 * ch);
+        if opts.pot {
+            if !c.is_power_of_two() || !r.is_power_of_two() {
+                return None;
+            }
+            sw = sw.next_power_of_two();
+            sh = sh.next_power_of_two();
+        }
+        if sw > max as u64 || sh > max as u64 || sw * sh > MAX_PIXELS {
+            return None;
+        }
+        let (cellw, cellh) = ((sw / c as u64) as u32, (sh / r as u64) as u32);
+        Some(Layout {
+            columns: c,
+            rows: r,
+            cell_width: cellw,
+            cell_height: cellh,
+            frame_x: (cellw - frame.width) / 2,
+            frame_y: (cellh - frame.height) / 2,
+            sheet_width: sw as u32,
+            sheet_height: sh as u32,
+        })
+    };
+    let too_big = |what: String| {
+        let fit = (max as u64 / cw) * (max as u64 / ch);
+        MediaError::LimitExceeded(format!(
+            "{what} of {}x{} frames (+{pad} padding per side) do not fit a {max}x{max} sheet{} \
+             (at most {fit} cells fit); use fewer or smaller frames, less padding or a larger --max-size",
+            frame.width,
+            frame.height,
+            if opts.pot { " with power-of-two sides" } else { "" },
+        ))
+    };
+    if v > 1 {
+        if opts.columns.is_some() || opts.rows.is_some() {
+            return Err(MediaError::bad(
+                "variants",
+                "variants set the grid (one row per loop); drop --columns / --rows",
+            ));
+        }
+        if !n.is_multiple_of(v) {
+            return Err(MediaError::bad(
+                "variants",
+                format!("{n} frames do not split into {v} loops of equal length"),
+            ));
+        }
+        let per = n / v;
+        let cols = if opts.pot && opts.fit_frames {
+            per.next_power_of_two()
+        } else {
+            per
+        };
+        let l = make(cols, v).ok_or_else(|| too_big(format!("{v} rows of {cols} cells")))?;
+        return Ok((l, cols * v));
+    }
+    let layout = match (opts.columns, opts.rows) {
         (Some(0), _) | (_, Some(0)) => {
             return Err(MediaError::bad("flipbook", "columns and rows must be ≥ 1"))
         }
-        (Some(c), Some(r)) => (c, r),
-        (Some(c), None) => (c, div_ceil(n, c)),
-        (None, Some(r)) => (div_ceil(n, r), r),
+        (Some(c), Some(r)) => {
+            if (c as u64) * (r as u64) < n as u64 {
+                return Err(MediaError::bad(
+                    "flipbook",
+                    format!(
+                        "{c} columns × {r} rows hold {} frames, but there are {n}",
+                        c as u64 * r as u64
+                    ),
+                ));
+            }
+            make(c, r).ok_or_else(|| too_big(format!("{c}×{r} cells")))?
+        }
+        (Some(c), None) => {
+            let r = n.div_ceil(c);
+            let r = if opts.pot { r.next_power_of_two() } else { r };
+            make(c, r).ok_or_else(|| too_big(format!("{c}×{r} cells")))?
+        }
+        (None, Some(r)) => {
+            let c = n.div_ceil(r);
+            let c = if opts.pot { c.next_power_of_two() } else { c };
+            make(c, r).ok_or_else(|| too_big(format!("{c}×{r} cells")))?
+        }
         (None, None) => {
-            let c = (n as f64).sqrt().ceil() as u32;
-            (c.max(1), div_ceil(n, c.max(1)))
+            // Fewest wasted cells (sheets over 4:1 only when nothing else fits); among
+            // those the squarest sheet, then the wider one.
+            let mut best: Option<((bool, u64, u64, u32), Layout)> = None;
+            let mut c = 1u32;
+            while c <= n {
+                let r = n.div_ceil(c);
+                let r = if opts.pot { r.next_power_of_two() } else { r };
+                if let Some(l) = make(c, r) {
+                    let waste = l.cells() - n as u64;
+                    let (a, b) = (l.sheet_width as u64, l.sheet_height as u64);
+                    let long = a.max(b) > 4 * a.min(b);
+                    let skew = a.max(b) * 1000 / a.min(b);
+                    let key = (long, waste, skew, u32::MAX - c);
+                    if best.as_ref().is_none_or(|(k, _)| key < *k) {
+                        best = Some((key, l));
+                    }
+                }
+                c = if opts.pot { c * 2 } else { c + 1 };
+            }
+            best.map(|b| b.1)
+                .ok_or_else(|| too_big(format!("{n} cells")))?
         }
     };
-    if (c as u64) * (r as u64) < n as u64 {
-        return Err(MediaError::bad(
-            "flipbook",
-            format!(
-                "{c} columns × {r} rows hold {} frames, but there are {n}",
-                c as u64 * r as u64
-            ),
-        ));
+    let m = if opts.fit_frames {
+        layout.cells() as u32
+    } else {
+        n
+    };
+    Ok((layout, m))
+}
+
+/// Resamples one loop (or one-shot animation) of `frames` to `m` frames by cross-fading
+/// neighbours: a loop keeps its period (frame `j` at time `j·n/m`, wrapping), a one-shot
+/// keeps its first and last frames.
+pub fn retime(frames: &[RgbaFrame], m: usize, loop_: bool) -> Vec<RgbaFrame> {
+    let n = frames.len();
+    if n == m || n == 0 {
+        return frames.to_vec();
     }
-    Ok((c, r.max(1)))
+    (0..m)
+        .map(|j| {
+            let t = if loop_ {
+                j as f64 * n as f64 / m as f64
+            } else if m > 1 {
+                j as f64 * (n - 1) as f64 / (m - 1) as f64
+            } else {
+                0.0
+            };
+            let i0 = (t.floor() as usize).min(n - 1);
+            let a = (t - i0 as f64) as f32;
+            let i1 = if loop_ {
+                (i0 + 1) % n
+            } else {
+                (i0 + 1).min(n - 1)
+            };
+            if a <= 1e-6 {
+                frames[i0].clone()
+            } else {
+                motion::linear_blend(&frames[i0], &frames[i1], a)
+            }
+        })
+        .collect()
+}
+
+/// Copies `frame` (w×h values) into cell `index` of `sheet`, extruding its edges.
+fn place<T: Copy>(sheet: &mut [T], l: &Layout, index: usize, frame: &[T], w: usize, h: usize) {
+    let (c, sw) = (l.columns as usize, l.sheet_width as usize);
+    let (ox, oy) = (
+        (index % c) * l.cell_width as usize,
+        (index / c) * l.cell_height as usize,
+    );
+    let (fx, fy) = (l.frame_x as usize, l.frame_y as usize);
+    for cy in 0..l.cell_height as usize {
+        let sy = cy.saturating_sub(fy).min(h - 1);
+        let dst = (oy + cy) * sw + ox;
+        let src = &frame[sy * w..sy * w + w];
+        for cx in 0..l.cell_width as usize {
+            sheet[dst + cx] = src[cx.saturating_sub(fx).min(w - 1)];
+        }
+    }
 }
 
 pub(crate) struct FlipbookSink {
@@ -114,8 +421,8 @@ pub(crate) struct FlipbookSink {
     fps: f64,
     loop_: bool,
     loop_quality: Option<LoopQuality>,
-    /// Each frame as 8-bit sRGB RGBA in the sheet's alpha mode.
-    frames: Vec<Vec<u8>>,
+    /// Every pushed frame, linear light, straight alpha.
+    frames: Vec<RgbaFrame>,
 }
 
 impl FlipbookSink {
@@ -129,10 +436,33 @@ impl FlipbookSink {
                 format!("a flipbook is a .png file, not {}", path.display()),
             ));
         }
+        // Checks the options (variants, max-size) before any frame is made.
+        plan_layout(
+            opts.flipbook.variants.max(1),
+            size,
+            &FlipbookOptions {
+                columns: None,
+                rows: None,
+                fit_frames: false,
+                ..opts.flipbook.clone()
+            },
+        )
+        .map_err(|e| match e {
+            MediaError::LimitExceeded(m) => {
+                MediaError::LimitExceeded(format!("even one frame: {m}"))
+            }
+            e => e,
+        })?;
+        if opts.flipbook.variants == 0 {
+            return Err(MediaError::bad(
+                "variants",
+                "0 variants: use 1 for one animation, or N ≥ 2 for N loops as rows",
+            ));
+        }
         Ok(FlipbookSink {
             path: path.to_path_buf(),
             size,
-            opts: opts.flipbook,
+            opts: opts.flipbook.clone(),
             fps: opts.fps,
             loop_: opts.loop_,
             loop_quality: None,
@@ -140,12 +470,117 @@ impl FlipbookSink {
         })
     }
 
-    fn cell(&self) -> (u32, u32) {
-        (
-            self.size.width + 2 * self.opts.padding,
-            self.size.height + 2 * self.opts.padding,
-        )
+    fn side_path(&self, suffix: &str) -> PathBuf {
+        let stem = self
+            .path
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        self.path.with_file_name(format!("{stem}{suffix}"))
     }
+
+    /// Forward motion of every frame of `frames` (one loop per row), in pixels (+y down).
+    fn motion(
+        &self,
+        src: &MotionSource,
+        frames: &[RgbaFrame],
+        per: usize,
+    ) -> Result<Vec<Vec<[f32; 2]>>> {
+        if per < 2 {
+            return Err(MediaError::bad(
+                "motion-vectors",
+                format!(
+                    "motion vectors need at least two frames per loop, but the sheet has {per}; \
+                     render more frames or drop --motion-vectors"
+                ),
+            ));
+        }
+        let mut out = Vec::with_capacity(frames.len());
+        for row in frames.chunks(per) {
+            let mut row_mv: Vec<Vec<[f32; 2]>> = Vec::with_capacity(per);
+            for k in 0..per {
+                let next = if k + 1 < per {
+                    Some(k + 1)
+                } else if self.loop_ {
+                    Some(0)
+                } else {
+                    None // the last frame of a one-shot keeps the motion that led into it
+                };
+                let flow = |a: &RgbaFrame, b: &RgbaFrame| -> Result<Vec<[f32; 2]>> {
+                    let f = (src.0)(a, b).map_err(|e| {
+                        MediaError::encode(&self.path, format!("optical flow: {e}"))
+                    })?;
+                    if f.len() != self.size.pixels() {
+                        return Err(MediaError::encode(
+                            &self.path,
+                            format!(
+                                "optical flow gave {} vectors for {} pixels",
+                                f.len(),
+                                self.size.pixels()
+                            ),
+                        ));
+                    }
+                    let ok = |v: f32| if v.is_finite() { v } else { 0.0 };
+                    Ok(f.into_iter().map(|[dx, dy]| [ok(dx), ok(dy)]).collect())
+                };
+                let mv = match next {
+                    Some(j) => flow(&row[k], &row[j])?,
+                    // The last frame of a one-shot: the motion that led into it, at its own
+                    // pixels (the backward flow, reversed).
+                    None => flow(&row[k], &row[k - 1])?
+                        .into_iter()
+                        .map(|[dx, dy]| [-dx, -dy])
+                        .collect(),
+                };
+                row_mv.push(mv);
+            }
+            out.extend(row_mv);
+        }
+        Ok(out)
+    }
+}
+
+/// Encodes a sheet into a hidden temporary file next to `path`.
+fn encode_temp(
+    path: &Path,
+    encode: impl FnOnce(&mut std::io::BufWriter<&std::fs::File>) -> std::result::Result<(), String>,
+) -> Result<tempfile::NamedTempFile> {
+    let tmp = temp_file_for(path)?;
+    {
+        let mut w = std::io::BufWriter::new(tmp.as_file());
+        encode(&mut w).map_err(|e| MediaError::encode(path, e))?;
+        w.flush().map_err(|e| MediaError::io(tmp.path(), e))?;
+    }
+    Ok(tmp)
+}
+
+/// Moves every finished temporary into place, the JSON last; on a failure removes what was
+/// already moved, so the flipbook appears whole or not at all.
+/// Moves every file of a flipbook into place as one unit (a journal completes an
+/// interrupted commit on the next run; see `ignis_core::tempfiles`).
+fn commit(files: Vec<(tempfile::NamedTempFile, PathBuf)>) -> Result<Vec<PathBuf>> {
+    let Some((_, first)) = files.first() else {
+        return Ok(Vec::new());
+    };
+    let dir = super::parent_dir(first);
+    let paths: Vec<PathBuf> = files.iter().map(|(_, p)| p.clone()).collect();
+    super::commit_temps(&dir, files)?;
+    Ok(paths)
+}
+
+fn png16(
+    w: &mut impl Write,
+    width: u32,
+    height: u32,
+    data: &[u16],
+    color: image::ExtendedColorType,
+) -> std::result::Result<(), String> {
+    use image::codecs::png::{CompressionType, FilterType, PngEncoder};
+    use image::ImageEncoder;
+    let bytes: Vec<u8> = data.iter().flat_map(|v| v.to_ne_bytes()).collect();
+    PngEncoder::new_with_quality(w, CompressionType::Fast, FilterType::Adaptive)
+        .write_image(&bytes, width, height, color)
+        .map_err(|e| e.to_string())
 }
 
 impl Sink for FlipbookSink {
@@ -154,121 +589,308 @@ impl Sink for FlipbookSink {
     }
 
     fn push(&mut self, frame: &RgbaFrame) -> Result<()> {
-        let (cw, ch) = self.cell();
-        let area = (self.frames.len() as u64 + 1) * cw as u64 * ch as u64;
+        let (cw, ch) = (
+            self.size.width as u64 + 2 * self.opts.padding as u64,
+            self.size.height as u64 + 2 * self.opts.padding as u64,
+        );
+        let area = (self.frames.len() as u64 + 1) * cw * ch;
         if area > MAX_PIXELS {
             return Err(MediaError::LimitExceeded(format!(
                 "a flipbook of {} frames of {cw}x{ch} cells exceeds {MAX_PIXELS} pixels; use fewer or smaller frames",
                 self.frames.len() + 1
             )));
         }
-        let bytes = match self.opts.alpha {
-            AlphaMode::Straight => convert::to_srgba8(frame),
-            AlphaMode::Premultiplied => {
-                let mut pre = frame.clone();
-                convert::premultiply(&mut pre);
-                convert::to_srgba8(&pre)
-            }
-        };
-        self.frames.push(bytes);
+        self.frames.push(frame.clone());
         Ok(())
     }
 
     fn finish(self: Box<Self>) -> Result<Vec<PathBuf>> {
         let n = self.frames.len() as u32;
-        let (cols, rows) = grid(n, &self.opts)?;
-        let (cw, ch) = self.cell();
-        let sheet = Size::new(cols * cw, rows * ch).map_err(|e| {
-            MediaError::LimitExceeded(format!(
-                "flipbook sheet of {cols}×{rows} cells of {cw}x{ch}: {e}"
-            ))
-        })?;
-        let (w, h, p) = (
-            self.size.width as usize,
-            self.size.height as usize,
-            self.opts.padding as usize,
-        );
-        let sw = sheet.width as usize;
-        let mut pixels = vec![0u8; sheet.pixels() * 4];
-        for (i, f) in self.frames.iter().enumerate() {
-            let (ox, oy) = (
-                (i % cols as usize) * cw as usize,
-                (i / cols as usize) * ch as usize,
-            );
-            for cy in 0..ch as usize {
-                let sy = cy.saturating_sub(p).min(h - 1);
-                let dst_row = (oy + cy) * sw + ox;
-                for cx in 0..cw as usize {
-                    let sx = cx.saturating_sub(p).min(w - 1);
-                    let s = (sy * w + sx) * 4;
-                    let d = (dst_row + cx) * 4;
-                    pixels[d..d + 4].copy_from_slice(&f[s..s + 4]);
-                }
-            }
-        }
-        let json_path = self.path.with_extension("json");
-        let meta = FlipbookMeta {
-            image: self
-                .path
-                .file_name()
+        let (layout, m) = plan_layout(n, self.size, &self.opts)?;
+        let v = self.opts.variants as usize;
+        let per_in = n as usize / v;
+        let per = m as usize / v;
+        let frames: Vec<RgbaFrame> = if m == n {
+            self.frames.clone()
+        } else {
+            self.frames
+                .chunks(per_in)
+                .flat_map(|row| retime(row, per, self.loop_))
+                .collect()
+        };
+        let fps = self.fps * per as f64 / per_in as f64;
+        let retimed = (m != n).then_some(Retime {
+            from_frames: per_in as u32,
+            from_fps: self.fps,
+        });
+        // The motion first: the flow is the slow part and can fail.
+        let motion = match &self.opts.motion {
+            Some(src) => Some(self.motion(src, &frames, per)?),
+            None => None,
+        };
+        let (w, h) = (self.size.width as usize, self.size.height as usize);
+        let sheet_px = layout.sheet_width as usize * layout.sheet_height as usize;
+        let sheet_size = Size::new(layout.sheet_width, layout.sheet_height)?;
+        let name_of = |p: &Path| {
+            p.file_name()
                 .map(|n| n.to_string_lossy().into_owned())
-                .unwrap_or_default(),
+                .unwrap_or_default()
+        };
+        let mut files = Vec::new();
+
+        // Colour.
+        let mut colour = vec![[0u8; 4]; sheet_px];
+        for (i, f) in frames.iter().enumerate() {
+            let bytes = match self.opts.alpha {
+                AlphaMode::Straight => convert::to_srgba8(f),
+                AlphaMode::Premultiplied => {
+                    let mut pre = f.clone();
+                    convert::premultiply(&mut pre);
+                    convert::to_srgba8(&pre)
+                }
+            };
+            let px: Vec<[u8; 4]> = bytes
+                .chunks_exact(4)
+                .map(|c| [c[0], c[1], c[2], c[3]])
+                .collect();
+            place(&mut colour, &layout, i, &px, w, h);
+        }
+        let flat: Vec<u8> = colour.iter().flatten().copied().collect();
+        files.push((
+            encode_temp(&self.path, |wr| {
+                encode_png(wr, sheet_size, &flat).map_err(|e| e.to_string())
+            })?,
+            self.path.clone(),
+        ));
+
+        // Motion vectors.
+        let mut mv_meta = None;
+        if let Some(mv) = &motion {
+            // Tile-UV units: the engines add the offset to a UV spanning one cell.
+            let (cw, ch) = (layout.cell_width as f32, layout.cell_height as f32);
+            let vsign = if self.opts.engine.conventions().v_up {
+                -1.0
+            } else {
+                1.0
+            };
+            let to_uv = |[dx, dy]: [f32; 2]| [dx / cw, vsign * dy / ch];
+            let max_abs = mv
+                .iter()
+                .flatten()
+                .map(|&p| {
+                    let [u, v] = to_uv(p);
+                    u.abs().max(v.abs())
+                })
+                .fold(0f32, f32::max);
+            let scale = motion::mv_scale_for(max_abs);
+            let n0 = motion::MV_NEUTRAL;
+            let mut sheet = vec![[n0, n0, 0u16]; sheet_px];
+            for (i, f) in mv.iter().enumerate() {
+                let px: Vec<[u16; 3]> = f
+                    .iter()
+                    .map(|&p| {
+                        let [u, v] = to_uv(p);
+                        [
+                            motion::encode_mv16(u, scale),
+                            motion::encode_mv16(v, scale),
+                            0,
+                        ]
+                    })
+                    .collect();
+                place(&mut sheet, &layout, i, &px, w, h);
+            }
+            let path = self.side_path(".mv.png");
+            let flat: Vec<u16> = sheet.iter().flatten().copied().collect();
+            files.push((
+                encode_temp(&path, |wr| {
+                    png16(
+                        wr,
+                        layout.sheet_width,
+                        layout.sheet_height,
+                        &flat,
+                        image::ExtendedColorType::Rgb16,
+                    )
+                })?,
+                path.clone(),
+            ));
+            mv_meta = Some(MotionMeta {
+                image: name_of(&path),
+                scale,
+                neutral: n0,
+                green: if self.opts.engine.conventions().v_up { "up" } else { "down" }.into(),
+                color_space: "linear".into(),
+                direction: if self.loop_ {
+                    "forward: frame k to k+1 at frame k's pixels; the last frame of each loop to its first"
+                } else {
+                    "forward: frame k to k+1 at frame k's pixels; the last frame: the motion into it (reversed backward flow)"
+                }
+                .into(),
+            });
+        }
+
+        // Heat: luminance of the premultiplied colour, linear.
+        let mut heat_meta = None;
+        if self.opts.heat {
+            let lum: Vec<Vec<f32>> = frames
+                .iter()
+                .map(|f| {
+                    f.data()
+                        .iter()
+                        .map(|p| (0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2]) * p[3])
+                        .map(|v| if v.is_finite() { v.max(0.0) } else { 0.0 })
+                        .collect()
+                })
+                .collect();
+            let scale = lum.iter().flatten().fold(0f32, |a, &b| a.max(b)).max(1e-6);
+            let mut sheet = vec![0u16; sheet_px];
+            for (i, f) in lum.iter().enumerate() {
+                let px: Vec<u16> = f
+                    .iter()
+                    .map(|&v| (v / scale * 65535.0).round().clamp(0.0, 65535.0) as u16)
+                    .collect();
+                place(&mut sheet, &layout, i, &px, w, h);
+            }
+            let path = self.side_path(".heat.png");
+            files.push((
+                encode_temp(&path, |wr| {
+                    png16(
+                        wr,
+                        layout.sheet_width,
+                        layout.sheet_height,
+                        &sheet,
+                        image::ExtendedColorType::L16,
+                    )
+                })?,
+                path.clone(),
+            ));
+            heat_meta = Some(HeatMeta {
+                image: name_of(&path),
+                scale,
+                color_space: "linear".into(),
+            });
+        }
+
+        // HDR colour: linear f32, premultiplied.
+        let mut hdr_image = None;
+        if self.opts.hdr {
+            let mut sheet = vec![[0f32; 4]; sheet_px];
+            for (i, f) in frames.iter().enumerate() {
+                let mut pre = f.clone();
+                convert::premultiply(&mut pre);
+                place(&mut sheet, &layout, i, pre.data(), w, h);
+            }
+            let path = self.path.with_extension("exr");
+            let flat: Vec<f32> = sheet.iter().flatten().copied().collect();
+            let img = image::Rgba32FImage::from_raw(layout.sheet_width, layout.sheet_height, flat)
+                .ok_or_else(|| MediaError::encode(&path, "sheet buffer size"))?;
+            let tmp = temp_file_for(&path)?;
+            {
+                let mut wr = std::io::BufWriter::new(tmp.as_file());
+                image::DynamicImage::ImageRgba32F(img)
+                    .write_to(&mut wr, image::ImageFormat::OpenExr)
+                    .map_err(|e| MediaError::encode(&path, e.to_string()))?;
+                wr.flush().map_err(|e| MediaError::io(tmp.path(), e))?;
+            }
+            // `write_to` needs Seek, which BufWriter<&File> provides.
+            files.push((tmp, path.clone()));
+            hdr_image = Some(name_of(&path));
+        }
+
+        let json_path = self.path.with_extension("json");
+        let engine_settings = engine::settings(
+            self.opts.engine,
+            &engine::SettingsInput {
+                columns: layout.columns,
+                rows: layout.rows,
+                frames: m,
+                fps,
+                loop_: self.loop_,
+                variants: self.opts.variants,
+                alpha: self.opts.alpha,
+                mv_scale: mv_meta.as_ref().map(|mm| mm.scale),
+            },
+        );
+        let meta = FlipbookMeta {
+            image: name_of(&self.path),
             frame_width: self.size.width,
             frame_height: self.size.height,
-            columns: cols,
-            rows,
-            frame_count: n,
-            fps: self.fps,
+            columns: layout.columns,
+            rows: layout.rows,
+            frame_count: m,
+            fps,
             loop_: self.loop_,
-            padding: self.opts.padding,
+            padding: layout.frame_x.min(layout.frame_y),
             alpha: self.opts.alpha,
             order: "row-major, top-left first".into(),
             color_space: "srgb".into(),
-            loop_quality: self.loop_quality,
+            cell_width: layout.cell_width,
+            cell_height: layout.cell_height,
+            frame_x: layout.frame_x,
+            frame_y: layout.frame_y,
+            variants: self.opts.variants,
+            engine: self.opts.engine,
+            engine_settings,
+            motion_vectors: mv_meta,
+            heat: heat_meta,
+            hdr_image,
+            retimed,
+            // Measured on the pushed frames; a retimed or multi-variant sheet plays other
+            // frames, so the figure would not describe it.
+            loop_quality: if m == n && v == 1 {
+                self.loop_quality
+            } else {
+                None
+            },
         };
-        let png_tmp = temp_file_for(&self.path)?;
-        {
-            let mut w = std::io::BufWriter::new(png_tmp.as_file());
-            encode_png(&mut w, sheet, &pixels)
-                .map_err(|e| MediaError::encode(&self.path, e.to_string()))?;
-            w.flush().map_err(|e| MediaError::io(png_tmp.path(), e))?;
-        }
-        let json_tmp = temp_file_for(&json_path)?;
-        {
-            let mut w = std::io::BufWriter::new(json_tmp.as_file());
-            serde_json::to_writer_pretty(&mut w, &meta)
-                .map_err(|e| MediaError::encode(&json_path, e.to_string()))?;
-            w.write_all(b"\n")
-                .and_then(|_| w.flush())
-                .map_err(|e| MediaError::io(json_tmp.path(), e))?;
-        }
-        // PNG and JSON as one unit (a journal completes an interrupted commit).
-        super::commit_temps(
-            &super::parent_dir(&self.path),
-            vec![(png_tmp, self.path.clone()), (json_tmp, json_path.clone())],
-        )?;
-        Ok(vec![self.path.clone(), json_path])
+        files.push((
+            encode_temp(&json_path, |wr| {
+                serde_json::to_writer_pretty(&mut *wr, &meta).map_err(|e| e.to_string())?;
+                wr.write_all(b"\n").map_err(|e| e.to_string())
+            })?,
+            json_path,
+        ));
+        commit(files)
     }
 }
 
-/// Reads a flipbook back from its JSON sidecar: the metadata and every frame (linear
-/// light, straight alpha; a premultiplied sheet is un-premultiplied).
-pub fn read_flipbook(json_path: &Path) -> Result<Flipbook> {
-    // Complete a PNG + JSON commit a killed writer left half done.
+/// Reads only a flipbook's JSON sidecar.
+pub fn read_flipbook_meta(json_path: &Path) -> Result<FlipbookMeta> {
+    // Complete a commit of a flipbook's files that a killed writer left half done.
     ignis_core::tempfiles::recover_and_clean(&super::parent_dir(json_path));
     let text = std::fs::read(json_path).map_err(|e| MediaError::io(json_path, e))?;
-    let meta: FlipbookMeta = serde_json::from_slice(&text)
-        .map_err(|e| MediaError::decode(json_path, None, format!("not a flipbook sidecar: {e}")))?;
-    let image_path = super::parent_dir(json_path).join(&meta.image);
-    let sheet = crate::read::read_image(&image_path)?;
+    serde_json::from_slice(&text)
+        .map_err(|e| MediaError::decode(json_path, None, format!("not a flipbook sidecar: {e}")))
+}
+
+/// Reads a flipbook back from its JSON sidecar: the metadata, every frame (linear light,
+/// straight alpha; a premultiplied sheet is un-premultiplied) and the motion vectors when
+/// the sheet has them (pixels, +y down).
+pub fn read_flipbook(json_path: &Path) -> Result<Flipbook> {
+    let meta = read_flipbook_meta(json_path)?;
+    let dir = super::parent_dir(json_path);
+    let sheet = crate::read::read_image(&dir.join(&meta.image))?;
     let fw = meta.frame_width;
     let fh = meta.frame_height;
-    let (cw, ch) = (
-        fw as u64 + 2 * meta.padding as u64,
-        fh as u64 + 2 * meta.padding as u64,
-    );
+    // Sidecars written before cells were recorded: cell = frame + 2 × padding.
+    let (cw, ch, fx, fy) = if meta.cell_width == 0 {
+        (
+            fw as u64 + 2 * meta.padding as u64,
+            fh as u64 + 2 * meta.padding as u64,
+            meta.padding as u64,
+            meta.padding as u64,
+        )
+    } else {
+        (
+            meta.cell_width as u64,
+            meta.cell_height as u64,
+            meta.frame_x as u64,
+            meta.frame_y as u64,
+        )
+    };
     let fits = fw > 0
         && fh > 0
+        && fx + fw as u64 <= cw
+        && fy + fh as u64 <= ch
         && meta.columns as u64 * cw <= sheet.width() as u64
         && meta.rows as u64 * ch <= sheet.height() as u64
         && meta.frame_count as u64 <= meta.columns as u64 * meta.rows as u64;
@@ -277,68 +899,163 @@ pub fn read_flipbook(json_path: &Path) -> Result<Flipbook> {
             json_path,
             None,
             format!(
-                "the sidecar describes {}×{} cells of {fw}x{fh} + {} padding, which do not fit the {} sheet",
+                "the sidecar describes {}×{} cells of {cw}x{ch} holding {fw}x{fh} frames, which do not fit the {} sheet",
                 meta.columns,
                 meta.rows,
-                meta.padding,
                 sheet.size()
             ),
         ));
     }
     let size = Size::new(fw, fh)?;
+    let rect = |i: u64| crate::read::Rect {
+        x: ((i % meta.columns as u64) * cw + fx) as u32,
+        y: ((i / meta.columns as u64) * ch + fy) as u32,
+        width: fw,
+        height: fh,
+    };
     let mut frames = Vec::with_capacity(meta.frame_count as usize);
     for i in 0..meta.frame_count as u64 {
-        let x0 = (i % meta.columns as u64) * cw + meta.padding as u64;
-        let y0 = (i / meta.columns as u64) * ch + meta.padding as u64;
-        let rect = crate::read::Rect {
-            x: x0 as u32,
-            y: y0 as u32,
-            width: fw,
-            height: fh,
-        };
-        let mut f = convert::crop(&sheet, &rect);
+        let mut f = convert::crop(&sheet, &rect(i));
         if meta.alpha == AlphaMode::Premultiplied {
             convert::unpremultiply(&mut f);
         }
         debug_assert_eq!(f.size(), size);
         frames.push(f);
     }
-    Ok(Flipbook { meta, frames })
+    let motion = match &meta.motion_vectors {
+        None => None,
+        Some(mm) => {
+            let path = dir.join(&mm.image);
+            let img = image::open(&path)
+                .map_err(|e| MediaError::decode(&path, None, e.to_string()))?
+                .into_rgb16();
+            if img.width() != sheet.width() || img.height() != sheet.height() {
+                return Err(MediaError::decode(
+                    &path,
+                    None,
+                    "the motion-vector sheet's size differs from the colour sheet's",
+                ));
+            }
+            let vsign = if mm.green == "up" { -1.0 } else { 1.0 };
+            let mut all = Vec::with_capacity(frames.len());
+            for i in 0..meta.frame_count as u64 {
+                let r = rect(i);
+                let mut f = Vec::with_capacity(size.pixels());
+                for y in r.y..r.y + fh {
+                    for x in r.x..r.x + fw {
+                        let p = img.get_pixel(x, y).0;
+                        f.push([
+                            motion::decode_mv16(p[0], mm.scale) * cw as f32,
+                            vsign * motion::decode_mv16(p[1], mm.scale) * ch as f32,
+                        ]);
+                    }
+                }
+                all.push(f);
+            }
+            Some(all)
+        }
+    };
+    Ok(Flipbook {
+        meta,
+        frames,
+        motion,
+    })
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
+    fn grid(n: u32, o: &FlipbookOptions) -> Result<(u32, u32)> {
+        let s = Size::new(10, 10).unwrap();
+        plan_layout(n, s, o).map(|(l, _)| (l.columns, l.rows))
+    }
+
     #[test]
     fn grids() {
         let d = FlipbookOptions::default();
         assert_eq!(grid(16, &d).unwrap(), (4, 4));
-        assert_eq!(grid(10, &d).unwrap(), (4, 3));
+        assert_eq!(grid(10, &d).unwrap(), (5, 2)); // no wasted cell
+        assert_eq!(grid(61, &d).unwrap(), (9, 7)); // 2 wasted: 61×1 is too long
         assert_eq!(grid(1, &d).unwrap(), (1, 1));
-        assert_eq!(
-            grid(
-                10,
-                &FlipbookOptions {
-                    columns: Some(8),
-                    ..d
-                }
-            )
-            .unwrap(),
-            (8, 2)
-        );
-        assert_eq!(
-            grid(10, &FlipbookOptions { rows: Some(2), ..d }).unwrap(),
-            (5, 2)
-        );
-        assert!(grid(
-            10,
-            &FlipbookOptions {
-                rows: Some(2),
-                columns: Some(2),
-                ..d
-            }
-        )
-        .is_err());
+        let c8 = FlipbookOptions {
+            columns: Some(8),
+            ..d.clone()
+        };
+        assert_eq!(grid(10, &c8).unwrap(), (8, 2));
+        let r2 = FlipbookOptions {
+            rows: Some(2),
+            ..d.clone()
+        };
+        assert_eq!(grid(10, &r2).unwrap(), (5, 2));
+        let both = FlipbookOptions {
+            rows: Some(2),
+            columns: Some(2),
+            ..d.clone()
+        };
+        assert!(grid(10, &both).is_err());
+    }
+
+    #[test]
+    fn max_size_pot_and_fit() {
+        let s = Size::new(30, 20).unwrap();
+        let o = FlipbookOptions {
+            max_size: Some(128),
+            padding: 1,
+            ..Default::default()
+        };
+        // 32×22 cells: 4 columns × 5 rows fit 128×110.
+        let (l, m) = plan_layout(20, s, &o).unwrap();
+        assert_eq!((l.columns, l.rows, m), (4, 5, 20));
+        assert!(matches!(
+            plan_layout(21, s, &o),
+            Err(MediaError::LimitExceeded(_))
+        ));
+        let pot = FlipbookOptions {
+            pot: true,
+            ..o.clone()
+        };
+        let (l, _) = plan_layout(7, s, &pot).unwrap();
+        assert!(l.sheet_width.is_power_of_two() && l.sheet_height.is_power_of_two());
+        assert!(l.columns.is_power_of_two() && l.rows.is_power_of_two());
+        assert_eq!(l.cell_width * l.columns, l.sheet_width);
+        assert!(l.cell_width >= 32 && l.cell_height >= 22);
+        let fit = FlipbookOptions {
+            fit_frames: true,
+            ..pot
+        };
+        let (l, m) = plan_layout(7, s, &fit).unwrap();
+        assert_eq!(m as u64, l.cells());
+        let v0 = FlipbookOptions {
+            variants: 0,
+            ..Default::default()
+        };
+        assert!(matches!(
+            plan_layout(8, s, &v0),
+            Err(MediaError::BadParameter {
+                name: "variants",
+                ..
+            })
+        ));
+        let v3 = FlipbookOptions {
+            variants: 3,
+            ..Default::default()
+        };
+        assert_eq!(grid(12, &v3).unwrap(), (4, 3));
+        assert!(grid(10, &v3).is_err());
+    }
+
+    #[test]
+    fn retime_keeps_period_and_ends() {
+        let s = Size::new(1, 1).unwrap();
+        let f: Vec<RgbaFrame> = (0..4)
+            .map(|i| RgbaFrame::filled(s, [i as f32, 0.0, 0.0, 1.0]))
+            .collect();
+        let r = retime(&f, 8, true);
+        let v: Vec<f32> = r.iter().map(|x| x.get(0, 0)[0]).collect();
+        assert_eq!(v, [0.0, 0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 1.5]);
+        let r = retime(&f, 7, false);
+        let v: Vec<f32> = r.iter().map(|x| x.get(0, 0)[0]).collect();
+        assert_eq!(v, [0.0, 0.5, 1.0, 1.5, 2.0, 2.5, 3.0]);
     }
 }

@@ -28,8 +28,10 @@
 //! by one instead). Outputs that exist and are not regular files (devices, FIFOs) are
 //! refused; frame rates must be in [`MIN_FPS`]..=[`MAX_FPS`].
 
+pub mod engine;
 mod flipbook;
 mod gif_out;
+pub mod motion;
 mod mp4_out;
 mod sequence_out;
 
@@ -41,7 +43,12 @@ use ignis_core::{GrayFrame, RgbaFrame, Size};
 
 use crate::error::{MediaError, Result};
 
-pub use flipbook::{read_flipbook, AlphaMode, Flipbook, FlipbookMeta, FlipbookOptions};
+pub use engine::Engine;
+pub use flipbook::{
+    plan_layout, read_flipbook, read_flipbook_meta, retime, AlphaMode, Flipbook, FlipbookMeta,
+    FlipbookOptions, HeatMeta, Layout, MotionMeta, Retime,
+};
+pub use motion::MotionSource;
 
 /// An output format.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]

@@ -1,0 +1,201 @@
+//! `ignis bench export`: does motion-vector frame blending help? Each case renders (or
+//! decodes) an animation at twice the exported frame rate, writes every other frame as a
+//! flipbook with motion vectors (through the same writer and flow as `--motion-vectors`),
+//! reads the sheets back, and rebuilds each dropped frame at blend 0.5 with the engines'
+//! motion-vector blend (`ignis_media::write::motion::mv_blend`, the formula of `engines/`)
+//! and with a plain cross-fade. Error: mean absolute difference from the true dropped frame
+//! in 8-bit sRGB levels of the colour composited over black.
+
+use crate::global::Global;
+use crate::output::flow_source;
+use anyhow::{Context, Result};
+use ignis_core::{RgbaFrame, Size};
+use ignis_media::write::motion::{linear_blend, mv_blend};
+use ignis_media::{FlipbookOptions, ReadOptions, WriteOptions};
+use serde_json::json;
+use std::time::Instant;
+
+/// Goal: motion-vector blend error at least 30% below the cross-fade's.
+const GOAL_REDUCTION: f64 = 0.30;
+/// Goal: a 64-frame 256² flipbook with motion vectors, in seconds.
+const GOAL_FLIPBOOK_S: f64 = 2.0;
+
+fn error(a: &RgbaFrame, b: &RgbaFrame) -> f64 {
+    use ignis_core::palette::linear_to_srgb;
+    let mut sum = 0.0;
+    for (p, q) in a.data().iter().zip(b.data()) {
+        for c in 0..3 {
+            let x = linear_to_srgb((p[c] * p[3]).clamp(0.0, 1.0));
+            let y = linear_to_srgb((q[c] * q[3]).clamp(0.0, 1.0));
+            sum += ((x - y) * 255.0).abs() as f64;
+        }
+    }
+    sum / (a.data().len() * 3) as f64
+}
+
+/// Exports `frames[0::2]` with motion vectors, rebuilds the odd frames, returns the row.
+fn case(name: &str, frames: &[RgbaFrame], dir: &std::path::Path) -> Result<serde_json::Value> {
+    let kept: Vec<RgbaFrame> = frames.iter().step_by(2).cloned().collect();
+    let path = dir.join(format!("{name}.png"));
+    let opts = WriteOptions {
+        loop_: false,
+        flipbook: FlipbookOptions {
+            padding: 2,
+            motion: Some(flow_source()),
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    let mut w = ignis_media::create(&path, kept[0].size(), &opts)?;
+    for f in &kept {
+        w.push(f)?;
+    }
+    w.finish()
+        .with_context(|| format!("writing {}", path.display()))?;
+    let fb = ignis_media::read_flipbook(&path.with_extension("json"))?;
+    let mv = fb.motion.context("the flipbook has no motion vectors")?;
+    let (mut e_mv, mut e_plain) = (0.0, 0.0);
+    let pairs = fb.frames.len() - 1;
+    for k in 0..pairs {
+        let truth = &frames[2 * k + 1];
+        let m = mv_blend(&fb.frames[k], &fb.frames[k + 1], &mv[k], &mv[k + 1], 0.5);
+        let l = linear_blend(&fb.frames[k], &fb.frames[k + 1], 0.5);
+        e_mv += error(&m, truth);
+        e_plain += error(&l, truth);
+    }
+    let (e_mv, e_plain) = (e_mv / pairs as f64, e_plain / pairs as f64);
+    let reduction = 1.0 - e_mv / e_plain.max(1e-12);
+    let r3 = |v: f64| (v * 1000.0).round() / 1000.0;
+    Ok(json!({
+        "case": name,
+        "size": kept[0].size().to_string(),
+        "dropped_frames": pairs,
+        "mv_blend_error": r3(e_mv),
+        "plain_blend_error": r3(e_plain),
+        "error_reduction": r3(reduction),
+        "motion_vector_scale": fb.meta.motion_vectors.map(|m| m.scale),
+        "goal_met": reduction >= GOAL_REDUCTION,
+    }))
+}
+
+fn classic(n: usize) -> Result<Vec<RgbaFrame>> {
+    use ignis_classic::{ClassicFire, ClassicParams};
+    let mut fire = ClassicFire::new(ClassicParams {
+        size: Size::new(160, 120)?,
+        seed: 7,
+        ..Default::default()
+    })?;
+    let palette = ignis_core::Palette::preset("classic")?;
+    for _ in 0..60 {
+        fire.step();
+    }
+    Ok((0..n)
+        .map(|_| {
+            fire.step();
+            fire.rgba(&palette)
+        })
+        .collect())
+}
+
+fn volume(n: usize, preset: ignis_volume::Preset) -> Result<Vec<RgbaFrame>> {
+    let mut scene = ignis_volume::FireScene::preset(preset).with_size(Size::new(128, 128)?);
+    scene.fps *= 2.0; // twice the preset's frame rate
+    let mut anim = scene.animator()?;
+    (0..n)
+        .map(|_| Ok(anim.next_frame()?.image))
+        .collect::<Result<Vec<_>>>()
+}
+
+fn footage(name: &str, n: usize) -> Result<Option<Vec<RgbaFrame>>> {
+    let Some(path) = crate::demo::shared_data(name) else {
+        return Ok(None);
+    };
+    let opts = ReadOptions {
+        range: Some(ignis_media::FrameRange::frames(100, Some(100 + n as u64))),
+        scale: Some(Size::new(256, 144)?),
+        ..Default::default()
+    };
+    let frames = ignis_media::open(&path, &opts)?
+        .collect::<std::result::Result<Vec<_>, _>>()
+        .with_context(|| format!("decoding {}", path.display()))?;
+    Ok(Some(frames))
+}
+
+/// The table: one row per case, plus the flow and flipbook timings.
+pub fn figures(g: &Global, quick: bool) -> Result<serde_json::Value> {
+    let n = if quick { 9 } else { 25 };
+    let dir = tempfile::tempdir()?;
+    let mut rows = Vec::new();
+    let sp = g.spinner("exporting at half rate and rebuilding the dropped frames");
+    // A textured picture moving 1.5 px right and 1 px up per frame: the blend's
+    // reference case (its motion is exactly what motion vectors describe).
+    let shift: Vec<RgbaFrame> = (0..n)
+        .map(|i| {
+            let d = [1.5 * i as f32, -(i as f32)];
+            ignis_flow::bench::texture(Size::new(128, 128).unwrap(), 3, d, 1.5).to_rgba()
+        })
+        .collect();
+    rows.push(case("moving-texture", &shift, dir.path())?);
+    rows.push(case("classic", &classic(n)?, dir.path())?);
+    for p in [ignis_volume::Preset::Candle, ignis_volume::Preset::Campfire] {
+        rows.push(case(
+            &format!("volume-{}", p.name()),
+            &volume(n, p)?,
+            dir.path(),
+        )?);
+    }
+    let mut skipped = Vec::new();
+    for clip in ["candle.mp4", "campfire.mp4"] {
+        match footage(clip, n)? {
+            Some(frames) => rows.push(case(clip, &frames, dir.path())?),
+            None => skipped.push(format!("{clip}: ../shared/data not found")),
+        }
+    }
+    // A 64-frame 256² flipbook with motion vectors, end to end.
+    let scene = ignis_volume::FireScene::preset(ignis_volume::Preset::Candle)
+        .with_size(Size::new(256, 256)?);
+    let mut anim = scene.animator()?;
+    let frames: Vec<RgbaFrame> = (0..64)
+        .map(|_| Ok(anim.next_frame()?.image))
+        .collect::<Result<_>>()?;
+    let path = dir.path().join("timed.png");
+    let opts = WriteOptions {
+        flipbook: FlipbookOptions {
+            motion: Some(flow_source()),
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    let t = Instant::now();
+    let mut w = ignis_media::create(&path, frames[0].size(), &opts)?;
+    for f in &frames {
+        w.push(f)?;
+    }
+    w.finish()?;
+    let flipbook_s = t.elapsed().as_secs_f64();
+    let flow: Vec<serde_json::Value> = ignis_flow::bench::figures(quick)?
+        .iter()
+        .filter(|t| t.name.starts_with("flow_"))
+        .map(|t| {
+            json!({
+                "case": t.name,
+                "size": t.size.to_string(),
+                "median_ms": (t.median_ms * 10.0).round() / 10.0,
+                "goal_ms": t.goal_ms,
+                "goal_met": t.goal_met(),
+            })
+        })
+        .collect();
+    sp.finish_and_clear();
+    Ok(json!({
+        "threads": rayon::current_num_threads(),
+        "metric": "mean |error| vs the true dropped frame, 8-bit sRGB levels, colour over black",
+        "goal_error_reduction": GOAL_REDUCTION,
+        "blend": rows,
+        "skipped": skipped,
+        "flipbook_64x256_mv_s": (flipbook_s * 1000.0).round() / 1000.0,
+        "flipbook_goal_s": GOAL_FLIPBOOK_S,
+        "flipbook_goal_met": flipbook_s <= GOAL_FLIPBOOK_S,
+        "flow": flow,
+    }))
+}
