@@ -427,9 +427,11 @@ pub struct Chosen {
     pub evaluate_s: f64,
 }
 
-/// Searches the n×k weights (one row per window frame) for loops of about `length`
+/// Searches the n×k weights (one row per window frame; window frame 0 = source frame
+/// `first`) for loops of about `length`
 /// frames, evaluates every closing on `metric` and chooses with `method`.
 pub fn search_and_choose(
+    first: usize,
     weights: &[f32],
     k: usize,
     e: usize,
@@ -464,7 +466,7 @@ pub fn search_and_choose(
         .filter(|e| method.admits(&e.closing))
         .collect();
     let evaluate_s = t.elapsed().as_secs_f64();
-    let (best, why) = loops::choose(&evaluated).ok_or_else(|| {
+    let (best, why) = loops::choose(&evaluated, first).ok_or_else(|| {
         anyhow::anyhow!(
             "no loop closing fits in the window; use a longer window or a shorter --length"
         )
@@ -602,7 +604,7 @@ pub fn make_loop(
     top: usize,
     g: &Global,
 ) -> Result<Done> {
-    let chosen = search_and_choose(weights, k, e, metric, length, method)?;
+    let chosen = search_and_choose(first, weights, k, e, metric, length, method)?;
     g.say("best candidates (predicted on the footage's 128-px frames):");
     for (i, c) in top_candidates(&chosen.evaluated, top).iter().enumerate() {
         g.say(format!("  {}. {}", i + 1, describe(c, first)));

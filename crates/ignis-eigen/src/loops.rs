@@ -605,15 +605,16 @@ fn measure(win: &MetricWindow, c: &Candidate, closing: Closing, mids: &[GrayFram
     }
 }
 
-/// The best evaluated closing with a sentence saying why it won, or `None` for an empty list.
-pub fn choose(evaluated: &[Evaluated]) -> Option<(Evaluated, String)> {
+/// The best evaluated closing with a sentence saying why it won (frame numbers offset by
+/// `first`, the window's first source frame), or `None` for an empty list.
+pub fn choose(evaluated: &[Evaluated], first: usize) -> Option<(Evaluated, String)> {
     let best = *evaluated.first()?;
     let best_of = |f: &dyn Fn(&Closing) -> bool| evaluated.iter().find(|e| f(&e.closing));
     let mut why = format!(
         "{} at {}..{} scores {:.3} (seam {:.2} + {GHOST_WEIGHT} × ghost shortfall {:.2})",
         best.closing,
-        best.candidate.start,
-        best.candidate.end,
+        first + best.candidate.start,
+        first + best.candidate.end,
         best.score,
         best.quality.seam,
         (1.0 - best.quality.ghost).max(0.0)
@@ -767,6 +768,6 @@ mod tests {
         assert!((q.ghost - ev[0].quality.ghost).abs() < 1e-9);
         // Every other closing was tried too.
         assert!(ev.iter().any(|e| e.closing == Closing::Crossfade(4)));
-        assert!(choose(&ev).unwrap().1.contains("plain cut"));
+        assert!(choose(&ev, 0).unwrap().1.contains("plain cut"));
     }
 }
