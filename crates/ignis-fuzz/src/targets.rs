@@ -464,6 +464,7 @@ pub fn toml_targets(fx: &Fixtures) -> Vec<Arc<dyn Target>> {
                         fuel_x: 20.0,
                         base_y: 60.0,
                         scale: 1.0,
+                        isolate: true,
                     };
                     let _ = ignis_eigen::preprocess::preprocess_stages(&frame, &pose, &p);
                     Outcome::Ok
