@@ -173,7 +173,7 @@ pub fn figures(g: &Global, quick: bool) -> Result<serde_json::Value> {
     }
     w.finish()?;
     let flipbook_s = t.elapsed().as_secs_f64();
-    let flow: Vec<serde_json::Value> = ignis_flow::bench::figures(quick)?
+    let flow: Vec<serde_json::Value> = ignis_flow::bench::figures(quick, &crate::process_cpu_ms)?
         .iter()
         .filter(|t| t.name.starts_with("flow_"))
         .map(|t| {

@@ -181,14 +181,8 @@ pub fn bench(clips: &[PathBuf], cache: Option<&Path>, g: &Global) -> Result<Valu
                 tmp.join(format!("{stem}-{secs}s/%04d.png"))
             };
             let out = crate::output::OutputArgs {
-                output,
-                format: None,
                 fps: c.fps,
-                columns: None,
-                rows: None,
-                padding: 0,
-                premultiplied: false,
-                no_loop: false,
+                ..crate::output::OutputArgs::for_path(output)
             };
             let quiet = Global { quiet: true };
             let t = Instant::now();

@@ -840,16 +840,7 @@ mod tests {
     }
 
     fn out_args(path: PathBuf) -> crate::output::OutputArgs {
-        crate::output::OutputArgs {
-            output: path,
-            format: None,
-            fps: 30.0,
-            columns: None,
-            rows: None,
-            padding: 0,
-            premultiplied: false,
-            no_loop: false,
-        }
+        crate::output::OutputArgs::for_path(path)
     }
 
     /// The loop goal on each dev clip, on a 120-frame window of its middle (cheap

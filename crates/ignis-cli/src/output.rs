@@ -80,6 +80,18 @@ pub struct OutputArgs {
 }
 
 impl OutputArgs {
+    /// The options a user gets who only gives `-o path` (every other flag at its default),
+    /// for commands that write outputs of their own (benches, tests).
+    pub fn for_path(output: PathBuf) -> OutputArgs {
+        let mut argv = vec![std::ffi::OsString::from("ignis"), "-o".into()];
+        argv.push(output.into_os_string());
+        <OutputArgs as clap::FromArgMatches>::from_arg_matches(
+            &<OutputArgs as clap::Args>::augment_args(clap::Command::new("ignis"))
+                .get_matches_from(argv),
+        )
+        .expect("the defaults of OutputArgs parse")
+    }
+
     pub fn write_options(&self) -> WriteOptions {
         WriteOptions {
             format: self.format.as_deref().map(|f| match f {
