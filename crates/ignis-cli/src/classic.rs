@@ -136,8 +136,7 @@ pub fn run(args: &Args, g: &Global) -> Result<Vec<PathBuf>> {
     let mut opts = args.out.write_options();
     opts.loop_ = plan.mark_loop;
     opts.first_frame = plan.range.start as u64;
-    let mut writer = ignis_media::create(&args.out.output, args.size, &opts)
-        .with_context(|| format!("creating {}", args.out.output.display()))?;
+    let mut writer = args.out.create_with(args.size, &opts)?;
     let pb = g.progress(plan.range.len() as u64, "classic");
     for _ in plan.range.clone() {
         fire.step_par();

@@ -352,8 +352,7 @@ pub fn synth(a: &SynthArgs, g: &Global) -> Result<Vec<PathBuf>> {
     let mut opts = a.out.write_options();
     opts.loop_ = plan.mark_loop;
     opts.first_frame = plan.range.start as u64;
-    let mut writer = ignis_media::create(&a.out.output, a.size, &opts)
-        .with_context(|| format!("creating {}", a.out.output.display()))?;
+    let mut writer = a.out.create_with(a.size, &opts)?;
     let mut frame = GrayFrame::new(a.size);
     let bar = g.progress(plan.range.len() as u64, "synthesising");
     for _ in plan.range.clone() {

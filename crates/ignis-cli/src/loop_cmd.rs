@@ -614,8 +614,7 @@ pub fn make_loop(
     opts.fps = fps;
     opts.loop_ = true;
     let t = Instant::now();
-    let mut w = ignis_media::create(&out.output, info.size, &opts)
-        .with_context(|| format!("creating {}", out.output.display()))?;
+    let mut w = out.create_with(info.size, &opts)?;
     let pb = g.progress(chosen.best.candidate.len() as u64, "rendering");
     render(path, first, &chosen.best, &mut |f| {
         pb.inc(1);

@@ -133,6 +133,13 @@ impl OutputArgs {
 
     /// Opens the writer (atomic: nothing appears under the final name until `finish`).
     pub fn create(&self, size: Size) -> Result<FrameWriter> {
+        self.create_with(size, &self.write_options())
+    }
+
+    /// [`OutputArgs::create`] with options the command adjusted (loop marking, a chunk's
+    /// first frame number, the footage's fps); flipbook-only flags are still refused for
+    /// other formats.
+    pub fn create_with(&self, size: Size, opts: &WriteOptions) -> Result<FrameWriter> {
         let flipbook_only = self.motion_vectors
             || self.emission
             || self.hdr
@@ -141,7 +148,7 @@ impl OutputArgs {
             || self.fit_frames
             || self.variants != 1
             || self.engine() != Engine::Generic;
-        let format = match self.write_options().format {
+        let format = match opts.format {
             Some(f) => f,
             None => Format::from_path(&self.output)?,
         };
@@ -151,7 +158,7 @@ impl OutputArgs {
                  --variants apply to flipbooks; write to a .png file (e.g. -o fire.png)"
             );
         }
-        ignis_media::create(&self.output, size, &self.write_options())
+        ignis_media::create(&self.output, size, opts)
             .with_context(|| format!("creating {}", self.output.display()))
     }
 }

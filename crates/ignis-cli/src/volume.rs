@@ -173,8 +173,7 @@ pub fn render(a: &RenderArgs, g: &Global) -> Result<Vec<PathBuf>> {
     };
     // a chunk replays only the motion (cheap) up to its first frame
     anim.skip(plan.range.start as u64);
-    let mut writer = ignis_media::create(&a.out.output, scene.size, &opts)
-        .with_context(|| format!("creating {}", a.out.output.display()))?;
+    let mut writer = a.out.create_with(scene.size, &opts)?;
     let mut hits = String::new();
     let pb = g.progress(plan.range.len() as u64, "rendering");
     for i in plan.range.clone() {
