@@ -11,7 +11,7 @@ use ignis_flow::*;
 /// A smooth random texture: a seeded sum of sinusoids (wavelengths 6–40 px) evaluated at
 /// `(x − dx, y − dy)`, so shifting by a sub-pixel amount is exact. Values in about 0.1..1.
 fn texture(size: Size, seed: u64, d: [f32; 2]) -> GrayFrame {
-    texture_scaled(size, seed, d, 1.0)
+    ignis_flow::bench::texture(size, seed, d, 1.0)
 }
 
 /// Per-pixel errors of `f` against the constant truth `d` on the interior (a `margin` px
@@ -131,7 +131,7 @@ mod translation {
         let s = Size::new(1920, 1080).unwrap();
         let d = [7.5, -4.0];
         // A coarser texture so it survives the 3.75× reduction (wavelengths × 4).
-        let big = |d: [f32; 2]| texture_scaled(s, 21, d, 4.0);
+        let big = |d: [f32; 2]| ignis_flow::bench::texture(s, 21, d, 4.0);
         let (a, b) = (big([0.0, 0.0]), big(d));
         let p = FlowParams::default();
         let f = flow(&a, &b, &p).unwrap();
@@ -145,33 +145,6 @@ mod translation {
         // Full-resolution pixels: the working-size bound scaled by about 2.
         assert!(p95 < 2.0 * P95_BOUND, "p95 {p95}");
     }
-}
-
-/// [`texture`] with every wavelength multiplied by `k`.
-fn texture_scaled(size: Size, seed: u64, d: [f32; 2], k: f32) -> GrayFrame {
-    let mut rng = Rng::new(seed);
-    let waves: Vec<[f32; 4]> = (0..12)
-        .map(|_| {
-            let lambda = k * rng.uniform(6.0, 40.0) as f32;
-            let angle = rng.uniform(0.0, std::f64::consts::TAU) as f32;
-            let kk = std::f32::consts::TAU / lambda;
-            [
-                kk * angle.cos(),
-                kk * angle.sin(),
-                rng.uniform(0.0, std::f64::consts::TAU) as f32,
-                rng.uniform(0.5, 1.0) as f32,
-            ]
-        })
-        .collect();
-    let norm: f32 = waves.iter().map(|w| w[3]).sum();
-    GrayFrame::from_fn(size, |x, y| {
-        let (px, py) = (x as f32 - d[0], y as f32 - d[1]);
-        let s: f32 = waves
-            .iter()
-            .map(|w| w[3] * (w[0] * px + w[1] * py + w[2]).sin())
-            .sum();
-        0.55 + 0.45 * s / norm
-    })
 }
 
 mod morph {
