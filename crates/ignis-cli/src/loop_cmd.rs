@@ -277,7 +277,6 @@ fn open_entry(dir: &Path, sha: &str, settings: &CacheSettings) -> Result<Cached>
     })
 }
 
-#[allow(clippy::too_many_arguments)]
 fn build_entry(
     path: &Path,
     sha: &str,
@@ -330,8 +329,10 @@ fn build_entry(
             spec,
             source: crate::eigen::media_source(path)?,
         }];
-        let mut pre = PreprocessParams::default();
-        pre.train_size = Some(train_size);
+        let pre = PreprocessParams {
+            train_size: Some(train_size),
+            ..Default::default()
+        };
         let tp = TrainParams {
             keep: Some(ignis_eigen::ESelect::Count(keep.max(2))),
             ..Default::default()
@@ -589,7 +590,6 @@ pub struct Done {
 }
 
 /// Searches, renders and writes a loop of window `first..` of `path` to `out`.
-#[allow(clippy::too_many_arguments)]
 pub fn make_loop(
     path: &Path,
     first: usize,

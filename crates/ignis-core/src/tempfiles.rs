@@ -131,11 +131,9 @@ pub fn commit_files(dir: &Path, pairs: &[(String, String)]) -> std::io::Result<(
     std::fs::rename(&partial, &journal)?;
     sync_dir(dir);
     for (t, f) in pairs {
-        if let Err(e) = std::fs::rename(dir.join(t), dir.join(f)) {
-            // Nothing renamed yet can be undone safely only for the first pair; leave the
-            // journal so the next run completes or cleans it.
-            return Err(e);
-        }
+        // Nothing renamed yet can be undone safely only for the first pair; on failure leave
+        // the journal so the next run completes or cleans it.
+        std::fs::rename(dir.join(t), dir.join(f))?;
     }
     sync_dir(dir);
     std::fs::remove_file(&journal)?;

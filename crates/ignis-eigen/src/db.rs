@@ -405,7 +405,7 @@ impl Manifest {
             if !(c.fps.is_finite() && c.fps > 0.0) {
                 return bad(format!("fps is {}, expected a finite number > 0", c.fps));
             }
-            size_ok("source_size", c.source_size).or_else(|r| bad(r))?;
+            size_ok("source_size", c.source_size).or_else(&bad)?;
             let p = c.pose;
             if !(p.fuel_x.is_finite()
                 && p.base_y.is_finite()
@@ -422,7 +422,7 @@ impl Manifest {
                 ("theta_min", t.theta_min),
                 ("theta_average", t.theta_average),
             ] {
-                fin(&format!("thresholds.{w}"), v).or_else(|r| bad(r))?;
+                fin(&format!("thresholds.{w}"), v).or_else(&bad)?;
             }
             if let Some(&pk) = t.peaks.iter().find(|&&pk| pk >= c.frames) {
                 return bad(format!(

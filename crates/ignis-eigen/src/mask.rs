@@ -573,8 +573,10 @@ mod tests {
     /// Issue 18 defect 5: a zero low threshold is refused; the smallest accepted one runs.
     #[test]
     fn canny_thresholds_are_checked() {
-        let mut p = MaskParams::default();
-        p.canny = [0.0, 100.0];
+        let mut p = MaskParams {
+            canny: [0.0, 100.0],
+            ..Default::default()
+        };
         assert!(p.validate().is_err());
         p.canny = [f32::NAN, 100.0];
         assert!(p.validate().is_err());

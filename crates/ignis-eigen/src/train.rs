@@ -583,7 +583,6 @@ pub fn train(
     }
 }
 
-#[allow(clippy::too_many_arguments)]
 fn train_into(
     clips: &[ClipInput<'_>],
     plans: &[Planned],

@@ -189,7 +189,6 @@ fn warp_patch(img: &Img, px: usize, py: usize, u: [f32; 2], patch: usize, out: &
     }
 }
 
-#[allow(clippy::too_many_arguments)]
 fn inverse_search(
     i0: &Img,
     i1: &Img,

@@ -275,11 +275,14 @@ impl Target for Flipbook {
     }
 }
 
+/// A reader of TOML text, given the text and a scratch directory.
+type TomlRun = Box<dyn Fn(&str, &Path) -> Outcome + Send + Sync>;
+
 /// A TOML reader given as a function of (text, scratch directory).
 pub struct Toml {
     name: &'static str,
     seeds: Vec<Vec<u8>>,
-    run: Box<dyn Fn(&str, &Path) -> Outcome + Send + Sync>,
+    run: TomlRun,
 }
 
 impl Target for Toml {

@@ -151,9 +151,9 @@ impl Arp {
                 out[i] += row.iter().zip(x.iter()).map(|(a, b)| a * b).sum::<f64>();
             }
         }
-        for i in 0..n {
+        for (i, o) in out.iter_mut().enumerate() {
             let row = &self.b[i * n..i * n + i + 1];
-            out[i] += row
+            *o += row
                 .iter()
                 .zip(noise.iter())
                 .map(|(a, b)| a * b)

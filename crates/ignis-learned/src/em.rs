@@ -95,7 +95,7 @@ impl EmParams {
                 "iterations and patience must be ≥ 1",
             ));
         }
-        if !(self.obs_noise > 0.0 && self.obs_noise < 1.0) || !(self.min_obs_noise > 0.0) {
+        if !(self.obs_noise > 0.0 && self.obs_noise < 1.0 && self.min_obs_noise > 0.0) {
             return Err(LearnedError::bad(
                 "obs_noise",
                 "must be in (0, 1), and its floor > 0",

@@ -110,7 +110,10 @@ pub fn address_space_left() -> u64 {
                     .and_then(|v| v.parse::<u64>().ok())
             })
             .map_or(0, |kb| kb.saturating_mul(1024));
-        (r.rlim_cur as u64).saturating_sub(used)
+        // `rlim_t` is u64 here but not on every unix (i64 on FreeBSD), so the cast stays.
+        #[allow(clippy::unnecessary_cast)]
+        let limit = r.rlim_cur as u64;
+        limit.saturating_sub(used)
     }
     #[cfg(not(unix))]
     {

@@ -1316,12 +1316,12 @@ mod tests {
                 for _ in 0..300 {
                     let l = [0; 3].map(|_| rng.uniform(0.0, 1.0) as f32);
                     let p = c.forward(l);
-                    for r in 0..3 {
+                    for (r, &lr) in l.iter().enumerate() {
                         let est = 0.5
                             + (0..3)
                                 .map(|i| aff.m[r][i] * (p[i] as f64 - aff.centre[i]))
                                 .sum::<f64>();
-                        let e = (est - l[r] as f64).abs();
+                        let e = (est - lr as f64).abs();
                         // `p` is rounded to f32: allow for that (≈ 1e-7 · |M| · |p|)
                         assert!(e <= aff.err[r] + 1e-5, "error {e} > bound {}", aff.err[r]);
                         worst = worst.max(e / (aff.err[r] + 1e-5));

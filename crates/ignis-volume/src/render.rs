@@ -1091,7 +1091,6 @@ impl Ctx<'_, '_> {
     /// Marches pixel `(x, y)`'s ray through one fire's candidate cells and appends its
     /// samples inside the unit cylinder (texture coordinates) to `out`; samples at slice
     /// index `best_k` or beyond are skipped. Returns whether any sample was inside a cell.
-    #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     fn march(
         &self,
@@ -1161,7 +1160,6 @@ impl Ctx<'_, '_> {
     /// pixel that gave no sample is then marched ray by ray ([`Ctx::cover`]) until one
     /// sample is known to lie in a cell, to count it as covered (those samples are not
     /// visible and are not kept).
-    #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     fn march_cells(
         &self,
@@ -1292,7 +1290,6 @@ impl Ctx<'_, '_> {
     /// Inverts a batch of candidate samples of cell `j` ([`Ctx::march_cells`]) and keeps
     /// those the cell claims ([`Ctx::owns`]) and that lie in the unit cylinder.
     #[inline(always)]
-    #[allow(clippy::too_many_arguments)]
     fn claim(
         &self,
         fire: &FireInstance,
@@ -1419,7 +1416,6 @@ impl Ctx<'_, '_> {
 
     /// Marches pixel `(x, y)`'s ray through one fire's cells only until a sample is
     /// known to lie inside a cell (then the pixel is covered); keeps no sample.
-    #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     fn cover(
         &self,
@@ -1450,7 +1446,6 @@ impl Ctx<'_, '_> {
     /// Sets up pixel `(x, y)`'s ray: direction, the candidate cells it meets (with their
     /// ray intervals, kept in `ranges`), its slice range and, `with_visible`, the slices
     /// that may be visible (else none); `None` if it meets no cell.
-    #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     fn ray<'r>(
         &self,

@@ -963,7 +963,7 @@ mod hardening_tests {
         for spacing in [1e-7f32, 1e-9] {
             s.slice_spacing = spacing;
             let mut a = s.animator().unwrap();
-            let e = a.next_frame().err().expect("refused");
+            let e = a.next_frame().expect_err("refused");
             assert!(matches!(e, VolumeError::LimitExceeded(_)), "{e}");
             let e = e.to_string();
             assert!(e.contains("samples") && e.contains("slice_spacing"), "{e}");

@@ -351,7 +351,6 @@ fn try_join(
 }
 
 /// Optimize_Path(): drop detours, then split dramatic jumps (see the module docs).
-#[allow(clippy::too_many_arguments)]
 pub(crate) fn optimize_path(
     space: &WeightSpace,
     alpha: usize,
@@ -424,7 +423,6 @@ pub(crate) fn optimize_path(
 /// scanning in index order with a strict `<` keeps the first minimum, and starting from
 /// `worst` only drops frames that could not be inserted anyway. Distances past the best so
 /// far are abandoned early (exactly, see [`super::dist_upto`]).
-#[allow(clippy::too_many_arguments)]
 fn best_split(
     space: &WeightSpace,
     p: usize,
