@@ -5,7 +5,7 @@
 
 use std::path::PathBuf;
 
-use ignis_core::{GrayFrame, RgbaFrame, Rng, Size};
+use ignis_core::{GrayFrame, RgbaFrame, Size};
 use ignis_flow::*;
 
 /// A smooth random texture: a seeded sum of sinusoids (wavelengths 6–40 px) evaluated at
