@@ -360,9 +360,11 @@ fn morph_join_between_two_clips_measured_on_the_written_frames() {
             source: ignis_eigen::train::ClipSource::from_frames("campfire.mp4", &b, 25.0),
         },
     ];
-    let mut p = PreprocessParams::default();
-    p.pose_samples = 4;
-    p.train_pixels = 1200;
+    let p = PreprocessParams {
+        pose_samples: 4,
+        train_pixels: 1200,
+        ..Default::default()
+    };
     let tp = TrainParams {
         pack_size: 8,
         store_frames: true,
