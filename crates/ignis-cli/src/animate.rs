@@ -388,7 +388,7 @@ pub fn template(db: &EigenfireDb, db_path: &str) -> String {
             c.name
         ));
     }
-    s.push_str("[transition]                # defaults for every join\nmethod = \"auto\"             # auto | end-growing | direct | low-pass\n\n");
+    s.push_str("[transition]                # defaults for every join\nmethod = \"auto\"             # auto | end-growing | direct | low-pass | morph\n\n");
     s.push_str("# [[join]]                  # join 1 (positional), overrides [transition]\n# method = \"end-growing\"\n# steps = 40                # N: most frames (end-growing) / frames (direct)\n# theta_min = 2.5           # fixed θ_min (default: adaptive, per clip)\n# kernel = [0.2, 0.2, 0.6]  # low-pass\n# eigenfires = 50           # low-pass: E of the morphs\n\n");
     s.push_str("[colour]\nmode = \"original\"           # original (Algorithm 2) | synthetic | palette | grey\ntint = [1.0, 0.42, 0.08]    # synthetic colour, and the bloom's tint\n# palette = \"candle\"        # palette mode\nthreshold = 0.013           # original: copy the footage above this grey level (thesis 30/255)\nalpha = \"matte\"             # matte | opaque\nfast_path = true            # §7.1.2: stored pre-processed frames for database frames\n# mask_mode = \"add\"         # add | replace (custom masks, §6.4)\n\n");
     s.push_str("[bloom]\npasses = 3\nradius = 24.0\nstrength = 0.4\n\n");

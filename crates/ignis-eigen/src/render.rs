@@ -18,7 +18,7 @@ use crate::animate::has_stored_frames;
 use crate::colour::{original_colouring, synthetic_smoke, warp_rgba, OriginalColour};
 use crate::db::{ClipEntry, EigenfireDb};
 use crate::error::{EigenError, Result};
-use crate::scenario::{ColourMode, Look, Plan, PlanFrame};
+use crate::scenario::{ColourMode, Look, MorphRun, Plan, PlanFrame};
 use crate::synthetic::{parse_source_name, synthetic_frame, SyntheticParams};
 use crate::transition::FrameRef;
 
@@ -495,11 +495,102 @@ pub fn render_plan_with(
     let out = opts.size.unwrap_or(default_size);
     check_output_size(out)?;
     let geo = Geometry { frame, view, out };
+    let n = plan.frames.len();
+    let mut runs: Vec<&MorphRun> = plan.morphs.iter().collect();
+    runs.sort_by_key(|r| r.start);
+    for r in &runs {
+        let (a, b) = r.endpoints(n.max(1));
+        let inside = |i: usize| i >= r.start && i < r.start + r.len;
+        if n == 0 || r.len == 0 || r.start + r.len > n || inside(a) || inside(b) {
+            return Err(EigenError::bad(
+                "plan",
+                format!(
+                    "morph run {}..{} does not sit between two real frames of the {n}-frame plan",
+                    r.start,
+                    r.start + r.len
+                ),
+            ));
+        }
+    }
+    let mut done = 0;
+    let mut at = 0;
+    let mut count = |f: RgbaFrame, sink: &mut dyn FnMut(RgbaFrame) -> Result<()>| {
+        sink(f)?;
+        done += 1;
+        progress(done);
+        Ok::<(), EigenError>(())
+    };
+    for r in runs {
+        if r.start < at {
+            return Err(EigenError::bad("plan", "morph runs overlap"));
+        }
+        render_frames(
+            db,
+            plan,
+            &plan.frames[at..r.start],
+            look,
+            opts,
+            geo,
+            sources,
+            &mut |f| count(f, sink),
+        )?;
+        // The two endpoint frames, rendered once, and the flow between them once.
+        let (a, b) = r.endpoints(n);
+        let ends = [plan.frames[a].clone(), plan.frames[b].clone()];
+        let mut got = Vec::with_capacity(2);
+        render_frames(db, plan, &ends, look, opts, geo, sources, &mut |f| {
+            got.push(f);
+            Ok(())
+        })?;
+        let (fa, fb) = (&got[0], &got[1]);
+        let p = ignis_flow::FlowParams {
+            max_side: MORPH_FLOW_SIDE,
+            ..Default::default()
+        };
+        let flow_err = |e: ignis_flow::FlowError| EigenError::bad("morph", e.to_string());
+        let (la, lb) = rayon::join(|| ignis_flow::luma(fa), || ignis_flow::luma(fb));
+        let (fw, bw) = ignis_flow::flow_pair_reduced(&la, &lb, &p).map_err(flow_err)?;
+        for k in 0..r.len {
+            let t = (k + 1) as f32 / (r.len + 1) as f32;
+            let m = ignis_flow::morph_rgba(fa, fb, &fw, &bw, t).map_err(flow_err)?;
+            count(m, sink)?;
+        }
+        at = r.start + r.len;
+    }
+    render_frames(
+        db,
+        plan,
+        &plan.frames[at..],
+        look,
+        opts,
+        geo,
+        sources,
+        &mut |f| count(f, sink),
+    )
+}
+
+/// Longest side of the flow's working size for morph joins (full-resolution frames are
+/// morphed with the flow upsampled from it).
+pub const MORPH_FLOW_SIDE: u32 = 384;
+
+/// Renders `frames` (no morph runs among them) of `plan` into `sink`, in order.
+#[allow(clippy::too_many_arguments)]
+fn render_frames(
+    db: &EigenfireDb,
+    plan: &Plan,
+    all_frames: &[PlanFrame],
+    look: &Look,
+    opts: &RenderOptions,
+    geo: Geometry,
+    sources: &mut dyn SourceFrames,
+    sink: &mut dyn FnMut(RgbaFrame) -> Result<()>,
+) -> Result<()> {
+    let Geometry { frame, view, out } = geo;
     let stored = has_stored_frames(db);
     let original = matches!(look.mode, ColourMode::Original);
     let needs_rows = original || !look.masks.is_empty();
     let rows: Vec<usize> = if needs_rows {
-        plan.frames
+        all_frames
             .iter()
             .map(|f| colour_row(db, f, plan.e_detect))
             .collect()
@@ -542,10 +633,9 @@ pub fn render_plan_with(
         w
     };
     const BATCH: usize = 16;
-    let mut done = 0;
-    for start in (0..plan.frames.len()).step_by(BATCH) {
-        let end = (start + BATCH).min(plan.frames.len());
-        let frames = &plan.frames[start..end];
+    for start in (0..all_frames.len()).step_by(BATCH) {
+        let end = (start + BATCH).min(all_frames.len());
+        let frames = &all_frames[start..end];
         let colour_rows: Vec<usize> = if needs_rows {
             rows[start..end].to_vec()
         } else {
@@ -664,8 +754,6 @@ pub fn render_plan_with(
             .collect();
         for f in batch {
             sink(f?)?;
-            done += 1;
-            progress(done);
         }
     }
     Ok(())
@@ -742,6 +830,7 @@ pub fn loop_plan(
     let e = e_render.clamp(1, db.usable_components().max(1));
     let plan = Plan {
         frames,
+        morphs: Vec::new(),
         joins: Vec::new(),
         wrap_seam: join.seam_ratio,
         worst_step: join.seam_ratio,

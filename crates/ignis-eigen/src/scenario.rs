@@ -24,7 +24,7 @@
 //! weights = "1=0.8"             # optional §5.2 edits: set Eigenfire 1's weight on every frame
 //!
 //! [transition]                  # defaults for every join
-//! method = "auto"               # auto | end-growing | direct | low-pass
+//! method = "auto"               # auto | end-growing | direct | low-pass | morph
 //!
 //! [[join]]                      # join 1: calm → wind (positional; fewer than joins is fine)
 //! method = "direct"
@@ -37,7 +37,14 @@
 //! Join settings: `method`, `steps` (direct: N frames; end-growing: N, the most frames;
 //! default automatic / 40), `theta_min` (fixed θ_min in weight units; default adaptive,
 //! per clip), `theta_quantile`, `join_gap`, `reject_near`, and for low-pass `kernel`,
-//! `eigenfires` (E of the morphs, default 50) and `inject_from` (detail injection).
+//! `eigenfires` (E of the morphs, default 50) and `inject_from` (detail injection), and
+//! for `morph` `frames` (the in-betweens; default automatic, see [`MorphRun`]).
+//!
+//! `method = "morph"` joins the last frame of one motion to the first of the next with
+//! motion-compensated in-betweens (`ignis_flow`: DIS flow both ways at a reduced size,
+//! warp and blend) of the two rendered frames. `auto` keeps a real-frame path (End
+//! Growing, Direct Bridging) when its seam ratio is within [`AUTO_MORPH_ABOVE`], and
+//! otherwise uses the morph, saying why.
 //! The look (`[colour]`, `[bloom]`, `[smoke]`, `[originals]`, `[masks]`) is described in
 //! [`Look`].
 //!
@@ -197,6 +204,7 @@ struct RawJoin {
     kernel: Option<Spanned<Vec<f32>>>,
     eigenfires: Option<Spanned<usize>>,
     inject_from: Option<Spanned<usize>>,
+    frames: Option<Spanned<usize>>,
 }
 
 #[derive(Debug, Default, Deserialize)]
@@ -525,7 +533,7 @@ impl Scenario {
     }
 
     /// The transition of join `i` (0-based), from `[[join]]` i over `[transition]`.
-    fn join_method(&self, i: usize) -> Result<(Transition, RecognitionParams)> {
+    fn join_method(&self, i: usize) -> Result<(Transition, RecognitionParams, Option<MorphSpec>)> {
         let dflt = RawJoin::default();
         let d = self.raw.transition.as_ref().map_or(&dflt, |t| t.get_ref());
         let j = self.raw.join.get(i).map(|s| s.get_ref());
@@ -539,13 +547,37 @@ impl Scenario {
         let kernel = pick!(kernel);
         let eigenfires = pick!(eigenfires);
         let inject_from = pick!(inject_from);
+        let n_frames = pick!(frames);
         let name = method.as_ref().map_or("auto", |m| m.get_ref().as_str());
-        let mut t = animate::parse_method(name).map_err(|_| {
-            self.err_at(
-                method.as_ref().map_or(0..0, |m| m.span()),
-                format!("unknown method `{name}`; choose auto, end-growing, direct or low-pass"),
-            )
-        })?;
+        if let Some(f) = &n_frames {
+            if *f.get_ref() == 0 || *f.get_ref() > MORPH_MAX_FRAMES {
+                return Err(self.err_at(
+                    f.span(),
+                    format!("`frames` must be in 1..={MORPH_MAX_FRAMES}"),
+                ));
+            }
+        }
+        let morph = match name {
+            "morph" => Some(MorphSpec {
+                frames: n_frames.as_ref().map(|f| *f.get_ref()),
+                forced: true,
+            }),
+            "auto" => Some(MorphSpec {
+                frames: n_frames.as_ref().map(|f| *f.get_ref()),
+                forced: false,
+            }),
+            _ => None,
+        };
+        let mut t = if name == "morph" {
+            Transition::Auto
+        } else {
+            animate::parse_method(name).map_err(|_| {
+                self.err_at(
+                    method.as_ref().map_or(0..0, |m| m.span()),
+                    format!("unknown method `{name}`; choose auto, end-growing, direct, low-pass or morph"),
+                )
+            })?
+        };
         if let Some(s) = &steps {
             if *s.get_ref() == 0 {
                 return Err(self.err_at(s.span(), "`steps` must be at least 1"));
@@ -615,7 +647,7 @@ impl Scenario {
         if let Some(v) = pick!(reject_near) {
             rec.reject_near = v;
         }
-        Ok((t, rec))
+        Ok((t, rec, morph))
     }
 
     /// Where join `i` is configured (its `[[join]]` table, else `[transition]`, else the
@@ -729,11 +761,42 @@ impl Scenario {
         for i in 0..n_joins {
             progress(i, n_joins);
             let (a, b) = (seq[i], seq[(i + 1) % seq.len()]);
-            let (t, mut rec) = self.join_method(i)?;
+            let (t, mut rec, morph) = self.join_method(i)?;
             rec.e_detect = e_detect;
             let (ra, rb) = (motions[a].rows.clone(), motions[b].rows.clone());
-            let join =
-                transition::transition(&space, ra.clone(), rb.clone(), &t, &rec).map_err(|e| {
+            let e = rec.e_detect(&space);
+            let forced = morph.as_ref().is_some_and(|m| m.forced);
+            let tried = if forced {
+                None
+            } else {
+                Some(transition::transition(
+                    &space,
+                    ra.clone(),
+                    rb.clone(),
+                    &t,
+                    &rec,
+                ))
+            };
+            let join = match (tried, &morph) {
+                (None, Some(m)) => morph_join(&space, &ra, &rb, m.frames, e, "method = \"morph\""),
+                (Some(Ok(j)), Some(m)) if j.seam_ratio > AUTO_MORPH_ABOVE => {
+                    let mj = morph_join(&space, &ra, &rb, m.frames, e, "");
+                    if mj.seam_ratio < j.seam_ratio {
+                        let why = format!(
+                            "auto: {} gave seam ratio {:.2} (> {AUTO_MORPH_ABOVE}), the morph {:.2}; {}",
+                            j.method, j.seam_ratio, mj.seam_ratio, mj.why
+                        );
+                        Join { why, ..mj }
+                    } else {
+                        j
+                    }
+                }
+                (Some(Err(TransitionError::NoPath { .. })), Some(m)) if !m.forced => {
+                    let mj = morph_join(&space, &ra, &rb, m.frames, e, "");
+                    let why = format!("auto: no real-frame path; {}", mj.why);
+                    Join { why, ..mj }
+                }
+                (Some(r), _) => r.map_err(|e| {
                     let why = match &e {
                         TransitionError::NoPath { .. } => format!(
                             "{e}; try a larger `steps`, another method, or method = \"auto\""
@@ -744,8 +807,16 @@ impl Scenario {
                         self.join_span(i),
                         format!("join {} ({a} → {b}): {why}", i + 1),
                     )
-                })?;
-            let e = rec.e_detect(&space);
+                })?,
+                (None, m) => morph_join(
+                    &space,
+                    &ra,
+                    &rb,
+                    m.as_ref().and_then(|m| m.frames),
+                    e,
+                    "method = \"morph\"",
+                ),
+            };
             let plain = transition::join_seam(&space, &ra, &rb, &[], (0, 0), e);
             joins.push(JoinReport {
                 from: a.to_string(),
@@ -758,6 +829,7 @@ impl Scenario {
         // The frame list: each motion's body (less the frames its joins replace), then the
         // join to the next motion.
         let mut frames = Vec::new();
+        let mut morphs = Vec::new();
         for (i, &name) in seq.iter().enumerate() {
             let m = &motions[name];
             let trim_head = if i > 0 {
@@ -780,6 +852,12 @@ impl Scenario {
             if let Some(j) = joins.get(i) {
                 let next = &motions[seq[(i + 1) % seq.len()]];
                 let n = j.join.frames.len();
+                if j.join.method == "morph" && n > 0 {
+                    morphs.push(MorphRun {
+                        start: frames.len(),
+                        len: n,
+                    });
+                }
                 for (t, f) in j.join.frames.iter().enumerate() {
                     let s = (t + 1) as f32 / (n + 1) as f32;
                     let mut edits: Vec<(usize, f32, f32)> =
@@ -820,8 +898,15 @@ impl Scenario {
             .windows(2)
             .map(|p| transition::seam_ratio(&[vec_of(&p[0]), vec_of(&p[1])], median))
             .fold(0.0, f64::max);
+        if morphs.iter().any(|m| m.len >= frames.len()) {
+            return Err(self.err_at(
+                self.raw.sequence.span(),
+                "a morph join has no real frame to start or end from; use longer ranges",
+            ));
+        }
         Ok(Plan {
             frames,
+            morphs,
             joins,
             wrap_seam: wrap,
             worst_step: worst,
@@ -830,6 +915,103 @@ impl Scenario {
             e_detect: e,
             loops: self.raw.loop_,
         })
+    }
+}
+
+/// Seam ratio above which `auto` replaces a real-frame (or low-pass) join by the morph
+/// when the morph's own seam ratio is lower.
+pub const AUTO_MORPH_ABOVE: f64 = 1.5;
+/// The largest step an automatic morph aims for, in footage median steps.
+pub const MORPH_STEP: f64 = 1.2;
+/// Most in-between frames of one morph join.
+pub const MORPH_MAX_FRAMES: usize = 120;
+
+/// A join's morph settings: `frames` given or automatic; `forced` for `method = "morph"`
+/// (else `auto` may use it).
+#[derive(Clone, Debug)]
+struct MorphSpec {
+    frames: Option<usize>,
+    forced: bool,
+}
+
+/// The morph join from the last row of `ra` to the first of `rb`: `frames` in-betweens,
+/// or automatically as many as keep each step of the weight-space straight line within
+/// [`MORPH_STEP`] × the footage's median step. The plan's frames for it carry the
+/// linearly interpolated weights (what the planner measures and what a renderer that does
+/// not know morphs shows); [`crate::render::render_plan_with`] renders them as the
+/// motion-compensated morph of the two rendered endpoint frames ([`Plan::morphs`]).
+fn morph_join(
+    space: &WeightSpace,
+    ra: &Range<usize>,
+    rb: &Range<usize>,
+    frames: Option<usize>,
+    e: usize,
+    reason: &str,
+) -> Join {
+    let (a, b) = (ra.end - 1, rb.start);
+    let (wa, wb) = (space.frame(a), space.frame(b));
+    let median = space.source_median(e);
+    let d = space.distance(a, b, e);
+    let n = frames.unwrap_or_else(|| {
+        if median > 0.0 && d.is_finite() {
+            ((d / (MORPH_STEP * median)).ceil() as usize)
+                .saturating_sub(1)
+                .clamp(1, MORPH_MAX_FRAMES)
+        } else {
+            1
+        }
+    });
+    let refs: Vec<FrameRef> = (0..n)
+        .map(|k| {
+            let t = (k + 1) as f32 / (n + 1) as f32;
+            FrameRef::Weights(wa.iter().zip(wb).map(|(x, y)| x + (y - x) * t).collect())
+        })
+        .collect();
+    let seam = transition::join_seam(space, ra, rb, &refs, (0, 0), e);
+    let how = if frames.is_some() {
+        format!("{n} frames as asked")
+    } else {
+        format!(
+            "{n} frames: distance {:.2} median steps, each step ≤ {MORPH_STEP}",
+            if median > 0.0 { d / median } else { 0.0 }
+        )
+    };
+    Join {
+        frames: refs,
+        trim_t1: 0,
+        trim_t2: 0,
+        method: "morph",
+        seam_ratio: seam,
+        why: format!(
+            "{}motion-compensated morph from source row {a} to row {b}, {how}; weight-space seam ratio {seam:.2}",
+            if reason.is_empty() {
+                String::new()
+            } else {
+                format!("{reason}: ")
+            }
+        ),
+    }
+}
+
+/// A run of morph frames in [`Plan::frames`]: frames `start..start + len` are the
+/// motion-compensated in-betweens (t = (k + 1) / (len + 1)) of the rendered frame before
+/// the run (`start − 1`, or the plan's last frame when `start` is 0) and the one after it
+/// (`start + len`, wrapping to frame 0).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct MorphRun {
+    pub start: usize,
+    pub len: usize,
+}
+
+impl MorphRun {
+    /// Indices of the run's endpoint frames in a plan of `n` frames.
+    pub fn endpoints(&self, n: usize) -> (usize, usize) {
+        let from = if self.start == 0 {
+            n - 1
+        } else {
+            self.start - 1
+        };
+        (from, (self.start + self.len) % n)
     }
 }
 
@@ -862,6 +1044,8 @@ pub struct PlanFrame {
 #[derive(Clone, Debug)]
 pub struct Plan {
     pub frames: Vec<PlanFrame>,
+    /// The runs of `frames` that are motion-compensated morphs (method `morph`).
+    pub morphs: Vec<MorphRun>,
     pub joins: Vec<JoinReport>,
     /// Seam ratio of the wrap from the last frame to the first (what a looping GIF or
     /// flipbook shows); with `loop = true` this is a footage step.
@@ -946,6 +1130,17 @@ mod tests {
             "{base}sequence = [\"a\", \"a\"]\n{m}[transition]\nmethod = \"low-pass\"\nkernel = [1.0, -1.0]\n"
         ));
         assert!(e.starts_with("dir/scene.toml:7:"), "{e}");
+        // Morph joins: `frames` within range, named by line.
+        let e = err(&format!(
+            "{base}sequence = [\"a\", \"a\"]\n{m}[transition]\nmethod = \"morph\"\nframes = 0\n"
+        ));
+        assert!(e.starts_with("dir/scene.toml:7:"), "{e}");
+        assert!(e.contains("`frames`"), "{e}");
+        Scenario::parse(
+            &format!("{base}sequence = [\"a\", \"a\"]\n{m}[transition]\nmethod = \"morph\"\nframes = 4\n"),
+            Path::new("dir/scene.toml"),
+        )
+        .unwrap();
     }
 
     #[test]
