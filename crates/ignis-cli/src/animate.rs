@@ -25,6 +25,35 @@ pub struct AnimateArgs {
     pub out: crate::output::OutputArgs,
 }
 
+/// Renders `plan` with `look` (footage options and sources from `footage`) into the output
+/// `out`, with a progress bar; returns the frame size written.
+pub fn write_plan(
+    db: &EigenfireDb,
+    plan: &Plan,
+    look: &ignis_eigen::scenario::Look,
+    footage: &FootageArgs,
+    out: &crate::output::OutputArgs,
+    g: &Global,
+) -> Result<Size> {
+    let opts = footage.options()?;
+    let mut sources = footage.sources(db)?;
+    let size = opts.size.unwrap_or_else(|| render::output_size(db, plan));
+    let mut w = out.create(size)?;
+    let bar = g.progress(plan.frames.len() as u64, "rendering");
+    let mut sink = |f: RgbaFrame| -> ignis_eigen::Result<()> {
+        w.push(&f).map_err(|e| EigenError::BadParameter {
+            name: "output".into(),
+            reason: format!("{}: {e}", out.output.display()),
+        })
+    };
+    render::render_plan_with(db, plan, look, &opts, &mut sources, &mut sink, &mut |n| {
+        bar.set_position(n as u64)
+    })?;
+    bar.finish_and_clear();
+    out.finish(w, g)?;
+    Ok(size)
+}
+
 /// Output size and where the footage comes from (`eigen animate`, `eigen loop`).
 #[derive(clap::Args, Debug, Clone, Default)]
 pub struct FootageArgs {
@@ -322,31 +351,10 @@ pub fn animate_cmd(a: &AnimateArgs, g: &Global) -> Result<Plan> {
     if a.dry_run {
         return Ok(plan);
     }
-    let opts = a.footage.options()?;
-    let mut sources = a.footage.sources(&db)?;
     let mut look = sc.look.clone();
     a.footage.adjust_look(&mut look, g);
-    let size = opts.size.unwrap_or_else(|| render::output_size(&db, &plan));
-    let mut w = a.out.create(size)?;
-    let bar = g.progress(plan.frames.len() as u64, "rendering");
-    let mut sink = |f: RgbaFrame| -> ignis_eigen::Result<()> {
-        w.push(&f).map_err(|e| EigenError::BadParameter {
-            name: "output".into(),
-            reason: format!("{}: {e}", a.out.output.display()),
-        })
-    };
-    render::render_plan_with(
-        &db,
-        &plan,
-        &look,
-        &opts,
-        &mut sources,
-        &mut sink,
-        &mut |n| bar.set_position(n as u64),
-    )
-    .with_context(|| format!("rendering {}", a.scenario.display()))?;
-    bar.finish_and_clear();
-    a.out.finish(w, g)?;
+    let size = write_plan(&db, &plan, &look, &a.footage, &a.out, g)
+        .with_context(|| format!("rendering {}", a.scenario.display()))?;
     g.say(format!(
         "{} frames at {size}, colour {}{}{}",
         plan.frames.len(),

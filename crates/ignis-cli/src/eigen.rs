@@ -681,8 +681,8 @@ fn loop_cmd(a: &LoopArgs, g: &Global) -> Result<ignis_eigen::transition::Join> {
     if e == 0 {
         bail!("--eigenfires must be at least 1");
     }
-    let opts = a.footage.options()?;
-    let mut sources = a.footage.sources(&db)?;
+    // Bad --size and the like fail before the search.
+    a.footage.options()?;
     let mut look = crate::animate::default_look();
     if let Some(p) = &a.palette {
         look.mode = ColourMode::Palette(p.load()?);
@@ -704,28 +704,8 @@ fn loop_cmd(a: &LoopArgs, g: &Global) -> Result<ignis_eigen::transition::Join> {
         })?;
     sp.finish_and_clear();
     let plain = animate::plain_cut_ratio(&db, rows.clone())?;
-    let size = opts.size.unwrap_or_else(|| render::output_size(&db, &plan));
-    let mut w = a.out.create(size)?;
-    let bar = g.progress(plan.frames.len() as u64, "rendering");
-    let mut sink = |f: ignis_core::RgbaFrame| -> ignis_eigen::Result<()> {
-        w.push(&f)
-            .map_err(|e| ignis_eigen::EigenError::BadParameter {
-                name: "output".into(),
-                reason: format!("{}: {e}", a.out.output.display()),
-            })
-    };
-    render::render_plan_with(
-        &db,
-        &plan,
-        &look,
-        &opts,
-        &mut sources,
-        &mut sink,
-        &mut |n| bar.set_position(n as u64),
-    )
-    .with_context(|| format!("rendering the loop of clip `{}`", a.clip))?;
-    bar.finish_and_clear();
-    a.out.finish(w, g)?;
+    let size = crate::animate::write_plan(&db, &plan, &look, &a.footage, &a.out, g)
+        .with_context(|| format!("rendering the loop of clip `{}`", a.clip))?;
     g.say(format!(
         "method {}: {} range frame(s) + {} transition frame(s) = {} frames at {}, colour {}, E = {} (the transition replaces the range's last {} and first {} frame(s)); seam ratio {:.2} (plain cut {:.2})",
         join.method,
