@@ -295,20 +295,7 @@ fn build_entry(
     let result = (|| -> Result<()> {
         // Metric frames of every frame of the window, as a writer would measure them.
         let info = ignis_media::probe(path)?;
-        let opts = ignis_media::ReadOptions {
-            range: Some(ignis_media::FrameRange::frames(
-                window.start as u64,
-                Some(window.end as u64),
-            )),
-            ..Default::default()
-        };
-        let pb = g.progress(window.len() as u64, "measuring");
-        let mut metric = Vec::with_capacity(window.len());
-        for f in ignis_media::open(path, &opts)? {
-            metric.push(loopq::metric_frame_rgba(&f?, [0.0; 3]));
-            pb.inc(1);
-        }
-        pb.finish_and_clear();
+        let metric = metric_frames(path, &window, g)?;
         if metric.len() != window.len() {
             bail!(
                 "read {} frames of {}..{}",
@@ -757,22 +744,8 @@ pub fn eigen_length_loop(a: &crate::eigen::LoopArgs, g: &Global) -> Result<()> {
     }
     let source = find_source(&c.source, &a.db)?;
     // Metric frames of the window, as the writer will measure them.
-    let opts = ignis_media::ReadOptions {
-        range: Some(ignis_media::FrameRange::frames(
-            window.start as u64,
-            Some(window.end as u64),
-        )),
-        ..Default::default()
-    };
-    let pb = g.progress(window.len() as u64, "measuring");
-    let mut metric = Vec::with_capacity(window.len());
-    for f in ignis_media::open(&source, &opts)
-        .with_context(|| format!("reading {}", source.display()))?
-    {
-        metric.push(loopq::metric_frame_rgba(&f?, [0.0; 3]));
-        pb.inc(1);
-    }
-    pb.finish_and_clear();
+    let metric = metric_frames(&source, &window, g)
+        .with_context(|| format!("reading {}", source.display()))?;
     if metric.len() != window.len() {
         bail!(
             "{} has fewer frames than the database says",
@@ -816,6 +789,27 @@ fn find_source(recorded: &str, db: &Path) -> Result<PathBuf> {
     bail!(
         "the clip's source {recorded} is not found (the loop is rendered from the source video); run from the directory training ran in"
     )
+}
+
+/// Metric frames ([`loopq::metric_frame_rgba`], as a writer measures them) of the source
+/// frames in `window`, with a progress bar. May return fewer frames than asked when the
+/// video is shorter.
+fn metric_frames(path: &Path, window: &Range<usize>, g: &Global) -> Result<Vec<GrayFrame>> {
+    let opts = ignis_media::ReadOptions {
+        range: Some(ignis_media::FrameRange::frames(
+            window.start as u64,
+            Some(window.end as u64),
+        )),
+        ..Default::default()
+    };
+    let pb = g.progress(window.len() as u64, "measuring");
+    let mut metric = Vec::with_capacity(window.len());
+    for f in ignis_media::open(path, &opts)? {
+        metric.push(loopq::metric_frame_rgba(&f?, [0.0; 3]));
+        pb.inc(1);
+    }
+    pb.finish_and_clear();
+    Ok(metric)
 }
 
 #[cfg(test)]
