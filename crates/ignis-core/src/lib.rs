@@ -8,17 +8,21 @@
 //! - [`loopq`]: seam and ghost, the loop/transition quality measured on written frames.
 //! - [`rng`]: the seeded RNG every generator uses.
 //! - [`tempfiles`]: names of writers' hidden temporaries and removal of stale ones.
+//! - [`atomic`]: the one atomic file write (temporary beside the target, sync, rename).
+//! - [`progress`]: the one progress-reporting trait the libraries take.
 //!
-//! **Invariant:** this crate knows nothing of files (beyond naming and removing the
-//! writers' own stale temporaries, [`tempfiles`]), codecs, clap or GPUs. Pixel data is
+//! **Invariant:** this crate knows no file formats (it only names, writes atomically and
+//! removes the writers' temporaries: [`tempfiles`], [`atomic`]), codecs, clap or GPUs. Pixel data is
 //! linear light everywhere; only `ignis-media` converts to 8-bit sRGB.
 
+pub mod atomic;
 pub mod colour;
 pub mod error;
 pub mod frame;
 pub mod loopq;
 pub mod palette;
 pub mod post;
+pub mod progress;
 pub mod rng;
 pub mod tempfiles;
 
