@@ -91,7 +91,9 @@ pub fn read_rgba(path: &Path) -> Result<RgbaFrame, GoldenError> {
     }
     let data = body
         .chunks_exact(16)
-        .map(|px| std::array::from_fn(|c| f32::from_le_bytes(px[4 * c..4 * c + 4].try_into().unwrap())))
+        .map(|px| {
+            std::array::from_fn(|c| f32::from_le_bytes(px[4 * c..4 * c + 4].try_into().unwrap()))
+        })
         .collect();
     RgbaFrame::from_vec(size, data).map_err(|e| bad(e.to_string()))
 }

@@ -27,7 +27,10 @@ fn check(name: &str, frame: &RgbaFrame) {
         .iter()
         .map(|p| p[0].max(p[1]).max(p[2]))
         .fold(0.0f32, f32::max);
-    assert!(peak > 0.2, "{name}: the frame is nearly black (peak {peak})");
+    assert!(
+        peak > 0.2,
+        "{name}: the frame is nearly black (peak {peak})"
+    );
     match check_rgba(&path, frame, TOLERANCE) {
         Ok(worst) => println!("{name}: max abs difference {worst:e}"),
         Err(e) => panic!("{e}"),
