@@ -25,7 +25,7 @@ pub(super) struct Candidate {
     /// with a pixel of margin: rays of other pixels cannot meet the cell (it lies in the
     /// convex hull of its corners, whose projection is inside this rectangle), so their
     /// slab test is skipped.
-    pub(super) px: [i32; 4],
+    pub(super) pixel_rect: [i32; 4],
 }
 
 /// Bins every cell of `fires` into the 16×16-pixel tiles its projected bounding box touches
@@ -118,7 +118,7 @@ pub(super) fn bin_cells(
                         visible_min: sub(vis.min, camera.position),
                         visible_max: sub(vis.max, camera.position),
                         disc: vis.disc,
-                        px,
+                        pixel_rect: px,
                     });
                 }
             }

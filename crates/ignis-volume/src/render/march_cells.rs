@@ -86,54 +86,29 @@ impl FrameRenderer<'_, '_> {
     ) {
         let tw = (x1 - x0) as usize;
         let n = tw * (y1 - y0) as usize;
-        out.dirs.clear();
-        out.invs.clear();
-        for y in y0..y1 {
-            for x in x0..x1 {
-                let [sx, sy] = self.screen(x, y);
-                let d = add(self.forward, add(scale(self.right, sx), scale(self.up, sy)));
-                out.dirs.push(d);
-                out.invs.push([1.0 / d[0], 1.0 / d[1], 1.0 / d[2]]);
-            }
-        }
+        self.tile_directions([x0, y0, x1, y1], out);
         out.hit.clear();
         out.hit.resize(n, false);
         let o = self.camera.position;
         let spacing = self.params.slice_spacing;
         let tol = local_tol(fire, CELL_TEX_TOL);
         for cand in group {
-            let (cx0, cx1) = (cand.px[0].max(x0 as i32), cand.px[1].min(x1 as i32 - 1));
-            let (cy0, cy1) = (cand.px[2].max(y0 as i32), cand.px[3].min(y1 as i32 - 1));
+            let (cx0, cx1) = (
+                cand.pixel_rect[0].max(x0 as i32),
+                cand.pixel_rect[1].min(x1 as i32 - 1),
+            );
+            let (cy0, cy1) = (
+                cand.pixel_rect[2].max(y0 as i32),
+                cand.pixel_rect[3].min(y1 as i32 - 1),
+            );
             if cand.visible_min[0] > cand.visible_max[0] {
                 continue; // nothing of this cell can be visible
             }
             let j = cand.cell as usize;
             let mut batch = SampleBatch::default();
             for y in cy0..cy1 + 1 {
-                // the row's pixels that can meet the disc's cylinder (with a pixel to spare)
-                let (rx0, rx1) = match &cand.disc {
-                    Some(disc) => {
-                        let Some((lo, hi)) = disc.row_span(
-                            self.forward,
-                            self.right,
-                            self.up,
-                            self.screen(0, y as u32)[1],
-                        ) else {
-                            continue;
-                        };
-                        let px = |sx: f64| {
-                            (sx / (self.tan * self.aspect) as f64 + 1.0)
-                                * 0.5
-                                * self.params.size.width as f64
-                                - 0.5
-                        };
-                        let lim = |v: f64| v.clamp(cx0 as f64 - 1.0, cx1 as f64 + 1.0) as i32;
-                        (
-                            cx0.max(lim(px(lo).floor() - 1.0)),
-                            cx1.min(lim(px(hi).ceil() + 1.0)),
-                        )
-                    }
-                    None => (cx0, cx1),
+                let Some((rx0, rx1)) = self.row_pixels(cand, y, cx0, cx1) else {
+                    continue;
                 };
                 // The part of the cell that can be visible is convex, so the pixels of a
                 // row whose rays meet it are consecutive: after the first miss that follows
@@ -199,6 +174,45 @@ impl FrameRenderer<'_, '_> {
                 covered[p] = self.cover(fire, group, x, y, best_k[p], ranges, stats, out);
             }
         }
+    }
+
+    /// Per pixel of tile `[x0, y0, x1, y1)`, row by row: the ray direction `D` scaled to
+    /// `D · forward = 1` (into `out.dirs`) and its reciprocal (into `out.invs`).
+    #[inline(always)]
+    fn tile_directions(&self, [x0, y0, x1, y1]: [u32; 4], out: &mut Scratch) {
+        out.dirs.clear();
+        out.invs.clear();
+        for y in y0..y1 {
+            for x in x0..x1 {
+                let [sx, sy] = self.screen(x, y);
+                let d = add(self.forward, add(scale(self.right, sx), scale(self.up, sy)));
+                out.dirs.push(d);
+                out.invs.push([1.0 / d[0], 1.0 / d[1], 1.0 / d[2]]);
+            }
+        }
+    }
+
+    /// The pixels `x0 ..= x1` of row `y` within `cx0 ..= cx1` whose rays can meet the
+    /// cylinder of `cand`'s affine disc (with a pixel to spare); `None` if none can.
+    #[inline(always)]
+    fn row_pixels(&self, cand: &Candidate, y: i32, cx0: i32, cx1: i32) -> Option<(i32, i32)> {
+        let Some(disc) = &cand.disc else {
+            return Some((cx0, cx1));
+        };
+        let (lo, hi) = disc.row_span(
+            self.forward,
+            self.right,
+            self.up,
+            self.screen(0, y as u32)[1],
+        )?;
+        let px = |sx: f64| {
+            (sx / (self.tan * self.aspect) as f64 + 1.0) * 0.5 * self.params.size.width as f64 - 0.5
+        };
+        let lim = |v: f64| v.clamp(cx0 as f64 - 1.0, cx1 as f64 + 1.0) as i32;
+        Some((
+            cx0.max(lim(px(lo).floor() - 1.0)),
+            cx1.min(lim(px(hi).ceil() + 1.0)),
+        ))
     }
 
     /// Inverts a batch of candidate samples of cell `j` ([`FrameRenderer::march_cells`]) and keeps

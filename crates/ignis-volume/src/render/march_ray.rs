@@ -33,29 +33,29 @@ pub(super) fn slab(inv: V3, min: V3, max: V3) -> Option<(f32, f32)> {
 
 /// A pixel's ray being marched (see [`FrameRenderer::march`]).
 pub(super) struct Ray<'r> {
-    pub(super) o: V3,
-    pub(super) d: V3,
-    /// `d · forward`: sample `k` is at `o + d · k · spacing / cos_forward`.
+    pub(super) origin: V3,
+    pub(super) dir: V3,
+    /// `dir · forward`: sample `k` is at `origin + dir · k · spacing / cos_forward`.
     pub(super) cos_forward: f32,
     /// The candidate cells the ray meets, with its parameter interval in each.
     pub(super) ranges: &'r [(u32, f32, f32)],
-    /// Next slice index, and the last one.
-    pub(super) k: i64,
-    pub(super) k1: i64,
+    /// Next slice index `k`, and the last one.
+    pub(super) slice: i64,
+    pub(super) last_slice: i64,
     /// The slices that may meet a visible part of a cell ([`visible_parts`]); empty if
     /// `.0 > .1`.
     pub(super) visible: (i64, i64),
     pub(super) pix: u16,
     pub(super) covered: bool,
-    /// While tracking, `g` is the last sample's global lattice coordinates
-    /// `(a, b, level + s)` and `dg` their change per sample: consecutive samples are
+    /// While tracking, `coords` is the last sample's global lattice coordinates
+    /// `(a, b, level + s)` and `coords_step` their change per sample: consecutive samples are
     /// predicted by linear extrapolation (the map is smooth across cell faces), so the
     /// cell is known and one or two Newton steps usually suffice.
     pub(super) tracking: bool,
-    pub(super) g: V3,
-    pub(super) dg: Option<V3>,
+    pub(super) coords: V3,
+    pub(super) coords_step: Option<V3>,
     /// Inverse Jacobian of the last Newton solve, for the chord steps.
-    pub(super) m: Track,
+    pub(super) track: Track,
     /// Local-coordinate tolerance of the certified chord steps: [`INVERSE_TEX_TOL`] in
     /// texture space (`tex_x = 2a − 1`, `tex_z = (j + s)/cells`).
     pub(super) tol: V3,
@@ -84,12 +84,12 @@ impl FrameRenderer<'_, '_> {
         ray.tol = local_tol(fire, INVERSE_TEX_TOL);
         // the slices that may be visible, then (when counting coverage) the others only
         // until one sample is known to lie inside a cell (their alpha is zero)
-        let (k0, k1) = (ray.k, ray.k1);
+        let (k0, k1) = (ray.slice, ray.last_slice);
         let (v0, v1) = ray.visible;
         let rest = if v0 <= v1 {
-            ray.k1 = v1;
-            ray.k = v0;
-            while ray.k <= ray.k1 {
+            ray.last_slice = v1;
+            ray.slice = v0;
+            while ray.slice <= ray.last_slice {
                 self.sample(fire, &mut ray, stats, out);
             }
             [(k0, v0 - 1), (v1 + 1, k1)]
@@ -100,8 +100,8 @@ impl FrameRenderer<'_, '_> {
             return ray.covered;
         }
         for (a, b) in rest {
-            (ray.k, ray.k1, ray.tracking) = (a, b, false);
-            while !ray.covered && ray.k <= ray.k1 {
+            (ray.slice, ray.last_slice, ray.tracking) = (a, b, false);
+            while !ray.covered && ray.slice <= ray.last_slice {
                 self.sample(fire, &mut ray, stats, out);
             }
         }
@@ -127,7 +127,7 @@ impl FrameRenderer<'_, '_> {
         };
         ray.tol = local_tol(fire, INVERSE_TEX_TOL);
         let n0 = out.pix.len();
-        while !ray.covered && ray.k <= ray.k1 {
+        while !ray.covered && ray.slice <= ray.last_slice {
             self.sample(fire, &mut ray, stats, out);
         }
         stats.shaded -= (out.pix.len() - n0) as u64;
@@ -168,7 +168,11 @@ impl FrameRenderer<'_, '_> {
         let (xi, yi) = (x as i32, y as i32);
         let (mut vlo, mut vhi) = (f32::INFINITY, f32::NEG_INFINITY);
         for cell in group {
-            if xi < cell.px[0] || xi > cell.px[1] || yi < cell.px[2] || yi > cell.px[3] {
+            if xi < cell.pixel_rect[0]
+                || xi > cell.pixel_rect[1]
+                || yi < cell.pixel_rect[2]
+                || yi > cell.pixel_rect[3]
+            {
                 continue;
             }
             let Some((t0, t1)) = slab(inv, cell.min, cell.max) else {
@@ -206,24 +210,24 @@ impl FrameRenderer<'_, '_> {
             (1, 0)
         };
         Some(Ray {
-            o,
-            d,
+            origin: o,
+            dir: d,
             cos_forward,
             ranges: &ranges[..nr],
-            k: k0,
-            k1,
+            slice: k0,
+            last_slice: k1,
             visible,
             pix,
             covered: false,
             tracking: false,
-            g: [0.5; 3],
-            dg: None,
-            m: Track::default(),
+            coords: [0.5; 3],
+            coords_step: None,
+            track: Track::default(),
             tol: [0.0; 3],
         })
     }
 
-    /// Takes ray `r`'s next sample (slice `r.k`) and advances it: finds the sample's cell
+    /// Takes ray `r`'s next sample (slice `r.slice`) and advances it: finds the sample's cell
     /// and local coordinates and appends it to `out` if it lies inside the unit cylinder.
     #[inline(always)]
     pub(super) fn sample(
@@ -233,16 +237,16 @@ impl FrameRenderer<'_, '_> {
         stats: &mut RenderStats,
         out: &mut Scratch,
     ) {
-        let k = r.k;
-        r.k += 1;
+        let k = r.slice;
+        r.slice += 1;
         let cells = fire.lattice.cells();
         let last = cells.len() - 1;
         let t = k as f32 * self.params.slice_spacing / r.cos_forward;
-        let p = add(r.o, scale(r.d, t));
+        let p = add(r.origin, scale(r.dir, t));
         let (mut j, mut guess) = if r.tracking {
-            let pred = match r.dg {
-                Some(dl) => add(r.g, dl),
-                None => r.g,
+            let pred = match r.coords_step {
+                Some(dl) => add(r.coords, dl),
+                None => r.coords,
             };
             let lv = pred[2].clamp(0.0, cells.len() as f32);
             let j = (lv as usize).min(last);
@@ -250,7 +254,7 @@ impl FrameRenderer<'_, '_> {
         } else {
             match r.ranges.iter().find(|q| q.1 <= t && t <= q.2) {
                 Some(q) => {
-                    r.dg = None;
+                    r.coords_step = None;
                     // the chord step from the centre, moving to the neighbouring cell while
                     // it says the point lies there (nearly affine cells: the step is
                     // accurate, so this saves a failed solve)
@@ -276,7 +280,7 @@ impl FrameRenderer<'_, '_> {
                 Ok(l) => Some(l),
                 // beyond an end of the lattice: outside whatever the exact inverse
                 Err(Some(l)) if (j == 0 && l[2] < 0.0) || (j == last && l[2] > 1.0) => Some(l),
-                Err(_) => cells[j].inverse_tracked(p, guess, &mut r.m),
+                Err(_) => cells[j].inverse_tracked(p, guess, &mut r.track),
             };
             let Some(l) = l else {
                 break;
@@ -296,14 +300,14 @@ impl FrameRenderer<'_, '_> {
             return;
         };
         let ng = [l[0], l[1], j as f32 + l[2]];
-        r.dg = if r.tracking {
-            Some(sub(ng, r.g))
+        r.coords_step = if r.tracking {
+            Some(sub(ng, r.coords))
         } else {
             // no previous sample yet: the ray's step mapped by the inverse Jacobian at the
             // cell centre (the affine part of the map), a first-order prediction
-            Some(cells[j].local_direction(scale(r.d, self.params.slice_spacing / r.cos_forward)))
+            Some(cells[j].local_direction(scale(r.dir, self.params.slice_spacing / r.cos_forward)))
         };
-        r.g = ng;
+        r.coords = ng;
         r.tracking = true;
         keep_sample(fire, r, k, j, l, stats, out);
     }

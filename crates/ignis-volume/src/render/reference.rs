@@ -32,13 +32,13 @@ impl FrameRenderer<'_, '_> {
         let Some(mut ray) = self.ray(group, x, y, best_k, pix, ranges, false) else {
             return false;
         };
-        while ray.k <= ray.k1 {
+        while ray.slice <= ray.last_slice {
             self.sample_reference(fire, &mut ray, stats, out);
         }
         ray.covered
     }
 
-    /// Takes ray `r`'s next sample (slice `r.k`): its cell and local coordinates by
+    /// Takes ray `r`'s next sample (slice `r.slice`): its cell and local coordinates by
     /// [`crate::lattice::Cell::inverse_fast`], from the cell centre on entering a cell and
     /// from the previous sample's extrapolated coordinates after that, moving to the
     /// neighbouring cell while the inverse says the point lies there.
@@ -49,16 +49,16 @@ impl FrameRenderer<'_, '_> {
         stats: &mut RenderStats,
         out: &mut Scratch,
     ) {
-        let k = r.k;
-        r.k += 1;
+        let k = r.slice;
+        r.slice += 1;
         let cells = fire.lattice.cells();
         let last = cells.len() - 1;
         let t = k as f32 * self.params.slice_spacing / r.cos_forward;
-        let p = add(r.o, scale(r.d, t));
+        let p = add(r.origin, scale(r.dir, t));
         let (mut j, mut guess) = if r.tracking {
-            let pred = match r.dg {
-                Some(dl) => add(r.g, dl),
-                None => r.g,
+            let pred = match r.coords_step {
+                Some(dl) => add(r.coords, dl),
+                None => r.coords,
             };
             let lv = pred[2].clamp(0.0, cells.len() as f32);
             let j = (lv as usize).min(last);
@@ -66,7 +66,7 @@ impl FrameRenderer<'_, '_> {
         } else {
             match r.ranges.iter().find(|q| q.1 <= t && t <= q.2) {
                 Some(q) => {
-                    r.dg = None;
+                    r.coords_step = None;
                     (q.0 as usize, [0.5; 3])
                 }
                 None => return,
@@ -92,8 +92,12 @@ impl FrameRenderer<'_, '_> {
             return;
         };
         let ng = [l[0], l[1], j as f32 + l[2]];
-        r.dg = if r.tracking { Some(sub(ng, r.g)) } else { None };
-        r.g = ng;
+        r.coords_step = if r.tracking {
+            Some(sub(ng, r.coords))
+        } else {
+            None
+        };
+        r.coords = ng;
         r.tracking = true;
         keep_sample(fire, r, k, j, l, stats, out);
     }

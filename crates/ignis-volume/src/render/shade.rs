@@ -8,7 +8,7 @@ use super::tile::{FrameRenderer, Scratch};
 use super::visible::turbulence_bounds;
 use super::FireInstance;
 use crate::mapping::{kernel, noise_position, noise_scale, profile_uv, radial_u};
-use crate::noise::{NoiseCache, LANES};
+use crate::noise::{NoiseCache, NoiseKind, LANES};
 
 /// A sample whose noise is still being summed.
 #[derive(Clone, Copy, Debug)]
@@ -93,14 +93,7 @@ impl FrameRenderer<'_, '_> {
         s.col.resize(n, [0.0; 4]);
         if noise.octaves == 0 || noise.stability == 0.0 {
             // no turbulence: nothing to batch
-            for (c, &tex) in s.col.iter_mut().zip(&s.tex) {
-                let [u, v] = profile_uv(tex, 0.0, noise.stability);
-                *c = if fire.profile.column_empty(u) {
-                    [0.0; 4]
-                } else {
-                    fire.profile.sample(u, v)
-                };
-            }
+            shade_calm(fire, s);
             return;
         }
         let mix = self.params.mix(noise, self.time);
@@ -171,26 +164,16 @@ impl FrameRenderer<'_, '_> {
         let mut f = 1.0f32;
         for o in 0..octaves {
             for batch in act.chunks_mut(LANES) {
-                let mut q = [[pw * f; LANES]; 4];
-                for (l, live) in batch.iter().enumerate() {
-                    for (qa, pa) in q.iter_mut().zip(live.p) {
-                        qa[l] = pa * f;
-                    }
-                }
-                let val = lanes_noise(noise.kind, &q, &mut s.noise_cache, avx2);
-                for (live, v) in batch.iter_mut().zip(val) {
-                    live.sum += amp * v;
-                }
-                if looped {
-                    q[3] = [pw2 * f; LANES];
-                    for (l, live) in batch.iter().enumerate() {
-                        q[2][l] = live.pz2 * f;
-                    }
-                    let val = lanes_noise(noise.kind, &q, &mut s.noise_cache, avx2);
-                    for (live, v) in batch.iter_mut().zip(val) {
-                        live.sum2 += amp * v;
-                    }
-                }
+                let kind = noise.kind;
+                add_octave(
+                    kind,
+                    batch,
+                    [f, amp],
+                    [pw, pw2],
+                    looped,
+                    &mut s.noise_cache,
+                    avx2,
+                );
             }
             amp *= noise.gain;
             f *= noise.lacunarity;
@@ -207,11 +190,62 @@ impl FrameRenderer<'_, '_> {
     }
 }
 
+/// The colours of samples without turbulence (no octaves, or stability 0): the profile
+/// look-up of [`profile_uv`] with zero turbulence.
+#[inline(always)]
+fn shade_calm(fire: &FireInstance, s: &mut Scratch) {
+    let stability = fire.noise.stability;
+    for (c, &tex) in s.col.iter_mut().zip(&s.tex) {
+        let [u, v] = profile_uv(tex, 0.0, stability);
+        *c = if fire.profile.column_empty(u) {
+            [0.0; 4]
+        } else {
+            fire.profile.sample(u, v)
+        };
+    }
+}
+
+/// Adds one octave (`[frequency, amplitude]`) of the noise to the turbulence sums of up
+/// to [`LANES`] live samples; with `looped`, also to the loop's second copy (noise time
+/// `w` = `pw2` instead of `pw`, the samples' `pz2` for `z`). The same operations in the
+/// same order as [`crate::noise::turbulence`].
+#[inline(always)]
+fn add_octave(
+    kind: NoiseKind,
+    batch: &mut [LiveSample],
+    [f, amp]: [f32; 2],
+    [pw, pw2]: [f32; 2],
+    looped: bool,
+    cache: &mut NoiseCache,
+    avx2: bool,
+) {
+    let mut q = [[pw * f; LANES]; 4];
+    for (l, live) in batch.iter().enumerate() {
+        for (qa, pa) in q.iter_mut().zip(live.p) {
+            qa[l] = pa * f;
+        }
+    }
+    let val = lanes_noise(kind, &q, cache, avx2);
+    for (live, v) in batch.iter_mut().zip(val) {
+        live.sum += amp * v;
+    }
+    if looped {
+        q[3] = [pw2 * f; LANES];
+        for (l, live) in batch.iter().enumerate() {
+            q[2][l] = live.pz2 * f;
+        }
+        let val = lanes_noise(kind, &q, cache, avx2);
+        for (live, v) in batch.iter_mut().zip(val) {
+            live.sum2 += amp * v;
+        }
+    }
+}
+
 /// One octave of noise on [`LANES`] points, with the AVX2 build when `avx2` (the caller
 /// guarantees the CPU has it); the same values either way.
 #[inline(always)]
 pub(super) fn lanes_noise(
-    kind: crate::noise::NoiseKind,
+    kind: NoiseKind,
     q: &[[f32; LANES]; 4],
     cache: &mut NoiseCache,
     avx2: bool,

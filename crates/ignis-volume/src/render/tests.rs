@@ -218,6 +218,8 @@ fn simd_build_matches_baseline_build() {
 /// The batched shading (lanes noise, octaves skipped only where the alpha is provably
 /// zero) gives the very same colour as `shade` for every sample, and every sample with
 /// some alpha lies in the part of its cell the fast path marches (`visible_parts`).
+// (Long: it marches each scene once and checks the culling, the row spans and the shading
+// on the very same samples.)
 #[test]
 fn batched_shading_equals_scalar_shading_and_culls_only_invisible_samples() {
     let mut scenes = Vec::new();
