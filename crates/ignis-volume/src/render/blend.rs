@@ -16,7 +16,7 @@ pub enum Blend {
     Tint([f32; 3]),
 }
 
-/// Adds one fire's shaded samples (`scratch.pix`, `.k`, `.col`) into the tile's pixels
+/// Adds one fire's shaded samples (`scratch.pix`, `.slice`, `.col`) into the tile's pixels
 /// `acc`, each weighted by `gain` (intensity × slice spacing). `best_k`: per pixel, the
 /// slice of its nearest opaque sample so far (the cartoon blend; `i64::MAX` for none).
 #[inline(always)]
@@ -50,8 +50,8 @@ pub(super) fn blend_samples(
                 // the nearest opaque sample along the ray, over this fire and the earlier
                 // ones (a pixel has at most one sample per slice and fire; the march
                 // already dropped samples behind an earlier fire's hit)
-                if c[3] >= 0.5 && scratch.k[s] < best_k[p] {
-                    best_k[p] = scratch.k[s];
+                if c[3] >= 0.5 && scratch.slice[s] < best_k[p] {
+                    best_k[p] = scratch.slice[s];
                     *a = [c[0], c[1], c[2], 1.0];
                 }
             }

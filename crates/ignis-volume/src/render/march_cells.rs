@@ -299,7 +299,7 @@ impl FrameRenderer<'_, '_> {
         stats.samples += samples;
         stats.shaded += kept as u64;
         out.pix.extend_from_slice(&pix[..kept]);
-        out.k.extend_from_slice(&ks[..kept]);
+        out.slice.extend_from_slice(&ks[..kept]);
         out.tex.extend_from_slice(&texs[..kept]);
     }
 

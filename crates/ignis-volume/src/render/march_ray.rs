@@ -132,7 +132,7 @@ impl FrameRenderer<'_, '_> {
         }
         stats.shaded -= (out.pix.len() - n0) as u64;
         out.pix.truncate(n0);
-        out.k.truncate(n0);
+        out.slice.truncate(n0);
         out.tex.truncate(n0);
         ray.covered
     }
@@ -336,7 +336,7 @@ pub(super) fn keep_sample(
     }
     stats.shaded += 1;
     out.pix.push(r.pix);
-    out.k.push(k);
+    out.slice.push(k);
     out.tex.push(tex);
 }
 

@@ -124,8 +124,8 @@ impl FrameRenderer<'_, '_> {
         let wscale = noise_scale(1.0, length, noise.frequency);
         let pw = noise_position([0.0; 3], time, wscale, fire.offset)[3];
         let pw2 = noise_position([0.0; 3], time2, wscale, fire.offset)[3];
-        slice_order(&s.k, &mut s.buckets, &mut s.order);
-        let act = &mut s.act;
+        slice_order(&s.slice, &mut s.buckets, &mut s.order);
+        let act = &mut s.live;
         act.clear();
         for &i in &s.order {
             let tex = s.tex[i as usize];

@@ -276,7 +276,7 @@ fn batched_shading_equals_scalar_shading_and_culls_only_invisible_samples() {
                 visible_min: sub(c.min, scene.camera.position),
                 visible_max: sub(c.max, scene.camera.position),
                 disc: None,
-                px: [i32::MIN, i32::MAX, i32::MIN, i32::MAX],
+                pixel_rect: [i32::MIN, i32::MAX, i32::MIN, i32::MAX],
             })
             .collect();
         let mut s = Scratch::default();

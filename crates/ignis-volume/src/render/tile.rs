@@ -9,15 +9,20 @@ use super::{Camera, FireInstance, RenderParams, RenderStats, TILE};
 use crate::lattice::V3;
 use crate::noise::NoiseCache;
 
+/// What every tile of one frame shares: the fires, the camera and its basis, the settings.
+/// Its methods, spread over this module's files, render the tiles.
 pub(super) struct FrameRenderer<'a, 'b> {
     pub(super) fires: &'a [FireInstance<'b>],
     pub(super) camera: &'a Camera,
     pub(super) params: &'a RenderParams,
+    /// The camera's forward, right and up unit vectors ([`Camera::basis`]).
     pub(super) forward: V3,
     pub(super) right: V3,
     pub(super) up: V3,
+    /// `tan(fov / 2)` and the image's width over its height.
     pub(super) tan: f32,
     pub(super) aspect: f32,
+    /// Noise time, seconds.
     pub(super) time: f32,
     /// Use the AVX2 build of the tile renderer when the CPU has it (same results).
     pub(super) simd: bool,
@@ -40,13 +45,13 @@ pub(super) struct Scratch {
     /// Pixel index within the tile.
     pub(super) pix: Vec<u16>,
     /// Slice index (depth) of the sample, for the cartoon blend.
-    pub(super) k: Vec<i64>,
+    pub(super) slice: Vec<i64>,
     /// Texture coordinates.
     pub(super) tex: Vec<V3>,
     /// Straight-alpha colour of each sample (after shading).
     pub(super) col: Vec<[f32; 4]>,
     /// Batched noise: the samples still in play.
-    pub(super) act: Vec<LiveSample>,
+    pub(super) live: Vec<LiveSample>,
     /// Sample indices ordered by slice, then pixel (see `FrameRenderer::shade_batched`), and the
     /// counting sort's buckets.
     pub(super) order: Vec<u32>,
@@ -134,7 +139,7 @@ impl FrameRenderer<'_, '_> {
             let group = &cands[start..i];
             let fire = &self.fires[fi as usize];
             scratch.pix.clear();
-            scratch.k.clear();
+            scratch.slice.clear();
             scratch.tex.clear();
             if self.per_cell[fi as usize] {
                 self.march_cells(
