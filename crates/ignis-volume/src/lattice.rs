@@ -684,8 +684,7 @@ impl Cell {
     /// second-order Taylor remainder of the trilinear map, `|R| ≤ nonlin · ‖Δ‖₁²` (`Δ` the
     /// distance to the root, ≈ `δ`), so `|error| ≤ ‖J(l)⁻¹‖_F · nonlin · δ²`. For the
     /// nearly affine cells of a gently bent fire `nonlin` is small and the first step is
-    /// already accurate, which saves the confirming second step (about a third of the
-    /// inverse's cost on the Table 1 scene).
+    /// already accurate, which saves the confirming second step.
     #[inline(always)]
     #[cfg(test)]
     fn inverse_predicted(&self, p: V3, guess: V3) -> Option<V3> {
@@ -926,6 +925,47 @@ pub struct Lattice {
     pub max: V3,
 }
 
+/// The four corner curves of the lattice around `curve` (§3.1): per control point, a
+/// square of side `2r` in the plane normal to the curve's velocity, aligned to its
+/// parallel-transported normal; its corners become the corner curves' control points.
+fn corner_curves(curve: &BSpline) -> Result<Vec<BSpline>> {
+    let pts = curve.points();
+    let n = pts.len();
+    // frames at t = i/(n-1), parallel transported
+    let mut corner_pts: [Vec<[f32; 4]>; 4] = Default::default();
+    let mut prev_n: Option<V3> = None;
+    let mut prev_v: V3 = [0.0, 0.0, 1.0];
+    for (i, p) in pts.iter().enumerate() {
+        let t = i as f32 / (n - 1) as f32;
+        let d = curve.derivative(t);
+        let v = normalize([d[0], d[1], d[2]]).unwrap_or(prev_v);
+        let nrm = match prev_n {
+            None => {
+                // world x projected onto the plane normal to v (y if v ∥ x)
+                let r = if v[0].abs() < 0.9 {
+                    [1.0, 0.0, 0.0]
+                } else {
+                    [0.0, 1.0, 0.0]
+                };
+                normalize(sub(r, scale(v, dot(r, v)))).unwrap_or([1.0, 0.0, 0.0])
+            }
+            Some(pn) => normalize(sub(pn, scale(v, dot(pn, v)))).unwrap_or(pn),
+        };
+        let bin = normalize(cross(v, nrm)).unwrap_or([0.0, 1.0, 0.0]);
+        prev_n = Some(nrm);
+        prev_v = v;
+        let r = p[3];
+        for (k, xy) in CORNER_XY.iter().enumerate() {
+            let off = add(scale(nrm, xy[0] * r), scale(bin, xy[1] * r));
+            corner_pts[k].push([p[0] + off[0], p[1] + off[1], p[2] + off[2], r]);
+        }
+    }
+    corner_pts
+        .into_iter()
+        .map(|cp| BSpline::new(cp, curve.degree()))
+        .collect()
+}
+
 impl Lattice {
     /// Builds the lattice of §3.1 around `curve` with `resolution` levels.
     pub fn build(curve: &BSpline, resolution: usize) -> Result<Lattice> {
@@ -935,41 +975,7 @@ impl Lattice {
                 format!("{resolution}; use 2 to 4096"),
             ));
         }
-        let pts = curve.points();
-        let n = pts.len();
-        // frames at t = i/(n-1), parallel transported
-        let mut corner_pts: [Vec<[f32; 4]>; 4] = Default::default();
-        let mut prev_n: Option<V3> = None;
-        let mut prev_v: V3 = [0.0, 0.0, 1.0];
-        for (i, p) in pts.iter().enumerate() {
-            let t = i as f32 / (n - 1) as f32;
-            let d = curve.derivative(t);
-            let v = normalize([d[0], d[1], d[2]]).unwrap_or(prev_v);
-            let nrm = match prev_n {
-                None => {
-                    // world x projected onto the plane normal to v (y if v ∥ x)
-                    let r = if v[0].abs() < 0.9 {
-                        [1.0, 0.0, 0.0]
-                    } else {
-                        [0.0, 1.0, 0.0]
-                    };
-                    normalize(sub(r, scale(v, dot(r, v)))).unwrap_or([1.0, 0.0, 0.0])
-                }
-                Some(pn) => normalize(sub(pn, scale(v, dot(pn, v)))).unwrap_or(pn),
-            };
-            let bin = normalize(cross(v, nrm)).unwrap_or([0.0, 1.0, 0.0]);
-            prev_n = Some(nrm);
-            prev_v = v;
-            let r = p[3];
-            for (k, xy) in CORNER_XY.iter().enumerate() {
-                let off = add(scale(nrm, xy[0] * r), scale(bin, xy[1] * r));
-                corner_pts[k].push([p[0] + off[0], p[1] + off[1], p[2] + off[2], r]);
-            }
-        }
-        let corners: Vec<BSpline> = corner_pts
-            .into_iter()
-            .map(|cp| BSpline::new(cp, curve.degree()))
-            .collect::<Result<_>>()?;
+        let corners = corner_curves(curve)?;
         // arc-length table of the centre curve
         let dense = (resolution * 16).max(256);
         let mut ts = Vec::with_capacity(dense + 1);

@@ -78,12 +78,13 @@ pub struct RenderParams {
     /// method from the cell centre ([`crate::lattice::Cell::inverse_fast`], steps down to
     /// 1e-5) and shade each sample with the scalar [`shade`], instead of the tracked
     /// chord/Newton inverse and the batched noise. The reference for a GPU parity check;
-    /// the fast path differs from it by < 1e-4 per channel (tested; ≤ 6e-5 measured).
+    /// the fast path differs from it by < 1e-4 per channel (tested; see
+    /// `benches/README.md` for the measured difference).
     /// Default false.
     pub exact_inverse: bool,
     /// Also count [`RenderStats::covered_pixels`]: march the rest of every ray that found
     /// no visible sample until one sample is known to lie in a cell. That work adds
-    /// nothing to the image (those samples have zero alpha; about 7% of a Table 1 frame),
+    /// nothing to the image (those samples have zero alpha; see `benches/README.md`),
     /// so it is off by default and `covered_pixels` is then 0.
     pub count_coverage: bool,
     /// A seamless loop: the length of the loop in seconds (`frames / fps`), or `None`.
