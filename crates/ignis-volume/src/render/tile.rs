@@ -157,23 +157,13 @@ impl FrameRenderer<'_, '_> {
                 for y in y0..y1 {
                     for x in x0..x1 {
                         let p = (y - y0) as usize * tw + (x - x0) as usize;
-                        let march = if self.params.exact_inverse {
-                            Self::march_reference
+                        let (k, pix) = (best_k[p], p as u16);
+                        let (r, st) = (&mut ranges, &mut stats);
+                        covered[p] |= if self.params.exact_inverse {
+                            self.march_reference(fire, group, x, y, k, pix, r, st, scratch)
                         } else {
-                            Self::march
+                            self.march(fire, group, x, y, k, pix, r, st, scratch)
                         };
-                        covered[p] |= march(
-                            self,
-                            fire,
-                            group,
-                            x,
-                            y,
-                            best_k[p],
-                            p as u16,
-                            &mut ranges,
-                            &mut stats,
-                            scratch,
-                        );
                     }
                 }
             }
