@@ -24,7 +24,7 @@
 //!   certified chord inverse (lattices whose cells all have one: every Table 1 lattice).
 //! - `march_ray.rs`: finding samples ray by ray with a predicted inverse (other lattices,
 //!   and [`RenderParams::count_coverage`]).
-//! - `shade.rs`: shading in batches: the noise [`crate::noise::LANES`] samples at a time,
+//! - `shade.rs`: shading in batches: the noise 8 samples at a time,
 //!   a sample dropped once the remaining octaves provably cannot make it visible.
 //! - `blend.rs`: the additive, cartoon and tint blends. `finish.rs`: bloom, straight alpha.
 //! - **`reference.rs`: the reference path** ([`RenderParams::exact_inverse`]): the plain
@@ -74,10 +74,10 @@ pub struct RenderParams {
     /// so brightness does not depend on the spacing (`intensity = 1/spacing` is the paper's
     /// plain per-slice sum). Default 2.5.
     pub intensity: f32,
-    /// The reference path: invert every sample's cell map with the chord-then-Newton
-    /// method from the cell centre ([`crate::lattice::Cell::inverse_fast`], steps down to
-    /// 1e-5) and shade each sample with the scalar [`shade`], instead of the tracked
-    /// chord/Newton inverse and the batched noise. The reference for a GPU parity check;
+    /// The reference path (`render/reference.rs`): march every slice of every ray, invert
+    /// each sample's cell map with the chord-then-Newton method from the cell centre
+    /// (steps down to 1e-5) and shade each sample with the scalar
+    /// [`crate::mapping::shade`], instead of the certified inverses and the batched noise. The reference for a GPU parity check;
     /// the fast path differs from it by < 1e-4 per channel (tested; see
     /// `benches/README.md` for the measured difference).
     /// Default false.
@@ -174,16 +174,16 @@ pub const MAX_SAMPLES: f64 = 2e9;
 pub const MAX_CANDIDATES: u64 = 30_000_000;
 
 /// Error bound, per texture coordinate, of the fast path's certified chord inverse
-/// ([`crate::lattice::Cell::inverse_certified`]) against the exact inverse: proven in
+/// (`Cell::inverse_certified`) against the exact inverse: proven in
 /// exact arithmetic; `f32` rounding of the residual adds < 1e-6 (the test
 /// `certified_inverse_error_bound` checks ≤ this + 2e-6 against an `f64` inverse).
 /// Texture space: `x, y ∈ [−1, 1]` across the fire, `z ∈ [0, 1]` along it.
-pub const INVERSE_TEX_TOL: f32 = 3e-5;
+pub(crate) const INVERSE_TEX_TOL: f32 = 3e-5;
 /// Error bound, per texture coordinate, of the certified inverse in [`FrameRenderer::march_cells`]:
 /// a quarter of [`INVERSE_TEX_TOL`]. The chord iteration there starts from the cell
 /// centre rather than from a prediction along the ray, so the iterate it accepts is
 /// usually close to its bound; the tighter bound costs about one more step (vectorised).
-pub const CELL_TEX_TOL: f32 = 0.25 * INVERSE_TEX_TOL;
+pub(crate) const CELL_TEX_TOL: f32 = 0.25 * INVERSE_TEX_TOL;
 /// Renders `fires` seen from `camera` at noise time `time` (seconds). Returns a
 /// premultiplied HDR frame (see the module docs) and work counters.
 pub fn render(
