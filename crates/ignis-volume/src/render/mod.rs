@@ -100,6 +100,7 @@ impl RenderParams {
             .map(|p| loop_mix(time * noise.time_scale, p * noise.time_scale))
     }
 
+    /// Checks the loop period, slice spacing, tint and intensity.
     pub fn validate(&self) -> Result<()> {
         if let Some(p) = self.loop_period {
             if !(p > 0.0 && p.is_finite()) {
@@ -163,6 +164,8 @@ pub struct RenderStats {
     /// Of those, the samples inside the unit cylinder (handed to the shading).
     pub shaded: u64,
 }
+
+/// Side of the square pixel tiles the frame is rendered in, one rayon task each.
 const TILE: u32 = 16;
 
 /// Most samples (estimated before marching: for every cell, the pixels its projection
@@ -184,6 +187,7 @@ pub(crate) const INVERSE_TEX_TOL: f32 = 3e-5;
 /// centre rather than from a prediction along the ray, so the iterate it accepts is
 /// usually close to its bound; the tighter bound costs about one more step (vectorised).
 pub(crate) const CELL_TEX_TOL: f32 = 0.25 * INVERSE_TEX_TOL;
+
 /// Renders `fires` seen from `camera` at noise time `time` (seconds). Returns a
 /// premultiplied HDR frame (see the module docs) and work counters.
 pub fn render(
@@ -220,7 +224,7 @@ fn render_with(
         tan,
         aspect,
     )?;
-    let ctx = FrameRenderer {
+    let renderer = FrameRenderer {
         fires,
         camera,
         params,
@@ -244,9 +248,9 @@ fn render_with(
                 return (Vec::new(), RenderStats::default());
             }
             SCRATCH.with(|s| match s.try_borrow_mut() {
-                Ok(mut scratch) => ctx.tile(t % tx, t / tx, cands, &mut scratch),
+                Ok(mut scratch) => renderer.tile(t % tx, t / tx, cands, &mut scratch),
                 // (not reached: a tile starts no parallel work that could render here)
-                Err(_) => ctx.tile(t % tx, t / tx, cands, &mut Scratch::default()),
+                Err(_) => renderer.tile(t % tx, t / tx, cands, &mut Scratch::default()),
             })
         })
         .collect();
