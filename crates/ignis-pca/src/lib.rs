@@ -24,15 +24,16 @@ use std::path::PathBuf;
 
 use faer::{Mat, MatRef, Par};
 
-mod bench;
 pub mod memory;
 pub mod npy;
 mod randomized;
 mod snapshot;
+mod synthetic;
 
-pub use bench::{bench_figures, synthetic_flames, SyntheticFlames};
 pub use memory::{alloc_data_matrix, available_bytes, required_bytes};
 pub use randomized::{fit_streaming, BlockSource, MatSource, NpySource, StreamingOptions};
+pub use snapshot::SnapshotPhases;
+pub use synthetic::{synthetic_flames, SyntheticFlames};
 
 /// Errors of the PCA crate, split by who is at fault.
 #[derive(Debug, thiserror::Error)]
@@ -207,6 +208,16 @@ impl Pca {
     /// turns it into the components in place, so peak memory stays ≈ the data matrix + O(M²).
     pub fn fit_owned(data: Mat<f32>, opts: &PcaOptions) -> Result<Pca, PcaError> {
         Self::fit_owned_with_weights(data, opts).map(|(pca, _)| pca)
+    }
+
+    /// The snapshot fit of [`Pca::fit_owned_with_weights`] (all components: `keep`), timing
+    /// each phase (for `ignis bench eigen-train`).
+    pub fn fit_snapshot_timed(
+        data: Mat<f32>,
+        keep: Keep,
+    ) -> Result<(Pca, Mat<f32>, SnapshotPhases), PcaError> {
+        check_shape(data.nrows(), data.ncols())?;
+        snapshot::snapshot_in_place_timed(data, keep)
     }
 
     /// [`Pca::fit_owned`] that also returns the weights Ω (eq. 18) of every training frame,
