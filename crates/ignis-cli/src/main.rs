@@ -124,10 +124,9 @@ fn run(cli: Cli) -> Result<()> {
 
 /// Keeps glibc from handing large freed buffers back to the kernel. A frame at 400×400 in
 /// linear RGBA is 2.5 MB; by default glibc maps each such buffer afresh and unmaps it when
-/// freed (or trims it off the heap), so every frame of a render or a benchmark pays ~1,200
-/// page faults for its new buffers (measured: `perf stat -e page-faults ignis bench volume
-/// --quick`, ~25,000 → ~4,500; up to ~15% of a Table 1 frame). Serving them from the heap
-/// and keeping up to 256 MB of freed memory for reuse costs nothing else.
+/// freed (or trims it off the heap), so every frame of a render or a benchmark pays page
+/// faults for its new buffers (figures: `crates/ignis-cli/benches/README.md`). Serving them
+/// from the heap and keeping up to 256 MB of freed memory for reuse costs nothing else.
 #[cfg(all(target_os = "linux", target_env = "gnu"))]
 fn keep_freed_memory() {
     // SAFETY: `mallopt` only sets allocator parameters; called before any other thread

@@ -507,7 +507,7 @@ pub(crate) fn column_mean(data: MatRef<'_, f32>) -> Vec<f32> {
 
 /// `aᵀ b` for tall `a` (K×p) and `b` (K×q): K (the pixels) is split into one contiguous range per
 /// rayon thread, each a sequential faer GEMM, and the p×q partial products are added. faer's
-/// GEMM does not split K across threads (measured ~3 GFLOP/s for K = 274,700, p×q = 64×110).
+/// GEMM does not split K across threads (figures: `benches/README.md`).
 pub(crate) fn at_b(a: MatRef<'_, f32>, b: MatRef<'_, f32>) -> Mat<f32> {
     use rayon::prelude::*;
     const MIN_ROWS: usize = 8192;
@@ -541,9 +541,9 @@ pub(crate) fn at_b(a: MatRef<'_, f32>, b: MatRef<'_, f32>) -> Mat<f32> {
 ///
 /// Parallelism policy of this crate: every faer product runs with `Par::Seq` inside rayon tasks
 /// that we split ourselves (row chunks here, pixel ranges in [`at_b`], row blocks for the Gram
-/// and the components). faer's own `Par::Rayon` mode hands work to its spin-waiting worker pool;
-/// on this shared 2-core machine (load ≈ 8 from parallel builds) `perf` showed > 50 % of the
-/// CPU in `spindle::Barrier::wait_and_clear`/`worker_loop`, while rayon's idle workers sleep.
+/// and the components). faer's own `Par::Rayon` mode hands work to its spin-waiting worker pool,
+/// which burns the CPU on a loaded machine while rayon's idle workers sleep
+/// (`benches/README.md`).
 /// Only the M×M eigendecomposition and the QR/SVD of thin sketches use faer's global setting.
 pub(crate) fn rows_gemm(
     dst: faer::MatMut<'_, f32>,

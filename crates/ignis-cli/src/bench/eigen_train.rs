@@ -7,12 +7,12 @@ use ignis_pca::{
 use serde_json::{json, Value};
 use std::time::Instant;
 
-/// Peak resident set size of this process (VmHWM), bytes.
-fn peak_rss() -> Option<u64> {
+/// A `kB` field of /proc/self/status in bytes (Linux; `None` elsewhere).
+fn status_bytes(field: &str) -> Option<u64> {
     let s = std::fs::read_to_string("/proc/self/status").ok()?;
     let kb: u64 = s
         .lines()
-        .find(|l| l.starts_with("VmHWM:"))?
+        .find(|l| l.starts_with(field))?
         .split_whitespace()
         .nth(1)?
         .parse()
@@ -20,17 +20,14 @@ fn peak_rss() -> Option<u64> {
     Some(kb * 1024)
 }
 
+/// Peak resident set size of this process (VmHWM), bytes.
+fn peak_rss() -> Option<u64> {
+    status_bytes("VmHWM:")
+}
+
 /// Current resident set size (VmRSS), bytes.
 fn rss() -> Option<u64> {
-    let s = std::fs::read_to_string("/proc/self/status").ok()?;
-    let kb: u64 = s
-        .lines()
-        .find(|l| l.starts_with("VmRSS:"))?
-        .split_whitespace()
-        .nth(1)?
-        .parse()
-        .ok()?;
-    Some(kb * 1024)
+    status_bytes("VmRSS:")
 }
 
 /// CPU time (user + system) of this process so far, seconds, from /proc/self/stat (clock ticks

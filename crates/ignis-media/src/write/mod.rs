@@ -15,9 +15,9 @@
 //! GIF delays are whole centiseconds (accumulated so the average rate is right); browsers
 //! treat delays under 2 cs as 10 cs, so rates above 50 fps play at 50.
 //!
-//! Every writer is atomic: output goes to a hidden temporary name in the destination's
-//! directory (`.name.ignis-tmp-PID.XXXX.partial`) and is renamed into place by
-//! [`FrameWriter::finish`]. An error, or dropping the writer without `finish`, deletes the
+//! Every writer is atomic ([`ignis_core::atomic`]): output goes to a hidden temporary name
+//! in the destination's directory (`.name.ignis-tmp-PID.N.partial`) and is renamed into
+//! place by [`FrameWriter::finish`]. An error, or dropping the writer without `finish`, deletes the
 //! temporary output and leaves nothing under the final name; temporaries of a killed run
 //! carry its PID and are removed by the next run in that directory
 //! ([`ignis_core::tempfiles`]). A flipbook's PNG and JSON are committed as one unit (a
