@@ -7,7 +7,6 @@ use anyhow::{Context, Result};
 use ignis_classic::{ClassicFire, ClassicParams, Kernel, SourceEdge, SourceMode, Sparkle};
 use ignis_core::Size;
 use std::path::PathBuf;
-use std::time::Instant;
 
 #[derive(clap::Args, Debug)]
 #[command(
@@ -145,80 +144,6 @@ pub fn run(args: &Args, g: &Global) -> Result<Vec<PathBuf>> {
     }
     pb.finish_and_clear();
     args.out.finish(writer, g)
-}
-
-/// Headline figures: ns per pixel per frame at 1920×1080 for each kernel, one thread and
-/// rayon.
-pub fn bench(quick: bool) -> Result<serde_json::Value> {
-    let size = Size::new(1920, 1080)?;
-    let frames = if quick { 5 } else { 200 };
-    let mut out = serde_json::Map::new();
-    out.insert("size".into(), "1920x1080".into());
-    out.insert("threads".into(), rayon::current_num_threads().into());
-    for kernel in [Kernel::Article, Kernel::Buffered] {
-        let mut fire = ClassicFire::new(ClassicParams {
-            size,
-            fade: 1,
-            kernel,
-            seed: 1,
-            ..Default::default()
-        })?;
-        for _ in 0..20 {
-            fire.step();
-        }
-        for par in [false, true] {
-            let t = Instant::now();
-            for _ in 0..frames {
-                if par {
-                    fire.step_par()
-                } else {
-                    fire.step()
-                }
-            }
-            let ns = t.elapsed().as_secs_f64() * 1e9 / (frames as f64 * size.pixels() as f64);
-            let name = format!(
-                "{}_{}_ns_per_pixel",
-                format!("{kernel:?}").to_lowercase(),
-                if par { "rayon" } else { "1thread" }
-            );
-            out.insert(name, ((ns * 1000.0).round() / 1000.0).into());
-        }
-    }
-    // a seamless loop of 120 frames at 320×200 (settling included) against the plain
-    // animation with its default warm-up, both drawn through the palette as a render does
-    let loop_frames = if quick { 24 } else { 120 };
-    let palette = ignis_core::Palette::preset("classic")?;
-    let lp = ClassicParams {
-        size: Size::new(320, 200)?,
-        seed: 1,
-        ..Default::default()
-    };
-    let mut times = [0.0f64; 2];
-    for (i, looping) in [false, true].into_iter().enumerate() {
-        let t = Instant::now();
-        let mut fire = if looping {
-            ClassicFire::new_looping(lp.clone(), loop_frames)?
-        } else {
-            ClassicFire::new(lp.clone())?
-        };
-        fire.settle_loop(60, 40 * 200);
-        for _ in 0..loop_frames {
-            fire.step_par();
-            std::hint::black_box(fire.rgba(&palette));
-        }
-        times[i] = t.elapsed().as_secs_f64();
-    }
-    out.insert(
-        "loop".into(),
-        serde_json::json!({
-            "case": format!("320x200, {loop_frames} frames through the palette"),
-            "plain_ms": (times[0] * 1e4).round() / 10.0,
-            "looping_ms": (times[1] * 1e4).round() / 10.0,
-            "overhead": ((times[1] / times[0] - 1.0) * 1000.0).round() / 1000.0,
-            "goal_overhead": 0.1,
-        }),
-    );
-    Ok(serde_json::Value::Object(out))
 }
 
 /// The demo section: the classic fire in every output format.

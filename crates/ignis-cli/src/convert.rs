@@ -1,11 +1,12 @@
 //! `ignis convert`: any source Ignis reads to any output it writes (footage to a flipbook,
 //! an MP4 to an EXR sequence, ...), with the readers' range, crop and scale options.
 
+use crate::args;
 use crate::global::Global;
 use crate::output::OutputArgs;
-use anyhow::{Context, Result};
+use anyhow::{anyhow, Context, Result};
 use ignis_core::Size;
-use ignis_media::{FrameRange, ReadOptions, Rect};
+use ignis_media::{FrameRange, ReadOptions};
 use std::path::PathBuf;
 
 #[derive(clap::Args, Debug)]
@@ -32,63 +33,24 @@ pub struct Args {
     pub out: OutputArgs,
 }
 
-/// Parses `A..B`, `A..` or `..B`.
-pub fn parse_range(s: &str) -> Result<(f64, Option<f64>)> {
-    let (a, b) = s
-        .split_once("..")
-        .with_context(|| format!("range `{s}` is not START..END, e.g. 100..220"))?;
-    let num = |v: &str, what: &str| -> Result<Option<f64>> {
-        if v.trim().is_empty() {
-            return Ok(None);
-        }
-        let x: f64 = v
-            .trim()
-            .parse()
-            .with_context(|| format!("range `{s}`: {what} `{v}` is not a number"))?;
-        anyhow::ensure!(x >= 0.0 && x.is_finite(), "range `{s}`: {what} must be ≥ 0");
-        Ok(Some(x))
-    };
-    let start = num(a, "start")?.unwrap_or(0.0);
-    let end = num(b, "end")?;
-    if let Some(e) = end {
-        anyhow::ensure!(
-            e > start,
-            "range `{s}` is empty: END must be greater than START"
-        );
-    }
-    Ok((start, end))
-}
-
 impl Args {
     pub fn read_options(&self) -> Result<ReadOptions> {
         let range = match (&self.range, &self.seconds) {
             (Some(r), _) => {
-                let (a, b) = parse_range(r)?;
-                Some(FrameRange::frames(a as u64, b.map(|e| e as u64)))
+                let (a, b) = args::frame_range(r).map_err(|e| anyhow!("--range {e}"))?;
+                Some(FrameRange::frames(a, b))
             }
             (None, Some(r)) => {
-                let (a, b) = parse_range(r)?;
+                let (a, b) = args::seconds_range(r).map_err(|e| anyhow!("--seconds {e}"))?;
                 Some(FrameRange::seconds(a, b))
             }
             _ => None,
         };
-        let crop = match &self.crop {
-            Some(c) => {
-                let v: Vec<u32> = c
-                    .split(',')
-                    .map(|x| x.trim().parse::<u32>())
-                    .collect::<Result<_, _>>()
-                    .with_context(|| format!("--crop `{c}` is not X,Y,WIDTH,HEIGHT"))?;
-                anyhow::ensure!(v.len() == 4, "--crop `{c}` is not X,Y,WIDTH,HEIGHT");
-                Some(Rect {
-                    x: v[0],
-                    y: v[1],
-                    width: v[2],
-                    height: v[3],
-                })
-            }
-            None => None,
-        };
+        let crop = self
+            .crop
+            .as_deref()
+            .map(|c| args::crop(c).map_err(|e| anyhow!("--{e}")))
+            .transpose()?;
         Ok(ReadOptions {
             range,
             crop,

@@ -16,12 +16,7 @@ pub struct Chunk {
 impl std::str::FromStr for Chunk {
     type Err = String;
     fn from_str(s: &str) -> std::result::Result<Chunk, String> {
-        let bad = || {
-            format!("`{s}`: write the frame range as A..B (first frame included, last excluded), e.g. 100..200")
-        };
-        let (a, b) = s.split_once("..").ok_or_else(bad)?;
-        let start = a.trim().parse::<u32>().map_err(|_| bad())?;
-        let end = b.trim().parse::<u32>().map_err(|_| bad())?;
+        let (start, end) = crate::args::closed_range::<u32>(s, "a frame number")?;
         Ok(Chunk { start, end })
     }
 }

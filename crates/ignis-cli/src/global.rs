@@ -1,5 +1,6 @@
 //! Options every subcommand shares, and progress reporting.
 
+use ignis_core::progress::Progress;
 use indicatif::{ProgressBar, ProgressStyle};
 
 /// Global options (`--quiet`).
@@ -42,5 +43,68 @@ impl Global {
         if !self.quiet {
             println!("{}", msg.as_ref());
         }
+    }
+}
+
+/// Draws a library's [`Progress`] as one bar per stage (a spinner when the length is
+/// unknown); messages are printed as lines above the bar. Quiet runs draw and print nothing.
+pub struct StageBars<'a> {
+    g: &'a Global,
+    bar: Option<ProgressBar>,
+    /// Stage lengths the caller knows better than the library (e.g. a clip's frame count).
+    known: Vec<(String, u64)>,
+}
+
+impl<'a> StageBars<'a> {
+    pub fn new(g: &'a Global) -> StageBars<'a> {
+        StageBars {
+            g,
+            bar: None,
+            known: Vec::new(),
+        }
+    }
+
+    /// Draws stage `name` with `len` steps whatever length the library announces.
+    pub fn with_length(mut self, name: &str, len: u64) -> StageBars<'a> {
+        self.known.push((name.to_string(), len));
+        self
+    }
+}
+
+impl Progress for StageBars<'_> {
+    fn stage(&mut self, name: &str, len: u64) {
+        self.finish_stage();
+        let len = self
+            .known
+            .iter()
+            .find(|(n, _)| n == name)
+            .map_or(len, |&(_, l)| l);
+        self.bar = Some(if len > 0 {
+            self.g.progress(len, name)
+        } else {
+            self.g.spinner(name)
+        });
+    }
+    fn inc(&mut self, n: u64) {
+        if let Some(b) = &self.bar {
+            b.inc(n);
+        }
+    }
+    fn message(&mut self, text: &str) {
+        match &self.bar {
+            Some(b) => b.suspend(|| self.g.say(text)),
+            None => self.g.say(text),
+        }
+    }
+    fn finish_stage(&mut self) {
+        if let Some(b) = self.bar.take() {
+            b.finish_and_clear();
+        }
+    }
+}
+
+impl Drop for StageBars<'_> {
+    fn drop(&mut self) {
+        self.finish_stage();
     }
 }

@@ -2,14 +2,13 @@
 //! flame video, learn its dynamics, and synthesise new, steerable flames of any length.
 //! A thin layer over `ignis_learned` (the library) and `ignis_media` (decoding, writing).
 
+use crate::args;
 use crate::frames::FrameArgs;
-use crate::global::Global;
+use crate::global::{Global, StageBars};
 use crate::output::{OutputArgs, PaletteArg};
-use anyhow::{bail, Context, Result};
+use anyhow::{anyhow, bail, Context, Result};
 use ignis_core::{GrayFrame, Size};
-use ignis_learned::{
-    Controls, EmParams, FlameModel, Progress, ShapeParams, Synthesiser, TrainParams, Wind,
-};
+use ignis_learned::{Controls, EmParams, FlameModel, ShapeParams, Synthesiser, TrainParams, Wind};
 use std::cell::RefCell;
 use std::path::{Path, PathBuf};
 
@@ -150,43 +149,8 @@ pub fn run(cmd: Command, g: &Global) -> Result<()> {
 }
 
 fn parse_range(s: &str) -> Result<ignis_media::FrameRange> {
-    let (a, b) = s
-        .split_once("..")
-        .with_context(|| format!("--range `{s}`: write START..END or START.., e.g. 0..300"))?;
-    let start: u64 = if a.trim().is_empty() {
-        0
-    } else {
-        a.trim()
-            .parse()
-            .with_context(|| format!("--range start `{a}`"))?
-    };
-    let end: Option<u64> = if b.trim().is_empty() {
-        None
-    } else {
-        Some(
-            b.trim()
-                .parse()
-                .with_context(|| format!("--range end `{b}`"))?,
-        )
-    };
-    Ok(ignis_media::FrameRange::frames(start, end))
-}
-
-fn parse_crop(s: &str) -> Result<ignis_media::Rect> {
-    let v: Vec<u32> = s
-        .split(',')
-        .map(|x| x.trim().parse::<u32>())
-        .collect::<std::result::Result<_, _>>()
-        .with_context(|| format!("--crop `{s}`: write X,Y,W,H in pixels, e.g. 140,120,200,300"))?;
-    if v.len() != 4 || v[2] == 0 || v[3] == 0 {
-        bail!("--crop `{s}`: write X,Y,W,H with W, H > 0, e.g. 140,120,200,300");
-    }
-    Ok(ignis_media::Rect {
-        x: v[0],
-        y: v[1],
-        width: v[2],
-        height: v[3],
-    })
+    let (a, b) = args::frame_range(s).map_err(|e| anyhow!("--range {e}"))?;
+    Ok(ignis_media::FrameRange::frames(a, b))
 }
 
 /// Reads the video, trains, writes the model. Returns the model.
@@ -194,7 +158,11 @@ pub fn train(a: &TrainArgs, g: &Global) -> Result<FlameModel> {
     let path = &a.input;
     let opts = ignis_media::ReadOptions {
         range: a.range.as_deref().map(parse_range).transpose()?,
-        crop: a.crop.as_deref().map(parse_crop).transpose()?,
+        crop: a
+            .crop
+            .as_deref()
+            .map(|c| args::crop(c).map_err(|e| anyhow!("--{e}")))
+            .transpose()?,
         ..Default::default()
     };
     let reader =
@@ -226,20 +194,11 @@ pub fn train(a: &TrainArgs, g: &Global) -> Result<FlameModel> {
             None
         }
     });
-    let bar = g.progress(total.unwrap_or(0), "normalising");
-    let mut em_started = false;
+    let mut bars =
+        StageBars::new(g).with_length(ignis_learned::STAGE_NORMALISE, total.unwrap_or(0));
     let t = std::time::Instant::now();
-    let result = ignis_learned::train(frames, &p, |pr| match pr {
-        Progress::Frame(_) => bar.inc(1),
-        Progress::Iteration(i, ll) => {
-            if !em_started {
-                bar.finish_and_clear();
-                em_started = true;
-            }
-            g.say(format!("EM iteration {:>3}: log-likelihood {ll:.3}", i));
-        }
-    });
-    bar.finish_and_clear();
+    let result = ignis_learned::train(frames, &p, &mut bars);
+    drop(bars);
     if let Some(e) = read_error.into_inner() {
         return Err(e).with_context(|| format!("reading {}", path.display()));
     }
@@ -498,12 +457,6 @@ fn write_eigenflames(m: &FlameModel, dir: &Path) -> Result<Vec<PathBuf>> {
         out.push(p);
     }
     Ok(out)
-}
-
-/// Headline figures (training time for 100 frames, 26 parameters, N_c = 200; synthesis +
-/// rendering frames/s at 256×256 on one thread) as one JSON object.
-pub fn bench(_g: &Global, quick: bool) -> Result<serde_json::Value> {
-    Ok(ignis_learned::bench::figures(quick)?)
 }
 
 /// The demo section: a model trained on a flame Ignis renders itself (and on candle.mp4

@@ -253,13 +253,13 @@ impl PaletteArg {
 }
 
 /// A directory of several outputs (plots, stage images) written as one unit: files go into
-/// a fresh hidden `.<name>.ignis-tmp-<pid>.dir` beside the target, which [`StagedDir::commit`]
-/// renames into place (or, when the target exists, whose files it moves in). A failed
-/// command drops it, leaving nothing new; a killed one leaves a PID-tagged directory the
-/// next run removes.
+/// a fresh hidden staging directory beside the target ([`ignis_core::atomic::StagingDir`]),
+/// which [`StagedDir::commit`] renames into place (or, when the target exists, whose files
+/// it moves in). A failed command drops it, leaving nothing new; a killed one leaves a
+/// PID-tagged directory the next run removes.
 pub struct StagedDir {
     target: PathBuf,
-    tmp: Option<PathBuf>,
+    tmp: ignis_core::atomic::StagingDir,
 }
 
 impl StagedDir {
@@ -270,46 +270,29 @@ impl StagedDir {
                 target.display()
             );
         }
-        let parent = match target.parent() {
-            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-            _ => PathBuf::from("."),
-        };
-        std::fs::create_dir_all(&parent)
-            .with_context(|| format!("creating {}", parent.display()))?;
-        ignis_core::tempfiles::recover_and_clean(&parent);
-        let name = target
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_else(|| "out".into());
-        let tmp = parent.join(ignis_core::tempfiles::temp_name(&name, "dir"));
-        if tmp.exists() {
-            let _ = std::fs::remove_dir_all(&tmp);
-        }
-        std::fs::create_dir(&tmp).with_context(|| format!("creating {}", tmp.display()))?;
+        let tmp = ignis_core::atomic::StagingDir::create(target)
+            .with_context(|| format!("creating a directory beside {}", target.display()))?;
         Ok(StagedDir {
             target: target.to_path_buf(),
-            tmp: Some(tmp),
+            tmp,
         })
     }
 
     /// Where to write the files now.
     pub fn path(&self) -> &std::path::Path {
-        self.tmp.as_deref().expect("not committed")
+        self.tmp.path()
     }
 
-    /// Moves the staged files into the target directory.
-    pub fn commit(mut self) -> Result<()> {
-        let tmp = self.tmp.take().expect("not committed");
-        let r = (|| -> Result<()> {
-            if std::fs::symlink_metadata(&self.target).is_err() {
-                std::fs::rename(&tmp, &self.target)
-                    .with_context(|| format!("writing {}", self.target.display()))?;
-                return Ok(());
-            }
-            move_into(&tmp, &self.target)
-        })();
-        let _ = std::fs::remove_dir_all(&tmp);
-        r
+    /// Moves the staged files into the target directory (what is left of the staging
+    /// directory is removed when `self` drops).
+    pub fn commit(self) -> Result<()> {
+        let tmp = self.tmp.path();
+        if std::fs::symlink_metadata(&self.target).is_err() {
+            std::fs::rename(tmp, &self.target)
+                .with_context(|| format!("writing {}", self.target.display()))?;
+            return Ok(());
+        }
+        move_into(tmp, &self.target)
     }
 }
 
@@ -328,12 +311,4 @@ fn move_into(from: &std::path::Path, to: &std::path::Path) -> Result<()> {
         }
     }
     Ok(())
-}
-
-impl Drop for StagedDir {
-    fn drop(&mut self) {
-        if let Some(t) = self.tmp.take() {
-            let _ = std::fs::remove_dir_all(t);
-        }
-    }
 }

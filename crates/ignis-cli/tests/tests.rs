@@ -10,6 +10,38 @@ fn ignis(args: &[&str]) -> Output {
         .expect("runs ignis")
 }
 
+/// Runs `ignis` and asserts it succeeded (showing its stderr otherwise).
+fn ignis_ok(args: &[&str]) -> Output {
+    let o = ignis(args);
+    assert!(
+        o.status.success(),
+        "{args:?}: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    o
+}
+
+/// `ignis classic --size SIZE --frames FRAMES EXTRA… -q -o OUT`.
+fn classic(size: &str, frames: &str, extra: &[&str], out: &Path) -> Output {
+    let mut a = vec!["classic", "--size", size, "--frames", frames];
+    a.extend_from_slice(extra);
+    a.extend(["-q", "-o", out.to_str().unwrap()]);
+    ignis(&a)
+}
+
+/// `ignis volume render --preset PRESET EXTRA… -q -o OUT`.
+fn volume_render(preset: &str, extra: &[&str], out: &Path) -> Output {
+    let mut a = vec!["volume", "render", "--preset", preset];
+    a.extend_from_slice(extra);
+    a.extend(["-q", "-o", out.to_str().unwrap()]);
+    ignis(&a)
+}
+
+/// A JSON file (a flipbook's sidecar).
+fn read_json(p: &Path) -> serde_json::Value {
+    serde_json::from_slice(&std::fs::read(p).unwrap()).unwrap()
+}
+
 fn data(name: &str) -> Option<PathBuf> {
     let p = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../../../shared/data")
@@ -66,19 +98,7 @@ mod classic {
     fn writes_every_format_and_same_seed_same_bytes() {
         let t = tempfile::tempdir().unwrap();
         for name in ["a.mp4", "a.gif", "a.png", "seq/%04d.png", "exr/%04d.exr"] {
-            let out = t.path().join(name);
-            let o = ignis(&[
-                "classic",
-                "--size",
-                "48x32",
-                "--frames",
-                "6",
-                "--seed",
-                "3",
-                "-q",
-                "-o",
-                out.to_str().unwrap(),
-            ]);
+            let o = classic("48x32", "6", &["--seed", "3"], &t.path().join(name));
             assert!(
                 o.status.success(),
                 "{name}: {}",
@@ -89,18 +109,7 @@ mod classic {
         assert_eq!(files_in(&t.path().join("seq")).len(), 6);
         assert_eq!(files_in(&t.path().join("exr")).len(), 6);
         let b = t.path().join("b.png");
-        ignis(&[
-            "classic",
-            "--size",
-            "48x32",
-            "--frames",
-            "6",
-            "--seed",
-            "3",
-            "-q",
-            "-o",
-            b.to_str().unwrap(),
-        ]);
+        classic("48x32", "6", &["--seed", "3"], &b);
         assert_eq!(
             std::fs::read(t.path().join("a.png")).unwrap(),
             std::fs::read(&b).unwrap()
@@ -114,17 +123,7 @@ mod classic {
         }
         let t = tempfile::tempdir().unwrap();
         let out = t.path().join("f.mp4");
-        let o = ignis(&[
-            "classic",
-            "--size",
-            "64x48",
-            "--frames",
-            "10",
-            "-q",
-            "-o",
-            out.to_str().unwrap(),
-        ]);
-        assert!(o.status.success());
+        assert!(classic("64x48", "10", &[], &out).status.success());
         let p = Command::new("ffprobe")
             .args([
                 "-v",
@@ -158,13 +157,7 @@ mod classic {
         );
         assert_fails(&ignis(&["classic", "--edge", "0", "-o", o]), "edge");
         assert_fails(
-            &ignis(&[
-                "classic",
-                "--frames",
-                "5",
-                "-o",
-                t.path().join("x.txt").to_str().unwrap(),
-            ]),
+            &classic("48x32", "5", &[], &t.path().join("x.txt")),
             "format",
         );
         assert!(
@@ -224,18 +217,7 @@ mod info {
         assert_fails(&ignis(&["info", empty.to_str().unwrap()]), "empty.mp4");
         // a truncated MP4 of our own
         let full = t.path().join("full.mp4");
-        assert!(ignis(&[
-            "classic",
-            "--size",
-            "32x32",
-            "--frames",
-            "20",
-            "-q",
-            "-o",
-            full.to_str().unwrap()
-        ])
-        .status
-        .success());
+        assert!(classic("32x32", "20", &[], &full).status.success());
         let bytes = std::fs::read(&full).unwrap();
         let cut = t.path().join("cut.mp4");
         std::fs::write(&cut, &bytes[..bytes.len() / 3]).unwrap();
@@ -259,18 +241,9 @@ mod info {
         std::fs::create_dir(&mixed).unwrap();
         for (i, s) in ["32x32", "32x32", "16x16"].iter().enumerate() {
             let p = mixed.join(format!("f{i}.png"));
-            assert!(ignis(&[
-                "classic",
-                "--size",
-                s,
-                "--frames",
-                "1",
-                "-q",
-                "-o",
-                t.path().join("tmp.png").to_str().unwrap()
-            ])
-            .status
-            .success());
+            assert!(classic(s, "1", &[], &t.path().join("tmp.png"))
+                .status
+                .success());
             std::fs::rename(t.path().join("tmp.png"), &p).unwrap();
         }
         assert_fails(&ignis(&["info", mixed.to_str().unwrap()]), "f2.png");
@@ -285,44 +258,19 @@ mod convert {
         let Some(p) = data("candle.mp4") else { return };
         let t = tempfile::tempdir().unwrap();
         let out = t.path().join("c.png");
-        let o = ignis(&[
-            "convert",
-            p.to_str().unwrap(),
-            "--range",
-            "100..110",
-            "--scale",
-            "64x64",
-            "-q",
-            "-o",
-            out.to_str().unwrap(),
-        ]);
+        let convert = |range: &str, extra: &[&str]| {
+            let mut a = vec!["convert", p.to_str().unwrap(), "--range", range];
+            a.extend_from_slice(extra);
+            a.extend(["-q", "-o", out.to_str().unwrap()]);
+            ignis(&a)
+        };
+        let o = convert("100..110", &["--scale", "64x64"]);
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-        let meta: serde_json::Value =
-            serde_json::from_slice(&std::fs::read(t.path().join("c.json")).unwrap()).unwrap();
+        let meta = read_json(&t.path().join("c.json"));
         assert_eq!(meta["frame_count"], 10);
         assert_eq!(meta["frame_width"], 64);
-        assert_fails(
-            &ignis(&[
-                "convert",
-                p.to_str().unwrap(),
-                "--range",
-                "900..950",
-                "-o",
-                out.to_str().unwrap(),
-            ]),
-            "range",
-        );
-        assert_fails(
-            &ignis(&[
-                "convert",
-                p.to_str().unwrap(),
-                "--range",
-                "50..50",
-                "-o",
-                out.to_str().unwrap(),
-            ]),
-            "empty",
-        );
+        assert_fails(&convert("900..950", &[]), "range");
+        assert_fails(&convert("50..50", &[]), "empty");
     }
 }
 
@@ -338,7 +286,7 @@ mod eigen {
         )
         .unwrap();
         let db = dir.join("fire.db");
-        let o = ignis(&[
+        ignis_ok(&[
             "eigen",
             "train",
             cfg.to_str().unwrap(),
@@ -346,7 +294,6 @@ mod eigen {
             "-o",
             db.to_str().unwrap(),
         ]);
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
         db
     }
 
@@ -357,7 +304,7 @@ mod eigen {
         let dbs = db.to_str().unwrap();
         // A loop as a GIF and as a flipbook.
         let gif = t.path().join("loop.gif");
-        let o = ignis(&[
+        let o = ignis_ok(&[
             "eigen",
             "loop",
             dbs,
@@ -368,11 +315,10 @@ mod eigen {
             "-o",
             gif.to_str().unwrap(),
         ]);
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
         assert!(String::from_utf8_lossy(&o.stdout).contains("seam ratio"));
         assert!(gif.exists());
         let fb = t.path().join("loop.png");
-        let o = ignis(&[
+        ignis_ok(&[
             "eigen",
             "loop",
             dbs,
@@ -387,11 +333,10 @@ mod eigen {
             "-o",
             fb.to_str().unwrap(),
         ]);
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
         assert!(fb.exists() && t.path().join("loop.json").exists());
         // A synthesised flame, and its bad inputs.
         let png = t.path().join("flame.png");
-        let o = ignis(&[
+        ignis_ok(&[
             "eigen",
             "synth",
             dbs,
@@ -402,7 +347,6 @@ mod eigen {
             "-o",
             png.to_str().unwrap(),
         ]);
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
         assert!(png.exists());
         let bad = t.path().join("bad.png");
         assert_fails(
@@ -436,14 +380,13 @@ mod eigen {
         let scene = t.path().join("scene.toml");
         std::fs::write(&scene, &o.stdout).unwrap();
         let out = t.path().join("anim.png");
-        let o = ignis(&[
+        let o = ignis_ok(&[
             "eigen",
             "animate",
             scene.to_str().unwrap(),
             "-o",
             out.to_str().unwrap(),
         ]);
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
         let stdout = String::from_utf8_lossy(&o.stdout);
         assert!(
             stdout.contains("seam ratio") && stdout.contains("candle-a → candle-b"),
@@ -523,8 +466,7 @@ mod footage {
     }
 
     fn json_size(p: &Path) -> (u64, u64) {
-        let v: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap();
+        let v = read_json(p);
         (
             v["frame_width"].as_u64().unwrap(),
             v["frame_height"].as_u64().unwrap(),
@@ -544,7 +486,7 @@ mod footage {
         let keep = t.path().join("moved.mp4");
         std::fs::copy(&clip, &keep).unwrap();
         let db = t.path().join("fire.db");
-        let o = ignis(&[
+        ignis_ok(&[
             "eigen",
             "train",
             clip.to_str().unwrap(),
@@ -552,7 +494,6 @@ mod footage {
             "-o",
             db.to_str().unwrap(),
         ]);
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
         let info = ignis(&["eigen", "info", db.to_str().unwrap()]);
         assert!(String::from_utf8_lossy(&info.stdout).contains("framing"));
         let dbs = db.to_str().unwrap();
@@ -602,24 +543,10 @@ mod volume {
     fn preset_renders_a_flipbook_with_its_layout() {
         let t = tempfile::tempdir().unwrap();
         let png = t.path().join("torch.png");
-        let o = ignis(&[
-            "volume",
-            "render",
-            "--preset",
-            "torch",
-            "--size",
-            "48x48",
-            "--frames",
-            "4",
-            "-q",
-            "-o",
-            png.to_str().unwrap(),
-        ]);
+        let o = volume_render("torch", &["--size", "48x48", "--frames", "4"], &png);
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
         assert!(std::fs::metadata(&png).unwrap().len() > 100);
-        let layout: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(t.path().join("torch.json")).unwrap())
-                .unwrap();
+        let layout = read_json(&t.path().join("torch.json"));
         assert_eq!(layout["frame_count"], 4);
         assert_eq!(layout["frame_width"], 48);
     }
@@ -693,7 +620,7 @@ mod demo {
         std::fs::rename(&dir, &moved).unwrap();
         let scenario = moved.join("eigen/scenario-synthetic.toml");
         let out = t.path().join("again.gif");
-        let o = ignis(&[
+        ignis_ok(&[
             "eigen",
             "animate",
             scenario.to_str().unwrap(),
@@ -701,7 +628,6 @@ mod demo {
             "-o",
             out.to_str().unwrap(),
         ]);
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
         assert!(out.exists());
     }
 
@@ -756,76 +682,23 @@ mod hardening {
     #[test]
     fn bad_arguments_are_errors_and_write_nothing() {
         let t = tempfile::tempdir().unwrap();
-        let p = |s: &str| t.path().join(s).to_str().unwrap().to_string();
+        let p = |s: &str| t.path().join(s);
         // Defect 5: a huge pattern width.
-        let o = ignis(&[
-            "classic",
-            "--size",
-            "32x24",
-            "--frames",
-            "3",
-            "-o",
-            &p("out/%65536d.png"),
-        ]);
+        let o = classic("32x24", "3", &[], &p("out/%65536d.png"));
         assert_fails(&o, "at most 20");
         // Defect 9: frame rates out of range.
         for fps in ["1e30", "1e-30"] {
-            let o = ignis(&[
-                "classic",
-                "--size",
-                "32x24",
-                "--frames",
-                "3",
-                "--fps",
-                fps,
-                "-o",
-                &p("q.mp4"),
-            ]);
-            assert_fails(&o, "fps");
+            assert_fails(&classic("32x24", "3", &["--fps", fps], &p("q.mp4")), "fps");
         }
         // Defects 4 and 10: runaway volume work and a NaN tint.
-        let o = ignis(&[
-            "volume",
-            "render",
-            "--preset",
-            "candle",
-            "--size",
-            "32x32",
-            "--frames",
-            "1",
-            "--slice-spacing",
-            "1e-7",
-            "-o",
-            &p("v.gif"),
-        ]);
-        assert_fails(&o, "slice_spacing");
-        let o = ignis(&[
-            "volume",
-            "render",
-            "--preset",
-            "candle",
-            "--size",
-            "32x32",
-            "--frames",
-            "1",
-            "--blend",
-            "tint:nan,0,0",
-            "-o",
-            &p("v.gif"),
-        ]);
-        assert_fails(&o, "tint");
+        let one = |extra: &[&str]| {
+            let a = [&["--size", "32x32", "--frames", "1"][..], extra].concat();
+            volume_render("candle", &a, &p("v.gif"))
+        };
+        assert_fails(&one(&["--slice-spacing", "1e-7"]), "slice_spacing");
+        assert_fails(&one(&["--blend", "tint:nan,0,0"]), "tint");
         // Defect 13: a device node is not replaced.
-        let o = ignis(&[
-            "classic",
-            "--size",
-            "32x24",
-            "--frames",
-            "2",
-            "--format",
-            "mp4",
-            "-o",
-            "/dev/null",
-        ]);
+        let o = classic("32x24", "2", &["--format", "mp4"], Path::new("/dev/null"));
         assert_fails(&o, "device");
         assert!(files_in(t.path()).is_empty(), "{:?}", files_in(t.path()));
     }
@@ -866,11 +739,6 @@ fn loop_bad_lengths() {
 mod loops_and_chunks {
     use super::*;
 
-    fn run_ok(args: &[&str]) {
-        let o = ignis(args);
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    }
-
     /// Frames 0..40 written in chunks 0..13, 13..27, 27..40 into one directory equal the
     /// full render's files byte for byte, named by their frame numbers.
     fn chunks_equal_full(generator: &[&str]) {
@@ -881,12 +749,12 @@ mod loops_and_chunks {
         let mut a: Vec<&str> = generator.to_vec();
         let full_pat = pat(&full);
         a.extend(["--frames", "40", "-q", "-o", &full_pat]);
-        run_ok(&a);
+        ignis_ok(&a);
         let parts_pat = pat(&parts);
         for chunk in ["0..13", "13..27", "27..40"] {
             let mut a: Vec<&str> = generator.to_vec();
             a.extend(["--frames", "40", "--chunk", chunk, "-q", "-o", &parts_pat]);
-            run_ok(&a);
+            ignis_ok(&a);
         }
         let names = files_in(&full);
         assert_eq!(names.len(), 40);
@@ -920,9 +788,7 @@ mod loops_and_chunks {
     #[test]
     fn flipbooks_say_loop_only_when_they_are_one() {
         let t = tempfile::tempdir().unwrap();
-        let json = |name: &str| -> serde_json::Value {
-            serde_json::from_str(&std::fs::read_to_string(t.path().join(name)).unwrap()).unwrap()
-        };
+        let json = |name: &str| read_json(&t.path().join(name));
         let out = |name: &str| t.path().join(name).to_string_lossy().into_owned();
         for (gen, name) in [
             (vec!["classic", "--size", "48x36"], "c"),
@@ -940,7 +806,7 @@ mod loops_and_chunks {
                 let mut a = gen.clone();
                 a.extend(["--frames", "12", "-q", "-o", &path]);
                 a.extend(extra);
-                run_ok(&a);
+                ignis_ok(&a);
                 let j = json(&format!("{name}-{suffix}.json"));
                 assert_eq!(j["loop"], expect, "{name} {suffix}");
                 if expect {
@@ -1005,23 +871,20 @@ mod export {
     fn engine_flipbook_with_motion_vectors_emission_and_hdr() {
         let dir = tempfile::tempdir().unwrap();
         let out = dir.path().join("fire.png");
-        let o = ignis(&[
-            "-q",
-            "classic",
-            "--size",
+        let o = classic(
             "48x32",
-            "--frames",
             "6",
-            "--engine",
-            "unity",
-            "--motion-vectors",
-            "--emission",
-            "--hdr",
-            "--max-size",
-            "256",
-            "-o",
-            out.to_str().unwrap(),
-        ]);
+            &[
+                "--engine",
+                "unity",
+                "--motion-vectors",
+                "--emission",
+                "--hdr",
+                "--max-size",
+                "256",
+            ],
+            &out,
+        );
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
         assert_eq!(
             files_in(dir.path()),
@@ -1033,8 +896,7 @@ mod export {
                 "fire.png"
             ]
         );
-        let m: serde_json::Value =
-            serde_json::from_slice(&std::fs::read(dir.path().join("fire.json")).unwrap()).unwrap();
+        let m = read_json(&dir.path().join("fire.json"));
         assert_eq!(m["engine"], "unity");
         assert_eq!(m["motion_vectors"]["green"], "up");
         assert_eq!(m["padding"], 2);
@@ -1103,31 +965,13 @@ mod export {
     fn bad_export_options_are_refused_and_nothing_is_written() {
         let dir = tempfile::tempdir().unwrap();
         let out = dir.path().join("f.png");
-        let o = out.to_str().unwrap();
-        let run = |extra: &[&str], frames: &str| {
-            let mut a = vec![
-                "-q", "classic", "--size", "48x32", "--frames", frames, "-o", o,
-            ];
-            a.extend_from_slice(extra);
-            ignis(&a)
-        };
+        let run = |extra: &[&str], frames: &str| classic("48x32", frames, extra, &out);
         assert_fails(&run(&["--max-size", "100"], "40"), "max-size");
         assert_fails(&run(&["--variants", "0"], "4"), "variants");
         assert_fails(&run(&["--motion-vectors"], "1"), "at least two frames");
         let mp4 = dir.path().join("f.mp4");
         assert_fails(
-            &ignis(&[
-                "-q",
-                "classic",
-                "--size",
-                "48x32",
-                "--frames",
-                "2",
-                "--engine",
-                "unity",
-                "-o",
-                mp4.to_str().unwrap(),
-            ]),
+            &classic("48x32", "2", &["--engine", "unity"], &mp4),
             "apply to flipbooks",
         );
         assert!(

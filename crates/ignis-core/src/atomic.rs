@@ -50,9 +50,31 @@ impl AtomicFile {
         &self.tmp
     }
 
+    /// The target the temporary will be renamed to.
+    pub fn target(&self) -> &Path {
+        &self.target
+    }
+
     /// The writer over the temporary.
     pub fn writer(&mut self) -> &mut BufWriter<File> {
         self.file.as_mut().expect("AtomicFile used after commit")
+    }
+
+    /// A second handle to the temporary (sharing its offset), for encoders that must own
+    /// their writer. Flush what is written through it before [`AtomicFile::commit`].
+    pub fn try_clone_file(&self) -> io::Result<File> {
+        self.file
+            .as_ref()
+            .expect("AtomicFile used after commit")
+            .get_ref()
+            .try_clone()
+    }
+
+    /// Flushes and syncs the temporary, keeping it open.
+    fn sync(&mut self) -> io::Result<()> {
+        let w = self.writer();
+        w.flush()?;
+        w.get_ref().sync_all()
     }
 
     /// Flushes, syncs and renames the temporary over the target.
@@ -74,6 +96,90 @@ impl Drop for AtomicFile {
             self.file.take();
             let _ = std::fs::remove_file(&self.tmp);
         }
+    }
+}
+
+/// Commits several finished files as one unit (e.g. a flipbook's sheet and its JSON): each
+/// is flushed and synced, then [`crate::tempfiles::commit_files`] renames them all under a
+/// journal, so an interrupted commit is completed by the next run. Every target must be in
+/// the same directory. On an error the temporaries not yet renamed are removed.
+pub fn commit_all(files: Vec<AtomicFile>) -> io::Result<()> {
+    let Some(first) = files.first() else {
+        return Ok(());
+    };
+    let first = first.target.clone();
+    let dir = parent_dir(&first);
+    let mut files = files;
+    let mut pairs = Vec::with_capacity(files.len());
+    for f in &mut files {
+        if parent_dir(&f.target) != dir {
+            return Err(io::Error::new(
+                io::ErrorKind::InvalidInput,
+                format!(
+                    "{} and {} are in different directories; files committed together must \
+                     share one",
+                    first.display(),
+                    f.target.display()
+                ),
+            ));
+        }
+        f.sync()?;
+        let name = |p: &Path| p.file_name().map(|n| n.to_string_lossy().into_owned());
+        let (Some(t), Some(n)) = (name(&f.tmp), name(&f.target)) else {
+            return Err(io::Error::new(
+                io::ErrorKind::InvalidInput,
+                format!("{} has no file name", f.target.display()),
+            ));
+        };
+        pairs.push((t, n));
+    }
+    for f in &mut files {
+        f.file.take();
+    }
+    crate::tempfiles::commit_files(&dir, &pairs)?;
+    for f in &mut files {
+        // Renamed away: nothing for drop to remove.
+        f.tmp = PathBuf::new();
+    }
+    Ok(())
+}
+
+/// A fresh hidden directory beside a target directory, for outputs written as a whole
+/// directory (frame sequences, a run's plots): named like every temporary
+/// (`.<name>.ignis-tmp-<pid>.<n>.dir`, removed by the next run if this one is killed) and
+/// removed with its contents on drop unless the caller has renamed it away.
+pub struct StagingDir {
+    path: PathBuf,
+}
+
+impl StagingDir {
+    /// Creates the staging directory beside `target`, creating `target`'s parent if needed
+    /// and cleaning the parent of stale temporaries first.
+    pub fn create(target: &Path) -> io::Result<StagingDir> {
+        let parent = parent_dir(target);
+        std::fs::create_dir_all(&parent)?;
+        crate::tempfiles::recover_and_clean(&parent);
+        let name = target
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "out".into());
+        static NEXT: AtomicU64 = AtomicU64::new(0);
+        let n = NEXT.fetch_add(1, Ordering::Relaxed);
+        let path = parent.join(crate::tempfiles::temp_name(&name, &format!("{n}.dir")));
+        std::fs::create_dir(&path)?;
+        Ok(StagingDir { path })
+    }
+
+    /// Where to write the files.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+}
+
+impl Drop for StagingDir {
+    fn drop(&mut self) {
+        // Gone already when the caller renamed it into place.
+        let _ = std::fs::remove_dir_all(&self.path);
     }
 }
 
@@ -185,6 +291,67 @@ mod tests {
         }
         assert!(!p.exists());
         assert_eq!(std::fs::read_dir(d.path()).unwrap().count(), 0);
+    }
+
+    #[test]
+    fn files_committed_together_all_appear() {
+        let d = tempfile::tempdir().unwrap();
+        let (a, b) = (d.path().join("a.png"), d.path().join("a.json"));
+        write_bytes(&a, b"old").unwrap();
+        let mut fa = AtomicFile::create(&a).unwrap();
+        fa.writer().write_all(b"sheet").unwrap();
+        let mut fb = AtomicFile::create(&b).unwrap();
+        fb.writer().write_all(b"{}").unwrap();
+        // nothing visible before the commit
+        assert_eq!(std::fs::read(&a).unwrap(), b"old");
+        assert!(!b.exists());
+        commit_all(vec![fa, fb]).unwrap();
+        assert_eq!(std::fs::read(&a).unwrap(), b"sheet");
+        assert_eq!(std::fs::read(&b).unwrap(), b"{}");
+        assert_eq!(std::fs::read_dir(d.path()).unwrap().count(), 2);
+    }
+
+    #[test]
+    fn files_in_different_directories_are_refused_and_removed() {
+        let d = tempfile::tempdir().unwrap();
+        std::fs::create_dir(d.path().join("sub")).unwrap();
+        let fa = AtomicFile::create(&d.path().join("a")).unwrap();
+        let fb = AtomicFile::create(&d.path().join("sub/b")).unwrap();
+        let e = commit_all(vec![fa, fb]).unwrap_err();
+        assert!(e.to_string().contains("different directories"), "{e}");
+        assert_eq!(std::fs::read_dir(d.path()).unwrap().count(), 1); // only sub/
+        assert_eq!(std::fs::read_dir(d.path().join("sub")).unwrap().count(), 0);
+    }
+
+    #[test]
+    fn a_cloned_handle_writes_into_the_temporary() {
+        let d = tempfile::tempdir().unwrap();
+        let p = d.path().join("a.bin");
+        let f = AtomicFile::create(&p).unwrap();
+        let mut h = f.try_clone_file().unwrap();
+        h.write_all(b"through the clone").unwrap();
+        drop(h);
+        f.commit().unwrap();
+        assert_eq!(std::fs::read(&p).unwrap(), b"through the clone");
+    }
+
+    #[test]
+    fn a_staging_dir_is_beside_its_target_and_removed_on_drop() {
+        let d = tempfile::tempdir().unwrap();
+        let target = d.path().join("new/frames");
+        let s = StagingDir::create(&target).unwrap();
+        assert_eq!(s.path().parent(), Some(d.path().join("new").as_path()));
+        assert!(
+            crate::tempfiles::owner(&s.path().file_name().unwrap().to_string_lossy()).is_some()
+        );
+        std::fs::write(s.path().join("0000.png"), b"x").unwrap();
+        let kept = d.path().join("new/kept");
+        let s2 = StagingDir::create(&kept).unwrap();
+        std::fs::rename(s2.path(), &kept).unwrap();
+        drop(s2);
+        assert!(kept.is_dir());
+        drop(s);
+        assert_eq!(std::fs::read_dir(d.path().join("new")).unwrap().count(), 1);
     }
 
     #[cfg(unix)]

@@ -66,7 +66,7 @@ impl Fixtures {
             },
             ..Default::default()
         };
-        let t = ignis_learned::train(clip, &tp, |_| {})?;
+        let t = ignis_learned::train(clip, &tp, &mut ignis_core::progress::NoProgress)?;
         let fp = dir.path().join("m.flame");
         t.model.save(&fp)?;
         let flame = std::fs::read(&fp)?;

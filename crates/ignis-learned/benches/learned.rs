@@ -16,12 +16,21 @@ fn benches(c: &mut Criterion) {
         },
         ..TrainParams::default()
     };
-    let model = train(clip.clone(), &p, |_| {}).unwrap().model;
+    let model = train(clip.clone(), &p, &mut ignis_core::progress::NoProgress)
+        .unwrap()
+        .model;
 
     let mut g = c.benchmark_group("learned");
     g.sample_size(10);
     g.bench_function("learned train 100x256x256 26p nc200", |b| {
-        b.iter(|| black_box(train(clip.clone(), &p, |_| {}).unwrap().model.n_state()))
+        b.iter(|| {
+            black_box(
+                train(clip.clone(), &p, &mut ignis_core::progress::NoProgress)
+                    .unwrap()
+                    .model
+                    .n_state(),
+            )
+        })
     });
     g.throughput(Throughput::Elements(size.pixels() as u64));
     g.sample_size(50);

@@ -14,7 +14,6 @@
 //! model file. All randomness comes from an explicit `seed`. Pixels are linear light.
 
 pub mod arp;
-pub mod bench;
 pub mod em;
 pub mod error;
 pub mod model;
@@ -27,7 +26,9 @@ pub mod synthetic;
 pub use arp::{Arp, Stabilised};
 pub use em::{learn, EmParams, EmReport, Learned};
 pub use error::{LearnedError, Result};
-pub use model::{train, FitSummary, FlameModel, Progress, TrainParams, Training, MODEL_VERSION};
+pub use model::{
+    train, FitSummary, FlameModel, TrainParams, Training, MODEL_VERSION, STAGE_EM, STAGE_NORMALISE,
+};
 pub use moments::{Moments, Pose};
 pub use shape::{Placement, Shape, ShapeParams};
 pub use synth::{Controls, Synthesiser, Wind};

@@ -15,6 +15,7 @@ use crate::error::{LearnedError, Result};
 use crate::moments::Pose;
 use crate::shape::{normalise, render_into, Placement, RenderScratch, Shape, ShapeParams, Skip};
 use faer::Mat;
+use ignis_core::progress::Progress;
 use ignis_core::{GrayFrame, Size};
 use ignis_pca::{Keep, Pca, PcaOptions};
 use serde::{Deserialize, Serialize};
@@ -43,14 +44,12 @@ pub struct TrainParams {
     pub em: EmParams,
 }
 
-/// Progress of [`train`], for progress bars and the per-iteration likelihood printout.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Progress {
-    /// Frame `i` has been normalised.
-    Frame(usize),
-    /// EM iteration `i` finished its E-step with this log-likelihood.
-    Iteration(usize, f64),
-}
+/// The [`Progress`] stage of [`train`] in which frames are normalised (one step a frame;
+/// the length is unknown up front: 0).
+pub const STAGE_NORMALISE: &str = "normalising";
+/// The [`Progress`] stage of [`train`] in which EM runs: one step and one message
+/// (`EM iteration <i>: log-likelihood <ll>`) per iteration, at most `max_iterations`.
+pub const STAGE_EM: &str = "EM";
 
 /// Counts of what the fit used.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -111,7 +110,7 @@ pub struct Training {
 pub fn train(
     frames: impl IntoIterator<Item = GrayFrame>,
     p: &TrainParams,
-    mut progress: impl FnMut(Progress),
+    progress: &mut dyn Progress,
 ) -> Result<Training> {
     p.shape.validate()?;
     p.em.validate()?;
@@ -121,6 +120,7 @@ pub fn train(
         (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     let (mut n_frames, mut dark, mut multi) = (0, 0, 0);
     let mut source_size: Option<Size> = None;
+    progress.stage(STAGE_NORMALISE, 0);
     for (i, frame) in frames.into_iter().enumerate() {
         n_frames += 1;
         match source_size {
@@ -143,8 +143,9 @@ pub fn train(
             Err(Skip::Dark) => dark += 1,
             Err(Skip::Multiple) => multi += 1,
         }
-        progress(Progress::Frame(i));
+        progress.inc(1);
     }
+    progress.finish_stage();
     let k = p.em.order;
     if images.is_empty() {
         return Err(LearnedError::Unsupported(format!(
@@ -202,9 +203,12 @@ pub fn train(
         })
         .collect();
     let run_states = &states[best.clone()];
+    progress.stage(STAGE_EM, p.em.max_iterations as u64);
     let learned = learn(run_states, &p.em, |i, ll| {
-        progress(Progress::Iteration(i, ll))
+        progress.inc(1);
+        progress.message(&format!("EM iteration {i:>3}: log-likelihood {ll:.3}"));
     })?;
+    progress.finish_stage();
     let n = shape.n_state();
     let state_mean: Vec<f64> = (0..n)
         .map(|i| states.iter().map(|s| s[i]).sum::<f64>() / m as f64)
@@ -354,44 +358,19 @@ impl FlameModel {
             path: path.to_path_buf(),
             source,
         };
-        let dir = path
-            .parent()
-            .filter(|d| !d.as_os_str().is_empty())
-            .unwrap_or(Path::new("."));
-        let name = path
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default();
-        if std::fs::metadata(path).is_ok_and(|m| !m.is_file()) {
-            return Err(LearnedError::bad(
-                "output",
-                format!(
-                    "{} exists and is not a regular file (a device, FIFO or directory); \
-                     choose a regular file path",
-                    path.display()
-                ),
-            ));
-        }
         let body = serde_json::to_vec(&file)
             .map_err(|e| LearnedError::Numerical(format!("serialising: {e}")))?;
-        // `.<name>.ignis-tmp-<pid>.partial`: removed on any failure here, and by a later
-        // save in this directory if this process is killed.
-        ignis_core::tempfiles::recover_and_clean(dir);
-        let tmp = dir.join(ignis_core::tempfiles::temp_name(&name, "partial"));
-        let written = (|| {
-            let mut f = std::fs::File::create(&tmp)?;
+        // Written beside the target and renamed (ignis_core::atomic): a failure leaves the
+        // old model, or none.
+        ignis_core::atomic::check_regular_target(path)
+            .map_err(|e| LearnedError::bad("output", e.to_string()))?;
+        ignis_core::atomic::write_file(path, |f| {
             f.write_all(
                 format!("{MAGIC} {MODEL_VERSION} sha256:{}\n", sha256_hex(&body)).as_bytes(),
             )?;
-            f.write_all(&body)?;
-            f.sync_all()?;
-            drop(f);
-            std::fs::rename(&tmp, path)
-        })();
-        written.map_err(|e| {
-            let _ = std::fs::remove_file(&tmp);
-            io(e)
+            f.write_all(&body)
         })
+        .map_err(io)
     }
 
     /// Reads a model written by [`FlameModel::save`]; a file of another format version is

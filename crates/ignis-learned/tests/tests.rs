@@ -147,8 +147,35 @@ mod flame {
             },
             ..TrainParams::default()
         };
-        let t = train(clip.clone(), &p, |_| {}).unwrap();
+        let t = train(clip.clone(), &p, &mut ignis_core::progress::NoProgress).unwrap();
         (clip, t)
+    }
+
+    #[test]
+    fn training_reports_each_frame_and_em_iteration() {
+        let clip = synthetic::flame_clip(Size::new(96, 96).unwrap(), 40, 3);
+        let p = TrainParams {
+            em: EmParams {
+                particles: 50,
+                max_iterations: 4,
+                seed: 3,
+                ..EmParams::default()
+            },
+            ..TrainParams::default()
+        };
+        let mut pr = ignis_core::progress::CountingProgress::default();
+        train(clip, &p, &mut pr).unwrap();
+        assert_eq!(pr.stages.len(), 2, "{:?}", pr.stages);
+        assert_eq!(pr.stages[0], (ignis_learned::STAGE_NORMALISE.into(), 0, 40));
+        let (name, len, steps) = pr.stages[1].clone();
+        assert_eq!((name.as_str(), len), (ignis_learned::STAGE_EM, 4));
+        assert!((1..=4).contains(&steps), "{steps}");
+        assert_eq!(pr.messages.len() as u64, steps);
+        assert!(
+            pr.messages[0].starts_with("EM iteration   0: log-likelihood "),
+            "{}",
+            pr.messages[0]
+        );
     }
 
     #[test]
@@ -316,18 +343,26 @@ mod bad_input {
     #[test]
     fn all_dark_video_is_a_clear_error() {
         let dark = vec![GrayFrame::new(Size::new(32, 32).unwrap()); 10];
-        let err = train(dark, &TrainParams::default(), |_| {})
-            .unwrap_err()
-            .to_string();
+        let err = train(
+            dark,
+            &TrainParams::default(),
+            &mut ignis_core::progress::NoProgress,
+        )
+        .unwrap_err()
+        .to_string();
         assert!(err.contains("no flame found in 10 frames"), "{err}");
     }
 
     #[test]
     fn too_few_frames_is_a_clear_error() {
         let clip = synthetic::flame_clip(Size::new(48, 48).unwrap(), 3, 1);
-        let err = train(clip, &TrainParams::default(), |_| {})
-            .unwrap_err()
-            .to_string();
+        let err = train(
+            clip,
+            &TrainParams::default(),
+            &mut ignis_core::progress::NoProgress,
+        )
+        .unwrap_err()
+        .to_string();
         assert!(err.contains("needs at least 4"), "{err}");
     }
 
@@ -364,7 +399,7 @@ mod flame_statistics {
             },
             ..TrainParams::default()
         };
-        let t = train(clip, &p, |_| {}).unwrap();
+        let t = train(clip, &p, &mut ignis_core::progress::NoProgress).unwrap();
         let run = &t.states[t.run.clone()];
         let synth = t.model.arp.simulate(&t.model.init, 100_000, 5).unwrap();
         let bound = 20.0 * run.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));

@@ -24,15 +24,16 @@ use std::path::PathBuf;
 
 use faer::{Mat, MatRef, Par};
 
-mod bench;
 pub mod memory;
 pub mod npy;
 mod randomized;
 mod snapshot;
+mod synthetic;
 
-pub use bench::{bench_figures, synthetic_flames, SyntheticFlames};
 pub use memory::{alloc_data_matrix, available_bytes, required_bytes};
 pub use randomized::{fit_streaming, BlockSource, MatSource, NpySource, StreamingOptions};
+pub use snapshot::SnapshotPhases;
+pub use synthetic::{synthetic_flames, SyntheticFlames};
 
 /// Errors of the PCA crate, split by who is at fault.
 #[derive(Debug, thiserror::Error)]
@@ -207,6 +208,16 @@ impl Pca {
     /// turns it into the components in place, so peak memory stays ≈ the data matrix + O(M²).
     pub fn fit_owned(data: Mat<f32>, opts: &PcaOptions) -> Result<Pca, PcaError> {
         Self::fit_owned_with_weights(data, opts).map(|(pca, _)| pca)
+    }
+
+    /// The snapshot fit of [`Pca::fit_owned_with_weights`] (all components: `keep`), timing
+    /// each phase (for `ignis bench eigen-train`).
+    pub fn fit_snapshot_timed(
+        data: Mat<f32>,
+        keep: Keep,
+    ) -> Result<(Pca, Mat<f32>, SnapshotPhases), PcaError> {
+        check_shape(data.nrows(), data.ncols())?;
+        snapshot::snapshot_in_place_timed(data, keep)
     }
 
     /// [`Pca::fit_owned`] that also returns the weights Ω (eq. 18) of every training frame,
@@ -496,7 +507,7 @@ pub(crate) fn column_mean(data: MatRef<'_, f32>) -> Vec<f32> {
 
 /// `aᵀ b` for tall `a` (K×p) and `b` (K×q): K (the pixels) is split into one contiguous range per
 /// rayon thread, each a sequential faer GEMM, and the p×q partial products are added. faer's
-/// GEMM does not split K across threads (measured ~3 GFLOP/s for K = 274,700, p×q = 64×110).
+/// GEMM does not split K across threads (figures: `benches/README.md`).
 pub(crate) fn at_b(a: MatRef<'_, f32>, b: MatRef<'_, f32>) -> Mat<f32> {
     use rayon::prelude::*;
     const MIN_ROWS: usize = 8192;
@@ -530,9 +541,9 @@ pub(crate) fn at_b(a: MatRef<'_, f32>, b: MatRef<'_, f32>) -> Mat<f32> {
 ///
 /// Parallelism policy of this crate: every faer product runs with `Par::Seq` inside rayon tasks
 /// that we split ourselves (row chunks here, pixel ranges in [`at_b`], row blocks for the Gram
-/// and the components). faer's own `Par::Rayon` mode hands work to its spin-waiting worker pool;
-/// on this shared 2-core machine (load ≈ 8 from parallel builds) `perf` showed > 50 % of the
-/// CPU in `spindle::Barrier::wait_and_clear`/`worker_loop`, while rayon's idle workers sleep.
+/// and the components). faer's own `Par::Rayon` mode hands work to its spin-waiting worker pool,
+/// which burns the CPU on a loaded machine while rayon's idle workers sleep
+/// (`benches/README.md`).
 /// Only the M×M eigendecomposition and the QR/SVD of thin sketches use faer's global setting.
 pub(crate) fn rows_gemm(
     dst: faer::MatMut<'_, f32>,

@@ -15,6 +15,7 @@ use std::path::{Path, PathBuf};
 use faer::{Mat, MatRef};
 
 use crate::PcaError;
+use ignis_core::atomic::AtomicFile;
 
 /// Element type of an `.npy` file we read or write.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -230,41 +231,13 @@ impl Elem for f64 {
     }
 }
 
-/// The temp file next to `path` that an atomic write fills before renaming it to `path`.
-fn temp_path(path: &Path) -> PathBuf {
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d.to_owned(),
-        _ => PathBuf::from("."),
-    };
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    // Unique per process and call, so concurrent writers of the same path do not collide.
-    static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
-    let n = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-    dir.join(format!(".{name}.tmp{}-{n}", std::process::id()))
-}
-
-/// Writes atomically: `write` fills a temp file next to `path`, which is then renamed.
+/// Writes atomically ([`ignis_core::atomic::write_file`]): `write` fills a temp file next
+/// to `path`, which is then renamed.
 fn atomic_write(
     path: &Path,
-    write: impl FnOnce(&mut BufWriter<&std::fs::File>) -> std::io::Result<()>,
+    write: impl FnOnce(&mut BufWriter<std::fs::File>) -> std::io::Result<()>,
 ) -> Result<(), PcaError> {
-    let tmp = temp_path(path);
-    let res = (|| {
-        let f = std::fs::File::create(&tmp)?;
-        let mut w = BufWriter::with_capacity(1 << 20, &f);
-        write(&mut w)?;
-        w.flush()?;
-        drop(w);
-        f.sync_all()?;
-        std::fs::rename(&tmp, path)
-    })();
-    if res.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    res.map_err(io(path))
+    ignis_core::atomic::write_file(path, write).map_err(io(path))
 }
 
 fn write_columns<T: Elem>(path: &Path, m: MatRef<'_, T>) -> Result<(), PcaError> {
@@ -403,28 +376,23 @@ pub fn f64_data(bytes: &[u8], h: &Header) -> Vec<f64> {
 /// `path`, which [`NpyWriter::finish`] renames once exactly `shape.product()` values were
 /// written; dropping an unfinished writer deletes the temp file.
 pub struct NpyWriter {
-    file: Option<BufWriter<std::fs::File>>,
+    file: Option<AtomicFile>,
     path: PathBuf,
-    tmp: PathBuf,
     dtype: Dtype,
     expected: usize,
     written: usize,
-    renamed: bool,
 }
 
 impl NpyWriter {
     /// Starts `path` as an array of `dtype` with `shape` (C order).
     pub fn create(path: &Path, dtype: Dtype, shape: &[usize]) -> Result<NpyWriter, PcaError> {
-        let tmp = temp_path(path);
-        let f = std::fs::File::create(&tmp).map_err(io(path))?;
+        let f = AtomicFile::create(path).map_err(io(path))?;
         let mut w = NpyWriter {
-            file: Some(BufWriter::with_capacity(1 << 20, f)),
+            file: Some(f),
             path: path.to_owned(),
-            tmp,
             dtype,
             expected: shape.iter().product(),
             written: 0,
-            renamed: false,
         };
         let header = header_bytes(dtype, false, shape);
         w.put(&header)?;
@@ -438,7 +406,7 @@ impl NpyWriter {
 
     fn put(&mut self, bytes: &[u8]) -> Result<(), PcaError> {
         let f = self.file.as_mut().expect("NpyWriter used after finish");
-        f.write_all(bytes).map_err(io(&self.path))
+        f.writer().write_all(bytes).map_err(io(&self.path))
     }
 
     fn push<T: Elem>(&mut self, v: &[T]) -> Result<(), PcaError> {
@@ -500,25 +468,9 @@ impl NpyWriter {
                 ),
             ));
         }
-        let w = self.file.take().expect("NpyWriter used after finish");
-        let res = (|| {
-            let f = w.into_inner().map_err(|e| e.into_error())?;
-            f.sync_all()?;
-            drop(f);
-            std::fs::rename(&self.tmp, &self.path)
-        })();
-        self.renamed = res.is_ok();
-        res.map_err(io(&self.path))
-    }
-}
-
-impl Drop for NpyWriter {
-    fn drop(&mut self) {
-        // Unfinished, or failed during finish: remove the partial file.
-        self.file.take();
-        if !self.renamed {
-            let _ = std::fs::remove_file(&self.tmp);
-        }
+        // Dropping an unfinished AtomicFile (here or on an error) removes the temp file.
+        let f = self.file.take().expect("NpyWriter used after finish");
+        f.commit().map_err(io(&self.path))
     }
 }
 
@@ -680,7 +632,7 @@ mod unit {
     fn no_temp_files(dir: &Path) -> bool {
         !dir.read_dir()
             .unwrap()
-            .any(|e| e.unwrap().file_name().to_string_lossy().contains(".tmp"))
+            .any(|e| e.unwrap().file_name().to_string_lossy().starts_with('.'))
     }
 
     #[test]

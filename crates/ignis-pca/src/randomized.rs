@@ -244,8 +244,8 @@ fn debug_time(what: &str) {
 }
 
 /// Orthonormal basis of the columns of a tall `y` (thin Q of a Householder QR), run with
-/// `Par::Seq`: `y.qr()` uses faer's global parallelism, whose spin-waiting pool made one QR of a
-/// 274,700×110 sketch take 2.5–12 s on the loaded 2-core machine (0.2 s sequential).
+/// `Par::Seq`: `y.qr()` uses faer's global parallelism, whose spin-waiting pool is many times
+/// slower on a loaded machine (`benches/README.md`).
 fn orth(y: &Mat<f32>) -> Mat<f32> {
     use faer::dyn_stack::{MemBuffer, MemStack};
     use faer::linalg::householder as hh;

@@ -128,9 +128,9 @@ pub(crate) fn snapshot_in_place(a: Mat<f32>, keep: Keep) -> Result<(Pca, Mat<f32
     snapshot_in_place_timed(a, keep).map(|(p, w, _)| (p, w))
 }
 
-/// Wall time of each phase of [`snapshot_in_place`], seconds.
+/// Wall time of each phase of a snapshot fit ([`crate::Pca::fit_snapshot_timed`]), seconds.
 #[derive(Clone, Copy, Debug, Default)]
-pub(crate) struct Phases {
+pub struct SnapshotPhases {
     pub centre: f64,
     pub gram: f64,
     pub eigen: f64,
@@ -140,9 +140,9 @@ pub(crate) struct Phases {
 pub(crate) fn snapshot_in_place_timed(
     mut a: Mat<f32>,
     keep: Keep,
-) -> Result<(Pca, Mat<f32>, Phases), PcaError> {
+) -> Result<(Pca, Mat<f32>, SnapshotPhases), PcaError> {
     let (n, m) = (a.nrows(), a.ncols());
-    let mut ph = Phases::default();
+    let mut ph = SnapshotPhases::default();
     let t = std::time::Instant::now();
     let mean = centre_in_place(&mut a)?;
     ph.centre = t.elapsed().as_secs_f64();

@@ -546,7 +546,7 @@ mod npy_files {
             .unwrap()
             .file_name()
             .to_string_lossy()
-            .contains(".tmp")));
+            .starts_with('.')));
     }
 
     #[test]

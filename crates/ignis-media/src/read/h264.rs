@@ -314,13 +314,7 @@ impl Job {
             ) {
                 Ok(Some(yuv)) => {
                     if want {
-                        let (w, h) = yuv.dimensions();
-                        let mut rgba = vec![0u8; w * h * 4];
-                        yuv.write_rgba8(&mut rgba);
-                        let size = Size {
-                            width: w as u32,
-                            height: h as u32,
-                        };
+                        let (rgba, size) = rgba8_of(&yuv);
                         if !send(Ok((picture - 1, rgba, size))) {
                             return;
                         }
@@ -342,13 +336,7 @@ impl Job {
             Ok(rest) => {
                 for yuv in rest {
                     if picture >= self.target {
-                        let (w, h) = yuv.dimensions();
-                        let mut rgba = vec![0u8; w * h * 4];
-                        yuv.write_rgba8(&mut rgba);
-                        let size = Size {
-                            width: w as u32,
-                            height: h as u32,
-                        };
+                        let (rgba, size) = rgba8_of(&yuv);
                         if !send(Ok((picture - 1, rgba, size))) {
                             return;
                         }
@@ -400,6 +388,18 @@ pub fn decode_rgba8_count(path: &Path) -> Result<u64> {
         n += 1;
     }
     Ok(n)
+}
+
+/// A decoded picture as 8-bit RGBA and its size.
+fn rgba8_of(yuv: &openh264::decoder::DecodedYUV<'_>) -> (Vec<u8>, Size) {
+    let (w, h) = yuv.dimensions();
+    let mut rgba = vec![0u8; w * h * 4];
+    yuv.write_rgba8(&mut rgba);
+    let size = Size {
+        width: w as u32,
+        height: h as u32,
+    };
+    (rgba, size)
 }
 
 #[cfg(test)]

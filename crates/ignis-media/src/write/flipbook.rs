@@ -33,6 +33,7 @@ use super::motion::{self, MotionSource};
 use super::{encode_png, temp_file_for, Sink, WriteOptions};
 use crate::convert;
 use crate::error::{MediaError, Result};
+use ignis_core::atomic::AtomicFile;
 
 /// How colour relates to alpha in a flipbook sheet.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -543,29 +544,48 @@ impl FlipbookSink {
 /// Encodes a sheet into a hidden temporary file next to `path`.
 fn encode_temp(
     path: &Path,
-    encode: impl FnOnce(&mut std::io::BufWriter<&std::fs::File>) -> std::result::Result<(), String>,
-) -> Result<tempfile::NamedTempFile> {
-    let tmp = temp_file_for(path)?;
-    {
-        let mut w = std::io::BufWriter::new(tmp.as_file());
-        encode(&mut w).map_err(|e| MediaError::encode(path, e))?;
-        w.flush().map_err(|e| MediaError::io(tmp.path(), e))?;
-    }
+    encode: impl FnOnce(&mut std::io::BufWriter<std::fs::File>) -> std::result::Result<(), String>,
+) -> Result<AtomicFile> {
+    let mut tmp = temp_file_for(path)?;
+    encode(tmp.writer()).map_err(|e| MediaError::encode(path, e))?;
     Ok(tmp)
 }
 
-/// Moves every finished temporary into place, the JSON last; on a failure removes what was
-/// already moved, so the flipbook appears whole or not at all.
 /// Moves every file of a flipbook into place as one unit (a journal completes an
-/// interrupted commit on the next run; see `ignis_core::tempfiles`).
-fn commit(files: Vec<(tempfile::NamedTempFile, PathBuf)>) -> Result<Vec<PathBuf>> {
-    let Some((_, first)) = files.first() else {
-        return Ok(Vec::new());
-    };
-    let dir = super::parent_dir(first);
-    let paths: Vec<PathBuf> = files.iter().map(|(_, p)| p.clone()).collect();
-    super::commit_temps(&dir, files)?;
+/// interrupted commit on the next run; see `ignis_core::atomic::commit_all`).
+fn commit(files: Vec<AtomicFile>) -> Result<Vec<PathBuf>> {
+    let paths: Vec<PathBuf> = files.iter().map(|f| f.target().to_path_buf()).collect();
+    super::commit_temps(files)?;
     Ok(paths)
+}
+
+/// A sheet filled with `background` with every frame's pixels (`pixels(frame)`, `w × h`
+/// row-major) placed in its cell.
+fn sheet_of<S, T: Copy>(
+    l: &Layout,
+    frames: &[S],
+    background: T,
+    w: usize,
+    h: usize,
+    pixels: impl Fn(&S) -> Vec<T>,
+) -> Vec<T> {
+    let mut sheet = vec![background; l.sheet_width as usize * l.sheet_height as usize];
+    for (i, f) in frames.iter().enumerate() {
+        place(&mut sheet, l, i, &pixels(f), w, h);
+    }
+    sheet
+}
+
+/// A 16-bit PNG sheet encoded into a temporary beside `path`.
+fn png16_temp(
+    path: &Path,
+    l: &Layout,
+    data: &[u16],
+    color: image::ExtendedColorType,
+) -> Result<AtomicFile> {
+    encode_temp(path, |wr| {
+        png16(wr, l.sheet_width, l.sheet_height, data, color)
+    })
 }
 
 fn png16(
@@ -629,7 +649,6 @@ impl Sink for FlipbookSink {
             None => None,
         };
         let (w, h) = (self.size.width as usize, self.size.height as usize);
-        let sheet_px = layout.sheet_width as usize * layout.sheet_height as usize;
         let sheet_size = Size::new(layout.sheet_width, layout.sheet_height)?;
         let name_of = |p: &Path| {
             p.file_name()
@@ -639,8 +658,7 @@ impl Sink for FlipbookSink {
         let mut files = Vec::new();
 
         // Colour.
-        let mut colour = vec![[0u8; 4]; sheet_px];
-        for (i, f) in frames.iter().enumerate() {
+        let colour = sheet_of(&layout, &frames, [0u8; 4], w, h, |f| {
             let bytes = match self.opts.alpha {
                 AlphaMode::Straight => convert::to_srgba8(f),
                 AlphaMode::Premultiplied => {
@@ -649,19 +667,15 @@ impl Sink for FlipbookSink {
                     convert::to_srgba8(&pre)
                 }
             };
-            let px: Vec<[u8; 4]> = bytes
+            bytes
                 .chunks_exact(4)
                 .map(|c| [c[0], c[1], c[2], c[3]])
-                .collect();
-            place(&mut colour, &layout, i, &px, w, h);
-        }
+                .collect()
+        });
         let flat: Vec<u8> = colour.iter().flatten().copied().collect();
-        files.push((
-            encode_temp(&self.path, |wr| {
-                encode_png(wr, sheet_size, &flat).map_err(|e| e.to_string())
-            })?,
-            self.path.clone(),
-        ));
+        files.push(encode_temp(&self.path, |wr| {
+            encode_png(wr, sheet_size, &flat).map_err(|e| e.to_string())
+        })?);
 
         // Motion vectors.
         let mut mv_meta = None;
@@ -684,10 +698,8 @@ impl Sink for FlipbookSink {
                 .fold(0f32, f32::max);
             let scale = motion::mv_scale_for(max_abs);
             let n0 = motion::MV_NEUTRAL;
-            let mut sheet = vec![[n0, n0, 0u16]; sheet_px];
-            for (i, f) in mv.iter().enumerate() {
-                let px: Vec<[u16; 3]> = f
-                    .iter()
+            let sheet = sheet_of(&layout, mv, [n0, n0, 0u16], w, h, |f| {
+                f.iter()
                     .map(|&p| {
                         let [u, v] = to_uv(p);
                         [
@@ -696,23 +708,16 @@ impl Sink for FlipbookSink {
                             0,
                         ]
                     })
-                    .collect();
-                place(&mut sheet, &layout, i, &px, w, h);
-            }
+                    .collect()
+            });
             let path = self.side_path(".mv.png");
             let flat: Vec<u16> = sheet.iter().flatten().copied().collect();
-            files.push((
-                encode_temp(&path, |wr| {
-                    png16(
-                        wr,
-                        layout.sheet_width,
-                        layout.sheet_height,
-                        &flat,
-                        image::ExtendedColorType::Rgb16,
-                    )
-                })?,
-                path.clone(),
-            ));
+            files.push(png16_temp(
+                &path,
+                &layout,
+                &flat,
+                image::ExtendedColorType::Rgb16,
+            )?);
             mv_meta = Some(MotionMeta {
                 image: name_of(&path),
                 scale,
@@ -742,27 +747,18 @@ impl Sink for FlipbookSink {
                 })
                 .collect();
             let scale = lum.iter().flatten().fold(0f32, |a, &b| a.max(b)).max(1e-6);
-            let mut sheet = vec![0u16; sheet_px];
-            for (i, f) in lum.iter().enumerate() {
-                let px: Vec<u16> = f
-                    .iter()
+            let sheet = sheet_of(&layout, &lum, 0u16, w, h, |f| {
+                f.iter()
                     .map(|&v| (v / scale * 65535.0).round().clamp(0.0, 65535.0) as u16)
-                    .collect();
-                place(&mut sheet, &layout, i, &px, w, h);
-            }
+                    .collect()
+            });
             let path = self.side_path(".heat.png");
-            files.push((
-                encode_temp(&path, |wr| {
-                    png16(
-                        wr,
-                        layout.sheet_width,
-                        layout.sheet_height,
-                        &sheet,
-                        image::ExtendedColorType::L16,
-                    )
-                })?,
-                path.clone(),
-            ));
+            files.push(png16_temp(
+                &path,
+                &layout,
+                &sheet,
+                image::ExtendedColorType::L16,
+            )?);
             heat_meta = Some(HeatMeta {
                 image: name_of(&path),
                 scale,
@@ -773,26 +769,21 @@ impl Sink for FlipbookSink {
         // HDR colour: linear f32, premultiplied.
         let mut hdr_image = None;
         if self.opts.hdr {
-            let mut sheet = vec![[0f32; 4]; sheet_px];
-            for (i, f) in frames.iter().enumerate() {
+            let sheet = sheet_of(&layout, &frames, [0f32; 4], w, h, |f| {
                 let mut pre = f.clone();
                 convert::premultiply(&mut pre);
-                place(&mut sheet, &layout, i, pre.data(), w, h);
-            }
+                pre.data().to_vec()
+            });
             let path = self.path.with_extension("exr");
             let flat: Vec<f32> = sheet.iter().flatten().copied().collect();
             let img = image::Rgba32FImage::from_raw(layout.sheet_width, layout.sheet_height, flat)
                 .ok_or_else(|| MediaError::encode(&path, "sheet buffer size"))?;
-            let tmp = temp_file_for(&path)?;
-            {
-                let mut wr = std::io::BufWriter::new(tmp.as_file());
+            // `write_to` needs Seek, which the temporary's BufWriter<File> provides.
+            files.push(encode_temp(&path, |wr| {
                 image::DynamicImage::ImageRgba32F(img)
-                    .write_to(&mut wr, image::ImageFormat::OpenExr)
-                    .map_err(|e| MediaError::encode(&path, e.to_string()))?;
-                wr.flush().map_err(|e| MediaError::io(tmp.path(), e))?;
-            }
-            // `write_to` needs Seek, which BufWriter<&File> provides.
-            files.push((tmp, path.clone()));
+                    .write_to(wr, image::ImageFormat::OpenExr)
+                    .map_err(|e| e.to_string())
+            })?);
             hdr_image = Some(name_of(&path));
         }
 
@@ -842,13 +833,10 @@ impl Sink for FlipbookSink {
                 None
             },
         };
-        files.push((
-            encode_temp(&json_path, |wr| {
-                serde_json::to_writer_pretty(&mut *wr, &meta).map_err(|e| e.to_string())?;
-                wr.write_all(b"\n").map_err(|e| e.to_string())
-            })?,
-            json_path,
-        ));
+        files.push(encode_temp(&json_path, |wr| {
+            serde_json::to_writer_pretty(&mut *wr, &meta).map_err(|e| e.to_string())?;
+            wr.write_all(b"\n").map_err(|e| e.to_string())
+        })?);
         commit(files)
     }
 }

@@ -15,7 +15,7 @@ const QUANTISER_SPEED: i32 = 3;
 
 pub(crate) struct GifSink {
     path: PathBuf,
-    tmp: tempfile::NamedTempFile,
+    tmp: ignis_core::atomic::AtomicFile,
     encoder: gif::Encoder<BufWriter<std::fs::File>>,
     size: Size,
     fps: f64,
@@ -35,7 +35,9 @@ impl GifSink {
             )));
         }
         let tmp = temp_file_for(path)?;
-        let file = tmp.reopen().map_err(|e| MediaError::io(tmp.path(), e))?;
+        let file = tmp
+            .try_clone_file()
+            .map_err(|e| MediaError::io(tmp.temp_path(), e))?;
         let mut encoder = gif::Encoder::new(
             BufWriter::new(file),
             size.width as u16,
@@ -93,7 +95,7 @@ impl Sink for GifSink {
             path, tmp, encoder, ..
         } = *self;
         let mut w = encoder.into_inner().map_err(|e| gif_err(&path, e))?;
-        w.flush().map_err(|e| MediaError::io(tmp.path(), e))?;
+        w.flush().map_err(|e| MediaError::io(tmp.temp_path(), e))?;
         drop(w);
         persist(tmp, &path)?;
         Ok(vec![path])

@@ -15,9 +15,9 @@
 //! GIF delays are whole centiseconds (accumulated so the average rate is right); browsers
 //! treat delays under 2 cs as 10 cs, so rates above 50 fps play at 50.
 //!
-//! Every writer is atomic: output goes to a hidden temporary name in the destination's
-//! directory (`.name.ignis-tmp-PID.XXXX.partial`) and is renamed into place by
-//! [`FrameWriter::finish`]. An error, or dropping the writer without `finish`, deletes the
+//! Every writer is atomic ([`ignis_core::atomic`]): output goes to a hidden temporary name
+//! in the destination's directory (`.name.ignis-tmp-PID.N.partial`) and is renamed into
+//! place by [`FrameWriter::finish`]. An error, or dropping the writer without `finish`, deletes the
 //! temporary output and leaves nothing under the final name; temporaries of a killed run
 //! carry its PID and are removed by the next run in that directory
 //! ([`ignis_core::tempfiles`]). A flipbook's PNG and JSON are committed as one unit (a
@@ -42,6 +42,8 @@ use ignis_core::loopq::{self, LoopQuality};
 use ignis_core::{GrayFrame, RgbaFrame, Size};
 
 use crate::error::{MediaError, Result};
+pub(crate) use ignis_core::atomic::parent_dir;
+use ignis_core::atomic::{self, AtomicFile};
 
 pub use engine::Engine;
 pub use flipbook::{
@@ -310,119 +312,42 @@ impl FrameWriter {
     }
 }
 
-/// A hidden temporary file next to `path`, deleted on drop unless persisted.
-pub(crate) fn temp_file_for(path: &Path) -> Result<tempfile::NamedTempFile> {
+/// The atomic temporary for `path` ([`ignis_core::atomic::AtomicFile`], deleted on drop
+/// unless committed); creates `path`'s directory first.
+pub(crate) fn temp_file_for(path: &Path) -> Result<AtomicFile> {
     let dir = parent_dir(path);
     std::fs::create_dir_all(&dir).map_err(|e| MediaError::io(&dir, e))?;
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    ignis_core::tempfiles::recover_and_clean(&dir);
-    let mut b = tempfile::Builder::new();
-    // `.<name>.ignis-tmp-<pid>.XXXXXX.partial`: removed by the next run once this process
-    // is gone (ignis_core::tempfiles).
-    let prefix = ignis_core::tempfiles::temp_name(&name, "");
-    b.prefix(&prefix).suffix(".partial");
-    // tempfile creates 0600 files; outputs are ordinary files others must read (web
-    // servers, game engines, render farms), so use the usual 0644.
-    #[cfg(unix)]
-    b.permissions(std::os::unix::fs::PermissionsExt::from_mode(0o644));
-    b.tempfile_in(&dir).map_err(|e| MediaError::io(&dir, e))
+    AtomicFile::create(path).map_err(|e| target_error(path, e))
 }
 
-/// Refuses an output path that exists and is not a regular file (a character or block
-/// device, FIFO, socket or directory): renaming over it would replace e.g. `/dev/null`.
+/// Refuses an output path that exists and is not a regular file
+/// ([`ignis_core::atomic::check_regular_target`]) as a bad `output`.
 pub(crate) fn check_regular_target(path: &Path) -> Result<()> {
-    match std::fs::metadata(path) {
-        Ok(m) if !m.is_file() => {
-            let ft = m.file_type();
-            let kind = {
-                #[cfg(unix)]
-                {
-                    use std::os::unix::fs::FileTypeExt;
-                    if ft.is_char_device() || ft.is_block_device() {
-                        "a device"
-                    } else if ft.is_fifo() {
-                        "a FIFO"
-                    } else if ft.is_socket() {
-                        "a socket"
-                    } else if ft.is_dir() {
-                        "a directory"
-                    } else {
-                        "not a regular file"
-                    }
-                }
-                #[cfg(not(unix))]
-                {
-                    let _ = ft;
-                    "not a regular file"
-                }
-            };
-            Err(MediaError::bad(
-                "output",
-                format!(
-                    "{} is {kind}; outputs are written as regular files and this one would be \
-                     replaced, not written through. Choose a regular file path (to stream, write \
-                     a file and copy it)",
-                    path.display()
-                ),
-            ))
-        }
-        _ => Ok(()),
+    atomic::check_regular_target(path).map_err(|e| target_error(path, e))
+}
+
+/// A refused target is a bad `output` argument; any other failure an I/O error.
+fn target_error(path: &Path, e: std::io::Error) -> MediaError {
+    if e.kind() == std::io::ErrorKind::InvalidInput {
+        MediaError::bad("output", e.to_string())
+    } else {
+        MediaError::io(path, e)
     }
 }
 
-/// Moves several finished temporaries (all in `dir`) into place as one unit; see
-/// [`ignis_core::tempfiles::commit_files`] (a journal makes an interrupted commit complete
-/// on the next run).
-pub(crate) fn commit_temps(
-    dir: &Path,
-    files: Vec<(tempfile::NamedTempFile, PathBuf)>,
-) -> Result<()> {
-    let mut pairs = Vec::new();
-    let mut kept = Vec::new();
-    for (tmp, fin) in files {
-        tmp.as_file()
-            .sync_all()
-            .map_err(|e| MediaError::io(tmp.path(), e))?;
-        let name = |p: &Path| p.file_name().map(|n| n.to_string_lossy().into_owned());
-        let (Some(t), Some(f)) = (name(tmp.path()), name(&fin)) else {
-            return Err(MediaError::bad(
-                "path",
-                format!("{} has no file name", fin.display()),
-            ));
-        };
-        pairs.push((t, f));
-        kept.push(tmp.into_temp_path());
-    }
-    match ignis_core::tempfiles::commit_files(dir, &pairs) {
-        Ok(()) => {
-            for k in kept {
-                // Renamed away: nothing to delete.
-                let _ = k.keep();
-            }
-            Ok(())
-        }
-        Err(e) => Err(MediaError::io(dir, e)),
-    }
+/// Moves several finished temporaries (all in one directory) into place as one unit; see
+/// [`ignis_core::atomic::commit_all`].
+pub(crate) fn commit_temps(files: Vec<AtomicFile>) -> Result<()> {
+    let dir = files
+        .first()
+        .map(|f| parent_dir(f.target()))
+        .unwrap_or_default();
+    atomic::commit_all(files).map_err(|e| MediaError::io(&dir, e))
 }
 
-/// Flushes and renames a temporary file into place.
-pub(crate) fn persist(tmp: tempfile::NamedTempFile, path: &Path) -> Result<()> {
-    tmp.as_file()
-        .sync_all()
-        .map_err(|e| MediaError::io(tmp.path(), e))?;
-    tmp.persist(path)
-        .map_err(|e| MediaError::io(path, e.error))?;
-    Ok(())
-}
-
-pub(crate) fn parent_dir(path: &Path) -> PathBuf {
-    match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-        _ => PathBuf::from("."),
-    }
+/// Flushes, syncs and renames a temporary file into place.
+pub(crate) fn persist(tmp: AtomicFile, path: &Path) -> Result<()> {
+    tmp.commit().map_err(|e| MediaError::io(path, e))
 }
 
 /// Encodes 8-bit RGBA as PNG into `w`.
@@ -439,15 +364,10 @@ pub(crate) fn encode_png(w: impl Write, size: Size, rgba: &[u8]) -> image::Image
 
 /// Writes one still as an 8-bit sRGB PNG with straight alpha, atomically.
 pub fn write_png(path: &Path, frame: &RgbaFrame) -> Result<()> {
-    check_regular_target(path)?;
-    let tmp = temp_file_for(path)?;
+    let mut tmp = temp_file_for(path)?;
     let rgba = crate::convert::to_srgba8(frame);
-    {
-        let mut w = std::io::BufWriter::new(tmp.as_file());
-        encode_png(&mut w, frame.size(), &rgba)
-            .map_err(|e| MediaError::encode(path, e.to_string()))?;
-        w.flush().map_err(|e| MediaError::io(tmp.path(), e))?;
-    }
+    encode_png(tmp.writer(), frame.size(), &rgba)
+        .map_err(|e| MediaError::encode(path, e.to_string()))?;
     persist(tmp, path)
 }
 

@@ -28,7 +28,7 @@ const BITS_PER_PIXEL: f64 = 0.3;
 
 pub(crate) struct Mp4Sink {
     path: PathBuf,
-    tmp: tempfile::NamedTempFile,
+    tmp: ignis_core::atomic::AtomicFile,
     encoder: Encoder,
     muxer: Option<mp4::Mp4Writer<BufWriter<std::fs::File>>>,
     size: Size,
@@ -111,8 +111,8 @@ impl Mp4Sink {
         let err = |e: mp4::Error| MediaError::encode(&self.path, format!("MP4 muxer: {e}"));
         let file = self
             .tmp
-            .reopen()
-            .map_err(|e| MediaError::io(self.tmp.path(), e))?;
+            .try_clone_file()
+            .map_err(|e| MediaError::io(self.tmp.temp_path(), e))?;
         let brand = |s: &str| s.parse::<mp4::FourCC>().expect("four characters");
         let config = mp4::Mp4Config {
             major_brand: brand("isom"),
@@ -218,7 +218,7 @@ impl Sink for Mp4Sink {
             .write_end()
             .map_err(|e| MediaError::encode(&path, format!("MP4 muxer: {e}")))?;
         let mut w = muxer.into_writer();
-        w.flush().map_err(|e| MediaError::io(tmp.path(), e))?;
+        w.flush().map_err(|e| MediaError::io(tmp.temp_path(), e))?;
         drop(w);
         persist(tmp, &path)?;
         Ok(vec![path])

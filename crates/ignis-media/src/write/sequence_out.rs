@@ -7,6 +7,7 @@
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
+use ignis_core::atomic::StagingDir;
 use ignis_core::RgbaFrame;
 
 use super::{encode_png, parent_dir, Sink};
@@ -20,7 +21,7 @@ pub(crate) struct SequenceSink {
     final_dir: PathBuf,
     /// The fresh temporary directory the frames are staged in (see `commit_sequence`);
     /// `None` once finished. Dropping it removes every staged frame.
-    temp_dir: Option<tempfile::TempDir>,
+    temp_dir: Option<StagingDir>,
     /// (staged path, final path) of each frame written.
     written: Vec<(PathBuf, PathBuf)>,
     /// Number of the first frame's file.
@@ -65,23 +66,10 @@ impl SequenceSink {
             }
         }
         // Frames always go into a fresh hidden directory beside the destination
-        // (`.<dir>.ignis-tmp-<pid>.XXXXXX.dir`, removed by a later run if this one is killed).
-        let parent = parent_dir(&final_dir);
-        std::fs::create_dir_all(&parent).map_err(|e| MediaError::io(&parent, e))?;
-        ignis_core::tempfiles::recover_and_clean(&parent);
-        let dir_name = final_dir
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_else(|| "frames".into());
-        let mut b = tempfile::Builder::new();
-        let prefix = ignis_core::tempfiles::temp_name(&dir_name, "");
-        b.prefix(&prefix).suffix(".dir");
-        // an ordinary directory (0755), not tempfile's private 0700
-        #[cfg(unix)]
-        b.permissions(std::os::unix::fs::PermissionsExt::from_mode(0o755));
+        // (`.<dir>.ignis-tmp-<pid>.<n>.dir`, removed by a later run if this one is killed).
         let temp_dir = Some(
-            b.tempdir_in(&parent)
-                .map_err(|e| MediaError::io(&parent, e))?,
+            StagingDir::create(&final_dir)
+                .map_err(|e| MediaError::io(&parent_dir(&final_dir), e))?,
         );
         Ok(SequenceSink {
             exr,
@@ -156,10 +144,8 @@ impl Sink for SequenceSink {
                 "the writer has finished",
             ));
         };
-        let staged_dir = t.keep();
-        let r = commit_sequence(&staged_dir, &self.final_dir, &self.written);
-        let _ = std::fs::remove_dir_all(&staged_dir);
-        r?;
+        // Dropping `t` removes what commit_sequence left of the staged directory.
+        commit_sequence(t.path(), &self.final_dir, &self.written)?;
         Ok(finals)
     }
 }

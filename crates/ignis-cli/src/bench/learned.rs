@@ -1,20 +1,42 @@
-//! Headline figures for `ignis bench learned` (the criterion benches in
-//! `benches/learned.rs` measure the same steps with statistics).
+//! `ignis bench learned`: training on 100 synthetic frames and synthesis at 256×256.
 //!
 //! Issue goals: training on 100 frames, 26 parameters, `N_c = 200` in ≤ 5 s (the paper's
 //! Matlab took ≈ 30 min on a 3 GHz Pentium 4); synthesis plus rendering of 256×256 frames
 //! at ≥ 200 frames/s on one core.
 
-use crate::model::{train, TrainParams};
-use crate::synth::{Controls, Synthesiser};
-use crate::synthetic::flame_clip;
-use crate::EmParams;
+use anyhow::Result;
+use ignis_core::progress::Progress;
 use ignis_core::{GrayFrame, Palette, Size};
+use ignis_learned::synthetic::flame_clip;
+use ignis_learned::{train, Controls, EmParams, Synthesiser, TrainParams};
 use serde_json::{json, Value};
 use std::time::Instant;
 
+/// Times the end of the fit (normalisation and PCA: until EM's first iteration) and counts
+/// EM iterations.
+struct EmTimer {
+    start: Instant,
+    em: bool,
+    fit_done: Option<f64>,
+    iterations: usize,
+}
+
+impl Progress for EmTimer {
+    fn stage(&mut self, name: &str, _len: u64) {
+        self.em = name == ignis_learned::STAGE_EM;
+    }
+    fn inc(&mut self, n: u64) {
+        if self.em {
+            let start = self.start;
+            self.fit_done
+                .get_or_insert_with(|| start.elapsed().as_secs_f64());
+            self.iterations += n as usize;
+        }
+    }
+}
+
 /// Runs the benchmark and returns its figures. `quick` uses fewer synthesised frames.
-pub fn figures(quick: bool) -> crate::Result<Value> {
+pub fn figures(quick: bool) -> Result<Value> {
     let size = Size::new(256, 256)?;
     let clip = flame_clip(size, 100, 1);
     let p = TrainParams {
@@ -24,17 +46,17 @@ pub fn figures(quick: bool) -> crate::Result<Value> {
         },
         ..TrainParams::default()
     };
-    let mut iterations = 0;
-    let mut fit_done = None;
     let t = Instant::now();
-    let training = train(clip, &p, |pr| {
-        if let crate::Progress::Iteration(i, _) = pr {
-            fit_done.get_or_insert_with(|| t.elapsed().as_secs_f64());
-            iterations = i + 1;
-        }
-    })?;
+    let mut timer = EmTimer {
+        start: t,
+        em: false,
+        fit_done: None,
+        iterations: 0,
+    };
+    let training = train(clip, &p, &mut timer)?;
     let train_s = t.elapsed().as_secs_f64();
-    let fit_s = fit_done.unwrap_or(train_s);
+    let fit_s = timer.fit_done.unwrap_or(train_s);
+    let iterations = timer.iterations;
     let model = &training.model;
 
     let frames = if quick { 300 } else { 3000 };

@@ -1,0 +1,215 @@
+//! Parsers for the range and rectangle arguments the commands share (`--range`, `--seconds`,
+//! `--crop`, `--chunk`, eigen's frame spans): one syntax and one set of messages, so a
+//! range means the same thing in every command.
+//!
+//! A range is `START..END` with END excluded; [`frame_range`] and [`seconds_range`] also take
+//! `START..` and `..END`. Frame numbers are whole numbers: `1.5..3` is refused, not
+//! truncated. Errors name the argument text and say how to write it.
+
+use ignis_media::Rect;
+use std::ops::Range;
+use std::str::FromStr;
+
+const EXAMPLE: &str = "e.g. 100..220 (START included, END excluded)";
+
+/// The two bounds of `A..B`, either of which may be left out (`None`).
+fn bounds<T: FromStr>(s: &str, what: &str) -> Result<(Option<T>, Option<T>), String> {
+    let (a, b) = s
+        .split_once("..")
+        .ok_or_else(|| format!("`{s}` is not a range A..B; {EXAMPLE}"))?;
+    let one = |v: &str, which: &str| -> Result<Option<T>, String> {
+        let v = v.trim();
+        if v.is_empty() {
+            return Ok(None);
+        }
+        v.parse::<T>()
+            .map(Some)
+            .map_err(|_| format!("range `{s}`: {which} `{v}` is not {what}; {EXAMPLE}"))
+    };
+    Ok((one(a, "START")?, one(b, "END")?))
+}
+
+/// `A..B` with both bounds given (no check that A < B: [`frame_span`] and the callers of a
+/// chunk check that against their own limits).
+pub fn closed_range<T: FromStr>(s: &str, what: &str) -> Result<(T, T), String> {
+    match bounds::<T>(s, what)? {
+        (Some(a), Some(b)) => Ok((a, b)),
+        _ => Err(format!(
+            "range `{s}` needs both bounds: write it as A..B; {EXAMPLE}"
+        )),
+    }
+}
+
+fn non_empty<T: PartialOrd>(s: &str, start: T, end: Option<T>) -> Result<(), String> {
+    match end {
+        Some(e) if e <= start => Err(format!(
+            "range `{s}` is empty: END must be greater than START; {EXAMPLE}"
+        )),
+        _ => Ok(()),
+    }
+}
+
+const FRAME: &str = "a frame number (a whole number, 0 or more)";
+
+/// A frame range `A..B`, `A..` or `..B` as (start, end); START defaults to 0, a missing END
+/// reads to the last frame. Refuses an empty range.
+pub fn frame_range(s: &str) -> Result<(u64, Option<u64>), String> {
+    let (a, b) = bounds::<u64>(s, FRAME)?;
+    let start = a.unwrap_or(0);
+    non_empty(s, start, b)?;
+    Ok((start, b))
+}
+
+/// A time range in seconds, `A..B`, `A..` or `..B`, as (start, end): finite, 0 or more,
+/// not empty.
+pub fn seconds_range(s: &str) -> Result<(f64, Option<f64>), String> {
+    let (a, b) = bounds::<f64>(s, "a number of seconds")?;
+    for x in [a, b].into_iter().flatten() {
+        if !(x.is_finite() && x >= 0.0) {
+            return Err(format!(
+                "range `{s}`: {x} is not a time of 0 seconds or more; e.g. 2..4.5"
+            ));
+        }
+    }
+    let start = a.unwrap_or(0.0);
+    non_empty(s, start, b)?;
+    Ok((start, b))
+}
+
+/// A frame span `A..B` with both bounds and A < B (eigen's and `ignis loop`'s `--range`).
+#[allow(
+    dead_code,
+    reason = "`eigen::parse_range` (another branch's file this round) becomes this at merge"
+)]
+pub fn frame_span(s: &str) -> Result<Range<usize>, String> {
+    let (a, b) = closed_range::<usize>(s, FRAME)?;
+    non_empty(s, a, Some(b))?;
+    Ok(a..b)
+}
+
+/// A crop rectangle `X,Y,WIDTH,HEIGHT` in pixels, WIDTH and HEIGHT above 0.
+pub fn crop(s: &str) -> Result<Rect, String> {
+    let bad = || {
+        format!("crop `{s}`: write X,Y,WIDTH,HEIGHT in pixels with WIDTH, HEIGHT > 0, e.g. 140,120,200,300")
+    };
+    let v: Vec<u32> = s
+        .split(',')
+        .map(|x| x.trim().parse::<u32>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| bad())?;
+    match v[..] {
+        [x, y, width, height] if width > 0 && height > 0 => Ok(Rect {
+            x,
+            y,
+            width,
+            height,
+        }),
+        _ => Err(bad()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    #[test]
+    fn frame_ranges() {
+        assert_eq!(frame_range("100..220"), Ok((100, Some(220))));
+        assert_eq!(frame_range(" 5 .. "), Ok((5, None)));
+        assert_eq!(frame_range("..7"), Ok((0, Some(7))));
+        assert_eq!(frame_range(".."), Ok((0, None)));
+        // the old `a as u64` truncation: refused with the reason
+        let e = frame_range("1.5..3").unwrap_err();
+        assert!(e.contains("`1.5` is not a frame number"), "{e}");
+        assert!(frame_range("-1..3").unwrap_err().contains("START `-1`"));
+        assert!(frame_range("50..50").unwrap_err().contains("empty"));
+        assert!(frame_range("9..3").unwrap_err().contains("empty"));
+        assert!(frame_range("3-9").unwrap_err().contains("A..B"));
+        assert!(frame_range("1..2..3").unwrap_err().contains("END `2..3`"));
+    }
+
+    #[test]
+    fn seconds_ranges() {
+        assert_eq!(seconds_range("2..4.5"), Ok((2.0, Some(4.5))));
+        assert_eq!(seconds_range("1.25.."), Ok((1.25, None)));
+        assert!(seconds_range("-1..2")
+            .unwrap_err()
+            .contains("0 seconds or more"));
+        assert!(seconds_range("0..inf")
+            .unwrap_err()
+            .contains("0 seconds or more"));
+        assert!(seconds_range("NaN..2")
+            .unwrap_err()
+            .contains("0 seconds or more"));
+        assert!(seconds_range("3..1").unwrap_err().contains("empty"));
+        assert!(seconds_range("a..1").unwrap_err().contains("START `a`"));
+    }
+
+    #[test]
+    fn spans_and_closed_ranges() {
+        assert_eq!(frame_span("1..11"), Ok(1..11));
+        assert!(frame_span("5..").unwrap_err().contains("both bounds"));
+        assert!(frame_span("5..5").unwrap_err().contains("empty"));
+        assert_eq!(closed_range::<u32>("20..20", FRAME), Ok((20, 20)));
+        assert!(closed_range::<u32>("5-9", FRAME)
+            .unwrap_err()
+            .contains("A..B"));
+    }
+
+    #[test]
+    fn crops() {
+        assert_eq!(
+            crop("140, 120,200,300"),
+            Ok(Rect {
+                x: 140,
+                y: 120,
+                width: 200,
+                height: 300
+            })
+        );
+        for bad in [
+            "1,2,3",
+            "1,2,3,4,5",
+            "1,2,0,4",
+            "1,2,3,0",
+            "a,2,3,4",
+            "-1,2,3,4",
+            "",
+        ] {
+            assert!(crop(bad).unwrap_err().contains("X,Y,WIDTH,HEIGHT"), "{bad}");
+        }
+    }
+
+    proptest! {
+        #[test]
+        fn frame_ranges_round_trip(a in 0u64..1 << 40, len in 1u64..1 << 20, open_end: bool) {
+            let s = if open_end { format!("{a}..") } else { format!("{a}..{}", a + len) };
+            let want = (a, (!open_end).then_some(a + len));
+            prop_assert_eq!(frame_range(&s), Ok(want));
+        }
+
+        #[test]
+        fn frame_ranges_never_panic_and_are_never_empty(s in "[0-9.\\- a]{0,12}") {
+            if let Ok((a, Some(b))) = frame_range(&s) {
+                prop_assert!(a < b);
+            }
+        }
+
+        #[test]
+        fn seconds_ranges_are_finite_ordered_and_non_negative(s in "[0-9.e\\-inf ]{0,14}") {
+            if let Ok((a, b)) = seconds_range(&s) {
+                prop_assert!(a.is_finite() && a >= 0.0);
+                if let Some(b) = b {
+                    prop_assert!(b.is_finite() && b > a);
+                }
+            }
+        }
+
+        #[test]
+        fn crops_round_trip(x: u32, y: u32, w in 1u32.., h in 1u32..) {
+            let r = crop(&format!("{x},{y},{w},{h}")).unwrap();
+            prop_assert_eq!((r.x, r.y, r.width, r.height), (x, y, w, h));
+        }
+    }
+}

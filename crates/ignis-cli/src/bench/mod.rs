@@ -1,0 +1,90 @@
+//! `ignis bench TARGET`: the headline performance figures of a method as one JSON object.
+//!
+//! Each target is implemented here, one file per target, over the libraries' public API:
+//! `classic`, `eigen_train` (PCA), `learned`, `volume`, `flow`. Three live elsewhere this
+//! round and are dispatched from here: `eigen-animate` (`ignis_eigen::bench` and
+//! `crate::animate::bench_footage`), `export` (`crate::bench_export`) and `loops`
+//! (`crate::bench_loops`). Measured figures are recorded in each crate's
+//! `benches/README.md`, not in the code.
+
+mod classic;
+mod eigen_train;
+mod flow;
+mod learned;
+mod volume;
+
+pub use flow::process_cpu_ms;
+
+use crate::global::Global;
+use anyhow::Result;
+use std::path::PathBuf;
+
+#[derive(clap::Args, Debug)]
+#[command(
+    after_help = "Examples:\n  ignis bench classic\n  ignis bench classic --quick\n  ignis bench eigen-train\n  ignis bench eigen-animate --keep-db /tmp/bench.db\n  ignis bench eigen-footage   (only eigen-animate's footage case: a 1080p loop read from the source video)\n  ignis bench learned\n  ignis bench volume\n  ignis bench flow --quick\n  ignis bench export         # motion-vector blend vs cross-fade, flow timings\n  ignis bench loops\n  ignis bench loops fire1.mp4 fire2.mov --cache /tmp/ignis-cache"
+)]
+pub struct BenchArgs {
+    /// What to measure (`flow`: dense optical flow and the motion-compensated morph,
+    /// against the issues' speed goals, plus mid-frame prediction on ../shared/data;
+    /// `export`: flipbook motion-vector blending vs a cross-fade, and flipbook timing;
+    /// `loops`: Ignis's loops against the crossfade and Video Textures peers).
+    #[arg(value_parser = ["classic", "eigen-train", "eigen-animate", "eigen-footage", "learned", "volume", "flow", "export", "loops"])]
+    pub target: String,
+    /// loops: the clips (default ../shared/data/{candle,campfire,fireball}.mp4; missing
+    /// ones are reported as skipped).
+    pub clips: Vec<PathBuf>,
+    /// loops: the cache of clip databases (default as `ignis loop`).
+    #[arg(long, value_name = "DIR")]
+    pub cache: Option<PathBuf>,
+    /// Fewer repetitions (a smoke test; figures are noisier).
+    #[arg(long)]
+    pub quick: bool,
+    /// eigen-animate: keep the trained benchmark database in this directory and reuse it
+    /// on later runs (training 2,197 frames takes about half a minute).
+    #[arg(long, value_name = "DIR")]
+    pub keep_db: Option<PathBuf>,
+}
+
+/// Runs one benchmark target and prints its JSON object.
+pub fn run(a: &BenchArgs, g: &Global) -> Result<()> {
+    let v = match a.target.as_str() {
+        "classic" => classic::figures(a.quick)?,
+        "eigen-train" => eigen_train::figures(a.quick),
+        "eigen-animate" => {
+            let sp = g.spinner("training the benchmark database, then timing");
+            let mut v = ignis_eigen::bench::animate_figures(a.quick, a.keep_db.as_deref())?;
+            sp.finish_and_clear();
+            let sp = g.spinner("footage case: writing, training and rendering a clip");
+            let f = crate::animate::bench_footage(a.quick)?;
+            sp.finish_and_clear();
+            v["footage"] = f;
+            v
+        }
+        "eigen-footage" => {
+            let sp = g.spinner("writing, training and rendering a clip");
+            let f = crate::animate::bench_footage(a.quick)?;
+            sp.finish_and_clear();
+            serde_json::json!({"bench": "eigen-footage", "quick": a.quick, "footage": f})
+        }
+        "volume" => volume::figures(g, a.quick)?,
+        "learned" => learned::figures(a.quick)?,
+        "export" => crate::bench_export::figures(g, a.quick)?,
+        "flow" => {
+            let sp = g.spinner("timing flow and morphs");
+            let v = flow::figures(a.quick)?;
+            sp.finish_and_clear();
+            v
+        }
+        "loops" => {
+            let clips = if a.clips.is_empty() {
+                crate::bench_loops::default_clips()
+            } else {
+                a.clips.clone()
+            };
+            crate::bench_loops::bench(&clips, a.cache.as_deref(), g)?
+        }
+        other => anyhow::bail!("unknown bench target `{other}`"),
+    };
+    println!("{}", serde_json::to_string_pretty(&v)?);
+    Ok(())
+}
