@@ -48,10 +48,15 @@
 //! The look (`[colour]`, `[bloom]`, `[smoke]`, `[originals]`, `[masks]`) is described in
 //! [`Look`].
 //!
-//! Every error names the file, line and column of the offending value
-//! ([`EigenError::Scenario`]), including those only found against the database (an
-//! unknown clip, a range past the clip's end, an Eigenfire index beyond E, a join for which
-//! End Growing finds no path).
+//! Two stages. [`Scenario::parse`] reads the file once (`spec`: serde into spanned raw
+//! tables) and checks every setting that needs no database with the settings types' own
+//! `validate()` ([`Transition::validate`], [`RecognitionParams::validate`],
+//! [`BloomParams::validate`], [`SmokeParams::validate`], ...), keeping the typed result and
+//! each value's place in the file. [`Scenario::plan`] (`plan`) only resolves names against
+//! the database (clips, ranges, Eigenfire indices) and computes the joins. Every error
+//! names the file, line and column of the offending value ([`EigenError::Scenario`]),
+//! including those only found against the database (an unknown clip, a range past the
+//! clip's end, an Eigenfire index beyond E, a join for which End Growing finds no path).
 //!
 //! Weight edits across joins: a motion's edits apply to all its frames; the frames of a
 //! join ramp linearly from the edits of the motion before to those of the motion after
@@ -66,27 +71,81 @@ use std::path::{Path, PathBuf};
 use ignis_core::colour::Tint;
 use ignis_core::post::BloomParams;
 use ignis_core::Palette;
-use serde::Deserialize;
-use toml::Spanned;
 
-use crate::animate::{self, parse_weight_edits};
 use crate::colour::{MaskMode, SmokeParams};
-use crate::db::EigenfireDb;
 use crate::error::{EigenError, Result};
-use crate::transition::{
-    self, FrameRef, Join, RecognitionParams, Transition, TransitionError, WeightSpace,
-};
+use crate::transition::{self, FrameRef, Join, RecognitionParams, Transition, WeightSpace};
 
-/// A parsed scenario, not yet checked against its database.
+mod look;
+mod plan;
+mod spec;
+
+/// A scenario read and checked (every setting that needs no database), not yet resolved
+/// against its database ([`Scenario::plan`]).
 #[derive(Debug)]
 pub struct Scenario {
     file: PathBuf,
-    text: String,
-    raw: RawScenario,
     /// The database directory, resolved against the scenario's folder.
     pub database: PathBuf,
     /// The look (colour and post), with paths resolved against the scenario's folder.
     pub look: Look,
+    /// Motion names in playing order (each a key of `motions`).
+    sequence: At<Vec<At<String>>>,
+    loops: bool,
+    e_detect: Option<usize>,
+    e_render: Option<usize>,
+    motions: BTreeMap<String, MotionSpec>,
+    /// One per join: between consecutive motions, plus the loop join.
+    joins: Vec<JoinSpec>,
+}
+
+/// A place in the scenario file (1-based), for errors.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct Loc {
+    line: usize,
+    column: usize,
+}
+
+impl Loc {
+    fn err(self, file: &Path, message: impl Into<String>) -> EigenError {
+        EigenError::Scenario {
+            file: file.to_path_buf(),
+            line: self.line,
+            column: self.column,
+            message: message.into(),
+        }
+    }
+}
+
+/// A value and where in the file it was written.
+#[derive(Clone, Debug)]
+struct At<T> {
+    value: T,
+    loc: Loc,
+}
+
+/// A motion as written: checked, its names not yet resolved against the database.
+#[derive(Debug)]
+struct MotionSpec {
+    clip: At<String>,
+    /// Source frames `start..end`; the clip's training range where not given.
+    start: Option<At<usize>>,
+    end: Option<At<usize>>,
+    /// §5.2 edits `(Eigenfire index, weight)`, indices not yet checked against E.
+    edits: Option<At<Vec<(usize, f32)>>>,
+}
+
+/// A join's checked settings (`[[join]]` over `[transition]`).
+#[derive(Debug)]
+struct JoinSpec {
+    /// The real-frame or low-pass method (`Auto` for `method = "morph"`).
+    transition: Transition,
+    /// Recognition settings; `e_detect` is set when planning.
+    rec: RecognitionParams,
+    /// The morph for `auto` and `morph`.
+    morph: Option<MorphSpec>,
+    /// The join's table (`[[join]]`, else `[transition]`, else `sequence`).
+    loc: Loc,
 }
 
 /// How frames are coloured and post-processed (chapter 6).
@@ -159,101 +218,23 @@ impl ColourMode {
     }
 }
 
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RawScenario {
-    database: Spanned<String>,
-    sequence: Spanned<Vec<Spanned<String>>>,
-    #[serde(rename = "loop", default)]
-    loop_: bool,
-    e_detect: Option<Spanned<usize>>,
-    e_render: Option<Spanned<usize>>,
-    #[serde(default)]
-    motions: BTreeMap<String, Spanned<RawMotion>>,
-    transition: Option<Spanned<RawJoin>>,
-    #[serde(default)]
-    join: Vec<Spanned<RawJoin>>,
-    #[serde(default)]
-    colour: RawColour,
-    bloom: Option<Spanned<RawBloom>>,
-    smoke: Option<Spanned<RawSmoke>>,
-    #[serde(default)]
-    originals: BTreeMap<String, Spanned<String>>,
-    #[serde(default)]
-    masks: BTreeMap<String, Spanned<String>>,
-}
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RawMotion {
-    clip: Spanned<String>,
-    start: Option<Spanned<usize>>,
-    end: Option<Spanned<usize>>,
-    weights: Option<Spanned<String>>,
-}
-
-#[derive(Clone, Debug, Default, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RawJoin {
-    method: Option<Spanned<String>>,
-    steps: Option<Spanned<usize>>,
-    theta_min: Option<Spanned<f64>>,
-    theta_quantile: Option<Spanned<f64>>,
-    join_gap: Option<Spanned<f64>>,
-    reject_near: Option<usize>,
-    kernel: Option<Spanned<Vec<f32>>>,
-    eigenfires: Option<Spanned<usize>>,
-    inject_from: Option<Spanned<usize>>,
-    frames: Option<Spanned<usize>>,
-}
-
-#[derive(Debug, Default, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RawColour {
-    mode: Option<Spanned<String>>,
-    tint: Option<Spanned<[f32; 3]>>,
-    palette: Option<Spanned<String>>,
-    threshold: Option<Spanned<f32>>,
-    alpha: Option<Spanned<String>>,
-    fast_path: Option<bool>,
-    mask_mode: Option<Spanned<String>>,
-}
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RawBloom {
-    #[serde(default = "yes")]
-    enabled: bool,
-    passes: Option<u32>,
-    radius: Option<f32>,
-    radius_falloff: Option<f32>,
-    strength: Option<f32>,
-}
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RawSmoke {
-    #[serde(default = "yes")]
-    enabled: bool,
-    threshold: Option<f32>,
-    blur: Option<f32>,
-    colour: Option<[f32; 3]>,
-    absolute: Option<bool>,
-}
-
-fn yes() -> bool {
-    true
-}
-
-/// Line and column (1-based) of byte `offset` in `text`.
-fn line_col(text: &str, offset: usize) -> (usize, usize) {
-    let before = &text[..offset.min(text.len())];
-    let line = before.matches('\n').count() + 1;
-    let col = before
-        .rfind('\n')
-        .map_or(before.len(), |i| before.len() - i - 1)
-        + 1;
-    (line, col)
+impl Default for Look {
+    /// Original colouring with the thesis's threshold, default bloom, no smoke, a matte,
+    /// the fast path, no originals or masks.
+    fn default() -> Self {
+        Look {
+            mode: ColourMode::Original,
+            tint: Tint::Solid([1.0, 0.42, 0.08]),
+            threshold: crate::colour::THESIS_THRESHOLD,
+            bloom: Some(BloomParams::default()),
+            smoke: None,
+            matte: true,
+            fast_path: true,
+            originals: BTreeMap::new(),
+            masks: BTreeMap::new(),
+            mask_mode: MaskMode::Add,
+        }
+    }
 }
 
 impl Scenario {
@@ -264,39 +245,9 @@ impl Scenario {
     }
 
     /// Parses `text` as the scenario file `file` (used for error messages and to resolve
-    /// relative paths).
+    /// relative paths) and checks everything that needs no database.
     pub fn parse(text: &str, file: &Path) -> Result<Scenario> {
-        let raw: RawScenario = toml::from_str(text).map_err(|e| {
-            let (line, column) = line_col(text, e.span().map_or(0, |s| s.start));
-            EigenError::Scenario {
-                file: file.to_path_buf(),
-                line,
-                column,
-                message: e.message().trim().to_string(),
-            }
-        })?;
-        let mut s = Scenario {
-            file: file.to_path_buf(),
-            text: text.to_string(),
-            database: PathBuf::new(),
-            look: Look {
-                mode: ColourMode::Original,
-                tint: Tint::Solid([1.0, 0.42, 0.08]),
-                threshold: crate::colour::THESIS_THRESHOLD,
-                bloom: Some(BloomParams::default()),
-                smoke: None,
-                matte: true,
-                fast_path: true,
-                originals: BTreeMap::new(),
-                masks: BTreeMap::new(),
-                mask_mode: MaskMode::Add,
-            },
-            raw,
-        };
-        s.database = s.resolve_path(s.raw.database.get_ref());
-        s.look = s.parse_look()?;
-        s.check_static()?;
-        Ok(s)
+        spec::parse(text, file)
     }
 
     /// The scenario file's path.
@@ -306,615 +257,17 @@ impl Scenario {
 
     /// Whether the sequence loops back to its start.
     pub fn is_loop(&self) -> bool {
-        self.raw.loop_
-    }
-
-    fn resolve_path(&self, p: &str) -> PathBuf {
-        let p = Path::new(p);
-        if p.is_absolute() {
-            return p.to_path_buf();
-        }
-        match self.file.parent() {
-            Some(dir) if !dir.as_os_str().is_empty() => dir.join(p),
-            _ => p.to_path_buf(),
-        }
-    }
-
-    fn err_at(&self, span: Range<usize>, message: impl Into<String>) -> EigenError {
-        let (line, column) = line_col(&self.text, span.start);
-        EigenError::Scenario {
-            file: self.file.clone(),
-            line,
-            column,
-            message: message.into(),
-        }
-    }
-
-    fn parse_look(&self) -> Result<Look> {
-        let c = &self.raw.colour;
-        let mut look = self.look.clone();
-        if let Some(t) = &c.tint {
-            let v = t.get_ref();
-            if v.iter().any(|x| !(0.0..=1.0).contains(x)) {
-                return Err(self.err_at(
-                    t.span(),
-                    format!("`tint` must be three linear RGB values in 0..=1, got {v:?}"),
-                ));
-            }
-            look.tint = Tint::Solid(*v);
-        }
-        if let Some(m) = &c.mode {
-            look.mode = match m.get_ref().as_str() {
-                "original" => ColourMode::Original,
-                "synthetic" => ColourMode::Synthetic,
-                "grey" | "gray" => ColourMode::Grey,
-                "palette" => {
-                    let name = c.palette.as_ref().map_or("candle", |p| p.get_ref().as_str());
-                    let p = Palette::preset(name).map_err(|_| {
-                        self.err_at(
-                            c.palette.as_ref().map_or(m.span(), |p| p.span()),
-                            format!(
-                                "unknown palette `{name}`; choose one of {}",
-                                ignis_core::palette::PRESETS.join(", ")
-                            ),
-                        )
-                    })?;
-                    ColourMode::Palette(p)
-                }
-                other => {
-                    return Err(self.err_at(
-                        m.span(),
-                        format!("unknown colour mode `{other}`; choose original, synthetic, palette or grey"),
-                    ))
-                }
-            };
-        }
-        if let Some(t) = &c.threshold {
-            let v = *t.get_ref();
-            if !(v > 0.0 && v <= 1.0) {
-                return Err(self.err_at(
-                    t.span(),
-                    format!("`threshold` must be in (0, 1] (grey units), got {v}"),
-                ));
-            }
-            look.threshold = v;
-        }
-        if let Some(a) = &c.alpha {
-            look.matte = match a.get_ref().as_str() {
-                "matte" => true,
-                "opaque" => false,
-                other => {
-                    return Err(self.err_at(
-                        a.span(),
-                        format!("unknown alpha `{other}`; choose matte or opaque"),
-                    ))
-                }
-            };
-        }
-        if let Some(f) = c.fast_path {
-            look.fast_path = f;
-        }
-        if let Some(m) = &c.mask_mode {
-            look.mask_mode = match m.get_ref().as_str() {
-                "add" => MaskMode::Add,
-                "replace" => MaskMode::Replace,
-                other => {
-                    return Err(self.err_at(
-                        m.span(),
-                        format!("unknown mask_mode `{other}`; choose add or replace"),
-                    ))
-                }
-            };
-        }
-        if let Some(bs) = &self.raw.bloom {
-            let b = bs.get_ref();
-            look.bloom = if b.enabled {
-                let d = BloomParams::default();
-                let p = BloomParams {
-                    passes: b.passes.unwrap_or(d.passes),
-                    radius: b.radius.unwrap_or(d.radius),
-                    radius_falloff: b.radius_falloff.unwrap_or(d.radius_falloff),
-                    strength: b.strength.unwrap_or(d.strength),
-                };
-                p.validate()
-                    .map_err(|e| self.err_at(bs.span(), format!("[bloom]: {e}")))?;
-                Some(p)
-            } else {
-                None
-            };
-        }
-        if let Some(ss) = &self.raw.smoke {
-            let s = ss.get_ref();
-            look.smoke = if s.enabled {
-                let d = SmokeParams::default();
-                let p = SmokeParams {
-                    threshold: s.threshold.unwrap_or(d.threshold),
-                    blur_sigma: s.blur.unwrap_or(d.blur_sigma),
-                    colour: s.colour.unwrap_or(d.colour),
-                    absolute: s.absolute.unwrap_or(d.absolute),
-                };
-                let bad = !(0.0..=1.0).contains(&p.threshold)
-                    || !(0.0..=64.0).contains(&p.blur_sigma)
-                    || p.colour.iter().any(|c| !(0.0..=4.0).contains(c));
-                if bad {
-                    return Err(self.err_at(
-                        ss.span(),
-                        "[smoke]: threshold must be in 0..=1, blur in 0..=64 px, colour values in 0..=4",
-                    ));
-                }
-                Some(p)
-            } else {
-                None
-            };
-        }
-        look.originals = self
-            .raw
-            .originals
-            .iter()
-            .map(|(k, v)| (k.clone(), self.resolve_path(v.get_ref())))
-            .collect();
-        look.masks = self
-            .raw
-            .masks
-            .iter()
-            .map(|(k, v)| (k.clone(), self.resolve_path(v.get_ref())))
-            .collect();
-        Ok(look)
-    }
-
-    /// Checks that need no database: the sequence, motion names, join settings.
-    fn check_static(&self) -> Result<()> {
-        let seq = &self.raw.sequence;
-        if seq.get_ref().is_empty() {
-            return Err(self.err_at(
-                seq.span(),
-                "`sequence` is empty; list at least one motion, e.g. sequence = [\"calm\"]",
-            ));
-        }
-        for item in seq.get_ref() {
-            if !self.raw.motions.contains_key(item.get_ref()) {
-                let known: Vec<&str> = self.raw.motions.keys().map(String::as_str).collect();
-                return Err(self.err_at(
-                    item.span(),
-                    format!(
-                        "unknown motion `{}`; the scenario defines {}",
-                        item.get_ref(),
-                        if known.is_empty() {
-                            "none (add a [motions.NAME] table)".to_string()
-                        } else {
-                            known.join(", ")
-                        }
-                    ),
-                ));
-            }
-        }
-        let joins = self.join_count();
-        if self.raw.join.len() > joins {
-            return Err(self.err_at(
-                self.raw.join[joins].span(),
-                format!(
-                    "{} [[join]] tables for {joins} join(s) ({} motions{})",
-                    self.raw.join.len(),
-                    seq.get_ref().len(),
-                    if self.raw.loop_ {
-                        " with loop = true"
-                    } else {
-                        ""
-                    }
-                ),
-            ));
-        }
-        for i in 0..joins {
-            self.join_method(i)?;
-        }
-        for (name, m) in &self.raw.motions {
-            if let Some(w) = &m.get_ref().weights {
-                parse_weight_edits(w.get_ref())
-                    .map_err(|e| self.err_at(w.span(), format!("motion `{name}`: {e}")))?;
-            }
-        }
-        for (k, v) in [
-            ("e_detect", &self.raw.e_detect),
-            ("e_render", &self.raw.e_render),
-        ] {
-            if let Some(v) = v {
-                if *v.get_ref() == 0 {
-                    return Err(self.err_at(v.span(), format!("`{k}` must be at least 1")));
-                }
-            }
-        }
-        Ok(())
+        self.loops
     }
 
     /// Number of joins: between consecutive motions, plus the loop join.
     pub fn join_count(&self) -> usize {
-        let n = self.raw.sequence.get_ref().len();
-        n - 1 + usize::from(self.raw.loop_)
+        self.joins.len()
     }
 
-    /// The transition of join `i` (0-based), from `[[join]]` i over `[transition]`.
-    fn join_method(&self, i: usize) -> Result<(Transition, RecognitionParams, Option<MorphSpec>)> {
-        let dflt = RawJoin::default();
-        let d = self.raw.transition.as_ref().map_or(&dflt, |t| t.get_ref());
-        let j = self.raw.join.get(i).map(|s| s.get_ref());
-        macro_rules! pick {
-            ($f:ident) => {
-                j.and_then(|j| j.$f.clone()).or_else(|| d.$f.clone())
-            };
-        }
-        let method = pick!(method);
-        let steps = pick!(steps);
-        let kernel = pick!(kernel);
-        let eigenfires = pick!(eigenfires);
-        let inject_from = pick!(inject_from);
-        let n_frames = pick!(frames);
-        let name = method.as_ref().map_or("auto", |m| m.get_ref().as_str());
-        if let Some(f) = &n_frames {
-            if *f.get_ref() == 0 || *f.get_ref() > MORPH_MAX_FRAMES {
-                return Err(self.err_at(
-                    f.span(),
-                    format!("`frames` must be in 1..={MORPH_MAX_FRAMES}"),
-                ));
-            }
-        }
-        let morph = match name {
-            "morph" => Some(MorphSpec {
-                frames: n_frames.as_ref().map(|f| *f.get_ref()),
-                forced: true,
-            }),
-            "auto" => Some(MorphSpec {
-                frames: n_frames.as_ref().map(|f| *f.get_ref()),
-                forced: false,
-            }),
-            _ => None,
-        };
-        let mut t = if name == "morph" {
-            Transition::Auto
-        } else {
-            animate::parse_method(name).map_err(|_| {
-                self.err_at(
-                    method.as_ref().map_or(0..0, |m| m.span()),
-                    format!("unknown method `{name}`; choose auto, end-growing, direct, low-pass or morph"),
-                )
-            })?
-        };
-        if let Some(s) = &steps {
-            if *s.get_ref() == 0 {
-                return Err(self.err_at(s.span(), "`steps` must be at least 1"));
-            }
-        }
-        match &mut t {
-            Transition::EndGrowing { max_steps } => {
-                if let Some(s) = &steps {
-                    *max_steps = *s.get_ref();
-                }
-            }
-            Transition::DirectBridging { steps: st } => *st = steps.as_ref().map(|s| *s.get_ref()),
-            Transition::LowPass(p) => {
-                if let Some(k) = &kernel {
-                    let v = k.get_ref();
-                    let sum: f32 = v.iter().sum();
-                    if v.len() < 2 || v.iter().any(|x| !x.is_finite()) || sum.abs() < 1e-6 {
-                        return Err(self.err_at(
-                            k.span(),
-                            format!(
-                                "`kernel` needs at least 2 finite taps not summing to 0, got {v:?}"
-                            ),
-                        ));
-                    }
-                    p.kernel = v.clone();
-                }
-                if let Some(e) = &eigenfires {
-                    if *e.get_ref() == 0 {
-                        return Err(self.err_at(e.span(), "`eigenfires` must be at least 1"));
-                    }
-                    p.e_render = *e.get_ref();
-                }
-                if let Some(f) = &inject_from {
-                    if *f.get_ref() < p.e_render {
-                        return Err(self.err_at(
-                            f.span(),
-                            format!(
-                                "`inject_from` must be ≥ the morphs' eigenfires ({})",
-                                p.e_render
-                            ),
-                        ));
-                    }
-                    p.inject_from = Some(*f.get_ref());
-                }
-            }
-            Transition::Auto => {}
-        }
-        let mut rec = RecognitionParams::default();
-        if let Some(v) = pick!(theta_min) {
-            if !(*v.get_ref() > 0.0 && v.get_ref().is_finite()) {
-                return Err(self.err_at(v.span(), "`theta_min` must be a number > 0"));
-            }
-            rec.theta_min = Some(*v.get_ref());
-        }
-        if let Some(v) = pick!(theta_quantile) {
-            if !(0.0..=1.0).contains(v.get_ref()) {
-                return Err(self.err_at(v.span(), "`theta_quantile` must be in 0..=1"));
-            }
-            rec.theta_quantile = *v.get_ref();
-        }
-        if let Some(v) = pick!(join_gap) {
-            if !(*v.get_ref() > 0.0 && v.get_ref().is_finite()) {
-                return Err(self.err_at(v.span(), "`join_gap` must be a number > 0"));
-            }
-            rec.join_gap = Some(*v.get_ref());
-        }
-        if let Some(v) = pick!(reject_near) {
-            rec.reject_near = v;
-        }
-        Ok((t, rec, morph))
-    }
-
-    /// Where join `i` is configured (its `[[join]]` table, else `[transition]`, else the
-    /// sequence), for errors.
-    fn join_span(&self, i: usize) -> Range<usize> {
-        if let Some(j) = self.raw.join.get(i) {
-            return j.span();
-        }
-        match &self.raw.transition {
-            Some(t) => t.span(),
-            None => self.raw.sequence.span(),
-        }
-    }
-
-    /// Checks the scenario against `db` and computes every join: the frame list to render.
-    /// `progress(i, n)` is called before join `i` of `n`.
-    pub fn plan(&self, db: &EigenfireDb, progress: &mut dyn FnMut(usize, usize)) -> Result<Plan> {
-        let usable = db.usable_components().max(1);
-        let e_detect = self
-            .raw
-            .e_detect
-            .as_ref()
-            .map_or(db.manifest().e_detect, |v| *v.get_ref());
-        let e_render_req = self
-            .raw
-            .e_render
-            .as_ref()
-            .map_or(db.manifest().e_render, |v| *v.get_ref());
-        // Motions.
-        let mut motions: BTreeMap<&str, MotionPlan> = BTreeMap::new();
-        for (name, m) in &self.raw.motions {
-            let m = m.get_ref();
-            let clip = db
-                .clips()
-                .iter()
-                .find(|c| &c.name == m.clip.get_ref())
-                .ok_or_else(|| {
-                    let names: Vec<&str> = db.clips().iter().map(|c| c.name.as_str()).collect();
-                    self.err_at(
-                        m.clip.span(),
-                        format!(
-                            "motion `{name}`: unknown clip `{}`; database {} has {}",
-                            m.clip.get_ref(),
-                            db.path().display(),
-                            names.join(", ")
-                        ),
-                    )
-                })?;
-            let start = m.start.as_ref().map_or(clip.start, |s| *s.get_ref());
-            let end = m.end.as_ref().map_or(clip.end, |s| *s.get_ref());
-            let last = clip.start + clip.frames.saturating_sub(1) * clip.stride;
-            if let Some(e) = &m.end {
-                if end > clip.end {
-                    return Err(self.err_at(
-                        e.span(),
-                        format!(
-                            "motion `{name}`: end = {end} is past the end of clip `{}` (trained on frames {}..{})",
-                            clip.name, clip.start, clip.end
-                        ),
-                    ));
-                }
-            }
-            if start >= end {
-                return Err(self.err_at(
-                    m.start
-                        .as_ref()
-                        .or(m.end.as_ref())
-                        .map_or(m.clip.span(), |s| s.span()),
-                    format!("motion `{name}`: the range {start}..{end} is empty"),
-                ));
-            }
-            let rows = animate::clip_rows(db, &clip.name, start..end).map_err(|e| {
-                self.err_at(
-                    m.start.as_ref().map_or(m.clip.span(), |s| s.span()),
-                    format!(
-                        "motion `{name}`: {e} (clip `{}` has training frames {}..={last} every {})",
-                        clip.name, clip.start, clip.stride
-                    ),
-                )
-            })?;
-            let mut edits = Vec::new();
-            if let Some(w) = &m.weights {
-                for (i, v) in parse_weight_edits(w.get_ref())
-                    .map_err(|e| self.err_at(w.span(), format!("motion `{name}`: {e}")))?
-                {
-                    if i >= usable {
-                        return Err(self.err_at(
-                            w.span(),
-                            format!(
-                                "motion `{name}`: Eigenfire index {i} is out of range: the database has {usable} usable Eigenfires (0..{usable})"
-                            ),
-                        ));
-                    }
-                    edits.push((i, v));
-                }
-            }
-            motions.insert(name, MotionPlan { rows, edits });
-        }
-        let (w, k, spans) = animate::weight_space(db)?;
-        let space = WeightSpace::new(w, k, spans)
-            .map_err(|e| EigenError::bad("database", e.to_string()))?;
-        let seq: Vec<&str> = self
-            .raw
-            .sequence
-            .get_ref()
-            .iter()
-            .map(|s| s.get_ref().as_str())
-            .collect();
-        let n_joins = self.join_count();
-        let mut joins = Vec::with_capacity(n_joins);
-        for i in 0..n_joins {
-            progress(i, n_joins);
-            let (a, b) = (seq[i], seq[(i + 1) % seq.len()]);
-            let (t, mut rec, morph) = self.join_method(i)?;
-            rec.e_detect = e_detect;
-            let (ra, rb) = (motions[a].rows.clone(), motions[b].rows.clone());
-            let e = rec.e_detect(&space);
-            let forced = morph.as_ref().is_some_and(|m| m.forced);
-            let tried = if forced {
-                None
-            } else {
-                Some(transition::transition(
-                    &space,
-                    ra.clone(),
-                    rb.clone(),
-                    &t,
-                    &rec,
-                ))
-            };
-            let join = match (tried, &morph) {
-                (None, Some(m)) => morph_join(&space, &ra, &rb, m.frames, e, "method = \"morph\""),
-                (Some(Ok(j)), Some(m)) if j.seam_ratio > AUTO_MORPH_ABOVE => {
-                    let mj = morph_join(&space, &ra, &rb, m.frames, e, "");
-                    if mj.seam_ratio < j.seam_ratio {
-                        let why = format!(
-                            "auto: {} gave seam ratio {:.2} (> {AUTO_MORPH_ABOVE}), the morph {:.2}; {}",
-                            j.method, j.seam_ratio, mj.seam_ratio, mj.why
-                        );
-                        Join { why, ..mj }
-                    } else {
-                        j
-                    }
-                }
-                (Some(Err(TransitionError::NoPath { .. })), Some(m)) if !m.forced => {
-                    let mj = morph_join(&space, &ra, &rb, m.frames, e, "");
-                    let why = format!("auto: no real-frame path; {}", mj.why);
-                    Join { why, ..mj }
-                }
-                (Some(r), _) => r.map_err(|e| {
-                    let why = match &e {
-                        TransitionError::NoPath { .. } => format!(
-                            "{e}; try a larger `steps`, another method, or method = \"auto\""
-                        ),
-                        _ => e.to_string(),
-                    };
-                    self.err_at(
-                        self.join_span(i),
-                        format!("join {} ({a} → {b}): {why}", i + 1),
-                    )
-                })?,
-                (None, m) => morph_join(
-                    &space,
-                    &ra,
-                    &rb,
-                    m.as_ref().and_then(|m| m.frames),
-                    e,
-                    "method = \"morph\"",
-                ),
-            };
-            let plain = transition::join_seam(&space, &ra, &rb, &[], (0, 0), e);
-            joins.push(JoinReport {
-                from: a.to_string(),
-                to: b.to_string(),
-                join,
-                plain_cut: plain,
-            });
-        }
-        progress(n_joins, n_joins);
-        // The frame list: each motion's body (less the frames its joins replace), then the
-        // join to the next motion.
-        let mut frames = Vec::new();
-        let mut morphs = Vec::new();
-        for (i, &name) in seq.iter().enumerate() {
-            let m = &motions[name];
-            let trim_head = if i > 0 {
-                joins[i - 1].join.trim_t2
-            } else if self.raw.loop_ {
-                joins[n_joins - 1].join.trim_t2
-            } else {
-                0
-            };
-            let trim_tail = joins.get(i).map_or(0, |j| j.join.trim_t1);
-            let start = m.rows.start + trim_head.min(m.rows.len());
-            let end = m.rows.end.saturating_sub(trim_tail).max(start);
-            let full: Vec<(usize, f32, f32)> = m.edits.iter().map(|&(k, v)| (k, v, 1.0)).collect();
-            for r in start..end {
-                frames.push(PlanFrame {
-                    source: FrameRef::Db(r),
-                    edits: full.clone(),
-                });
-            }
-            if let Some(j) = joins.get(i) {
-                let next = &motions[seq[(i + 1) % seq.len()]];
-                let n = j.join.frames.len();
-                if j.join.method == "morph" && n > 0 {
-                    morphs.push(MorphRun {
-                        start: frames.len(),
-                        len: n,
-                    });
-                }
-                for (t, f) in j.join.frames.iter().enumerate() {
-                    let s = (t + 1) as f32 / (n + 1) as f32;
-                    let mut edits: Vec<(usize, f32, f32)> =
-                        m.edits.iter().map(|&(k, v)| (k, v, 1.0 - s)).collect();
-                    edits.extend(next.edits.iter().map(|&(k, v)| (k, v, s)));
-                    frames.push(PlanFrame {
-                        source: f.clone(),
-                        edits,
-                    });
-                }
-            }
-        }
-        if frames.is_empty() {
-            return Err(self.err_at(
-                self.raw.sequence.span(),
-                "the transitions replaced every frame of the motions; use longer ranges",
-            ));
-        }
-        // Smoothness of the sequence as written, and of its wrap (last → first).
-        let e = RecognitionParams {
-            e_detect,
-            ..Default::default()
-        }
-        .e_detect(&space);
-        let vec_of = |f: &PlanFrame| -> Vec<f32> {
-            let v = match &f.source {
-                FrameRef::Db(r) => space.frame(*r),
-                FrameRef::Weights(w) => w.as_slice(),
-            };
-            v[..e.min(v.len())].to_vec()
-        };
-        let median = space.source_median(e);
-        let wrap = transition::seam_ratio(
-            &[vec_of(&frames[frames.len() - 1]), vec_of(&frames[0])],
-            median,
-        );
-        let worst = frames
-            .windows(2)
-            .map(|p| transition::seam_ratio(&[vec_of(&p[0]), vec_of(&p[1])], median))
-            .fold(0.0, f64::max);
-        if morphs.iter().any(|m| m.len >= frames.len()) {
-            return Err(self.err_at(
-                self.raw.sequence.span(),
-                "a morph join has no real frame to start or end from; use longer ranges",
-            ));
-        }
-        Ok(Plan {
-            frames,
-            morphs,
-            joins,
-            wrap_seam: wrap,
-            worst_step: worst,
-            e_render: e_render_req.clamp(1, usable),
-            e_render_requested: e_render_req,
-            e_detect: e,
-            loops: self.raw.loop_,
-        })
+    /// The scenario error at `loc`.
+    fn err(&self, loc: Loc, message: impl Into<String>) -> EigenError {
+        loc.err(&self.file, message)
     }
 }
 
@@ -1062,6 +415,7 @@ pub struct Plan {
 
 #[cfg(test)]
 mod tests {
+    use super::spec::line_col;
     use super::*;
 
     #[test]
@@ -1141,6 +495,191 @@ mod tests {
             Path::new("dir/scene.toml"),
         )
         .unwrap();
+    }
+
+    /// A bad value in each section: the error names the key (`key` in backticks, or
+    /// `what`) and starts at the line holding `line_of`.
+    #[test]
+    fn a_bad_field_in_each_section_names_the_field_and_its_line() {
+        let head = "database = \"fire.db\"\nsequence = [\"a\", \"a\"]\n";
+        let motion = "[motions.a]\nclip = \"candle\"\n";
+        // (text after the motion table, text of the bad line, what the message says)
+        let cases: &[(&str, &str, &str)] = &[
+            (
+                "[transition]\nmethod = \"low-pass\"\nkernel = [1.0, -1.0]\n",
+                "kernel",
+                "`kernel`",
+            ),
+            (
+                "[transition]\nmethod = \"low-pass\"\neigenfires = 0\n",
+                "eigenfires",
+                "`eigenfires` must be at least 1",
+            ),
+            (
+                "[transition]\nmethod = \"low-pass\"\neigenfires = 20\ninject_from = 10\n",
+                "inject_from",
+                "`inject_from`",
+            ),
+            (
+                "[transition]\ntheta_min = -1.0\n",
+                "theta_min",
+                "`theta_min`",
+            ),
+            (
+                "[[join]]\ntheta_quantile = 2.0\n",
+                "theta_quantile",
+                "`theta_quantile`",
+            ),
+            ("[[join]]\njoin_gap = 0.0\n", "join_gap", "`join_gap`"),
+            (
+                "[[join]]\nmethod = \"direct\"\nsteps = 0\n",
+                "steps",
+                "`steps` must be at least 1",
+            ),
+            (
+                "[[join]]\nmethod = \"end-growing\"\nsteps = 1\n",
+                "steps",
+                "`steps` must be at least 2",
+            ),
+            (
+                "[[join]]\nmethod = \"morph\"\nframes = 500\n",
+                "frames",
+                "`frames`",
+            ),
+            (
+                "[[join]]\nmethod = \"teleport\"\n",
+                "teleport",
+                "unknown method `teleport`",
+            ),
+            (
+                "[colour]\nmode = \"sepia\"\n",
+                "sepia",
+                "unknown colour mode `sepia`",
+            ),
+            ("[colour]\ntint = [2.0, 0.0, 0.0]\n", "tint", "`tint`"),
+            ("[colour]\nthreshold = 1.5\n", "threshold", "`threshold`"),
+            (
+                "[colour]\nalpha = \"glass\"\n",
+                "glass",
+                "unknown alpha `glass`",
+            ),
+            (
+                "[colour]\nmask_mode = \"xor\"\n",
+                "xor",
+                "unknown mask_mode `xor`",
+            ),
+            (
+                "[colour]\nmode = \"palette\"\npalette = \"plaid\"\n",
+                "plaid",
+                "unknown palette `plaid`",
+            ),
+            ("[bloom]\npasses = 99\n", "passes", "[bloom]: `passes`"),
+            ("[bloom]\nradius = -1.0\n", "radius", "[bloom]: `radius`"),
+            (
+                "[bloom]\nradius_falloff = 2.0\n",
+                "radius_falloff",
+                "[bloom]: `radius_falloff`",
+            ),
+            (
+                "[bloom]\nstrength = 9.0\n",
+                "strength",
+                "[bloom]: `strength`",
+            ),
+            ("[bloom]\nglow = 1.0\n", "glow", "glow"),
+            (
+                "[smoke]\nthreshold = 2.0\n",
+                "threshold",
+                "[smoke]: `threshold`",
+            ),
+            ("[smoke]\nblur = 100.0\n", "blur", "[smoke]: `blur`"),
+            (
+                "[smoke]\ncolour = [9.0, 0.0, 0.0]\n",
+                "colour",
+                "[smoke]: `colour`",
+            ),
+            (
+                "[motions.b]\nclip = \"candle\"\nweights = \"1=x\"\n",
+                "weights",
+                "motion `b`",
+            ),
+            ("[motions.c]\nclip = \"candle\"\nstart = -3\n", "start", ""),
+        ];
+        let top: &[(&str, &str, &str)] = &[
+            (
+                "e_detect = 0\n",
+                "e_detect",
+                "`e_detect` must be at least 1",
+            ),
+            (
+                "e_render = 0\n",
+                "e_render",
+                "`e_render` must be at least 1",
+            ),
+            ("loop = \"yes\"\n", "loop", ""),
+        ];
+        let texts = cases
+            .iter()
+            .map(|(t, l, w)| (format!("{head}{motion}{t}"), *l, *w))
+            .chain(
+                top.iter()
+                    .map(|(t, l, w)| (format!("{head}{t}{motion}"), *l, *w)),
+            );
+        for (text, line_of, what) in texts {
+            let line = 1 + text
+                .lines()
+                .position(|l| l.contains(line_of))
+                .unwrap_or_else(|| panic!("{line_of} not in {text}"));
+            let e = err(&text);
+            let want = format!("dir/scene.toml:{line}:");
+            assert!(
+                e.starts_with(&want),
+                "`{e}` should start with `{want}`:\n{text}"
+            );
+            assert!(e.contains(what), "`{e}` should say `{what}`");
+        }
+    }
+
+    /// `[[join]]` settings override `[transition]` ones; only the joins there are are
+    /// checked, each in the table it comes from.
+    #[test]
+    fn join_settings_merge_over_the_defaults() {
+        let head = "database = \"fire.db\"\nsequence = [\"a\", \"a\"]\nloop = true\n[motions.a]\nclip = \"candle\"\n";
+        let s = Scenario::parse(
+            &format!("{head}[transition]\nmethod = \"low-pass\"\nkernel = [0.5, 0.5]\n[[join]]\nmethod = \"direct\"\nsteps = 3\n"),
+            Path::new("dir/scene.toml"),
+        )
+        .unwrap();
+        assert_eq!(s.join_count(), 2);
+        assert_eq!(
+            s.joins[0].transition,
+            Transition::DirectBridging { steps: Some(3) }
+        );
+        let Transition::LowPass(p) = &s.joins[1].transition else {
+            panic!("{:?}", s.joins[1].transition)
+        };
+        assert_eq!(p.kernel, vec![0.5, 0.5]);
+        assert_eq!(s.joins[0].loc.line, 9);
+        assert_eq!(s.joins[1].loc.line, 6);
+        // A default that only the second join takes is reported where it is written.
+        let e = err(&format!(
+            "{head}[transition]\ntheta_min = 0.0\n[[join]]\ntheta_min = 0.5\n"
+        ));
+        assert!(
+            e.starts_with("dir/scene.toml:7:") && e.contains("`theta_min`"),
+            "{e}"
+        );
+        // Morph and auto joins carry their morph settings.
+        let s = Scenario::parse(
+            &format!("{head}[transition]\nframes = 5\n[[join]]\nmethod = \"morph\"\n"),
+            Path::new("dir/scene.toml"),
+        )
+        .unwrap();
+        let m: Vec<_> = s
+            .joins
+            .iter()
+            .map(|j| j.morph.clone().map(|m| (m.frames, m.forced)))
+            .collect();
+        assert_eq!(m, vec![Some((Some(5), true)), Some((Some(5), false))]);
     }
 
     #[test]
