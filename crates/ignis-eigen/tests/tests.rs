@@ -701,6 +701,15 @@ mod animate {
     }
 
     #[test]
+    fn plan_reports_one_progress_step_per_join() {
+        let sc = Scenario::from_file(&scenario("progress.toml", MOTIONS)).unwrap();
+        let db = EigenfireDb::open(&sc.database).unwrap();
+        let mut p = ignis_core::progress::CountingProgress::default();
+        sc.plan(&db, &mut p).unwrap();
+        assert_eq!(p.stages, vec![("finding transitions".to_string(), 3, 3)]);
+    }
+
+    #[test]
     fn fast_path_takes_stored_frames_and_edits_reconstruct() {
         let body = "sequence = [\"calm\"]\n\n[motions.calm]\nclip = \"candle\"\nstart = 4\nend = 10\n\n[colour]\nmode = \"grey\"\nalpha = \"opaque\"\n\n[bloom]\nenabled = false\n";
         let sc = Scenario::from_file(&scenario("fast.toml", body)).unwrap();
