@@ -1,15 +1,13 @@
 //! Reading the look of a scenario (`[colour]`, `[bloom]`, `[smoke]`, `[originals]`,
 //! `[masks]`) into [`Look`], checked by the settings types' own `validate()`.
 
-use std::ops::Range;
-
 use ignis_core::colour::Tint;
 use ignis_core::post::BloomParams;
 use ignis_core::Palette;
 use serde::Deserialize;
 use toml::Spanned;
 
-use super::spec::{resolve_path, RawScenario, Source};
+use super::spec::{resolve_path, span, value, RawScenario, Source};
 use super::{ColourMode, Look};
 use crate::colour::{MaskMode, OriginalColour, SmokeParams};
 use crate::error::Result;
@@ -50,16 +48,6 @@ pub(super) struct RawSmoke {
 
 fn yes() -> bool {
     true
-}
-
-/// The value of an optional spanned setting, or `default`.
-fn or<T: Copy>(v: &Option<Spanned<T>>, default: T) -> T {
-    v.as_ref().map_or(default, |v| *v.get_ref())
-}
-
-/// The span of an optional spanned setting.
-fn span<T>(v: &Option<Spanned<T>>) -> Option<Range<usize>> {
-    v.as_ref().map(Spanned::span)
 }
 
 /// The look of `raw`, with paths resolved against the scenario's folder.
@@ -188,10 +176,10 @@ fn bloom(src: &Source, bs: &Spanned<RawBloom>) -> Result<Option<BloomParams>> {
     }
     let d = BloomParams::default();
     let p = BloomParams {
-        passes: or(&b.passes, d.passes),
-        radius: or(&b.radius, d.radius),
-        radius_falloff: or(&b.radius_falloff, d.radius_falloff),
-        strength: or(&b.strength, d.strength),
+        passes: value(&b.passes).unwrap_or(d.passes),
+        radius: value(&b.radius).unwrap_or(d.radius),
+        radius_falloff: value(&b.radius_falloff).unwrap_or(d.radius_falloff),
+        strength: value(&b.strength).unwrap_or(d.strength),
     };
     p.validate().map_err(|e| {
         src.invalid(
@@ -221,9 +209,9 @@ fn smoke(src: &Source, ss: &Spanned<RawSmoke>) -> Result<Option<SmokeParams>> {
     }
     let d = SmokeParams::default();
     let p = SmokeParams {
-        threshold: or(&s.threshold, d.threshold),
-        blur_sigma: or(&s.blur, d.blur_sigma),
-        colour: or(&s.colour, d.colour),
+        threshold: value(&s.threshold).unwrap_or(d.threshold),
+        blur_sigma: value(&s.blur).unwrap_or(d.blur_sigma),
+        colour: value(&s.colour).unwrap_or(d.colour),
         absolute: s.absolute.unwrap_or(d.absolute),
     };
     p.validate().map_err(|e| {

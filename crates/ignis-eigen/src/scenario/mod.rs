@@ -368,11 +368,6 @@ impl MorphRun {
     }
 }
 
-struct MotionPlan {
-    rows: Range<usize>,
-    edits: Vec<(usize, f32)>,
-}
-
 /// One join of a plan, for the table `ignis eigen animate` prints.
 #[derive(Clone, Debug)]
 pub struct JoinReport {

@@ -9,13 +9,21 @@ use std::ops::Range;
 use ignis_core::progress::Progress;
 
 use super::{
-    morph_join, JoinReport, JoinSpec, MorphRun, MotionPlan, MotionSpec, Plan, PlanFrame, Scenario,
+    morph_join, JoinReport, JoinSpec, MorphRun, MotionSpec, Plan, PlanFrame, Scenario,
     AUTO_MORPH_ABOVE,
 };
 use crate::animate;
 use crate::db::{ClipEntry, EigenfireDb};
 use crate::error::{EigenError, Result};
 use crate::transition::{self, FrameRef, Join, RecognitionParams, TransitionError, WeightSpace};
+
+/// A motion resolved against the database.
+struct MotionPlan {
+    /// Its database rows.
+    rows: Range<usize>,
+    /// Its §5.2 edits `(Eigenfire index, weight)`, indices within the usable Eigenfires.
+    edits: Vec<(usize, f32)>,
+}
 
 impl Scenario {
     /// Checks the scenario against `db` and computes every join: the frame list to render.

@@ -179,6 +179,16 @@ impl From<ignis_core::CoreError> for Invalid {
     }
 }
 
+/// The value of an optional spanned setting.
+pub(super) fn value<T: Copy>(v: &Option<Spanned<T>>) -> Option<T> {
+    v.as_ref().map(|v| *v.get_ref())
+}
+
+/// The span of an optional spanned setting.
+pub(super) fn span<T>(v: &Option<Spanned<T>>) -> Option<Range<usize>> {
+    v.as_ref().map(Spanned::span)
+}
+
 /// Line and column (1-based) of byte `offset` in `text`.
 pub(super) fn line_col(text: &str, offset: usize) -> (usize, usize) {
     let before = &text[..offset.min(text.len())];
@@ -281,7 +291,7 @@ fn joins(src: &Source, raw: &RawScenario) -> Result<Vec<JoinSpec>> {
     (0..n)
         .map(|i| {
             // Where join i is configured, for errors found only against the database.
-            let span = match (raw.join.get(i), &raw.transition) {
+            let table = match (raw.join.get(i), &raw.transition) {
                 (Some(j), _) => j.span(),
                 (None, Some(t)) => t.span(),
                 (None, None) => raw.sequence.span(),
@@ -290,14 +300,14 @@ fn joins(src: &Source, raw: &RawScenario) -> Result<Vec<JoinSpec>> {
                 .join
                 .get(i)
                 .map_or(defaults.clone(), |j| j.get_ref().over(defaults));
-            join(src, &settings, span)
+            join(src, &settings, table)
         })
         .collect()
 }
 
 /// One join's settings: the method's parameters and the recognition settings, each
 /// checked by its own `validate()`.
-fn join(src: &Source, j: &RawJoin, span: Range<usize>) -> Result<JoinSpec> {
+fn join(src: &Source, j: &RawJoin, table: Range<usize>) -> Result<JoinSpec> {
     if let Some(f) = &j.frames {
         if !(1..=MORPH_MAX_FRAMES).contains(f.get_ref()) {
             return Err(src.err(
@@ -307,7 +317,7 @@ fn join(src: &Source, j: &RawJoin, span: Range<usize>) -> Result<JoinSpec> {
         }
     }
     let name = j.method.as_ref().map_or("auto", |m| m.get_ref().as_str());
-    let frames = j.frames.as_ref().map(|f| *f.get_ref());
+    let frames = value(&j.frames);
     let morph = match name {
         "morph" | "auto" => Some(MorphSpec {
             frames,
@@ -315,49 +325,34 @@ fn join(src: &Source, j: &RawJoin, span: Range<usize>) -> Result<JoinSpec> {
         }),
         _ => None,
     };
-    let transition = method(src, j, name)?;
-    let span_of = |s: &Option<Spanned<f64>>| s.as_ref().map(Spanned::span);
+    let transition = method(src, j, name, &table)?;
+    let d = RecognitionParams::default();
     let rec = RecognitionParams {
-        theta_min: j.theta_min.as_ref().map(|v| *v.get_ref()),
-        theta_quantile: j
-            .theta_quantile
-            .as_ref()
-            .map_or(RecognitionParams::default().theta_quantile, |v| {
-                *v.get_ref()
-            }),
-        join_gap: j.join_gap.as_ref().map(|v| *v.get_ref()),
-        reject_near: j
-            .reject_near
-            .unwrap_or(RecognitionParams::default().reject_near),
-        ..Default::default()
+        theta_min: value(&j.theta_min),
+        theta_quantile: value(&j.theta_quantile).unwrap_or(d.theta_quantile),
+        join_gap: value(&j.join_gap),
+        reject_near: j.reject_near.unwrap_or(d.reject_near),
+        ..d
     };
     rec.validate().map_err(|e| {
-        src.invalid(
-            e.into(),
-            &[
-                ("theta_min", "theta_min", span_of(&j.theta_min)),
-                (
-                    "theta_quantile",
-                    "theta_quantile",
-                    span_of(&j.theta_quantile),
-                ),
-                ("join_gap", "join_gap", span_of(&j.join_gap)),
-            ],
-            span.clone(),
-            "",
-        )
+        let keys = [
+            ("theta_min", "theta_min", span(&j.theta_min)),
+            ("theta_quantile", "theta_quantile", span(&j.theta_quantile)),
+            ("join_gap", "join_gap", span(&j.join_gap)),
+        ];
+        src.invalid(e.into(), &keys, table.clone(), "")
     })?;
     Ok(JoinSpec {
         transition,
         rec,
         morph,
-        loc: src.loc(span),
+        loc: src.loc(table),
     })
 }
 
 /// The transition method `name` with its settings from `j`, checked by
 /// [`Transition::validate`].
-fn method(src: &Source, j: &RawJoin, name: &str) -> Result<Transition> {
+fn method(src: &Source, j: &RawJoin, name: &str, table: &Range<usize>) -> Result<Transition> {
     let mut t = if name == "morph" {
         Transition::Auto
     } else {
@@ -370,7 +365,7 @@ fn method(src: &Source, j: &RawJoin, name: &str) -> Result<Transition> {
             )
         })?
     };
-    let steps = j.steps.as_ref().map(|s| *s.get_ref());
+    let steps = value(&j.steps);
     if let Some(s) = &j.steps {
         if *s.get_ref() == 0 {
             return Err(src.err(s.span(), "`steps` must be at least 1"));
@@ -383,39 +378,20 @@ fn method(src: &Source, j: &RawJoin, name: &str) -> Result<Transition> {
             if let Some(k) = &j.kernel {
                 p.kernel = k.get_ref().clone();
             }
-            if let Some(e) = &j.eigenfires {
-                p.e_render = *e.get_ref();
-            }
-            p.inject_from = j.inject_from.as_ref().map(|f| *f.get_ref());
+            p.e_render = value(&j.eigenfires).unwrap_or(p.e_render);
+            p.inject_from = value(&j.inject_from);
         }
         Transition::Auto => {}
     }
-    let span = |s: Option<Range<usize>>| s;
     t.validate().map_err(|e| {
-        src.invalid(
-            e.into(),
-            &[
-                ("steps", "steps", span(j.steps.as_ref().map(Spanned::span))),
-                (
-                    "max_steps",
-                    "steps",
-                    span(j.steps.as_ref().map(Spanned::span)),
-                ),
-                ("kernel", "kernel", j.kernel.as_ref().map(Spanned::span)),
-                (
-                    "e_render",
-                    "eigenfires",
-                    j.eigenfires.as_ref().map(Spanned::span),
-                ),
-                (
-                    "inject_from",
-                    "inject_from",
-                    j.inject_from.as_ref().map(Spanned::span),
-                ),
-            ],
-            j.method.as_ref().map_or(0..0, |m| m.span()),
-            "",
-        )
+        let keys = [
+            ("steps", "steps", span(&j.steps)),
+            ("max_steps", "steps", span(&j.steps)),
+            ("kernel", "kernel", span(&j.kernel)),
+            ("e_render", "eigenfires", span(&j.eigenfires)),
+            ("inject_from", "inject_from", span(&j.inject_from)),
+        ];
+        src.invalid(e.into(), &keys, table.clone(), "")
     })?;
     Ok(t)
 }
@@ -452,6 +428,6 @@ fn at_least_one(src: &Source, key: &str, v: &Option<Spanned<usize>>) -> Result<O
         Some(v) if *v.get_ref() == 0 => {
             Err(src.err(v.span(), format!("`{key}` must be at least 1")))
         }
-        v => Ok(v.as_ref().map(|v| *v.get_ref())),
+        v => Ok(value(v)),
     }
 }
