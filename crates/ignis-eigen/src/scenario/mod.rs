@@ -513,7 +513,7 @@ mod tests {
             (
                 "[transition]\nmethod = \"low-pass\"\neigenfires = 20\ninject_from = 10\n",
                 "inject_from",
-                "`inject_from`",
+                "`inject_from` must be ≥ eigenfires = 20, got 10",
             ),
             (
                 "[transition]\ntheta_min = -1.0\n",

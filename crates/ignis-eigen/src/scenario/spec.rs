@@ -112,7 +112,8 @@ impl Source<'_> {
 
     /// The error for a settings type's `validate()` failure `bad`: at the scenario key the
     /// failing setting comes from (`keys`: setting name → key and its span when given),
-    /// else at `fallback`.
+    /// else at `fallback`. Settings named otherwise in the file (`e_render = 50` in a
+    /// reason) are given their key's name.
     pub(super) fn invalid(
         &self,
         bad: Invalid,
@@ -120,15 +121,19 @@ impl Source<'_> {
         fallback: Range<usize>,
         prefix: &str,
     ) -> EigenError {
+        let mut reason = bad.reason;
+        for (name, key, _) in keys.iter().filter(|(name, key, _)| name != key) {
+            reason = reason.replace(&format!("{name} ="), &format!("{key} ="));
+        }
         match keys.iter().find(|(name, _, _)| *name == bad.name) {
             Some((_, key, Some(span))) => {
-                self.err(span.clone(), format!("{prefix}`{key}` {}", bad.reason))
+                self.err(span.clone(), format!("{prefix}`{key}` {reason}"))
             }
-            Some((_, key, None)) => self.err(fallback, format!("{prefix}`{key}` {}", bad.reason)),
-            None if bad.name.is_empty() => self.err(fallback, format!("{prefix}{}", bad.reason)),
+            Some((_, key, None)) => self.err(fallback, format!("{prefix}`{key}` {reason}")),
+            None if bad.name.is_empty() => self.err(fallback, format!("{prefix}{reason}")),
             None => self.err(
                 fallback,
-                format!("{prefix}invalid setting `{}`: {}", bad.name, bad.reason),
+                format!("{prefix}invalid setting `{}`: {reason}", bad.name),
             ),
         }
     }
