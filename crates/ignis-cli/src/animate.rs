@@ -337,9 +337,7 @@ pub fn animate_cmd(a: &AnimateArgs, g: &Global) -> Result<Plan> {
             a.scenario.display()
         )
     })?;
-    let bar = g.progress(sc.join_count() as u64, "finding transitions");
-    let plan = sc.plan(&db, &mut |i, _| bar.set_position(i as u64))?;
-    bar.finish_and_clear();
+    let plan = sc.plan(&db, &mut crate::eigen::Bars::new(g))?;
     let opts = a.out.write_options();
     let out_loops = opts.loop_
         && matches!(

@@ -218,17 +218,8 @@ impl TrainConfig {
     }
 }
 
-/// Progress reporting; every method has a no-op default.
-pub trait Progress {
-    /// A new stage of `len` steps (0 = unknown).
-    fn stage(&mut self, _name: &str, _len: u64) {}
-    fn inc(&mut self, _n: u64) {}
-    fn finish_stage(&mut self) {}
-}
-
-/// No progress output.
-pub struct NoProgress;
-impl Progress for NoProgress {}
+/// Progress reporting: the workspace's one progress type.
+pub use ignis_core::progress::{NoProgress, Progress};
 
 /// A clip with its source, ready to train.
 pub struct ClipInput<'a> {

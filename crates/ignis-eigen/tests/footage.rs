@@ -382,7 +382,7 @@ fn morph_join_between_two_clips_measured_on_the_written_frames() {
         )
         .unwrap();
         let s = Scenario::from_file(&file).unwrap();
-        let plan = s.plan(&db, &mut |_, _| {}).unwrap();
+        let plan = s.plan(&db, &mut NoProgress).unwrap();
         let mut out = Vec::new();
         render_plan_with(
             &db,

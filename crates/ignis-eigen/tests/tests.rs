@@ -606,7 +606,7 @@ mod animate {
 
     fn render(sc: &Scenario) -> (ignis_eigen::scenario::Plan, Vec<RgbaFrame>) {
         let db = EigenfireDb::open(&sc.database).unwrap();
-        let plan = sc.plan(&db, &mut |_, _| {}).unwrap();
+        let plan = sc.plan(&db, &mut NoProgress).unwrap();
         let mut frames = Vec::new();
         render_plan(
             &db,
@@ -693,11 +693,20 @@ mod animate {
         );
         let sc = Scenario::from_file(&p).unwrap();
         let db = EigenfireDb::open(&sc.database).unwrap();
-        let plan = sc.plan(&db, &mut |_, _| {}).unwrap();
+        let plan = sc.plan(&db, &mut NoProgress).unwrap();
         for j in &plan.joins {
             assert_eq!(j.join.method, "low-pass");
             assert_eq!(j.join.trim_t1 + j.join.trim_t2, 1);
         }
+    }
+
+    #[test]
+    fn plan_reports_one_progress_step_per_join() {
+        let sc = Scenario::from_file(&scenario("progress.toml", MOTIONS)).unwrap();
+        let db = EigenfireDb::open(&sc.database).unwrap();
+        let mut p = ignis_core::progress::CountingProgress::default();
+        sc.plan(&db, &mut p).unwrap();
+        assert_eq!(p.stages, vec![("finding transitions".to_string(), 3, 3)]);
     }
 
     #[test]
@@ -773,7 +782,7 @@ mod animate {
             let p = scenario(&format!("bad{i}.toml"), body);
             let e = Scenario::from_file(&p).and_then(|sc| {
                 let db = EigenfireDb::open(&sc.database)?;
-                sc.plan(&db, &mut |_, _| {}).map(|_| ())
+                sc.plan(&db, &mut NoProgress).map(|_| ())
             });
             let e = e.unwrap_err().to_string();
             let want = format!("{}:{line}:", p.display());
@@ -827,7 +836,7 @@ mod animate {
         let run = |name: &str, text: &str| {
             let sc = Scenario::from_file(&scenario(name, text)).unwrap();
             let db = EigenfireDb::open(&sc.database).unwrap();
-            let plan = sc.plan(&db, &mut |_, _| {}).unwrap();
+            let plan = sc.plan(&db, &mut NoProgress).unwrap();
             let mut frames = Vec::new();
             render_plan(
                 &db,

@@ -412,7 +412,7 @@ pub fn toml_targets(fx: &Fixtures) -> Vec<Arc<dyn Target>> {
                 Ok(s) => {
                     // Plan against the fixture database (the scenario names it).
                     if let Ok(d) = ignis_eigen::EigenfireDb::open(&db) {
-                        let _ = s.plan(&d, &mut |_, _| {});
+                        let _ = s.plan(&d, &mut ignis_core::progress::NoProgress);
                     }
                     Outcome::Ok
                 }

@@ -17,7 +17,8 @@
 use std::ops::Range;
 
 use super::{
-    bad, join_seam, FrameRef, Join, RecognitionParams, Result, TransitionError, WeightSpace,
+    bad, join_seam, FrameRef, Join, RecognitionParams, Result, Transition, TransitionError,
+    WeightSpace,
 };
 
 /// Direct Bridging from T1 to T2 with `steps` (N) frames; `None` = automatic N.
@@ -34,8 +35,8 @@ pub fn direct_bridging(
     let e = rec.e_detect(space);
     let (alpha, beta) = (t1.end - 1, t2.start);
     let gap = space.distance(alpha, beta, e);
+    Transition::DirectBridging { steps }.validate()?;
     let n = match steps {
-        Some(0) => return Err(bad("steps", "must be at least 1")),
         Some(n) => n,
         None => {
             let med = space.source_median(e);

@@ -50,7 +50,7 @@ use std::ops::Range;
 
 use super::bridging::excluded_frames;
 use super::{
-    bad, join_seam, FrameRef, Join, RecognitionParams, Result, TransitionError, WeightSpace,
+    join_seam, FrameRef, Join, RecognitionParams, Result, Transition, TransitionError, WeightSpace,
 };
 
 /// End Growing Connection from T1 to T2 with at most `max_steps` (N) new frames.
@@ -64,12 +64,7 @@ pub fn end_growing(
     space.check_range("T1", &t1)?;
     space.check_range("T2", &t2)?;
     rec.validate()?;
-    if max_steps < 2 {
-        return Err(bad(
-            "max_steps",
-            format!("must be at least 2 (one frame per side per step), got {max_steps}"),
-        ));
-    }
+    Transition::EndGrowing { max_steps }.validate()?;
     let e = rec.e_detect(space);
     let (alpha, beta) = (t1.end - 1, t2.start);
     let excluded = excluded_frames(space, &t1, &t2, rec.reject_near, false);

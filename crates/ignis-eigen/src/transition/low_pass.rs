@@ -56,6 +56,42 @@ impl Default for LowPassParams {
     }
 }
 
+impl LowPassParams {
+    /// Checks the settings: a kernel of at least 2 finite taps not summing to 0,
+    /// `e_render` ≥ 1 and `inject_from` ≥ `e_render`.
+    pub fn validate(&self) -> Result<()> {
+        let l = self.kernel.len();
+        if l < 2 {
+            return Err(bad(
+                "kernel",
+                format!("needs at least 2 taps to make a morph, got {l}"),
+            ));
+        }
+        if self.kernel.iter().any(|k| !k.is_finite()) {
+            return Err(bad("kernel", "contains NaN or infinity"));
+        }
+        let sum: f64 = self.kernel.iter().map(|&k| k as f64).sum();
+        if sum.abs() < 1e-6 {
+            return Err(bad(
+                "kernel",
+                format!("sums to {sum}; it must not sum to 0 (it is normalised by its sum)"),
+            ));
+        }
+        if self.e_render == 0 {
+            return Err(bad("e_render", "must be at least 1"));
+        }
+        if let Some(k) = self.inject_from {
+            if k < self.e_render {
+                return Err(bad(
+                    "inject_from",
+                    format!("must be ≥ e_render = {}, got {k}", self.e_render),
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
 /// Low-pass transition from T1 to T2: `kernel.len() - 1` synthetic weight vectors.
 pub fn low_pass(
     space: &WeightSpace,
@@ -66,36 +102,11 @@ pub fn low_pass(
 ) -> Result<Join> {
     space.check_range("T1", &t1)?;
     space.check_range("T2", &t2)?;
+    p.validate()?;
     let l = p.kernel.len();
-    if l < 2 {
-        return Err(bad(
-            "kernel",
-            format!("needs at least 2 taps to make a morph, got {l}"),
-        ));
-    }
-    if p.kernel.iter().any(|k| !k.is_finite()) {
-        return Err(bad("kernel", "contains NaN or infinity"));
-    }
-    let sum: f64 = p.kernel.iter().map(|&k| k as f64).sum();
-    if sum.abs() < 1e-6 {
-        return Err(bad(
-            "kernel",
-            format!("sums to {sum}; it must not sum to 0 (it is normalised by its sum)"),
-        ));
-    }
-    if p.e_render == 0 {
-        return Err(bad("e_render", "must be at least 1"));
-    }
     let e = space.e();
     let e_render = p.e_render.min(e);
-    if let Some(k) = p.inject_from {
-        if k < p.e_render {
-            return Err(bad(
-                "inject_from",
-                format!("must be ≥ e_render = {}, got {k}", p.e_render),
-            ));
-        }
-    }
+    let sum: f64 = p.kernel.iter().map(|&k| k as f64).sum();
     let k: Vec<f64> = p.kernel.iter().map(|&x| x as f64 / sum).collect();
     let (alpha, beta) = (t1.end - 1, t2.start);
     let n1 = t1.len() as isize;

@@ -367,7 +367,9 @@ impl RecognitionParams {
         }
     }
 
-    pub(crate) fn validate(&self) -> Result<()> {
+    /// Checks the settings: `theta_min` and `join_gap` finite and > 0 when given,
+    /// `theta_quantile` in [0, 1].
+    pub fn validate(&self) -> Result<()> {
         if let Some(t) = self.theta_min {
             if !(t > 0.0 && t.is_finite()) {
                 return Err(bad(
@@ -435,6 +437,25 @@ pub enum Transition {
     EndGrowing { max_steps: usize },
     /// End Growing (N = 40), then Direct Bridging, then low-pass; the smallest worst jump wins.
     Auto,
+}
+
+impl Transition {
+    /// Checks the method's own settings (the recognition settings are
+    /// [`RecognitionParams::validate`]'s): Direct Bridging's `steps` ≥ 1, End Growing's
+    /// N ≥ 2, and [`LowPassParams::validate`].
+    pub fn validate(&self) -> Result<()> {
+        match self {
+            Transition::LowPass(p) => p.validate(),
+            Transition::DirectBridging { steps: Some(0) } => {
+                Err(bad("steps", "must be at least 1"))
+            }
+            Transition::EndGrowing { max_steps } if *max_steps < 2 => Err(bad(
+                "max_steps",
+                format!("must be at least 2 (one frame per side per step), got {max_steps}"),
+            )),
+            _ => Ok(()),
+        }
+    }
 }
 
 /// A frame of a transition.

@@ -1,0 +1,334 @@
+//! Planning a scenario against its database: names resolved (clips, ranges, Eigenfire
+//! indices), every join computed, the frame list assembled and measured. The settings
+//! were checked when the file was read; what can fail here is what only the database
+//! knows, reported at the key in the file it comes from.
+
+use std::collections::BTreeMap;
+use std::ops::Range;
+
+use ignis_core::progress::Progress;
+
+use super::{
+    morph_join, JoinReport, JoinSpec, MorphRun, MotionSpec, Plan, PlanFrame, Scenario,
+    AUTO_MORPH_ABOVE,
+};
+use crate::animate;
+use crate::db::{ClipEntry, EigenfireDb};
+use crate::error::{EigenError, Result};
+use crate::transition::{self, FrameRef, Join, RecognitionParams, TransitionError, WeightSpace};
+
+/// A motion resolved against the database.
+struct MotionPlan {
+    /// Its database rows.
+    rows: Range<usize>,
+    /// Its §5.2 edits `(Eigenfire index, weight)`, indices within the usable Eigenfires.
+    edits: Vec<(usize, f32)>,
+}
+
+impl Scenario {
+    /// Checks the scenario against `db` and computes every join: the frame list to render.
+    /// Reports one progress stage, "finding transitions", of one step per join.
+    pub fn plan(&self, db: &EigenfireDb, progress: &mut dyn Progress) -> Result<Plan> {
+        let usable = db.usable_components().max(1);
+        let e_detect = self.e_detect.unwrap_or(db.manifest().e_detect);
+        let e_render_req = self.e_render.unwrap_or(db.manifest().e_render);
+        let motions = self.resolve_motions(db, usable)?;
+        let (w, k, spans) = animate::weight_space(db)?;
+        let space = WeightSpace::new(w, k, spans)
+            .map_err(|e| EigenError::bad("database", e.to_string()))?;
+        let n_joins = self.joins.len();
+        progress.stage("finding transitions", n_joins as u64);
+        let mut joins = Vec::with_capacity(n_joins);
+        for i in 0..n_joins {
+            joins.push(self.plan_join(&space, &motions, i, e_detect)?);
+            progress.inc(1);
+        }
+        progress.finish_stage();
+        let (frames, morphs) = self.frame_list(&motions, &joins)?;
+        let e = RecognitionParams {
+            e_detect,
+            ..Default::default()
+        }
+        .e_detect(&space);
+        let (wrap_seam, worst_step) = smoothness(&space, &frames, e);
+        Ok(Plan {
+            frames,
+            morphs,
+            joins,
+            wrap_seam,
+            worst_step,
+            e_render: e_render_req.clamp(1, usable),
+            e_render_requested: e_render_req,
+            e_detect: e,
+            loops: self.loops,
+        })
+    }
+
+    /// Every motion's database rows and weight edits.
+    fn resolve_motions(
+        &self,
+        db: &EigenfireDb,
+        usable: usize,
+    ) -> Result<BTreeMap<&str, MotionPlan>> {
+        self.motions
+            .iter()
+            .map(|(name, m)| Ok((name.as_str(), self.resolve_motion(db, name, m, usable)?)))
+            .collect()
+    }
+
+    /// Motion `name`: its clip, its range of source frames as database rows, and its edits
+    /// checked against the `usable` Eigenfires.
+    fn resolve_motion(
+        &self,
+        db: &EigenfireDb,
+        name: &str,
+        m: &MotionSpec,
+        usable: usize,
+    ) -> Result<MotionPlan> {
+        let clip = self.clip(db, name, m)?;
+        let start = m.start.as_ref().map_or(clip.start, |s| s.value);
+        let end = m.end.as_ref().map_or(clip.end, |s| s.value);
+        let last = clip.start + clip.frames.saturating_sub(1) * clip.stride;
+        if let Some(e) = &m.end {
+            if end > clip.end {
+                return Err(self.err(
+                    e.loc,
+                    format!(
+                        "motion `{name}`: end = {end} is past the end of clip `{}` (trained on frames {}..{})",
+                        clip.name, clip.start, clip.end
+                    ),
+                ));
+            }
+        }
+        if start >= end {
+            let loc = m
+                .start
+                .as_ref()
+                .map(|s| s.loc)
+                .or(m.end.as_ref().map(|s| s.loc))
+                .unwrap_or(m.clip.loc);
+            return Err(self.err(
+                loc,
+                format!("motion `{name}`: the range {start}..{end} is empty"),
+            ));
+        }
+        let rows = animate::clip_rows(db, &clip.name, start..end).map_err(|e| {
+            self.err(
+                m.start.as_ref().map_or(m.clip.loc, |s| s.loc),
+                format!(
+                    "motion `{name}`: {e} (clip `{}` has training frames {}..={last} every {})",
+                    clip.name, clip.start, clip.stride
+                ),
+            )
+        })?;
+        let edits = match &m.edits {
+            Some(w) => {
+                if let Some((i, _)) = w.value.iter().find(|(i, _)| *i >= usable) {
+                    return Err(self.err(
+                        w.loc,
+                        format!(
+                            "motion `{name}`: Eigenfire index {i} is out of range: the database has {usable} usable Eigenfires (0..{usable})"
+                        ),
+                    ));
+                }
+                w.value.clone()
+            }
+            None => Vec::new(),
+        };
+        Ok(MotionPlan { rows, edits })
+    }
+
+    /// The clip motion `name` is cut from.
+    fn clip<'d>(&self, db: &'d EigenfireDb, name: &str, m: &MotionSpec) -> Result<&'d ClipEntry> {
+        db.clips()
+            .iter()
+            .find(|c| c.name == m.clip.value)
+            .ok_or_else(|| {
+                let names: Vec<&str> = db.clips().iter().map(|c| c.name.as_str()).collect();
+                self.err(
+                    m.clip.loc,
+                    format!(
+                        "motion `{name}`: unknown clip `{}`; database {} has {}",
+                        m.clip.value,
+                        db.path().display(),
+                        names.join(", ")
+                    ),
+                )
+            })
+    }
+
+    /// Join `i`, from the `i`-th motion of the sequence to the next (wrapping).
+    fn plan_join(
+        &self,
+        space: &WeightSpace,
+        motions: &BTreeMap<&str, MotionPlan>,
+        i: usize,
+        e_detect: usize,
+    ) -> Result<JoinReport> {
+        let seq = &self.sequence.value;
+        let (a, b) = (&seq[i].value, &seq[(i + 1) % seq.len()].value);
+        let spec = &self.joins[i];
+        let rec = RecognitionParams {
+            e_detect,
+            ..spec.rec.clone()
+        };
+        let (ra, rb) = (
+            motions[a.as_str()].rows.clone(),
+            motions[b.as_str()].rows.clone(),
+        );
+        let e = rec.e_detect(space);
+        let join = choose_join(space, &ra, &rb, spec, &rec, e).map_err(|e| {
+            let why = match &e {
+                TransitionError::NoPath { .. } => {
+                    format!("{e}; try a larger `steps`, another method, or method = \"auto\"")
+                }
+                _ => e.to_string(),
+            };
+            self.err(spec.loc, format!("join {} ({a} → {b}): {why}", i + 1))
+        })?;
+        let plain = transition::join_seam(space, &ra, &rb, &[], (0, 0), e);
+        Ok(JoinReport {
+            from: a.clone(),
+            to: b.clone(),
+            join,
+            plain_cut: plain,
+        })
+    }
+
+    /// The frame list: each motion's body (less the frames its joins replace), then the
+    /// join to the next motion, its frames' edits ramping from one motion's to the next's.
+    fn frame_list(
+        &self,
+        motions: &BTreeMap<&str, MotionPlan>,
+        joins: &[JoinReport],
+    ) -> Result<(Vec<PlanFrame>, Vec<MorphRun>)> {
+        let seq = &self.sequence.value;
+        let mut frames = Vec::new();
+        let mut morphs = Vec::new();
+        for (i, name) in seq.iter().enumerate() {
+            let m = &motions[name.value.as_str()];
+            let trim_head = if i > 0 {
+                joins[i - 1].join.trim_t2
+            } else if self.loops {
+                joins[joins.len() - 1].join.trim_t2
+            } else {
+                0
+            };
+            let trim_tail = joins.get(i).map_or(0, |j| j.join.trim_t1);
+            let start = m.rows.start + trim_head.min(m.rows.len());
+            let end = m.rows.end.saturating_sub(trim_tail).max(start);
+            let full: Vec<(usize, f32, f32)> = m.edits.iter().map(|&(k, v)| (k, v, 1.0)).collect();
+            for r in start..end {
+                frames.push(PlanFrame {
+                    source: FrameRef::Db(r),
+                    edits: full.clone(),
+                });
+            }
+            if let Some(j) = joins.get(i) {
+                let next = &motions[seq[(i + 1) % seq.len()].value.as_str()];
+                let n = j.join.frames.len();
+                if j.join.method == "morph" && n > 0 {
+                    morphs.push(MorphRun {
+                        start: frames.len(),
+                        len: n,
+                    });
+                }
+                for (t, f) in j.join.frames.iter().enumerate() {
+                    let s = (t + 1) as f32 / (n + 1) as f32;
+                    let mut edits: Vec<(usize, f32, f32)> =
+                        m.edits.iter().map(|&(k, v)| (k, v, 1.0 - s)).collect();
+                    edits.extend(next.edits.iter().map(|&(k, v)| (k, v, s)));
+                    frames.push(PlanFrame {
+                        source: f.clone(),
+                        edits,
+                    });
+                }
+            }
+        }
+        if frames.is_empty() {
+            return Err(self.err(
+                self.sequence.loc,
+                "the transitions replaced every frame of the motions; use longer ranges",
+            ));
+        }
+        if morphs.iter().any(|m| m.len >= frames.len()) {
+            return Err(self.err(
+                self.sequence.loc,
+                "a morph join has no real frame to start or end from; use longer ranges",
+            ));
+        }
+        Ok((frames, morphs))
+    }
+}
+
+/// The join from the end of `ra` to the start of `rb` by `spec`'s method. `auto` keeps a
+/// real-frame path when its seam ratio is within [`AUTO_MORPH_ABOVE`] (or the morph is no
+/// better), else the morph, saying why; `method = "morph"` always morphs.
+fn choose_join(
+    space: &WeightSpace,
+    ra: &Range<usize>,
+    rb: &Range<usize>,
+    spec: &JoinSpec,
+    rec: &RecognitionParams,
+    e: usize,
+) -> Result<Join, TransitionError> {
+    let morph = |reason: &str| {
+        morph_join(
+            space,
+            ra,
+            rb,
+            spec.morph.as_ref().and_then(|m| m.frames),
+            e,
+            reason,
+        )
+    };
+    match &spec.morph {
+        Some(m) if m.forced => return Ok(morph("method = \"morph\"")),
+        None => {
+            return transition::transition(space, ra.clone(), rb.clone(), &spec.transition, rec)
+        }
+        Some(_) => {}
+    }
+    match transition::transition(space, ra.clone(), rb.clone(), &spec.transition, rec) {
+        Ok(j) if j.seam_ratio > AUTO_MORPH_ABOVE => {
+            let mj = morph("");
+            if mj.seam_ratio < j.seam_ratio {
+                let why = format!(
+                    "auto: {} gave seam ratio {:.2} (> {AUTO_MORPH_ABOVE}), the morph {:.2}; {}",
+                    j.method, j.seam_ratio, mj.seam_ratio, mj.why
+                );
+                Ok(Join { why, ..mj })
+            } else {
+                Ok(j)
+            }
+        }
+        Err(TransitionError::NoPath { .. }) => {
+            let mj = morph("");
+            let why = format!("auto: no real-frame path; {}", mj.why);
+            Ok(Join { why, ..mj })
+        }
+        r => r,
+    }
+}
+
+/// Seam ratios of the wrap (last frame → first) and of the largest step between
+/// consecutive frames, on the first `e` weights.
+fn smoothness(space: &WeightSpace, frames: &[PlanFrame], e: usize) -> (f64, f64) {
+    let vec_of = |f: &PlanFrame| -> Vec<f32> {
+        let v = match &f.source {
+            FrameRef::Db(r) => space.frame(*r),
+            FrameRef::Weights(w) => w.as_slice(),
+        };
+        v[..e.min(v.len())].to_vec()
+    };
+    let median = space.source_median(e);
+    let wrap = transition::seam_ratio(
+        &[vec_of(&frames[frames.len() - 1]), vec_of(&frames[0])],
+        median,
+    );
+    let worst = frames
+        .windows(2)
+        .map(|p| transition::seam_ratio(&[vec_of(&p[0]), vec_of(&p[1])], median))
+        .fold(0.0, f64::max);
+    (wrap, worst)
+}
