@@ -226,6 +226,7 @@ pub fn figures(g: &Global, quick: bool) -> Result<serde_json::Value> {
         },
         ..Default::default()
     };
+    let c0 = crate::process_cpu_ms();
     let t = Instant::now();
     let mut w = ignis_media::create(&path, frames[0].size(), &opts)?;
     for f in &frames {
@@ -233,6 +234,14 @@ pub fn figures(g: &Global, quick: bool) -> Result<serde_json::Value> {
     }
     w.finish()?;
     let flipbook_s = t.elapsed().as_secs_f64();
+    // CPU time of all threads: on a busy machine wall time overstates the cost.
+    let flipbook_cpu_s = match (c0, crate::process_cpu_ms()) {
+        (Some(a), Some(b)) => Some(((b - a) / 1000.0 * 1000.0).round() / 1000.0),
+        _ => None,
+    };
+    let load = std::fs::read_to_string("/proc/loadavg")
+        .ok()
+        .and_then(|l| l.split_whitespace().next()?.parse::<f64>().ok());
     let flow: Vec<serde_json::Value> = ignis_flow::bench::figures(quick, &crate::process_cpu_ms)?
         .iter()
         .filter(|t| t.name.starts_with("flow_"))
@@ -260,6 +269,8 @@ pub fn figures(g: &Global, quick: bool) -> Result<serde_json::Value> {
         "blend": rows,
         "skipped": skipped,
         "flipbook_64x256_mv_s": (flipbook_s * 1000.0).round() / 1000.0,
+        "flipbook_64x256_mv_cpu_s": flipbook_cpu_s,
+        "load_average_1min": load,
         "flipbook_goal_s": GOAL_FLIPBOOK_S,
         "flipbook_goal_met": flipbook_s <= GOAL_FLIPBOOK_S,
         "flow": flow,

@@ -743,9 +743,9 @@ impl Sink for FlipbookSink {
                 green: if self.opts.engine.conventions().v_up { "up" } else { "down" }.into(),
                 color_space: "linear".into(),
                 direction: if self.loop_ {
-                    "forward: frame k to k+1 at frame k's pixels; the last frame of each loop to its first"
+                    "velocity at frame k's pixels: the mean of the motion k to k+1 and the reversed motion k to k-1, wrapping within each loop"
                 } else {
-                    "velocity at frame k's pixels: the mean of the motion k to k+1 and the reversed motion k to k-1 (one side only at the ends of a one-shot)"
+                    "velocity at frame k's pixels: the mean of the motion k to k+1 and the reversed motion k to k-1 (one side only at the first and last frame)"
                 }
                 .into(),
             });
