@@ -1170,6 +1170,43 @@ mod export {
             "different loops",
         );
         assert!(!c.exists());
+        // Variants are whole loops of a flipbook: no chunks, no other formats.
+        let v = dir.path().join("w.png");
+        let vs = v.to_str().unwrap();
+        let args = [
+            "-q", "volume", "render", "--preset", "candle", "--size", "32x32",
+        ];
+        let with = |extra: &[&str]| {
+            let mut a = args.to_vec();
+            a.extend_from_slice(extra);
+            ignis(&a)
+        };
+        assert_fails(
+            &with(&[
+                "--frames",
+                "8",
+                "--variants",
+                "2",
+                "--chunk",
+                "0..4",
+                "-o",
+                vs,
+            ]),
+            "--chunk",
+        );
+        let mp4 = dir.path().join("w.mp4");
+        assert_fails(
+            &with(&[
+                "--frames",
+                "8",
+                "--variants",
+                "2",
+                "-o",
+                mp4.to_str().unwrap(),
+            ]),
+            "flipbooks",
+        );
+        assert!(!v.exists() && !mp4.exists());
     }
 
     #[test]
