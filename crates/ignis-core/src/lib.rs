@@ -10,15 +10,18 @@
 //! - [`tempfiles`]: names of writers' hidden temporaries and removal of stale ones.
 //! - [`atomic`]: the one atomic file write (temporary beside the target, sync, rename).
 //! - [`progress`]: the one progress-reporting trait the libraries take.
+//! - [`golden`]: golden float images for tests (stored frames compared within a tolerance).
 //!
 //! **Invariant:** this crate knows no file formats (it only names, writes atomically and
-//! removes the writers' temporaries: [`tempfiles`], [`atomic`]), codecs, clap or GPUs. Pixel data is
+//! removes the writers' temporaries: [`tempfiles`], [`atomic`]; the one exception is the
+//! raw float layout of the tests' goldens, [`golden`]), codecs, clap or GPUs. Pixel data is
 //! linear light everywhere; only `ignis-media` converts to 8-bit sRGB.
 
 pub mod atomic;
 pub mod colour;
 pub mod error;
 pub mod frame;
+pub mod golden;
 pub mod loopq;
 pub mod palette;
 pub mod post;

@@ -16,6 +16,22 @@
 //! - The GPU interpolates texture coordinates across triangles; the CPU renderer instead
 //!   inverts each cell's trilinear map (Newton), which is the exact inverse of the forward
 //!   map [`Cell::forward`].
+//!
+//! Inverting a cell's map (world point → local coordinates), plain first:
+//! - [`Cell::inverse`]: Newton's method from a guess; the public one.
+//! - `inverse_fast`: chord steps with the centre's inverse Jacobian, then Newton; the
+//!   renderer's reference path (`render/reference.rs`).
+//! - `inverse_certified` (one point from a guess) and `inverse_certified_lanes` (eight
+//!   points from the centre; `inverse_chord_certified` is one point with the same bits,
+//!   `inverse_certified_lanes_avx2` the same bits with AVX2 intrinsics): chord steps
+//!   accepted only with a proven error bound; the fast paths' inverse.
+//! - `inverse_tracked`: chord steps with the Jacobian of a ray's last Newton solve, else
+//!   Newton; where the certified one gives no answer.
+//!
+//! All but [`Cell::inverse`] are the renderer's (crate-private). The tests check them
+//! against an `f64` Newton inverse (`inverse_undoes_forward`,
+//! `certified_inverse_error_bound`) and the AVX2 lanes against the portable ones, bit for
+//! bit.
 
 use crate::error::{Result, VolumeError};
 use crate::spline::BSpline;
@@ -23,7 +39,7 @@ use crate::spline::BSpline;
 pub(crate) type V3 = [f32; 3];
 
 /// Points per call of [`Cell::inverse_certified_lanes`].
-pub const CHORD_LANES: usize = 8;
+pub(crate) const CHORD_LANES: usize = 8;
 
 #[inline(always)]
 pub(crate) fn sub(a: V3, b: V3) -> V3 {
@@ -109,7 +125,7 @@ struct Certificate {
 
 /// See [`Cell::affine_inverse`]: `l ≈ ½ + M (p − centre)` within `err` per component.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct AffineInverse {
+pub(crate) struct AffineInverse {
     /// Rows of `M`, the inverse Jacobian at the cell centre.
     pub m: [[f64; 3]; 3],
     /// World position of the cell centre.
@@ -122,7 +138,7 @@ pub struct AffineInverse {
 /// Jacobian of its last Newton solve, as columns padded to four lanes (`None` before the
 /// first solve or after a failed one).
 #[derive(Clone, Copy, Debug, Default)]
-pub struct Track {
+pub(crate) struct Track {
     m: Option<[[f32; 4]; 3]>,
 }
 
@@ -297,7 +313,7 @@ impl Cell {
     /// `½ |I − M J(c)| 1 + ¼ (|M w4| + |M w5| + |M w6|) + ⅛ |M w7|` (all in `f64` from the
     /// cell's exact `f32` coefficients, rounded up). `None` for a cell without a
     /// [`Certificate`]: not nearly affine, the bound would be of no use.
-    pub fn affine_inverse(&self) -> Option<AffineInverse> {
+    pub(crate) fn affine_inverse(&self) -> Option<AffineInverse> {
         self.cert.as_ref()?;
         let k = self.k.map(|v| v.map(|x| x as f64));
         let comb = |w: &[(usize, f64)]| -> [f64; 3] {
@@ -348,7 +364,7 @@ impl Cell {
 
     /// Half-margin of the box `[−CERT_BOX, 1 + CERT_BOX]³` (local coordinates) on which
     /// the [`Certificate`] bounds the chord iteration.
-    pub const CERT_BOX: f32 = 0.25;
+    const CERT_BOX: f32 = 0.25;
 
     /// Largest diagonal entry of `(I − K)⁻¹` for which a cell gets a [`Certificate`]
     /// (beyond it the chord steps would rarely be accepted anyway).
@@ -356,7 +372,8 @@ impl Cell {
 
     /// Whether the cell has a [`Certificate`] (nearly affine: [`Cell::inverse_certified`]
     /// can answer).
-    pub fn certified(&self) -> bool {
+    #[cfg(test)]
+    fn certified(&self) -> bool {
         self.cert.is_some()
     }
 
@@ -386,7 +403,7 @@ impl Cell {
     /// texture space (the test `certified_inverse_error_bound` checks the total against
     /// an `f64` inverse).
     #[inline(always)]
-    pub fn inverse_certified(
+    pub(crate) fn inverse_certified(
         &self,
         p: V3,
         guess: V3,
@@ -452,7 +469,7 @@ impl Cell {
     /// coordinates are then meaningless). A lane's result depends on its own point only,
     /// so [`Cell::inverse_chord_certified`] (one point) gives the same bits.
     #[inline(always)]
-    pub fn inverse_certified_lanes(
+    pub(crate) fn inverse_certified_lanes(
         &self,
         p: &[[f32; CHORD_LANES]; 3],
         tol: V3,
@@ -528,7 +545,7 @@ impl Cell {
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
     #[inline]
-    pub unsafe fn inverse_certified_lanes_avx2(
+    pub(crate) unsafe fn inverse_certified_lanes_avx2(
         &self,
         p: &[[f32; CHORD_LANES]; 3],
         tol: V3,
@@ -608,7 +625,7 @@ impl Cell {
 
     /// [`Cell::inverse_certified_lanes`] for one point: within `tol` of the exact inverse
     /// (proven) or `None`. The same bits as the lanes version gives for `p`.
-    pub fn inverse_chord_certified(&self, p: V3, tol: V3) -> Option<V3> {
+    pub(crate) fn inverse_chord_certified(&self, p: V3, tol: V3) -> Option<V3> {
         let (l, ok) = self.inverse_certified_lanes(
             &[
                 [p[0]; CHORD_LANES],
@@ -640,7 +657,7 @@ impl Cell {
     /// Jacobian, exact in one step for an affine cell, cheap for nearly affine ones), and
     /// falls back to Newton's method.
     #[inline(always)]
-    pub fn inverse_fast(&self, p: V3, guess: V3) -> Option<V3> {
+    pub(crate) fn inverse_fast(&self, p: V3, guess: V3) -> Option<V3> {
         let mut l = guess;
         let m = &self.jinv;
         for _ in 0..4 {
@@ -667,10 +684,10 @@ impl Cell {
     /// second-order Taylor remainder of the trilinear map, `|R| ≤ nonlin · ‖Δ‖₁²` (`Δ` the
     /// distance to the root, ≈ `δ`), so `|error| ≤ ‖J(l)⁻¹‖_F · nonlin · δ²`. For the
     /// nearly affine cells of a gently bent fire `nonlin` is small and the first step is
-    /// already accurate, which saves the confirming second step (about a third of the
-    /// inverse's cost on the Table 1 scene).
+    /// already accurate, which saves the confirming second step.
     #[inline(always)]
-    pub fn inverse_predicted(&self, p: V3, guess: V3) -> Option<V3> {
+    #[cfg(test)]
+    fn inverse_predicted(&self, p: V3, guess: V3) -> Option<V3> {
         match self.newton(p, guess) {
             Ok((l, _)) => Some(l),
             Err(true) => self.inverse_fast(p, guess),
@@ -688,7 +705,7 @@ impl Cell {
     /// the steps do not shrink fast enough, Newton runs from `guess` and refreshes `m`
     /// (or clears it when it falls back to the chord-from-centre method).
     #[inline(always)]
-    pub fn inverse_tracked(&self, p: V3, guess: V3, track: &mut Track) -> Option<V3> {
+    pub(crate) fn inverse_tracked(&self, p: V3, guess: V3, track: &mut Track) -> Option<V3> {
         if let Some(mc) = &track.m {
             let p4 = [p[0], p[1], p[2], 0.0];
             let mut l = [guess[0], guess[1], guess[2], 0.0];
@@ -760,7 +777,7 @@ impl Cell {
 
     /// Acceptance threshold of the chord step in [`Cell::inverse_tracked`] (sum of |step|,
     /// local units).
-    pub const CHORD_STEP: f32 = 1e-4;
+    const CHORD_STEP: f32 = 1e-4;
 
     /// The Newton iteration of [`Cell::inverse_predicted`]: the root and the inverse
     /// Jacobian at the last iterate, or `Err(true)` when it did not settle in 6 steps
@@ -808,7 +825,7 @@ impl Cell {
     /// A first guess of the local coordinates of `p` with no history: one chord step from
     /// the centre (exact for an affine cell). Not clamped; it may lie outside the cell.
     #[inline(always)]
-    pub fn chord_guess(&self, p: V3) -> V3 {
+    pub(crate) fn chord_guess(&self, p: V3) -> V3 {
         let f = sub(p, self.centre);
         let m = &self.jinv;
         [0.5 + dot(m[0], f), 0.5 + dot(m[1], f), 0.5 + dot(m[2], f)]
@@ -817,16 +834,16 @@ impl Cell {
     /// The local-coordinate change `J(c)⁻¹ v` of a world displacement `v` at the centre
     /// (exact for an affine cell).
     #[inline(always)]
-    pub fn local_direction(&self, v: V3) -> V3 {
+    pub(crate) fn local_direction(&self, v: V3) -> V3 {
         let m = &self.jinv;
         [dot(m[0], v), dot(m[1], v), dot(m[2], v)]
     }
 
     /// Acceptance threshold of [`Cell::inverse_predicted`] (sum of |step| in local units).
-    pub const FAST_STEP: f32 = 1e-3;
+    const FAST_STEP: f32 = 1e-3;
 
     /// Error bound (local units) below which [`Cell::inverse_predicted`] accepts a step.
-    pub const NEWTON_TOL: f32 = 1e-5;
+    const NEWTON_TOL: f32 = 1e-5;
 
     /// World position of local coordinates `(a, b, s)`.
     #[inline(always)]
@@ -908,6 +925,47 @@ pub struct Lattice {
     pub max: V3,
 }
 
+/// The four corner curves of the lattice around `curve` (§3.1): per control point, a
+/// square of side `2r` in the plane normal to the curve's velocity, aligned to its
+/// parallel-transported normal; its corners become the corner curves' control points.
+fn corner_curves(curve: &BSpline) -> Result<Vec<BSpline>> {
+    let pts = curve.points();
+    let n = pts.len();
+    // frames at t = i/(n-1), parallel transported
+    let mut corner_pts: [Vec<[f32; 4]>; 4] = Default::default();
+    let mut prev_n: Option<V3> = None;
+    let mut prev_v: V3 = [0.0, 0.0, 1.0];
+    for (i, p) in pts.iter().enumerate() {
+        let t = i as f32 / (n - 1) as f32;
+        let d = curve.derivative(t);
+        let v = normalize([d[0], d[1], d[2]]).unwrap_or(prev_v);
+        let nrm = match prev_n {
+            None => {
+                // world x projected onto the plane normal to v (y if v ∥ x)
+                let r = if v[0].abs() < 0.9 {
+                    [1.0, 0.0, 0.0]
+                } else {
+                    [0.0, 1.0, 0.0]
+                };
+                normalize(sub(r, scale(v, dot(r, v)))).unwrap_or([1.0, 0.0, 0.0])
+            }
+            Some(pn) => normalize(sub(pn, scale(v, dot(pn, v)))).unwrap_or(pn),
+        };
+        let bin = normalize(cross(v, nrm)).unwrap_or([0.0, 1.0, 0.0]);
+        prev_n = Some(nrm);
+        prev_v = v;
+        let r = p[3];
+        for (k, xy) in CORNER_XY.iter().enumerate() {
+            let off = add(scale(nrm, xy[0] * r), scale(bin, xy[1] * r));
+            corner_pts[k].push([p[0] + off[0], p[1] + off[1], p[2] + off[2], r]);
+        }
+    }
+    corner_pts
+        .into_iter()
+        .map(|cp| BSpline::new(cp, curve.degree()))
+        .collect()
+}
+
 impl Lattice {
     /// Builds the lattice of §3.1 around `curve` with `resolution` levels.
     pub fn build(curve: &BSpline, resolution: usize) -> Result<Lattice> {
@@ -917,41 +975,7 @@ impl Lattice {
                 format!("{resolution}; use 2 to 4096"),
             ));
         }
-        let pts = curve.points();
-        let n = pts.len();
-        // frames at t = i/(n-1), parallel transported
-        let mut corner_pts: [Vec<[f32; 4]>; 4] = Default::default();
-        let mut prev_n: Option<V3> = None;
-        let mut prev_v: V3 = [0.0, 0.0, 1.0];
-        for (i, p) in pts.iter().enumerate() {
-            let t = i as f32 / (n - 1) as f32;
-            let d = curve.derivative(t);
-            let v = normalize([d[0], d[1], d[2]]).unwrap_or(prev_v);
-            let nrm = match prev_n {
-                None => {
-                    // world x projected onto the plane normal to v (y if v ∥ x)
-                    let r = if v[0].abs() < 0.9 {
-                        [1.0, 0.0, 0.0]
-                    } else {
-                        [0.0, 1.0, 0.0]
-                    };
-                    normalize(sub(r, scale(v, dot(r, v)))).unwrap_or([1.0, 0.0, 0.0])
-                }
-                Some(pn) => normalize(sub(pn, scale(v, dot(pn, v)))).unwrap_or(pn),
-            };
-            let bin = normalize(cross(v, nrm)).unwrap_or([0.0, 1.0, 0.0]);
-            prev_n = Some(nrm);
-            prev_v = v;
-            let r = p[3];
-            for (k, xy) in CORNER_XY.iter().enumerate() {
-                let off = add(scale(nrm, xy[0] * r), scale(bin, xy[1] * r));
-                corner_pts[k].push([p[0] + off[0], p[1] + off[1], p[2] + off[2], r]);
-            }
-        }
-        let corners: Vec<BSpline> = corner_pts
-            .into_iter()
-            .map(|cp| BSpline::new(cp, curve.degree()))
-            .collect::<Result<_>>()?;
+        let corners = corner_curves(curve)?;
         // arc-length table of the centre curve
         let dense = (resolution * 16).max(256);
         let mut ts = Vec::with_capacity(dense + 1);

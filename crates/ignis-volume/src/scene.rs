@@ -515,6 +515,7 @@ impl FireScene {
         Ok(a)
     }
 
+    // (Long: data, one match arm per preset.)
     /// The built-in scenes.
     pub fn preset(p: Preset) -> FireScene {
         let mut s = FireScene::empty();

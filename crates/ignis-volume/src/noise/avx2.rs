@@ -146,7 +146,7 @@ unsafe fn dot3w(g: &[[f32; 8]; 3], d: [__m256; 3]) -> __m256 {
 /// The CPU must support AVX2.
 #[target_feature(enable = "avx2")]
 #[inline]
-pub unsafe fn perlin4_cached(p: &[Lanes; 4], cache: &mut NoiseCache) -> Lanes {
+pub(crate) unsafe fn perlin4_cached(p: &[Lanes; 4], cache: &mut NoiseCache) -> Lanes {
     let (xi, x) = split(load(&p[0]));
     let (yi, y) = split(load(&p[1]));
     let (zi, z) = split(load(&p[2]));
@@ -247,7 +247,7 @@ unsafe fn tree16(c: impl Fn(usize) -> __m256, [fu, fv, fs, ft]: [__m256; 4]) -> 
 /// The CPU must support AVX2.
 #[target_feature(enable = "avx2")]
 #[inline]
-pub unsafe fn perlin3_cached(p: &[Lanes; 3], cache: &mut NoiseCache) -> Lanes {
+pub(crate) unsafe fn perlin3_cached(p: &[Lanes; 3], cache: &mut NoiseCache) -> Lanes {
     let (xi, x) = split(load(&p[0]));
     let (yi, y) = split(load(&p[1]));
     let (zi, z) = split(load(&p[2]));
@@ -303,7 +303,11 @@ pub unsafe fn perlin3_cached(p: &[Lanes; 3], cache: &mut NoiseCache) -> Lanes {
 /// The CPU must support AVX2.
 #[target_feature(enable = "avx2")]
 #[inline]
-pub unsafe fn eval_lanes_cached(kind: NoiseKind, p: &[Lanes; 4], cache: &mut NoiseCache) -> Lanes {
+pub(crate) unsafe fn eval_lanes_cached(
+    kind: NoiseKind,
+    p: &[Lanes; 4],
+    cache: &mut NoiseCache,
+) -> Lanes {
     match kind {
         NoiseKind::Perlin3 => perlin3_cached(&[p[0], p[1], p[2]], cache),
         NoiseKind::Perlin4 => perlin4_cached(p, cache),

@@ -18,11 +18,20 @@
 //!
 //! All functions have a base frequency of one lattice cell per unit (the paper's
 //! "corrected" frequency), and are zero at integer lattice points.
+//!
+//! Which is the reference: [`perlin3_f64`] for the algorithm (checked against an
+//! independent port's values); the scalar `f32` functions [`perlin3`], [`perlin4`],
+//! [`mnoise`] (through [`NoiseKind::eval`] and [`turbulence`]) for the renderer — the
+//! public API, what [`crate::mapping::shade`] and the renderer's reference path use. The
+//! renderer's fast path evaluates 8 points at a time: `eval_lanes_cached` (the corner
+//! hashes memoised) and its AVX2 build (`avx2.rs`); the tests check both, and the uncached
+//! `eval_lanes` / `turbulence_lanes`, against the scalar functions value for value. Those
+//! lanes variants are crate-private.
 
 use serde::{Deserialize, Serialize};
 
 #[cfg(target_arch = "x86_64")]
-pub mod avx2;
+pub(crate) mod avx2;
 
 /// Perlin's reference permutation of 0..=255.
 pub const PERMUTATION: [u8; 256] = [
@@ -173,7 +182,7 @@ fn grad3(hash: usize, x: f32, y: f32, z: f32) -> f32 {
 
 /// `floor` without a libm call (x86-64 baseline has no `roundss`); exact for |x| < 2³¹.
 #[inline(always)]
-pub fn ffloor(x: f32) -> f32 {
+pub(crate) fn ffloor(x: f32) -> f32 {
     let i = x as i32 as f32;
     if x < i {
         i - 1.0
@@ -414,10 +423,10 @@ pub fn mnoise(x: f32, y: f32, z: f32) -> f32 {
 // ---------------------------------------------------------------------------------------
 
 /// Number of points the batched noise evaluates together.
-pub const LANES: usize = 8;
+pub(crate) const LANES: usize = 8;
 
 /// One `f32` per lane.
-pub type Lanes = [f32; LANES];
+pub(crate) type Lanes = [f32; LANES];
 
 const ONE_BITS: u32 = 0x3f80_0000; // 1.0f32
 
@@ -617,7 +626,7 @@ fn corners4(xi: usize, yi: usize, zi: usize, wi: usize) -> [u8; 16] {
 /// time, is the same for a whole frame), so almost every look-up hits and replaces 14
 /// (3-D) or 30 (4-D) dependent permutation-table reads by one compare and one copy.
 /// Entries always hold the exact hashes of their key, so results are unchanged.
-pub struct HashCache<const N: usize> {
+pub(crate) struct HashCache<const N: usize> {
     keys: Box<[u32]>,
     vals: Box<[[u8; N]]>,
 }
@@ -663,14 +672,15 @@ impl Default for HashCache<16> {
 
 /// Memos for [`NoiseKind::eval_lanes_cached`].
 #[derive(Default)]
-pub struct NoiseCache {
+pub(crate) struct NoiseCache {
     c3: HashCache<8>,
     c4: HashCache<16>,
 }
 
 /// [`perlin3`] on [`LANES`] points (`p[axis][lane]`); equal to it lane by lane.
+#[cfg(test)]
 #[inline]
-pub fn perlin3_lanes(p: &[Lanes; 3]) -> Lanes {
+pub(crate) fn perlin3_lanes(p: &[Lanes; 3]) -> Lanes {
     perlin3_lanes_with(p, |xi, yi, zi| {
         corners3(xi as usize, yi as usize, zi as usize)
     })
@@ -678,7 +688,7 @@ pub fn perlin3_lanes(p: &[Lanes; 3]) -> Lanes {
 
 /// [`perlin3_lanes`] with the corner hashes from `cache`.
 #[inline(always)]
-pub fn perlin3_lanes_cached(p: &[Lanes; 3], cache: &mut HashCache<8>) -> Lanes {
+pub(crate) fn perlin3_lanes_cached(p: &[Lanes; 3], cache: &mut HashCache<8>) -> Lanes {
     perlin3_lanes_with(p, |xi, yi, zi| {
         cache.get(xi | yi << 8 | zi << 16, || {
             corners3(xi as usize, yi as usize, zi as usize)
@@ -719,8 +729,9 @@ fn perlin3_lanes_with(p: &[Lanes; 3], mut hash: impl FnMut(u32, u32, u32) -> [u8
 }
 
 /// [`perlin4`] on [`LANES`] points (`p[axis][lane]`); equal to it lane by lane.
+#[cfg(test)]
 #[inline]
-pub fn perlin4_lanes(p: &[Lanes; 4]) -> Lanes {
+pub(crate) fn perlin4_lanes(p: &[Lanes; 4]) -> Lanes {
     perlin4_lanes_with(p, |xi, yi, zi, wi| {
         corners4(xi as usize, yi as usize, zi as usize, wi as usize)
     })
@@ -728,7 +739,7 @@ pub fn perlin4_lanes(p: &[Lanes; 4]) -> Lanes {
 
 /// [`perlin4_lanes`] with the corner hashes from `cache`.
 #[inline(always)]
-pub fn perlin4_lanes_cached(p: &[Lanes; 4], cache: &mut HashCache<16>) -> Lanes {
+pub(crate) fn perlin4_lanes_cached(p: &[Lanes; 4], cache: &mut HashCache<16>) -> Lanes {
     perlin4_lanes_with(p, |xi, yi, zi, wi| {
         cache.get(xi | yi << 8 | zi << 16 | wi << 24, || {
             corners4(xi as usize, yi as usize, zi as usize, wi as usize)
@@ -786,7 +797,7 @@ fn perlin4_lanes_with(
 /// [`mnoise`] on [`LANES`] points (`p[axis][lane]`); equal to it lane by lane. The
 /// arithmetic hash is all floating point, so here everything vectorises.
 #[inline(always)]
-pub fn mnoise_lanes(p: &[Lanes; 3]) -> Lanes {
+pub(crate) fn mnoise_lanes(p: &[Lanes; 3]) -> Lanes {
     let mut f = [[0.0f32; LANES]; 3];
     let mut i = [[0.0f32; LANES]; 3];
     for a in 0..3 {
@@ -845,8 +856,9 @@ impl NoiseKind {
 
     /// [`NoiseKind::eval`] on [`LANES`] points at once (`p[axis][lane]`); equal to it lane
     /// by lane.
+    #[cfg(test)]
     #[inline(always)]
-    pub fn eval_lanes(self, p: &[Lanes; 4]) -> Lanes {
+    pub(crate) fn eval_lanes(self, p: &[Lanes; 4]) -> Lanes {
         match self {
             NoiseKind::Perlin3 => perlin3_lanes(&[p[0], p[1], p[2]]),
             NoiseKind::Perlin4 => perlin4_lanes(p),
@@ -857,7 +869,7 @@ impl NoiseKind {
     /// [`NoiseKind::eval_lanes`] with the permutation hashes memoised in `cache`; the same
     /// values.
     #[inline(always)]
-    pub fn eval_lanes_cached(self, p: &[Lanes; 4], cache: &mut NoiseCache) -> Lanes {
+    pub(crate) fn eval_lanes_cached(self, p: &[Lanes; 4], cache: &mut NoiseCache) -> Lanes {
         match self {
             NoiseKind::Perlin3 => perlin3_lanes_cached(&[p[0], p[1], p[2]], &mut cache.c3),
             NoiseKind::Perlin4 => perlin4_lanes_cached(p, &mut cache.c4),
@@ -904,8 +916,9 @@ pub fn turbulence(kind: NoiseKind, p: [f32; 4], octaves: u32, gain: f32, lacunar
 
 /// [`turbulence`] on [`LANES`] points at once; equal to it lane by lane (same operations
 /// in the same order).
+#[cfg(test)]
 #[inline]
-pub fn turbulence_lanes(
+pub(crate) fn turbulence_lanes(
     kind: NoiseKind,
     p: &[Lanes; 4],
     octaves: u32,
