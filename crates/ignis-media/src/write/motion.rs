@@ -132,8 +132,9 @@ pub fn sample_bilinear(frame: &RgbaFrame, x: f32, y: f32) -> [f32; 4] {
 }
 
 /// The engines' motion-vector frame blend (see the module docs), in pixels: `mv_prev` and
-/// `mv_next` are the forward motion of `prev` and `next` (one `[dx, dy]` per pixel, +y
-/// down), `t` the blend (0 = `prev`, 1 = `next`). The same formula as `engines/*`.
+/// `mv_next` are the stored motion of `prev` and `next` (per frame, one `[dx, dy]` per
+/// pixel, +y down; Ignis stores each frame's velocity), `t` the blend (0 = `prev`,
+/// 1 = `next`). The same formula as `engines/*`.
 pub fn mv_blend(
     prev: &RgbaFrame,
     next: &RgbaFrame,
