@@ -68,10 +68,11 @@ pub struct OutputArgs {
     /// raised to keep the duration; reported in the JSON's `retimed`).
     #[arg(long)]
     pub fit_frames: bool,
-    /// Flipbook: lay the frames as N rows of equal length, each row played as its own loop
-    /// (Unity's Single Row mode; motion vectors wrap within each row); the frame count must
-    /// divide by N. The frames are split in the order the command makes them, so rows are
-    /// seamless only when the command renders each row as a loop.
+    /// Flipbook: N statistically different loops of the effect as the N rows of one sheet
+    /// (Unity's Single Row mode, a row picked at random per particle): `ignis volume render`
+    /// renders `--frames` frames per row, each a seamless loop with seed `--seed + row`;
+    /// motion vectors wrap within each row. Commands that render one animation refuse N > 1.
+    /// Example: `ignis volume render --preset torch --frames 32 --variants 4 -o torch.png`.
     #[arg(long, default_value_t = 1, value_name = "N")]
     pub variants: u32,
     /// Do not mark GIFs and flipbooks as looping.
@@ -116,7 +117,9 @@ impl OutputArgs {
                 max_size: self.max_size,
                 pot: self.pot,
                 fit_frames: self.fit_frames,
-                variants: self.variants,
+                // A command that renders N loops sets this ([`OutputArgs::variants`]);
+                // `create_with` refuses --variants for the others.
+                variants: if self.variants == 0 { 0 } else { 1 },
                 motion: self.motion_vectors.then(flow_source),
                 heat: self.emission,
                 hdr: self.hdr,
@@ -124,6 +127,12 @@ impl OutputArgs {
             background: [0.0; 3],
             first_frame: 0,
         }
+    }
+
+    /// `--variants`: the number of loops a command that renders variants must make (set
+    /// it as the write options' `flipbook.variants`).
+    pub fn variants(&self) -> u32 {
+        self.variants
     }
 
     /// The engine preset named by `--engine`.
@@ -152,6 +161,16 @@ impl OutputArgs {
             Some(f) => f,
             None => Format::from_path(&self.output)?,
         };
+        if self.variants > 1 && opts.flipbook.variants != self.variants {
+            anyhow::bail!(
+                "--variants {}: this command renders one animation, and splitting it into rows \
+                 would not give {} different loops; use `ignis volume render … --variants {}`, \
+                 or drop --variants",
+                self.variants,
+                self.variants,
+                self.variants
+            );
+        }
         if flipbook_only && format != Format::Flipbook {
             anyhow::bail!(
                 "--engine, --motion-vectors, --emission, --hdr, --max-size, --pot, --fit-frames and \
@@ -194,27 +213,15 @@ impl OutputArgs {
 }
 
 /// Motion vectors from the workspace's dense optical flow (DIS on the frames' luma), kept
-/// where the forward and backward flows agree: a vector `F(x)` is weighted by
-/// `exp(-(|F(x) + B(x + F(x))| / 1 px)²)`, so flicker, occlusions and textureless areas
-/// (where flow is guesswork) get no motion and the engine's blend falls back to a
+/// where they are reliable ([`ignis_flow::motion_vector_pair`]: forward and backward flows
+/// agree, and moving the pixels explains the change between the frames), so flicker,
+/// occlusions and textureless areas get no motion and the engine's blend falls back to a
 /// cross-fade there instead of dragging pixels along a wrong vector.
 pub fn flow_source() -> MotionSource {
-    MotionSource::new(|a, b| {
-        let p = ignis_flow::FlowParams::default();
-        let (f, g) = ignis_flow::flow_pair(&ignis_flow::luma(a), &ignis_flow::luma(b), &p)
+    MotionSource::pair(|a, b| {
+        let (f, g) = ignis_flow::motion_vector_pair(a, b, &ignis_flow::VectorParams::default())
             .map_err(|e| e.to_string())?;
-        let w = f.size().width as usize;
-        Ok(f.data()
-            .iter()
-            .enumerate()
-            .map(|(i, &[dx, dy])| {
-                let (x, y) = ((i % w) as f32, (i / w) as f32);
-                let [bx, by] = g.at(x + dx, y + dy);
-                let e2 = (dx + bx).powi(2) + (dy + by).powi(2);
-                let k = (-e2).exp();
-                [dx * k, dy * k]
-            })
-            .collect())
+        Ok((f.into_vec(), g.into_vec()))
     })
 }
 

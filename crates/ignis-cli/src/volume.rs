@@ -165,22 +165,48 @@ pub fn render(a: &RenderArgs, g: &Global) -> Result<Vec<PathBuf>> {
     opts.fps = scene.fps as f64;
     opts.loop_ = plan.mark_loop;
     opts.first_frame = plan.range.start as u64;
-    let mut anim = if plan.looping {
-        scene.looping_animator(a.frames)?
-    } else {
-        scene.animator()?
-    };
-    // a chunk replays only the motion (cheap) up to its first frame
-    anim.skip(plan.range.start as u64);
+    // --variants N: N loops with seeds seed, seed + 1, …, one per row of the sheet.
+    let variants = a.out.variants();
+    opts.flipbook.variants = variants;
+    // Refuses --variants for other formats; nothing is written until `finish`.
     let mut writer = a.out.create_with(scene.size, &opts)?;
+    anyhow::ensure!(
+        variants <= 1 || (plan.looping && plan.range == (0..a.frames)),
+        "--variants {variants} lays {variants} whole loops as the rows of a flipbook; \
+         drop --no-loop and --chunk"
+    );
     let mut hits = String::new();
-    let pb = g.progress(plan.range.len() as u64, "rendering");
-    for i in plan.range.clone() {
-        let f = anim.next_frame().context("rendering")?;
+    let scenes: Vec<_> = (0..variants)
+        .map(|v| {
+            let mut sc = scene.clone();
+            sc.seed = scene.seed.wrapping_add(v as u64);
+            sc
+        })
+        .collect();
+    let mut anim = None;
+    let pb = g.progress(plan.range.len() as u64 * variants as u64, "rendering");
+    for (variant, i) in (0..variants).flat_map(|v| plan.range.clone().map(move |i| (v, i))) {
+        if i == plan.range.start {
+            let sc = &scenes[variant as usize];
+            anim = Some(if plan.looping {
+                sc.looping_animator(a.frames)?
+            } else {
+                sc.animator()?
+            });
+            // a chunk replays only the motion (cheap) up to its first frame
+            if let Some(an) = anim.as_mut() {
+                an.skip(plan.range.start as u64);
+            }
+        }
+        let f = anim
+            .as_mut()
+            .expect("made at the range's start")
+            .next_frame()
+            .context("rendering")?;
         if a.collisions.is_some() {
             for c in &f.collisions {
                 let mut v = serde_json::to_value(c)?;
-                v["frame"] = i.into();
+                v["frame"] = (variant * a.frames + i).into(); // the frame's place in the output
                 hits.push_str(&v.to_string());
                 hits.push('\n');
             }

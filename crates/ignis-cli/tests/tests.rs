@@ -961,6 +961,116 @@ mod export {
         }
     }
 
+    /// `--variants 3`: three loops rendered with different seeds as the sheet's rows, not
+    /// one render cut into rows: the rows differ, and each row's wrap is measured.
+    #[test]
+    fn variants_are_different_seamless_loops() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("v.png");
+        let o = ignis(&[
+            "-q",
+            "volume",
+            "render",
+            "--preset",
+            "candle",
+            "--size",
+            "48x48",
+            "--frames",
+            "8",
+            "--variants",
+            "3",
+            "-o",
+            out.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let fb = ignis_media::read_flipbook(&out.with_extension("json")).unwrap();
+        assert_eq!(
+            (fb.meta.rows, fb.meta.variants, fb.frames.len()),
+            (3, 3, 24)
+        );
+        let diff = |a: &ignis_media::RgbaFrame, b: &ignis_media::RgbaFrame| {
+            a.data()
+                .iter()
+                .zip(b.data())
+                .map(|(p, q)| (p[0] * p[3] - q[0] * q[3]).abs())
+                .sum::<f32>()
+                / a.data().len() as f32
+        };
+        // Rows differ from one another more than a row's consecutive frames do.
+        let step = diff(&fb.frames[0], &fb.frames[1]);
+        for r in 1..3 {
+            let across = diff(&fb.frames[0], &fb.frames[8 * r]);
+            assert!(
+                across > 0.0 && across > 0.5 * step,
+                "row {r}: {across} vs {step}"
+            );
+        }
+        let q = fb
+            .meta
+            .variant_loop_quality
+            .expect("each row's loop quality");
+        assert_eq!(q.len(), 3);
+        for row in &q {
+            // A seamless loop: the wrap is no bigger a step than the loop's usual steps.
+            assert!(row.seam.is_finite() && row.seam < 2.0, "{row:?}");
+        }
+        // A command that renders one animation refuses to cut it into rows.
+        let c = dir.path().join("c.png");
+        assert_fails(
+            &ignis(&[
+                "-q",
+                "classic",
+                "--size",
+                "48x32",
+                "--frames",
+                "8",
+                "--variants",
+                "2",
+                "-o",
+                c.to_str().unwrap(),
+            ]),
+            "different loops",
+        );
+        assert!(!c.exists());
+        // Variants are whole loops of a flipbook: no chunks, no other formats.
+        let v = dir.path().join("w.png");
+        let vs = v.to_str().unwrap();
+        let args = [
+            "-q", "volume", "render", "--preset", "candle", "--size", "32x32",
+        ];
+        let with = |extra: &[&str]| {
+            let mut a = args.to_vec();
+            a.extend_from_slice(extra);
+            ignis(&a)
+        };
+        assert_fails(
+            &with(&[
+                "--frames",
+                "8",
+                "--variants",
+                "2",
+                "--chunk",
+                "0..4",
+                "-o",
+                vs,
+            ]),
+            "--chunk",
+        );
+        let mp4 = dir.path().join("w.mp4");
+        assert_fails(
+            &with(&[
+                "--frames",
+                "8",
+                "--variants",
+                "2",
+                "-o",
+                mp4.to_str().unwrap(),
+            ]),
+            "flipbooks",
+        );
+        assert!(!v.exists() && !mp4.exists());
+    }
+
     #[test]
     fn bad_export_options_are_refused_and_nothing_is_written() {
         let dir = tempfile::tempdir().unwrap();

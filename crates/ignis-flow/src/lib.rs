@@ -11,6 +11,9 @@
 //!   [`morph_gray_with`] / [`morph_rgba_with`] add optional occlusion-aware weights from
 //!   forward–backward consistency ([`MorphParams`]).
 //! - [`luma`]: the grey input for flow from a colour frame.
+//! - [`motion_vector_pair`]: both flows of a pair kept only where they are reliable
+//!   (forward–backward consistent, and explaining the change between the frames), the
+//!   input of flipbook motion-vector sheets.
 //!
 //! Convention: for `flow(a, b)`, `a(x) ≈ b(x + F(x))`, vectors in pixels of the field's
 //! own size, pixel centres at integer coordinates, row 0 at the top. Frames are linear
@@ -31,11 +34,13 @@ pub mod dis;
 pub mod error;
 mod field;
 mod image;
+mod vectors;
 mod warp;
 
 pub use error::{FlowError, Result};
 pub use field::FlowField;
 pub use ignis_core::{GrayFrame, RgbaFrame, Size};
+pub use vectors::{motion_vector_pair, VectorParams};
 pub use warp::{
     luma, morph_gray, morph_gray_with, morph_rgba, morph_rgba_with, warp_gray, warp_rgba,
     MorphParams,

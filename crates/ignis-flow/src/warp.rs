@@ -33,21 +33,14 @@ pub fn warp_gray(src: &GrayFrame, f: &FlowField, t: f32) -> GrayFrame {
     if size.pixels() == 0 || f.data().is_empty() {
         return src.clone();
     }
-    let w = size.width as usize;
     let map = FieldMap::new(f, size);
     let d = src.data();
-    let mut out = vec![0.0f32; size.pixels()];
-    out.par_chunks_mut(w).enumerate().for_each_init(
-        || RowScratch::new(w),
-        |s, (y, row)| {
-            map.row(y, &mut s.fa);
-            RowScratch::along(&mut s.xs, &mut s.ys, &s.fa, y, t);
-            s.ka.fill(&s.xs, &s.ys, size.width, size.height);
-            for (i, o) in row.iter_mut().enumerate() {
-                *o = s.ka.gray(d, i);
-            }
-        },
-    );
+    let out = per_row(size, 0.0f32, |y, s, row| {
+        s.warp_taps(&map, y, t, size);
+        for (i, o) in row.iter_mut().enumerate() {
+            *o = s.ka.gray(d, i);
+        }
+    });
     GrayFrame::from_vec(size, out).expect("sized from src")
 }
 
@@ -58,23 +51,16 @@ pub fn warp_rgba(src: &RgbaFrame, f: &FlowField, t: f32) -> RgbaFrame {
     if size.pixels() == 0 || f.data().is_empty() {
         return src.clone();
     }
-    let w = size.width as usize;
     let map = FieldMap::new(f, size);
     let d = src.data();
-    let mut out = vec![[0.0f32; 4]; size.pixels()];
-    out.par_chunks_mut(w).enumerate().for_each_init(
-        || RowScratch::new(w),
-        |s, (y, row)| {
-            map.row(y, &mut s.fa);
-            RowScratch::along(&mut s.xs, &mut s.ys, &s.fa, y, t);
-            s.ka.fill(&s.xs, &s.ys, size.width, size.height);
-            for (i, o) in row.iter_mut().enumerate() {
-                let mut acc = [0.0f32; 4];
-                s.ka.add_pm(d, i, 1.0, &mut acc);
-                *o = unpremultiply(acc);
-            }
-        },
-    );
+    let out = per_row(size, [0.0f32; 4], |y, s, row| {
+        s.warp_taps(&map, y, t, size);
+        for (i, o) in row.iter_mut().enumerate() {
+            let mut acc = [0.0f32; 4];
+            s.ka.add_pm(d, i, 1.0, &mut acc);
+            *o = unpremultiply(acc);
+        }
+    });
     RgbaFrame::from_vec(size, out).expect("sized from src")
 }
 
@@ -216,6 +202,14 @@ impl RowScratch {
         }
     }
 
+    /// Taps into `ka` for `x + t·F(x)` along row `y`, `F` read through `map`.
+    #[inline(always)]
+    fn warp_taps(&mut self, map: &FieldMap<'_>, y: usize, t: f32, size: Size) {
+        map.row(y, &mut self.fa);
+        RowScratch::along(&mut self.xs, &mut self.ys, &self.fa, y, t);
+        self.ka.fill(&self.xs, &self.ys, size.width, size.height);
+    }
+
     /// Taps into `ka` for `x + t·v(x)` along row `y` of the vectors `v`.
     #[inline(always)]
     fn along(xs: &mut [f32], ys: &mut [f32], v: &[[f32; 2]], y: usize, t: f32) {
@@ -224,6 +218,46 @@ impl RowScratch {
             *px = x as f32 + t * v[0];
             *py = yf + t * v[1];
         }
+    }
+}
+
+/// The one parallel row loop of every warp and morph: `row(y, scratch, out_row)` for each
+/// row of a `size` output, with per-thread scratch (rows are independent, so the result
+/// does not depend on the thread count).
+fn per_row<T: Clone + Send + Sync>(
+    size: Size,
+    zero: T,
+    row: impl Fn(usize, &mut RowScratch, &mut [T]) + Send + Sync,
+) -> Vec<T> {
+    let w = size.width as usize;
+    let mut out = vec![zero; size.pixels()];
+    out.par_chunks_mut(w)
+        .enumerate()
+        .for_each_init(|| RowScratch::new(w), |s, (y, r)| row(y, s, r));
+    out
+}
+
+/// Calls `f(i, c)` with the consistency map `occ` (of `occ_size`) sampled at each frame
+/// position `(xs[i], ys[i])` of a `w × h` frame.
+#[inline(always)]
+fn occlusion_at(
+    occ: &[f32],
+    occ_size: Size,
+    (w, h): (u32, u32),
+    xs: &[f32],
+    ys: &[f32],
+    mut f: impl FnMut(usize, f32),
+) {
+    let (rx, ry) = (
+        occ_size.width as f32 / w as f32,
+        occ_size.height as f32 / h as f32,
+    );
+    let v = View::new(occ, occ_size);
+    for (i, (&x, &y)) in xs.iter().zip(ys).enumerate() {
+        f(
+            i,
+            sample_gray(v, (x + 0.5) * rx - 0.5, (y + 0.5) * ry - 0.5),
+        );
     }
 }
 
@@ -386,33 +420,19 @@ impl<'a> MorphPlan<'a> {
         RowScratch::along(&mut s.xs, &mut s.ys, &s.fa, y, -t);
         s.ka.fill(&s.xs, &s.ys, w, h);
         let occ = self.occ.as_ref();
+        let wa = &mut s.wa;
         if let Some(occ) = occ {
-            let (rx, ry) = (
-                occ.ca_size.width as f32 / w as f32,
-                occ.ca_size.height as f32 / h as f32,
-            );
-            let va = View::new(&occ.ca, occ.ca_size);
-            for ((wa, &x), &y) in s.wa.iter_mut().zip(&s.xs).zip(&s.ys) {
-                *wa = sample_gray(va, (x + 0.5) * rx - 0.5, (y + 0.5) * ry - 0.5);
-            }
+            occlusion_at(&occ.ca, occ.ca_size, (w, h), &s.xs, &s.ys, |i, c| wa[i] = c);
         }
         RowScratch::along(&mut s.xs, &mut s.ys, &s.fb, y, -(1.0 - t));
         s.kb.fill(&s.xs, &s.ys, w, h);
         match occ {
-            None => s.wa.fill(1.0 - t),
-            Some(occ) => {
-                let (rx, ry) = (
-                    occ.cb_size.width as f32 / w as f32,
-                    occ.cb_size.height as f32 / h as f32,
-                );
-                let vb = View::new(&occ.cb, occ.cb_size);
-                for ((wa, &x), &y) in s.wa.iter_mut().zip(&s.xs).zip(&s.ys) {
-                    let cb = sample_gray(vb, (x + 0.5) * rx - 0.5, (y + 0.5) * ry - 0.5);
-                    let a = (1.0 - t) * wa.max(1e-3);
-                    let b = t * cb.max(1e-3);
-                    *wa = a / (a + b);
-                }
-            }
+            None => wa.fill(1.0 - t),
+            Some(occ) => occlusion_at(&occ.cb, occ.cb_size, (w, h), &s.xs, &s.ys, |i, cb| {
+                let a = (1.0 - t) * wa[i].max(1e-3);
+                let b = t * cb.max(1e-3);
+                wa[i] = a / (a + b);
+            }),
         }
     }
 }
@@ -457,19 +477,14 @@ pub fn morph_gray_with(
     }
     let (fwd, bwd) = (nonempty(fwd), nonempty(bwd));
     let plan = MorphPlan::new(size, &fwd, &bwd, t, p);
-    let w = size.width as usize;
     let (da, db) = (a.data(), b.data());
-    let mut out = vec![0.0f32; size.pixels()];
-    out.par_chunks_mut(w).enumerate().for_each_init(
-        || RowScratch::new(w),
-        |s, (y, row)| {
-            plan.row(y, s);
-            for (i, o) in row.iter_mut().enumerate() {
-                let k = s.wa[i];
-                *o = k * s.ka.gray(da, i) + (1.0 - k) * s.kb.gray(db, i);
-            }
-        },
-    );
+    let out = per_row(size, 0.0f32, |y, s, row| {
+        plan.row(y, s);
+        for (i, o) in row.iter_mut().enumerate() {
+            let k = s.wa[i];
+            *o = k * s.ka.gray(da, i) + (1.0 - k) * s.kb.gray(db, i);
+        }
+    });
     Ok(GrayFrame::from_vec(size, out).expect("sized from a"))
 }
 
@@ -500,22 +515,17 @@ pub fn morph_rgba_with(
     }
     let (fwd, bwd) = (nonempty(fwd), nonempty(bwd));
     let plan = MorphPlan::new(size, &fwd, &bwd, t, p);
-    let w = size.width as usize;
     let (da, db) = (a.data(), b.data());
-    let mut out = vec![[0.0f32; 4]; size.pixels()];
-    out.par_chunks_mut(w).enumerate().for_each_init(
-        || RowScratch::new(w),
-        |s, (y, row)| {
-            plan.row(y, s);
-            for (i, o) in row.iter_mut().enumerate() {
-                let k = s.wa[i];
-                let mut acc = [0.0f32; 4];
-                s.ka.add_pm(da, i, k, &mut acc);
-                s.kb.add_pm(db, i, 1.0 - k, &mut acc);
-                *o = unpremultiply(acc);
-            }
-        },
-    );
+    let out = per_row(size, [0.0f32; 4], |y, s, row| {
+        plan.row(y, s);
+        for (i, o) in row.iter_mut().enumerate() {
+            let k = s.wa[i];
+            let mut acc = [0.0f32; 4];
+            s.ka.add_pm(da, i, k, &mut acc);
+            s.kb.add_pm(db, i, 1.0 - k, &mut acc);
+            *o = unpremultiply(acc);
+        }
+    });
     Ok(RgbaFrame::from_vec(size, out).expect("sized from a"))
 }
 

@@ -1354,11 +1354,13 @@ mod engines {
         );
         let fb = read_flipbook(&dir.path().join("v.json")).unwrap();
         assert_eq!((fb.meta.columns, fb.meta.rows, fb.meta.variants), (3, 2, 2));
-        // Each row loops on its own: the last frame of a row moves back to its first.
+        // Each row loops on its own: the last frame of a row moves back to its first
+        // (−2 steps) after arriving from the one before (+1 step); its velocity is the
+        // mean, −½ step.
         let mv = fb.motion.unwrap();
         let [x, y] = centre(2);
         let i = (y as usize) * W as usize + x as usize;
-        let back = [-2.0 * STEP[0], -2.0 * STEP[1]];
+        let back = [-0.5 * STEP[0], -0.5 * STEP[1]];
         assert!(
             (mv[2][i][0] - back[0]).abs() < 0.01 && (mv[2][i][1] - back[1]).abs() < 0.01,
             "{:?}",

@@ -189,6 +189,10 @@ pub struct FlipbookMeta {
     /// written ([`ignis_core::loopq`]); present when `loop` is true.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub loop_quality: Option<LoopQuality>,
+    /// With `variants` > 1 and `loop`: each row's seam and ghost played as its own loop,
+    /// measured on the sheet's frames (row order).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub variant_loop_quality: Option<Vec<LoopQuality>>,
 }
 
 fn one() -> u32 {
@@ -422,6 +426,8 @@ pub(crate) struct FlipbookSink {
     fps: f64,
     loop_: bool,
     loop_quality: Option<LoopQuality>,
+    /// The background the loop metrics composite over (the writer's).
+    background: [f32; 3],
     /// Every pushed frame, linear light, straight alpha.
     frames: Vec<RgbaFrame>,
 }
@@ -467,6 +473,7 @@ impl FlipbookSink {
             fps: opts.fps,
             loop_: opts.loop_,
             loop_quality: None,
+            background: opts.background,
             frames: Vec::new(),
         })
     }
@@ -496,46 +503,49 @@ impl FlipbookSink {
                 ),
             ));
         }
+        let check = |f: Vec<[f32; 2]>| -> Result<Vec<[f32; 2]>> {
+            if f.len() != self.size.pixels() {
+                return Err(MediaError::encode(
+                    &self.path,
+                    format!(
+                        "optical flow gave {} vectors for {} pixels",
+                        f.len(),
+                        self.size.pixels()
+                    ),
+                ));
+            }
+            let ok = |v: f32| if v.is_finite() { v } else { 0.0 };
+            Ok(f.into_iter().map(|[dx, dy]| [ok(dx), ok(dy)]).collect())
+        };
         let mut out = Vec::with_capacity(frames.len());
         for row in frames.chunks(per) {
-            let mut row_mv: Vec<Vec<[f32; 2]>> = Vec::with_capacity(per);
-            for k in 0..per {
-                let next = if k + 1 < per {
-                    Some(k + 1)
-                } else if self.loop_ {
-                    Some(0)
-                } else {
-                    None // the last frame of a one-shot keeps the motion that led into it
-                };
-                let flow = |a: &RgbaFrame, b: &RgbaFrame| -> Result<Vec<[f32; 2]>> {
-                    let f = (src.0)(a, b).map_err(|e| {
-                        MediaError::encode(&self.path, format!("optical flow: {e}"))
-                    })?;
-                    if f.len() != self.size.pixels() {
-                        return Err(MediaError::encode(
-                            &self.path,
-                            format!(
-                                "optical flow gave {} vectors for {} pixels",
-                                f.len(),
-                                self.size.pixels()
-                            ),
-                        ));
-                    }
-                    let ok = |v: f32| if v.is_finite() { v } else { 0.0 };
-                    Ok(f.into_iter().map(|[dx, dy]| [ok(dx), ok(dy)]).collect())
-                };
-                let mv = match next {
-                    Some(j) => flow(&row[k], &row[j])?,
-                    // The last frame of a one-shot: the motion that led into it, at its own
-                    // pixels (the backward flow, reversed).
-                    None => flow(&row[k], &row[k - 1])?
-                        .into_iter()
-                        .map(|[dx, dy]| [-dx, -dy])
-                        .collect(),
-                };
-                row_mv.push(mv);
+            // Pair k joins frame k to k+1 (the last one wraps to 0 in a loop).
+            let pairs = if self.loop_ { per } else { per - 1 };
+            let mut fwd = Vec::with_capacity(pairs);
+            let mut bwd = Vec::with_capacity(pairs);
+            for k in 0..pairs {
+                let (f, b) = (src.0)(&row[k], &row[(k + 1) % per])
+                    .map_err(|e| MediaError::encode(&self.path, format!("optical flow: {e}")))?;
+                fwd.push(check(f)?);
+                bwd.push(check(b)?);
             }
-            out.extend(row_mv);
+            // Frame k's velocity: the mean of its forward motion and its reversed backward
+            // motion; the ends of a one-shot have one side only.
+            for k in 0..per {
+                let ahead = (k < pairs).then(|| &fwd[k]);
+                let behind = (k > 0 || self.loop_).then(|| &bwd[(k + pairs - 1) % pairs]);
+                let mv = match (ahead, behind) {
+                    (Some(f), Some(b)) => f
+                        .iter()
+                        .zip(b)
+                        .map(|(f, b)| [0.5 * (f[0] - b[0]), 0.5 * (f[1] - b[1])])
+                        .collect(),
+                    (Some(f), None) => f.clone(),
+                    (None, Some(b)) => b.iter().map(|b| [-b[0], -b[1]]).collect(),
+                    (None, None) => unreachable!("per >= 2"),
+                };
+                out.push(mv);
+            }
         }
         Ok(out)
     }
@@ -643,6 +653,19 @@ impl Sink for FlipbookSink {
             from_frames: per_in as u32,
             from_fps: self.fps,
         });
+        // Each variant row's wrap, measured on the frames the sheet holds.
+        let variant_loop_quality = (v > 1 && self.loop_).then(|| {
+            frames
+                .chunks(per)
+                .filter_map(|row| {
+                    let metric: Vec<_> = row
+                        .iter()
+                        .map(|f| ignis_core::loopq::metric_frame_rgba(f, self.background))
+                        .collect();
+                    ignis_core::loopq::loop_quality(&metric).ok()
+                })
+                .collect::<Vec<_>>()
+        });
         // The motion first: the flow is the slow part and can fail.
         let motion = match &self.opts.motion {
             Some(src) => Some(self.motion(src, &frames, per)?),
@@ -725,9 +748,9 @@ impl Sink for FlipbookSink {
                 green: if self.opts.engine.conventions().v_up { "up" } else { "down" }.into(),
                 color_space: "linear".into(),
                 direction: if self.loop_ {
-                    "forward: frame k to k+1 at frame k's pixels; the last frame of each loop to its first"
+                    "velocity at frame k's pixels: the mean of the motion k to k+1 and the reversed motion k to k-1, wrapping within each loop"
                 } else {
-                    "forward: frame k to k+1 at frame k's pixels; the last frame: the motion into it (reversed backward flow)"
+                    "velocity at frame k's pixels: the mean of the motion k to k+1 and the reversed motion k to k-1 (one side only at the first and last frame)"
                 }
                 .into(),
             });
@@ -832,6 +855,7 @@ impl Sink for FlipbookSink {
             } else {
                 None
             },
+            variant_loop_quality,
         };
         files.push(encode_temp(&json_path, |wr| {
             serde_json::to_writer_pretty(&mut *wr, &meta).map_err(|e| e.to_string())?;

@@ -3,8 +3,9 @@
 //! ([`mv_blend`]), ported from the reference shaders in `engines/`.
 //!
 //! Convention (Unity VFX Graph's "Flipbook Motion Blend", which Unreal's and SideFX's
-//! material functions share): the cell of frame `k` holds the forward motion of frame `k`,
-//! `F_k(x)` with `frame_k(x) ≈ frame_{k+1}(x + F_k(x))`, in tile-UV units (a fraction of
+//! material functions share): the cell of frame `k` holds the motion of frame `k` per
+//! frame, `F_k(x)` (content at `x` moves to about `x + F_k(x)` by the next frame; Ignis
+//! writes the velocity, see [`MotionSource`]), in tile-UV units (a fraction of
 //! one cell's width and height: the UV range an engine maps onto one sub-image). Between frames `k` and `k+1` at blend `t ∈ [0, 1)`:
 //!
 //! ```text
@@ -27,15 +28,35 @@ use ignis_core::RgbaFrame;
 /// (row-major, pixels, +y down) with `a(x) ≈ b(x + F(x))`.
 pub type FlowFn = dyn Fn(&RgbaFrame, &RgbaFrame) -> Result<Vec<[f32; 2]>, String> + Send + Sync;
 
+/// Both flows of a pair, `(a→b, b→a)`, each as a [`FlowFn`] gives it.
+pub type FlowPairFn =
+    dyn Fn(&RgbaFrame, &RgbaFrame) -> Result<(Vec<[f32; 2]>, Vec<[f32; 2]>), String> + Send + Sync;
+
 /// Where a flipbook's motion vectors come from: a dense optical flow (the CLI passes
 /// `ignis_flow`), or a generator that knows its own motion. Compared by identity.
+///
+/// The writer stores each frame's **velocity**: the mean of its forward motion (to the
+/// next frame) and its reversed backward motion (from the previous frame), because an
+/// engine reads a frame's one vector both when the frame is `prev` of a blend (sampled at
+/// `−mv·t`) and when it is `next` (sampled at `+mv·(1−t)`).
 #[derive(Clone)]
-pub struct MotionSource(pub Arc<FlowFn>);
+pub struct MotionSource(pub Arc<FlowPairFn>);
 
 impl MotionSource {
-    /// Wraps a flow function.
+    /// Wraps a one-direction flow function (called twice per pair of frames).
     pub fn new(
         f: impl Fn(&RgbaFrame, &RgbaFrame) -> Result<Vec<[f32; 2]>, String> + Send + Sync + 'static,
+    ) -> MotionSource {
+        MotionSource(Arc::new(move |a, b| Ok((f(a, b)?, f(b, a)?))))
+    }
+
+    /// Wraps a function giving both directions of a pair at once (cheaper when the two
+    /// share work, e.g. a forward–backward consistency check).
+    pub fn pair(
+        f: impl Fn(&RgbaFrame, &RgbaFrame) -> Result<(Vec<[f32; 2]>, Vec<[f32; 2]>), String>
+            + Send
+            + Sync
+            + 'static,
     ) -> MotionSource {
         MotionSource(Arc::new(f))
     }
@@ -111,8 +132,9 @@ pub fn sample_bilinear(frame: &RgbaFrame, x: f32, y: f32) -> [f32; 4] {
 }
 
 /// The engines' motion-vector frame blend (see the module docs), in pixels: `mv_prev` and
-/// `mv_next` are the forward motion of `prev` and `next` (one `[dx, dy]` per pixel, +y
-/// down), `t` the blend (0 = `prev`, 1 = `next`). The same formula as `engines/*`.
+/// `mv_next` are the stored motion of `prev` and `next` (per frame, one `[dx, dy]` per
+/// pixel, +y down; Ignis stores each frame's velocity), `t` the blend (0 = `prev`,
+/// 1 = `next`). The same formula as `engines/*`.
 pub fn mv_blend(
     prev: &RgbaFrame,
     next: &RgbaFrame,
