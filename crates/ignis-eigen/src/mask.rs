@@ -797,7 +797,7 @@ mod tests {
                     px(0.8, 0.35, 0.1) // saturated glint on the rim, far from the flame
                 } else if y == 20.0 && (70.0..80.0).contains(&x) {
                     px(1.0, 1.0, 1.0) // one-pixel specular reflection of the flame
-                } else if (8.0..88.0).contains(&x) && y >= 12.0 && y < 88.0 {
+                } else if (8.0..88.0).contains(&x) && (12.0..88.0).contains(&y) {
                     px(0.6, 0.5, 0.5) // the pale lit plate
                 } else {
                     px(0.02, 0.02, 0.02)
