@@ -620,7 +620,10 @@ pub fn isolate_levels(
         .collect();
     let mid = lit.len() / 2;
     let median_lit = *lit.select_nth_unstable(mid).1 as usize;
+    // And never above where the merge search starts (24 levels below the peak): the edge
+    // of the white-hot core is not the flame's edge.
     let best = best
+        .min(vmax.saturating_sub(24))
         .max((median_lit + vmax).div_ceil(2))
         .min(top.max(floor));
     // Everything at least that bright, connected to the seeds or not (a flame's
