@@ -526,18 +526,32 @@ impl<'a> MetricWindow<'a> {
 /// window: a cut and crossfades for all, and — when `morph` is motion-compensated, which
 /// costs a flow per pair — morphs for the `morph_candidates` candidates whose best cut or
 /// crossfade scores best. Sorted by [`score`] (ties: fewer transition frames, then the
-/// search's order). Deterministic.
+/// search's order). Deterministic. Soft frames are left out ([`Skips`]) only as long as
+/// the loop stays at least as long as the shortest candidate (the search's lower bound);
+/// [`evaluate_with`] takes that bound explicitly.
 pub fn evaluate(
     win: &MetricWindow,
     cands: &[Candidate],
     morph: &dyn PairMorph,
     morph_candidates: usize,
 ) -> Vec<Evaluated> {
+    let min_len = cands.iter().map(Candidate::len).min().unwrap_or(0);
+    evaluate_with(win, cands, morph, morph_candidates, min_len)
+}
+
+/// [`evaluate`], the written loops never shorter than `min_len` frames.
+pub fn evaluate_with(
+    win: &MetricWindow,
+    cands: &[Candidate],
+    morph: &dyn PairMorph,
+    morph_candidates: usize,
+    min_len: usize,
+) -> Vec<Evaluated> {
     let mut out: Vec<(usize, Evaluated)> = cands
         .par_iter()
         .enumerate()
         .flat_map_iter(|(rank, c)| {
-            evaluate_one(win, c, &Crossfade)
+            evaluate_one(win, c, &Crossfade, min_len)
                 .into_iter()
                 .map(move |e| (rank, e))
         })
@@ -556,7 +570,7 @@ pub fn evaluate(
         let morphs: Vec<(usize, Evaluated)> = picked
             .par_iter()
             .flat_map_iter(|&rank| {
-                evaluate_one(win, &cands[rank], morph)
+                evaluate_one(win, &cands[rank], morph, min_len)
                     .into_iter()
                     .map(move |e| (rank, e))
             })
@@ -581,7 +595,12 @@ fn sort_evaluated(v: &mut [(usize, Evaluated)]) {
 
 /// `c` closed every way `morph` offers: with [`Crossfade`], a cut and crossfades; with a
 /// motion-compensated morph, morphs only.
-fn evaluate_one(win: &MetricWindow, c: &Candidate, morph: &dyn PairMorph) -> Vec<Evaluated> {
+fn evaluate_one(
+    win: &MetricWindow,
+    c: &Candidate,
+    morph: &dyn PairMorph,
+    min_len: usize,
+) -> Vec<Evaluated> {
     let n = win.len();
     let max_m = TRANSITION_LENGTHS
         .iter()
@@ -603,19 +622,27 @@ fn evaluate_one(win: &MetricWindow, c: &Candidate, morph: &dyn PairMorph) -> Vec
         let mids: Vec<GrayFrame> = (0..m)
             .map(|t| pairs[t]((t + 1) as f32 / (m + 1) as f32))
             .collect();
-        out.push(measure(win, c, closing, &mids));
+        out.push(measure(win, c, closing, &mids, min_len));
     }
     out
 }
 
 /// Seam and ghost of `c` closed with `closing` whose transition frames are `mids`, then
 /// with soft body frames left out one at a time (see [`Skips`]) while that lowers the
-/// [`score`].
-fn measure(win: &MetricWindow, c: &Candidate, closing: Closing, mids: &[GrayFrame]) -> Evaluated {
+/// [`score`] and the loop keeps at least `min_len` frames.
+fn measure(
+    win: &MetricWindow,
+    c: &Candidate,
+    closing: Closing,
+    mids: &[GrayFrame],
+    min_len: usize,
+) -> Evaluated {
     let mut best = measure_with(win, c, closing, mids, Skips::default());
     let m = mids.len();
     let body = c.start + m..c.end;
-    let allowed = MAX_SKIPS.min(c.len() / SKIP_EVERY);
+    let allowed = MAX_SKIPS
+        .min(c.len() / SKIP_EVERY)
+        .min(c.len().saturating_sub(min_len));
     while best.skips.len() < allowed {
         // The softest frame, when it is a body frame whose neighbours are both kept
         // body frames (never two in a row, never the frames next to the closing).
@@ -916,7 +943,9 @@ mod tests {
             end: 70,
             cost: 0.0,
         };
-        let ev = evaluate(&win, &[c], &Crossfade, 0);
+        // A lone candidate is the shortest: nothing may be left out.
+        assert!(evaluate(&win, &[c], &Crossfade, 0)[0].skips.is_empty());
+        let ev = evaluate_with(&win, &[c], &Crossfade, 0, 50);
         let best = ev[0];
         assert_eq!(best.closing, Closing::Cut, "{best:?}");
         assert_eq!(best.skips.as_slice(), &[30], "{best:?}");
