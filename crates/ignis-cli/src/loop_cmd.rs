@@ -495,7 +495,7 @@ pub fn render(
 ) -> Result<()> {
     let c = best.candidate;
     let m = best.closing.frames();
-    let plan = loops::plan(&c, best.closing);
+    let plan = loops::plan_with(&c, best.closing, &best.skips);
     let end = loops::plan_end(&c, best.closing);
     let opts = ignis_media::ReadOptions {
         range: Some(ignis_media::FrameRange::frames(
@@ -506,11 +506,18 @@ pub fn render(
     };
     let mut reader =
         ignis_media::open(path, &opts).with_context(|| format!("reading {}", path.display()))?;
+    // Window frame the reader gives next (left-out frames are read past).
+    let mut at = c.start;
     let mut next = |want: usize| -> Result<RgbaFrame> {
-        reader
-            .next()
-            .transpose()?
-            .with_context(|| format!("{} ended before frame {}", path.display(), first + want))
+        loop {
+            let f = reader.next().transpose()?.with_context(|| {
+                format!("{} ended before frame {}", path.display(), first + want)
+            })?;
+            at += 1;
+            if at > want {
+                return Ok(f);
+            }
+        }
     };
     let mut head: Vec<RgbaFrame> = Vec::with_capacity(m);
     for i in c.start..c.start + m {

@@ -26,7 +26,9 @@
 //! `end + t` going into frame `start + t` with weight `(t + 1) / (m + 1)` on the latter
 //! (the crossfade of loop_metrics.py, rotated to start after the head it replaces). Played
 //! repeatedly, the last transition frame is followed by `start + m`. It needs frames up to
-//! `end + m - 1`.
+//! `end + m - 1`. A few single soft frames of the body may be left out ([`Skips`]) when
+//! the measured score says the loop is better without them: the footage's own blurred
+//! frames would otherwise be the loop's ghost.
 //!
 //! This crate knows no flow or codec: the morph comes in through [`PairMorph`] (the CLI
 //! implements it with `ignis_flow`); [`Crossfade`] is the plain blend.
@@ -43,6 +45,52 @@ pub const FILTER: [f64; 4] = [1.0, 3.0, 3.0, 1.0];
 pub const TRANSITION_LENGTHS: [usize; 10] = [0, 2, 3, 4, 6, 8, 10, 12, 16, 20];
 /// Weight of the ghost shortfall in [`score`].
 pub const GHOST_WEIGHT: f64 = 3.0;
+/// Most footage frames a closed loop may leave out ([`Skips`]); also at most one in
+/// [`SKIP_EVERY`] of its frames.
+pub const MAX_SKIPS: usize = 4;
+/// See [`MAX_SKIPS`].
+pub const SKIP_EVERY: usize = 24;
+
+/// Body frames a closed loop leaves out (window indices, ascending): single soft footage
+/// frames — motion blur, a compression glitch — that would be the loop's ghost. Playing
+/// `i - 1` then `i + 1` is a Video Textures transition to the frame after the next
+/// (Schödl 2000 §3), kept only when the measured seam and ghost score better with it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub struct Skips {
+    n: u8,
+    at: [u32; MAX_SKIPS],
+}
+
+impl Skips {
+    /// The left-out frames, ascending.
+    pub fn as_slice(&self) -> &[u32] {
+        &self.at[..self.n as usize]
+    }
+    pub fn len(&self) -> usize {
+        self.n as usize
+    }
+    pub fn is_empty(&self) -> bool {
+        self.n == 0
+    }
+    pub fn contains(&self, i: usize) -> bool {
+        self.as_slice().iter().any(|&s| s as usize == i)
+    }
+    /// With `i` added (ignored when full).
+    fn with(mut self, i: usize) -> Skips {
+        if (self.n as usize) < MAX_SKIPS {
+            self.at[self.n as usize] = i as u32;
+            self.n += 1;
+            self.at[..self.n as usize].sort_unstable();
+        }
+        self
+    }
+}
+
+impl serde::Serialize for Skips {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
+        self.as_slice().serialize(s)
+    }
+}
 
 /// What [`search`] looks for.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -321,8 +369,16 @@ pub enum Planned {
 
 /// The output frames of `c` closed with `closing` (see the module doc for the layout).
 pub fn plan(c: &Candidate, closing: Closing) -> Vec<Planned> {
+    plan_with(c, closing, &Skips::default())
+}
+
+/// [`plan`] leaving out the body frames `skips` (an [`Evaluated::skips`]).
+pub fn plan_with(c: &Candidate, closing: Closing, skips: &Skips) -> Vec<Planned> {
     let m = closing.frames().min(c.len());
-    let mut out: Vec<Planned> = (c.start + m..c.end).map(Planned::Src).collect();
+    let mut out: Vec<Planned> = (c.start + m..c.end)
+        .filter(|&i| !skips.contains(i))
+        .map(Planned::Src)
+        .collect();
     for t in 0..m {
         out.push(Planned::Mix {
             from: c.end + t,
@@ -383,6 +439,8 @@ pub fn blend(a: &GrayFrame, b: &GrayFrame, w: f32) -> GrayFrame {
 pub struct Evaluated {
     pub candidate: Candidate,
     pub closing: Closing,
+    /// Soft footage frames of the body left out (see [`Skips`]).
+    pub skips: Skips,
     pub quality: LoopQuality,
     /// Largest step of the transition (the steps into and out of it included; a cut's
     /// single jump) over the median step.
@@ -468,18 +526,32 @@ impl<'a> MetricWindow<'a> {
 /// window: a cut and crossfades for all, and — when `morph` is motion-compensated, which
 /// costs a flow per pair — morphs for the `morph_candidates` candidates whose best cut or
 /// crossfade scores best. Sorted by [`score`] (ties: fewer transition frames, then the
-/// search's order). Deterministic.
+/// search's order). Deterministic. Soft frames are left out ([`Skips`]) only as long as
+/// the loop stays at least as long as the shortest candidate (the search's lower bound);
+/// [`evaluate_with`] takes that bound explicitly.
 pub fn evaluate(
     win: &MetricWindow,
     cands: &[Candidate],
     morph: &dyn PairMorph,
     morph_candidates: usize,
 ) -> Vec<Evaluated> {
+    let min_len = cands.iter().map(Candidate::len).min().unwrap_or(0);
+    evaluate_with(win, cands, morph, morph_candidates, min_len)
+}
+
+/// [`evaluate`], the written loops never shorter than `min_len` frames.
+pub fn evaluate_with(
+    win: &MetricWindow,
+    cands: &[Candidate],
+    morph: &dyn PairMorph,
+    morph_candidates: usize,
+    min_len: usize,
+) -> Vec<Evaluated> {
     let mut out: Vec<(usize, Evaluated)> = cands
         .par_iter()
         .enumerate()
         .flat_map_iter(|(rank, c)| {
-            evaluate_one(win, c, &Crossfade)
+            evaluate_one(win, c, &Crossfade, min_len)
                 .into_iter()
                 .map(move |e| (rank, e))
         })
@@ -498,7 +570,7 @@ pub fn evaluate(
         let morphs: Vec<(usize, Evaluated)> = picked
             .par_iter()
             .flat_map_iter(|&rank| {
-                evaluate_one(win, &cands[rank], morph)
+                evaluate_one(win, &cands[rank], morph, min_len)
                     .into_iter()
                     .map(move |e| (rank, e))
             })
@@ -523,7 +595,12 @@ fn sort_evaluated(v: &mut [(usize, Evaluated)]) {
 
 /// `c` closed every way `morph` offers: with [`Crossfade`], a cut and crossfades; with a
 /// motion-compensated morph, morphs only.
-fn evaluate_one(win: &MetricWindow, c: &Candidate, morph: &dyn PairMorph) -> Vec<Evaluated> {
+fn evaluate_one(
+    win: &MetricWindow,
+    c: &Candidate,
+    morph: &dyn PairMorph,
+    min_len: usize,
+) -> Vec<Evaluated> {
     let n = win.len();
     let max_m = TRANSITION_LENGTHS
         .iter()
@@ -545,29 +622,82 @@ fn evaluate_one(win: &MetricWindow, c: &Candidate, morph: &dyn PairMorph) -> Vec
         let mids: Vec<GrayFrame> = (0..m)
             .map(|t| pairs[t]((t + 1) as f32 / (m + 1) as f32))
             .collect();
-        out.push(measure(win, c, closing, &mids));
+        out.push(measure(win, c, closing, &mids, min_len));
     }
     out
 }
 
-/// Seam and ghost of `c` closed with `closing` whose transition frames are `mids`.
-fn measure(win: &MetricWindow, c: &Candidate, closing: Closing, mids: &[GrayFrame]) -> Evaluated {
+/// Seam and ghost of `c` closed with `closing` whose transition frames are `mids`, then
+/// with soft body frames left out one at a time (see [`Skips`]) while that lowers the
+/// [`score`] and the loop keeps at least `min_len` frames.
+fn measure(
+    win: &MetricWindow,
+    c: &Candidate,
+    closing: Closing,
+    mids: &[GrayFrame],
+    min_len: usize,
+) -> Evaluated {
+    let mut best = measure_with(win, c, closing, mids, Skips::default());
     let m = mids.len();
     let body = c.start + m..c.end;
-    // Steps: body (natural), last body → first mid, mids, last mid → first body (wrap).
-    let mut steps: Vec<f64> = win.steps[body.start..body.end - 1].to_vec();
+    let allowed = MAX_SKIPS
+        .min(c.len() / SKIP_EVERY)
+        .min(c.len().saturating_sub(min_len));
+    while best.skips.len() < allowed {
+        // The softest frame, when it is a body frame whose neighbours are both kept
+        // body frames (never two in a row, never the frames next to the closing).
+        let kept: Vec<usize> = body.clone().filter(|&i| !best.skips.contains(i)).collect();
+        let at = best.quality.ghost_at;
+        if at == 0 || at + 1 >= kept.len() {
+            break;
+        }
+        let i = kept[at];
+        if kept[at - 1] + 1 != i || kept[at + 1] != i + 1 {
+            break;
+        }
+        let tried = measure_with(win, c, closing, mids, best.skips.with(i));
+        if tried.score < best.score {
+            best = tried;
+        } else {
+            break;
+        }
+    }
+    best
+}
+
+/// Seam and ghost of `c` closed with `closing` (transition frames `mids`), body frames
+/// `skips` left out.
+fn measure_with(
+    win: &MetricWindow,
+    c: &Candidate,
+    closing: Closing,
+    mids: &[GrayFrame],
+    skips: Skips,
+) -> Evaluated {
+    let m = mids.len();
+    let body: Vec<usize> = (c.start + m..c.end)
+        .filter(|&i| !skips.contains(i))
+        .collect();
+    let step = |a: usize, b: usize| {
+        if b == a + 1 {
+            win.steps[a]
+        } else {
+            loopq::rms_diff(&win.frames[a], &win.frames[b])
+        }
+    };
+    let (first, last) = (body[0], body[body.len() - 1]);
+    // Steps: body (natural, or across a left-out frame), last body → first mid, mids,
+    // last mid → first body (wrap).
+    let mut steps: Vec<f64> = body.windows(2).map(|w| step(w[0], w[1])).collect();
     let mut trans = Vec::with_capacity(m + 1);
     if m == 0 {
-        trans.push(loopq::rms_diff(
-            &win.frames[body.end - 1],
-            &win.frames[body.start],
-        ));
+        trans.push(loopq::rms_diff(&win.frames[last], &win.frames[first]));
     } else {
-        trans.push(loopq::rms_diff(&win.frames[body.end - 1], &mids[0]));
+        trans.push(loopq::rms_diff(&win.frames[last], &mids[0]));
         for t in 1..m {
             trans.push(loopq::rms_diff(&mids[t - 1], &mids[t]));
         }
-        trans.push(loopq::rms_diff(&mids[m - 1], &win.frames[body.start]));
+        trans.push(loopq::rms_diff(&mids[m - 1], &win.frames[first]));
     }
     steps.extend_from_slice(&trans);
     let med = loopq::median(&mut steps.clone());
@@ -576,7 +706,7 @@ fn measure(win: &MetricWindow, c: &Candidate, closing: Closing, mids: &[GrayFram
             (0, f64::NEG_INFINITY),
             |b, (i, &v)| if v > b.1 { (i, v) } else { b },
         );
-    let mut sharp: Vec<f64> = win.sharp[body.clone()].to_vec();
+    let mut sharp: Vec<f64> = body.iter().map(|&i| win.sharp[i]).collect();
     sharp.extend(mids.iter().map(loopq::sharpness));
     let (ghost, ghost_at) = loopq::ghost(&sharp);
     // As loopq: a still loop is perfectly smooth, a step out of stillness infinitely rough.
@@ -599,6 +729,7 @@ fn measure(win: &MetricWindow, c: &Candidate, closing: Closing, mids: &[GrayFram
     Evaluated {
         candidate: *c,
         closing,
+        skips,
         quality,
         transition_step: ratio(trans.iter().copied().fold(0.0, f64::max)),
         score: score(&quality),
@@ -619,6 +750,19 @@ pub fn choose(evaluated: &[Evaluated], first: usize) -> Option<(Evaluated, Strin
         best.quality.seam,
         (1.0 - best.quality.ghost).max(0.0)
     );
+    if !best.skips.is_empty() {
+        let list: Vec<String> = best
+            .skips
+            .as_slice()
+            .iter()
+            .map(|&i| (first + i as usize).to_string())
+            .collect();
+        why.push_str(&format!(
+            ", leaving out {} soft footage frame(s) ({})",
+            best.skips.len(),
+            list.join(", ")
+        ));
+    }
     let others: Vec<String> = [
         ("plain cut", best_of(&|c| matches!(c, Closing::Cut))),
         (
@@ -769,5 +913,60 @@ mod tests {
         // Every other closing was tried too.
         assert!(ev.iter().any(|e| e.closing == Closing::Crossfade(4)));
         assert!(choose(&ev, 0).unwrap().1.contains("plain cut"));
+        assert!(ev[0].skips.is_empty());
+    }
+
+    /// A blurred footage frame inside the loop is left out, and the plan and loopq agree
+    /// with the prediction.
+    #[test]
+    fn soft_footage_frame_is_left_out() {
+        let size = Size::new(32, 8).unwrap();
+        let frames: Vec<GrayFrame> = (0..100)
+            .map(|i| {
+                let mut f = GrayFrame::new(size);
+                for y in 0..8 {
+                    if i == 30 {
+                        // Motion blur: the bar smeared over three pixels.
+                        for d in 0..3 {
+                            f.data_mut()[y * 32 + 3 + i % 20 + d] = 1.0 / 3.0;
+                        }
+                    } else {
+                        f.data_mut()[y * 32 + 4 + i % 20] = 1.0;
+                    }
+                }
+                f
+            })
+            .collect();
+        let win = MetricWindow::new(&frames).unwrap();
+        let c = Candidate {
+            start: 10,
+            end: 70,
+            cost: 0.0,
+        };
+        // A lone candidate is the shortest: nothing may be left out.
+        assert!(evaluate(&win, &[c], &Crossfade, 0)[0].skips.is_empty());
+        let ev = evaluate_with(&win, &[c], &Crossfade, 0, 50);
+        let best = ev[0];
+        assert_eq!(best.closing, Closing::Cut, "{best:?}");
+        assert_eq!(best.skips.as_slice(), &[30], "{best:?}");
+        let p = plan_with(&c, best.closing, &best.skips);
+        assert!(!p.contains(&Planned::Src(30)) && p.contains(&Planned::Src(31)));
+        let built: Vec<GrayFrame> = p
+            .iter()
+            .map(|p| match *p {
+                Planned::Src(i) => frames[i].clone(),
+                Planned::Mix { from, to, w } => blend(&frames[from], &frames[to], w),
+            })
+            .collect();
+        let q = loopq::loop_quality(&built).unwrap();
+        assert!((q.seam - best.quality.seam).abs() < 1e-9);
+        assert!((q.ghost - best.quality.ghost).abs() < 1e-9);
+        // Without the skip the blurred frame is the ghost.
+        let with_blur = measure_with(&win, &c, best.closing, &[], Skips::default());
+        assert!(with_blur.quality.ghost < 0.5 && best.quality.ghost > 0.9);
+        assert!(choose(&ev, 0)
+            .unwrap()
+            .1
+            .contains("leaving out 1 soft footage frame(s) (30)"));
     }
 }

@@ -104,9 +104,10 @@ pub struct MaskParams {
     /// Darkest sRGB-encoded luminance an isolated flame reaches, `0..1`. Default 0.3.
     pub isolate_floor: f32,
     /// With isolation, mask pixels at least this saturated (sRGB HSV S) are kept as
-    /// flame wherever they are: a flame's own light is saturated (orange, red, blue), the
-    /// surfaces it lights are paler (the lit jar of candle.mp4: 3 % of its lit pixels
-    /// reach 0.5; the fire of fireball.mp4: all). Default 0.5.
+    /// flame where they connect to the isolated flame: a flame's own light is saturated
+    /// (orange, red, its blue root), the surfaces it lights are paler (the lit jar of
+    /// candle.mp4: 3 % of its lit pixels reach 0.5; the fire of fireball.mp4: all); a
+    /// saturated glint away from the flame (a jar's rim) is not flame. Default 0.5.
     pub isolate_saturation: f32,
     /// With isolation, how much weaker than the strongest edge (`0..1`, a fraction) the
     /// flame's outer edge may be and still be chosen over the edge of its white-hot core.
@@ -311,11 +312,14 @@ pub fn smooth_mask(mask: &GrayImage, sigma: f32) -> GrayImage {
     b
 }
 
-/// The full mask of §3.2.1: HSV layers (when `isolate`, restricted to the
-/// [`isolate_flame`] region and the saturated — emissive — pixels), then morphology,
-/// then smoothing.
+/// The full mask of §3.2.1: HSV layers, then morphology, then smoothing. When `isolate`,
+/// the HSV mask is first restricted to the [`isolate_flame`] region and the saturated —
+/// emissive — pixels connected to it, and the isolated region (dilated by 2 px) is added
+/// back after the clean-up: specular reflections of the flame are as bright as the flame
+/// and flicker with it, but thin, and opening would erase them.
 pub fn flame_mask(frame: &RgbaFrame, p: &MaskParams, isolate: bool) -> GrayImage {
     let mut m = hsv_mask(frame, &p.layers);
+    let mut bright = None;
     if isolate {
         let keep = isolate_flame(
             &luma8(frame),
@@ -324,25 +328,83 @@ pub fn flame_mask(frame: &RgbaFrame, p: &MaskParams, isolate: bool) -> GrayImage
             p.isolate_floor,
             p.isolate_edge_tolerance,
         );
-        for ((a, b), px) in m.as_mut().iter_mut().zip(keep.as_raw()).zip(frame.data()) {
-            // A flame's own light is saturated (orange, red, blue); what it lights is paler.
-            let (_, sat, _) = rgb_to_hsv(
-                linear_to_srgb(px[0]),
-                linear_to_srgb(px[1]),
-                linear_to_srgb(px[2]),
-            );
-            let emissive = sat >= p.isolate_saturation;
-            *a = if *a > 0 && (*b > 0 || emissive) {
-                255
+        // Kept: the isolated flame, and saturated (emissive) pixels connected to it — a
+        // flame's own light is saturated (orange, red, its blue root), what it lights is
+        // paler; a saturated glint on a jar's rim away from the flame is not flame.
+        let mut b = GrayImage::new(frame.width(), frame.height());
+        let mut cand = vec![false; m.as_raw().len()];
+        let mut stack = Vec::new();
+        for (i, ((&a, &k), px)) in m
+            .as_raw()
+            .iter()
+            .zip(keep.as_raw())
+            .zip(frame.data())
+            .enumerate()
+        {
+            if a == 0 {
+                continue;
+            }
+            if k > 0 {
+                b.as_mut()[i] = 255;
+                stack.push(i);
             } else {
-                0
-            };
+                let (_, sat, _) = rgb_to_hsv(
+                    linear_to_srgb(px[0]),
+                    linear_to_srgb(px[1]),
+                    linear_to_srgb(px[2]),
+                );
+                cand[i] = sat >= p.isolate_saturation;
+            }
         }
+        let out = grow_into(&mut cand, stack, frame.width() as usize);
+        m = out;
+        bright = Some(morph(
+            &b,
+            Morph {
+                op: MorphOp::Dilate,
+                radius: 2,
+            },
+        ));
     }
     for step in &p.morphology {
         m = morph(&m, *step);
     }
-    smooth_mask(&m, p.smooth_sigma)
+    let mut m = smooth_mask(&m, p.smooth_sigma);
+    if let Some(b) = bright {
+        for (o, &v) in m.as_mut().iter_mut().zip(b.as_raw()) {
+            *o = (*o).max(v);
+        }
+    }
+    m
+}
+
+/// The pixels reachable (8-connected) from `seeds` through `open` pixels, as a mask (the
+/// seeds included). `open` is consumed as the visited set.
+fn grow_into(open: &mut [bool], mut stack: Vec<usize>, w: usize) -> GrayImage {
+    let n = open.len();
+    let h = n / w.max(1);
+    let mut out = GrayImage::new(w as u32, h as u32);
+    for &i in &stack {
+        open[i] = false;
+    }
+    while let Some(i) = stack.pop() {
+        out.as_mut()[i] = 255;
+        let (x, y) = ((i % w) as isize, (i / w) as isize);
+        for dy in -1..=1isize {
+            for dx in -1..=1isize {
+                let (xx, yy) = (x + dx, y + dy);
+                if xx < 0 || yy < 0 || xx >= w as isize || yy >= h as isize {
+                    continue;
+                }
+                let j = yy as usize * w + xx as usize;
+                if open[j] {
+                    open[j] = false;
+                    stack.push(j);
+                }
+            }
+        }
+    }
+    out
 }
 
 /// sRGB-encoded luminance of a linear frame, 8-bit.
@@ -370,7 +432,7 @@ pub fn value8(frame: &RgbaFrame) -> Vec<u8> {
 const GROWTH_STEP: usize = 12;
 /// Growth over [`GROWTH_STEP`] levels that marks the flame region merging into lit
 /// surroundings.
-const MERGE_GROWTH: f64 = 2.2;
+const MERGE_GROWTH: f64 = 1.5;
 
 /// Flame isolation: the part of the frame lit by the flame itself, not by its light.
 ///
@@ -379,21 +441,58 @@ const MERGE_GROWTH: f64 = 2.2;
 /// brightest pixels (within 8 levels of the maximum of `luma`, sRGB-encoded luminance),
 /// a priority flood visits pixels in decreasing luminance down to `floor`, which gives
 /// each pixel the threshold `τ` at which it joins the seeds' region `R(τ)`. Walking `τ`
-/// down, the first level where the area more than doubles within 12 levels
-/// ([`MERGE_GROWTH`]) is where the flame's region merges into the lit surroundings; above
-/// it, the mean luminance step between neighbours across each region's boundary is
-/// measured, and the `τ` with the strongest step (the flame's edge) is chosen. Returns
+/// down, the level below which the area grows fastest over the next 12 levels (by at
+/// least [`MERGE_GROWTH`]) is where the flame's region merges into the lit surroundings
+/// (a flame ends at a steep edge, few pixels per level; lit surroundings are a plateau);
+/// above it, the mean luminance step between neighbours across each region's boundary is
+/// measured, and the lowest `τ` whose step is within `tolerance` of the strongest (the
+/// flame's outer edge) is chosen — but never below halfway from the median lit pixel
+/// (≥ `floor`) to the peak: a flame is brighter than most of what it lights. Returns
 /// the mask of every pixel at least as bright as `τ` (255 inside), so a reflection or a
 /// second tongue not connected to the seeds is kept too.
 /// Deterministic; O(pixels). The thresholds adapt to each frame: nothing is tuned to a
 /// clip.
 pub fn isolate_flame(luma: &[u8], w: u32, h: u32, floor: f32, tolerance: f32) -> GrayImage {
+    let mut out = GrayImage::new(w, h);
+    if let Some(lv) = isolate_levels(luma, w, h, floor, tolerance) {
+        for (o, &v) in out.as_mut().iter_mut().zip(luma) {
+            if v as usize >= lv.chosen {
+                *o = 255;
+            }
+        }
+    }
+    out
+}
+
+/// What [`isolate_flame`] measured on a frame, per luminance level `τ` (8-bit).
+#[derive(Clone, Debug)]
+pub struct IsolateLevels {
+    /// Brightest luminance of the frame.
+    pub vmax: usize,
+    /// Area of the seeds' region `R(τ)` (pixels).
+    pub area: Vec<u64>,
+    /// Mean luminance step across the boundary of `R(τ)`.
+    pub edge: Vec<f64>,
+    /// The merge level (the lowest level searched).
+    pub merge: usize,
+    /// The chosen threshold: every pixel at least this bright is flame.
+    pub chosen: usize,
+}
+
+/// The measurements behind [`isolate_flame`]; `None` when nothing reaches `floor` or
+/// `luma` is not `w × h`.
+pub fn isolate_levels(
+    luma: &[u8],
+    w: u32,
+    h: u32,
+    floor: f32,
+    tolerance: f32,
+) -> Option<IsolateLevels> {
     let (w, h) = (w as usize, h as usize);
-    let mut out = GrayImage::new(w as u32, h as u32);
     let floor = (floor * 255.0).round() as usize;
     let vmax = luma.iter().copied().max().unwrap_or(0) as usize;
     if vmax < floor || luma.len() != w * h {
-        return out;
+        return None;
     }
     // Entry level of each pixel (-1: never reached).
     let mut entry = vec![-1i16; w * h];
@@ -485,14 +584,19 @@ pub fn isolate_flame(luma: &[u8], w: u32, h: u32, floor: f32, tolerance: f32) ->
         c += dcount[t];
         mean[t] = if c > 0 { s / c as f64 } else { 0.0 };
     }
-    // The merge level: walking τ down from below the seeds.
+    // The merge level: of the levels below the seeds, the one where the region grows
+    // fastest over the next GROWTH_STEP levels down — a flame ends at a steep edge (few
+    // pixels per level), lit surroundings are a plateau (many) — if it grows by at least
+    // MERGE_GROWTH there; else nothing merges and the whole range down to `floor` is open.
     let top = vmax.saturating_sub(8).max(floor);
     let mut stop = floor;
+    let mut fastest = MERGE_GROWTH;
     let mut t = vmax.saturating_sub(24);
     while t >= floor + GROWTH_STEP && t > 0 {
-        if area[t - GROWTH_STEP] as f64 > MERGE_GROWTH * area[t].max(1) as f64 {
+        let growth = area[t - GROWTH_STEP] as f64 / area[t].max(1) as f64;
+        if growth > fastest {
+            fastest = growth;
             stop = t;
-            break;
         }
         t -= 1;
     }
@@ -506,14 +610,31 @@ pub fn isolate_flame(luma: &[u8], w: u32, h: u32, floor: f32, tolerance: f32) ->
     let best = (stop..=top.max(stop))
         .find(|&t| area[t] > 0 && mean[t] >= (1.0 - tolerance as f64) * strongest)
         .unwrap_or(top);
+    // Never below halfway from the median lit pixel to the peak: a flame is brighter than
+    // most of what it lights (where no merge shows, the strongest edges can be the
+    // outline of a lit jar against the dark).
+    let mut lit: Vec<u8> = luma
+        .iter()
+        .copied()
+        .filter(|&v| v as usize >= floor)
+        .collect();
+    let mid = lit.len() / 2;
+    let median_lit = *lit.select_nth_unstable(mid).1 as usize;
+    // And never above where the merge search starts (24 levels below the peak): the edge
+    // of the white-hot core is not the flame's edge.
+    let best = best
+        .min(vmax.saturating_sub(24))
+        .max((median_lit + vmax).div_ceil(2))
+        .min(top.max(floor));
     // Everything at least that bright, connected to the seeds or not (a flame's
     // reflection, a second tongue): the lit surroundings are dimmer than the merge level.
-    for (o, &v) in out.as_mut().iter_mut().zip(luma) {
-        if v as usize >= best {
-            *o = 255;
-        }
-    }
-    out
+    Some(IsolateLevels {
+        vmax,
+        area: area.to_vec(),
+        edge: mean.to_vec(),
+        merge: stop,
+        chosen: best,
+    })
 }
 
 /// Fraction of the lit pixels (V ≥ `floor`) of `samples` (8-bit sRGB values, one `Vec`
@@ -659,6 +780,50 @@ mod tests {
             ..red
         };
         assert_eq!(hsv_mask(&f, &[bright, diff]).as_raw(), &vec![0, 255, 0]);
+    }
+
+    /// Issue 14: on a lit plate (a jar), isolation keeps the flame, its saturated rim
+    /// and a thin specular reflection of it, and drops the plate and a saturated glint
+    /// away from the flame.
+    #[test]
+    fn isolation_keeps_flame_rim_and_reflection_not_plate_or_glint() {
+        let (w, h) = (96u32, 96u32);
+        let data = (0..w * h)
+            .map(|i| {
+                let (x, y) = ((i % w) as f32, (i / w) as f32);
+                let r = ((x - 48.0).powi(2) + (y - 40.0).powi(2)).sqrt();
+                if r < 7.0 {
+                    px(1.0, 1.0, 0.97) // white-hot core
+                } else if r < 10.0 {
+                    px(1.0, 0.55, 0.1) // saturated orange edge of the flame
+                } else if (80.0..83.0).contains(&y) && (10.0..20.0).contains(&x) {
+                    px(0.8, 0.35, 0.1) // saturated glint on the rim, far from the flame
+                } else if y == 20.0 && (70.0..80.0).contains(&x) {
+                    px(1.0, 1.0, 1.0) // one-pixel specular reflection of the flame
+                } else if (8.0..88.0).contains(&x) && (12.0..88.0).contains(&y) {
+                    px(0.6, 0.5, 0.5) // the pale lit plate
+                } else {
+                    px(0.02, 0.02, 0.02)
+                }
+            })
+            .collect();
+        let f = RgbaFrame::from_vec(Size::new(w, h).unwrap(), data).unwrap();
+        let p = MaskParams::default();
+        let m = flame_mask(&f, &p, true);
+        let at = |x: u32, y: u32| m.get_pixel(x, y)[0] > 0;
+        assert!(
+            at(48, 40) && at(48, 31),
+            "the core and its orange edge are flame"
+        );
+        assert!(at(75, 20), "the thin reflection is kept");
+        assert!(
+            !at(15, 81),
+            "the saturated glint away from the flame is not flame"
+        );
+        assert!(!at(20, 60) && !at(80, 70), "the lit plate is not flame");
+        assert!(mask_area(&m) < 600, "{} px", mask_area(&m));
+        // Without isolation the plate is kept.
+        assert!(flame_mask(&f, &p, false).get_pixel(20, 60)[0] > 0);
     }
 
     #[test]
