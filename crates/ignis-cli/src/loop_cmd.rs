@@ -312,10 +312,7 @@ fn build_entry(
         spec.start = window.start;
         spec.end = Some(window.end);
         spec.stride = 1;
-        let clips = vec![ClipInput {
-            spec,
-            source: crate::eigen::media_source(path)?,
-        }];
+        let clips = vec![ClipInput::new(spec, ignis_eigen::MediaFootage::open(path)?)];
         let pre = PreprocessParams {
             train_size: Some(train_size),
             ..Default::default()

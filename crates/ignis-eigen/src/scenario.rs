@@ -746,9 +746,7 @@ impl Scenario {
             }
             motions.insert(name, MotionPlan { rows, edits });
         }
-        let (w, k, spans) = animate::weight_space(db)?;
-        let space = WeightSpace::new(w, k, spans)
-            .map_err(|e| EigenError::bad("database", e.to_string()))?;
+        let space = WeightSpace::from_db(db)?;
         let seq: Vec<&str> = self
             .raw
             .sequence
