@@ -750,7 +750,7 @@ pub fn eigen_length_loop(a: &crate::eigen::LoopArgs, g: &Global) -> Result<()> {
         );
     }
     let k = db.n_components();
-    let rows = c.first_row + (window.start - c.start)..c.first_row + (window.end - c.start);
+    let rows = ignis_eigen::animate::clip_rows(&db, &a.clip, window.clone())?;
     let weights = &db.weights_row_major()[rows.start * k..rows.end * k];
     let e = db.manifest().e_detect.max(1);
     let d = make_loop(
