@@ -310,12 +310,16 @@ mod media {
             })))
         }
         /// Reads only `indices[0]..=indices[last]` (a bounded range: the decoder stops
-        /// there).
+        /// there), cut at the end of the source when its length is known.
         fn frames_at(&self, indices: &[usize]) -> Result<Vec<Option<RgbaFrame>>> {
             let (Some(&lo), Some(&hi)) = (indices.first(), indices.last()) else {
                 return Ok(Vec::new());
             };
-            let reader = self.read(lo, Some(hi + 1))?;
+            let end = self.info.frame_count.map_or(hi + 1, |n| n.min(hi + 1));
+            if lo >= end {
+                return Ok(vec![None; indices.len()]);
+            }
+            let reader = self.read(lo, Some(end))?;
             let mut out = vec![None; indices.len()];
             let mut want = indices.iter().enumerate().peekable();
             for (i, f) in reader.enumerate() {
@@ -330,5 +334,77 @@ mod media {
             }
             Ok(out)
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::synthetic::FlameStyle;
+
+    fn params(frames: usize) -> SyntheticParams {
+        SyntheticParams {
+            size: Size::new(16, 24).unwrap(),
+            frames,
+            style: FlameStyle::Candle,
+            seed: 5,
+        }
+    }
+
+    /// Footage with only `frames` (the trait's default `frames_at`).
+    struct Streamed<'a>(FrameList<'a>);
+    impl Footage for Streamed<'_> {
+        fn info(&self) -> &FootageInfo {
+            self.0.info()
+        }
+        fn frames(&self, start: usize) -> Result<Frames<'_>> {
+            self.0.frames(start)
+        }
+    }
+
+    #[test]
+    fn frames_at_agrees_with_frames_everywhere() {
+        let syn = SyntheticFootage::new(params(7), 30.0);
+        assert_eq!(syn.info().frame_count, Some(7));
+        assert_eq!(syn.info().source, "synthetic:candle:seed=5");
+        let all: Vec<RgbaFrame> = syn.frames(0).unwrap().map(|f| f.unwrap()).collect();
+        assert_eq!(all.len(), 7);
+        assert_eq!(syn.frames(5).unwrap().count(), 2);
+        assert_eq!(syn.frames(9).unwrap().count(), 0);
+        let list = FrameList::new("mem", &all, 30.0);
+        let streamed = Streamed(list.clone());
+        let want = [1, 2, 5, 6, 8];
+        for f in [&syn as &dyn Footage, &list, &streamed] {
+            let got = f.frames_at(&want).unwrap();
+            assert_eq!(got.len(), want.len());
+            for (g, &i) in got.iter().zip(&want) {
+                assert_eq!(g.as_ref(), all.get(i), "frame {i} of {}", f.info().source);
+            }
+            assert!(f.frames_at(&[]).unwrap().is_empty());
+        }
+    }
+
+    #[cfg(feature = "media")]
+    #[test]
+    fn media_footage_reads_a_sequence_by_index_and_names_the_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let syn = SyntheticFootage::new(params(5), 30.0);
+        for (i, f) in syn.frames(0).unwrap().enumerate() {
+            ignis_media::write_png(&dir.path().join(format!("f{i:03}.png")), &f.unwrap()).unwrap();
+        }
+        let m = MediaFootage::open(&dir.path().join("f%03d.png")).unwrap();
+        assert_eq!(m.info().size, Size::new(16, 24).unwrap());
+        assert_eq!(m.info().frame_count, Some(5));
+        let seq: Vec<RgbaFrame> = m.frames(0).unwrap().map(|f| f.unwrap()).collect();
+        assert_eq!(seq.len(), 5);
+        let got = m.frames_at(&[1, 4, 7]).unwrap();
+        assert_eq!(got[0].as_ref(), Some(&seq[1]));
+        assert_eq!(got[1].as_ref(), Some(&seq[4]));
+        assert_eq!(got[2], None);
+        let e = MediaFootage::open(&dir.path().join("missing.mp4")).unwrap_err();
+        assert!(matches!(e, EigenError::Decode { frame: None, .. }), "{e}");
+        assert!(e.to_string().contains("missing.mp4"), "{e}");
+        let e = e.in_clip("fire");
+        assert!(e.to_string().starts_with("clip `fire`"), "{e}");
     }
 }
