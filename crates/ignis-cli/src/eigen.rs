@@ -322,6 +322,11 @@ impl Progress for Bars<'_> {
             b.inc(n);
         }
     }
+    fn message(&mut self, text: &str) {
+        if let Some(b) = &self.bar {
+            b.set_message(text.to_string());
+        }
+    }
     fn finish_stage(&mut self) {
         if let Some(b) = self.bar.take() {
             b.finish_and_clear();
