@@ -514,6 +514,9 @@ pub fn render_plan_with(
 pub const MORPH_FLOW_SIDE: u32 = 384;
 
 /// Renders `frames` (no morph runs among them) of `plan` into `sink`, in order.
+// Long on purpose: per batch of 16 it chooses each frame's grey source (footage, stored
+// frame or reconstruction) and the layers they share, then finishes them in parallel
+// ([`finish_frame`]); the per-frame rules are closures over that shared batch state.
 #[allow(clippy::too_many_arguments)]
 fn render_frames(
     db: &EigenfireDb,
