@@ -7,9 +7,10 @@
 use crate::global::Global;
 use anyhow::{Context, Result};
 use ignis_core::{RgbaFrame, Size};
-use ignis_eigen::render::{self, SourceFrames, SyntheticSources};
+use ignis_eigen::render;
 use ignis_eigen::scenario::{Plan, Scenario};
 use ignis_eigen::{ClipEntry, EigenError, EigenfireDb};
+use ignis_eigen::{Footage, FootageOpener, MediaFootage, SyntheticFootage};
 use std::path::{Path, PathBuf};
 
 #[derive(clap::Args, Debug)]
@@ -120,7 +121,7 @@ impl FootageArgs {
         }
         Ok(MediaSources {
             relink: self.relink.iter().cloned().collect(),
-            checked: Default::default(),
+            ..Default::default()
         })
     }
 
@@ -141,7 +142,7 @@ pub struct ScenarioArgs {
     pub db: PathBuf,
 }
 
-/// [`SourceFrames`] over `ignis-media`, falling back to redrawing synthetic clips. A
+/// [`FootageOpener`] over `ignis-media`, falling back to redrawing synthetic clips. A
 /// clip's recorded source is checked once against the fingerprint taken at training
 /// (size, SHA-256, frame count); `relink` gives a clip's footage a new place (checked
 /// for the trained frame size and count).
@@ -149,6 +150,8 @@ pub struct ScenarioArgs {
 pub struct MediaSources {
     pub relink: std::collections::HashMap<String, PathBuf>,
     pub checked: std::collections::HashSet<String>,
+    /// Footage opened so far (probed once per file).
+    opened: std::collections::HashMap<PathBuf, MediaFootage>,
 }
 
 impl MediaSources {
@@ -168,8 +171,9 @@ impl MediaSources {
             ));
         }
         let info = ignis_media::probe(p).map_err(|e| EigenError::Decode {
-            clip: clip.name.clone(),
-            reason: format!("{}: {e}", p.display()),
+            what: format!("clip `{}` ({})", clip.name, p.display()),
+            frame: None,
+            source: Box::new(e),
         })?;
         let frames = info.frame_count.map(|n| n as usize);
         if relinked {
@@ -216,16 +220,17 @@ impl MediaSources {
     }
 }
 
-impl SourceFrames for MediaSources {
-    fn read(
+impl FootageOpener for MediaSources {
+    fn open(
         &mut self,
         clip: &ClipEntry,
         path: Option<&Path>,
-        frames: &[usize],
-    ) -> ignis_eigen::Result<Vec<Option<RgbaFrame>>> {
+    ) -> ignis_eigen::Result<Box<dyn Footage + '_>> {
         let relinked = self.relink.get(&clip.name).cloned();
-        if path.is_none() && relinked.is_none() && SyntheticSources::params(clip).is_some() {
-            return SyntheticSources.read(clip, None, frames);
+        if path.is_none() && relinked.is_none() {
+            if let Some(f) = SyntheticFootage::of_clip(clip) {
+                return Ok(Box::new(f));
+            }
         }
         let p = match (path, &relinked) {
             (Some(p), _) => p.to_path_buf(),
@@ -235,73 +240,36 @@ impl SourceFrames for MediaSources {
         if path.is_none() {
             self.check(clip, &p)?;
         }
-        let fail = |why: String| EigenError::Decode {
-            clip: clip.name.clone(),
-            reason: format!(
-                "{}: {why}{}",
+        if !self.opened.contains_key(&p) {
+            let label = format!(
+                "clip `{}` ({}{})",
+                clip.name,
                 p.display(),
                 if path.is_none() {
-                    " (the path recorded at training; give the footage under [originals] in the scenario)"
+                    ", the path recorded at training; give the footage under [originals] in the scenario"
                 } else {
                     ""
                 }
-            ),
-        };
-        let (Some(&lo), Some(&hi)) = (frames.first(), frames.last()) else {
-            return Ok(Vec::new());
-        };
-        let opts = ignis_media::ReadOptions {
-            range: Some(ignis_media::FrameRange::frames(
-                lo as u64,
-                Some(hi as u64 + 1),
-            )),
-            ..Default::default()
-        };
-        let reader = ignis_media::open(&p, &opts).map_err(|e| fail(e.to_string()))?;
-        let mut out = vec![None; frames.len()];
-        let mut want = frames.iter().enumerate().peekable();
-        for (i, f) in reader.enumerate() {
-            let n = lo + i;
-            let f = f.map_err(|e| fail(e.to_string()))?;
-            while let Some((j, _)) = want.next_if(|(_, &w)| w == n) {
-                out[j] = Some(f.clone());
-            }
-            if want.peek().is_none() {
-                break;
-            }
+            );
+            let f = MediaFootage::open(&p)
+                .map_err(|e| e.in_clip(&clip.name))?
+                .labelled(label);
+            self.opened.insert(p.clone(), f);
         }
-        Ok(out)
+        Ok(Box::new(&self.opened[&p]))
     }
 }
 
 fn print_table(g: &Global, plan: &Plan, sc: &Scenario, out_loops: bool) {
-    g.say(format!(
-        "{:<4} {:<28} {:<16} {:>5} {:>10} {:>9}",
-        "join", "motions", "method", "steps", "seam ratio", "plain cut"
-    ));
-    for (i, j) in plan.joins.iter().enumerate() {
-        g.say(format!(
-            "{:<4} {:<28} {:<16} {:>5} {:>10.2} {:>9.2}",
-            i + 1,
-            format!("{} → {}", j.from, j.to),
-            j.join.method,
-            j.join.frames.len(),
-            j.join.seam_ratio,
-            j.plain_cut
-        ));
+    let joins = ignis_eigen::JoinReport::of_plan(plan);
+    g.say(ignis_eigen::JoinReport::header());
+    for j in &joins {
+        g.say(j.row());
     }
-    for (i, j) in plan.joins.iter().enumerate() {
-        g.say(format!("join {}: {}", i + 1, j.join.why));
-        if j.join.seam_ratio > j.plain_cut + 1e-9 {
-            g.say(format!(
-                "warning: join {} ({} → {}): {} is rougher than a plain cut ({:.2} > {:.2}); try method = \"auto\" or another method for this join",
-                i + 1,
-                j.from,
-                j.to,
-                j.join.method,
-                j.join.seam_ratio,
-                j.plain_cut
-            ));
+    for j in &joins {
+        g.say(j.why());
+        if let Some(w) = j.warning() {
+            g.say(w);
         }
     }
     g.say(format!(
@@ -481,8 +449,7 @@ fn workable(
     methods: &[&str],
 ) -> Result<Vec<&'static str>> {
     use ignis_eigen::transition::{self, WeightSpace};
-    let (w, k, spans) = ignis_eigen::animate::weight_space(db)?;
-    let space = WeightSpace::new(w, k, spans)?;
+    let space = WeightSpace::from_db(db)?;
     let rec = ignis_eigen::animate::recognition_params(db);
     let rows = |name: &str| -> Result<std::ops::Range<usize>> {
         let m = motions
@@ -722,10 +689,7 @@ pub fn bench_footage(quick: bool) -> Result<serde_json::Value> {
         let t_train = Instant::now();
         let mut spec = ClipSpec::new("fire");
         spec.path = Some(clip.clone());
-        let input = ClipInput {
-            spec,
-            source: crate::eigen::media_source(&clip)?,
-        };
+        let input = ClipInput::new(spec, ignis_eigen::MediaFootage::open(&clip)?);
         let dbp = dir.join("fire.db");
         let tp = TrainParams {
             pack_size: 64,
@@ -740,7 +704,7 @@ pub fn bench_footage(quick: bool) -> Result<serde_json::Value> {
         )?;
         let train_s = t_train.elapsed().as_secs_f64();
         let db = EigenfireDb::open(&dbp)?;
-        let (mut plan, _, _) = render::loop_plan(
+        let (mut plan, _) = render::loop_plan(
             &db,
             "fire",
             4..4 + loop_len,

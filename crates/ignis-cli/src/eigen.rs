@@ -6,10 +6,9 @@ use crate::global::Global;
 use anyhow::{bail, Context, Result};
 use ignis_core::Size;
 use ignis_eigen::analysis::{self, ESelect};
-use ignis_eigen::train::{
-    ClipInput, ClipSource, ClipSpec, FrameIter, Progress, TrainConfig, TrainParams,
-};
+use ignis_eigen::train::{ClipInput, ClipSpec, TrainConfig, TrainParams};
 use ignis_eigen::{plot, EigenfireDb, PreprocessParams};
+use ignis_eigen::{MediaFootage, Progress, SyntheticFootage};
 use std::path::{Path, PathBuf};
 
 /// `ignis eigen ...`
@@ -323,34 +322,16 @@ impl Progress for Bars<'_> {
             b.inc(n);
         }
     }
+    fn message(&mut self, text: &str) {
+        if let Some(b) = &self.bar {
+            b.set_message(text.to_string());
+        }
+    }
     fn finish_stage(&mut self) {
         if let Some(b) = self.bar.take() {
             b.finish_and_clear();
         }
     }
-}
-
-/// A clip source over `ignis_media`.
-pub(crate) fn media_source(path: &Path) -> Result<ClipSource<'static>> {
-    let info = ignis_media::probe(path).with_context(|| format!("reading {}", path.display()))?;
-    let p = path.to_path_buf();
-    // Stored in the manifest and used later (original colouring) from any directory: an
-    // absolute path.
-    let abs = std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf());
-    Ok(ClipSource {
-        source: abs.display().to_string(),
-        fps: info.fps,
-        size: info.size,
-        frame_count: info.frame_count.map(|n| n as usize),
-        open: Box::new(move |start| {
-            let opts = ignis_media::ReadOptions {
-                range: Some(ignis_media::FrameRange::frames(start as u64, None)),
-                ..Default::default()
-            };
-            let r = ignis_media::open(&p, &opts).map_err(|e| e.to_string())?;
-            Ok(Box::new(r.map(|f| f.map_err(|e| e.to_string()))) as FrameIter<'static>)
-        }),
-    })
 }
 
 fn clip_name(path: &Path, taken: &[String]) -> String {
@@ -444,19 +425,21 @@ pub fn train(a: TrainArgs, g: &Global) -> Result<()> {
     }
     let mut clips = Vec::new();
     for s in specs {
-        let source = match (&s.path, s.synthetic) {
-            (Some(p), _) => media_source(p).with_context(|| format!("clip `{}`", s.name))?,
-            (None, Some(style)) => ClipSource::synthetic(
+        let footage: Box<dyn ignis_eigen::Footage> = match (&s.path, s.synthetic) {
+            (Some(p), _) => {
+                Box::new(MediaFootage::open(p).with_context(|| format!("clip `{}`", s.name))?)
+            }
+            (None, Some(style)) => Box::new(SyntheticFootage::new(
                 ignis_eigen::synthetic::SyntheticParams {
                     style,
                     frames: s.end.unwrap_or(120),
                     ..Default::default()
                 },
                 30.0,
-            ),
+            )),
             (None, None) => bail!("clip `{}` has neither a path nor `synthetic`", s.name),
         };
-        clips.push(ClipInput { spec: s, source });
+        clips.push(ClipInput { spec: s, footage });
     }
     let mut bars = Bars { g, bar: None };
     let r = ignis_eigen::train(&clips, &pre, &tp, &a.output, &mut bars)
@@ -692,10 +675,8 @@ fn loop_cmd(a: &LoopArgs, g: &Global) -> Result<ignis_eigen::transition::Join> {
     let range = a.range.clone().context(
         "give --range START..END (loop exactly that range) or --length (search for a loop)",
     )?;
-    let rows = animate::clip_rows(&db, &a.clip, range.clone())
-        .with_context(|| format!("clip `{}` range {}..{}", a.clip, range.start, range.end))?;
     let sp = g.spinner("finding the transition");
-    let (plan, join, used) = render::loop_plan(&db, &a.clip, range.clone(), method, e, a.search)
+    let (plan, report) = render::loop_plan(&db, &a.clip, range.clone(), method, e, a.search)
         .with_context(|| {
             format!(
                 "looping clip `{}` frames {}..{} with {}",
@@ -703,31 +684,18 @@ fn loop_cmd(a: &LoopArgs, g: &Global) -> Result<ignis_eigen::transition::Join> {
             )
         })?;
     sp.finish_and_clear();
-    let plain = animate::plain_cut_ratio(&db, rows.clone())?;
     let size = crate::animate::write_plan(&db, &plan, &look, &a.footage, &a.out, g)
         .with_context(|| format!("rendering the loop of clip `{}`", a.clip))?;
     g.say(format!(
-        "method {}: {} range frame(s) + {} transition frame(s) = {} frames at {}, colour {}, E = {} (the transition replaces the range's last {} and first {} frame(s)); seam ratio {:.2} (plain cut {:.2})",
-        join.method,
-        plan.frames.len() - join.frames.len(),
-        join.frames.len(),
-        plan.frames.len(),
-        size,
-        look.mode.name(),
-        e.min(db.usable_components()),
-        join.trim_t1,
-        join.trim_t2,
-        join.seam_ratio,
-        plain,
+        "{}; {size}, colour {}",
+        report.summary(),
+        look.mode.name()
     ));
-    if used != range {
-        g.say(format!(
-            "loop points moved to {}..{} (--search {}; --search 0 keeps {}..{})",
-            used.start, used.end, a.search, range.start, range.end
-        ));
+    if let Some(moved) = report.moved() {
+        g.say(moved);
     }
-    g.say(format!("why: {}", join.why));
-    Ok(join)
+    g.say(format!("why: {}", report.join.why));
+    Ok(report.join)
 }
 
 /// `ignis eigen synth`.
@@ -795,10 +763,7 @@ fn preprocess(a: PreprocessArgs, g: &Global) -> Result<()> {
     spec.start = a.start;
     spec.end = a.end;
     spec.stride = a.stride;
-    let clip = ClipInput {
-        source: media_source(&input)?,
-        spec,
-    };
+    let clip = ClipInput::new(spec, MediaFootage::open(&input)?);
     let mut bars = Bars { g, bar: None };
     let stages = ignis_eigen::train::preprocess_clip(&clip, &pre, &a.frames, &mut bars)
         .with_context(|| format!("pre-processing {}", input.display()))?;

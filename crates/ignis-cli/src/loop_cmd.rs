@@ -312,10 +312,7 @@ fn build_entry(
         spec.start = window.start;
         spec.end = Some(window.end);
         spec.stride = 1;
-        let clips = vec![ClipInput {
-            spec,
-            source: crate::eigen::media_source(path)?,
-        }];
+        let clips = vec![ClipInput::new(spec, ignis_eigen::MediaFootage::open(path)?)];
         let pre = PreprocessParams {
             train_size: Some(train_size),
             ..Default::default()
@@ -760,7 +757,7 @@ pub fn eigen_length_loop(a: &crate::eigen::LoopArgs, g: &Global) -> Result<()> {
         );
     }
     let k = db.n_components();
-    let rows = c.first_row + (window.start - c.start)..c.first_row + (window.end - c.start);
+    let rows = ignis_eigen::animate::clip_rows(&db, &a.clip, window.clone())?;
     let weights = &db.weights_row_major()[rows.start * k..rows.end * k];
     let e = db.manifest().e_detect.max(1);
     let d = make_loop(

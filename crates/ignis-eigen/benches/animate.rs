@@ -9,23 +9,14 @@
 
 use criterion::{criterion_group, criterion_main, BatchSize, Criterion, Throughput};
 use ignis_eigen::transition::{
-    transition, ClipSpan, LowPassParams, RecognitionParams, Transition, WeightSpace,
+    transition, LowPassParams, RecognitionParams, Transition, WeightSpace,
 };
 
 fn animate(c: &mut Criterion) {
     let tmp = tempfile::tempdir().expect("temp dir");
     let (db, _) = ignis_eigen::bench::database(true, &tmp.path().join("db")).expect("database");
     let (m, k) = (db.n_frames(), db.n_components());
-    let w = db.weights_row_major();
-    let spans: Vec<ClipSpan> = db
-        .clips()
-        .iter()
-        .map(|c| ClipSpan {
-            name: c.name.clone(),
-            start: c.first_row,
-            len: c.frames,
-        })
-        .collect();
+    let spans = ignis_eigen::animate::clip_spans(&db);
     // Clip 0 (middle) → clip 1 (middle).
     let (c0, c1) = (&spans[0], &spans[1]);
     let t1 = c0.start + c0.len / 2 - 16..c0.start + c0.len / 2;
@@ -51,7 +42,7 @@ fn animate(c: &mut Criterion) {
         ] {
             g.bench_function(format!("{name} e_detect={e_detect}"), |b| {
                 b.iter_batched(
-                    || WeightSpace::new(w, k, spans.clone()).expect("space"),
+                    || WeightSpace::from_db(&db).expect("space"),
                     |space| transition(&space, t1.clone(), t2.clone(), &method, &rec),
                     BatchSize::SmallInput,
                 )

@@ -21,39 +21,40 @@ use ignis_core::GrayFrame;
 
 use crate::db::EigenfireDb;
 use crate::error::{EigenError, Result};
+use crate::report::LoopReport;
 use crate::transition::{
     self, ClipSpan, FrameRef, Join, LowPassParams, RecognitionParams, Transition, TransitionError,
     WeightSpace,
 };
 
-fn from_transition(e: TransitionError) -> EigenError {
-    match e {
-        TransitionError::BadParameter { name, reason } => EigenError::BadParameter { name, reason },
-        TransitionError::BadRange { .. } => EigenError::bad("range", e.to_string()),
-        TransitionError::NoPath { .. } => EigenError::bad("method", e.to_string()),
-    }
-}
-
-/// The weights of `db` as its M×k row-major matrix (borrowed, no copy), k, and the clip
-/// spans (training rows), ready for [`WeightSpace::new`].
-pub fn weight_space(db: &EigenfireDb) -> Result<(&[f32], usize, Vec<ClipSpan>)> {
-    let (m, k) = (db.n_frames(), db.n_components());
-    if m == 0 || k == 0 {
-        return Err(EigenError::bad(
-            "database",
-            format!("has {m} frames and {k} Eigenfires; a loop needs at least one of each"),
-        ));
-    }
-    let spans = db
-        .clips()
+/// The clips of `db` as spans of training rows (what [`WeightSpace`] calls clips).
+pub fn clip_spans(db: &EigenfireDb) -> Vec<ClipSpan> {
+    db.clips()
         .iter()
         .map(|c| ClipSpan {
             name: c.name.clone(),
             start: c.first_row,
             len: c.frames,
         })
-        .collect();
-    Ok((db.weights_row_major(), k, spans))
+        .collect()
+}
+
+impl<'a> WeightSpace<'a> {
+    /// The weight space of `db`: its M×k weights (borrowed from the map, no copy) and one
+    /// span per clip. Fails on a database without frames or Eigenfires.
+    pub fn from_db(db: &'a EigenfireDb) -> Result<WeightSpace<'a>> {
+        let (m, k) = (db.n_frames(), db.n_components());
+        if m == 0 || k == 0 {
+            return Err(EigenError::Database {
+                db: db.path().to_path_buf(),
+                file: "manifest.json".into(),
+                reason: format!(
+                    "has {m} frames and {k} Eigenfires; a loop needs at least one of each"
+                ),
+            });
+        }
+        Ok(WeightSpace::new(db.weights_row_major(), k, clip_spans(db))?)
+    }
 }
 
 /// Recognition settings for `db`: its E for detection, everything else default.
@@ -100,9 +101,8 @@ pub fn clip_rows(db: &EigenfireDb, clip: &str, range: Range<usize>) -> Result<Ra
 /// Seam ratio of a plain cut from the end of `rows` back to its start (no transition
 /// frames): what [`Join::seam_ratio`] is to be compared with.
 pub fn plain_cut_ratio(db: &EigenfireDb, rows: Range<usize>) -> Result<f64> {
-    let (w, k, spans) = weight_space(db)?;
-    let space = WeightSpace::new(w, k, spans).map_err(from_transition)?;
-    space.check_range("range", &rows).map_err(from_transition)?;
+    let space = WeightSpace::from_db(db)?;
+    space.check_range("range", &rows)?;
     let rec = recognition_params(db);
     let e = rec.e_detect(&space);
     Ok(transition::join_seam(&space, &rows, &rows, &[], (0, 0), e))
@@ -129,16 +129,63 @@ pub(crate) fn has_stored_frames(db: &EigenfireDb) -> bool {
     !db.clips().is_empty() && db.clips().iter().all(|c| c.frames_file.is_some())
 }
 
-/// Renders a loop of clip `clip` over source frames `range`: the range's frames (without
-/// the [`Join::trim_t2`] first and [`Join::trim_t1`] last frames a low-pass join replaces)
-/// followed by the transition back to the start, so that playing the result repeatedly
-/// loops. Synthetic frames are reconstructed with `e_render` Eigenfires (clamped to the
-/// usable ones). Database frames are the stored pre-processed frames when the database
-/// has them (§7.1.2; every frame is then at the pre-processed size, reconstructions being
-/// resized to it), else reconstructions with `e_render` Eigenfires at the training size.
-///
-/// With `search` > 0 the loop's first and last frames may move inwards by up to `search`
-/// training frames each (see [`best_loop`]); the range actually used is returned.
+/// Finds a loop of clip `clip` over source frames `range`: the rows (moved inwards by up
+/// to `search` training frames each end, see [`best_loop`]), the join back to the start
+/// with `method`, a plain cut's seam ratio for comparison and `e_render` clamped to the
+/// usable Eigenfires. What [`render_loop`] and [`crate::render::loop_plan`] render.
+pub fn find_loop(
+    db: &EigenfireDb,
+    clip: &str,
+    range: Range<usize>,
+    method: &Transition,
+    e_render: usize,
+    search: usize,
+) -> Result<LoopReport> {
+    let requested = clip_rows(db, clip, range.clone())?;
+    let space = WeightSpace::from_db(db)?;
+    let rec = recognition_params(db);
+    let (rows, join) = best_loop(&space, requested.clone(), search, method, &rec)?;
+    let e = rec.e_detect(&space);
+    let plain_cut = transition::join_seam(&space, &requested, &requested, &[], (0, 0), e);
+    let c = db.clip(clip)?;
+    let used = c.start + (rows.start - c.first_row) * c.stride
+        ..c.start + (rows.end - c.first_row) * c.stride;
+    // Body: the range without the frames the transition replaces. A low-pass join over a
+    // range shorter than its kernel may replace everything.
+    let body = loop_body(&rows, &join);
+    if body.is_empty() && join.frames.is_empty() {
+        return Err(EigenError::bad(
+            "range",
+            "the loop has no frames left (the transition replaced the whole range); use a longer range",
+        ));
+    }
+    Ok(LoopReport {
+        clip: clip.to_string(),
+        requested: range,
+        used,
+        search,
+        body_frames: body.len(),
+        rows,
+        join,
+        plain_cut,
+        e_render: e_render.clamp(1, db.usable_components().max(1)),
+        e_render_requested: e_render,
+    })
+}
+
+/// The rows of a loop over `rows` that `join` keeps: without its [`Join::trim_t2`] first
+/// and [`Join::trim_t1`] last frames.
+pub fn loop_body(rows: &Range<usize>, join: &Join) -> Range<usize> {
+    let start = rows.start + join.trim_t2;
+    start..rows.end.saturating_sub(join.trim_t1).max(start)
+}
+
+/// Renders a loop of clip `clip` over source frames `range` (see [`find_loop`]): the
+/// range's frames without those the transition replaces, followed by the transition back
+/// to the start, so that playing the result repeatedly loops. Synthetic frames are
+/// reconstructed with the report's E. Database frames are the stored pre-processed frames
+/// when the database has them (§7.1.2; every frame is then at the pre-processed size,
+/// reconstructions being resized to it), else reconstructions at the training size.
 pub fn render_loop(
     db: &EigenfireDb,
     clip: &str,
@@ -146,16 +193,9 @@ pub fn render_loop(
     method: Transition,
     e_render: usize,
     search: usize,
-) -> Result<(Vec<GrayFrame>, Join, Range<usize>)> {
-    let rows = clip_rows(db, clip, range)?;
-    let (w, k, spans) = weight_space(db)?;
-    let space = WeightSpace::new(w, k, spans).map_err(from_transition)?;
-    let rec = recognition_params(db);
-    let (rows, join) = best_loop(&space, rows, search, &method, &rec).map_err(from_transition)?;
-    let c = db.clip(clip)?;
-    let used = c.start + (rows.start - c.first_row) * c.stride
-        ..c.start + (rows.end - c.first_row) * c.stride;
-    let e = e_render.clamp(1, db.usable_components().max(1));
+) -> Result<(Vec<GrayFrame>, LoopReport)> {
+    let report = find_loop(db, clip, range, &method, e_render, search)?;
+    let e = report.e_render;
     let stored = has_stored_frames(db);
     let size = if stored {
         db.manifest().frame_size
@@ -172,29 +212,19 @@ pub fn render_loop(
                 return db.preprocessed_frame(&c.name, frame);
             }
         }
-        render_weights(space.frame(r))
+        render_weights(&db.frame_weights(r))
     };
-    // Body: the range without the frames the transition replaces. A low-pass join over a
-    // range shorter than its kernel may replace everything; the body is then empty.
-    let body_start = rows.start + join.trim_t2;
-    let body_end = rows.end.saturating_sub(join.trim_t1).max(body_start);
-    let mut out = Vec::with_capacity(body_end - body_start + join.frames.len());
-    for r in body_start..body_end {
+    let mut out = Vec::with_capacity(report.frames());
+    for r in loop_body(&report.rows, &report.join) {
         out.push(render_row(r)?);
     }
-    for f in &join.frames {
+    for f in &report.join.frames {
         out.push(match f {
             FrameRef::Db(r) => render_row(*r)?,
             FrameRef::Weights(wv) => render_weights(wv)?,
         });
     }
-    if out.is_empty() {
-        return Err(EigenError::bad(
-            "range",
-            "the loop has no frames left (the transition replaced the whole range); use a longer range",
-        ));
-    }
-    Ok((out, join, used))
+    Ok((out, report))
 }
 
 /// How many candidate loop points [`best_loop`] joins with the full method.
@@ -361,8 +391,8 @@ mod tests {
         let plain = plain_cut_ratio(&db, rows.clone()).unwrap();
         for method in ["auto", "direct", "low-pass", "end-growing"] {
             let m = parse_method(method).unwrap();
-            let (frames, join, _) = match render_loop(&db, "candle", range.clone(), m, 10, 0) {
-                Ok(x) => x,
+            let (frames, join) = match render_loop(&db, "candle", range.clone(), m, 10, 0) {
+                Ok((f, r)) => (f, r.join),
                 // End Growing may legitimately find no path on a tiny database.
                 Err(e) if method == "end-growing" => {
                     assert!(e.to_string().contains("no transition"), "{e}");
@@ -393,8 +423,9 @@ mod tests {
         // Without stored frames: reconstructions at the training size.
         let dir2 = tempfile::tempdir().unwrap();
         let db2 = tiny_db(dir2.path(), false);
-        let (frames, join, used) =
+        let (frames, report) =
             render_loop(&db2, "campfire", 0..20, Transition::Auto, 5, 0).unwrap();
+        let (join, used) = (report.join, report.used);
         assert_eq!(used, 0..20);
         assert_eq!(
             frames.len(),

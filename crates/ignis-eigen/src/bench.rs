@@ -29,12 +29,10 @@ use ignis_core::Size;
 use serde_json::{json, Value};
 
 use crate::db::EigenfireDb;
-use crate::error::{EigenError, Result};
+use crate::error::Result;
 use crate::preprocess::PreprocessParams;
 use crate::train::{self, NoProgress, TrainParams};
-use crate::transition::{
-    transition, ClipSpan, LowPassParams, RecognitionParams, Transition, WeightSpace,
-};
+use crate::transition::{transition, LowPassParams, RecognitionParams, Transition, WeightSpace};
 
 /// Goal of the issue: every transition at most this many ms per inserted frame.
 pub const GOAL_MS_PER_STEP: f64 = 1.0;
@@ -251,22 +249,11 @@ fn pairs(db: &EigenfireDb, len: usize) -> Vec<(String, Range<usize>, Range<usize
 
 /// Per method and E for detection: time per transition and per step over the pairs.
 fn transition_figures(db: &EigenfireDb, quick: bool, reps: usize) -> Result<Value> {
-    let w = db.weights_row_major();
     let k = db.n_components();
-    let spans: Vec<ClipSpan> = db
-        .clips()
-        .iter()
-        .map(|c| ClipSpan {
-            name: c.name.clone(),
-            start: c.first_row,
-            len: c.frames,
-        })
-        .collect();
-    let to_err = |e: crate::transition::TransitionError| EigenError::bad("bench", e.to_string());
     // Start rayon's workers before anything is timed.
     rayon::broadcast(|_| ());
     let t0 = Instant::now();
-    let space = WeightSpace::new(w, k, spans.clone()).map_err(to_err)?;
+    let space = WeightSpace::from_db(db)?;
     let setup_ms = ms(t0);
     drop(space);
     let pairs = pairs(db, if quick { 16 } else { 24 });
@@ -298,7 +285,7 @@ fn transition_figures(db: &EigenfireDb, quick: bool, reps: usize) -> Result<Valu
                 let mut r = None;
                 let mut warm = f64::INFINITY;
                 for _ in 0..reps {
-                    let space = WeightSpace::new(w, k, spans.clone()).map_err(to_err)?;
+                    let space = WeightSpace::from_db(db)?;
                     let t = Instant::now();
                     let j = transition(&space, t1.clone(), t2.clone(), method, &rec);
                     took = took.min(ms(t));

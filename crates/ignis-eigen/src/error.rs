@@ -31,12 +31,29 @@ pub enum EigenError {
         file: String,
         reason: String,
     },
-    /// Decoding a clip failed (the message comes from the frame source).
-    #[error("clip `{clip}`: decoding failed: {reason}")]
-    Decode { clip: String, reason: String },
-    /// The PCA failed.
-    #[error("PCA: {0}")]
-    Pca(String),
+    /// Reading footage failed: `what` names the clip or file, `frame` the frame when
+    /// known; the reader's own error is the source.
+    #[error("{what}: {}", frame.map_or("cannot read the footage".into(), |f| format!("decoding frame {f} failed")))]
+    Decode {
+        what: String,
+        frame: Option<usize>,
+        #[source]
+        source: Box<dyn std::error::Error + Send + Sync>,
+    },
+    /// The PCA, or an array file it reads or writes, failed (I/O errors and memory
+    /// refusals of `ignis-pca` become [`EigenError::Io`] and [`EigenError::LimitExceeded`]).
+    #[error(transparent)]
+    Pca(ignis_pca::PcaError),
+    /// The PCA kept no component: the training frames do not vary.
+    #[error("PCA: no component retained (are all training frames identical?)")]
+    NoComponents,
+    /// A transition method found no path between two motions (e.g. End Growing did not
+    /// join within its step limit); another method, or `auto`, may.
+    #[error("{method}: no transition found: {reason}")]
+    NoPath {
+        method: &'static str,
+        reason: String,
+    },
     /// Drawing a plot failed.
     #[error("plot {file}: {reason}")]
     Plot { file: String, reason: String },
@@ -67,19 +84,49 @@ impl EigenError {
             reason: reason.into(),
         }
     }
+    /// A footage error seen while using clip `clip`: a decoding error names the clip too.
+    pub fn in_clip(self, clip: &str) -> Self {
+        match self {
+            EigenError::Decode {
+                what,
+                frame,
+                source,
+            } if !what.starts_with("clip `") => EigenError::Decode {
+                what: format!("clip `{clip}` ({what})"),
+                frame,
+                source,
+            },
+            other => other,
+        }
+    }
     pub(crate) fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
         EigenError::Io {
             path: path.into(),
             source,
         }
     }
-    /// An error of `ignis_pca::npy` (reading or writing an array file). I/O errors keep
-    /// their path; the others name the file in their message.
-    pub(crate) fn npy(e: ignis_pca::PcaError) -> Self {
+}
+
+impl From<ignis_pca::PcaError> for EigenError {
+    /// I/O errors keep their path; a memory refusal is [`EigenError::LimitExceeded`].
+    fn from(e: ignis_pca::PcaError) -> Self {
         match e {
             ignis_pca::PcaError::Io { path, source } => EigenError::Io { path, source },
             ignis_pca::PcaError::LimitExceeded { .. } => EigenError::LimitExceeded(e.to_string()),
-            other => EigenError::bad("npy", other.to_string()),
+            other => EigenError::Pca(other),
+        }
+    }
+}
+
+impl From<crate::transition::TransitionError> for EigenError {
+    /// A bad setting stays a bad setting (a bad range names the range); a failed search is
+    /// [`EigenError::NoPath`].
+    fn from(e: crate::transition::TransitionError) -> Self {
+        use crate::transition::TransitionError as T;
+        match e {
+            T::BadParameter { name, reason } => EigenError::BadParameter { name, reason },
+            T::BadRange { .. } => EigenError::bad("range", e.to_string()),
+            T::NoPath { method, reason } => EigenError::NoPath { method, reason },
         }
     }
 }

@@ -5,12 +5,13 @@
 //! (Eigenfires, weights, thresholds, reconstruction, packs) and §7.1–7.3 (speed-up
 //! tricks: training on resized frames while keeping full-resolution pre-processed frames).
 //!
-//! Data flow: [`train::ClipSource`] (frames from anywhere, linear RGBA) →
+//! Data flow: [`Footage`] (frames from anywhere, linear RGBA) →
 //! [`preprocess`] (mask → contours → Hermite → pose → grayscale, [`GrayFrame`]) → data
 //! matrix → `ignis_pca` → [`db`] (manifest + `.npy` files) → [`analysis`] and [`plot`].
 //!
 //! **Invariant:** this crate knows nothing of video codecs or clap: frames come in through
-//! [`train::ClipSource`] (the CLI wraps `ignis-media`); it converts nothing to 8-bit sRGB
+//! [`Footage`] (`MediaFootage`, behind the `media` feature, wraps `ignis-media`); it
+//! converts nothing to 8-bit sRGB
 //! except the plots `plotters` draws. The PCA itself lives in `ignis-pca`. All randomness
 //! (synthetic footage) comes from an explicit `seed`.
 //!
@@ -23,6 +24,7 @@ pub mod colour;
 pub mod contour;
 pub mod db;
 pub mod error;
+pub mod footage;
 pub mod hermite;
 pub mod loops;
 pub mod mask;
@@ -30,6 +32,7 @@ pub mod plot;
 pub mod pose;
 pub mod preprocess;
 pub mod render;
+pub mod report;
 pub mod scenario;
 pub mod synthetic;
 pub mod train;
@@ -38,7 +41,9 @@ pub mod transition;
 pub use analysis::ESelect;
 pub use db::{ClipEntry, EigenfireDb, Manifest, Thresholds};
 pub use error::{EigenError, Result};
+#[cfg(feature = "media")]
+pub use footage::MediaFootage;
+pub use footage::{Footage, FootageInfo, FootageOpener, FrameList, SyntheticFootage};
 pub use preprocess::PreprocessParams;
-pub use train::{
-    train, ClipInput, ClipSource, ClipSpec, NoProgress, Progress, TrainConfig, TrainParams,
-};
+pub use report::{JoinReport, LoopReport};
+pub use train::{train, ClipInput, ClipSpec, NoProgress, Progress, TrainConfig, TrainParams};

@@ -27,7 +27,13 @@ pub const CLIP_COLOURS: [RGBColor; 6] = [
 
 type DrawResult = std::result::Result<(), Box<dyn std::error::Error>>;
 
-fn draw_with_fallback(path: &Path, f: impl Fn(&Path, bool) -> DrawResult) -> Result<()> {
+/// Draws a `size` figure with `f` into an RGB buffer (with text; again without text when
+/// that fails) and writes it to `path` as PNG through [`ignis_core::atomic`].
+fn draw_with_fallback(
+    path: &Path,
+    size: (u32, u32),
+    f: impl Fn(&mut [u8], bool) -> DrawResult,
+) -> Result<()> {
     let err = |e: Box<dyn std::error::Error>| EigenError::Plot {
         file: path.display().to_string(),
         reason: e.to_string(),
@@ -37,18 +43,19 @@ fn draw_with_fallback(path: &Path, f: impl Fn(&Path, bool) -> DrawResult) -> Res
             std::fs::create_dir_all(parent).map_err(|e| EigenError::io(parent, e))?;
         }
     }
-    // Atomic: draw to a temporary file beside the target, then rename.
-    let tmp = path.with_file_name(format!(
-        ".{}.tmp.png",
-        path.file_name()
-            .map(|s| s.to_string_lossy().into_owned())
-            .unwrap_or_default()
-    ));
-    match f(&tmp, true) {
-        Ok(()) => {}
-        Err(_) => f(&tmp, false).map_err(err)?,
+    let len = size.0 as usize * size.1 as usize * 3;
+    let mut buf = vec![0u8; len];
+    if f(&mut buf, true).is_err() {
+        buf = vec![0u8; len];
+        f(&mut buf, false).map_err(err)?;
     }
-    std::fs::rename(&tmp, path).map_err(|e| EigenError::io(path, e))
+    ignis_core::atomic::write_file(path, |w| {
+        use image::ImageEncoder;
+        image::codecs::png::PngEncoder::new(w)
+            .write_image(&buf, size.0, size.1, image::ExtendedColorType::Rgb8)
+            .map_err(std::io::Error::other)
+    })
+    .map_err(|e| EigenError::io(path, e))
 }
 
 fn font(labels: bool, size: u32) -> TextStyle<'static> {
@@ -76,8 +83,8 @@ pub fn scatter_3d(db: &EigenfireDb, path: &Path, size: (u32, u32)) -> Result<()>
             hi[c] = lo[c] + 1.0;
         }
     }
-    draw_with_fallback(path, |p, labels| {
-        let root = BitMapBackend::new(p, size).into_drawing_area();
+    draw_with_fallback(path, size, |buf, labels| {
+        let root = BitMapBackend::with_buffer(buf, size).into_drawing_area();
         root.fill(&RGBColor(17, 17, 17))?;
         let mut b = ChartBuilder::on(&root);
         b.margin(20);
@@ -160,8 +167,8 @@ pub fn weight_clusters(
     }
     let pad = 0.05 * (hi - lo);
     let name = c.name.clone();
-    draw_with_fallback(path, |p, labels| {
-        let root = BitMapBackend::new(p, size).into_drawing_area();
+    draw_with_fallback(path, size, |buf, labels| {
+        let root = BitMapBackend::with_buffer(buf, size).into_drawing_area();
         root.fill(&RGBColor(17, 17, 17))?;
         let mut b = ChartBuilder::on(&root);
         b.margin(15)
@@ -231,8 +238,8 @@ pub fn frame_weights(
         Some((c, f)) => format!("{} frame {f}: first {comps} weights", c.name),
         None => format!("frame {row}"),
     };
-    draw_with_fallback(path, |p, labels| {
-        let root = BitMapBackend::new(p, size).into_drawing_area();
+    draw_with_fallback(path, size, |buf, labels| {
+        let root = BitMapBackend::with_buffer(buf, size).into_drawing_area();
         root.fill(&RGBColor(17, 17, 17))?;
         let mut b = ChartBuilder::on(&root);
         b.margin(15)
@@ -277,8 +284,8 @@ pub fn spectrum(db: &EigenfireDb, path: &Path, size: (u32, u32)) -> Result<()> {
         acc += v;
         cum.push(acc / total);
     }
-    draw_with_fallback(path, |p, labels| {
-        let root = BitMapBackend::new(p, size).into_drawing_area();
+    draw_with_fallback(path, size, |buf, labels| {
+        let root = BitMapBackend::with_buffer(buf, size).into_drawing_area();
         root.fill(&RGBColor(17, 17, 17))?;
         let mut b = ChartBuilder::on(&root);
         b.margin(15)
@@ -332,8 +339,8 @@ pub fn compression_chart(points: &[CompressionPoint], path: &Path, size: (u32, u
         .map(|q| q.psnr.max(q.psnr_hermite))
         .fold(10.0f64, f64::max)
         .min(100.0);
-    draw_with_fallback(path, |p, labels| {
-        let root = BitMapBackend::new(p, size).into_drawing_area();
+    draw_with_fallback(path, size, |buf, labels| {
+        let root = BitMapBackend::with_buffer(buf, size).into_drawing_area();
         root.fill(&RGBColor(17, 17, 17))?;
         let mut b = ChartBuilder::on(&root);
         b.margin(15)

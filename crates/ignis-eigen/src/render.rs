@@ -7,7 +7,7 @@
 //! footage warped onto the pre-processed frames, smoke, masks) and runs the pipeline.
 
 use std::collections::HashMap;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use ignis_core::colour::synthetic_colour;
 use ignis_core::post::{alpha_matte, bloom};
@@ -19,74 +19,11 @@ use crate::colour::{original_colouring, synthetic_smoke, warp_rgba, OriginalColo
 use crate::db::{ClipEntry, EigenfireDb};
 use crate::error::{EigenError, Result};
 use crate::scenario::{ColourMode, Look, MorphRun, Plan, PlanFrame};
-use crate::synthetic::{parse_source_name, synthetic_frame, SyntheticParams};
 use crate::transition::FrameRef;
 
-/// Reads source frames for original colouring (§6.1.1), synthetic smoke (§6.3) and custom
-/// masks (§6.4). The CLI implements it over `ignis-media`; [`SyntheticSources`] covers the
-/// clips Ignis draws itself.
-pub trait SourceFrames {
-    /// Source frames `frames` (ascending, distinct source frame numbers) of `path`, or of
-    /// the clip's recorded source when `path` is `None`, at their own size. An entry is
-    /// `None` when the source has no such frame (e.g. a mask sequence that stops early).
-    fn read(
-        &mut self,
-        clip: &ClipEntry,
-        path: Option<&Path>,
-        frames: &[usize],
-    ) -> Result<Vec<Option<RgbaFrame>>>;
-}
-
-/// [`SourceFrames`] for clips whose source is `synthetic:<style>:seed=<n>` (the clips of
-/// [`crate::train::synthetic_clips`]): frames are drawn again, identical to training.
-/// Any other source is an error naming the clip.
-#[derive(Clone, Copy, Debug, Default)]
-pub struct SyntheticSources;
-
-impl SyntheticSources {
-    /// The synthetic clip parameters of `clip`, if its source is synthetic.
-    pub fn params(clip: &ClipEntry) -> Option<SyntheticParams> {
-        let (style, seed) = parse_source_name(&clip.source)?;
-        Some(SyntheticParams {
-            size: clip.source_size,
-            frames: clip.end,
-            style,
-            seed,
-        })
-    }
-}
-
-impl SourceFrames for SyntheticSources {
-    fn read(
-        &mut self,
-        clip: &ClipEntry,
-        path: Option<&Path>,
-        frames: &[usize],
-    ) -> Result<Vec<Option<RgbaFrame>>> {
-        let p = match (path, Self::params(clip)) {
-            (None, Some(p)) => p,
-            _ => {
-                return Err(EigenError::clip(
-                    &clip.name,
-                    format!(
-                        "cannot read {} here (only Ignis's synthetic clips can be redrawn without a media reader)",
-                        path.map_or(clip.source.clone(), |p| p.display().to_string())
-                    ),
-                ))
-            }
-        };
-        frames
-            .iter()
-            .map(|&t| {
-                if t < p.frames {
-                    Ok(Some(synthetic_frame(&p, t)?))
-                } else {
-                    Ok(None)
-                }
-            })
-            .collect()
-    }
-}
+/// Where rendering reads footage: [`crate::footage::SyntheticSources`] for Ignis's own
+/// clips, the CLI's opener over `ignis-media` for real footage.
+pub use crate::footage::{FootageOpener, SyntheticSources};
 
 /// Resizes every channel of `src` to `size` (area average when shrinking, as
 /// [`crate::pose::resize`]); returns `src` itself when it already has that size.
@@ -316,13 +253,16 @@ struct Geometry {
 /// Loads the originals, smoke images, custom masks and source-made grey frames that
 /// the rows `colour_rows` (colouring) and `grey_rows` (grey frames from the footage)
 /// need, one clip at a time, reading only those source frames.
+// Long on purpose: per clip it decides which source frames to read, reads them once and
+// derives every layer from the same decoded frame; split, the frames would be passed
+// around or read twice.
 fn load_layers(
     db: &EigenfireDb,
     colour_rows: &[usize],
     grey_rows: &[usize],
     look: &Look,
     geo: Geometry,
-    sources: &mut dyn SourceFrames,
+    sources: &mut dyn FootageOpener,
 ) -> Result<Layers> {
     let mut layers = Layers::default();
     let want_original = matches!(look.mode, ColourMode::Original);
@@ -385,7 +325,7 @@ fn load_layers(
         need.dedup();
         if !need.is_empty() {
             let path = look.originals.get(&clip.name).map(PathBuf::as_path);
-            let got = sources.read(clip, path, &need)?;
+            let got = sources.open(clip, path)?.frames_at(&need)?;
             let by_frame: HashMap<usize, RgbaFrame> = need
                 .iter()
                 .zip(got)
@@ -439,7 +379,7 @@ fn load_layers(
                 .filter(|m| colour_rows.contains(&m.0))
                 .collect();
             let frames: Vec<usize> = need.iter().map(|m| m.1).collect();
-            let got = sources.read(clip, Some(mp), &frames)?;
+            let got = sources.open(clip, Some(mp))?.frames_at(&frames)?;
             for (&(r, _), g) in need.iter().zip(got) {
                 if let Some(g) = g {
                     layers.mask.insert(r, warp_g(&g.luminance(), r));
@@ -455,7 +395,7 @@ pub fn render_plan(
     db: &EigenfireDb,
     plan: &Plan,
     look: &Look,
-    sources: &mut dyn SourceFrames,
+    sources: &mut dyn FootageOpener,
     sink: &mut dyn FnMut(RgbaFrame) -> Result<()>,
     progress: &mut dyn FnMut(usize),
 ) -> Result<()> {
@@ -486,7 +426,7 @@ pub fn render_plan_with(
     plan: &Plan,
     look: &Look,
     opts: &RenderOptions,
-    sources: &mut dyn SourceFrames,
+    sources: &mut dyn FootageOpener,
     sink: &mut dyn FnMut(RgbaFrame) -> Result<()>,
     progress: &mut dyn FnMut(usize),
 ) -> Result<()> {
@@ -574,6 +514,9 @@ pub fn render_plan_with(
 pub const MORPH_FLOW_SIDE: u32 = 384;
 
 /// Renders `frames` (no morph runs among them) of `plan` into `sink`, in order.
+// Long on purpose: per batch of 16 it chooses each frame's grey source (footage, stored
+// frame or reconstruction) and the layers they share, then finishes them in parallel
+// ([`finish_frame`]); the per-frame rules are closures over that shared batch state.
 #[allow(clippy::too_many_arguments)]
 fn render_frames(
     db: &EigenfireDb,
@@ -582,7 +525,7 @@ fn render_frames(
     look: &Look,
     opts: &RenderOptions,
     geo: Geometry,
-    sources: &mut dyn SourceFrames,
+    sources: &mut dyn FootageOpener,
     sink: &mut dyn FnMut(RgbaFrame) -> Result<()>,
 ) -> Result<()> {
     let Geometry { frame, view, out } = geo;
@@ -694,69 +637,88 @@ fn render_frames(
                 greys.push((g, None));
             }
         }
-        let render_one =
-            |i: usize, grey: GrayFrame, matte: Option<&GrayFrame>| -> Result<RgbaFrame> {
-                let bloomed = match &look.bloom {
-                    Some(b) => Some(bloom(&grey, b)?),
-                    None => None,
-                };
-                let lit = bloomed.as_ref().unwrap_or(&grey);
-                let mut out = match &look.mode {
-                    ColourMode::Grey => lit.to_rgba(),
-                    ColourMode::Palette(p) => p.apply(lit),
-                    ColourMode::Synthetic => synthetic_colour(lit, &look.tint)?,
-                    ColourMode::Original => {
-                        let r = rows[i];
-                        let dest = match &bloomed {
-                            Some(b) => Some(synthetic_colour(b, &look.tint)?),
-                            None => None,
-                        };
-                        let smoke = layers.smoke.get(&r);
-                        let params = OriginalColour {
-                            threshold: look.threshold,
-                            smoke: smoke.is_some(),
-                        };
-                        original_colouring(
-                            &grey,
-                            &layers.original[&r],
-                            dest.as_ref(),
-                            smoke,
-                            layers.mask.get(&r).map(|m| (m, look.mask_mode)),
-                            &params,
-                        )?
-                    }
-                };
-                if look.matte {
-                    let a = alpha_matte(&grey, lit)?;
-                    match matte {
-                        Some(m) => {
-                            for ((px, &av), &mv) in
-                                out.data_mut().iter_mut().zip(a.data()).zip(m.data())
-                            {
-                                px[3] = av.max(mv.min(px[3]));
-                            }
-                        }
-                        None => {
-                            for (px, &av) in out.data_mut().iter_mut().zip(a.data()) {
-                                px[3] = av;
-                            }
-                        }
-                    }
-                } else {
-                    out.data_mut().iter_mut().for_each(|px| px[3] = 1.0);
-                }
-                Ok(out)
-            };
         let batch: Vec<Result<RgbaFrame>> = greys
             .into_par_iter()
             .enumerate()
-            .map(|(j, (g, m))| render_one(start + j, g, m))
+            .map(|(j, (g, m))| {
+                let row = if original {
+                    Some(rows[start + j])
+                } else {
+                    None
+                };
+                finish_frame(g, m, row, look, &layers)
+            })
             .collect();
         for f in batch {
             sink(f?)?;
         }
     }
     Ok(())
+}
+
+/// Bloom (§6.2), colouring and the alpha matte of one grey frame: `row` is the database
+/// row whose layers colour it (original colouring), `matte` the pre-processing matte of a
+/// frame made from the footage.
+fn finish_frame(
+    grey: GrayFrame,
+    matte: Option<&GrayFrame>,
+    row: Option<usize>,
+    look: &Look,
+    layers: &Layers,
+) -> Result<RgbaFrame> {
+    let bloomed = match &look.bloom {
+        Some(b) => Some(bloom(&grey, b)?),
+        None => None,
+    };
+    let lit = bloomed.as_ref().unwrap_or(&grey);
+    let mut out = match (&look.mode, row) {
+        (ColourMode::Grey, _) => lit.to_rgba(),
+        (ColourMode::Palette(p), _) => p.apply(lit),
+        (ColourMode::Synthetic, _) => synthetic_colour(lit, &look.tint)?,
+        (ColourMode::Original, None) => {
+            return Err(EigenError::bad(
+                "colour",
+                "original colouring needs the frame's database row",
+            ))
+        }
+        (ColourMode::Original, Some(r)) => {
+            let dest = match &bloomed {
+                Some(b) => Some(synthetic_colour(b, &look.tint)?),
+                None => None,
+            };
+            let smoke = layers.smoke.get(&r);
+            let params = OriginalColour {
+                threshold: look.threshold,
+                smoke: smoke.is_some(),
+            };
+            original_colouring(
+                &grey,
+                &layers.original[&r],
+                dest.as_ref(),
+                smoke,
+                layers.mask.get(&r).map(|m| (m, look.mask_mode)),
+                &params,
+            )?
+        }
+    };
+    if look.matte {
+        let a = alpha_matte(&grey, lit)?;
+        match matte {
+            Some(m) => {
+                for ((px, &av), &mv) in out.data_mut().iter_mut().zip(a.data()).zip(m.data()) {
+                    px[3] = av.max(mv.min(px[3]));
+                }
+            }
+            None => {
+                for (px, &av) in out.data_mut().iter_mut().zip(a.data()) {
+                    px[3] = av;
+                }
+            }
+        }
+    } else {
+        out.data_mut().iter_mut().for_each(|px| px[3] = 1.0);
+    }
+    Ok(out)
 }
 
 /// Detail transfer for a reconstructed frame: adds the fine detail of `real` (a
@@ -788,9 +750,9 @@ fn add_detail(g: &mut GrayFrame, real: &GrayFrame, train: Size, geo: Geometry) {
 }
 
 /// The plan of a seamless loop of `clip` over source frames `range` (what
-/// [`crate::animate::render_loop`] renders): the range's frames without those the
-/// transition replaces, then the transition back to the start. Returns the plan, the join
-/// and the range actually used (see [`crate::animate::best_loop`]).
+/// [`crate::animate::render_loop`] renders, see [`crate::animate::find_loop`]): the
+/// range's frames without those the transition replaces, then the transition back to the
+/// start. Returns the plan and the loop's report.
 pub fn loop_plan(
     db: &EigenfireDb,
     clip: &str,
@@ -798,46 +760,27 @@ pub fn loop_plan(
     method: crate::transition::Transition,
     e_render: usize,
     search: usize,
-) -> Result<(Plan, crate::transition::Join, std::ops::Range<usize>)> {
-    use crate::animate::{best_loop, clip_rows, recognition_params, weight_space};
-    let rows = clip_rows(db, clip, range)?;
-    let (w, k, spans) = weight_space(db)?;
-    let terr = |e: crate::transition::TransitionError| EigenError::bad("loop", e.to_string());
-    let space = crate::transition::WeightSpace::new(w, k, spans).map_err(terr)?;
-    let rec = recognition_params(db);
-    let (rows, join) = best_loop(&space, rows, search, &method, &rec).map_err(terr)?;
-    let c = db.clip(clip)?;
-    let used = c.start + (rows.start - c.first_row) * c.stride
-        ..c.start + (rows.end - c.first_row) * c.stride;
-    let body_start = rows.start + join.trim_t2;
-    let body_end = rows.end.saturating_sub(join.trim_t1).max(body_start);
-    let mut frames: Vec<PlanFrame> = (body_start..body_end)
-        .map(|r| PlanFrame {
-            source: FrameRef::Db(r),
+) -> Result<(Plan, crate::report::LoopReport)> {
+    let report = crate::animate::find_loop(db, clip, range, &method, e_render, search)?;
+    let join = &report.join;
+    let frames: Vec<PlanFrame> = crate::animate::loop_body(&report.rows, join)
+        .map(FrameRef::Db)
+        .chain(join.frames.iter().cloned())
+        .map(|source| PlanFrame {
+            source,
             edits: Vec::new(),
         })
         .collect();
-    frames.extend(join.frames.iter().map(|f| PlanFrame {
-        source: f.clone(),
-        edits: Vec::new(),
-    }));
-    if frames.is_empty() {
-        return Err(EigenError::bad(
-            "range",
-            "the loop has no frames left (the transition replaced the whole range); use a longer range",
-        ));
-    }
-    let e = e_render.clamp(1, db.usable_components().max(1));
     let plan = Plan {
         frames,
         morphs: Vec::new(),
         joins: Vec::new(),
         wrap_seam: join.seam_ratio,
         worst_step: join.seam_ratio,
-        e_render: e,
+        e_render: report.e_render,
         e_render_requested: e_render,
         e_detect: db.manifest().e_detect,
         loops: true,
     };
-    Ok((plan, join, used))
+    Ok((plan, report))
 }

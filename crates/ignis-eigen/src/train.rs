@@ -10,74 +10,20 @@
 //! in blocks (randomized, top `streaming_components` Eigenfires).
 
 use crate::analysis::{thresholds, ESelect};
-use crate::db::{self, ClipEntry, FileEntry, Manifest, PackEntry};
+use crate::db::{self, ClipEntry, DbWriter, FileEntry, Manifest};
 use crate::error::{EigenError, Result};
+use crate::footage::{Footage, SyntheticFootage};
 use crate::mask::{static_fraction, value8, Isolate, STATIC_LIT};
 use crate::pose::{auto_framing, clip_pose, ClipPose};
 use crate::preprocess::{
     frame_mask, preprocess_frame, preprocess_stages, FrameStages, PreprocessParams,
 };
-use crate::synthetic::{synthetic_frame, FlameStyle, SyntheticParams};
+use crate::synthetic::{FlameStyle, SyntheticParams};
 use ignis_core::{RgbaFrame, Size};
 use ignis_pca::npy::{self, Dtype, NpyWriter};
 use ignis_pca::{Keep, Method, Pca, PcaOptions};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
-
-/// A stream of decoded frames; errors are the source's messages.
-pub type FrameIter<'a> = Box<dyn Iterator<Item = std::result::Result<RgbaFrame, String>> + 'a>;
-
-/// Where a clip's frames come from: something that can be opened (more than once) at frame
-/// 0. The library knows nothing of video files; the CLI wraps `ignis-media` in this.
-pub struct ClipSource<'a> {
-    /// Description for the manifest (a path or `synthetic:candle`).
-    pub source: String,
-    pub fps: f64,
-    /// Frame size of the source.
-    pub size: Size,
-    /// Number of frames when known (containers usually say).
-    pub frame_count: Option<usize>,
-    /// Opens the clip positioned at frame `start` (0-based): the iterator's first item is
-    /// frame `start`, or nothing when the clip is shorter.
-    pub open: Box<dyn Fn(usize) -> std::result::Result<FrameIter<'a>, String> + 'a>,
-}
-
-impl<'a> ClipSource<'a> {
-    /// A synthetic clip (see [`crate::synthetic`]), frames made on demand.
-    pub fn synthetic(p: SyntheticParams, fps: f64) -> ClipSource<'static> {
-        let n = p.frames;
-        ClipSource {
-            source: crate::synthetic::source_name(&p),
-            fps,
-            size: p.size,
-            frame_count: Some(n),
-            open: Box::new(move |start| {
-                let p = p.clone();
-                Ok(Box::new(
-                    (start..p.frames)
-                        .map(move |t| synthetic_frame(&p, t).map_err(|e| e.to_string())),
-                ) as FrameIter<'static>)
-            }),
-        }
-    }
-
-    /// Frames already in memory.
-    pub fn from_frames(source: &str, frames: &'a [RgbaFrame], fps: f64) -> ClipSource<'a> {
-        let size = frames.first().map(|f| f.size()).unwrap_or(Size {
-            width: 1,
-            height: 1,
-        });
-        ClipSource {
-            source: source.into(),
-            fps,
-            size,
-            frame_count: Some(frames.len()),
-            open: Box::new(move |start| {
-                Ok(Box::new(frames.iter().skip(start).cloned().map(Ok)) as FrameIter<'a>)
-            }),
-        }
-    }
-}
 
 /// One clip of a training configuration.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -218,13 +164,21 @@ impl TrainConfig {
     }
 }
 
-/// Progress reporting: the workspace's one progress type.
 pub use ignis_core::progress::{NoProgress, Progress};
 
-/// A clip with its source, ready to train.
+/// A clip with its footage, ready to train.
 pub struct ClipInput<'a> {
     pub spec: ClipSpec,
-    pub source: ClipSource<'a>,
+    pub footage: Box<dyn Footage + 'a>,
+}
+
+impl<'a> ClipInput<'a> {
+    pub fn new(spec: ClipSpec, footage: impl Footage + 'a) -> ClipInput<'a> {
+        ClipInput {
+            spec,
+            footage: Box::new(footage),
+        }
+    }
 }
 
 /// The two built-in synthetic clips, `candle` and `campfire` (30 fps), that the demo and
@@ -235,17 +189,19 @@ pub fn synthetic_clips(size: Size, frames: usize, seed: u64) -> Vec<ClipInput<'s
         ("campfire", FlameStyle::Campfire),
     ]
     .into_iter()
-    .map(|(name, style)| ClipInput {
-        spec: ClipSpec::new(name),
-        source: ClipSource::synthetic(
-            SyntheticParams {
-                size,
-                frames,
-                style,
-                seed,
-            },
-            30.0,
-        ),
+    .map(|(name, style)| {
+        ClipInput::new(
+            ClipSpec::new(name),
+            SyntheticFootage::new(
+                SyntheticParams {
+                    size,
+                    frames,
+                    style,
+                    seed,
+                },
+                30.0,
+            ),
+        )
     })
     .collect()
 }
@@ -314,17 +270,16 @@ fn training_frames<'s>(
     c: &'s ClipInput<'_>,
     start: usize,
     end: usize,
-) -> Result<impl Iterator<Item = (usize, std::result::Result<RgbaFrame, String>)> + 's> {
-    let it = (c.source.open)(start).map_err(|reason| EigenError::Decode {
-        clip: c.spec.name.clone(),
-        reason,
-    })?;
+) -> Result<impl Iterator<Item = (usize, Result<RgbaFrame>)> + 's> {
+    let name = &c.spec.name;
+    let it = c.footage.frames(start).map_err(|e| e.in_clip(name))?;
     let stride = c.spec.stride;
     Ok(it
         .enumerate()
         .map(move |(i, f)| (i + start, f))
         .take_while(move |(i, _)| *i < end)
-        .filter(move |(i, _)| (i - start).is_multiple_of(stride)))
+        .filter(move |(i, _)| (i - start).is_multiple_of(stride))
+        .map(move |(i, f)| (i, f.map_err(|e| e.in_clip(name)))))
 }
 
 /// Checks the clip's range against what is known before decoding; returns `[start, end)`
@@ -334,10 +289,10 @@ fn plan_range(c: &ClipInput<'_>) -> Result<(usize, usize)> {
     if s.stride == 0 {
         return Err(EigenError::clip(&s.name, "stride must be at least 1"));
     }
-    if c.source.frame_count == Some(0) {
+    if c.footage.info().frame_count == Some(0) {
         return Err(EigenError::clip(
             &s.name,
-            format!("{} has zero frames", c.source.source),
+            format!("{} has zero frames", c.footage.info().source),
         ));
     }
     if let Some(e) = s.end {
@@ -348,14 +303,15 @@ fn plan_range(c: &ClipInput<'_>) -> Result<(usize, usize)> {
             ));
         }
     }
-    if let Some(n) = c.source.frame_count {
+    if let Some(n) = c.footage.info().frame_count {
         let end = s.end.unwrap_or(n);
         if s.start >= n || end > n {
             return Err(EigenError::clip(
                 &s.name,
                 format!(
                     "the range {}..{end} goes past the end of {} ({n} frames)",
-                    s.start, c.source.source
+                    s.start,
+                    c.footage.info().source
                 ),
             ));
         }
@@ -410,18 +366,15 @@ fn plan_clip(
     let mut values = Vec::new();
     let need_extents = c.spec.pose.is_none() && auto_pose.is_none();
     for (i, f) in training_frames(c, start, end)? {
-        let f = f.map_err(|reason| EigenError::Decode {
-            clip: name.clone(),
-            reason: format!("frame {i}: {reason}"),
-        })?;
+        let f = f?;
         if count % every == 0 {
-            if f.size() != c.source.size {
+            if f.size() != c.footage.info().size {
                 return Err(EigenError::clip(
                     name,
                     format!(
                         "frame {i} is {}, the source says {}; a clip must keep one frame size",
                         f.size(),
-                        c.source.size
+                        c.footage.info().size
                     ),
                 ));
             }
@@ -441,15 +394,15 @@ fn plan_clip(
     }
     progress.finish_stage();
     if count == 0 {
-        return Err(match c.source.frame_count {
+        return Err(match c.footage.info().frame_count {
             _ if start > 0 => EigenError::clip(
                 name,
                 format!(
                     "the range starts at frame {start}, past the end of {}",
-                    c.source.source
+                    c.footage.info().source
                 ),
             ),
-            _ => EigenError::clip(name, format!("{} has zero frames", c.source.source)),
+            _ => EigenError::clip(name, format!("{} has zero frames", c.footage.info().source)),
         });
     }
     let end = if end == usize::MAX {
@@ -463,7 +416,7 @@ fn plan_clip(
                 name,
                 format!(
                     "the range {start}..{end} goes past the end of {} (only {} frames decoded)",
-                    c.source.source,
+                    c.footage.info().source,
                     start + (count - 1) * c.spec.stride + 1
                 ),
             ));
@@ -505,7 +458,8 @@ pub struct TrainReport {
 }
 
 /// Trains a database from `clips` and writes it atomically to `out` (an existing database
-/// there is replaced only once the new one is complete).
+/// there is replaced only once the new one is complete): plan (pass 1) → collect (pass 2,
+/// the data matrix) → fit (PCA and weights) → [`DbWriter::finish`].
 pub fn train(
     clips: &[ClipInput<'_>],
     pre: &PreprocessParams,
@@ -513,6 +467,41 @@ pub fn train(
     out: &Path,
     progress: &mut dyn Progress,
 ) -> Result<TrainReport> {
+    let (pre, framing, plans) = plan_training(clips, pre, p, progress)?;
+    let n = pre.training_size().pixels();
+    let m: usize = plans.iter().map(|q| q.frames).sum();
+    let writer = DbWriter::create(out)?;
+    let collected = collect(clips, &plans, &pre, p, &writer, (n, m), progress)?;
+    progress.stage("PCA", 0);
+    let (pca, weights) = fit(collected.data, p, (n, m))?;
+    progress.finish_stage();
+    let fitted = Fitted {
+        pca,
+        weights,
+        angles: collected.angles,
+        frames_files: collected.frames_files,
+    };
+    let k = fitted.pca.n_components();
+    progress.stage("write", k.div_ceil(p.pack_size) as u64 + 4);
+    let manifest = write_model(&writer, clips, &plans, &pre, p, &fitted, framing, progress)?;
+    progress.stage("commit", 0);
+    let path = writer.finish(&manifest)?;
+    progress.finish_stage();
+    Ok(TrainReport {
+        manifest,
+        weights: fitted.weights,
+        path,
+    })
+}
+
+/// Checks the clips and settings, resolves the automatic sizes and runs pass 1 over every
+/// clip (range, pose); refuses a data matrix that would not fit before and after.
+fn plan_training(
+    clips: &[ClipInput<'_>],
+    pre: &PreprocessParams,
+    p: &TrainParams,
+    progress: &mut dyn Progress,
+) -> Result<(PreprocessParams, String, Vec<Planned>)> {
     pre.validate()?;
     if clips.is_empty() {
         return Err(EigenError::bad("clips", "no clips to train on"));
@@ -527,12 +516,10 @@ pub fn train(
         }
         plan_range(c)?;
     }
-    let sizes: Vec<Size> = clips.iter().map(|c| c.source.size).collect();
-    let (resolved, auto_poses, framing) = resolve_sizes(pre, &sizes);
-    let pre = &resolved;
+    let sizes: Vec<Size> = clips.iter().map(|c| c.footage.info().size).collect();
+    let (pre, auto_poses, framing) = resolve_sizes(pre, &sizes);
     pre.validate()?;
-    let train_size = pre.training_size();
-    let n = train_size.pixels();
+    let n = pre.training_size().pixels();
     // Early refusal from what is known before decoding.
     let known: usize = clips
         .iter()
@@ -542,264 +529,289 @@ pub fn train(
         })
         .sum();
     check_memory(n, known.max(1), p)?;
-
     let plans = clips
         .iter()
         .enumerate()
         .map(|(i, c)| {
             let ap = auto_poses.as_ref().map(|p| p[i]);
-            plan_clip(c, pre, ap, progress)
+            plan_clip(c, &pre, ap, progress)
         })
         .collect::<Result<Vec<_>>>()?;
     let m: usize = plans.iter().map(|q| q.frames).sum();
     check_memory(n, m, p)?;
-
-    let tmp = db::temp_dir_for(out)?;
-    let result = train_into(clips, &plans, pre, p, &tmp, (n, m), &framing, progress);
-    match result {
-        Ok((manifest, weights)) => {
-            progress.stage("commit", 0);
-            db::commit_dir(&tmp, out)?;
-            progress.finish_stage();
-            Ok(TrainReport {
-                manifest,
-                weights,
-                path: out.to_path_buf(),
-            })
-        }
-        Err(e) => {
-            let _ = std::fs::remove_dir_all(&tmp);
-            Err(e)
-        }
-    }
+    Ok((pre, framing, plans))
 }
 
-fn train_into(
+/// The data matrix: in memory (column j = training frame j) or streamed to a scratch
+/// `.npy` file in the database's temporary directory (row j).
+enum DataMatrix {
+    Memory(faer::Mat<f32>),
+    Streamed(PathBuf),
+}
+
+/// What pass 2 produced besides the data matrix.
+struct Collected {
+    data: DataMatrix,
+    /// Rotation of every training frame (pose normalisation).
+    angles: Vec<f32>,
+    /// Per clip, its stored pre-processed frames (`store_frames`).
+    frames_files: Vec<Option<FileEntry>>,
+}
+
+/// The fitted model: PCA, weights (M×k row-major), angles, stored frames per clip.
+struct Fitted {
+    pca: Pca,
+    weights: Vec<f32>,
+    angles: Vec<f32>,
+    frames_files: Vec<Option<FileEntry>>,
+}
+
+/// Where pass 2 puts each training frame.
+enum Sink {
+    Memory(faer::Mat<f32>),
+    Stream(NpyWriter, PathBuf),
+}
+
+/// Pass 2: pre-processes every training frame into the data matrix (and the stored frames).
+fn collect(
     clips: &[ClipInput<'_>],
     plans: &[Planned],
     pre: &PreprocessParams,
     p: &TrainParams,
-    tmp: &Path,
+    writer: &DbWriter,
     (n, m): (usize, usize),
-    framing: &str,
     progress: &mut dyn Progress,
-) -> Result<(Manifest, Vec<f32>)> {
-    let frame_size = pre.pose.frame();
+) -> Result<Collected> {
+    let mut sink = if p.streaming {
+        let rel = "data.tmp.npy";
+        Sink::Stream(
+            writer.array(rel, Dtype::F32, &[m, n])?,
+            writer.dir().join(rel),
+        )
+    } else {
+        Sink::Memory(ignis_pca::alloc_data_matrix(
+            n,
+            m,
+            &Method::Snapshot,
+            p.memory_limit,
+        )?)
+    };
     let mut angles = Vec::with_capacity(m);
     let mut frames_files = Vec::new();
-    // The data matrix, in memory (column j = training frame j) or on disk (row j).
-    let mut data = if p.streaming {
-        None
-    } else {
-        Some(
-            ignis_pca::alloc_data_matrix(n, m, &Method::Snapshot, p.memory_limit)
-                .map_err(|e| EigenError::LimitExceeded(e.to_string()))?,
-        )
-    };
-    let stream_path = tmp.join("data.tmp.npy");
-    let mut stream = if p.streaming {
-        Some(NpyWriter::create(&stream_path, Dtype::F32, &[m, n]).map_err(EigenError::npy)?)
-    } else {
-        None
-    };
-    let mut j = 0;
     for (c, plan) in clips.iter().zip(plans) {
-        let name = &c.spec.name;
-        progress.stage(&format!("pre-process {name}"), plan.frames as u64);
-        let rel = format!("frames/{name}.npy");
-        let mut fw = if p.store_frames {
-            Some(
-                NpyWriter::create(
-                    &tmp.join(&rel),
-                    Dtype::F32,
-                    &[
-                        plan.frames,
-                        frame_size.height as usize,
-                        frame_size.width as usize,
-                    ],
-                )
-                .map_err(EigenError::npy)?,
-            )
-        } else {
-            None
-        };
-        let mut done = 0;
-        let mut lit = 0;
-        for (i, f) in training_frames(c, plan.start, plan.end)? {
-            if done == plan.frames {
-                break;
-            }
-            let f = f.map_err(|reason| EigenError::Decode {
-                clip: name.clone(),
-                reason: format!("frame {i}: {reason}"),
-            })?;
-            let pr = preprocess_frame(&f, &plan.pose, pre);
-            if pr.mask_pixels > 0 {
-                lit += 1;
-            }
-            if let Some(d) = data.as_mut() {
-                let col = pr.train.data();
-                for (r, &v) in col.iter().enumerate() {
+        let ff = collect_clip(
+            c,
+            plan,
+            pre,
+            p.store_frames,
+            writer,
+            &mut sink,
+            &mut angles,
+            progress,
+        )?;
+        frames_files.push(ff);
+    }
+    let data = match sink {
+        Sink::Memory(d) => DataMatrix::Memory(d),
+        Sink::Stream(w, path) => {
+            w.finish()?;
+            DataMatrix::Streamed(path)
+        }
+    };
+    Ok(Collected {
+        data,
+        angles,
+        frames_files,
+    })
+}
+
+/// Pass 2 over one clip: its frames go to `sink` (column/row `angles.len()` on), their
+/// angles to `angles`; returns the entry of its stored frames when `store_frames`.
+#[allow(clippy::too_many_arguments)]
+fn collect_clip(
+    c: &ClipInput<'_>,
+    plan: &Planned,
+    pre: &PreprocessParams,
+    store_frames: bool,
+    writer: &DbWriter,
+    sink: &mut Sink,
+    angles: &mut Vec<f32>,
+    progress: &mut dyn Progress,
+) -> Result<Option<FileEntry>> {
+    let name = &c.spec.name;
+    let frame_size = pre.pose.frame();
+    progress.stage(&format!("pre-process {name}"), plan.frames as u64);
+    let rel = format!("frames/{name}.npy");
+    let mut fw = if store_frames {
+        let shape = [
+            plan.frames,
+            frame_size.height as usize,
+            frame_size.width as usize,
+        ];
+        Some(writer.array(&rel, Dtype::F32, &shape)?)
+    } else {
+        None
+    };
+    let (mut done, mut lit) = (0, 0);
+    for (_, f) in training_frames(c, plan.start, plan.end)? {
+        if done == plan.frames {
+            break;
+        }
+        let pr = preprocess_frame(&f?, &plan.pose, pre);
+        if pr.mask_pixels > 0 {
+            lit += 1;
+        }
+        match sink {
+            Sink::Memory(d) => {
+                let j = angles.len();
+                for (r, &v) in pr.train.data().iter().enumerate() {
                     d[(r, j)] = v;
                 }
             }
-            if let Some(s) = stream.as_mut() {
-                s.write_f32(pr.train.data()).map_err(EigenError::npy)?;
-            }
-            if let Some(w) = fw.as_mut() {
-                w.write_f32(pr.frame.data()).map_err(EigenError::npy)?;
-            }
-            angles.push(pr.angle);
-            j += 1;
-            done += 1;
-            progress.inc(1);
+            Sink::Stream(s, _) => s.write_f32(pr.train.data())?,
         }
-        progress.finish_stage();
-        if done != plan.frames {
-            return Err(EigenError::clip(
-                name,
-                format!(
-                    "decoded {done} frames on the second pass, {} on the first",
-                    plan.frames
-                ),
-            ));
+        if let Some(w) = fw.as_mut() {
+            w.write_f32(pr.frame.data())?;
         }
-        if lit == 0 {
-            return Err(EigenError::clip(name, "the mask removes every pixel in every frame; widen the HSV ranges (e.g. lower the V minimum of [[preprocess.mask.layers]])"));
-        }
-        if let Some(w) = fw {
-            w.finish().map_err(EigenError::npy)?;
-            frames_files.push(Some(db::file_entry(tmp, &rel)?));
-        } else {
-            frames_files.push(None);
-        }
+        angles.push(pr.angle);
+        done += 1;
+        progress.inc(1);
     }
+    progress.finish_stage();
+    if done != plan.frames {
+        return Err(EigenError::clip(
+            name,
+            format!(
+                "decoded {done} frames on the second pass, {} on the first",
+                plan.frames
+            ),
+        ));
+    }
+    if lit == 0 {
+        return Err(EigenError::clip(name, "the mask removes every pixel in every frame; widen the HSV ranges (e.g. lower the V minimum of [[preprocess.mask.layers]])"));
+    }
+    match fw {
+        Some(w) => {
+            w.finish()?;
+            Ok(Some(writer.entry(&rel)?))
+        }
+        None => Ok(None),
+    }
+}
 
-    progress.stage("PCA", 0);
+/// Fits the PCA to the data matrix and projects every training frame: the weights are
+/// M×k row-major. Fails when no component is retained.
+fn fit(data: DataMatrix, p: &TrainParams, (n, m): (usize, usize)) -> Result<(Pca, Vec<f32>)> {
     let keep = match p.keep {
         None => Keep::All,
         Some(ESelect::Count(k)) => Keep::Count(k),
         Some(ESelect::Variance(v)) => Keep::Variance(v),
     };
-    let pca_err = |e: ignis_pca::PcaError| match e {
-        ignis_pca::PcaError::LimitExceeded { .. } => EigenError::LimitExceeded(e.to_string()),
-        other => EigenError::Pca(other.to_string()),
-    };
-    // weights: k×M column-major = M×k row-major.
-    let (pca, weights): (Pca, Vec<f32>) = if let Some(d) = data.take() {
-        let (pca, w) = Pca::fit_owned_with_weights(
-            d,
-            &PcaOptions {
+    let (pca, weights) = match data {
+        DataMatrix::Memory(d) => {
+            let opts = PcaOptions {
                 keep,
                 method: Method::Snapshot,
                 memory_limit: p.memory_limit,
-            },
-        )
-        .map_err(pca_err)?;
-        let k = pca.n_components();
-        let mut flat = Vec::with_capacity(k * m);
-        for col in 0..m {
-            for r in 0..k {
-                flat.push(w[(r, col)]);
+            };
+            let (pca, w) = Pca::fit_owned_with_weights(d, &opts)?;
+            // w: k×M column-major = M×k row-major.
+            let k = pca.n_components();
+            let mut flat = Vec::with_capacity(k * m);
+            for col in 0..m {
+                for r in 0..k {
+                    flat.push(w[(r, col)]);
+                }
             }
+            (pca, flat)
         }
-        (pca, flat)
-    } else {
-        stream
-            .take()
-            .expect("streaming")
-            .finish()
-            .map_err(EigenError::npy)?;
-        let mut src = ignis_pca::NpySource::open(&stream_path).map_err(pca_err)?;
-        let kk = p.streaming_components.min(m.saturating_sub(1)).max(1);
-        let opts = ignis_pca::StreamingOptions {
-            keep,
-            memory_limit: p.memory_limit,
-            ..Default::default()
-        };
-        let pca = ignis_pca::fit_streaming(&mut src, kk, &opts).map_err(pca_err)?;
-        let k = pca.n_components();
-        drop(src);
-        // Project the frames in place from a read-only map of the streamed data.
-        let map = npy::mmap_f32(&stream_path).map_err(EigenError::npy)?;
-        let all = map.as_slice();
-        let mut flat = Vec::with_capacity(k * m);
-        for col in 0..m {
-            flat.extend(pca.project(&all[col * n..(col + 1) * n]));
+        DataMatrix::Streamed(path) => {
+            let mut src = ignis_pca::NpySource::open(&path)?;
+            let kk = p.streaming_components.min(m.saturating_sub(1)).max(1);
+            let opts = ignis_pca::StreamingOptions {
+                keep,
+                memory_limit: p.memory_limit,
+                ..Default::default()
+            };
+            let pca = ignis_pca::fit_streaming(&mut src, kk, &opts)?;
+            drop(src);
+            // Project the frames in place from a read-only map of the streamed data.
+            let map = npy::mmap_f32(&path)?;
+            let all = map.as_slice();
+            let mut flat = Vec::with_capacity(pca.n_components() * m);
+            for col in 0..m {
+                flat.extend(pca.project(&all[col * n..(col + 1) * n]));
+            }
+            drop(map);
+            let _ = std::fs::remove_file(&path);
+            (pca, flat)
         }
-        drop(map);
-        let _ = std::fs::remove_file(&stream_path);
-        (pca, flat)
     };
-    progress.finish_stage();
-    let k = pca.n_components();
-    if k == 0 {
-        return Err(EigenError::Pca(
-            "no component retained (are all training frames identical?)".into(),
-        ));
+    if pca.n_components() == 0 {
+        return Err(EigenError::NoComponents);
     }
+    Ok((pca, weights))
+}
 
-    let pack_count = k.div_ceil(p.pack_size);
-    progress.stage("write", pack_count as u64 + 3);
+/// Writes the arrays and packs of the fitted model and returns the manifest listing them.
+#[allow(clippy::too_many_arguments)]
+fn write_model(
+    writer: &DbWriter,
+    clips: &[ClipInput<'_>],
+    plans: &[Planned],
+    pre: &PreprocessParams,
+    p: &TrainParams,
+    fitted: &Fitted,
+    framing: String,
+    progress: &mut dyn Progress,
+) -> Result<Manifest> {
+    let Fitted {
+        pca,
+        weights,
+        angles,
+        frames_files,
+    } = fitted;
+    let (m, k) = (angles.len(), pca.n_components());
     let ts = pre.training_size();
     let (h, w) = (ts.height as usize, ts.width as usize);
-    npy::write_f32(&tmp.join("mean.npy"), &pca.mean, &[h, w], false).map_err(EigenError::npy)?;
-    npy::write_f64(&tmp.join("eigenvalues.npy"), &pca.eigenvalues, &[k], false)
-        .map_err(EigenError::npy)?;
-    npy::write_f32(&tmp.join("weights.npy"), &weights, &[m, k], false).map_err(EigenError::npy)?;
-    npy::write_f32(&tmp.join("angles.npy"), &angles, &[m], false).map_err(EigenError::npy)?;
-    progress.inc(3);
-    let mut packs = Vec::new();
-    for pi in 0..pack_count {
-        let first = pi * p.pack_size;
-        let count = p.pack_size.min(k - first);
-        let rel = format!("packs/pack_{:03}.npy", pi + 1);
-        let mut wr = NpyWriter::create(&tmp.join(&rel), Dtype::F32, &[count, h, w])
-            .map_err(EigenError::npy)?;
-        for i in first..first + count {
-            let col = pca.components.col(i);
-            let v: Vec<f32> = (0..n).map(|r| col[r]).collect();
-            wr.write_f32(&v).map_err(EigenError::npy)?;
-        }
-        wr.finish().map_err(EigenError::npy)?;
-        packs.push(PackEntry {
-            entry: db::file_entry(tmp, &rel)?,
-            first,
-            count,
-        });
-        progress.inc(1);
-    }
+    let mean = writer.write_f32("mean.npy", &pca.mean, &[h, w])?;
+    let eigenvalues = writer.write_f64("eigenvalues.npy", &pca.eigenvalues, &[k])?;
+    let weights_entry = writer.write_f32("weights.npy", weights, &[m, k])?;
+    let angles = writer.write_f32("angles.npy", angles, &[m])?;
+    progress.inc(4);
+    let packs = writer.write_packs(pca.components.as_ref(), p.pack_size, ts, progress)?;
     let e_detect = p.e_detect.resolve(&pca.eigenvalues, pca.total_variance);
     let e_render = p.e_render.resolve(&pca.eigenvalues, pca.total_variance);
-    let wref = faer::MatRef::from_row_major_slice(&weights, m, k);
+    let wref = faer::MatRef::from_row_major_slice(weights, m, k);
     let mut first_row = 0;
     let mut entries = Vec::new();
     for ((c, plan), ff) in clips.iter().zip(plans).zip(frames_files) {
+        let info = c.footage.info();
         entries.push(ClipEntry {
             name: c.spec.name.clone(),
-            source: c.source.source.clone(),
+            source: info.source.clone(),
             start: plan.start,
             end: plan.end,
             stride: c.spec.stride,
-            fps: c.source.fps,
-            source_size: c.source.size,
+            fps: info.fps,
+            source_size: info.size,
             first_row,
             frames: plan.frames,
             pose: plan.pose,
             thresholds: thresholds(wref, first_row..first_row + plan.frames, e_detect),
-            frames_file: ff,
-            source_check: db::source_check(&c.source.source, c.source.frame_count)?,
+            frames_file: ff.clone(),
+            source_check: db::source_check(&info.source, info.frame_count)?,
             static_lit: Some(plan.static_lit),
         });
         first_row += plan.frames;
     }
-    let entry = |f: &str| -> Result<FileEntry> { db::file_entry(tmp, f) };
-    let manifest = Manifest {
+    progress.finish_stage();
+    Ok(Manifest {
         format: db::FORMAT.into(),
         version: db::VERSION,
         created_by: format!("ignis-eigen {}", env!("CARGO_PKG_VERSION")),
         train_size: ts,
-        frame_size,
+        frame_size: pre.pose.frame(),
         frames: m,
         components: k,
         pack_size: p.pack_size,
@@ -808,22 +820,13 @@ fn train_into(
         e_render,
         clips: entries,
         preprocess: pre.clone(),
-        mean: entry("mean.npy")?,
-        eigenvalues: entry("eigenvalues.npy")?,
-        weights: entry("weights.npy")?,
-        angles: entry("angles.npy")?,
+        mean,
+        eigenvalues,
+        weights: weights_entry,
+        angles,
         packs,
-        framing: framing.to_string(),
-    };
-    let text = serde_json::to_string_pretty(&manifest)
-        .map_err(|e| EigenError::bad("manifest", e.to_string()))?;
-    let mp = tmp.join("manifest.json");
-    std::fs::write(&mp, &text).map_err(|e| EigenError::io(&mp, e))?;
-    let sp = tmp.join(db::MANIFEST_SUM);
-    std::fs::write(&sp, db::manifest_sum_text(text.as_bytes()))
-        .map_err(|e| EigenError::io(&sp, e))?;
-    progress.finish_stage();
-    Ok((manifest, weights))
+        framing,
+    })
 }
 
 /// `ignis eigen preprocess`: finds the clip's pose (pass 1) and returns every stage of
@@ -837,7 +840,7 @@ pub fn preprocess_clip(
 ) -> Result<Vec<(usize, FrameStages)>> {
     pre.validate()?;
     check_name(&c.spec.name)?;
-    let (resolved, auto_poses, _) = resolve_sizes(pre, &[c.source.size]);
+    let (resolved, auto_poses, _) = resolve_sizes(pre, &[c.footage.info().size]);
     let pre = &resolved;
     let plan = plan_clip(c, pre, auto_poses.map(|p| p[0]), progress)?;
     let wanted: Vec<usize> = if which.is_empty() {
@@ -858,10 +861,7 @@ pub fn preprocess_clip(
     progress.stage(&format!("stages {}", c.spec.name), wanted.len() as u64);
     for (j, (i, f)) in training_frames(c, plan.start, plan.end)?.enumerate() {
         if wanted.contains(&j) {
-            let f = f.map_err(|reason| EigenError::Decode {
-                clip: c.spec.name.clone(),
-                reason: format!("frame {i}: {reason}"),
-            })?;
+            let f = f?;
             out.push((i, preprocess_stages(&f, &plan.pose, pre)));
             progress.inc(1);
         }

@@ -10,9 +10,10 @@ use ignis_eigen::preprocess::{frame_mask, preprocess_frame};
 use ignis_eigen::render::{loop_plan, render_plan_with, RenderOptions, SyntheticSources};
 use ignis_eigen::scenario::{ColourMode, Look};
 use ignis_eigen::synthetic::{synthetic_frame, FlameStyle, SyntheticParams};
-use ignis_eigen::train::{train, ClipInput, ClipSource, ClipSpec, NoProgress, TrainParams};
+use ignis_eigen::train::{train, ClipInput, ClipSpec, NoProgress, TrainParams};
 use ignis_eigen::transition::Transition;
 use ignis_eigen::{EigenfireDb, PreprocessParams};
+use ignis_eigen::{FrameList, SyntheticFootage};
 use std::path::Path;
 
 fn synth(style: FlameStyle, w: u32, h: u32, frames: usize) -> SyntheticParams {
@@ -25,10 +26,7 @@ fn synth(style: FlameStyle, w: u32, h: u32, frames: usize) -> SyntheticParams {
 }
 
 fn input(name: &str, p: SyntheticParams) -> ClipInput<'static> {
-    ClipInput {
-        spec: ClipSpec::new(name),
-        source: ClipSource::synthetic(p, 30.0),
-    }
+    ClipInput::new(ClipSpec::new(name), SyntheticFootage::new(p, 30.0))
 }
 
 /// Default settings (automatic frame and training size), rotation asked for, few pose
@@ -62,7 +60,7 @@ fn render(
     range: std::ops::Range<usize>,
     size: Option<Size>,
 ) -> Vec<RgbaFrame> {
-    let (plan, _, _) = loop_plan(db, clip, range, Transition::Auto, 8, 0).unwrap();
+    let (plan, _) = loop_plan(db, clip, range, Transition::Auto, 8, 0).unwrap();
     let mut out = Vec::new();
     render_plan_with(
         db,
@@ -147,7 +145,7 @@ fn wide_sheet_and_tall_flame_at_their_own_size() {
         assert_no_flame_pixel_lost(&synthetic_frame(&wide, tf).unwrap(), &c.pose, p);
     }
     // A database frame shows the source frame's grey where the flame is.
-    let (plan, _, _) = loop_plan(&db, "sheet", 1..11, Transition::Auto, 8, 0).unwrap();
+    let (plan, _) = loop_plan(&db, "sheet", 1..11, Transition::Auto, 8, 0).unwrap();
     let first = match &plan.frames[0].source {
         ignis_eigen::transition::FrameRef::Db(r) => db.row_origin(*r).unwrap().1,
         other => panic!("the loop starts with a database frame, not {other:?}"),
@@ -199,7 +197,7 @@ fn clips_of_different_sizes_render_at_their_own_size_or_a_common_one() {
         assert!(f.iter().all(|f| f.size() == common));
     }
     // Bad sizes are errors, not panics.
-    let (plan, _, _) = loop_plan(&db, "wide", 1..9, Transition::Auto, 8, 0).unwrap();
+    let (plan, _) = loop_plan(&db, "wide", 1..9, Transition::Auto, 8, 0).unwrap();
     for bad in [
         Size {
             width: 0,
@@ -355,14 +353,14 @@ fn morph_join_between_two_clips_measured_on_the_written_frames() {
     assert_eq!((a.len(), b.len()), (40, 40));
     let t = tempfile::tempdir().unwrap();
     let clips = [
-        ClipInput {
-            spec: ClipSpec::new("candle"),
-            source: ignis_eigen::train::ClipSource::from_frames("candle.mp4", &a, 30.0),
-        },
-        ClipInput {
-            spec: ClipSpec::new("campfire"),
-            source: ignis_eigen::train::ClipSource::from_frames("campfire.mp4", &b, 25.0),
-        },
+        ClipInput::new(
+            ClipSpec::new("candle"),
+            FrameList::new("candle.mp4", &a, 30.0),
+        ),
+        ClipInput::new(
+            ClipSpec::new("campfire"),
+            FrameList::new("campfire.mp4", &b, 25.0),
+        ),
     ];
     let p = PreprocessParams {
         pose_samples: 4,

@@ -3,8 +3,9 @@
 
 use ignis_core::Size;
 use ignis_eigen::synthetic::{FlameStyle, SyntheticParams};
-use ignis_eigen::train::{train, ClipInput, ClipSource, ClipSpec, NoProgress, TrainParams};
+use ignis_eigen::train::{train, ClipInput, ClipSpec, NoProgress, TrainParams};
 use ignis_eigen::{EigenError, EigenfireDb, PreprocessParams};
+use ignis_eigen::{Footage, FootageInfo, SyntheticFootage};
 use std::path::Path;
 
 fn clip(name: &str, style: FlameStyle, frames: usize) -> ClipInput<'static> {
@@ -14,10 +15,7 @@ fn clip(name: &str, style: FlameStyle, frames: usize) -> ClipInput<'static> {
         style,
         seed: 7,
     };
-    ClipInput {
-        spec: ClipSpec::new(name),
-        source: ClipSource::synthetic(p, 30.0),
-    }
+    ClipInput::new(ClipSpec::new(name), SyntheticFootage::new(p, 30.0))
 }
 
 fn small_pre() -> PreprocessParams {
@@ -431,22 +429,25 @@ mod bad_input {
         let m = err_of(&[clip("nothing", FlameStyle::Candle, 0)], &pre, &p).to_string();
         assert!(m.contains("nothing") && m.contains("zero frames"), "{m}");
         // A source that reports no count and yields nothing.
-        let src = ClipSource {
+        struct EmptyStream(FootageInfo);
+        impl Footage for EmptyStream {
+            fn info(&self) -> &FootageInfo {
+                &self.0
+            }
+            fn frames(
+                &self,
+                _start: usize,
+            ) -> ignis_eigen::Result<ignis_eigen::footage::Frames<'_>> {
+                Ok(Box::new(std::iter::empty()))
+            }
+        }
+        let src = EmptyStream(FootageInfo {
             source: "empty-stream".into(),
             fps: 30.0,
             size: Size::new(8, 8).unwrap(),
             frame_count: None,
-            open: Box::new(|_| Ok(Box::new(std::iter::empty()))),
-        };
-        let m = err_of(
-            &[ClipInput {
-                spec: ClipSpec::new("stream"),
-                source: src,
-            }],
-            &pre,
-            &p,
-        )
-        .to_string();
+        });
+        let m = err_of(&[ClipInput::new(ClipSpec::new("stream"), src)], &pre, &p).to_string();
         assert!(m.contains("stream") && m.contains("zero frames"), "{m}");
     }
 
@@ -495,7 +496,6 @@ mod bad_input {
 
 mod footage {
     use super::*;
-    use ignis_eigen::train::FrameIter;
 
     fn data(name: &str) -> std::path::PathBuf {
         Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -506,27 +506,13 @@ mod footage {
     /// A clip over `ignis_media`, decoded at `scale` to keep the test fast.
     fn media_clip(name: &str, file: &str, scale: Size) -> ClipInput<'static> {
         let path = data(file);
-        let info = ignis_media::probe(&path).expect("probe");
-        let p = path.clone();
-        let source = ClipSource {
-            source: path.display().to_string(),
-            fps: info.fps,
-            size: scale,
-            frame_count: info.frame_count.map(|n| n as usize),
-            open: Box::new(move |start| {
-                let opts = ignis_media::ReadOptions {
-                    range: Some(ignis_media::FrameRange::frames(start as u64, None)),
-                    scale: Some(scale),
-                    ..Default::default()
-                };
-                let r = ignis_media::open(&p, &opts).map_err(|e| e.to_string())?;
-                Ok(Box::new(r.map(|f| f.map_err(|e| e.to_string()))) as FrameIter<'static>)
-            }),
-        };
+        let footage = ignis_eigen::MediaFootage::open(&path)
+            .expect("probe")
+            .scaled(scale);
         let mut spec = ClipSpec::new(name);
         spec.end = Some(120);
         spec.stride = 4;
-        ClipInput { spec, source }
+        ClipInput::new(spec, footage)
     }
 
     #[test]
@@ -800,33 +786,45 @@ mod animate {
     /// Synthetic clips as originals; any other path is a custom mask: white (1.0) on the
     /// left half of every frame, black elsewhere.
     struct MaskSources;
-    impl ignis_eigen::render::SourceFrames for MaskSources {
-        fn read(
+    impl ignis_eigen::FootageOpener for MaskSources {
+        fn open(
             &mut self,
             clip: &ignis_eigen::ClipEntry,
             path: Option<&Path>,
-            frames: &[usize],
-        ) -> ignis_eigen::Result<Vec<Option<RgbaFrame>>> {
+        ) -> ignis_eigen::Result<Box<dyn ignis_eigen::Footage + '_>> {
             match path {
-                None => SyntheticSources.read(clip, None, frames),
-                Some(_) => Ok(frames
-                    .iter()
-                    .map(|_| {
-                        let s = clip.source_size;
-                        let data = (0..s.pixels())
-                            .map(|i| {
-                                let v = if (i as u32 % s.width) < s.width / 2 {
-                                    1.0
-                                } else {
-                                    0.0
-                                };
-                                [v, v, v, 1.0]
-                            })
-                            .collect();
-                        Some(RgbaFrame::from_vec(s, data).unwrap())
-                    })
-                    .collect()),
+                None => Ok(Box::new(
+                    ignis_eigen::SyntheticFootage::of_clip(clip).expect("a synthetic clip"),
+                )),
+                Some(p) => Ok(Box::new(LeftHalf(ignis_eigen::FootageInfo {
+                    source: p.display().to_string(),
+                    fps: clip.fps,
+                    size: clip.source_size,
+                    frame_count: None,
+                }))),
             }
+        }
+    }
+    struct LeftHalf(ignis_eigen::FootageInfo);
+    impl ignis_eigen::Footage for LeftHalf {
+        fn info(&self) -> &ignis_eigen::FootageInfo {
+            &self.0
+        }
+        fn frames(&self, _start: usize) -> ignis_eigen::Result<ignis_eigen::footage::Frames<'_>> {
+            let s = self.0.size;
+            Ok(Box::new(std::iter::repeat_with(move || {
+                let data = (0..s.pixels())
+                    .map(|i| {
+                        let v = if (i as u32 % s.width) < s.width / 2 {
+                            1.0
+                        } else {
+                            0.0
+                        };
+                        [v, v, v, 1.0]
+                    })
+                    .collect();
+                Ok(RgbaFrame::from_vec(s, data).unwrap())
+            })))
         }
     }
 
@@ -922,26 +920,10 @@ mod animate {
             println!("skipped: {} not present", path.display());
             return;
         }
-        let info = ignis_media::probe(&path).unwrap();
-        let p = path.clone();
-        let source = ignis_eigen::ClipSource {
-            source: path.display().to_string(),
-            fps: info.fps,
-            size: info.size,
-            frame_count: info.frame_count.map(|n| n as usize),
-            open: Box::new(move |start| {
-                let opts = ignis_media::ReadOptions {
-                    range: Some(ignis_media::FrameRange::frames(start as u64, None)),
-                    ..Default::default()
-                };
-                let r = ignis_media::open(&p, &opts).map_err(|e| e.to_string())?;
-                Ok(Box::new(r.map(|f| f.map_err(|e| e.to_string())))
-                    as ignis_eigen::train::FrameIter<'static>)
-            }),
-        };
+        let source = ignis_eigen::MediaFootage::open(&path).unwrap();
         let mut spec = ignis_eigen::ClipSpec::new("candle");
         spec.stride = 2;
-        let clips = vec![ignis_eigen::ClipInput { spec, source }];
+        let clips = vec![ignis_eigen::ClipInput::new(spec, source)];
         let mut pre = PreprocessParams::with_sizes(
             Size::new(96, 160).unwrap(),
             Some(Size::new(48, 80).unwrap()),
@@ -957,8 +939,9 @@ mod animate {
             (200..500, "direct"),
         ] {
             let m = animate::parse_method(method).unwrap();
-            let (frames, join, used) =
+            let (frames, report) =
                 animate::render_loop(&db, "candle", range.clone(), m, 40, 8).unwrap();
+            let (join, used) = (report.join, report.used);
             println!(
                 "candle loop {range:?} → {used:?} with {method}: {} ({} frames), seam ratio {:.2}",
                 join.method,
@@ -975,8 +958,9 @@ mod animate {
         // Without the search, auto still never does worse than the plain cut.
         let rows = animate::clip_rows(&db, "candle", 100..300).unwrap();
         let plain = animate::plain_cut_ratio(&db, rows).unwrap();
-        let (_, join, _) =
+        let (_, report) =
             animate::render_loop(&db, "candle", 100..300, Transition::Auto, 40, 0).unwrap();
+        let join = report.join;
         assert!(join.seam_ratio <= plain + 1e-9);
     }
 }

@@ -14,7 +14,7 @@ use super::{
 };
 use crate::animate;
 use crate::db::{ClipEntry, EigenfireDb};
-use crate::error::{EigenError, Result};
+use crate::error::Result;
 use crate::transition::{self, FrameRef, Join, RecognitionParams, TransitionError, WeightSpace};
 
 /// A motion resolved against the database.
@@ -33,9 +33,7 @@ impl Scenario {
         let e_detect = self.e_detect.unwrap_or(db.manifest().e_detect);
         let e_render_req = self.e_render.unwrap_or(db.manifest().e_render);
         let motions = self.resolve_motions(db, usable)?;
-        let (w, k, spans) = animate::weight_space(db)?;
-        let space = WeightSpace::new(w, k, spans)
-            .map_err(|e| EigenError::bad("database", e.to_string()))?;
+        let space = WeightSpace::from_db(db)?;
         let n_joins = self.joins.len();
         progress.stage("finding transitions", n_joins as u64);
         let mut joins = Vec::with_capacity(n_joins);

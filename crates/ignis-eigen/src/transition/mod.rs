@@ -29,22 +29,17 @@
 //!   distances between consecutive frames of the clip the path is at — the same rule as
 //!   `Thresholds::theta_min` of the database — and so adapts when a path crosses clips
 //!   (the thesis's proposed "adaptive mode", end of §5.1.2.2), instead of one user
-//!   number. §4.1 asks for a threshold "slightly bigger than zero" and §5.1.2.2 used "the
-//!   average of thresholds or smallest threshold". We tried the clip's median step
-//!   (≈ its mean): it rejects the natural next frame about half of the time; on the test
-//!   flame End Growing then gave seam ratios 2.0–2.1 or no path (3 seeds) instead of
-//!   1.3–1.5 with the 10th percentile.
+//!   number (§4.1 asks for a threshold "slightly bigger than zero"; the clip's median
+//!   step rejects the natural next frame about half of the time — see
+//!   `benches/README.md`).
 //!
-//! Speed (Table 2 reports 5–48 ms per step over 2,197 frames): the consecutive-frame
-//! distances behind θ_min, the join gap and the seam ratio are computed once per
-//! `e_detect` and cached in the [`WeightSpace`] (building that cache reads the M × e_detect
-//! weights once, ≈ 1 ms for 2,197 × 913 — reuse one space for several transitions). Scans
-//! over all frames abandon a distance as soon as its leading weights pass the bound that
-//! matters, and End Growing's sorted candidate lists are produced lazily from lower
-//! bounds; both are exact (the same frames in the same order as computing every distance
-//! in full). Distances are summed in f64 over 8 interleaved lanes, so they differ from a
-//! strictly sequential sum by rounding only (≈ 1e-16 relative). `ignis bench
-//! eigen-animate` ([`crate::bench`]) reports the figures.
+//! Speed: the consecutive-frame distances behind θ_min, the join gap and the seam ratio
+//! are computed once per `e_detect` and cached in the [`WeightSpace`] (reuse one space for
+//! several transitions). Scans abandon a distance as soon as its leading weights pass the
+//! bound that matters, and End Growing's candidate lists are produced lazily from lower
+//! bounds; both are exact. Distances are summed in f64 over 8 interleaved lanes.
+//! `ignis bench eigen-animate` ([`crate::bench`]) measures it; figures in
+//! `benches/README.md`.
 
 mod bridging;
 mod end_growing;

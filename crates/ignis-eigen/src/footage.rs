@@ -1,0 +1,410 @@
+//! Footage: the one way frames come into `ignis-eigen`, for training (a clip read from a
+//! start frame) and for rendering (original colouring, smoke and custom masks read at
+//! chosen frames).
+//!
+//! [`Footage`] is a clip: its [`FootageInfo`], its frames from a start index, and its
+//! frames at chosen indices. Implementations: [`SyntheticFootage`] (Ignis's own drawn
+//! clips), [`FrameList`] (frames already in memory) and, with the `media` feature,
+//! [`MediaFootage`] over `ignis-media` (videos, image sequences). Rendering asks a
+//! [`FootageOpener`] for the footage of a database clip (or of another file, such as a
+//! custom mask); [`SyntheticSources`] opens synthetic clips only.
+
+use std::path::Path;
+
+use ignis_core::{RgbaFrame, Size};
+
+use crate::db::ClipEntry;
+use crate::error::{EigenError, Result};
+use crate::synthetic::{parse_source_name, source_name, synthetic_frame, SyntheticParams};
+
+/// What a clip is: where it comes from, its frame size, rate and length.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FootageInfo {
+    /// Description for the manifest (a path or `synthetic:candle:seed=1`).
+    pub source: String,
+    pub fps: f64,
+    /// Frame size.
+    pub size: Size,
+    /// Number of frames when known (containers usually say).
+    pub frame_count: Option<usize>,
+}
+
+/// A stream of decoded frames (linear RGBA).
+pub type Frames<'a> = Box<dyn Iterator<Item = Result<RgbaFrame>> + 'a>;
+
+/// A clip's frames. Errors are [`EigenError::Decode`] naming the source and frame.
+pub trait Footage {
+    /// Source, size, rate and length.
+    fn info(&self) -> &FootageInfo;
+
+    /// The frames from `start` (0-based) on: the first item is frame `start`, or nothing
+    /// when the clip is shorter.
+    fn frames(&self, start: usize) -> Result<Frames<'_>>;
+
+    /// Frames `indices` (ascending, distinct), `None` for an index past the end. The
+    /// default reads from the first index to the last and keeps the wanted ones.
+    fn frames_at(&self, indices: &[usize]) -> Result<Vec<Option<RgbaFrame>>> {
+        let (Some(&lo), Some(&hi)) = (indices.first(), indices.last()) else {
+            return Ok(Vec::new());
+        };
+        let mut out = vec![None; indices.len()];
+        let mut want = indices.iter().enumerate().peekable();
+        for (i, f) in self.frames(lo)?.enumerate() {
+            let n = lo + i;
+            if n > hi {
+                break;
+            }
+            let f = f?;
+            while let Some((j, _)) = want.next_if(|(_, &w)| w == n) {
+                out[j] = Some(f.clone());
+            }
+            if want.peek().is_none() {
+                break;
+            }
+        }
+        Ok(out)
+    }
+}
+
+impl<T: Footage + ?Sized> Footage for &T {
+    fn info(&self) -> &FootageInfo {
+        (**self).info()
+    }
+    fn frames(&self, start: usize) -> Result<Frames<'_>> {
+        (**self).frames(start)
+    }
+    fn frames_at(&self, indices: &[usize]) -> Result<Vec<Option<RgbaFrame>>> {
+        (**self).frames_at(indices)
+    }
+}
+
+impl<T: Footage + ?Sized> Footage for Box<T> {
+    fn info(&self) -> &FootageInfo {
+        (**self).info()
+    }
+    fn frames(&self, start: usize) -> Result<Frames<'_>> {
+        (**self).frames(start)
+    }
+    fn frames_at(&self, indices: &[usize]) -> Result<Vec<Option<RgbaFrame>>> {
+        (**self).frames_at(indices)
+    }
+}
+
+/// A synthetic clip (see [`crate::synthetic`]): frames drawn on demand, identical every
+/// time.
+#[derive(Clone, Debug)]
+pub struct SyntheticFootage {
+    params: SyntheticParams,
+    info: FootageInfo,
+}
+
+impl SyntheticFootage {
+    pub fn new(params: SyntheticParams, fps: f64) -> SyntheticFootage {
+        let info = FootageInfo {
+            source: source_name(&params),
+            fps,
+            size: params.size,
+            frame_count: Some(params.frames),
+        };
+        SyntheticFootage { params, info }
+    }
+
+    /// The footage of a database clip whose source is synthetic
+    /// (`synthetic:<style>:seed=<n>`), `None` for any other source.
+    pub fn of_clip(clip: &ClipEntry) -> Option<SyntheticFootage> {
+        let (style, seed) = parse_source_name(&clip.source)?;
+        let p = SyntheticParams {
+            size: clip.source_size,
+            frames: clip.end,
+            style,
+            seed,
+        };
+        Some(SyntheticFootage::new(p, clip.fps))
+    }
+
+    pub fn params(&self) -> &SyntheticParams {
+        &self.params
+    }
+}
+
+impl Footage for SyntheticFootage {
+    fn info(&self) -> &FootageInfo {
+        &self.info
+    }
+    fn frames(&self, start: usize) -> Result<Frames<'_>> {
+        let p = &self.params;
+        Ok(Box::new(
+            (start..p.frames).map(move |t| Ok(synthetic_frame(p, t)?)),
+        ))
+    }
+    fn frames_at(&self, indices: &[usize]) -> Result<Vec<Option<RgbaFrame>>> {
+        let p = &self.params;
+        indices
+            .iter()
+            .map(|&t| {
+                if t < p.frames {
+                    Ok(Some(synthetic_frame(p, t)?))
+                } else {
+                    Ok(None)
+                }
+            })
+            .collect()
+    }
+}
+
+/// Frames already in memory.
+#[derive(Clone, Debug)]
+pub struct FrameList<'a> {
+    frames: &'a [RgbaFrame],
+    info: FootageInfo,
+}
+
+impl<'a> FrameList<'a> {
+    /// `frames` as a clip named `source` at `fps` (size of the first frame; 1x1 when empty).
+    pub fn new(source: &str, frames: &'a [RgbaFrame], fps: f64) -> FrameList<'a> {
+        let size = frames.first().map(|f| f.size()).unwrap_or(Size {
+            width: 1,
+            height: 1,
+        });
+        FrameList {
+            frames,
+            info: FootageInfo {
+                source: source.into(),
+                fps,
+                size,
+                frame_count: Some(frames.len()),
+            },
+        }
+    }
+}
+
+impl Footage for FrameList<'_> {
+    fn info(&self) -> &FootageInfo {
+        &self.info
+    }
+    fn frames(&self, start: usize) -> Result<Frames<'_>> {
+        Ok(Box::new(self.frames.iter().skip(start).cloned().map(Ok)))
+    }
+    fn frames_at(&self, indices: &[usize]) -> Result<Vec<Option<RgbaFrame>>> {
+        Ok(indices
+            .iter()
+            .map(|&i| self.frames.get(i).cloned())
+            .collect())
+    }
+}
+
+/// Opens footage while rendering: a database clip's own footage (`path` = `None`) or
+/// another file for it (`path`: footage given under `[originals]`, a custom mask).
+pub trait FootageOpener {
+    fn open(&mut self, clip: &ClipEntry, path: Option<&Path>) -> Result<Box<dyn Footage + '_>>;
+}
+
+/// [`FootageOpener`] for clips whose source is `synthetic:<style>:seed=<n>` (the clips of
+/// [`crate::train::synthetic_clips`]): frames are drawn again, identical to training.
+/// Any other source is an error naming the clip.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct SyntheticSources;
+
+impl FootageOpener for SyntheticSources {
+    fn open(&mut self, clip: &ClipEntry, path: Option<&Path>) -> Result<Box<dyn Footage + '_>> {
+        match (path, SyntheticFootage::of_clip(clip)) {
+            (None, Some(f)) => Ok(Box::new(f)),
+            _ => Err(EigenError::clip(
+                &clip.name,
+                format!(
+                    "cannot read {} here (only Ignis's synthetic clips can be redrawn without a media reader)",
+                    path.map_or(clip.source.clone(), |p| p.display().to_string())
+                ),
+            )),
+        }
+    }
+}
+
+#[cfg(feature = "media")]
+pub use media::MediaFootage;
+
+#[cfg(feature = "media")]
+mod media {
+    use super::*;
+    use std::path::PathBuf;
+
+    /// [`Footage`] over `ignis-media`: a video, image sequence or still.
+    #[derive(Clone, Debug)]
+    pub struct MediaFootage {
+        path: PathBuf,
+        scale: Option<Size>,
+        info: FootageInfo,
+        /// How errors name the footage (default: its path).
+        label: String,
+    }
+
+    impl MediaFootage {
+        /// Probes `path`. The recorded source is the absolute path (a database is used
+        /// later from any directory).
+        pub fn open(path: &Path) -> Result<MediaFootage> {
+            let probed = ignis_media::probe(path).map_err(|e| EigenError::Decode {
+                what: path.display().to_string(),
+                frame: None,
+                source: Box::new(e),
+            })?;
+            let abs = std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf());
+            Ok(MediaFootage {
+                path: path.to_path_buf(),
+                scale: None,
+                label: path.display().to_string(),
+                info: FootageInfo {
+                    source: abs.display().to_string(),
+                    fps: probed.fps,
+                    size: probed.size,
+                    frame_count: probed.frame_count.map(|n| n as usize),
+                },
+            })
+        }
+
+        /// Every frame resized to `size` as it is decoded (tests and previews).
+        pub fn scaled(mut self, size: Size) -> MediaFootage {
+            self.scale = Some(size);
+            self.info.size = size;
+            self
+        }
+
+        /// Names the footage `label` in errors (e.g. the path plus where it was given).
+        pub fn labelled(mut self, label: impl Into<String>) -> MediaFootage {
+            self.label = label.into();
+            self
+        }
+
+        pub fn path(&self) -> &Path {
+            &self.path
+        }
+
+        fn read(&self, start: usize, end: Option<usize>) -> Result<ignis_media::FrameReader> {
+            let opts = ignis_media::ReadOptions {
+                range: Some(ignis_media::FrameRange::frames(
+                    start as u64,
+                    end.map(|e| e as u64),
+                )),
+                scale: self.scale,
+                ..Default::default()
+            };
+            ignis_media::open(&self.path, &opts).map_err(|e| self.fail(None, e))
+        }
+
+        fn fail(&self, frame: Option<usize>, e: ignis_media::MediaError) -> EigenError {
+            EigenError::Decode {
+                what: self.label.clone(),
+                frame,
+                source: Box::new(e),
+            }
+        }
+    }
+
+    impl Footage for MediaFootage {
+        fn info(&self) -> &FootageInfo {
+            &self.info
+        }
+        fn frames(&self, start: usize) -> Result<Frames<'_>> {
+            let r = self.read(start, None)?;
+            Ok(Box::new(r.enumerate().map(move |(i, f)| {
+                f.map_err(|e| self.fail(Some(start + i), e))
+            })))
+        }
+        /// Reads only `indices[0]..=indices[last]` (a bounded range: the decoder stops
+        /// there), cut at the end of the source when its length is known.
+        fn frames_at(&self, indices: &[usize]) -> Result<Vec<Option<RgbaFrame>>> {
+            let (Some(&lo), Some(&hi)) = (indices.first(), indices.last()) else {
+                return Ok(Vec::new());
+            };
+            let end = self.info.frame_count.map_or(hi + 1, |n| n.min(hi + 1));
+            if lo >= end {
+                return Ok(vec![None; indices.len()]);
+            }
+            let reader = self.read(lo, Some(end))?;
+            let mut out = vec![None; indices.len()];
+            let mut want = indices.iter().enumerate().peekable();
+            for (i, f) in reader.enumerate() {
+                let n = lo + i;
+                let f = f.map_err(|e| self.fail(Some(n), e))?;
+                while let Some((j, _)) = want.next_if(|(_, &w)| w == n) {
+                    out[j] = Some(f.clone());
+                }
+                if want.peek().is_none() {
+                    break;
+                }
+            }
+            Ok(out)
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::synthetic::FlameStyle;
+
+    fn params(frames: usize) -> SyntheticParams {
+        SyntheticParams {
+            size: Size::new(16, 24).unwrap(),
+            frames,
+            style: FlameStyle::Candle,
+            seed: 5,
+        }
+    }
+
+    /// Footage with only `frames` (the trait's default `frames_at`).
+    struct Streamed<'a>(FrameList<'a>);
+    impl Footage for Streamed<'_> {
+        fn info(&self) -> &FootageInfo {
+            self.0.info()
+        }
+        fn frames(&self, start: usize) -> Result<Frames<'_>> {
+            self.0.frames(start)
+        }
+    }
+
+    #[test]
+    fn frames_at_agrees_with_frames_everywhere() {
+        let syn = SyntheticFootage::new(params(7), 30.0);
+        assert_eq!(syn.info().frame_count, Some(7));
+        assert_eq!(syn.info().source, "synthetic:candle:seed=5");
+        let all: Vec<RgbaFrame> = syn.frames(0).unwrap().map(|f| f.unwrap()).collect();
+        assert_eq!(all.len(), 7);
+        assert_eq!(syn.frames(5).unwrap().count(), 2);
+        assert_eq!(syn.frames(9).unwrap().count(), 0);
+        let list = FrameList::new("mem", &all, 30.0);
+        let streamed = Streamed(list.clone());
+        let want = [1, 2, 5, 6, 8];
+        for f in [&syn as &dyn Footage, &list, &streamed] {
+            let got = f.frames_at(&want).unwrap();
+            assert_eq!(got.len(), want.len());
+            for (g, &i) in got.iter().zip(&want) {
+                assert_eq!(g.as_ref(), all.get(i), "frame {i} of {}", f.info().source);
+            }
+            assert!(f.frames_at(&[]).unwrap().is_empty());
+        }
+    }
+
+    #[cfg(feature = "media")]
+    #[test]
+    fn media_footage_reads_a_sequence_by_index_and_names_the_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let syn = SyntheticFootage::new(params(5), 30.0);
+        for (i, f) in syn.frames(0).unwrap().enumerate() {
+            ignis_media::write_png(&dir.path().join(format!("f{i:03}.png")), &f.unwrap()).unwrap();
+        }
+        let m = MediaFootage::open(&dir.path().join("f%03d.png")).unwrap();
+        assert_eq!(m.info().size, Size::new(16, 24).unwrap());
+        assert_eq!(m.info().frame_count, Some(5));
+        let seq: Vec<RgbaFrame> = m.frames(0).unwrap().map(|f| f.unwrap()).collect();
+        assert_eq!(seq.len(), 5);
+        let got = m.frames_at(&[1, 4, 7]).unwrap();
+        assert_eq!(got[0].as_ref(), Some(&seq[1]));
+        assert_eq!(got[1].as_ref(), Some(&seq[4]));
+        assert_eq!(got[2], None);
+        let e = MediaFootage::open(&dir.path().join("missing.mp4")).unwrap_err();
+        assert!(matches!(e, EigenError::Decode { frame: None, .. }), "{e}");
+        assert!(e.to_string().contains("missing.mp4"), "{e}");
+        let e = e.in_clip("fire");
+        assert!(e.to_string().starts_with("clip `fire`"), "{e}");
+    }
+}
