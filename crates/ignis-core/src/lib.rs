@@ -10,6 +10,7 @@
 //! - [`tempfiles`]: names of writers' hidden temporaries and removal of stale ones.
 //! - [`atomic`]: the one atomic file write (temporary beside the target, sync, rename).
 //! - [`progress`]: the one progress-reporting trait the libraries take.
+//! - [`realism`]: flicker frequency and spectral slope, measured on renders and footage alike.
 //!
 //! **Invariant:** this crate knows no file formats (it only names, writes atomically and
 //! removes the writers' temporaries: [`tempfiles`], [`atomic`]), codecs, clap or GPUs. Pixel data is
@@ -23,6 +24,7 @@ pub mod loopq;
 pub mod palette;
 pub mod post;
 pub mod progress;
+pub mod realism;
 pub mod rng;
 pub mod tempfiles;
 
