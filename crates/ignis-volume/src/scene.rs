@@ -6,6 +6,7 @@
 //! ```toml
 //! seed = 7
 //! fps = 30.0
+//! diameter = 0.3           # the fire's base diameter in metres: it puffs at 1.5/√D Hz
 //! [camera]
 //! position = [0.0, -7.0, 1.5]
 //! target = [0.0, 0.0, 1.5]
@@ -130,6 +131,10 @@ pub struct FireScene {
     pub seed: u64,
     /// Frames per second of the animation (> 0). Default 30.
     pub fps: f32,
+    /// Physical size of the fire: its base diameter in metres (> 0), which sets how fast
+    /// it puffs (`1.5/√D` Hz, Cetegen & Ahmed 1993; [`ignis_core::realism`]). Independent
+    /// of the scene's world units. Default 0.3 (a small campfire).
+    pub diameter: f32,
     pub camera: Camera,
     /// Output size. Default 256×256.
     pub size: Size,
@@ -154,6 +159,7 @@ struct FileScene {
     #[serde(default)]
     seed: u64,
     fps: Option<f32>,
+    diameter: Option<f32>,
     #[serde(default)]
     camera: Camera,
     #[serde(default)]
@@ -220,6 +226,7 @@ impl FireScene {
         FireScene {
             seed: 0,
             fps: 30.0,
+            diameter: 0.3,
             camera: Camera::default(),
             size,
             slice_spacing: 0.05,
@@ -246,6 +253,9 @@ impl FireScene {
         s.seed = file.seed;
         if let Some(f) = file.fps {
             s.fps = f;
+        }
+        if let Some(d) = file.diameter {
+            s.diameter = d;
         }
         s.camera = file.camera;
         if let Some(sz) = &file.render.size {
@@ -333,6 +343,15 @@ impl FireScene {
             return Err(VolumeError::bad(
                 "fps",
                 format!("{}; use (0, 1000]", self.fps),
+            ));
+        }
+        if !(self.diameter > 0.0 && self.diameter <= 1000.0) {
+            return Err(VolumeError::bad(
+                "diameter",
+                format!(
+                    "{} m; give the fire's physical base diameter in metres, in (0, 1000] (a candle 0.02, a campfire 0.4)",
+                    self.diameter
+                ),
             ));
         }
         self.camera.validate()?;
@@ -521,6 +540,8 @@ impl FireScene {
         s.seed = 1;
         match p {
             Preset::Candle => {
+                // a candle flame, about 2 cm across
+                s.diameter = 0.02;
                 let pose = |dx: f32| {
                     vec![
                         [0.0, 0.0, 0.0, 0.22],
@@ -566,6 +587,8 @@ impl FireScene {
                 s.intensity = 6.0;
             }
             Preset::Torch => {
+                // a torch head, about 10 cm
+                s.diameter = 0.1;
                 let mut f = FireSpec::new(Motion::Simulation(SimParams {
                     wind: [0.6, 0.0, 0.0],
                     gust: 0.6,
@@ -590,6 +613,8 @@ impl FireScene {
                 s.intensity = 3.5;
             }
             Preset::Campfire => {
+                // a small campfire, 40 cm
+                s.diameter = 0.4;
                 for k in 0..5 {
                     let a = k as f32 / 5.0 * std::f32::consts::TAU + 0.3;
                     let (c, sn) = (a.cos(), a.sin());
@@ -641,6 +666,8 @@ impl FireScene {
                 s.intensity = 1.6;
             }
             Preset::Wall => {
+                // each burning element of the wall, 60 cm
+                s.diameter = 0.6;
                 for k in 0..9 {
                     let x = -3.2 + 0.8 * k as f32;
                     let h = 2.0 + 0.5 * ((k * 5 % 9) as f32 / 8.0);
