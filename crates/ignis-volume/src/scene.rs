@@ -7,6 +7,7 @@
 //! seed = 7
 //! fps = 30.0
 //! diameter = 0.3           # the fire's base diameter in metres: it puffs at 1.5/√D Hz
+//! puff = 0.2               # amplitude of that puffing (flame length ±20 %), 0 = none
 //! [camera]
 //! position = [0.0, -7.0, 1.5]
 //! target = [0.0, 0.0, 1.5]
@@ -135,6 +136,10 @@ pub struct FireScene {
     /// it puffs (`1.5/√D` Hz, Cetegen & Ahmed 1993; [`ignis_core::realism`]). Independent
     /// of the scene's world units. Default 0.3 (a small campfire).
     pub diameter: f32,
+    /// Puffing (Cetegen & Ahmed 1993): relative amplitude, `0..=0.5`, of the flame-length
+    /// oscillation at the puffing frequency `1.5/√diameter` Hz ([`puff`]). 0 = none.
+    /// Default 0.
+    pub puff: f32,
     pub camera: Camera,
     /// Output size. Default 256×256.
     pub size: Size,
@@ -160,6 +165,7 @@ struct FileScene {
     seed: u64,
     fps: Option<f32>,
     diameter: Option<f32>,
+    puff: Option<f32>,
     #[serde(default)]
     camera: Camera,
     #[serde(default)]
@@ -227,6 +233,7 @@ impl FireScene {
             seed: 0,
             fps: 30.0,
             diameter: 0.3,
+            puff: 0.0,
             camera: Camera::default(),
             size,
             slice_spacing: 0.05,
@@ -256,6 +263,9 @@ impl FireScene {
         }
         if let Some(d) = file.diameter {
             s.diameter = d;
+        }
+        if let Some(p) = file.puff {
+            s.puff = p;
         }
         s.camera = file.camera;
         if let Some(sz) = &file.render.size {
@@ -352,6 +362,12 @@ impl FireScene {
                     "{} m; give the fire's physical base diameter in metres, in (0, 1000] (a candle 0.02, a campfire 0.4)",
                     self.diameter
                 ),
+            ));
+        }
+        if !(0.0..=0.5).contains(&self.puff) {
+            return Err(VolumeError::bad(
+                "puff",
+                format!("{}; use 0 (no puffing) to 0.5", self.puff),
             ));
         }
         self.camera.validate()?;
@@ -452,6 +468,13 @@ impl FireScene {
         })
     }
 
+    /// Phase offset (radians) of fire `i`'s puffing: the fires of one scene puff nearly
+    /// together (within a quarter cycle), as the parts of one fire do.
+    pub fn puff_offset(&self, i: usize) -> f32 {
+        let mut r = Rng::derive(self.seed, 0x9f0f + i as u64);
+        r.uniform(0.0, std::f64::consts::FRAC_PI_2) as f32
+    }
+
     /// A checked animator starting at frame 0.
     pub fn animator(&self) -> Result<Animator<'_>> {
         self.validate()?;
@@ -540,6 +563,7 @@ impl FireScene {
         s.seed = 1;
         match p {
             Preset::Candle => {
+                s.puff = 0.2;
                 // a candle flame, about 2 cm across
                 s.diameter = 0.02;
                 let pose = |dx: f32| {
@@ -587,6 +611,7 @@ impl FireScene {
                 s.intensity = 6.0;
             }
             Preset::Torch => {
+                s.puff = 0.2;
                 // a torch head, about 10 cm
                 s.diameter = 0.1;
                 let mut f = FireSpec::new(Motion::Simulation(SimParams {
@@ -613,6 +638,7 @@ impl FireScene {
                 s.intensity = 3.5;
             }
             Preset::Campfire => {
+                s.puff = 0.2;
                 // a small campfire, 40 cm
                 s.diameter = 0.4;
                 for k in 0..5 {
@@ -666,6 +692,7 @@ impl FireScene {
                 s.intensity = 1.6;
             }
             Preset::Wall => {
+                s.puff = 0.2;
                 // each burning element of the wall, 60 cm
                 s.diameter = 0.6;
                 for k in 0..9 {
@@ -833,8 +860,30 @@ impl Animator<'_> {
                 }
             }
         }
+        if s.puff > 0.0 {
+            let phase = self.puff_phase();
+            for (i, p) in pts.iter_mut().enumerate() {
+                puff(p, s.puff, phase + s.puff_offset(i));
+            }
+        }
         self.frame += 1;
         (pts, hits)
+    }
+
+    /// Phase (radians) of the puffing cycle at the current frame: `2π f t` with `f` the
+    /// puffing frequency, rounded for a loop to a whole number of cycles per loop (at least
+    /// one) and computed from the frame's place in the loop, so it repeats exactly.
+    fn puff_phase(&self) -> f32 {
+        let s = self.scene;
+        let f = ignis_core::realism::puffing_frequency(f64::from(s.diameter));
+        let tau = std::f64::consts::TAU;
+        match &self.looping {
+            Some(l) => {
+                let cycles = (f * l.frames as f64 / f64::from(s.fps)).round().max(1.0);
+                (tau * cycles * (self.frame % l.frames) as f64 / l.frames as f64) as f32
+            }
+            None => (tau * (f * self.frame as f64 / f64::from(s.fps)).fract()) as f32,
+        }
     }
 
     /// Renders the next frame.
@@ -959,6 +1008,30 @@ impl LoopScript {
                 })
             })
             .collect()
+    }
+}
+
+/// Puffing applied to a fire's control points `[x, y, z, radius]` (base first): a wave
+/// travelling up the flame at `phase` (radians) that stretches the flame by up to
+/// `amplitude` of its height and necks it where it stretches, growing from nothing at the
+/// base to full at the tip. This is the visible part of the buoyant instability Cetegen &
+/// Ahmed measured (a toroidal vortex forms at the base, rises, pinches the flame and sheds
+/// its tip once a cycle); the noise supplies the small-scale turbulence on top.
+pub fn puff(points: &mut [[f32; 4]], amplitude: f32, phase: f32) {
+    let n = points.len();
+    if n < 2 {
+        return;
+    }
+    let base = points[0];
+    for (i, p) in points.iter_mut().enumerate() {
+        let h = i as f32 / (n - 1) as f32;
+        // half a wavelength over the flame: the tip lags the middle by a quarter cycle
+        let wave = (phase - std::f32::consts::PI * h).sin();
+        let stretch = 1.0 + amplitude * h * wave;
+        for a in 0..3 {
+            p[a] = base[a] + (p[a] - base[a]) * stretch;
+        }
+        p[3] *= 1.0 - 0.5 * amplitude * h * wave;
     }
 }
 
