@@ -595,10 +595,12 @@ impl FireScene {
                     ],
                     looped: true,
                 }));
+                // detail tuned against candle.mp4's spectral slope (ignis bench realism)
                 f.noise = NoiseParams {
-                    frequency: 3.0,
-                    stability: 0.2,
-                    octaves: 3,
+                    frequency: 7.5,
+                    stability: 0.8,
+                    octaves: 4,
+                    gain: 0.6,
                     ..Default::default()
                 };
                 s.fires.push(f);
@@ -608,7 +610,8 @@ impl FireScene {
                     fov: 30.0,
                 };
                 s.slice_spacing = 0.02;
-                s.intensity = 6.0;
+                // exposed like footage: the core saturates
+                s.intensity = 18.0;
             }
             Preset::Torch => {
                 s.puff = 0.2;
@@ -624,8 +627,10 @@ impl FireScene {
                     ..Default::default()
                 }));
                 f.noise = NoiseParams {
-                    frequency: 1.6,
-                    stability: 0.4,
+                    frequency: 4.0,
+                    stability: 1.6,
+                    octaves: 4,
+                    gain: 0.6,
                     ..Default::default()
                 };
                 s.fires.push(f);
@@ -635,7 +640,7 @@ impl FireScene {
                     fov: 36.0,
                 };
                 s.slice_spacing = 0.04;
-                s.intensity = 3.5;
+                s.intensity = 10.5;
             }
             Preset::Campfire => {
                 s.puff = 0.2;
@@ -677,8 +682,10 @@ impl FireScene {
                         looped: true,
                     }));
                     f.noise = NoiseParams {
-                        frequency: 1.5,
-                        stability: 0.45,
+                        frequency: 3.0,
+                        stability: 0.9,
+                        octaves: 5,
+                        gain: 0.6,
                         ..Default::default()
                     };
                     s.fires.push(f);
@@ -689,7 +696,7 @@ impl FireScene {
                     fov: 36.0,
                 };
                 s.slice_spacing = 0.05;
-                s.intensity = 1.6;
+                s.intensity = 3.2;
             }
             Preset::Wall => {
                 s.puff = 0.2;
@@ -717,7 +724,7 @@ impl FireScene {
                     fov: 45.0,
                 };
                 s.slice_spacing = 0.06;
-                s.intensity = 1.6;
+                s.intensity = 3.2;
             }
         }
         s
