@@ -1033,7 +1033,7 @@ pub fn puff(points: &mut [[f32; 4]], amplitude: f32, phase: f32) {
     for (i, p) in points.iter_mut().enumerate() {
         let h = i as f32 / (n - 1) as f32;
         // half a wavelength over the flame: the tip lags the middle by a quarter cycle
-        let wave = (phase - std::f32::consts::PI * h).sin();
+        let wave = (phase - std::f32::consts::TAU * h).sin();
         let stretch = 1.0 + amplitude * h * wave;
         for a in 0..3 {
             p[a] = base[a] + (p[a] - base[a]) * stretch;

@@ -337,6 +337,8 @@ mod looping {
             .collect();
         let steps = loopq::steps(&metric, true).unwrap();
         let med = loopq::median(&mut steps.clone());
+        let series: Vec<String> = steps.iter().map(|s| format!("{:.2}", s / med)).collect();
+        println!("steps ÷ median: {}", series.join(" "));
         let wrap = steps[steps.len() - 1] / med;
         let max = steps.iter().cloned().fold(0.0, f64::max) / med;
         (wrap, max)
