@@ -1700,7 +1700,8 @@ impl Ctx<'_, '_> {
             Some(m) => (m.time, m.time - m.period, m.a, m.b),
             None => (self.time * noise.time_scale, 0.0, 1.0, 0.0),
         };
-        let looped = mix.is_some();
+        // a loop's second copy costs nothing while its weight is zero (`a = 1` exactly)
+        let looped = mix.is_some_and(|m| m.b != 0.0);
         let turb = |a: &Live| {
             if looped {
                 wa * a.sum + wb * a.sum2
@@ -1964,7 +1965,8 @@ mod tests {
     /// the inverse's accuracy (the certified inverse's texture coordinates are within
     /// [`INVERSE_TEX_TOL`] of the exact ones): measured ≤ 6e-5 per channel against
     /// peaks ≥ 1 (Table 1 scenes, lattice 35 and 135, all noises, cartoon blend, two bent
-    /// presets); the limit is 1e-4, just above, so a regression shows.
+    /// presets; 7.2e-5 of the peak on the brightly exposed torch); the limit is 1e-4 of the
+    /// peak (at least 1), just above, so a regression shows.
     #[test]
     fn fast_path_matches_exact_within_tolerance() {
         let small = Size::new(96, 72).unwrap();
@@ -1999,8 +2001,9 @@ mod tests {
             let (worst, peak) = max_difference(&fast, &exact);
             println!("scene {i}: max difference {worst:.2e}, peak {peak:.3}");
             assert!(peak > 0.1, "scene {i}: peak {peak}");
+            // relative to the peak: exposure scales the inverse's error with the image
             assert!(
-                worst < 1e-4,
+                worst < 1e-4 * peak.max(1.0),
                 "scene {i}: max difference {worst} (peak {peak})"
             );
             let dc = sf.covered_pixels.abs_diff(se.covered_pixels);
