@@ -162,7 +162,7 @@ pub fn bench(g: &Global, quick: bool) -> Result<Value> {
     }
     let reference = |k: Kind| refs.iter().find(|r| r.0 == k).copied();
     let mut rows = Vec::new();
-    let (small, big) = if quick { (64, 128) } else { (96, 256) };
+    let (small, big) = if quick { (64, 256) } else { (96, 512) };
     for preset in Preset::ALL {
         let kind = match preset {
             Preset::Torch | Preset::Candle => Kind::Candle,
