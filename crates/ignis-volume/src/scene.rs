@@ -597,8 +597,8 @@ impl FireScene {
                 }));
                 // detail tuned against candle.mp4's spectral slope (ignis bench realism)
                 f.noise = NoiseParams {
-                    frequency: 7.5,
-                    stability: 0.8,
+                    frequency: 9.0,
+                    stability: 1.05,
                     octaves: 4,
                     gain: 0.6,
                     ..Default::default()
@@ -683,7 +683,7 @@ impl FireScene {
                     }));
                     f.noise = NoiseParams {
                         frequency: 3.0,
-                        stability: 0.9,
+                        stability: 1.2,
                         octaves: 5,
                         gain: 0.6,
                         ..Default::default()
