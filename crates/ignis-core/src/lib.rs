@@ -11,6 +11,7 @@
 //! - [`atomic`]: the one atomic file write (temporary beside the target, sync, rename).
 //! - [`progress`]: the one progress-reporting trait the libraries take.
 //! - [`golden`]: golden float images for tests (stored frames compared within a tolerance).
+//! - [`realism`]: flicker frequency and spectral slope, measured on renders and footage alike.
 //!
 //! **Invariant:** this crate knows no file formats (it only names, writes atomically and
 //! removes the writers' temporaries: [`tempfiles`], [`atomic`]; the one exception is the
@@ -26,6 +27,7 @@ pub mod loopq;
 pub mod palette;
 pub mod post;
 pub mod progress;
+pub mod realism;
 pub mod rng;
 pub mod tempfiles;
 

@@ -165,6 +165,8 @@ pub struct Synthesiser<'m> {
     normalised: Vec<f32>,
     scratch: RenderScratch,
     t: u64,
+    /// Intensity scale of every rendered frame ([`exposure`]).
+    exposure: f32,
     /// A looping synthesiser's states, played in order and over again
     /// ([`Synthesiser::looping`]).
     looped: Option<Vec<Vec<f64>>>,
@@ -190,6 +192,7 @@ impl<'m> Synthesiser<'m> {
             normalised: Vec::new(),
             scratch: RenderScratch::default(),
             t: 0,
+            exposure: exposure(model),
             looped: None,
         })
     }
@@ -303,6 +306,10 @@ impl<'m> Synthesiser<'m> {
             &mut self.scratch,
             out,
         );
+        if self.exposure != 1.0 {
+            let e = self.exposure;
+            out.data_mut().iter_mut().for_each(|v| *v *= e);
+        }
     }
 
     /// Renders `frames` frames of `size` (a convenience over [`Self::next_frame_into`]).
@@ -315,6 +322,27 @@ impl<'m> Synthesiser<'m> {
                 f
             })
             .collect())
+    }
+}
+
+/// The intensity scale of synthesised frames: footage is exposed so a flame's core is at
+/// full brightness, but training levels it (a black level drops a lit background, the
+/// normalised images are averages), so a model's mean flame may peak far below 1 and
+/// render as a dim blob through any palette. Synthesis restores the footage's exposure:
+/// the mean flame's brightest 2 % of pixels map to 1 (the palette's hottest colour), as the
+/// core of a flame in the footage does. 1 for a model whose mean is dark.
+pub fn exposure(model: &FlameModel) -> f32 {
+    let mut m: Vec<f32> = model.pca.mean.clone();
+    if m.is_empty() {
+        return 1.0;
+    }
+    let k = ((m.len() as f64 * 0.98) as usize).min(m.len() - 1);
+    m.select_nth_unstable_by(k, f32::total_cmp);
+    let level = m[k];
+    if level > 1e-4 {
+        1.0 / level
+    } else {
+        1.0
     }
 }
 

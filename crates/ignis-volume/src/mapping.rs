@@ -90,7 +90,9 @@ pub fn profile_uv(tex: [f32; 3], turb: f32, stability: f32) -> [f32; 2] {
 
 /// How a seamless loop of `period` noise-time units mixes two copies of the noise field:
 /// `a · T(time') + b · T(time' − period)` with `time' = time mod period`, `a = cos θ`,
-/// `b = sin θ`, `θ = ½π · time' / period`.
+/// `b = sin θ`, `θ = ½π · clamp((time'/period − (1 − F)) / F, 0, 1)` and `F` =
+/// [`LOOP_MIX_FRACTION`]: the first copy alone for most of the loop, the two mixed over its
+/// last `F`.
 ///
 /// At `time' = 0` this is `T(0)`; as `time'` approaches `period` it approaches
 /// `T(0)` again (the second copy, a whole loop behind), so frame `N` of an `N`-frame loop
@@ -101,7 +103,10 @@ pub fn profile_uv(tex: [f32; 3], turb: f32, stability: f32) -> [f32; 2] {
 ///
 /// Departure from the paper (which has no loops): the 4-D noise's time axis cannot walk a
 /// circle without a fifth dimension, and a lattice periodic in time would need a period
-/// built into every noise kernel; this costs a second noise evaluation instead.
+/// built into every noise kernel (and, because the field also scrolls up by the fire's
+/// changing length, a period along a direction that changes every frame); this costs a
+/// second noise evaluation instead, only while the second copy's weight is not zero
+/// (the renderer skips it when `b = 0`).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct LoopMix {
     /// Noise time of the first copy, `time mod period`.
@@ -114,12 +119,19 @@ pub struct LoopMix {
     pub b: f32,
 }
 
+/// The fraction of a loop over which [`LoopMix`] mixes its two copies of the noise.
+/// Shorter is cheaper (one noise evaluation elsewhere) but turns the weights faster, which
+/// adds to the image's change per frame while they turn; over a quarter of the loop the
+/// steps stay within the spread of the fire's own (a fifth shows in the step series).
+pub const LOOP_MIX_FRACTION: f32 = 0.25;
+
 /// The [`LoopMix`] at noise time `time` of a loop `period` noise-time units long (> 0).
 pub fn loop_mix(time: f32, period: f32) -> LoopMix {
     let t = time.rem_euclid(period);
     // rem_euclid can round up to `period` itself for a tiny negative time
     let t = if t >= period { 0.0 } else { t };
-    let theta = std::f32::consts::FRAC_PI_2 * (t / period);
+    let x = ((t / period - (1.0 - LOOP_MIX_FRACTION)) / LOOP_MIX_FRACTION).clamp(0.0, 1.0);
+    let theta = std::f32::consts::FRAC_PI_2 * x;
     LoopMix {
         time: t,
         period,

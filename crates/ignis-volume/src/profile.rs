@@ -93,7 +93,7 @@ impl FireProfile {
                 let d = u / width; // 0 at the axis, 1 at the flame's edge
                 let heat = (1.0 - d * d) * (1.0 - 0.75 * v);
                 let mut c = pal.sample(0.25 + 0.75 * heat);
-                let edge = ((1.0 - d) / 0.25).min(1.0);
+                let edge = ((1.0 - d) / 0.08).min(1.0);
                 c[3] = (edge * (0.35 + 0.65 * heat)).clamp(0.0, 1.0);
                 frame.set(x, y, c);
             }

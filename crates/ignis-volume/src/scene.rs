@@ -6,6 +6,8 @@
 //! ```toml
 //! seed = 7
 //! fps = 30.0
+//! diameter = 0.3           # the fire's base diameter in metres: it puffs at 1.5/√D Hz
+//! puff = 0.2               # amplitude of that puffing (flame length ±20 %), 0 = none
 //! [camera]
 //! position = [0.0, -7.0, 1.5]
 //! target = [0.0, 0.0, 1.5]
@@ -130,6 +132,14 @@ pub struct FireScene {
     pub seed: u64,
     /// Frames per second of the animation (> 0). Default 30.
     pub fps: f32,
+    /// Physical size of the fire: its base diameter in metres (> 0), which sets how fast
+    /// it puffs (`1.5/√D` Hz, Cetegen & Ahmed 1993; [`ignis_core::realism`]). Independent
+    /// of the scene's world units. Default 0.3 (a small campfire).
+    pub diameter: f32,
+    /// Puffing (Cetegen & Ahmed 1993): relative amplitude, `0..=0.5`, of the flame-length
+    /// oscillation at the puffing frequency `1.5/√diameter` Hz ([`puff`]). 0 = none.
+    /// Default 0.
+    pub puff: f32,
     pub camera: Camera,
     /// Output size. Default 256×256.
     pub size: Size,
@@ -154,6 +164,8 @@ struct FileScene {
     #[serde(default)]
     seed: u64,
     fps: Option<f32>,
+    diameter: Option<f32>,
+    puff: Option<f32>,
     #[serde(default)]
     camera: Camera,
     #[serde(default)]
@@ -220,6 +232,8 @@ impl FireScene {
         FireScene {
             seed: 0,
             fps: 30.0,
+            diameter: 0.3,
+            puff: 0.0,
             camera: Camera::default(),
             size,
             slice_spacing: 0.05,
@@ -246,6 +260,12 @@ impl FireScene {
         s.seed = file.seed;
         if let Some(f) = file.fps {
             s.fps = f;
+        }
+        if let Some(d) = file.diameter {
+            s.diameter = d;
+        }
+        if let Some(p) = file.puff {
+            s.puff = p;
         }
         s.camera = file.camera;
         if let Some(sz) = &file.render.size {
@@ -333,6 +353,21 @@ impl FireScene {
             return Err(VolumeError::bad(
                 "fps",
                 format!("{}; use (0, 1000]", self.fps),
+            ));
+        }
+        if !(self.diameter > 0.0 && self.diameter <= 1000.0) {
+            return Err(VolumeError::bad(
+                "diameter",
+                format!(
+                    "{} m; give the fire's physical base diameter in metres, in (0, 1000] (a candle 0.02, a campfire 0.4)",
+                    self.diameter
+                ),
+            ));
+        }
+        if !(0.0..=0.5).contains(&self.puff) {
+            return Err(VolumeError::bad(
+                "puff",
+                format!("{}; use 0 (no puffing) to 0.5", self.puff),
             ));
         }
         self.camera.validate()?;
@@ -433,6 +468,13 @@ impl FireScene {
         })
     }
 
+    /// Phase offset (radians) of fire `i`'s puffing: the fires of one scene puff nearly
+    /// together (within a quarter cycle), as the parts of one fire do.
+    pub fn puff_offset(&self, i: usize) -> f32 {
+        let mut r = Rng::derive(self.seed, 0x9f0f + i as u64);
+        r.uniform(0.0, std::f64::consts::FRAC_PI_2) as f32
+    }
+
     /// A checked animator starting at frame 0.
     pub fn animator(&self) -> Result<Animator<'_>> {
         self.validate()?;
@@ -522,6 +564,9 @@ impl FireScene {
         s.seed = 1;
         match p {
             Preset::Candle => {
+                s.puff = 0.2;
+                // a candle flame, about 2 cm across
+                s.diameter = 0.02;
                 let pose = |dx: f32| {
                     vec![
                         [0.0, 0.0, 0.0, 0.22],
@@ -551,10 +596,12 @@ impl FireScene {
                     ],
                     looped: true,
                 }));
+                // detail tuned against candle.mp4's spectral slope (ignis bench realism)
                 f.noise = NoiseParams {
-                    frequency: 3.0,
-                    stability: 0.2,
-                    octaves: 3,
+                    frequency: 9.0,
+                    stability: 1.05,
+                    octaves: 4,
+                    gain: 0.6,
                     ..Default::default()
                 };
                 s.fires.push(f);
@@ -564,9 +611,13 @@ impl FireScene {
                     fov: 30.0,
                 };
                 s.slice_spacing = 0.02;
-                s.intensity = 6.0;
+                // exposed like footage: the core saturates
+                s.intensity = 18.0;
             }
             Preset::Torch => {
+                s.puff = 0.2;
+                // a torch head, about 10 cm
+                s.diameter = 0.1;
                 let mut f = FireSpec::new(Motion::Simulation(SimParams {
                     wind: [0.6, 0.0, 0.0],
                     gust: 0.6,
@@ -577,8 +628,10 @@ impl FireScene {
                     ..Default::default()
                 }));
                 f.noise = NoiseParams {
-                    frequency: 1.6,
-                    stability: 0.4,
+                    frequency: 4.0,
+                    stability: 1.6,
+                    octaves: 4,
+                    gain: 0.6,
                     ..Default::default()
                 };
                 s.fires.push(f);
@@ -588,9 +641,12 @@ impl FireScene {
                     fov: 36.0,
                 };
                 s.slice_spacing = 0.04;
-                s.intensity = 3.5;
+                s.intensity = 10.5;
             }
             Preset::Campfire => {
+                s.puff = 0.2;
+                // a small campfire, 40 cm
+                s.diameter = 0.4;
                 for k in 0..5 {
                     let a = k as f32 / 5.0 * std::f32::consts::TAU + 0.3;
                     let (c, sn) = (a.cos(), a.sin());
@@ -627,8 +683,10 @@ impl FireScene {
                         looped: true,
                     }));
                     f.noise = NoiseParams {
-                        frequency: 1.5,
-                        stability: 0.45,
+                        frequency: 3.0,
+                        stability: 1.2,
+                        octaves: 5,
+                        gain: 0.6,
                         ..Default::default()
                     };
                     s.fires.push(f);
@@ -639,9 +697,12 @@ impl FireScene {
                     fov: 36.0,
                 };
                 s.slice_spacing = 0.05;
-                s.intensity = 1.6;
+                s.intensity = 3.2;
             }
             Preset::Wall => {
+                s.puff = 0.2;
+                // each burning element of the wall, 60 cm
+                s.diameter = 0.6;
                 for k in 0..9 {
                     let x = -3.2 + 0.8 * k as f32;
                     let h = 2.0 + 0.5 * ((k * 5 % 9) as f32 / 8.0);
@@ -664,7 +725,7 @@ impl FireScene {
                     fov: 45.0,
                 };
                 s.slice_spacing = 0.06;
-                s.intensity = 1.6;
+                s.intensity = 3.2;
             }
         }
         s
@@ -807,8 +868,30 @@ impl Animator<'_> {
                 }
             }
         }
+        if s.puff > 0.0 {
+            let phase = self.puff_phase();
+            for (i, p) in pts.iter_mut().enumerate() {
+                puff(p, s.puff, phase + s.puff_offset(i));
+            }
+        }
         self.frame += 1;
         (pts, hits)
+    }
+
+    /// Phase (radians) of the puffing cycle at the current frame: `2π f t` with `f` the
+    /// puffing frequency, rounded for a loop to a whole number of cycles per loop (at least
+    /// one) and computed from the frame's place in the loop, so it repeats exactly.
+    fn puff_phase(&self) -> f32 {
+        let s = self.scene;
+        let f = ignis_core::realism::puffing_frequency(f64::from(s.diameter));
+        let tau = std::f64::consts::TAU;
+        match &self.looping {
+            Some(l) => {
+                let cycles = (f * l.frames as f64 / f64::from(s.fps)).round().max(1.0);
+                (tau * cycles * (self.frame % l.frames) as f64 / l.frames as f64) as f32
+            }
+            None => (tau * (f * self.frame as f64 / f64::from(s.fps)).fract()) as f32,
+        }
     }
 
     /// Renders the next frame.
@@ -933,6 +1016,30 @@ impl LoopScript {
                 })
             })
             .collect()
+    }
+}
+
+/// Puffing applied to a fire's control points `[x, y, z, radius]` (base first): a wave
+/// travelling up the flame at `phase` (radians) that stretches the flame by up to
+/// `amplitude` of its height and necks it where it stretches, growing from nothing at the
+/// base to full at the tip. This is the visible part of the buoyant instability Cetegen &
+/// Ahmed measured (a toroidal vortex forms at the base, rises, pinches the flame and sheds
+/// its tip once a cycle); the noise supplies the small-scale turbulence on top.
+pub fn puff(points: &mut [[f32; 4]], amplitude: f32, phase: f32) {
+    let n = points.len();
+    if n < 2 {
+        return;
+    }
+    let base = points[0];
+    for (i, p) in points.iter_mut().enumerate() {
+        let h = i as f32 / (n - 1) as f32;
+        // half a wavelength over the flame: the tip lags the middle by a quarter cycle
+        let wave = (phase - std::f32::consts::TAU * h).sin();
+        let stretch = 1.0 + amplitude * h * wave;
+        for a in 0..3 {
+            p[a] = base[a] + (p[a] - base[a]) * stretch;
+        }
+        p[3] *= 1.0 - 0.5 * amplitude * h * wave;
     }
 }
 

@@ -11,6 +11,7 @@ mod classic;
 mod eigen_train;
 mod flow;
 mod learned;
+mod realism;
 mod volume;
 
 pub use flow::process_cpu_ms;
@@ -21,14 +22,16 @@ use std::path::PathBuf;
 
 #[derive(clap::Args, Debug)]
 #[command(
-    after_help = "Examples:\n  ignis bench classic\n  ignis bench classic --quick\n  ignis bench eigen-train\n  ignis bench eigen-animate --keep-db /tmp/bench.db\n  ignis bench eigen-footage   (only eigen-animate's footage case: a 1080p loop read from the source video)\n  ignis bench learned\n  ignis bench volume\n  ignis bench flow --quick\n  ignis bench export         # motion-vector blend vs cross-fade, flow timings\n  ignis bench loops\n  ignis bench loops fire1.mp4 fire2.mov --cache /tmp/ignis-cache"
+    after_help = "Examples:\n  ignis bench classic\n  ignis bench classic --quick\n  ignis bench eigen-train\n  ignis bench eigen-animate --keep-db /tmp/bench.db\n  ignis bench eigen-footage   (only eigen-animate's footage case: a 1080p loop read from the source video)\n  ignis bench learned\n  ignis bench volume\n  ignis bench flow --quick\n  ignis bench export         # motion-vector blend vs cross-fade, flow timings\n  ignis bench loops\n  ignis bench loops fire1.mp4 fire2.mov --cache /tmp/ignis-cache\n  ignis bench realism        # flicker vs 1.5/√D and spectral slope vs the footage, every generator"
 )]
 pub struct BenchArgs {
     /// What to measure (`flow`: dense optical flow and the motion-compensated morph,
     /// against the issues' speed goals, plus mid-frame prediction on ../shared/data;
     /// `export`: flipbook motion-vector blending vs a cross-fade, and flipbook timing;
-    /// `loops`: Ignis's loops against the crossfade and Video Textures peers).
-    #[arg(value_parser = ["classic", "eigen-train", "eigen-animate", "eigen-footage", "learned", "volume", "flow", "export", "loops"])]
+    /// `loops`: Ignis's loops against the crossfade and Video Textures peers;
+    /// `realism`: flicker frequency and spectral slope of every generator against the
+    /// puffing law and ../shared/data footage).
+    #[arg(value_parser = ["classic", "eigen-train", "eigen-animate", "eigen-footage", "learned", "volume", "flow", "export", "loops", "realism"])]
     pub target: String,
     /// loops: the clips (default ../shared/data/{candle,campfire,fireball}.mp4; missing
     /// ones are reported as skipped).
@@ -69,6 +72,7 @@ pub fn run(a: &BenchArgs, g: &Global) -> Result<()> {
         "volume" => volume::figures(g, a.quick)?,
         "learned" => learned::figures(a.quick)?,
         "export" => crate::bench_export::figures(g, a.quick)?,
+        "realism" => realism::bench(g, a.quick)?,
         "flow" => {
             let sp = g.spinner("timing flow and morphs");
             let v = flow::figures(a.quick)?;

@@ -103,7 +103,8 @@ impl FrameRenderer<'_, '_> {
             Some(m) => (m.time, m.time - m.period, m.a, m.b),
             None => (self.time * noise.time_scale, 0.0, 1.0, 0.0),
         };
-        let looped = mix.is_some();
+        // a loop's second copy costs nothing while its weight is zero (`a = 1` exactly)
+        let looped = mix.is_some_and(|m| m.b != 0.0);
         let turb = |a: &LiveSample| {
             if looped {
                 wa * a.sum + wb * a.sum2
