@@ -210,7 +210,7 @@ mod flame {
             ..TrainParams::default()
         };
         let bright_peak = |frames: Vec<GrayFrame>| {
-            let t = train(frames, &p, |_| {}).unwrap();
+            let t = train(frames, &p, &mut ignis_core::progress::NoProgress).unwrap();
             let mut s = Synthesiser::new(&t.model, Controls::default(), 1).unwrap();
             let f = s.frames(Size::new(96, 96).unwrap(), 5).unwrap();
             let mut v: Vec<f32> = f.iter().flat_map(|f| f.data().to_vec()).collect();
