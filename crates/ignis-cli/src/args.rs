@@ -77,10 +77,6 @@ pub fn seconds_range(s: &str) -> Result<(f64, Option<f64>), String> {
 }
 
 /// A frame span `A..B` with both bounds and A < B (eigen's and `ignis loop`'s `--range`).
-#[allow(
-    dead_code,
-    reason = "`eigen::parse_range` (another branch's file this round) becomes this at merge"
-)]
 pub fn frame_span(s: &str) -> Result<Range<usize>, String> {
     let (a, b) = closed_range::<usize>(s, FRAME)?;
     non_empty(s, a, Some(b))?;

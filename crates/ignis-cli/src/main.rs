@@ -3,11 +3,8 @@
 //! A thin layer over the library crates: argument parsing, progress bars and error
 //! reporting live here; every capability is a library call.
 
-mod animate;
 mod args;
 mod bench;
-mod bench_export;
-mod bench_loops;
 mod classic;
 mod convert;
 mod demo;
@@ -16,7 +13,6 @@ mod frames;
 mod global;
 mod info;
 mod learned;
-mod loop_cmd;
 mod output;
 mod volume;
 
@@ -64,7 +60,7 @@ enum Cmd {
     #[command(subcommand)]
     Volume(volume::Command),
     /// A seamless loop of a fire clip, found, closed and written at the clip's own size.
-    Loop(loop_cmd::Args),
+    Loop(eigen::loop_cmd::Args),
     /// Headline performance figures of a method as one JSON object.
     Bench(bench::BenchArgs),
 }
@@ -102,7 +98,7 @@ fn run(cli: Cli) -> Result<()> {
         Cmd::Eigen(c) => eigen::run(c, &g),
         Cmd::Volume(c) => volume::run(c, &g),
         Cmd::Learned(c) => learned::run(c, &g),
-        Cmd::Loop(a) => loop_cmd::run(&a, &g),
+        Cmd::Loop(a) => eigen::loop_cmd::run(&a, &g),
         Cmd::Demo(a) => {
             let t = std::time::Instant::now();
             let mut d = demo::Demo::new(&a.output, g.clone(), a.seed, a.quick)?;

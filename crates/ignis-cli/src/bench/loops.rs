@@ -27,7 +27,7 @@ use ignis_eigen::loops::{self, SearchParams};
 use serde_json::{json, Value};
 
 use crate::global::Global;
-use crate::loop_cmd::{self, Method};
+use crate::eigen::loop_cmd::{self, Method};
 
 /// Crossfade frames of the peers.
 pub const K: usize = 10;

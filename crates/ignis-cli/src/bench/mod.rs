@@ -3,14 +3,16 @@
 //! Each target is implemented here, one file per target, over the libraries' public API:
 //! `classic`, `eigen_train` (PCA), `learned`, `volume`, `flow`. Three live elsewhere this
 //! round and are dispatched from here: `eigen-animate` (`ignis_eigen::bench` and
-//! `crate::animate::bench_footage`), `export` (`crate::bench_export`) and `loops`
+//! `crate::eigen::animate::bench_footage`), `export` (`crate::bench_export`) and `loops`
 //! (`crate::bench_loops`). Measured figures are recorded in each crate's
 //! `benches/README.md`, not in the code.
 
 mod classic;
 mod eigen_train;
+pub mod export;
 mod flow;
 mod learned;
+pub mod loops;
 mod realism;
 mod volume;
 
@@ -58,20 +60,20 @@ pub fn run(a: &BenchArgs, g: &Global) -> Result<()> {
             let mut v = ignis_eigen::bench::animate_figures(a.quick, a.keep_db.as_deref())?;
             sp.finish_and_clear();
             let sp = g.spinner("footage case: writing, training and rendering a clip");
-            let f = crate::animate::bench_footage(a.quick)?;
+            let f = crate::eigen::animate::bench_footage(a.quick)?;
             sp.finish_and_clear();
             v["footage"] = f;
             v
         }
         "eigen-footage" => {
             let sp = g.spinner("writing, training and rendering a clip");
-            let f = crate::animate::bench_footage(a.quick)?;
+            let f = crate::eigen::animate::bench_footage(a.quick)?;
             sp.finish_and_clear();
             serde_json::json!({"bench": "eigen-footage", "quick": a.quick, "footage": f})
         }
         "volume" => volume::figures(g, a.quick)?,
         "learned" => learned::figures(a.quick)?,
-        "export" => crate::bench_export::figures(g, a.quick)?,
+        "export" => crate::bench::export::figures(g, a.quick)?,
         "realism" => realism::bench(g, a.quick)?,
         "flow" => {
             let sp = g.spinner("timing flow and morphs");
@@ -81,11 +83,11 @@ pub fn run(a: &BenchArgs, g: &Global) -> Result<()> {
         }
         "loops" => {
             let clips = if a.clips.is_empty() {
-                crate::bench_loops::default_clips()
+                crate::bench::loops::default_clips()
             } else {
                 a.clips.clone()
             };
-            crate::bench_loops::bench(&clips, a.cache.as_deref(), g)?
+            crate::bench::loops::bench(&clips, a.cache.as_deref(), g)?
         }
         other => anyhow::bail!("unknown bench target `{other}`"),
     };

@@ -39,7 +39,7 @@ pub struct Args {
     #[arg(long)]
     pub length: String,
     /// Only look in source frames START..END (END excluded).
-    #[arg(long, value_parser = crate::eigen::parse_range)]
+    #[arg(long, value_parser = crate::args::frame_span)]
     pub range: Option<Range<usize>>,
     /// How to close the loop: auto (the best of the others by measured seam and ghost),
     /// cut, crossfade or morph (motion-compensated).
@@ -819,7 +819,7 @@ fn metric_frames(path: &Path, window: &Range<usize>, g: &Global) -> Result<Vec<G
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::bench_loops::{video_texture, xfade, K};
+    use crate::bench::loops::{video_texture, xfade, K};
 
     fn clip(name: &str) -> Option<PathBuf> {
         let p = Path::new(env!("CARGO_MANIFEST_DIR"))

@@ -2,6 +2,9 @@
 //! footage, inspect it, plot it, reconstruct frames, and show what pre-processing does.
 //! A thin layer over `ignis_eigen` (the library) and `ignis_media` (decoding, PNG output).
 
+pub mod animate;
+pub mod loop_cmd;
+
 use crate::global::Global;
 use anyhow::{bail, Context, Result};
 use ignis_core::Size;
@@ -55,26 +58,10 @@ pub enum Command {
     #[command(
         after_help = "Examples:\n  ignis eigen scenario fire.db > scene.toml\n  ignis eigen animate scene.toml -o fire.mp4\n  ignis eigen animate scene.toml -o fire.png --columns 8\n  ignis eigen animate scene.toml --dry-run -o x.gif\n\nThe seam ratio is the largest step of the joined sequence over the footage's median step:\n1.0 is as smooth as the footage; a plain cut between different flames is typically 3 or more."
     )]
-    Animate(crate::animate::AnimateArgs),
+    Animate(crate::eigen::animate::AnimateArgs),
     /// Print a commented example scenario for a database (every clip as two motions).
     #[command(after_help = "Example:\n  ignis eigen scenario fire.db > scene.toml")]
-    Scenario(crate::animate::ScenarioArgs),
-}
-
-pub(crate) fn parse_range(s: &str) -> std::result::Result<std::ops::Range<usize>, String> {
-    let (a, b) = s
-        .split_once("..")
-        .ok_or_else(|| format!("`{s}` is not a range START..END (e.g. 100..220)"))?;
-    let n = |x: &str| {
-        x.trim()
-            .parse::<usize>()
-            .map_err(|_| format!("`{x}` in `{s}` is not a frame number"))
-    };
-    let (a, b) = (n(a)?, n(b)?);
-    if a >= b {
-        return Err(format!("range `{s}` is empty (START must be < END)"));
-    }
-    Ok(a..b)
+    Scenario(crate::eigen::animate::ScenarioArgs),
 }
 
 fn parse_from(s: &str) -> std::result::Result<(String, usize), String> {
@@ -99,7 +86,7 @@ pub struct LoopArgs {
     pub clip: String,
     /// Source frames START..END of the clip: alone, exactly this range is looped (closed
     /// with --method); with --length, the window the loop is searched in.
-    #[arg(long, value_parser = parse_range)]
+    #[arg(long, value_parser = crate::args::frame_span)]
     pub range: Option<std::ops::Range<usize>>,
     /// Search the clip (or the --range window) for the best loop of about this length:
     /// seconds (`4s`, at the clip's fps) or frames (`120`), ±20%; rendered from the source
@@ -127,7 +114,7 @@ pub struct LoopArgs {
     #[arg(long)]
     pub palette: Option<crate::output::PaletteArg>,
     #[command(flatten)]
-    pub footage: crate::animate::FootageArgs,
+    pub footage: crate::eigen::animate::FootageArgs,
     #[command(flatten)]
     pub out: crate::output::OutputArgs,
 }
@@ -288,11 +275,11 @@ pub fn run(cmd: Command, g: &Global) -> Result<()> {
         Command::Plot(a) => plot_cmd(a, g),
         Command::Reconstruct(a) => reconstruct(a, g),
         Command::Preprocess(a) => preprocess(a, g),
-        Command::Loop(a) if a.length.is_some() => crate::loop_cmd::eigen_length_loop(&a, g),
+        Command::Loop(a) if a.length.is_some() => crate::eigen::loop_cmd::eigen_length_loop(&a, g),
         Command::Loop(a) => loop_cmd(&a, g).map(|_| ()),
         Command::Synth(a) => synth_cmd(&a, g).map(|_| ()),
-        Command::Animate(a) => crate::animate::animate_cmd(&a, g).map(|_| ()),
-        Command::Scenario(a) => crate::animate::scenario_cmd(&a),
+        Command::Animate(a) => crate::eigen::animate::animate_cmd(&a, g).map(|_| ()),
+        Command::Scenario(a) => crate::eigen::animate::scenario_cmd(&a),
     }
 }
 
@@ -666,7 +653,7 @@ fn loop_cmd(a: &LoopArgs, g: &Global) -> Result<ignis_eigen::transition::Join> {
     }
     // Bad --size and the like fail before the search.
     a.footage.options()?;
-    let mut look = crate::animate::default_look();
+    let mut look = crate::eigen::animate::default_look();
     if let Some(p) = &a.palette {
         look.mode = ColourMode::Palette(p.load()?);
         look.bloom = None;
@@ -684,7 +671,7 @@ fn loop_cmd(a: &LoopArgs, g: &Global) -> Result<ignis_eigen::transition::Join> {
             )
         })?;
     sp.finish_and_clear();
-    let size = crate::animate::write_plan(&db, &plan, &look, &a.footage, &a.out, g)
+    let size = crate::eigen::animate::write_plan(&db, &plan, &look, &a.footage, &a.out, g)
         .with_context(|| format!("rendering the loop of clip `{}`", a.clip))?;
     g.say(format!(
         "{}; {size}, colour {}",
@@ -916,5 +903,5 @@ pub fn demo(ctx: &mut crate::demo::Demo) -> Result<()> {
         "A new flame (§5.2): the mean flame with Eigenfire 0's weight set to 1.5 × its largest value in the database",
         &format!("ignis eigen synth fire.db --weights {wts} --palette candle -o synth.png"),
     );
-    crate::animate::demo(ctx, &dbp)
+    crate::eigen::animate::demo(ctx, &dbp)
 }

@@ -15,6 +15,11 @@
 //! - Distances (recognition and seam ratio) use the database's E for detection.
 //! - Frames are linear grey values, not clamped (a palette clamps when colouring).
 
+pub mod colour;
+pub mod loops;
+pub mod render;
+pub mod scenario;
+
 use std::ops::Range;
 
 use ignis_core::GrayFrame;

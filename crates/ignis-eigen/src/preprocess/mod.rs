@@ -8,6 +8,11 @@
 //! Pixel conventions: input [`RgbaFrame`]s and output [`GrayFrame`]s are linear light
 //! (luminance with Rec. 709 weights); masks are 8-bit, 255 = flame.
 
+pub mod contour;
+pub mod hermite;
+pub mod mask;
+pub mod pose;
+
 use crate::contour::{contour_tree, draw_contours, fill_contours, remove_holes, ContourParams};
 use crate::error::{EigenError, Result};
 use crate::hermite::{hermite_darken, HermiteParams};
