@@ -26,8 +26,8 @@ use ignis_core::{GrayFrame, Rng};
 use ignis_eigen::loops::{self, SearchParams};
 use serde_json::{json, Value};
 
-use crate::global::Global;
 use crate::eigen::loop_cmd::{self, Method};
+use crate::global::Global;
 
 /// Crossfade frames of the peers.
 pub const K: usize = 10;
