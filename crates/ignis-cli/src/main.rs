@@ -18,8 +18,6 @@ mod volume;
 
 use anyhow::Result;
 use clap::{FromArgMatches, Parser, Subcommand};
-// `bench_export` reaches the CPU clock through the crate root.
-pub(crate) use bench::process_cpu_ms;
 use global::Global;
 use std::path::PathBuf;
 use std::process::ExitCode;

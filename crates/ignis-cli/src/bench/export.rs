@@ -226,7 +226,7 @@ pub fn figures(g: &Global, quick: bool) -> Result<serde_json::Value> {
         },
         ..Default::default()
     };
-    let c0 = crate::process_cpu_ms();
+    let c0 = super::flow::process_cpu_ms();
     let t = Instant::now();
     let mut w = ignis_media::create(&path, frames[0].size(), &opts)?;
     for f in &frames {
@@ -235,26 +235,27 @@ pub fn figures(g: &Global, quick: bool) -> Result<serde_json::Value> {
     w.finish()?;
     let flipbook_s = t.elapsed().as_secs_f64();
     // CPU time of all threads: on a busy machine wall time overstates the cost.
-    let flipbook_cpu_s = match (c0, crate::process_cpu_ms()) {
+    let flipbook_cpu_s = match (c0, super::flow::process_cpu_ms()) {
         (Some(a), Some(b)) => Some(((b - a) / 1000.0 * 1000.0).round() / 1000.0),
         _ => None,
     };
     let load = std::fs::read_to_string("/proc/loadavg")
         .ok()
         .and_then(|l| l.split_whitespace().next()?.parse::<f64>().ok());
-    let flow: Vec<serde_json::Value> = ignis_flow::bench::figures(quick, &crate::process_cpu_ms)?
-        .iter()
-        .filter(|t| t.name.starts_with("flow_"))
-        .map(|t| {
-            json!({
-                "case": t.name,
-                "size": t.size.to_string(),
-                "median_ms": (t.median_ms * 10.0).round() / 10.0,
-                "goal_ms": t.goal_ms,
-                "goal_met": t.goal_met(),
+    let flow: Vec<serde_json::Value> =
+        ignis_flow::bench::figures(quick, &super::flow::process_cpu_ms)?
+            .iter()
+            .filter(|t| t.name.starts_with("flow_"))
+            .map(|t| {
+                json!({
+                    "case": t.name,
+                    "size": t.size.to_string(),
+                    "median_ms": (t.median_ms * 10.0).round() / 10.0,
+                    "goal_ms": t.goal_ms,
+                    "goal_met": t.goal_met(),
+                })
             })
-        })
-        .collect();
+            .collect();
     sp.finish_and_clear();
     Ok(json!({
         "threads": rayon::current_num_threads(),

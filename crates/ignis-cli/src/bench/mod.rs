@@ -1,10 +1,9 @@
 //! `ignis bench TARGET`: the headline performance figures of a method as one JSON object.
 //!
 //! Each target is implemented here, one file per target, over the libraries' public API:
-//! `classic`, `eigen_train` (PCA), `learned`, `volume`, `flow`. Three live elsewhere this
-//! round and are dispatched from here: `eigen-animate` (`ignis_eigen::bench` and
-//! `crate::eigen::animate::bench_footage`), `export` (`crate::bench_export`) and `loops`
-//! (`crate::bench_loops`). Measured figures are recorded in each crate's
+//! `classic`, `eigen_train` (PCA), `learned`, `volume`, `flow`, `export`, `loops`, `realism`;
+//! `eigen-animate` uses `ignis_eigen::bench` (shared with that crate's criterion bench) and
+//! `crate::eigen::animate::bench_footage`. Measured figures are recorded in each crate's
 //! `benches/README.md`, not in the code.
 
 mod classic;
@@ -15,8 +14,6 @@ mod learned;
 pub mod loops;
 mod realism;
 mod volume;
-
-pub use flow::process_cpu_ms;
 
 use crate::global::Global;
 use anyhow::Result;
