@@ -7,7 +7,7 @@
 use super::bin::Candidate;
 use super::tile::{FrameRenderer, Scratch};
 use super::{FireInstance, RenderStats, INVERSE_TEX_TOL};
-use crate::lattice::{add, dot, normalize, scale, sub, Track, V3};
+use crate::lattice::{add, dot, normalize, scale, sub, Cell, Track, V3};
 
 /// Cells kept per ray and fire for finding the entry cell (more are ignored).
 pub(super) const MAX_RANGES: usize = 64;
@@ -237,13 +237,73 @@ impl FrameRenderer<'_, '_> {
         stats: &mut RenderStats,
         out: &mut Scratch,
     ) {
+        let cells = fire.lattice.cells();
+        let last = cells.len() - 1;
+        // entering a cell: the chord step from the centre, moving to the neighbouring cell
+        // while it says the point lies there (nearly affine cells: the step is accurate, so
+        // this saves a failed solve)
+        let enter = |mut j: usize, p: V3| {
+            let mut q = cells[j].chord_guess(p);
+            for _ in 0..4 {
+                let hop = q[2].floor();
+                if !((hop < 0.0 && j > 0) || (hop >= 1.0 && j < last)) {
+                    break;
+                }
+                j = (j as i64 + hop as i64).clamp(0, last as i64) as usize;
+                q = cells[j].chord_guess(p);
+            }
+            (j, [q[0], q[1], q[2].clamp(-0.5, 1.5)])
+        };
+        let Some((k, p, j, guess)) = self.start_sample(cells, r, enter) else {
+            return;
+        };
+        let tol = r.tol;
+        let track = &mut r.track;
+        let found = locate(
+            cells,
+            j,
+            guess,
+            |j, p, guess| {
+                match cells[j].inverse_certified(p, guess, tol) {
+                    Ok(l) => Some(l),
+                    // beyond an end of the lattice: outside whatever the exact inverse
+                    Err(Some(l)) if (j == 0 && l[2] < 0.0) || (j == last && l[2] > 1.0) => Some(l),
+                    Err(_) => cells[j].inverse_tracked(p, guess, track),
+                }
+            },
+            p,
+        );
+        // no previous sample yet: the ray's step mapped by the inverse Jacobian at the cell
+        // centre (the affine part of the map), a first-order prediction
+        let step = scale(r.dir, self.params.slice_spacing / r.cos_forward);
+        finish_sample(
+            fire,
+            r,
+            k,
+            found,
+            |j| Some(cells[j].local_direction(step)),
+            stats,
+            out,
+        );
+    }
+
+    /// Advances ray `r` to its next slice and returns the slice `k`, the sample's position
+    /// `p` and where to start inverting: the previous sample's extrapolated coordinates
+    /// while tracking, else `enter(candidate cell, p)` on entering a candidate range. `None`
+    /// between candidate ranges.
+    #[inline(always)]
+    pub(super) fn start_sample(
+        &self,
+        cells: &[Cell],
+        r: &mut Ray,
+        enter: impl FnOnce(usize, V3) -> (usize, V3),
+    ) -> Option<(i64, V3, usize, V3)> {
         let k = r.slice;
         r.slice += 1;
-        let cells = fire.lattice.cells();
         let last = cells.len() - 1;
         let t = k as f32 * self.params.slice_spacing / r.cos_forward;
         let p = add(r.origin, scale(r.dir, t));
-        let (mut j, mut guess) = if r.tracking {
+        let (j, guess) = if r.tracking {
             let pred = match r.coords_step {
                 Some(dl) => add(r.coords, dl),
                 None => r.coords,
@@ -252,65 +312,66 @@ impl FrameRenderer<'_, '_> {
             let j = (lv as usize).min(last);
             (j, [pred[0], pred[1], lv - j as f32])
         } else {
-            match r.ranges.iter().find(|q| q.1 <= t && t <= q.2) {
-                Some(q) => {
-                    r.coords_step = None;
-                    // the chord step from the centre, moving to the neighbouring cell while
-                    // it says the point lies there (nearly affine cells: the step is
-                    // accurate, so this saves a failed solve)
-                    let mut j = q.0 as usize;
-                    let mut q = cells[j].chord_guess(p);
-                    for _ in 0..4 {
-                        let hop = q[2].floor();
-                        if !((hop < 0.0 && j > 0) || (hop >= 1.0 && j < last)) {
-                            break;
-                        }
-                        j = (j as i64 + hop as i64).clamp(0, last as i64) as usize;
-                        q = cells[j].chord_guess(p);
-                    }
-                    (j, [q[0], q[1], q[2].clamp(-0.5, 1.5)])
-                }
-                None => return,
-            }
+            let q = r.ranges.iter().find(|q| q.1 <= t && t <= q.2)?;
+            r.coords_step = None;
+            enter(q.0 as usize, p)
         };
-        let tol = r.tol;
-        let mut found = None;
-        for _ in 0..6 {
-            let l = match cells[j].inverse_certified(p, guess, tol) {
-                Ok(l) => Some(l),
-                // beyond an end of the lattice: outside whatever the exact inverse
-                Err(Some(l)) if (j == 0 && l[2] < 0.0) || (j == last && l[2] > 1.0) => Some(l),
-                Err(_) => cells[j].inverse_tracked(p, guess, &mut r.track),
-            };
-            let Some(l) = l else {
-                break;
-            };
-            let step = l[2].floor();
-            if (step < 0.0 && j > 0) || (step >= 1.0 && j < last) {
-                let nj = (j as i64 + step as i64).clamp(0, last as i64) as usize;
-                guess = [l[0], l[1], (l[2] - (nj as f32 - j as f32)).clamp(0.0, 1.0)];
-                j = nj;
-                continue;
-            }
-            found = Some(l);
-            break;
-        }
-        let Some(l) = found else {
-            r.tracking = false;
-            return;
-        };
-        let ng = [l[0], l[1], j as f32 + l[2]];
-        r.coords_step = if r.tracking {
-            Some(sub(ng, r.coords))
-        } else {
-            // no previous sample yet: the ray's step mapped by the inverse Jacobian at the
-            // cell centre (the affine part of the map), a first-order prediction
-            Some(cells[j].local_direction(scale(r.dir, self.params.slice_spacing / r.cos_forward)))
-        };
-        r.coords = ng;
-        r.tracking = true;
-        keep_sample(fire, r, k, j, l, stats, out);
+        Some((k, p, j, guess))
     }
+}
+
+/// Inverts `p` starting in cell `j` from `guess`, hopping to the neighbouring cell (at most
+/// six times) while the local coordinates say the point lies there: the cell and its local
+/// coordinates, or `None` when `inverse` fails.
+#[inline(always)]
+pub(super) fn locate(
+    cells: &[Cell],
+    mut j: usize,
+    mut guess: V3,
+    mut inverse: impl FnMut(usize, V3, V3) -> Option<V3>,
+    p: V3,
+) -> Option<(usize, V3)> {
+    let last = cells.len() - 1;
+    for _ in 0..6 {
+        let l = inverse(j, p, guess)?;
+        let step = l[2].floor();
+        if (step < 0.0 && j > 0) || (step >= 1.0 && j < last) {
+            let nj = (j as i64 + step as i64).clamp(0, last as i64) as usize;
+            guess = [l[0], l[1], (l[2] - (nj as f32 - j as f32)).clamp(0.0, 1.0)];
+            j = nj;
+            continue;
+        }
+        return Some((j, l));
+    }
+    None
+}
+
+/// Ends ray `r`'s sample at slice `k`: when `found` (cell, local coordinates) the ray
+/// tracks from it (the step from the previous sample, or `first_step(cell)` for the first)
+/// and the sample is kept ([`keep_sample`]); otherwise the ray stops tracking.
+#[inline(always)]
+pub(super) fn finish_sample(
+    fire: &FireInstance,
+    r: &mut Ray,
+    k: i64,
+    found: Option<(usize, V3)>,
+    first_step: impl FnOnce(usize) -> Option<V3>,
+    stats: &mut RenderStats,
+    out: &mut Scratch,
+) {
+    let Some((j, l)) = found else {
+        r.tracking = false;
+        return;
+    };
+    let ng = [l[0], l[1], j as f32 + l[2]];
+    r.coords_step = if r.tracking {
+        Some(sub(ng, r.coords))
+    } else {
+        first_step(j)
+    };
+    r.coords = ng;
+    r.tracking = true;
+    keep_sample(fire, r, k, j, l, stats, out);
 }
 
 /// Ray `r`'s sample at slice `k`, with local coordinates `l` in cell `j`: if it lies in

@@ -6,10 +6,9 @@
 //! and what a GPU port is checked against.
 
 use super::bin::Candidate;
-use super::march_ray::{keep_sample, Ray, MAX_RANGES};
+use super::march_ray::{finish_sample, locate, Ray, MAX_RANGES};
 use super::tile::{FrameRenderer, Scratch};
 use super::{FireInstance, RenderStats};
-use crate::lattice::{add, scale, sub};
 use crate::mapping::{shade, shade_looped};
 
 impl FrameRenderer<'_, '_> {
@@ -49,57 +48,18 @@ impl FrameRenderer<'_, '_> {
         stats: &mut RenderStats,
         out: &mut Scratch,
     ) {
-        let k = r.slice;
-        r.slice += 1;
         let cells = fire.lattice.cells();
-        let last = cells.len() - 1;
-        let t = k as f32 * self.params.slice_spacing / r.cos_forward;
-        let p = add(r.origin, scale(r.dir, t));
-        let (mut j, mut guess) = if r.tracking {
-            let pred = match r.coords_step {
-                Some(dl) => add(r.coords, dl),
-                None => r.coords,
-            };
-            let lv = pred[2].clamp(0.0, cells.len() as f32);
-            let j = (lv as usize).min(last);
-            (j, [pred[0], pred[1], lv - j as f32])
-        } else {
-            match r.ranges.iter().find(|q| q.1 <= t && t <= q.2) {
-                Some(q) => {
-                    r.coords_step = None;
-                    (q.0 as usize, [0.5; 3])
-                }
-                None => return,
-            }
-        };
-        let mut found = None;
-        for _ in 0..6 {
-            let Some(l) = cells[j].inverse_fast(p, guess) else {
-                break;
-            };
-            let step = l[2].floor();
-            if (step < 0.0 && j > 0) || (step >= 1.0 && j < last) {
-                let nj = (j as i64 + step as i64).clamp(0, last as i64) as usize;
-                guess = [l[0], l[1], (l[2] - (nj as f32 - j as f32)).clamp(0.0, 1.0)];
-                j = nj;
-                continue;
-            }
-            found = Some(l);
-            break;
-        }
-        let Some(l) = found else {
-            r.tracking = false;
+        let Some((k, p, j, guess)) = self.start_sample(cells, r, |j, _| (j, [0.5; 3])) else {
             return;
         };
-        let ng = [l[0], l[1], j as f32 + l[2]];
-        r.coords_step = if r.tracking {
-            Some(sub(ng, r.coords))
-        } else {
-            None
-        };
-        r.coords = ng;
-        r.tracking = true;
-        keep_sample(fire, r, k, j, l, stats, out);
+        let found = locate(
+            cells,
+            j,
+            guess,
+            |j, p, guess| cells[j].inverse_fast(p, guess),
+            p,
+        );
+        finish_sample(fire, r, k, found, |_| None, stats, out);
     }
 
     /// Shades every collected sample with [`shade`], one by one: the reference.
