@@ -10,7 +10,6 @@
 //! source video at its own resolution and colours, decoding only the frames it needs, and
 //! measured on the frames written.
 
-use std::io::Write as _;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -289,9 +288,11 @@ fn build_entry(
 ) -> Result<()> {
     std::fs::create_dir_all(dir.parent().unwrap_or(Path::new(".")))
         .with_context(|| format!("creating the cache directory {}", dir.display()))?;
-    let tmp = dir.with_extension(format!("tmp-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&tmp);
-    std::fs::create_dir_all(&tmp).with_context(|| format!("creating {}", tmp.display()))?;
+    // Built in a hidden staging directory beside the entry (removed if anything fails) and
+    // swapped in whole, so a reader never sees half an entry.
+    let staging = ignis_core::atomic::StagingDir::create(dir)
+        .with_context(|| format!("creating a directory beside {}", dir.display()))?;
+    let tmp = staging.path().to_path_buf();
     let result = (|| -> Result<()> {
         // Metric frames of every frame of the window, as a writer would measure them.
         let info = ignis_media::probe(path)?;
@@ -336,17 +337,16 @@ fn build_entry(
             fps: info.fps,
             source_size: info.size.to_string(),
         };
-        let mut f = std::fs::File::create(tmp.join("entry.json"))?;
-        f.write_all(&serde_json::to_vec_pretty(&meta)?)?;
-        f.sync_all()?;
+        ignis_core::atomic::write_bytes(
+            &tmp.join("entry.json"),
+            &serde_json::to_vec_pretty(&meta)?,
+        )?;
         Ok(())
     })();
     if let Err(e) = result {
-        let _ = std::fs::remove_dir_all(&tmp);
         return Err(e.context(format!("building the cache entry for {}", path.display())));
     }
-    let _ = std::fs::remove_dir_all(dir);
-    std::fs::rename(&tmp, dir)
+    ignis_core::tempfiles::replace_dir(&tmp, dir)
         .with_context(|| format!("moving the cache entry to {}", dir.display()))
 }
 
