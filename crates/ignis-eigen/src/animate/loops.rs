@@ -197,49 +197,10 @@ pub fn search(
     p: &SearchParams,
     body: Option<BodyStats>,
 ) -> Result<Vec<Candidate>> {
+    check_search(x, n, k, p, body)?;
     let body_steps = body.map(|b| b.steps);
     let soft = body.map(|b| b.softness);
-    if p.length < 2 {
-        return Err(EigenError::bad(
-            "length",
-            format!(
-                "{} frame(s) is too short for a loop; ask for at least 2",
-                p.length
-            ),
-        ));
-    }
-    if k == 0 || x.len() != n * k {
-        return Err(EigenError::bad(
-            "weights",
-            format!("{} values do not form {n} rows of {k}", x.len()),
-        ));
-    }
-    if let Some(b) = body {
-        if b.steps.len() + 1 != n || b.softness.len() != n {
-            return Err(EigenError::bad(
-                "steps",
-                format!(
-                    "{} body steps and {} softness values for {n} frames (expected {} and {n})",
-                    b.steps.len(),
-                    b.softness.len(),
-                    n.saturating_sub(1)
-                ),
-            ));
-        }
-    }
     let (lo, hi) = p.bounds();
-    if n < min_window(p) {
-        return Err(EigenError::bad(
-            "length",
-            format!(
-                "a loop of about {} frames (at least {lo} with the ±{:.0}% tolerance) does not fit in {n} frames: \
-                 the search needs {} (2 frames before the loop and 1 after it); ask for a shorter --length or a longer window",
-                p.length,
-                p.tolerance * 100.0,
-                min_window(p)
-            ),
-        ));
-    }
     let d = distances(x, n, k, p.e);
     let at = |i: usize, j: usize| f64::from(d[i * n + j]);
     // start ≥ 2, end + 1 ≤ n - 1.
@@ -291,39 +252,96 @@ pub fn search(
         }
     }
     let want = p.candidates.max(1);
-    let pick = |all: &mut Vec<(Candidate, f64)>,
-                key: fn(&(Candidate, f64)) -> f64,
-                want: usize,
-                out: &mut Vec<Candidate>| {
-        all.sort_by(|a, b| {
-            key(a)
-                .total_cmp(&key(b))
-                .then(a.0.start.cmp(&b.0.start))
-                .then(a.0.end.cmp(&b.0.end))
-        });
-        let mut added = 0;
-        for (c, _) in all.iter() {
-            if added >= want {
-                break;
-            }
-            // Suppress near-duplicates: within 3 frames (both ends) of a kept one.
-            let near = out
-                .iter()
-                .any(|o| o.start.abs_diff(c.start) <= 3 && o.end.abs_diff(c.end) <= 3);
-            if !near {
-                out.push(*c);
-                added += 1;
-            }
-        }
-    };
     let mut out: Vec<Candidate> = Vec::new();
     if body_steps.is_some() {
-        pick(&mut all, |a| a.1, want.div_ceil(2), &mut out);
-        pick(&mut all, |a| a.0.cost, want / 2, &mut out);
+        pick_distinct(&mut all, |a| a.1, want.div_ceil(2), &mut out);
+        pick_distinct(&mut all, |a| a.0.cost, want / 2, &mut out);
     } else {
-        pick(&mut all, |a| a.0.cost, want, &mut out);
+        pick_distinct(&mut all, |a| a.0.cost, want, &mut out);
     }
     Ok(out)
+}
+
+/// Refuses a search [`search`] cannot do: too short a loop, weights that are not `n × k`,
+/// body statistics of the wrong length, a window too short for the loop.
+fn check_search(
+    x: &[f32],
+    n: usize,
+    k: usize,
+    p: &SearchParams,
+    body: Option<BodyStats>,
+) -> Result<()> {
+    if p.length < 2 {
+        return Err(EigenError::bad(
+            "length",
+            format!(
+                "{} frame(s) is too short for a loop; ask for at least 2",
+                p.length
+            ),
+        ));
+    }
+    if k == 0 || x.len() != n * k {
+        return Err(EigenError::bad(
+            "weights",
+            format!("{} values do not form {n} rows of {k}", x.len()),
+        ));
+    }
+    if let Some(b) = body {
+        if b.steps.len() + 1 != n || b.softness.len() != n {
+            return Err(EigenError::bad(
+                "steps",
+                format!(
+                    "{} body steps and {} softness values for {n} frames (expected {} and {n})",
+                    b.steps.len(),
+                    b.softness.len(),
+                    n.saturating_sub(1)
+                ),
+            ));
+        }
+    }
+    let lo = p.bounds().0;
+    if n < min_window(p) {
+        return Err(EigenError::bad(
+            "length",
+            format!(
+                "a loop of about {} frames (at least {lo} with the ±{:.0}% tolerance) does not fit in {n} frames: \
+                 the search needs {} (2 frames before the loop and 1 after it); ask for a shorter --length or a longer window",
+                p.length,
+                p.tolerance * 100.0,
+                min_window(p)
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// Appends to `out` the `want` best of `all` by `key` (ties by start, then end), skipping
+/// near-duplicates: within 3 frames (both ends) of one already in `out`.
+fn pick_distinct(
+    all: &mut [(Candidate, f64)],
+    key: fn(&(Candidate, f64)) -> f64,
+    want: usize,
+    out: &mut Vec<Candidate>,
+) {
+    all.sort_by(|a, b| {
+        key(a)
+            .total_cmp(&key(b))
+            .then(a.0.start.cmp(&b.0.start))
+            .then(a.0.end.cmp(&b.0.end))
+    });
+    let mut added = 0;
+    for (c, _) in all.iter() {
+        if added >= want {
+            break;
+        }
+        let near = out
+            .iter()
+            .any(|o| o.start.abs_diff(c.start) <= 3 && o.end.abs_diff(c.end) <= 3);
+        if !near {
+            out.push(*c);
+            added += 1;
+        }
+    }
 }
 
 /// How a loop is closed.

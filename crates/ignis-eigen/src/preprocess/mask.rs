@@ -494,7 +494,50 @@ pub fn isolate_levels(
     if vmax < floor || luma.len() != w * h {
         return None;
     }
-    // Entry level of each pixel (-1: never reached).
+    let entry = entry_levels(luma, w, h, floor, vmax);
+    let (area, mean) = boundary_steps(&entry, luma, w, h);
+    let (stop, top) = merge_level(&area, vmax, floor);
+    // The flame's edge: the strongest boundary above the merge; of the boundaries within
+    // `tolerance` of it, the lowest (the outer edge of the flame rather than the edge of
+    // its white-hot core).
+    let strongest = (stop..=top.max(stop))
+        .filter(|&t| area[t] > 0)
+        .map(|t| mean[t])
+        .fold(0.0f64, f64::max);
+    let best = (stop..=top.max(stop))
+        .find(|&t| area[t] > 0 && mean[t] >= (1.0 - tolerance as f64) * strongest)
+        .unwrap_or(top);
+    // Never below halfway from the median lit pixel to the peak: a flame is brighter than
+    // most of what it lights (where no merge shows, the strongest edges can be the
+    // outline of a lit jar against the dark).
+    let mut lit: Vec<u8> = luma
+        .iter()
+        .copied()
+        .filter(|&v| v as usize >= floor)
+        .collect();
+    let mid = lit.len() / 2;
+    let median_lit = *lit.select_nth_unstable(mid).1 as usize;
+    // And never above where the merge search starts (24 levels below the peak): the edge
+    // of the white-hot core is not the flame's edge.
+    let best = best
+        .min(vmax.saturating_sub(24))
+        .max((median_lit + vmax).div_ceil(2))
+        .min(top.max(floor));
+    // Everything at least that bright, connected to the seeds or not (a flame's
+    // reflection, a second tongue): the lit surroundings are dimmer than the merge level.
+    Some(IsolateLevels {
+        vmax,
+        area: area.to_vec(),
+        edge: mean.to_vec(),
+        merge: stop,
+        chosen: best,
+    })
+}
+
+/// The entry level of each pixel in a flood from the brightest pixels down to `floor`
+/// (a priority flood by luminance): the level at which it joins the seeds' region `R(τ)`,
+/// −1 if never.
+fn entry_levels(luma: &[u8], w: usize, h: usize, floor: usize, vmax: usize) -> Vec<i16> {
     let mut entry = vec![-1i16; w * h];
     let mut queued = vec![false; w * h];
     let mut buckets: Vec<Vec<u32>> = vec![Vec::new(); 256];
@@ -539,9 +582,13 @@ pub fn isolate_levels(
             push(i + w);
         }
     }
-    // Area of R(τ) and the mean luminance step across its boundary, for every τ.
+    entry
+}
+
+/// Area of `R(τ)` and the mean luminance step across its boundary, for every level τ.
+fn boundary_steps(entry: &[i16], luma: &[u8], w: usize, h: usize) -> ([u64; 257], [f64; 257]) {
     let mut joined = [0u64; 257];
-    for &e in &entry {
+    for &e in entry {
         if e >= 0 {
             joined[e as usize] += 1;
         }
@@ -584,6 +631,11 @@ pub fn isolate_levels(
         c += dcount[t];
         mean[t] = if c > 0 { s / c as f64 } else { 0.0 };
     }
+    (area, mean)
+}
+
+/// The merge level and the top of the search (`(stop, top)`); see [`isolate_levels`].
+fn merge_level(area: &[u64; 257], vmax: usize, floor: usize) -> (usize, usize) {
     // The merge level: of the levels below the seeds, the one where the region grows
     // fastest over the next GROWTH_STEP levels down — a flame ends at a steep edge (few
     // pixels per level), lit surroundings are a plateau (many) — if it grows by at least
@@ -600,41 +652,7 @@ pub fn isolate_levels(
         }
         t -= 1;
     }
-    // The flame's edge: the strongest boundary above the merge; of the boundaries within
-    // `tolerance` of it, the lowest (the outer edge of the flame rather than the edge of
-    // its white-hot core).
-    let strongest = (stop..=top.max(stop))
-        .filter(|&t| area[t] > 0)
-        .map(|t| mean[t])
-        .fold(0.0f64, f64::max);
-    let best = (stop..=top.max(stop))
-        .find(|&t| area[t] > 0 && mean[t] >= (1.0 - tolerance as f64) * strongest)
-        .unwrap_or(top);
-    // Never below halfway from the median lit pixel to the peak: a flame is brighter than
-    // most of what it lights (where no merge shows, the strongest edges can be the
-    // outline of a lit jar against the dark).
-    let mut lit: Vec<u8> = luma
-        .iter()
-        .copied()
-        .filter(|&v| v as usize >= floor)
-        .collect();
-    let mid = lit.len() / 2;
-    let median_lit = *lit.select_nth_unstable(mid).1 as usize;
-    // And never above where the merge search starts (24 levels below the peak): the edge
-    // of the white-hot core is not the flame's edge.
-    let best = best
-        .min(vmax.saturating_sub(24))
-        .max((median_lit + vmax).div_ceil(2))
-        .min(top.max(floor));
-    // Everything at least that bright, connected to the seeds or not (a flame's
-    // reflection, a second tongue): the lit surroundings are dimmer than the merge level.
-    Some(IsolateLevels {
-        vmax,
-        area: area.to_vec(),
-        edge: mean.to_vec(),
-        merge: stop,
-        chosen: best,
-    })
+    (stop, top)
 }
 
 /// Fraction of the lit pixels (V ≥ `floor`) of `samples` (8-bit sRGB values, one `Vec`

@@ -71,6 +71,9 @@ impl FrameRenderer<'_, '_> {
     /// pixel that gave no sample is then marched ray by ray ([`FrameRenderer::cover`]) until one
     /// sample is known to lie in a cell, to count it as covered (those samples are not
     /// visible and are not kept).
+    ///
+    /// Long on purpose (~100 lines): the per-cell loop is the renderer's hottest path and is
+    /// kept in one body so the cell, row and batch state stay in registers.
     #[inline(always)]
     pub(super) fn march_cells(
         &self,

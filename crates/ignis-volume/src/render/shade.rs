@@ -85,6 +85,9 @@ impl FrameRenderer<'_, '_> {
     ///
     /// `avx2`: the CPU has AVX2 (only passed as `true` from the AVX2 build of the tile
     /// renderer); the noise then runs [`crate::noise::avx2`], which gives the same values.
+    ///
+    /// Long on purpose (~100 lines): the octave loop over a batch of 8 samples is one hot
+    /// body, so the window, culling and mix weights stay in registers.
     #[inline(always)]
     pub(super) fn shade_batched(&self, fire: &FireInstance, s: &mut Scratch, avx2: bool) {
         let noise = &fire.noise;

@@ -494,6 +494,7 @@ mod tests {
 
     /// A bad value in each section: the error names the key (`key` in backticks, or
     /// `what`) and starts at the line holding `line_of`.
+    /// Long on purpose: one table of 29 cases, one per section and key.
     #[test]
     fn a_bad_field_in_each_section_names_the_field_and_its_line() {
         let head = "database = \"fire.db\"\nsequence = [\"a\", \"a\"]\n";
