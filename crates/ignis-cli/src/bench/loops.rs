@@ -186,20 +186,13 @@ pub fn bench(clips: &[PathBuf], cache: Option<&Path>, g: &Global) -> Result<Valu
             };
             let quiet = Global { quiet: true };
             let t = Instant::now();
-            let d = match loop_cmd::make_loop(
-                clip,
-                window.start,
-                c.db.weights_row_major(),
-                c.db.n_components(),
-                c.db.manifest().e_detect.max(1),
-                &c.metric,
+            let ask = loop_cmd::LoopAsk {
                 length,
-                Method::Auto,
-                c.fps,
-                &out,
-                3,
-                &quiet,
-            ) {
+                method: Method::Auto,
+                top: 3,
+            };
+            let src = loop_cmd::LoopFootage::cached(clip, window.start, &c);
+            let d = match loop_cmd::make_loop(&src, &ask, &out, &quiet) {
                 Ok(d) => d,
                 Err(e) => {
                     entry["ignis"] = json!({"error": format!("{e:#}")});

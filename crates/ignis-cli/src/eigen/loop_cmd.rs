@@ -580,21 +580,65 @@ pub struct Done {
     pub render_s: f64,
 }
 
+/// The footage a loop is searched in and rendered from: the source video, the window's
+/// first frame, the window's weight rows (row-major, `k` per frame, the first `e` compared),
+/// its metric frames and frame rate.
+#[derive(Clone, Copy)]
+pub struct LoopFootage<'a> {
+    pub path: &'a Path,
+    pub first: usize,
+    pub weights: &'a [f32],
+    pub k: usize,
+    pub e: usize,
+    pub metric: &'a [GrayFrame],
+    pub fps: f64,
+}
+
+impl<'a> LoopFootage<'a> {
+    /// A cached clip's window (its database holds exactly the window's frames).
+    pub fn cached(path: &'a Path, first: usize, c: &'a Cached) -> LoopFootage<'a> {
+        LoopFootage {
+            path,
+            first,
+            weights: c.db.weights_row_major(),
+            k: c.db.n_components(),
+            e: c.db.manifest().e_detect.max(1),
+            metric: &c.metric,
+            fps: c.fps,
+        }
+    }
+}
+
+/// What loop to make: about `length` frames, closed by `method`; the best `top`
+/// candidates are listed.
+#[derive(Clone, Copy)]
+pub struct LoopAsk {
+    pub length: usize,
+    pub method: Method,
+    pub top: usize,
+}
+
 /// Searches, renders and writes a loop of window `first..` of `path` to `out`.
 pub fn make_loop(
-    path: &Path,
-    first: usize,
-    weights: &[f32],
-    k: usize,
-    e: usize,
-    metric: &[GrayFrame],
-    length: usize,
-    method: Method,
-    fps: f64,
+    src: &LoopFootage,
+    ask: &LoopAsk,
     out: &crate::output::OutputArgs,
-    top: usize,
     g: &Global,
 ) -> Result<Done> {
+    let LoopFootage {
+        path,
+        first,
+        weights,
+        k,
+        e,
+        metric,
+        fps,
+    } = *src;
+    let LoopAsk {
+        length,
+        method,
+        top,
+    } = *ask;
     let chosen = search_and_choose(first, weights, k, e, metric, length, method)?;
     g.say("best candidates (predicted on the footage's 128-px frames):");
     for (i, c) in top_candidates(&chosen.evaluated, top).iter().enumerate() {
@@ -681,20 +725,15 @@ pub fn run(a: &Args, g: &Global) -> Result<()> {
     if c.built {
         g.say(format!("cached the clip's database in {}", c.dir.display()));
     }
-    let k = c.db.n_components();
-    let e = c.db.manifest().e_detect.max(1);
-    let d = make_loop(
-        &a.input,
-        window.start,
-        c.db.weights_row_major(),
-        k,
-        e,
-        &c.metric,
+    let ask = LoopAsk {
         length,
         method,
-        c.fps,
+        top: a.top,
+    };
+    let d = make_loop(
+        &LoopFootage::cached(&a.input, window.start, &c),
+        &ask,
         &a.out,
-        a.top,
         g,
     )?;
     report(&d, window.start, g);
@@ -760,20 +799,21 @@ pub fn eigen_length_loop(a: &crate::eigen::LoopArgs, g: &Global) -> Result<()> {
     let rows = ignis_eigen::animate::clip_rows(&db, &a.clip, window.clone())?;
     let weights = &db.weights_row_major()[rows.start * k..rows.end * k];
     let e = db.manifest().e_detect.max(1);
-    let d = make_loop(
-        &source,
-        window.start,
+    let src = LoopFootage {
+        path: &source,
+        first: window.start,
         weights,
         k,
         e,
-        &metric,
+        metric: &metric,
+        fps: c.fps,
+    };
+    let ask = LoopAsk {
         length,
         method,
-        c.fps,
-        &a.out,
-        a.top,
-        g,
-    )?;
+        top: a.top,
+    };
+    let d = make_loop(&src, &ask, &a.out, g)?;
     report(&d, window.start, g);
     Ok(())
 }
@@ -870,21 +910,13 @@ mod tests {
             let (vtf, _, _) = video_texture(&c.metric, length, K).unwrap();
             let vt = loopq::loop_quality(&vtf).unwrap();
             let out = cache.path().join(format!("{name}.png"));
-            let d = make_loop(
-                &path,
-                window.start,
-                c.db.weights_row_major(),
-                c.db.n_components(),
-                c.db.manifest().e_detect.max(1),
-                &c.metric,
+            let ask = LoopAsk {
                 length,
-                Method::Auto,
-                c.fps,
-                &out_args(out.clone()),
-                3,
-                &quiet,
-            )
-            .unwrap();
+                method: Method::Auto,
+                top: 3,
+            };
+            let src = LoopFootage::cached(&path, window.start, &c);
+            let d = make_loop(&src, &ask, &out_args(out.clone()), &quiet).unwrap();
             assert_eq!(
                 d.size,
                 ignis_media::probe(&path).unwrap().size,
