@@ -153,21 +153,8 @@ pub struct TrainArgs {
     /// Pre-processing settings (TOML) for video inputs; see `ignis eigen preprocess --print-config`.
     #[arg(long)]
     pub config: Option<PathBuf>,
-    /// First source frame of every video input.
-    #[arg(long, default_value_t = 0)]
-    pub start: usize,
-    /// One past the last source frame of every video input (default: to the end).
-    #[arg(long)]
-    pub end: Option<usize>,
-    /// Use every N-th frame.
-    #[arg(long, default_value_t = 1)]
-    pub stride: usize,
-    /// Size of the training frames, e.g. 102x168 (overrides the config).
-    #[arg(long)]
-    pub train_size: Option<Size>,
-    /// Common pre-processed frame size, e.g. 410x670 (overrides the config).
-    #[arg(long)]
-    pub frame_size: Option<Size>,
+    #[command(flatten)]
+    pub frames_from: FrameSelect,
     /// Eigenfires to keep: a count (200) or retained variance (99%); default all (M-1).
     #[arg(long)]
     pub keep: Option<ESelect>,
@@ -236,6 +223,48 @@ pub struct ReconstructArgs {
     pub output: PathBuf,
 }
 
+/// Which source frames a video input trains on, and the frame sizes (train and preprocess).
+#[derive(clap::Args, Debug)]
+pub struct FrameSelect {
+    /// First source frame of every video input.
+    #[arg(long, default_value_t = 0)]
+    pub start: usize,
+    /// One past the last source frame of every video input (default: to the end).
+    #[arg(long)]
+    pub end: Option<usize>,
+    /// Use every N-th frame.
+    #[arg(long, default_value_t = 1)]
+    pub stride: usize,
+    /// Size of the training frames, e.g. 102x168 (overrides the config).
+    #[arg(long)]
+    pub train_size: Option<Size>,
+    /// Common pre-processed frame size, e.g. 410x670 (overrides the config).
+    #[arg(long)]
+    pub frame_size: Option<Size>,
+}
+
+impl FrameSelect {
+    /// A clip of `path` named `name` over the selected frames.
+    fn clip(&self, name: &str, path: &Path) -> ClipSpec {
+        let mut s = ClipSpec::new(name);
+        s.path = Some(path.to_path_buf());
+        s.start = self.start;
+        s.end = self.end;
+        s.stride = self.stride;
+        s
+    }
+
+    /// The sizes given on the command line, over those of the config.
+    fn apply_sizes(&self, pre: &mut PreprocessParams) {
+        if let Some(s) = self.train_size {
+            pre.train_size = Some(s);
+        }
+        if let Some(s) = self.frame_size {
+            pre.pose.frame_size = Some(s);
+        }
+    }
+}
+
 #[derive(clap::Args, Debug)]
 pub struct PreprocessArgs {
     /// Video or image sequence.
@@ -250,18 +279,8 @@ pub struct PreprocessArgs {
     /// Training-frame indices to show (default: first, middle, last).
     #[arg(long, value_delimiter = ',')]
     pub frames: Vec<usize>,
-    #[arg(long, default_value_t = 0)]
-    pub start: usize,
-    #[arg(long)]
-    pub end: Option<usize>,
-    #[arg(long, default_value_t = 1)]
-    pub stride: usize,
-    /// Size of the training frames, e.g. 102x168 (overrides the config).
-    #[arg(long)]
-    pub train_size: Option<Size>,
-    /// Common pre-processed frame size, e.g. 410x670 (overrides the config).
-    #[arg(long)]
-    pub frame_size: Option<Size>,
+    #[command(flatten)]
+    pub frames_from: FrameSelect,
     /// Print the settings (defaults, or --config with overrides) as TOML and exit.
     #[arg(long)]
     pub print_config: bool,
@@ -374,12 +393,7 @@ pub fn train(a: TrainArgs, g: &Global) -> Result<()> {
         let mut specs: Vec<ClipSpec> = Vec::new();
         for p in &a.inputs {
             let taken: Vec<String> = specs.iter().map(|s| s.name.clone()).collect();
-            let mut s = ClipSpec::new(&clip_name(p, &taken));
-            s.path = Some(p.clone());
-            s.start = a.start;
-            s.end = a.end;
-            s.stride = a.stride;
-            specs.push(s);
+            specs.push(a.frames_from.clip(&clip_name(p, &taken), p));
         }
         (
             specs,
@@ -387,12 +401,7 @@ pub fn train(a: TrainArgs, g: &Global) -> Result<()> {
             TrainParams::default(),
         )
     };
-    if let Some(s) = a.train_size {
-        pre.train_size = Some(s);
-    }
-    if let Some(s) = a.frame_size {
-        pre.pose.frame_size = Some(s);
-    }
+    a.frames_from.apply_sizes(&mut pre);
     if a.keep.is_some() {
         tp.keep = a.keep;
     }
@@ -733,12 +742,7 @@ fn synth_cmd(a: &SynthArgs, g: &Global) -> Result<()> {
 
 fn preprocess(a: PreprocessArgs, g: &Global) -> Result<()> {
     let mut pre = read_preprocess(a.config.as_deref())?;
-    if let Some(s) = a.train_size {
-        pre.train_size = Some(s);
-    }
-    if let Some(s) = a.frame_size {
-        pre.pose.frame_size = Some(s);
-    }
+    a.frames_from.apply_sizes(&mut pre);
     if a.print_config {
         print!("{}", pre.to_toml());
         return Ok(());
@@ -746,10 +750,7 @@ fn preprocess(a: PreprocessArgs, g: &Global) -> Result<()> {
     let (Some(input), Some(out)) = (a.input, a.output) else {
         bail!("give an input and -o DIR")
     };
-    let mut spec = ClipSpec::new(&clip_name(&input, &[]));
-    spec.start = a.start;
-    spec.end = a.end;
-    spec.stride = a.stride;
+    let spec = a.frames_from.clip(&clip_name(&input, &[]), &input);
     let clip = ClipInput::new(spec, MediaFootage::open(&input)?);
     let mut bars = Bars { g, bar: None };
     let stages = ignis_eigen::train::preprocess_clip(&clip, &pre, &a.frames, &mut bars)
