@@ -209,6 +209,11 @@ pub struct ClassicFire {
     noise: Perlin1,
     /// A looping fire's state ([`ClassicFire::new_looping`]).
     looping: Option<Looping>,
+    /// Every row above this one is all zero (the black sky above the flames). A zero row
+    /// over a zero row stays zero (the edges never burn and sparklies only brighten
+    /// burning pixels), so a step only burns from the row just above it: the same bytes
+    /// for a fraction of the work, since flames rarely fill the buffer.
+    top: usize,
 }
 
 /// What makes a looping fire's inputs repeat every `period` frames.
@@ -261,6 +266,7 @@ impl ClassicFire {
             noise,
             params,
             looping: None,
+            top: 0,
         })
     }
 
@@ -364,9 +370,10 @@ impl ClassicFire {
     /// Advances one frame on the calling thread.
     pub fn step(&mut self) {
         let (w, h, e) = (self.w, self.h, self.params.edge as usize);
+        let first = self.first_burning_row();
         let below = self.buf[(h - e) * w..(h - e + 1) * w].to_vec();
         burn_band(
-            &mut self.buf[e * w..(h - e) * w],
+            &mut self.buf[first * w..(h - e) * w],
             w,
             e,
             &below,
@@ -377,16 +384,24 @@ impl ClassicFire {
         self.after_burn();
     }
 
+    /// The first row a step must burn: the one just above the topmost row that may be
+    /// non-zero, never inside the top edge.
+    fn first_burning_row(&self) -> usize {
+        let e = self.params.edge as usize;
+        self.top.saturating_sub(1).clamp(e, self.h - e)
+    }
+
     /// Advances one frame with the burn spread over rayon's threads in bands of rows.
     /// Gives exactly the bytes [`ClassicFire::step`] gives.
     pub fn step_par(&mut self) {
         let (w, h, e) = (self.w, self.h, self.params.edge as usize);
-        let rows = h - 2 * e;
+        let first = self.first_burning_row();
+        let rows = h - e - first;
         let threads = rayon::current_num_threads().max(1);
         // bands of at least 16 rows, about four per thread for load balance
         let band = rows.div_ceil(threads * 4).max(16);
         let (fade, kernel) = (self.params.fade, self.params.kernel);
-        let region = &mut self.buf[e * w..(h - e + 1) * w];
+        let region = &mut self.buf[first * w..(h - e + 1) * w];
         // the old row just below each band, copied before any band changes it
         let belows: Vec<Vec<u8>> = (0..rows.div_ceil(band))
             .map(|b| {
@@ -469,6 +484,12 @@ impl ClassicFire {
         }
         let y = self.source_row();
         self.buf[y * w + e..y * w + w - e].copy_from_slice(&self.source);
+        // the sky rises at most one row a frame: rows above `top - 1` are still zero
+        let mut top = self.top.saturating_sub(1);
+        while top < self.h && self.buf[top * w..(top + 1) * w].iter().all(|&v| v == 0) {
+            top += 1;
+        }
+        self.top = top;
         self.frame += 1;
     }
 
