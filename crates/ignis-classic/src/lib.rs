@@ -834,6 +834,52 @@ mod tests {
         assert!(ClassicFire::new_looping(params(32, 32), 1).is_err());
     }
 
+    /// Skipping the black sky gives the bytes of burning every row: each step is checked
+    /// against a copy told that no row is known to be zero, while the flames grow, die
+    /// down under a large fade (the sky falls) and grow back, for both kernels, one
+    /// thread and rayon, plain and looping.
+    #[test]
+    fn sky_skip_gives_the_bytes_of_a_full_burn() {
+        for kernel in [Kernel::Article, Kernel::Buffered] {
+            for looping in [false, true] {
+                let p = ClassicParams {
+                    kernel,
+                    ..params(40, 48)
+                };
+                let mut f = if looping {
+                    ClassicFire::new_looping(p, 7).unwrap()
+                } else {
+                    ClassicFire::new(p).unwrap()
+                };
+                let mut skipped = 0;
+                for i in 0..90 {
+                    f.set_fade(match i {
+                        0..=29 => 0,
+                        30..=49 => 40,
+                        _ => 1,
+                    });
+                    let mut full = f.clone();
+                    full.top = 0;
+                    skipped += f.first_burning_row() - 1;
+                    if i % 2 == 0 {
+                        f.step();
+                        full.step();
+                    } else {
+                        f.step_par();
+                        full.step_par();
+                    }
+                    assert_eq!(
+                        f.buffer(),
+                        full.buffer(),
+                        "{kernel:?} looping={looping} i={i}"
+                    );
+                    assert!(f.buffer()[..f.top * 40].iter().all(|&v| v == 0));
+                }
+                assert!(skipped > 0, "some sky was skipped");
+            }
+        }
+    }
+
     #[test]
     fn fold_reflects_at_both_ends() {
         assert_eq!(fold(-3, 10), 3);
