@@ -397,6 +397,10 @@ impl ClassicFire {
         let (w, h, e) = (self.w, self.h, self.params.edge as usize);
         let first = self.first_burning_row();
         let rows = h - e - first;
+        if rows * w < PAR_MIN_PIXELS {
+            // too little to burn for threads to pay (the usual case under a low flame)
+            return self.step();
+        }
         let threads = rayon::current_num_threads().max(1);
         // bands of at least 16 rows, about four per thread for load balance
         let band = rows.div_ceil(threads * 4).max(16);
@@ -571,6 +575,10 @@ fn burn_band(
         r += 1;
     }
 }
+
+/// Below this many pixels to burn, [`ClassicFire::step_par`] burns on the calling thread:
+/// handing out bands costs more than it saves.
+const PAR_MIN_PIXELS: usize = 32 * 1024;
 
 /// Rows the article kernel interleaves.
 const ARTICLE_ROWS: usize = 8;
