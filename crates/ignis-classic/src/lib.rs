@@ -888,6 +888,47 @@ mod tests {
         }
     }
 
+    /// The banded burn (enough pixels under the sky for threads) gives the one-thread
+    /// bytes on a 3-thread pool, for both kernels, while the sky falls under a large fade
+    /// and the burn drops to the calling thread.
+    #[test]
+    fn banded_and_small_burns_match_one_thread() {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(3)
+            .build()
+            .unwrap();
+        for kernel in [Kernel::Article, Kernel::Buffered] {
+            let p = ClassicParams {
+                kernel,
+                fade: 0,
+                ..params(220, 160)
+            };
+            let (mut one, mut par) = (
+                ClassicFire::new(p.clone()).unwrap(),
+                ClassicFire::new(p).unwrap(),
+            );
+            let (mut banded, mut small) = (0, 0);
+            for i in 0..40 {
+                let fade = if i < 25 { 0 } else { 60 };
+                one.set_fade(fade);
+                par.set_fade(fade);
+                let rows = par.h - par.params.edge as usize - par.first_burning_row();
+                if rows * par.w >= PAR_MIN_PIXELS {
+                    banded += 1;
+                } else {
+                    small += 1;
+                }
+                one.step();
+                pool.install(|| par.step_par());
+                assert_eq!(one.buffer(), par.buffer(), "{kernel:?} frame {i}");
+            }
+            assert!(
+                banded > 0 && small > 0,
+                "{kernel:?}: {banded} banded, {small} small"
+            );
+        }
+    }
+
     #[test]
     fn fold_reflects_at_both_ends() {
         assert_eq!(fold(-3, 10), 3);
