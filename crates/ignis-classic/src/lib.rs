@@ -225,10 +225,18 @@ struct Looping {
     total: Vec<i64>,
     /// Random source: the walk's sum of steps so far this period.
     walk: Vec<i64>,
+    /// Once [`ClassicFire::settle_loop`] has found the loop: its `period` buffers, slot
+    /// `j` holding the frame whose number is `j` modulo the period. Stepping then copies
+    /// the next one instead of burning (the same bytes: the fire is on its loop).
+    replay: Option<Vec<u8>>,
     /// Perlin source: lattice cells of time per period (octave 0) and noise time per frame.
     cells: i64,
     speed: f32,
 }
+
+/// The most memory a looping fire keeps to replay its loop; longer or larger loops settle
+/// whole periods at a time and are stepped.
+const REPLAY_MAX_BYTES: usize = 128 << 20;
 
 /// Streams of the looping fire's per-frame random numbers.
 const WALK_STREAM: u64 = 0x3a1c_0000_0000;
@@ -306,6 +314,7 @@ impl ClassicFire {
             start,
             total,
             walk: vec![0; n],
+            replay: None,
             cells,
             speed,
         });
@@ -324,6 +333,23 @@ impl ClassicFire {
             }
             return Some(min_frames);
         };
+        let len = self.buf.len();
+        if let Some(bytes) = (period as usize)
+            .checked_mul(len)
+            .filter(|&b| b <= REPLAY_MAX_BYTES)
+        {
+            return self.settle_by_frames(period, bytes, min_frames, max_frames);
+        }
+        self.settle_whole_periods(period, min_frames, max_frames)
+    }
+
+    /// [`ClassicFire::settle_loop`] a whole period at a time, keeping one buffer.
+    fn settle_whole_periods(
+        &mut self,
+        period: u64,
+        min_frames: u64,
+        max_frames: u64,
+    ) -> Option<u64> {
         let mut stepped = 0u64;
         let mut last: Option<Vec<u8>> = None;
         loop {
@@ -343,6 +369,55 @@ impl ClassicFire {
         }
     }
 
+    /// [`ClassicFire::settle_loop`] with the last `period` frames kept (`bytes` in all):
+    /// the repeat is caught at the first frame equal to the one a period before, not only
+    /// at whole periods, and the kept frames are the loop, replayed from then on. The loop
+    /// found is the one whole-period settling finds, so its bytes are the same: if frame
+    /// `t` equals frame `t − N`, every frame from `t − N` on is on the loop, and so is the
+    /// whole-period check's frame 0 (`≥ t − N`). Without a repeat it stops where the
+    /// whole-period settle stops, on the same buffer.
+    fn settle_by_frames(
+        &mut self,
+        period: u64,
+        bytes: usize,
+        min_frames: u64,
+        max_frames: u64,
+    ) -> Option<u64> {
+        let len = self.buf.len();
+        let mut ring = vec![0u8; bytes];
+        let last = max_frames.div_ceil(period).max(1) * period;
+        let mut stepped = 0u64;
+        loop {
+            self.step_par();
+            stepped += 1;
+            let slot = (self.frame % period) as usize;
+            let kept = &mut ring[slot * len..(slot + 1) * len];
+            if stepped > period && stepped >= min_frames && kept[..] == self.buf[..] {
+                // on the loop: go to its frame 0 (a whole number of periods) and replay
+                let frame = self.frame.next_multiple_of(period);
+                self.buf.copy_from_slice(&ring[..len]);
+                let (w, e) = (self.w, self.params.edge as usize);
+                let y = self.source_row();
+                self.source
+                    .copy_from_slice(&self.buf[y * w + e..y * w + w - e]);
+                self.top = 0;
+                self.update_top();
+                if let Some(l) = self.looping.as_mut() {
+                    l.replay = Some(ring);
+                    // after a whole period the walk's steps sum to the period's total
+                    l.walk.clone_from(&l.total);
+                }
+                stepped += frame - self.frame;
+                self.frame = frame;
+                return Some(stepped);
+            }
+            kept.copy_from_slice(&self.buf);
+            if stepped >= last {
+                return None;
+            }
+        }
+    }
+
     pub fn params(&self) -> &ClassicParams {
         &self.params
     }
@@ -354,7 +429,63 @@ impl ClassicFire {
 
     /// Changes BURNFADE while running (e.g. from a UI slider); takes effect next step.
     pub fn set_fade(&mut self, fade: u8) {
+        if fade != self.params.fade {
+            self.leave_replay();
+        }
         self.params.fade = fade;
+    }
+
+    /// Stops replaying a found loop (its inputs change): simulation resumes from the
+    /// current frame, with the random walk rebuilt for the frame's place in the loop.
+    fn leave_replay(&mut self) {
+        let Some(l) = self.looping.as_mut() else {
+            return;
+        };
+        if l.replay.take().is_none() {
+            return;
+        }
+        l.walk.iter_mut().for_each(|v| *v = 0);
+        if let (SourceMode::Random { drift }, true) = (self.params.source, self.frame > 0) {
+            let d = drift as i32;
+            for k in 0..=(self.frame - 1) % l.period {
+                let mut r = Rng::derive(self.params.seed, WALK_STREAM + k);
+                for v in l.walk.iter_mut() {
+                    *v += r.range_i32(-d, d) as i64;
+                }
+            }
+        }
+    }
+
+    /// One frame of a found loop's replay; false when not replaying.
+    fn replay_step(&mut self) -> bool {
+        let Some(l) = self.looping.as_ref() else {
+            return false;
+        };
+        let Some(ring) = l.replay.as_ref() else {
+            return false;
+        };
+        let len = self.buf.len();
+        let slot = ((self.frame + 1) % l.period) as usize;
+        self.buf
+            .copy_from_slice(&ring[slot * len..(slot + 1) * len]);
+        let (w, e) = (self.w, self.params.edge as usize);
+        let y = self.source_row();
+        self.source
+            .copy_from_slice(&self.buf[y * w + e..y * w + w - e]);
+        self.update_top();
+        self.frame += 1;
+        true
+    }
+
+    /// Moves `top` to the topmost non-zero row after a step (the sky rises at most one row
+    /// a frame, so rows above `top - 1` are still zero).
+    fn update_top(&mut self) {
+        let w = self.w;
+        let mut top = self.top.saturating_sub(1);
+        while top < self.h && self.buf[top * w..(top + 1) * w].iter().all(|&v| v == 0) {
+            top += 1;
+        }
+        self.top = top;
     }
 
     /// Number of frames stepped so far.
@@ -369,6 +500,9 @@ impl ClassicFire {
 
     /// Advances one frame on the calling thread.
     pub fn step(&mut self) {
+        if self.replay_step() {
+            return;
+        }
         let (w, h, e) = (self.w, self.h, self.params.edge as usize);
         let first = self.first_burning_row();
         let below = self.buf[(h - e) * w..(h - e + 1) * w].to_vec();
@@ -394,6 +528,9 @@ impl ClassicFire {
     /// Advances one frame with the burn spread over rayon's threads in bands of rows.
     /// Gives exactly the bytes [`ClassicFire::step`] gives.
     pub fn step_par(&mut self) {
+        if self.replay_step() {
+            return;
+        }
         let (w, h, e) = (self.w, self.h, self.params.edge as usize);
         let first = self.first_burning_row();
         let rows = h - e - first;
@@ -488,12 +625,7 @@ impl ClassicFire {
         }
         let y = self.source_row();
         self.buf[y * w + e..y * w + w - e].copy_from_slice(&self.source);
-        // the sky rises at most one row a frame: rows above `top - 1` are still zero
-        let mut top = self.top.saturating_sub(1);
-        while top < self.h && self.buf[top * w..(top + 1) * w].iter().all(|&v| v == 0) {
-            top += 1;
-        }
-        self.top = top;
+        self.update_top();
         self.frame += 1;
     }
 
@@ -926,6 +1058,73 @@ mod tests {
                 banded > 0 && small > 0,
                 "{kernel:?}: {banded} banded, {small} small"
             );
+        }
+    }
+
+    /// Settling frame by frame and replaying gives the bytes of settling whole periods at a
+    /// time and simulating on, also when the replay is left mid-loop (a fade change) and the
+    /// simulation resumes; and with too short a limit both give up on the same buffer.
+    #[test]
+    fn replayed_loop_matches_the_simulated_one() {
+        for source in [
+            SourceMode::Random { drift: 48 },
+            SourceMode::Perlin {
+                scale: 12.0,
+                speed: 0.08,
+            },
+        ] {
+            for (n, min) in [(5u32, 0u64), (17, 60), (40, 10)] {
+                let p = ClassicParams {
+                    source,
+                    ..params(44, 40)
+                };
+                let mut replayed = ClassicFire::new_looping(p.clone(), n).unwrap();
+                let mut simulated = replayed.clone();
+                assert!(replayed.settle_loop(min, 4000).is_some());
+                assert!(replayed.looping.as_ref().unwrap().replay.is_some());
+                assert!(simulated
+                    .settle_whole_periods(n as u64, min, 4000)
+                    .is_some());
+                assert_eq!(replayed.buffer(), simulated.buffer(), "{source:?} N={n}");
+                assert_eq!(replayed.frame_number() % n as u64, 0);
+                for i in 0..2 * n + 3 {
+                    if i == n + 2 {
+                        // leave the replay mid-loop on a copy of the replayed fire
+                        let mut left = replayed.clone();
+                        left.leave_replay();
+                        assert!(left.looping.as_ref().unwrap().replay.is_none());
+                        for j in 0..n + 4 {
+                            left.step();
+                            replayed.step();
+                            assert_eq!(
+                                left.buffer(),
+                                replayed.buffer(),
+                                "{source:?} N={n} left {j}"
+                            );
+                        }
+                    }
+                    replayed.step_par();
+                    simulated.step_par();
+                }
+                let (mut a, mut b) = (replayed.clone(), simulated.clone());
+                while a.frame_number() % n as u64 != 0 {
+                    a.step();
+                }
+                while b.frame_number() % n as u64 != 0 {
+                    b.step();
+                }
+                assert_eq!(a.buffer(), b.buffer(), "{source:?} N={n} after the replay");
+                let (mut short_a, mut short_b) = (
+                    ClassicFire::new_looping(p.clone(), n).unwrap(),
+                    ClassicFire::new_looping(p, n).unwrap(),
+                );
+                assert!(short_a.settle_loop(0, 2 * n as u64 - 1).is_none());
+                assert!(short_b
+                    .settle_whole_periods(n as u64, 0, 2 * n as u64 - 1)
+                    .is_none());
+                assert_eq!(short_a.buffer(), short_b.buffer());
+                assert_eq!(short_a.frame_number(), short_b.frame_number());
+            }
         }
     }
 
