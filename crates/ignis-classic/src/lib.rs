@@ -26,7 +26,10 @@
 //! fades it, so the buffer forgets its past and becomes a function of the recent source
 //! lines). So the loop is made by driving it with a source line and sparklies that repeat
 //! every `N` frames, and stepping until the buffer itself repeats exactly
-//! ([`ClassicFire::settle_loop`]). This is chosen over finding and closing the best loop
+//! ([`ClassicFire::settle_loop`]). The settle keeps the last `N` frames (from the topmost
+//! burning row down), catches the first frame equal to the one `N` before, and from then on
+//! replays the kept loop instead of burning; loops over 128 MiB settle whole periods at a
+//! time and are stepped. This is chosen over finding and closing the best loop
 //! point of an unlooped run because it is exact (frame `N` equals frame 0 byte for byte)
 //! and leaves every frame a true frame of the article's simulation: no cut and no blend.
 //! The random source becomes a random walk bridged back to its start over the loop and
@@ -216,6 +219,9 @@ pub struct ClassicFire {
     top: usize,
 }
 
+/// A kept frame: its topmost non-zero row and the rows from there down.
+type Kept = (usize, Vec<u8>);
+
 /// What makes a looping fire's inputs repeat every `period` frames.
 #[derive(Clone, Debug)]
 struct Looping {
@@ -225,10 +231,11 @@ struct Looping {
     total: Vec<i64>,
     /// Random source: the walk's sum of steps so far this period.
     walk: Vec<i64>,
-    /// Once [`ClassicFire::settle_loop`] has found the loop: its `period` buffers, slot
-    /// `j` holding the frame whose number is `j` modulo the period. Stepping then copies
-    /// the next one instead of burning (the same bytes: the fire is on its loop).
-    replay: Option<Vec<u8>>,
+    /// Once [`ClassicFire::settle_loop`] has found the loop: its `period` frames, slot `j`
+    /// holding the frame whose number is `j` modulo the period, as its topmost non-zero
+    /// row and the rows from there down (all above are zero). Stepping then copies the
+    /// next one instead of burning (the same bytes: the fire is on its loop).
+    replay: Option<Vec<Kept>>,
     /// Perlin source: lattice cells of time per period (octave 0) and noise time per frame.
     cells: i64,
     speed: f32,
@@ -321,10 +328,12 @@ impl ClassicFire {
         Ok(fire)
     }
 
-    /// Steps a looping fire whole periods at a time until the buffer repeats exactly (at
-    /// least `min_frames` frames, at most `max_frames`). Returns the frames stepped, or
+    /// Steps a looping fire until the buffer repeats exactly (at least `min_frames`
+    /// frames, at most `max_frames` rounded up to whole periods) and leaves it on the
+    /// loop's frame at a whole number of periods. Returns the frames it moved on, or
     /// `None` if the buffer did not repeat within `max_frames` (it still loops, with a
-    /// seam). The next frame is then the loop's frame 0. A fire made with
+    /// seam). Once found, the loop is replayed from memory (up to 128 MiB of it) instead of
+    /// burnt again, until [`ClassicFire::set_fade`] changes the fire. A fire made with
     /// [`ClassicFire::new`] is just stepped `min_frames` frames.
     pub fn settle_loop(&mut self, min_frames: u64, max_frames: u64) -> Option<u64> {
         let Some(period) = self.looping.as_ref().map(|l| l.period) else {
@@ -333,12 +342,10 @@ impl ClassicFire {
             }
             return Some(min_frames);
         };
-        let len = self.buf.len();
-        if let Some(bytes) = (period as usize)
-            .checked_mul(len)
-            .filter(|&b| b <= REPLAY_MAX_BYTES)
-        {
-            return self.settle_by_frames(period, bytes, min_frames, max_frames);
+        // at most a whole buffer per frame of the loop is kept
+        let most = (period as usize).checked_mul(self.buf.len());
+        if most.is_some_and(|b| b <= REPLAY_MAX_BYTES) {
+            return self.settle_by_frames(period, min_frames, max_frames);
         }
         self.settle_whole_periods(period, min_frames, max_frames)
     }
@@ -369,39 +376,38 @@ impl ClassicFire {
         }
     }
 
-    /// [`ClassicFire::settle_loop`] with the last `period` frames kept (`bytes` in all):
+    /// [`ClassicFire::settle_loop`] with the last `period` frames kept (each from its
+    /// topmost non-zero row down, so keeping and comparing cost little under a low flame):
     /// the repeat is caught at the first frame equal to the one a period before, not only
     /// at whole periods, and the kept frames are the loop, replayed from then on. The loop
     /// found is the one whole-period settling finds, so its bytes are the same: if frame
     /// `t` equals frame `t − N`, every frame from `t − N` on is on the loop, and so is the
     /// whole-period check's frame 0 (`≥ t − N`). Without a repeat it stops where the
     /// whole-period settle stops, on the same buffer.
-    fn settle_by_frames(
-        &mut self,
-        period: u64,
-        bytes: usize,
-        min_frames: u64,
-        max_frames: u64,
-    ) -> Option<u64> {
-        let len = self.buf.len();
-        let mut ring = vec![0u8; bytes];
+    fn settle_by_frames(&mut self, period: u64, min_frames: u64, max_frames: u64) -> Option<u64> {
+        let w = self.w;
+        let mut ring: Vec<Kept> = vec![(0, Vec::new()); period as usize];
         let last = max_frames.div_ceil(period).max(1) * period;
         let mut stepped = 0u64;
         loop {
             self.step_par();
             stepped += 1;
-            let slot = (self.frame % period) as usize;
-            let kept = &mut ring[slot * len..(slot + 1) * len];
-            if stepped > period && stepped >= min_frames && kept[..] == self.buf[..] {
+            let (top, kept) = &mut ring[(self.frame % period) as usize];
+            if stepped > period
+                && stepped >= min_frames
+                && *top == self.top
+                && kept[..] == self.buf[self.top * w..]
+            {
                 // on the loop: go to its frame 0 (a whole number of periods) and replay
                 let frame = self.frame.next_multiple_of(period);
-                self.buf.copy_from_slice(&ring[..len]);
-                let (w, e) = (self.w, self.params.edge as usize);
+                let (top0, rows0) = &ring[0];
+                self.buf[..top0 * w].fill(0);
+                self.buf[top0 * w..].copy_from_slice(rows0);
+                self.top = *top0;
+                let e = self.params.edge as usize;
                 let y = self.source_row();
                 self.source
                     .copy_from_slice(&self.buf[y * w + e..y * w + w - e]);
-                self.top = 0;
-                self.update_top();
                 if let Some(l) = self.looping.as_mut() {
                     l.replay = Some(ring);
                     // after a whole period the walk's steps sum to the period's total
@@ -411,7 +417,9 @@ impl ClassicFire {
                 self.frame = frame;
                 return Some(stepped);
             }
-            kept.copy_from_slice(&self.buf);
+            *top = self.top;
+            kept.clear();
+            kept.extend_from_slice(&self.buf[self.top * w..]);
             if stepped >= last {
                 return None;
             }
@@ -464,15 +472,18 @@ impl ClassicFire {
         let Some(ring) = l.replay.as_ref() else {
             return false;
         };
-        let len = self.buf.len();
-        let slot = ((self.frame + 1) % l.period) as usize;
-        self.buf
-            .copy_from_slice(&ring[slot * len..(slot + 1) * len]);
-        let (w, e) = (self.w, self.params.edge as usize);
+        let (top, rows) = &ring[((self.frame + 1) % l.period) as usize];
+        let w = self.w;
+        // rows above the current top are zero already
+        if self.top < *top {
+            self.buf[self.top * w..top * w].fill(0);
+        }
+        self.buf[top * w..].copy_from_slice(rows);
+        self.top = *top;
+        let e = self.params.edge as usize;
         let y = self.source_row();
         self.source
             .copy_from_slice(&self.buf[y * w + e..y * w + w - e]);
-        self.update_top();
         self.frame += 1;
         true
     }
