@@ -26,7 +26,10 @@
 //! fades it, so the buffer forgets its past and becomes a function of the recent source
 //! lines). So the loop is made by driving it with a source line and sparklies that repeat
 //! every `N` frames, and stepping until the buffer itself repeats exactly
-//! ([`ClassicFire::settle_loop`]). This is chosen over finding and closing the best loop
+//! ([`ClassicFire::settle_loop`]). The settle keeps the last `N` frames (from the topmost
+//! burning row down), catches the first frame equal to the one `N` before, and from then on
+//! replays the kept loop instead of burning; loops over 128 MiB settle whole periods at a
+//! time and are stepped. This is chosen over finding and closing the best loop
 //! point of an unlooped run because it is exact (frame `N` equals frame 0 byte for byte)
 //! and leaves every frame a true frame of the article's simulation: no cut and no blend.
 //! The random source becomes a random walk bridged back to its start over the loop and
@@ -209,7 +212,15 @@ pub struct ClassicFire {
     noise: Perlin1,
     /// A looping fire's state ([`ClassicFire::new_looping`]).
     looping: Option<Looping>,
+    /// Every row above this one is all zero (the black sky above the flames). A zero row
+    /// over a zero row stays zero (the edges never burn and sparklies only brighten
+    /// burning pixels), so a step only burns from the row just above it: the same bytes
+    /// for a fraction of the work, since flames rarely fill the buffer.
+    top: usize,
 }
+
+/// A kept frame: its topmost non-zero row and the rows from there down.
+type Kept = (usize, Vec<u8>);
 
 /// What makes a looping fire's inputs repeat every `period` frames.
 #[derive(Clone, Debug)]
@@ -220,10 +231,19 @@ struct Looping {
     total: Vec<i64>,
     /// Random source: the walk's sum of steps so far this period.
     walk: Vec<i64>,
+    /// Once [`ClassicFire::settle_loop`] has found the loop: its `period` frames, slot `j`
+    /// holding the frame whose number is `j` modulo the period, as its topmost non-zero
+    /// row and the rows from there down (all above are zero). Stepping then copies the
+    /// next one instead of burning (the same bytes: the fire is on its loop).
+    replay: Option<Vec<Kept>>,
     /// Perlin source: lattice cells of time per period (octave 0) and noise time per frame.
     cells: i64,
     speed: f32,
 }
+
+/// The most memory a looping fire keeps to replay its loop; longer or larger loops settle
+/// whole periods at a time and are stepped.
+const REPLAY_MAX_BYTES: usize = 128 << 20;
 
 /// Streams of the looping fire's per-frame random numbers.
 const WALK_STREAM: u64 = 0x3a1c_0000_0000;
@@ -261,6 +281,7 @@ impl ClassicFire {
             noise,
             params,
             looping: None,
+            top: 0,
         })
     }
 
@@ -300,16 +321,19 @@ impl ClassicFire {
             start,
             total,
             walk: vec![0; n],
+            replay: None,
             cells,
             speed,
         });
         Ok(fire)
     }
 
-    /// Steps a looping fire whole periods at a time until the buffer repeats exactly (at
-    /// least `min_frames` frames, at most `max_frames`). Returns the frames stepped, or
+    /// Steps a looping fire until the buffer repeats exactly (at least `min_frames`
+    /// frames, at most `max_frames` rounded up to whole periods) and leaves it on the
+    /// loop's frame at a whole number of periods. Returns the frames it moved on, or
     /// `None` if the buffer did not repeat within `max_frames` (it still loops, with a
-    /// seam). The next frame is then the loop's frame 0. A fire made with
+    /// seam). Once found, the loop is replayed from memory (up to 128 MiB of it) instead of
+    /// burnt again, until [`ClassicFire::set_fade`] changes the fire. A fire made with
     /// [`ClassicFire::new`] is just stepped `min_frames` frames.
     pub fn settle_loop(&mut self, min_frames: u64, max_frames: u64) -> Option<u64> {
         let Some(period) = self.looping.as_ref().map(|l| l.period) else {
@@ -318,6 +342,21 @@ impl ClassicFire {
             }
             return Some(min_frames);
         };
+        // at most a whole buffer per frame of the loop is kept
+        let most = (period as usize).checked_mul(self.buf.len());
+        if most.is_some_and(|b| b <= REPLAY_MAX_BYTES) {
+            return self.settle_by_frames(period, min_frames, max_frames);
+        }
+        self.settle_whole_periods(period, min_frames, max_frames)
+    }
+
+    /// [`ClassicFire::settle_loop`] a whole period at a time, keeping one buffer.
+    fn settle_whole_periods(
+        &mut self,
+        period: u64,
+        min_frames: u64,
+        max_frames: u64,
+    ) -> Option<u64> {
         let mut stepped = 0u64;
         let mut last: Option<Vec<u8>> = None;
         loop {
@@ -337,6 +376,56 @@ impl ClassicFire {
         }
     }
 
+    /// [`ClassicFire::settle_loop`] with the last `period` frames kept (each from its
+    /// topmost non-zero row down, so keeping and comparing cost little under a low flame):
+    /// the repeat is caught at the first frame equal to the one a period before, not only
+    /// at whole periods, and the kept frames are the loop, replayed from then on. The loop
+    /// found is the one whole-period settling finds, so its bytes are the same: if frame
+    /// `t` equals frame `t − N`, every frame from `t − N` on is on the loop, and so is the
+    /// whole-period check's frame 0 (`≥ t − N`). Without a repeat it stops where the
+    /// whole-period settle stops, on the same buffer.
+    fn settle_by_frames(&mut self, period: u64, min_frames: u64, max_frames: u64) -> Option<u64> {
+        let w = self.w;
+        let mut ring: Vec<Kept> = vec![(0, Vec::new()); period as usize];
+        let last = max_frames.div_ceil(period).max(1) * period;
+        let mut stepped = 0u64;
+        loop {
+            self.step_par();
+            stepped += 1;
+            let (top, kept) = &mut ring[(self.frame % period) as usize];
+            if stepped > period
+                && stepped >= min_frames
+                && *top == self.top
+                && kept[..] == self.buf[self.top * w..]
+            {
+                // on the loop: go to its frame 0 (a whole number of periods) and replay
+                let frame = self.frame.next_multiple_of(period);
+                let (top0, rows0) = &ring[0];
+                self.buf[..top0 * w].fill(0);
+                self.buf[top0 * w..].copy_from_slice(rows0);
+                self.top = *top0;
+                let e = self.params.edge as usize;
+                let y = self.source_row();
+                self.source
+                    .copy_from_slice(&self.buf[y * w + e..y * w + w - e]);
+                if let Some(l) = self.looping.as_mut() {
+                    l.replay = Some(ring);
+                    // after a whole period the walk's steps sum to the period's total
+                    l.walk.clone_from(&l.total);
+                }
+                stepped += frame - self.frame;
+                self.frame = frame;
+                return Some(stepped);
+            }
+            *top = self.top;
+            kept.clear();
+            kept.extend_from_slice(&self.buf[self.top * w..]);
+            if stepped >= last {
+                return None;
+            }
+        }
+    }
+
     pub fn params(&self) -> &ClassicParams {
         &self.params
     }
@@ -348,7 +437,66 @@ impl ClassicFire {
 
     /// Changes BURNFADE while running (e.g. from a UI slider); takes effect next step.
     pub fn set_fade(&mut self, fade: u8) {
+        if fade != self.params.fade {
+            self.leave_replay();
+        }
         self.params.fade = fade;
+    }
+
+    /// Stops replaying a found loop (its inputs change): simulation resumes from the
+    /// current frame, with the random walk rebuilt for the frame's place in the loop.
+    fn leave_replay(&mut self) {
+        let Some(l) = self.looping.as_mut() else {
+            return;
+        };
+        if l.replay.take().is_none() {
+            return;
+        }
+        l.walk.iter_mut().for_each(|v| *v = 0);
+        if let (SourceMode::Random { drift }, true) = (self.params.source, self.frame > 0) {
+            let d = drift as i32;
+            for k in 0..=(self.frame - 1) % l.period {
+                let mut r = Rng::derive(self.params.seed, WALK_STREAM + k);
+                for v in l.walk.iter_mut() {
+                    *v += r.range_i32(-d, d) as i64;
+                }
+            }
+        }
+    }
+
+    /// One frame of a found loop's replay; false when not replaying.
+    fn replay_step(&mut self) -> bool {
+        let Some(l) = self.looping.as_ref() else {
+            return false;
+        };
+        let Some(ring) = l.replay.as_ref() else {
+            return false;
+        };
+        let (top, rows) = &ring[((self.frame + 1) % l.period) as usize];
+        let w = self.w;
+        // rows above the current top are zero already
+        if self.top < *top {
+            self.buf[self.top * w..top * w].fill(0);
+        }
+        self.buf[top * w..].copy_from_slice(rows);
+        self.top = *top;
+        let e = self.params.edge as usize;
+        let y = self.source_row();
+        self.source
+            .copy_from_slice(&self.buf[y * w + e..y * w + w - e]);
+        self.frame += 1;
+        true
+    }
+
+    /// Moves `top` to the topmost non-zero row after a step (the sky rises at most one row
+    /// a frame, so rows above `top - 1` are still zero).
+    fn update_top(&mut self) {
+        let w = self.w;
+        let mut top = self.top.saturating_sub(1);
+        while top < self.h && self.buf[top * w..(top + 1) * w].iter().all(|&v| v == 0) {
+            top += 1;
+        }
+        self.top = top;
     }
 
     /// Number of frames stepped so far.
@@ -363,10 +511,14 @@ impl ClassicFire {
 
     /// Advances one frame on the calling thread.
     pub fn step(&mut self) {
+        if self.replay_step() {
+            return;
+        }
         let (w, h, e) = (self.w, self.h, self.params.edge as usize);
+        let first = self.first_burning_row();
         let below = self.buf[(h - e) * w..(h - e + 1) * w].to_vec();
         burn_band(
-            &mut self.buf[e * w..(h - e) * w],
+            &mut self.buf[first * w..(h - e) * w],
             w,
             e,
             &below,
@@ -377,16 +529,31 @@ impl ClassicFire {
         self.after_burn();
     }
 
+    /// The first row a step must burn: the one just above the topmost row that may be
+    /// non-zero, never inside the top edge.
+    fn first_burning_row(&self) -> usize {
+        let e = self.params.edge as usize;
+        self.top.saturating_sub(1).clamp(e, self.h - e)
+    }
+
     /// Advances one frame with the burn spread over rayon's threads in bands of rows.
     /// Gives exactly the bytes [`ClassicFire::step`] gives.
     pub fn step_par(&mut self) {
+        if self.replay_step() {
+            return;
+        }
         let (w, h, e) = (self.w, self.h, self.params.edge as usize);
-        let rows = h - 2 * e;
+        let first = self.first_burning_row();
+        let rows = h - e - first;
+        if rows * w < PAR_MIN_PIXELS {
+            // too little to burn for threads to pay (the usual case under a low flame)
+            return self.step();
+        }
         let threads = rayon::current_num_threads().max(1);
         // bands of at least 16 rows, about four per thread for load balance
         let band = rows.div_ceil(threads * 4).max(16);
         let (fade, kernel) = (self.params.fade, self.params.kernel);
-        let region = &mut self.buf[e * w..(h - e + 1) * w];
+        let region = &mut self.buf[first * w..(h - e + 1) * w];
         // the old row just below each band, copied before any band changes it
         let belows: Vec<Vec<u8>> = (0..rows.div_ceil(band))
             .map(|b| {
@@ -469,6 +636,7 @@ impl ClassicFire {
         }
         let y = self.source_row();
         self.buf[y * w + e..y * w + w - e].copy_from_slice(&self.source);
+        self.update_top();
         self.frame += 1;
     }
 
@@ -550,6 +718,10 @@ fn burn_band(
         r += 1;
     }
 }
+
+/// Below this many pixels to burn, [`ClassicFire::step_par`] burns on the calling thread:
+/// handing out bands costs more than it saves.
+const PAR_MIN_PIXELS: usize = 32 * 1024;
 
 /// Rows the article kernel interleaves.
 const ARTICLE_ROWS: usize = 8;
@@ -811,6 +983,160 @@ mod tests {
             }
         }
         assert!(ClassicFire::new_looping(params(32, 32), 1).is_err());
+    }
+
+    /// Skipping the black sky gives the bytes of burning every row: each step is checked
+    /// against a copy told that no row is known to be zero, while the flames grow, die
+    /// down under a large fade (the sky falls) and grow back, for both kernels, one
+    /// thread and rayon, plain and looping.
+    #[test]
+    fn sky_skip_gives_the_bytes_of_a_full_burn() {
+        for kernel in [Kernel::Article, Kernel::Buffered] {
+            for looping in [false, true] {
+                let p = ClassicParams {
+                    kernel,
+                    ..params(40, 48)
+                };
+                let mut f = if looping {
+                    ClassicFire::new_looping(p, 7).unwrap()
+                } else {
+                    ClassicFire::new(p).unwrap()
+                };
+                let mut skipped = 0;
+                for i in 0..90 {
+                    f.set_fade(match i {
+                        0..=29 => 0,
+                        30..=49 => 40,
+                        _ => 1,
+                    });
+                    let mut full = f.clone();
+                    full.top = 0;
+                    skipped += f.first_burning_row() - 1;
+                    if i % 2 == 0 {
+                        f.step();
+                        full.step();
+                    } else {
+                        f.step_par();
+                        full.step_par();
+                    }
+                    assert_eq!(
+                        f.buffer(),
+                        full.buffer(),
+                        "{kernel:?} looping={looping} i={i}"
+                    );
+                    assert!(f.buffer()[..f.top * 40].iter().all(|&v| v == 0));
+                }
+                assert!(skipped > 0, "some sky was skipped");
+            }
+        }
+    }
+
+    /// The banded burn (enough pixels under the sky for threads) gives the one-thread
+    /// bytes on a 3-thread pool, for both kernels, while the sky falls under a large fade
+    /// and the burn drops to the calling thread.
+    #[test]
+    fn banded_and_small_burns_match_one_thread() {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(3)
+            .build()
+            .unwrap();
+        for kernel in [Kernel::Article, Kernel::Buffered] {
+            let p = ClassicParams {
+                kernel,
+                fade: 0,
+                ..params(220, 160)
+            };
+            let (mut one, mut par) = (
+                ClassicFire::new(p.clone()).unwrap(),
+                ClassicFire::new(p).unwrap(),
+            );
+            let (mut banded, mut small) = (0, 0);
+            for i in 0..40 {
+                let fade = if i < 25 { 0 } else { 60 };
+                one.set_fade(fade);
+                par.set_fade(fade);
+                let rows = par.h - par.params.edge as usize - par.first_burning_row();
+                if rows * par.w >= PAR_MIN_PIXELS {
+                    banded += 1;
+                } else {
+                    small += 1;
+                }
+                one.step();
+                pool.install(|| par.step_par());
+                assert_eq!(one.buffer(), par.buffer(), "{kernel:?} frame {i}");
+            }
+            assert!(
+                banded > 0 && small > 0,
+                "{kernel:?}: {banded} banded, {small} small"
+            );
+        }
+    }
+
+    /// Settling frame by frame and replaying gives the bytes of settling whole periods at a
+    /// time and simulating on, also when the replay is left mid-loop (a fade change) and the
+    /// simulation resumes; and with too short a limit both give up on the same buffer.
+    #[test]
+    fn replayed_loop_matches_the_simulated_one() {
+        for source in [
+            SourceMode::Random { drift: 48 },
+            SourceMode::Perlin {
+                scale: 12.0,
+                speed: 0.08,
+            },
+        ] {
+            for (n, min) in [(5u32, 0u64), (17, 60), (40, 10)] {
+                let p = ClassicParams {
+                    source,
+                    ..params(44, 40)
+                };
+                let mut replayed = ClassicFire::new_looping(p.clone(), n).unwrap();
+                let mut simulated = replayed.clone();
+                assert!(replayed.settle_loop(min, 4000).is_some());
+                assert!(replayed.looping.as_ref().unwrap().replay.is_some());
+                assert!(simulated
+                    .settle_whole_periods(n as u64, min, 4000)
+                    .is_some());
+                assert_eq!(replayed.buffer(), simulated.buffer(), "{source:?} N={n}");
+                assert_eq!(replayed.frame_number() % n as u64, 0);
+                for i in 0..2 * n + 3 {
+                    if i == n + 2 {
+                        // leave the replay mid-loop on a copy of the replayed fire
+                        let mut left = replayed.clone();
+                        left.leave_replay();
+                        assert!(left.looping.as_ref().unwrap().replay.is_none());
+                        for j in 0..n + 4 {
+                            left.step();
+                            replayed.step();
+                            assert_eq!(
+                                left.buffer(),
+                                replayed.buffer(),
+                                "{source:?} N={n} left {j}"
+                            );
+                        }
+                    }
+                    replayed.step_par();
+                    simulated.step_par();
+                }
+                let (mut a, mut b) = (replayed.clone(), simulated.clone());
+                while a.frame_number() % n as u64 != 0 {
+                    a.step();
+                }
+                while b.frame_number() % n as u64 != 0 {
+                    b.step();
+                }
+                assert_eq!(a.buffer(), b.buffer(), "{source:?} N={n} after the replay");
+                let (mut short_a, mut short_b) = (
+                    ClassicFire::new_looping(p.clone(), n).unwrap(),
+                    ClassicFire::new_looping(p, n).unwrap(),
+                );
+                assert!(short_a.settle_loop(0, 2 * n as u64 - 1).is_none());
+                assert!(short_b
+                    .settle_whole_periods(n as u64, 0, 2 * n as u64 - 1)
+                    .is_none());
+                assert_eq!(short_a.buffer(), short_b.buffer());
+                assert_eq!(short_a.frame_number(), short_b.frame_number());
+            }
+        }
     }
 
     #[test]
