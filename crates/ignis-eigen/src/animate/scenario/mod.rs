@@ -368,9 +368,10 @@ impl MorphRun {
     }
 }
 
-/// One join of a plan, for the table `ignis eigen animate` prints.
+/// One join of a plan as the planner chose it (the printable report is
+/// [`crate::report::JoinReport`], made from these).
 #[derive(Clone, Debug)]
-pub struct JoinReport {
+pub struct PlannedJoin {
     /// Motion names.
     pub from: String,
     pub to: String,
@@ -394,7 +395,7 @@ pub struct Plan {
     pub frames: Vec<PlanFrame>,
     /// The runs of `frames` that are motion-compensated morphs (method `morph`).
     pub morphs: Vec<MorphRun>,
-    pub joins: Vec<JoinReport>,
+    pub joins: Vec<PlannedJoin>,
     /// Seam ratio of the wrap from the last frame to the first (what a looping GIF or
     /// flipbook shows); with `loop = true` this is a footage step.
     pub wrap_seam: f64,

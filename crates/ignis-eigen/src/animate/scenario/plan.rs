@@ -9,7 +9,7 @@ use std::ops::Range;
 use ignis_core::progress::Progress;
 
 use super::{
-    morph_join, JoinReport, JoinSpec, MorphRun, MotionSpec, Plan, PlanFrame, Scenario,
+    morph_join, JoinSpec, MorphRun, MotionSpec, Plan, PlanFrame, PlannedJoin, Scenario,
     AUTO_MORPH_ABOVE,
 };
 use crate::animate;
@@ -162,7 +162,7 @@ impl Scenario {
         motions: &BTreeMap<&str, MotionPlan>,
         i: usize,
         e_detect: usize,
-    ) -> Result<JoinReport> {
+    ) -> Result<PlannedJoin> {
         let seq = &self.sequence.value;
         let (a, b) = (&seq[i].value, &seq[(i + 1) % seq.len()].value);
         let spec = &self.joins[i];
@@ -185,7 +185,7 @@ impl Scenario {
             self.err(spec.loc, format!("join {} ({a} → {b}): {why}", i + 1))
         })?;
         let plain = transition::join_seam(space, &ra, &rb, &[], (0, 0), e);
-        Ok(JoinReport {
+        Ok(PlannedJoin {
             from: a.clone(),
             to: b.clone(),
             join,
@@ -198,7 +198,7 @@ impl Scenario {
     fn frame_list(
         &self,
         motions: &BTreeMap<&str, MotionPlan>,
-        joins: &[JoinReport],
+        joins: &[PlannedJoin],
     ) -> Result<(Vec<PlanFrame>, Vec<MorphRun>)> {
         let seq = &self.sequence.value;
         let mut frames = Vec::new();
