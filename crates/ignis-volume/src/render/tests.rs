@@ -11,23 +11,21 @@ use crate::mapping::radial_u;
 
 use crate::{BSpline, FireScene, NoiseKind, Preset};
 
-/// Renders the first frame of `scene` (all fires) with and without `exact_inverse`.
-fn fast_and_exact(
-    scene: &FireScene,
-    time: f32,
-    loop_period: Option<f32>,
-) -> [(RgbaFrame, RenderStats); 2] {
+/// The lattices of `scene`'s fires at its animation's first step.
+fn first_lattices(scene: &FireScene) -> Vec<Lattice> {
     let mut anim = scene.animator().unwrap();
     let (pts, _) = anim.step();
-    let lats: Vec<Lattice> = pts
-        .iter()
+    pts.iter()
         .zip(&scene.fires)
         .map(|(p, f)| {
             Lattice::build(&BSpline::new(p.clone(), f.degree).unwrap(), scene.lattice).unwrap()
         })
-        .collect();
-    let inst: Vec<FireInstance> = lats
-        .iter()
+        .collect()
+}
+
+/// `scene`'s fires over `lats`, as the renderer takes them.
+fn instances<'a>(scene: &'a FireScene, lats: &'a [Lattice]) -> Vec<FireInstance<'a>> {
+    lats.iter()
         .zip(&scene.fires)
         .enumerate()
         .map(|(i, (lat, f))| FireInstance {
@@ -36,7 +34,17 @@ fn fast_and_exact(
             noise: f.noise,
             offset: scene.offset(i),
         })
-        .collect();
+        .collect()
+}
+
+/// Renders the first frame of `scene` (all fires) with and without `exact_inverse`.
+fn fast_and_exact(
+    scene: &FireScene,
+    time: f32,
+    loop_period: Option<f32>,
+) -> [(RgbaFrame, RenderStats); 2] {
+    let lats = first_lattices(scene);
+    let inst = instances(scene, &lats);
     let mut params = scene.render_params();
     params.loop_period = loop_period;
     assert!(!params.exact_inverse);
@@ -186,26 +194,8 @@ fn simd_build_matches_baseline_build() {
     mn.blend = Blend::Cartoon;
     scenes.push(mn);
     for scene in &scenes {
-        let mut anim = scene.animator().unwrap();
-        let (pts, _) = anim.step();
-        let lats: Vec<Lattice> = pts
-            .iter()
-            .zip(&scene.fires)
-            .map(|(p, f)| {
-                Lattice::build(&BSpline::new(p.clone(), f.degree).unwrap(), scene.lattice).unwrap()
-            })
-            .collect();
-        let inst: Vec<FireInstance> = lats
-            .iter()
-            .zip(&scene.fires)
-            .enumerate()
-            .map(|(i, (lat, f))| FireInstance {
-                lattice: lat,
-                profile: &f.profile,
-                noise: f.noise,
-                offset: scene.offset(i),
-            })
-            .collect();
+        let lats = first_lattices(scene);
+        let inst = instances(scene, &lats);
         let mut params = scene.render_params();
         for exact in [false, true] {
             params.exact_inverse = exact;
