@@ -305,7 +305,7 @@ pub fn animate_cmd(a: &AnimateArgs, g: &Global) -> Result<Plan> {
             a.scenario.display()
         )
     })?;
-    let plan = sc.plan(&db, &mut crate::eigen::Bars::new(g))?;
+    let plan = sc.plan(&db, &mut crate::global::StageBars::new(g))?;
     let opts = a.out.write_options();
     let out_loops = opts.loop_
         && matches!(

@@ -322,7 +322,7 @@ fn build_entry(
             keep: Some(ignis_eigen::ESelect::Count(keep.max(2))),
             ..Default::default()
         };
-        let mut bars = crate::eigen::Bars::new(g);
+        let mut bars = crate::global::StageBars::new(g);
         ignis_eigen::train(&clips, &pre, &tp, &tmp.join("fire.db"), &mut bars)
             .context("training the clip's database")?;
         bars.finish_stage();

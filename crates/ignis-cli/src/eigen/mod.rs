@@ -5,7 +5,7 @@
 pub mod animate;
 pub mod loop_cmd;
 
-use crate::global::Global;
+use crate::global::{Global, StageBars};
 use anyhow::{bail, Context, Result};
 use ignis_core::Size;
 use ignis_eigen::analysis::{self, ESelect};
@@ -302,44 +302,6 @@ pub fn run(cmd: Command, g: &Global) -> Result<()> {
     }
 }
 
-/// indicatif bars for the library's progress stages.
-pub(crate) struct Bars<'g> {
-    g: &'g Global,
-    bar: Option<indicatif::ProgressBar>,
-}
-
-impl<'g> Bars<'g> {
-    pub(crate) fn new(g: &'g Global) -> Bars<'g> {
-        Bars { g, bar: None }
-    }
-}
-
-impl Progress for Bars<'_> {
-    fn stage(&mut self, name: &str, len: u64) {
-        self.finish_stage();
-        self.bar = Some(if len == 0 {
-            self.g.spinner(name)
-        } else {
-            self.g.progress(len, name)
-        });
-    }
-    fn inc(&mut self, n: u64) {
-        if let Some(b) = &self.bar {
-            b.inc(n);
-        }
-    }
-    fn message(&mut self, text: &str) {
-        if let Some(b) = &self.bar {
-            b.set_message(text.to_string());
-        }
-    }
-    fn finish_stage(&mut self) {
-        if let Some(b) = self.bar.take() {
-            b.finish_and_clear();
-        }
-    }
-}
-
 fn clip_name(path: &Path, taken: &[String]) -> String {
     let stem: String = path
         .file_stem()
@@ -437,7 +399,7 @@ pub fn train(a: TrainArgs, g: &Global) -> Result<()> {
         };
         clips.push(ClipInput { spec: s, footage });
     }
-    let mut bars = Bars { g, bar: None };
+    let mut bars = StageBars::new(g);
     let r = ignis_eigen::train(&clips, &pre, &tp, &a.output, &mut bars)
         .with_context(|| format!("training {}", a.output.display()))?;
     bars.finish_stage();
@@ -752,7 +714,7 @@ fn preprocess(a: PreprocessArgs, g: &Global) -> Result<()> {
     };
     let spec = a.frames_from.clip(&clip_name(&input, &[]), &input);
     let clip = ClipInput::new(spec, MediaFootage::open(&input)?);
-    let mut bars = Bars { g, bar: None };
+    let mut bars = StageBars::new(g);
     let stages = ignis_eigen::train::preprocess_clip(&clip, &pre, &a.frames, &mut bars)
         .with_context(|| format!("pre-processing {}", input.display()))?;
     bars.finish_stage();
@@ -820,13 +782,10 @@ pub fn demo(ctx: &mut crate::demo::Demo) -> Result<()> {
         ..Default::default()
     };
     let dbp = ctx.path("eigen/fire.db")?;
-    let mut bars = Bars {
-        g: &ctx.global,
-        bar: None,
-    };
+    let mut bars = StageBars::new(&ctx.global);
     let r = ignis_eigen::train(&clips, &pre, &tp, &dbp, &mut bars)
         .context("training the demo Eigenfire database")?;
-    bars.finish_stage();
+    drop(bars);
     let db = open_db(&dbp)?;
     let settings = format!("2 synthetic clips × {frames} frames at {size}, seed {}, training size {train}, {} Eigenfires", ctx.seed, r.manifest.components);
     let plots = ctx.path("eigen/plots")?;
