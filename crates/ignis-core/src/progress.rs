@@ -12,6 +12,9 @@ pub trait Progress {
     fn inc(&mut self, _n: u64) {}
     /// A line worth showing beside the bar (e.g. an iteration's log-likelihood).
     fn message(&mut self, _text: &str) {}
+    /// A named figure of the step just reported (e.g. `"log-likelihood"` after an EM
+    /// iteration), for callers that watch values rather than read lines.
+    fn value(&mut self, _name: &str, _value: f64) {}
     /// The current stage is finished.
     fn finish_stage(&mut self) {}
 }
@@ -28,6 +31,8 @@ pub struct CountingProgress {
     pub stages: Vec<(String, u64, u64)>,
     /// Messages in order.
     pub messages: Vec<String>,
+    /// Named values in order.
+    pub values: Vec<(String, f64)>,
 }
 
 impl Progress for CountingProgress {
@@ -41,6 +46,9 @@ impl Progress for CountingProgress {
     }
     fn message(&mut self, text: &str) {
         self.messages.push(text.to_string());
+    }
+    fn value(&mut self, name: &str, value: f64) {
+        self.values.push((name.to_string(), value));
     }
 }
 
@@ -57,8 +65,10 @@ mod tests {
         dynp.inc(1);
         dynp.stage("b", 0);
         dynp.message("hi");
+        dynp.value("x", 2.5);
         dynp.finish_stage();
         assert_eq!(p.stages, vec![("a".into(), 3, 3), ("b".into(), 0, 0)]);
         assert_eq!(p.messages, vec!["hi".to_string()]);
+        assert_eq!(p.values, vec![("x".to_string(), 2.5)]);
     }
 }

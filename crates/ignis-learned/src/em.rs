@@ -144,11 +144,12 @@ struct Lambda {
 }
 
 /// Learns an ARP from a parameter series (`series[t]` = parameters of frame `t`, all the
-/// same length). `on_iteration(i, log_likelihood)` is called after each E-step.
+/// same length). Each E-step is one step of `progress`'s current stage, reported with its
+/// log-likelihood (as the value `"log-likelihood"` and as a message).
 pub fn learn(
     series: &[Vec<f64>],
     p: &EmParams,
-    mut on_iteration: impl FnMut(usize, f64),
+    progress: &mut dyn ignis_core::progress::Progress,
 ) -> Result<Learned> {
     p.validate()?;
     let (t_len, k) = (series.len(), p.order);
@@ -192,7 +193,9 @@ pub fn learn(
     for it in 0..p.max_iterations {
         let mut rng = Rng::derive(p.seed, it as u64);
         let (ll, g, resid) = e_step(&y, &lam, p, &mut rng)?;
-        on_iteration(it, ll);
+        progress.inc(1);
+        progress.value("log-likelihood", ll);
+        progress.message(&format!("EM iteration {it:>3}: log-likelihood {ll:.3}"));
         lls.push(ll);
         if ll > best.0 {
             best = (ll, lam.clone(), it);
@@ -529,7 +532,12 @@ mod tests {
     #[test]
     fn too_few_steps_is_a_clear_error() {
         let s = vec![vec![1.0, 2.0]; 3];
-        let err = learn(&s, &EmParams::default(), |_, _| {}).unwrap_err();
+        let err = learn(
+            &s,
+            &EmParams::default(),
+            &mut ignis_core::progress::NoProgress,
+        )
+        .unwrap_err();
         assert!(err.to_string().contains("at least 4"), "{err}");
     }
 
@@ -542,7 +550,7 @@ mod tests {
             max_iterations: 5,
             ..EmParams::default()
         };
-        let l = learn(&s, &p, |_, _| {}).unwrap();
+        let l = learn(&s, &p, &mut ignis_core::progress::NoProgress).unwrap();
         assert!(l.report.spectral_radius < 1.0);
     }
 }

@@ -204,10 +204,7 @@ pub fn train(
         .collect();
     let run_states = &states[best.clone()];
     progress.stage(STAGE_EM, p.em.max_iterations as u64);
-    let learned = learn(run_states, &p.em, |i, ll| {
-        progress.inc(1);
-        progress.message(&format!("EM iteration {i:>3}: log-likelihood {ll:.3}"));
-    })?;
+    let learned = learn(run_states, &p.em, progress)?;
     progress.finish_stage();
     let n = shape.n_state();
     let state_mean: Vec<f64> = (0..n)

@@ -79,8 +79,9 @@ mod dynamics {
             seed: 3,
             ..EmParams::default()
         };
-        let mut lls = Vec::new();
-        let learned = learn(&y, &p, |_, ll| lls.push(ll)).unwrap();
+        let mut watch = ignis_core::progress::CountingProgress::default();
+        let learned = learn(&y, &p, &mut watch).unwrap();
+        let lls: Vec<f64> = watch.values.iter().map(|v| v.1).collect();
         let arp = &learned.arp;
         // Tolerance: 0.08 on every entry of A_1, A_2 and d (the least-squares standard
         // error at T = 1500 is ≈ 0.02–0.03).
@@ -122,7 +123,9 @@ mod dynamics {
             seed: 4,
             ..EmParams::default()
         };
-        let arp = learn(&y, &p, |_, _| {}).unwrap().arp;
+        let arp = learn(&y, &p, &mut ignis_core::progress::NoProgress)
+            .unwrap()
+            .arp;
         let init = y[y.len() - 2..].to_vec();
         let synth = arp.simulate(&init, 100_000, 5).unwrap();
         let bound = 20.0 * y.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
