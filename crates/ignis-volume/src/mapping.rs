@@ -164,7 +164,14 @@ pub fn shade_looped(
             let p = noise_position(tex, time, scale, offset);
             turbulence(noise.kind, p, noise.octaves, noise.gain, noise.lacunarity)
         };
-        m.a * t(m.time) + m.b * t(m.time - m.period)
+        // the second copy is skipped while its weight is zero (exactly `a · T`, as the
+        // renderer's batched shading does)
+        let first = m.a * t(m.time);
+        if m.b == 0.0 {
+            first
+        } else {
+            first + m.b * t(m.time - m.period)
+        }
     };
     let [u, v] = profile_uv(tex, turb, noise.stability);
     profile.sample(u, v)
@@ -172,7 +179,7 @@ pub fn shade_looped(
 
 /// The whole mapping of eq. (9)–(14) for one sample: the profile colour (straight alpha)
 /// at texture coordinates `tex` of a fire whose local radius is `radius` and whose centre
-/// curve is `length` long, at noise time `time`.
+/// curve is `length` long, at noise time `time`. ([`shade_looped`] with one noise copy.)
 #[inline]
 pub fn shade(
     tex: [f32; 3],
@@ -183,17 +190,11 @@ pub fn shade(
     offset: [f32; 4],
     profile: &FireProfile,
 ) -> [f32; 4] {
-    let u = radial_u(tex);
-    if profile.column_empty(u) {
-        return [0.0; 4];
-    }
-    let turb = if noise.octaves == 0 || noise.stability == 0.0 {
-        0.0
-    } else {
-        let scale = noise_scale(radius, length, noise.frequency);
-        let p = noise_position(tex, time, scale, offset);
-        turbulence(noise.kind, p, noise.octaves, noise.gain, noise.lacunarity)
+    let one = LoopMix {
+        time,
+        period: 0.0,
+        a: 1.0,
+        b: 0.0,
     };
-    let [u, v] = profile_uv(tex, turb, noise.stability);
-    profile.sample(u, v)
+    shade_looped(tex, radius, length, one, noise, offset, profile)
 }
