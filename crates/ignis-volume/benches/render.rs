@@ -23,6 +23,7 @@ fn table1(c: &mut Criterion) {
                 profile: &scene.fires[0].profile,
                 noise: scene.fires[0].noise,
                 offset: scene.offset(0),
+                scroll_length: None,
             }];
             let params = scene.render_params();
             let counting = ignis_volume::RenderParams {

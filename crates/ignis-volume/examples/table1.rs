@@ -54,6 +54,7 @@ fn main() {
                 profile: &scene.fires[0].profile,
                 noise: scene.fires[0].noise,
                 offset: scene.offset(0),
+                scroll_length: None,
             }];
             let params = scene.render_params();
             // the covered pixels from one frame that counts them (extra work), then the

@@ -966,9 +966,42 @@ fn corner_curves(curve: &BSpline) -> Result<Vec<BSpline>> {
         .collect()
 }
 
+/// Puffing (Cetegen & Ahmed 1993) as a wave on a lattice: the flame necks and bulges
+/// where a wave travelling up the flame passes, `radius · (1 − a · e(h) · sin(φ − 2π h))`
+/// at height `h ∈ [0, 1]` (arc length over the curve's), with `a` the amplitude, `φ` the
+/// phase (advancing `2π f t` at the puffing frequency `f`) and `e(h) = h` growing from
+/// nothing at the base. One wavelength spans the flame, so a neck forms at the base, rises
+/// and pinches the tip once a cycle, and the brightness of the flame's upper half swings at
+/// `f`. Why a travelling wave rather than the whole flame stretching in step: a standing
+/// oscillation changes the image by `|cos φ|` per frame (fast through the middle, still at
+/// the turns), so the frame-to-frame steps of a loop spread by ±40 %; a travelling wave
+/// moves every part of the flame in turn, and the image changes by about the same amount
+/// every frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Puff {
+    /// Relative amplitude `a` of the radius swing, `0..=0.5` (so the radius stays ≥ half).
+    pub amplitude: f32,
+    /// Phase `φ` in radians.
+    pub phase: f32,
+}
+
+impl Puff {
+    /// The radius factor at height `h ∈ [0, 1]`.
+    pub fn factor(&self, h: f32) -> f32 {
+        let h = h.clamp(0.0, 1.0);
+        1.0 - self.amplitude * h * (self.phase - std::f32::consts::TAU * h).sin()
+    }
+}
+
 impl Lattice {
     /// Builds the lattice of §3.1 around `curve` with `resolution` levels.
     pub fn build(curve: &BSpline, resolution: usize) -> Result<Lattice> {
+        Lattice::build_puffed(curve, resolution, None)
+    }
+
+    /// [`Lattice::build`] with each level's square (and radius) scaled about the curve by
+    /// `puff`'s factor at the level's height ([`Puff`]).
+    pub fn build_puffed(curve: &BSpline, resolution: usize, puff: Option<Puff>) -> Result<Lattice> {
         if !(2..=4096).contains(&resolution) {
             return Err(VolumeError::bad(
                 "render.lattice",
@@ -1018,8 +1051,16 @@ impl Lattice {
                 let q = c.eval(t);
                 lv[k] = [q[0], q[1], q[2]];
             }
+            let mut r = curve.eval(t)[3];
+            if let Some(p) = puff.filter(|p| p.amplitude != 0.0) {
+                let f = p.factor(j as f32 / (resolution - 1) as f32);
+                // the corners' mean is the curve's point (their offsets cancel)
+                let c = scale(add(add(lv[0], lv[1]), add(lv[2], lv[3])), 0.25);
+                lv = lv.map(|q| add(c, scale(sub(q, c), f)));
+                r *= f;
+            }
             levels.push(lv);
-            radii.push(curve.eval(t)[3]);
+            radii.push(r);
         }
         let cells: Vec<Cell> = (0..resolution - 1)
             .map(|j| {
@@ -1116,6 +1157,45 @@ impl Lattice {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Puffing scales each level's square and radius about the curve by the wave's factor
+    /// (none at the base), leaves the curve where it is, and at amplitude 0 is no puffing.
+    #[test]
+    fn puffing_scales_levels_about_the_curve() {
+        let c = bent();
+        let plain = Lattice::build(&c, 21).unwrap();
+        let still = Puff {
+            amplitude: 0.0,
+            phase: 1.0,
+        };
+        assert_eq!(Lattice::build_puffed(&c, 21, Some(still)).unwrap(), plain);
+        let p = Puff {
+            amplitude: 0.4,
+            phase: 0.7,
+        };
+        let puffed = Lattice::build_puffed(&c, 21, Some(p)).unwrap();
+        assert_eq!(puffed.length(), plain.length());
+        for j in 0..21 {
+            let h = j as f32 / 20.0;
+            let f = p.factor(h);
+            assert!((0.6..=1.4).contains(&f));
+            let (a, b) = (plain.levels()[j], puffed.levels()[j]);
+            let mid = |l: [V3; 4]| scale(add(add(l[0], l[1]), add(l[2], l[3])), 0.25);
+            assert!(norm(sub(mid(a), mid(b))) < 1e-5, "level {j} moved");
+            let (ra, rb) = (norm(sub(a[0], mid(a))), norm(sub(b[0], mid(b))));
+            assert!((rb - f * ra).abs() < 1e-4, "level {j}: {rb} vs {f} · {ra}");
+            assert!((puffed.radius_at(h) - f * plain.radius_at(h)).abs() < 1e-5);
+        }
+        assert_eq!(p.factor(0.0), 1.0);
+        // the wave travels: a later phase puts the same factor higher up
+        let later = Puff {
+            phase: p.phase + 0.5,
+            ..p
+        };
+        let dh = 0.5 / std::f32::consts::TAU;
+        let s = |q: Puff, h: f32| (1.0 - q.factor(h)) / h;
+        assert!((s(later, 0.6 + dh) - s(p, 0.6)).abs() < 1e-5);
+    }
 
     fn bent() -> BSpline {
         BSpline::new(

@@ -27,7 +27,7 @@ pub mod scene;
 pub mod spline;
 
 pub use error::{Result, VolumeError};
-pub use lattice::{Cell, Lattice};
+pub use lattice::{Cell, Lattice, Puff};
 pub use mapping::NoiseParams;
 pub use motion::{Collision, Keyframe, Obstacle, ParticleSim, Script, SimParams};
 pub use noise::NoiseKind;

@@ -4,7 +4,7 @@
 //! functions on purpose: a GPU renderer must reproduce them line for line (they are the
 //! pixel shader), and [`shade`] is what the CPU renderer calls for every sample.
 
-use crate::noise::{turbulence, NoiseKind};
+use crate::noise::{periodic_octaves_fit, turbulence, turbulence_periodic, NoiseKind};
 use crate::profile::FireProfile;
 use serde::{Deserialize, Serialize};
 
@@ -58,16 +58,56 @@ pub fn noise_scale(radius: f32, length: f32, frequency: f32) -> [f32; 4] {
     ]
 }
 
+/// How far the noise's time axis `w` is sheared with height: `w` gains
+/// `TIME_SHEAR · tex_z · length · frequency` (half a cell per cell of height).
+///
+/// Departure from the paper (whose `w` is `time · frequency` at every sample): Improved
+/// Perlin noise changes with `w` at a rate that depends on where `w` lies in its lattice
+/// cell (slowly at whole numbers, where the fade's slope is zero, fastest mid-cell), so
+/// with one `w` for a whole fire the fire's image changed faster and slower by turns —
+/// frame-to-frame steps spread by ±30 % on a loop. Sheared, every height is at another
+/// place in the cell and the fire changes by about the same amount every frame. The
+/// noise is still a 3-D slice of the 4-D noise, tilted (its vertical frequency is
+/// `√(1 + 0.5²)` ≈ 1.12 times the paper's).
+pub const TIME_SHEAR: f32 = 0.5;
+
 /// Eq. (11) plus the instance offset of eq. (13):
-/// `(tex_x, tex_y, tex_z − time, time) · noise_scale + offset`.
+/// `(tex_x, tex_y, tex_z − scroll, time) · noise_scale + offset`, where the paper has
+/// `scroll = time` ([`scroll_time`]), and `w` sheared with height ([`TIME_SHEAR`]).
 #[inline(always)]
-pub fn noise_position(tex: [f32; 3], time: f32, scale: [f32; 4], offset: [f32; 4]) -> [f32; 4] {
+pub fn noise_position(
+    tex: [f32; 3],
+    time: f32,
+    scroll: f32,
+    scale: [f32; 4],
+    offset: [f32; 4],
+) -> [f32; 4] {
     [
         tex[0] * scale[0] + offset[0],
         tex[1] * scale[1] + offset[1],
-        (tex[2] - time) * scale[2] + offset[2],
-        time * scale[3] + offset[3],
+        (tex[2] - scroll) * scale[2] + offset[2],
+        time * scale[3] + offset[3] + tex[2] * (scale[2] * TIME_SHEAR),
     ]
+}
+
+/// The upward scroll of eq. (11) in texture units at noise time `time`, for a fire whose
+/// centre curve is `length` long now and whose scroll moves `scroll_length` world units
+/// per unit of noise time: `time · scroll_length / length` (exactly `time` when the two
+/// lengths are equal, as in the paper).
+///
+/// Departure from the paper: eq. (11) scrolls by `time` texture units, i.e. by
+/// `time · length` world units, so when the length changes from frame to frame (a
+/// simulated fire, a script, puffing) the whole noise field jumps by `time · Δlength` —
+/// a jitter that grows with time (over a loop: the noise speeds up and slows down more and
+/// more towards the loop's end). A fixed `scroll_length` per fire keeps the scroll at one
+/// speed in world units whatever the length does.
+#[inline(always)]
+pub fn scroll_time(time: f32, length: f32, scroll_length: f32) -> f32 {
+    if scroll_length == length || length <= 0.0 {
+        time
+    } else {
+        time * (scroll_length / length)
+    }
 }
 
 /// The kernel of eq. (13): `f(tex_z) = stability · √tex_z`.
@@ -140,14 +180,73 @@ pub fn loop_mix(time: f32, period: f32) -> LoopMix {
     }
 }
 
-/// [`shade`] for a looping animation: the same mapping with the turbulence mixed from two
-/// copies of the noise field ([`LoopMix`], which carries the noise time).
+/// A seamless loop of `period` noise-time units made by a noise field that is itself
+/// periodic in time, at no extra cost (the preferred way; [`LoopMix`] is the fallback).
+///
+/// Over one loop the noise position of eq. (11) moves along `z` (the upward scroll) and
+/// along `w` (the 4-D noise's time). Both moves are made whole numbers of lattice cells,
+/// `Pz = round(period · scroll_length · frequency)` and `Pw = round(period · frequency)`
+/// (at least 1), by scaling the scroll and the noise time by at most half a cell per loop
+/// (a few per cent on loops of a second or more), and the Improved Perlin lattice is
+/// wrapped modulo `Pz` and `Pw` cells (`Pz · 2^i`, `Pw · 2^i` at octave `i`, so every
+/// octave's period divides the loop): frame `N` equals frame 0, and frame `N − 1` to
+/// frame `N` is the same kind of step as every other — the noise never changes speed over
+/// the loop. Needs 4-D Perlin noise, a whole-number lacunarity and every octave's period
+/// within the permutation table's 256 cells; otherwise ([`periodic_loop`] gives `None`)
+/// the loop falls back to [`LoopMix`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PeriodicLoop {
+    /// Noise time along `w` (eq. 11's `time`), `time' · Pw / (period · frequency)` with
+    /// `time' = time mod period`.
+    pub time: f32,
+    /// `time'`, the scroll's noise time ([`scroll_time`] with [`PeriodicLoop::scroll_length`]).
+    pub scroll_time: f32,
+    /// The scroll length that moves the noise `Pz` cells per loop: `Pz / (period · frequency)`.
+    pub scroll_length: f32,
+    /// `[Pz, Pw]`, the lattice's periods in cells at the first octave.
+    pub period: [u32; 2],
+}
+
+/// The [`PeriodicLoop`] of a fire with `noise`, scrolling `scroll_length` world units per
+/// noise-time unit, at noise time `time` of a loop `period` noise-time units long; `None`
+/// where the lattice cannot be periodic (see [`PeriodicLoop`]).
+pub fn periodic_loop(
+    time: f32,
+    period: f32,
+    noise: &NoiseParams,
+    scroll_length: f32,
+) -> Option<PeriodicLoop> {
+    let f = noise.frequency;
+    if noise.kind != NoiseKind::Perlin4 || !(period > 0.0 && f > 0.0 && scroll_length > 0.0) {
+        return None;
+    }
+    let cells = |x: f32| {
+        let c = x.round().max(1.0);
+        (c <= 256.0).then_some(c as u32)
+    };
+    let pz = cells(period * scroll_length * f)?;
+    let pw = cells(period * f)?;
+    if !periodic_octaves_fit([pz, pw], noise.octaves, noise.lacunarity) {
+        return None;
+    }
+    let t = time.rem_euclid(period);
+    let t = if t >= period { 0.0 } else { t };
+    Some(PeriodicLoop {
+        time: t * (pw as f32 / (period * f)),
+        scroll_time: t,
+        scroll_length: pz as f32 / (period * f),
+        period: [pz, pw],
+    })
+}
+
+/// [`shade`] for a looping animation whose noise is periodic ([`PeriodicLoop`]), for a
+/// fire whose centre curve is `length` long.
 #[inline]
-pub fn shade_looped(
+pub fn shade_periodic(
     tex: [f32; 3],
     radius: f32,
     length: f32,
-    m: LoopMix,
+    pl: PeriodicLoop,
     noise: &NoiseParams,
     offset: [f32; 4],
     profile: &FireProfile,
@@ -160,8 +259,37 @@ pub fn shade_looped(
         0.0
     } else {
         let scale = noise_scale(radius, length, noise.frequency);
+        let scroll = scroll_time(pl.scroll_time, length, pl.scroll_length);
+        let p = noise_position(tex, pl.time, scroll, scale, offset);
+        turbulence_periodic(p, noise.octaves, noise.gain, noise.lacunarity, pl.period)
+    };
+    let [u, v] = profile_uv(tex, turb, noise.stability);
+    profile.sample(u, v)
+}
+
+/// [`shade`] for a looping animation: the same mapping with the turbulence mixed from two
+/// copies of the noise field ([`LoopMix`], which carries the noise time).
+#[inline]
+pub fn shade_looped(
+    tex: [f32; 3],
+    radius: f32,
+    length: [f32; 2],
+    m: LoopMix,
+    noise: &NoiseParams,
+    offset: [f32; 4],
+    profile: &FireProfile,
+) -> [f32; 4] {
+    let u = radial_u(tex);
+    if profile.column_empty(u) {
+        return [0.0; 4];
+    }
+    let turb = if noise.octaves == 0 || noise.stability == 0.0 {
+        0.0
+    } else {
+        let scale = noise_scale(radius, length[0], noise.frequency);
         let t = |time: f32| {
-            let p = noise_position(tex, time, scale, offset);
+            let scroll = scroll_time(time, length[0], length[1]);
+            let p = noise_position(tex, time, scroll, scale, offset);
             turbulence(noise.kind, p, noise.octaves, noise.gain, noise.lacunarity)
         };
         // the second copy is skipped while its weight is zero (exactly `a · T`, as the
@@ -178,13 +306,15 @@ pub fn shade_looped(
 }
 
 /// The whole mapping of eq. (9)–(14) for one sample: the profile colour (straight alpha)
-/// at texture coordinates `tex` of a fire whose local radius is `radius` and whose centre
-/// curve is `length` long, at noise time `time`. ([`shade_looped`] with one noise copy.)
+/// at texture coordinates `tex` of a fire whose local radius is `radius`, whose centre
+/// curve is `length[0]` long and whose noise scrolls `length[1]` world units per unit of
+/// noise time ([`scroll_time`]; the paper's `length[1] = length[0]`), at noise time `time`.
+/// ([`shade_looped`] with one noise copy.)
 #[inline]
 pub fn shade(
     tex: [f32; 3],
     radius: f32,
-    length: f32,
+    length: [f32; 2],
     time: f32,
     noise: &NoiseParams,
     offset: [f32; 4],
@@ -197,4 +327,63 @@ pub fn shade(
         b: 0.0,
     };
     shade_looped(tex, radius, length, one, noise, offset, profile)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The scroll moves the noise at one speed in world units whatever the fire's length:
+    /// `scroll_time · length` is `time · scroll_length`.
+    #[test]
+    fn scroll_keeps_its_speed_when_the_length_changes() {
+        assert_eq!(scroll_time(3.25, 1.5, 1.5), 3.25);
+        for length in [0.5f32, 1.0, 1.7, 4.0] {
+            let world = scroll_time(2.0, length, 1.2) * length;
+            assert!((world - 2.4).abs() < 1e-5, "{length}: {world}");
+        }
+    }
+
+    /// A periodic loop moves the noise whole numbers of cells per loop, repeats exactly with
+    /// the loop, and is refused (so the renderer mixes two copies) where it cannot be built.
+    #[test]
+    fn periodic_loop_whole_cells_or_none() {
+        let noise = NoiseParams {
+            frequency: 4.0,
+            octaves: 4,
+            ..Default::default()
+        };
+        let period = 0.8;
+        let pl = periodic_loop(0.3, period, &noise, 1.1).expect("periodic");
+        // 0.8 · 1.1 · 4 = 3.52 → 4 cells of scroll; 0.8 · 4 = 3.2 → 3 cells of time
+        assert_eq!(pl.period, [4, 3]);
+        let moved_z = period * pl.scroll_length * noise.frequency;
+        let moved_w = periodic_loop(period - 1e-6, period, &noise, 1.1)
+            .unwrap()
+            .time
+            * noise.frequency;
+        assert!((moved_z - 4.0).abs() < 1e-5, "{moved_z}");
+        assert!((moved_w - 3.0).abs() < 1e-4, "{moved_w}");
+        assert_eq!(periodic_loop(0.3 + period, period, &noise, 1.1), Some(pl));
+        let no = |n: NoiseParams| periodic_loop(0.3, period, &n, 1.1).is_none();
+        assert!(no(NoiseParams {
+            kind: NoiseKind::Mnoise,
+            ..noise
+        }));
+        assert!(no(NoiseParams {
+            lacunarity: 2.2,
+            ..noise
+        }));
+        // 8 octaves: 4 cells · 2⁷ = 512 exceed the 256-cell table
+        assert!(periodic_loop(
+            0.3,
+            period,
+            &NoiseParams {
+                octaves: 8,
+                ..noise
+            },
+            1.1
+        )
+        .is_none());
+    }
 }

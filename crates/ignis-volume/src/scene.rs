@@ -7,7 +7,7 @@
 //! seed = 7
 //! fps = 30.0
 //! diameter = 0.3           # the fire's base diameter in metres: it puffs at 1.5/√D Hz
-//! puff = 0.2               # amplitude of that puffing (flame length ±20 %), 0 = none
+//! puff = 0.4               # amplitude of that puffing (radius ±40 % at the tip), 0 = none
 //! [camera]
 //! position = [0.0, -7.0, 1.5]
 //! target = [0.0, 0.0, 1.5]
@@ -35,7 +35,7 @@
 //! ```
 
 use crate::error::{Result, VolumeError};
-use crate::lattice::Lattice;
+use crate::lattice::{Lattice, Puff};
 use crate::mapping::NoiseParams;
 use crate::motion::{
     deflect_points, Collision, Keyframe, Obstacle, ParticleSim, Script, SimParams,
@@ -136,8 +136,9 @@ pub struct FireScene {
     /// it puffs (`1.5/√D` Hz, Cetegen & Ahmed 1993; [`ignis_core::realism`]). Independent
     /// of the scene's world units. Default 0.3 (a small campfire).
     pub diameter: f32,
-    /// Puffing (Cetegen & Ahmed 1993): relative amplitude, `0..=0.5`, of the flame-length
-    /// oscillation at the puffing frequency `1.5/√diameter` Hz ([`puff`]). 0 = none.
+    /// Puffing (Cetegen & Ahmed 1993): relative amplitude, `0..=0.5`, of the neck-and-bulge
+    /// wave that travels up the flame at the puffing frequency `1.5/√diameter` Hz
+    /// ([`Puff`]: the radius swings by this fraction at the tip). 0 = none.
     /// Default 0.
     pub puff: f32,
     pub camera: Camera,
@@ -491,13 +492,16 @@ impl FireScene {
                 _ => None,
             })
             .collect();
-        Ok(Animator {
+        let mut a = Animator {
             scene: self,
             sims,
             frame: 0,
             count_coverage: false,
             looping: None,
-        })
+            scroll: Vec::new(),
+        };
+        a.scroll = a.scroll_lengths()?;
+        Ok(a)
     }
 
     /// A checked animator for a seamless loop of `frames` frames: frame `frames` (which
@@ -564,7 +568,7 @@ impl FireScene {
         s.seed = 1;
         match p {
             Preset::Candle => {
-                s.puff = 0.2;
+                s.puff = 0.4;
                 // a candle flame, about 2 cm across
                 s.diameter = 0.02;
                 let pose = |dx: f32| {
@@ -615,7 +619,7 @@ impl FireScene {
                 s.intensity = 18.0;
             }
             Preset::Torch => {
-                s.puff = 0.2;
+                s.puff = 0.4;
                 // a torch head, about 10 cm
                 s.diameter = 0.1;
                 let mut f = FireSpec::new(Motion::Simulation(SimParams {
@@ -644,7 +648,7 @@ impl FireScene {
                 s.intensity = 10.5;
             }
             Preset::Campfire => {
-                s.puff = 0.2;
+                s.puff = 0.4;
                 // a small campfire, 40 cm
                 s.diameter = 0.4;
                 for k in 0..5 {
@@ -700,7 +704,7 @@ impl FireScene {
                 s.intensity = 3.2;
             }
             Preset::Wall => {
-                s.puff = 0.2;
+                s.puff = 0.4;
                 // each burning element of the wall, 60 cm
                 s.diameter = 0.6;
                 for k in 0..9 {
@@ -784,6 +788,8 @@ pub struct Animator<'a> {
     frame: u64,
     count_coverage: bool,
     looping: Option<Looping>,
+    /// Per fire: its scroll length ([`Animator::scroll_lengths`]).
+    scroll: Vec<f32>,
 }
 
 impl Animator<'_> {
@@ -868,14 +874,41 @@ impl Animator<'_> {
                 }
             }
         }
-        if s.puff > 0.0 {
-            let phase = self.puff_phase();
-            for (i, p) in pts.iter_mut().enumerate() {
-                puff(p, s.puff, phase + s.puff_offset(i));
-            }
-        }
         self.frame += 1;
         (pts, hits)
+    }
+
+    /// Each fire's scroll length ([`FireInstance::scroll_length`]): the length of its
+    /// centre curve at frame 0 (before any loop blending), fixed for the whole animation
+    /// so that every frame range of it scrolls the same way.
+    fn scroll_lengths(&self) -> Result<Vec<f32>> {
+        let s = self.scene;
+        let mut probe = Animator {
+            scene: s,
+            sims: self.sims.clone(),
+            frame: 0,
+            count_coverage: false,
+            looping: None,
+            scroll: Vec::new(),
+        };
+        let (pts, _) = probe.step();
+        pts.into_iter()
+            .zip(&s.fires)
+            .enumerate()
+            .map(|(i, (p, f))| {
+                let c = BSpline::new(p, f.degree).map_err(|e| within(&format!("fire[{i}]"), e))?;
+                Ok(Lattice::build(&c, s.lattice)?.length())
+            })
+            .collect()
+    }
+
+    /// Fire `i`'s puffing wave at the next frame, if the scene puffs.
+    fn puff_wave(&self, i: usize) -> Option<Puff> {
+        let s = self.scene;
+        (s.puff > 0.0).then(|| Puff {
+            amplitude: s.puff,
+            phase: self.puff_phase() + s.puff_offset(i),
+        })
     }
 
     /// Phase (radians) of the puffing cycle at the current frame: `2π f t` with `f` the
@@ -898,6 +931,7 @@ impl Animator<'_> {
     pub fn next_frame(&mut self) -> Result<Frame> {
         let s = self.scene;
         let t = self.frame as f32 / s.fps;
+        let puffs: Vec<Option<Puff>> = (0..s.fires.len()).map(|i| self.puff_wave(i)).collect();
         let (pts, collisions) = self.step();
         let lattices = pts
             .iter()
@@ -906,7 +940,7 @@ impl Animator<'_> {
             .map(|(i, (p, f))| {
                 let c = BSpline::new(p.clone(), f.degree)
                     .map_err(|e| within(&format!("fire[{i}]"), e))?;
-                Lattice::build(&c, s.lattice)
+                Lattice::build_puffed(&c, s.lattice, puffs[i])
             })
             .collect::<Result<Vec<_>>>()?;
         let inst: Vec<FireInstance> = lattices
@@ -918,6 +952,7 @@ impl Animator<'_> {
                 profile: &f.profile,
                 noise: f.noise,
                 offset: s.offset(i),
+                scroll_length: Some(self.scroll[i]),
             })
             .collect();
         let params = RenderParams {
@@ -1016,30 +1051,6 @@ impl LoopScript {
                 })
             })
             .collect()
-    }
-}
-
-/// Puffing applied to a fire's control points `[x, y, z, radius]` (base first): a wave
-/// travelling up the flame at `phase` (radians) that stretches the flame by up to
-/// `amplitude` of its height and necks it where it stretches, growing from nothing at the
-/// base to full at the tip. This is the visible part of the buoyant instability Cetegen &
-/// Ahmed measured (a toroidal vortex forms at the base, rises, pinches the flame and sheds
-/// its tip once a cycle); the noise supplies the small-scale turbulence on top.
-pub fn puff(points: &mut [[f32; 4]], amplitude: f32, phase: f32) {
-    let n = points.len();
-    if n < 2 {
-        return;
-    }
-    let base = points[0];
-    for (i, p) in points.iter_mut().enumerate() {
-        let h = i as f32 / (n - 1) as f32;
-        // half a wavelength over the flame: the tip lags the middle by a quarter cycle
-        let wave = (phase - std::f32::consts::TAU * h).sin();
-        let stretch = 1.0 + amplitude * h * wave;
-        for a in 0..3 {
-            p[a] = base[a] + (p[a] - base[a]) * stretch;
-        }
-        p[3] *= 1.0 - 0.5 * amplitude * h * wave;
     }
 }
 

@@ -87,6 +87,7 @@ fn torch_frame_reference_path() {
             profile: &f.profile,
             noise: f.noise,
             offset: scene.offset(i),
+            scroll_length: None,
         })
         .collect();
     let params = ignis_volume::RenderParams {

@@ -363,12 +363,11 @@ mod looping {
         }
     }
 
-    /// The seam is a step like any other. Issue 16's goal is wrap ≤ 1.1× and every step
-    /// ≤ 1.2× the median; an exact loop meets the first only as often as any one step of
-    /// the animation does (the steps of these noise-driven flames spread by about ±40 %
-    /// on their own), so this asserts what the loop guarantees — a seam within the spread of
-    /// the ordinary steps, far below the jump of an unlooped render (2.8–5.8× at these
-    /// settings) — and prints the goal figures.
+    /// Issue 16's goal, on the written frames: the seam (last → first) ≤ 1.1× and every
+    /// step ≤ 1.2× the loop's median step. The noise is periodic in time (a wrapped lattice,
+    /// not a crossfade), so the seam is an ordinary step; the puffing is a wave travelling
+    /// up the flame and the noise's time axis is sheared with height, so the steps are
+    /// about equal all through the loop.
     #[test]
     fn every_preset_loops_seamlessly() {
         for p in Preset::ALL {
@@ -377,7 +376,32 @@ mod looping {
                 "{}: wrap {wrap:.3}, max step {max:.3} (goal 1.1 / 1.2)",
                 p.name()
             );
-            assert!(wrap <= 1.6, "{}: wrap {wrap:.3}", p.name());
+            assert!(wrap <= 1.1, "{}: wrap {wrap:.3}", p.name());
+            assert!(max <= 1.2, "{}: max step {max:.3}", p.name());
+        }
+    }
+
+    /// The same on other seeds and loop lengths, where the goal is not always met: the
+    /// seam is an ordinary step of a periodic animation, but these noise-driven flames at
+    /// 48² change by ±15 % from frame to frame on their own, so over 20–36 steps the
+    /// largest (the seam included, when it happens to be it) reaches 1.1–1.6× the median
+    /// (seeds 1–4 × 20, 24, 30, 36 frames: largest step 1.08–1.62, seam 0.77–1.44; see
+    /// `benches/README.md`). Relaxed bounds for that reason: seam ≤ 1.5, steps ≤ 1.7 —
+    /// an unlooped render's seam is 2.8–5.8 at these settings.
+    #[test]
+    fn other_seeds_and_lengths_loop_seamlessly() {
+        for (seed, frames) in [(2, 24), (3, 30), (1, 20)] {
+            for p in Preset::ALL {
+                let mut s = small(p);
+                s.seed = seed;
+                let (wrap, max) = loop_figures(&s, frames);
+                println!(
+                    "{} seed {seed}, {frames} frames: wrap {wrap:.3}, max step {max:.3}",
+                    p.name()
+                );
+                assert!(wrap <= 1.5, "{}: wrap {wrap:.3}", p.name());
+                assert!(max <= 1.7, "{}: max step {max:.3}", p.name());
+            }
         }
     }
 

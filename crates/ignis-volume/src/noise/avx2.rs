@@ -11,7 +11,7 @@
 //! three or more cells gets each cell's noise computed on all lanes the same way, and
 //! every lane keeps its own cell's.
 
-use super::{corners3, corners4, mnoise_lanes, Lanes, NoiseCache, NoiseKind, GRAD3, GRAD4};
+use super::{corners3, mnoise_lanes, Lanes, NoiseCache, NoiseKind, GRAD3, GRAD4};
 use std::arch::x86_64::*;
 
 /// [`super::ffloor_lane`] on 8 lanes: truncation of the clamped value, corrected down.
@@ -155,10 +155,6 @@ pub(crate) unsafe fn perlin4_cached(p: &[Lanes; 4], cache: &mut NoiseCache) -> L
         _mm256_or_si256(xi, _mm256_slli_epi32::<8>(yi)),
         _mm256_or_si256(_mm256_slli_epi32::<16>(zi), _mm256_slli_epi32::<24>(wi)),
     );
-    let hash = |k: u32| {
-        let (a, b, c, e) = (k & 255, (k >> 8) & 255, (k >> 16) & 255, k >> 24);
-        corners4(a as usize, b as usize, c as usize, e as usize)
-    };
     let one = _mm256_set1_ps(1.0);
     let off = [
         [x, _mm256_sub_ps(x, one)],
@@ -179,15 +175,15 @@ pub(crate) unsafe fn perlin4_cached(p: &[Lanes; 4], cache: &mut NoiseCache) -> L
     let Some((ka, kb, in_a)) = two_cells(key) else {
         // three or more cells: each cell's noise on all lanes, kept where it applies
         return store(per_cell(key, |k| {
-            let h = cache.c4.get(k, || hash(k));
+            let h = cache.corners4(k);
             tree16(|ci| dot4w(&GRAD4_WIDE.0[h[ci] as usize & 31], o(ci)), f)
         }));
     };
-    let ha = cache.c4.get(ka, || hash(ka));
+    let ha = cache.corners4(ka);
     let v = if kb == ka {
         tree16(|ci| dot4w(&GRAD4_WIDE.0[ha[ci] as usize & 31], o(ci)), f)
     } else {
-        let hb = cache.c4.get(kb, || hash(kb));
+        let hb = cache.corners4(kb);
         tree16(
             |ci| {
                 let (a, b) = (

@@ -595,29 +595,86 @@ fn corners3(xi: usize, yi: usize, zi: usize) -> [u8; 8] {
 /// `ix + 2 iy + 4 iz + 8 iw`.
 #[inline(always)]
 fn corners4(xi: usize, yi: usize, zi: usize, wi: usize) -> [u8; 16] {
+    corners4_with(xi, yi, [zi, zi + 1], [wi, wi + 1])
+}
+
+/// [`corners4`] with the cell's lower and upper lattice indices along `z` and `w` given
+/// (`[zi, zi + 1]` there; a periodic lattice wraps the upper one to 0 at its last cell).
+/// The hash of a corner depends only on its indices, so neighbouring cells agree.
+#[inline(always)]
+fn corners4_with(xi: usize, yi: usize, [z0, z1]: [usize; 2], [w0, w1]: [usize; 2]) -> [u8; 16] {
     let a = perm(xi) + yi;
     let b = perm(xi + 1) + yi;
-    let aa = perm(a) + zi;
-    let ab = perm(a + 1) + zi;
-    let ba = perm(b) + zi;
-    let bb = perm(b + 1) + zi;
+    let (pa, pb) = (perm(a), perm(b));
+    let (pa1, pb1) = (perm(a + 1), perm(b + 1));
     // (x, y, z) corners in the order ix + 2 iy + 4 iz
     let xyz = [
-        perm(aa) + wi,
-        perm(ba) + wi,
-        perm(ab) + wi,
-        perm(bb) + wi,
-        perm(aa + 1) + wi,
-        perm(ba + 1) + wi,
-        perm(ab + 1) + wi,
-        perm(bb + 1) + wi,
+        perm(pa + z0),
+        perm(pb + z0),
+        perm(pa1 + z0),
+        perm(pb1 + z0),
+        perm(pa + z1),
+        perm(pb + z1),
+        perm(pa1 + z1),
+        perm(pb1 + z1),
     ];
     let mut h = [0u8; 16];
     for (c, base) in xyz.into_iter().enumerate() {
-        h[c] = perm(base) as u8;
-        h[c + 8] = perm(base + 1) as u8;
+        h[c] = perm(base + w0) as u8;
+        h[c + 8] = perm(base + w1) as u8;
     }
     h
+}
+
+/// A 4-D noise lattice periodic along `z` and `w` (the axes a fire's noise moves along in
+/// time, eq. 11): `period = [Pz, Pw]` cells (1..=256 each) at the octave being
+/// evaluated. The coordinates are first wrapped into `[0, P)` ([`wrap_coordinate`]) and
+/// the last cell's upper corner is the first cell's lower one, so the noise is
+/// continuous and `noise(z + Pz) = noise(z)`, `noise(w + Pw) = noise(w)`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) struct Wrap {
+    pub(crate) period: [u32; 2],
+}
+
+impl Wrap {
+    /// The corner hashes of cell `(x, y, z, w)` (`z < Pz`, `w < Pw`) of this lattice.
+    #[inline(always)]
+    fn corners(&self, [x, y, z, w]: [u32; 4]) -> [u8; 16] {
+        let up = |i: u32, p: u32| if i + 1 >= p { 0 } else { i + 1 } as usize;
+        let [pz, pw] = self.period;
+        corners4_with(
+            x as usize,
+            y as usize,
+            [z as usize, up(z, pz)],
+            [w as usize, up(w, pw)],
+        )
+    }
+
+    /// Whether cell `(z, w)` is a last one, whose corners differ from [`corners4`]'s.
+    #[inline(always)]
+    fn at_seam(&self, z: u32, w: u32) -> bool {
+        z + 1 >= self.period[0] || w + 1 >= self.period[1]
+    }
+}
+
+/// `x` wrapped into `[0, period)` (`period` > 0): `x − period · ⌊x / period⌋`, with the
+/// rounding case `period` itself mapped to 0.
+#[inline(always)]
+pub(crate) fn wrap_coordinate(x: f32, period: f32) -> f32 {
+    let r = x - period * ffloor(x / period);
+    if r >= period || r < 0.0 {
+        0.0
+    } else {
+        r
+    }
+}
+
+/// [`perlin4`] on the periodic lattice `wrap` (the point's `z`, `w` already wrapped by
+/// [`wrap_coordinate`]); equal to [`perlin4`] away from the last cells.
+#[inline]
+pub(crate) fn perlin4_wrapped(p: [f32; 4], wrap: Wrap) -> f32 {
+    let lanes = p.map(|v| [v; LANES]);
+    perlin4_lanes_with(&lanes, |x, y, z, w| wrap.corners([x, y, z, w]))[0]
 }
 
 /// A direct-mapped memo of lattice-cell corner hashes (`N` = 8 for [`perlin3`], 16 for
@@ -670,11 +727,29 @@ impl Default for HashCache<16> {
     }
 }
 
-/// Memos for [`NoiseKind::eval_lanes_cached`].
+/// Memos for [`NoiseKind::eval_lanes_cached`], and the periodic lattice ([`Wrap`]) the
+/// 4-D noise is evaluated on, if any (set per octave by the renderer).
 #[derive(Default)]
 pub(crate) struct NoiseCache {
     c3: HashCache<8>,
     c4: HashCache<16>,
+    pub(crate) wrap: Option<Wrap>,
+}
+
+impl NoiseCache {
+    /// The corner hashes of 4-D cell `key` (packed as [`perlin4_lanes_cached`] packs it)
+    /// on the current lattice: memoised, except a periodic lattice's last cells (the only
+    /// ones whose hashes differ from the plain lattice's, so the memo stays valid for both).
+    #[inline(always)]
+    pub(crate) fn corners4(&mut self, key: u32) -> [u8; 16] {
+        let c = [key & 255, (key >> 8) & 255, (key >> 16) & 255, key >> 24];
+        match self.wrap {
+            Some(w) if w.at_seam(c[2], c[3]) => w.corners(c),
+            _ => self.c4.get(key, || {
+                corners4(c[0] as usize, c[1] as usize, c[2] as usize, c[3] as usize)
+            }),
+        }
+    }
 }
 
 /// [`perlin3`] on [`LANES`] points (`p[axis][lane]`); equal to it lane by lane.
@@ -737,13 +812,11 @@ pub(crate) fn perlin4_lanes(p: &[Lanes; 4]) -> Lanes {
     })
 }
 
-/// [`perlin4_lanes`] with the corner hashes from `cache`.
+/// [`perlin4_lanes`] with the corner hashes from `cache` (on its lattice, [`Wrap`]).
 #[inline(always)]
-pub(crate) fn perlin4_lanes_cached(p: &[Lanes; 4], cache: &mut HashCache<16>) -> Lanes {
+pub(crate) fn perlin4_lanes_cached(p: &[Lanes; 4], cache: &mut NoiseCache) -> Lanes {
     perlin4_lanes_with(p, |xi, yi, zi, wi| {
-        cache.get(xi | yi << 8 | zi << 16 | wi << 24, || {
-            corners4(xi as usize, yi as usize, zi as usize, wi as usize)
-        })
+        cache.corners4(xi | yi << 8 | zi << 16 | wi << 24)
     })
 }
 
@@ -872,7 +945,7 @@ impl NoiseKind {
     pub(crate) fn eval_lanes_cached(self, p: &[Lanes; 4], cache: &mut NoiseCache) -> Lanes {
         match self {
             NoiseKind::Perlin3 => perlin3_lanes_cached(&[p[0], p[1], p[2]], &mut cache.c3),
-            NoiseKind::Perlin4 => perlin4_lanes_cached(p, &mut cache.c4),
+            NoiseKind::Perlin4 => perlin4_lanes_cached(p, cache),
             NoiseKind::Mnoise => mnoise_lanes(&[p[0], p[1], p[2]]),
         }
     }
@@ -912,6 +985,55 @@ pub fn turbulence(kind: NoiseKind, p: [f32; 4], octaves: u32, gain: f32, lacunar
         f *= lacunarity;
     }
     sum
+}
+
+/// [`turbulence`] of 4-D Perlin noise on a lattice periodic along `z` and `w` with
+/// `period = [Pz, Pw]` cells at the first octave (`Pz · lacunarity^i` at octave `i`;
+/// the lacunarity a whole number, every octave's period ≤ 256 — [`periodic_octaves_fit`]):
+/// `turbulence(p + (0, 0, Pz, 0)) = turbulence(p + (0, 0, 0, Pw)) = turbulence(p)`.
+#[inline]
+pub fn turbulence_periodic(
+    p: [f32; 4],
+    octaves: u32,
+    gain: f32,
+    lacunarity: f32,
+    period: [u32; 2],
+) -> f32 {
+    let mut sum = 0.0;
+    let mut amp = 1.0;
+    let mut f = 1.0;
+    for _ in 0..octaves {
+        let wrap = octave_wrap(period, f);
+        let q = [
+            p[0] * f,
+            p[1] * f,
+            wrap_coordinate(p[2] * f, wrap.period[0] as f32),
+            wrap_coordinate(p[3] * f, wrap.period[1] as f32),
+        ];
+        sum += amp * perlin4_wrapped(q, wrap);
+        amp *= gain;
+        f *= lacunarity;
+    }
+    sum
+}
+
+/// The lattice of the octave whose frequency factor is `f` (a whole number) for a
+/// first-octave `period`.
+#[inline(always)]
+pub(crate) fn octave_wrap(period: [u32; 2], f: f32) -> Wrap {
+    Wrap {
+        period: period.map(|p| (p as f32 * f) as u32),
+    }
+}
+
+/// Whether [`turbulence_periodic`] can run with these settings: a whole-number lacunarity
+/// ≥ 1 and every octave's periods within 1..=256 (the permutation table's).
+pub fn periodic_octaves_fit(period: [u32; 2], octaves: u32, lacunarity: f32) -> bool {
+    if !(lacunarity >= 1.0 && lacunarity.fract() == 0.0 && lacunarity <= 256.0) {
+        return false;
+    }
+    let top = (lacunarity as f64).powi(octaves.saturating_sub(1) as i32);
+    period.iter().all(|&p| p >= 1 && p as f64 * top <= 256.0)
 }
 
 /// [`turbulence`] on [`LANES`] points at once; equal to it lane by lane (same operations
@@ -1068,6 +1190,85 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// The periodic lattice: [`turbulence_periodic`] repeats after `Pz` along `z` and `Pw`
+    /// along `w` (every octave's period dividing them), is continuous across the seam,
+    /// equals [`turbulence`] where no octave is in a last cell, and the lanes noise on a
+    /// wrapped lattice (plain and AVX2, through the memo) equals the scalar one.
+    #[test]
+    fn periodic_lattice_repeats_and_matches() {
+        let mut rng = ignis_core::Rng::new(9);
+        let mut cache = NoiseCache::default();
+        for round in 0..3000 {
+            let period = [1 + round % 7, 1 + (round / 7) % 5].map(|v| v as u32);
+            assert!(periodic_octaves_fit(period, 4, 2.0));
+            let p: [f32; 4] = [0; 4].map(|_| rng.uniform(0.0, 60.0) as f32);
+            let t = turbulence_periodic(p, 4, 0.6, 2.0, period);
+            for (a, pa) in [(2, period[0]), (3, period[1])] {
+                let mut q = p;
+                q[a] += pa as f32;
+                let tq = turbulence_periodic(q, 4, 0.6, 2.0, period);
+                // the shifted coordinate rounds differently in its fraction
+                assert!(
+                    (t - tq).abs() < 2e-4,
+                    "axis {a} period {period:?}: {t} vs {tq}"
+                );
+                // continuous: a tiny move across the seam changes it only a little
+                let mut seam = p;
+                seam[a] = pa as f32 - 1e-3;
+                let mut over = seam;
+                over[a] = pa as f32 + 1e-3;
+                let (u, v) = (
+                    turbulence_periodic(seam, 4, 0.6, 2.0, period),
+                    turbulence_periodic(over, 4, 0.6, 2.0, period),
+                );
+                assert!((u - v).abs() < 0.05, "seam on axis {a}: {u} vs {v}");
+            }
+            // inside the first cell of every octave's lattice no corner wraps
+            let inner = [p[0], p[1], 0.05, 0.05];
+            let plain = turbulence(NoiseKind::Perlin4, inner, 4, 0.6, 2.0);
+            let wrapped = turbulence_periodic(inner, 4, 0.6, 2.0, [7, 5]);
+            assert!((plain - wrapped).abs() < 1e-5, "{plain} vs {wrapped}");
+            // lanes on one octave's wrapped lattice, through the memo
+            let wrap = Wrap { period };
+            let mut q = [[0.0f32; LANES]; 4];
+            for l in 0..LANES {
+                for a in 0..4 {
+                    let v = rng.uniform(0.0, 40.0) as f32;
+                    q[a][l] = if a >= 2 {
+                        wrap_coordinate(v, period[a - 2] as f32)
+                    } else {
+                        v
+                    };
+                }
+            }
+            cache.wrap = Some(wrap);
+            let n = NoiseKind::Perlin4.eval_lanes_cached(&q, &mut cache);
+            #[cfg(target_arch = "x86_64")]
+            let n_avx2 = std::arch::is_x86_feature_detected!("avx2")
+                // SAFETY: AVX2 was detected.
+                .then(|| unsafe { avx2::eval_lanes_cached(NoiseKind::Perlin4, &q, &mut cache) });
+            cache.wrap = None;
+            for l in 0..LANES {
+                let s = perlin4_wrapped([q[0][l], q[1][l], q[2][l], q[3][l]], wrap);
+                assert!(n[l] == s, "lanes {} vs scalar {s}", n[l]);
+                #[cfg(target_arch = "x86_64")]
+                if let Some(v) = n_avx2 {
+                    assert!(v[l] == s, "avx2 {} vs scalar {s}", v[l]);
+                }
+            }
+        }
+        // the plain memo is not spoiled by the wrapped look-ups
+        let p = [[1.5f32; LANES], [2.5; LANES], [0.5; LANES], [0.5; LANES]];
+        assert_eq!(
+            NoiseKind::Perlin4.eval_lanes_cached(&p, &mut cache),
+            NoiseKind::Perlin4.eval_lanes(&p)
+        );
+        assert!(!periodic_octaves_fit([100, 3], 3, 2.0));
+        assert!(!periodic_octaves_fit([4, 3], 3, 2.5));
+        assert!(!periodic_octaves_fit([0, 3], 3, 2.0));
+        assert!(periodic_octaves_fit([64, 32], 3, 2.0));
     }
 
     /// The bounds are the rounded-up square roots of the proof, and the lemma `q ≤ ¼` of

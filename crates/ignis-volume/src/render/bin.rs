@@ -56,7 +56,7 @@ pub(super) fn bin_cells(
             f,
             camera.position,
             params.exact_inverse,
-            params.mix(&f.noise, time),
+            params.mix(f, time),
         );
         for (ci, c) in f.lattice.cells().iter().enumerate() {
             let vis = visible[ci];

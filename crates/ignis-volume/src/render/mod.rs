@@ -52,7 +52,7 @@ pub use finish::finish;
 
 use crate::error::{Result, VolumeError};
 use crate::lattice::Lattice;
-use crate::mapping::{loop_mix, LoopMix, NoiseParams};
+use crate::mapping::{loop_mix, periodic_loop, LoopMix, NoiseParams, PeriodicLoop};
 use crate::profile::FireProfile;
 use bin::bin_cells;
 use ignis_core::{RgbaFrame, Size};
@@ -94,10 +94,22 @@ pub struct RenderParams {
 }
 
 impl RenderParams {
-    /// The loop mix of a fire with this noise at scene time `time` (seconds).
-    fn mix(&self, noise: &NoiseParams, time: f32) -> Option<LoopMix> {
-        self.loop_period
-            .map(|p| loop_mix(time * noise.time_scale, p * noise.time_scale))
+    /// A looping render's periodic noise for `fire` at scene time `time` (seconds), where
+    /// its noise can be periodic ([`PeriodicLoop`]).
+    fn periodic(&self, fire: &FireInstance, time: f32) -> Option<PeriodicLoop> {
+        let ts = fire.noise.time_scale;
+        let p = self.loop_period?;
+        periodic_loop(time * ts, p * ts, &fire.noise, fire.scroll_length())
+    }
+
+    /// The loop mix of `fire` at scene time `time` (seconds): a looping render's fallback
+    /// where the noise cannot be periodic ([`RenderParams::periodic`]).
+    fn mix(&self, fire: &FireInstance, time: f32) -> Option<LoopMix> {
+        let ts = fire.noise.time_scale;
+        if self.periodic(fire, time).is_some() {
+            return None;
+        }
+        self.loop_period.map(|p| loop_mix(time * ts, p * ts))
     }
 
     /// Checks the loop period, slice spacing, tint and intensity.
@@ -148,6 +160,18 @@ pub struct FireInstance<'a> {
     pub noise: NoiseParams,
     /// Per-instance noise offset (eq. 13).
     pub offset: [f32; 4],
+    /// World units the noise scrolls up per unit of noise time
+    /// ([`crate::mapping::scroll_time`]); `None` = the lattice's own length, as in the
+    /// paper. An animation gives each fire a fixed one so the scroll keeps its speed
+    /// while the fire's length changes.
+    pub scroll_length: Option<f32>,
+}
+
+impl FireInstance<'_> {
+    /// The scroll length in use: [`FireInstance::scroll_length`] or the lattice's length.
+    pub fn scroll_length(&self) -> f32 {
+        self.scroll_length.unwrap_or_else(|| self.lattice.length())
+    }
 }
 
 /// Work counters of one frame.

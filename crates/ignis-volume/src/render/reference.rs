@@ -9,7 +9,7 @@ use super::bin::Candidate;
 use super::march_ray::{finish_sample, locate, Ray, MAX_RANGES};
 use super::tile::{FrameRenderer, Scratch};
 use super::{FireInstance, RenderStats};
-use crate::mapping::{shade, shade_looped};
+use crate::mapping::{shade, shade_looped, shade_periodic};
 
 impl FrameRenderer<'_, '_> {
     /// Marches pixel `(x, y)`'s ray through one fire's candidate cells, every slice from
@@ -65,10 +65,23 @@ impl FrameRenderer<'_, '_> {
     /// Shades every collected sample with [`shade`], one by one: the reference.
     pub(super) fn shade_reference(&self, fire: &FireInstance, s: &mut Scratch) {
         let time = self.time * fire.noise.time_scale;
-        let mix = self.params.mix(&fire.noise, self.time);
+        let mix = self.params.mix(fire, self.time);
+        let periodic = self.params.periodic(fire, self.time);
         s.col.clear();
         s.col.extend(s.tex.iter().map(|&tex| {
-            let (radius, length) = (fire.lattice.radius_at(tex[2]), fire.lattice.length());
+            let radius = fire.lattice.radius_at(tex[2]);
+            let length = [fire.lattice.length(), fire.scroll_length()];
+            if let Some(pl) = periodic {
+                return shade_periodic(
+                    tex,
+                    radius,
+                    length[0],
+                    pl,
+                    &fire.noise,
+                    fire.offset,
+                    fire.profile,
+                );
+            }
             let Some(m) = mix else {
                 return shade(
                     tex,

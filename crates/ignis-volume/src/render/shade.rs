@@ -7,16 +7,18 @@
 use super::tile::{FrameRenderer, Scratch};
 use super::visible::turbulence_bounds;
 use super::FireInstance;
-use crate::mapping::{kernel, noise_position, noise_scale, profile_uv, radial_u};
-use crate::noise::{NoiseCache, NoiseKind, LANES};
+use crate::mapping::{
+    kernel, noise_position, noise_scale, profile_uv, radial_u, scroll_time, TIME_SHEAR,
+};
+use crate::noise::{octave_wrap, wrap_coordinate, NoiseCache, NoiseKind, LANES};
 
 /// A sample whose noise is still being summed.
 #[derive(Clone, Copy, Debug)]
 pub(super) struct LiveSample {
     /// Index into the sample arrays.
     pub(super) idx: u32,
-    /// Noise-space position (eq. 11 + 13) but for `w`, which is the same for every sample
-    /// of a fire (`time · frequency + offset`).
+    /// Noise-space position (eq. 11 + 13) but for `w`, which is the fire's
+    /// `time · frequency + offset` plus the sample's `sw`.
     pub(super) p: [f32; 3],
     /// Partial turbulence sum.
     pub(super) sum: f32,
@@ -24,6 +26,8 @@ pub(super) struct LiveSample {
     /// are `p`'s) and its partial sum. Unused otherwise.
     pub(super) pz2: f32,
     pub(super) sum2: f32,
+    /// The sample's share of `w`, its height's shear ([`crate::mapping::TIME_SHEAR`]).
+    pub(super) sw: f32,
     /// `u` (eq. 12), `tex_z` and the kernel `f(tex_z)` (eq. 13).
     pub(super) u: f32,
     pub(super) z: f32,
@@ -99,12 +103,14 @@ impl FrameRenderer<'_, '_> {
             shade_calm(fire, s);
             return;
         }
-        let mix = self.params.mix(noise, self.time);
+        let periodic = self.params.periodic(fire, self.time);
+        let mix = self.params.mix(fire, self.time);
         // the first copy's noise time; a loop's second copy is a whole loop behind, and
         // the pair's turbulence `a·sum + b·sum2` is bounded by `(a + b)` times one's
-        let (time, time2, wa, wb) = match mix {
-            Some(m) => (m.time, m.time - m.period, m.a, m.b),
-            None => (self.time * noise.time_scale, 0.0, 1.0, 0.0),
+        let (time, time2, wa, wb) = match (periodic, mix) {
+            (Some(pl), _) => (pl.time, 0.0, 1.0, 0.0),
+            (None, Some(m)) => (m.time, m.time - m.period, m.a, m.b),
+            (None, None) => (self.time * noise.time_scale, 0.0, 1.0, 0.0),
         };
         // a loop's second copy costs nothing while its weight is zero (`a = 1` exactly)
         let looped = mix.is_some_and(|m| m.b != 0.0);
@@ -123,11 +129,17 @@ impl FrameRenderer<'_, '_> {
             rem = rem.map(|r| r * (wa + wb));
         }
         let uniform = fire.lattice.uniform_radius();
-        // the `w` of every sample's noise position (it depends on neither `tex` nor the
-        // radius)
+        // the fire's part of every sample's `w` (each adds its height's shear, `sw`)
         let wscale = noise_scale(1.0, length, noise.frequency);
-        let pw = noise_position([0.0; 3], time, wscale, fire.offset)[3];
-        let pw2 = noise_position([0.0; 3], time2, wscale, fire.offset)[3];
+        let pw = noise_position([0.0; 3], time, 0.0, wscale, fire.offset)[3];
+        let pw2 = noise_position([0.0; 3], time2, 0.0, wscale, fire.offset)[3];
+        // eq. (11)'s upward scroll at one speed in world units ([`scroll_time`])
+        let scroll_length = fire.scroll_length();
+        let scroll = match periodic {
+            Some(pl) => scroll_time(pl.scroll_time, length, pl.scroll_length),
+            None => scroll_time(time, length, scroll_length),
+        };
+        let scroll2 = scroll_time(time2, length, scroll_length);
         slice_order(&s.slice, &mut s.buckets, &mut s.order);
         let act = &mut s.live;
         act.clear();
@@ -145,9 +157,9 @@ impl FrameRenderer<'_, '_> {
             }
             let radius = uniform.unwrap_or_else(|| fire.lattice.radius_at(z));
             let scale = noise_scale(radius, length, noise.frequency);
-            let [px, py, pz, _] = noise_position(tex, time, scale, fire.offset);
+            let [px, py, pz, _] = noise_position(tex, time, scroll, scale, fire.offset);
             let pz2 = if looped {
-                noise_position(tex, time2, scale, fire.offset)[2]
+                noise_position(tex, time2, scroll2, scale, fire.offset)[2]
             } else {
                 0.0
             };
@@ -157,6 +169,7 @@ impl FrameRenderer<'_, '_> {
                 sum: 0.0,
                 pz2,
                 sum2: 0.0,
+                sw: tex[2] * (scale[2] * TIME_SHEAR),
                 u,
                 z,
                 kern,
@@ -167,6 +180,8 @@ impl FrameRenderer<'_, '_> {
         let mut amp = 1.0f32;
         let mut f = 1.0f32;
         for o in 0..octaves {
+            // a periodic loop's lattice at this octave ([`PeriodicLoop`])
+            s.noise_cache.wrap = periodic.map(|pl| octave_wrap(pl.period, f));
             for batch in act.chunks_mut(LANES) {
                 let kind = noise.kind;
                 add_octave(
@@ -186,6 +201,7 @@ impl FrameRenderer<'_, '_> {
                 act.retain(|a| a.win.reachable(a.kern, turb(a), r));
             }
         }
+        s.noise_cache.wrap = None;
         for live in act.iter() {
             // `profile_uv` of the sample, from the values computed above
             let v = live.z + live.kern * turb(live);
@@ -228,6 +244,13 @@ fn add_octave(
         for (qa, pa) in q.iter_mut().zip(live.p) {
             qa[l] = pa * f;
         }
+        q[3][l] = (pw + live.sw) * f;
+    }
+    if let Some(w) = cache.wrap {
+        // a periodic lattice: `z`, `w` into its period, as `turbulence_periodic` does
+        for (a, p) in [(2, w.period[0]), (3, w.period[1])] {
+            q[a] = q[a].map(|v| wrap_coordinate(v, p as f32));
+        }
     }
     let val = lanes_noise(kind, &q, cache, avx2);
     for (live, v) in batch.iter_mut().zip(val) {
@@ -237,6 +260,7 @@ fn add_octave(
         q[3] = [pw2 * f; LANES];
         for (l, live) in batch.iter().enumerate() {
             q[2][l] = live.pz2 * f;
+            q[3][l] = (pw2 + live.sw) * f;
         }
         let val = lanes_noise(kind, &q, cache, avx2);
         for (live, v) in batch.iter_mut().zip(val) {

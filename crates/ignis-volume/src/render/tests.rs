@@ -33,6 +33,7 @@ fn instances<'a>(scene: &'a FireScene, lats: &'a [Lattice]) -> Vec<FireInstance<
             profile: &f.profile,
             noise: f.noise,
             offset: scene.offset(i),
+            scroll_length: None,
         })
         .collect()
 }
@@ -241,6 +242,7 @@ fn batched_shading_equals_scalar_shading_and_culls_only_invisible_samples() {
             profile: &f.profile,
             noise: f.noise,
             offset: scene.offset(0),
+            scroll_length: None,
         }];
         let params = scene.render_params();
         let (forward, right, up) = scene.camera.basis();
