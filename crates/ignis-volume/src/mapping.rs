@@ -141,12 +141,11 @@ pub fn profile_uv(tex: [f32; 3], turb: f32, stability: f32) -> [f32; 2] {
 /// are a whole loop apart in noise space, so nearly independent), so the flicker does not
 /// fade in mid-loop as a linear crossfade of the noise would.
 ///
-/// Departure from the paper (which has no loops): the 4-D noise's time axis cannot walk a
-/// circle without a fifth dimension, and a lattice periodic in time would need a period
-/// built into every noise kernel (and, because the field also scrolls up by the fire's
-/// changing length, a period along a direction that changes every frame); this costs a
-/// second noise evaluation instead, only while the second copy's weight is not zero
-/// (the renderer skips it when `b = 0`).
+/// The fallback of [`PeriodicLoop`] (M-noise, 3-D Perlin noise, a lacunarity that is not a
+/// whole number, or a loop so long that an octave's period would exceed 256 cells): it
+/// costs a second noise evaluation while the second copy's weight is not zero (the
+/// renderer skips it when `b = 0`), and the turning weights add to the image's change over
+/// the loop's last quarter.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct LoopMix {
     /// Noise time of the first copy, `time mod period`.

@@ -507,7 +507,8 @@ impl FireScene {
     /// A checked animator for a seamless loop of `frames` frames: frame `frames` (which
     /// is never rendered) would equal frame 0, so the frames play as a loop with no jump.
     ///
-    /// - The noise is periodic with the loop ([`crate::mapping::LoopMix`]).
+    /// - The noise is periodic with the loop ([`crate::mapping::PeriodicLoop`], else
+    ///   [`crate::mapping::LoopMix`]).
     /// - A script repeats a whole number of times per loop: its period (keys that do not
     ///   end on the first pose are closed by returning to it) is stretched to the nearest
     ///   whole fraction of the loop, and its keys are joined by a periodic cubic spline.

@@ -1233,13 +1233,13 @@ mod tests {
             // lanes on one octave's wrapped lattice, through the memo
             let wrap = Wrap { period };
             let mut q = [[0.0f32; LANES]; 4];
-            for l in 0..LANES {
-                for a in 0..4 {
-                    let v = rng.uniform(0.0, 40.0) as f32;
-                    q[a][l] = if a >= 2 {
-                        wrap_coordinate(v, period[a - 2] as f32)
+            for (a, axis) in q.iter_mut().enumerate() {
+                for v in axis.iter_mut() {
+                    let x = rng.uniform(0.0, 40.0) as f32;
+                    *v = if a >= 2 {
+                        wrap_coordinate(x, period[a - 2] as f32)
                     } else {
-                        v
+                        x
                     };
                 }
             }

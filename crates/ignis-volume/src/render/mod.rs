@@ -88,7 +88,8 @@ pub struct RenderParams {
     /// so it is off by default and `covered_pixels` is then 0.
     pub count_coverage: bool,
     /// A seamless loop: the length of the loop in seconds (`frames / fps`), or `None`.
-    /// The noise is then periodic in time with this period ([`LoopMix`]), so a frame at
+    /// The noise is then periodic in time with this period ([`PeriodicLoop`], or
+    /// [`LoopMix`] where the lattice cannot wrap), so a frame at
     /// `time + loop_period` equals the one at `time`. Default `None`.
     pub loop_period: Option<f32>,
 }
