@@ -185,8 +185,10 @@ pub fn loop_mix(time: f32, period: f32) -> LoopMix {
 /// Over one loop the noise position of eq. (11) moves along `z` (the upward scroll) and
 /// along `w` (the 4-D noise's time). Both moves are made whole numbers of lattice cells,
 /// `Pz = round(period · scroll_length · frequency)` and `Pw = round(period · frequency)`
-/// (at least 1), by scaling the scroll and the noise time by at most half a cell per loop
-/// (a few per cent on loops of a second or more), and the Improved Perlin lattice is
+/// (each at least 1: a loop shorter than half a cell falls back), by scaling the scroll
+/// and the noise time by at most half a cell per loop (a relative change of at most
+/// `1 / (2 P)`: 5 % once a loop spans ten cells, up to −33 % / +100 % for a loop of
+/// 1.5 / 0.5 cells), and the Improved Perlin lattice is
 /// wrapped modulo `Pz` and `Pw` cells (`Pz · 2^i`, `Pw · 2^i` at octave `i`, so every
 /// octave's period divides the loop): frame `N` equals frame 0, and frame `N − 1` to
 /// frame `N` is the same kind of step as every other — the noise never changes speed over
@@ -219,9 +221,11 @@ pub fn periodic_loop(
     if noise.kind != NoiseKind::Perlin4 || !(period > 0.0 && f > 0.0 && scroll_length > 0.0) {
         return None;
     }
+    // under half a cell per loop the rounding would speed the noise up (by up to ×∞):
+    // the fallback mixes two copies instead
     let cells = |x: f32| {
-        let c = x.round().max(1.0);
-        (c <= 256.0).then_some(c as u32)
+        let c = x.round();
+        (1.0..=256.0).contains(&c).then_some(c as u32)
     };
     let pz = cells(period * scroll_length * f)?;
     let pw = cells(period * f)?;
@@ -371,6 +375,11 @@ mod tests {
         }));
         assert!(no(NoiseParams {
             lacunarity: 2.2,
+            ..noise
+        }));
+        // under half a cell of noise time per loop: not rounded up to a whole one
+        assert!(no(NoiseParams {
+            frequency: 0.5,
             ..noise
         }));
         // 8 octaves: 4 cells · 2⁷ = 512 exceed the 256-cell table
