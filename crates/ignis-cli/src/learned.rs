@@ -81,7 +81,8 @@ pub struct TrainArgs {
     /// background such as glowing wax.
     #[arg(long, default_value_t = 0.0)]
     pub black_level: f32,
-    /// Keep frames with more than one disjoint flame (skipped by default, as in the paper).
+    /// Keep frames with more than one disjoint flame (skipped by default, as in the paper);
+    /// only the main flame of such a frame (the region with the most light) is modelled.
     #[arg(long)]
     pub keep_multiple: bool,
     /// Seed of the particle filter.
