@@ -288,12 +288,52 @@ impl FlameModel {
         render_into(normalised, &shape, place, &self.shape, scratch, out);
     }
 
-    /// The default placement (mean training centroid and tilt) for an output of `size`.
+    /// The default placement for an output of `size`: the mean training tilt, centred
+    /// across, at the mean training centroid's height (as a fraction of the frame) unless
+    /// that cuts the mean flame off. Footage is often cropped close to the flame (its base
+    /// on the crop's edge) and the output's aspect may differ from the footage's, so the
+    /// centroid's fractions alone can put the flame half outside the frame; the mean
+    /// flame's extent along its axis ([`FlameModel::mean_extent`]) is kept inside the
+    /// frame with a margin of 4% of the frame height (centred when it is taller).
     pub fn placement_for(&self, size: Size) -> Placement {
+        let h = size.height as f64;
+        let sv = self.state_mean[self.shape.n_path + self.shape.n_width] * h;
+        let (below, above) = self.mean_extent();
+        let margin = 0.04 * h;
+        let (lo, hi) = (margin + above * sv, h - margin - below * sv);
+        let cy = self.placement.cy * h;
         Placement {
-            cx: self.placement.cx * size.width as f64,
-            cy: self.placement.cy * size.height as f64,
+            cx: 0.5 * size.width as f64,
+            cy: if lo <= hi {
+                cy.clamp(lo, hi)
+            } else {
+                0.5 * (lo + hi)
+            },
             tilt: self.placement.tilt,
+        }
+    }
+
+    /// How far the mean flame reaches below and above its centroid along its axis, in
+    /// `σ_v`: the outermost rows of the mean normalised image holding at least 2% of the
+    /// brightest row's light.
+    pub fn mean_extent(&self) -> (f64, f64) {
+        let ns = self.shape.norm_size as usize;
+        let rows: Vec<f64> = self
+            .pca
+            .mean
+            .chunks(ns)
+            .map(|r| r.iter().map(|&v| v.max(0.0) as f64).sum())
+            .collect();
+        let peak = rows.iter().copied().fold(0.0, f64::max);
+        let lit: Vec<usize> = (0..rows.len())
+            .filter(|&r| peak > 0.0 && rows[r] >= 0.02 * peak)
+            .collect();
+        match (lit.first(), lit.last()) {
+            (Some(&top), Some(&bottom)) => (
+                -self.shape.row_v(bottom as f64 + 0.5),
+                self.shape.row_v(top as f64 - 0.5),
+            ),
+            _ => (self.shape.below, self.shape.above),
         }
     }
 

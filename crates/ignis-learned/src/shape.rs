@@ -124,7 +124,7 @@ impl ShapeParams {
     }
 
     /// `v` of normalised row `r` (top row = `above`).
-    fn row_v(&self, r: f64) -> f64 {
+    pub(crate) fn row_v(&self, r: f64) -> f64 {
         self.above - (r + 0.5) / self.norm_size as f64 * (self.above + self.below)
     }
 

@@ -275,7 +275,7 @@ fn learned_row(
         "--range",
         "0..300",
         "--crop",
-        "140,150,120,260",
+        "140,150,160,166",
         "--black-level",
         "0.7",
         "--keep-multiple",
