@@ -169,6 +169,7 @@ pub fn train(a: &TrainArgs, g: &Global) -> Result<FlameModel> {
     let reader =
         ignis_media::open(path, &opts).with_context(|| format!("reading {}", path.display()))?;
     let total = reader.info().frame_count;
+    let footage_fps = reader.info().fps;
     let p = TrainParams {
         shape: ShapeParams {
             n_path: a.path_params,
@@ -203,7 +204,11 @@ pub fn train(a: &TrainArgs, g: &Global) -> Result<FlameModel> {
     if let Some(e) = read_error.into_inner() {
         return Err(e).with_context(|| format!("reading {}", path.display()));
     }
-    let training = result.with_context(|| format!("training on {}", path.display()))?;
+    let mut training = result.with_context(|| format!("training on {}", path.display()))?;
+    // the process steps once per footage frame: record the rate so synthesis at another
+    // output rate keeps the footage's flicker frequencies
+    training.model.summary.fps =
+        Some(footage_fps).filter(|f| f.is_finite() && *f > 0.0 && *f <= 1000.0);
     let m = &training.model;
     m.save(&a.output)
         .with_context(|| format!("writing {}", a.output.display()))?;
@@ -302,10 +307,11 @@ pub fn synth(a: &SynthArgs, g: &Global) -> Result<Vec<PathBuf>> {
     }
     let plan = a.frames_args.plan(a.frames, &a.out)?;
     let palette = a.palette.load()?;
+    let fps = Some(a.out.fps);
     let mut synth = if plan.looping {
-        Synthesiser::looping(&model, controls, a.seed, a.frames)?
+        Synthesiser::looping_at(&model, controls, a.seed, a.frames, fps)?
     } else {
-        Synthesiser::new(&model, controls, a.seed)?
+        Synthesiser::new_at(&model, controls, a.seed, fps)?
     };
     // a chunk steps only the (cheap) process to its first frame
     synth.skip(plan.range.start as u64);

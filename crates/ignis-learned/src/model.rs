@@ -68,6 +68,11 @@ pub struct FitSummary {
     pub explained_variance: f64,
     /// Source frame size.
     pub source_size: Size,
+    /// Frame rate of the footage (one process step per footage frame), when known:
+    /// synthesis at another output rate resamples the process in time
+    /// ([`crate::Synthesiser::new_at`]). Set by the caller that read the footage.
+    #[serde(default)]
+    pub fps: Option<f64>,
 }
 
 /// A trained flame model: shape settings, eigenflames and the learned ARP.
@@ -239,6 +244,7 @@ pub fn train(
             run_len: best.len(),
             explained_variance: explained,
             source_size: src,
+            fps: None,
         },
         placement,
         init: run_states[run_states.len() - k..].to_vec(),
@@ -491,6 +497,13 @@ impl FlameModel {
         }
         let f: ModelFile =
             serde_json::from_slice(body).map_err(|e| bad(format!("corrupt model body: {e}")))?;
+        if let Some(fps) = f.summary.fps {
+            if !(fps > 0.0 && fps <= 1000.0) {
+                return Err(bad(format!(
+                    "footage frame rate {fps} is outside (0, 1000]"
+                )));
+            }
+        }
         if f.arp.order() == 0 {
             return Err(bad(
                 "the ARP has order 0 (no dynamics to synthesise from); retrain the model".into(),

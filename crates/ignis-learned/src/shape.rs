@@ -307,7 +307,10 @@ pub fn drop_other_regions(frame: &GrayFrame, thr: f32) -> Option<GrayFrame> {
         return None;
     }
     let mut mass = vec![0.0f64; n as usize + 1];
-    label.iter().zip(&d).for_each(|(&l, &v)| mass[l as usize] += v as f64);
+    label
+        .iter()
+        .zip(&d)
+        .for_each(|(&l, &v)| mass[l as usize] += v as f64);
     let main = (1..=n)
         .max_by(|&a, &b| mass[a as usize].total_cmp(&mass[b as usize]))
         .expect("n ≥ 2");

@@ -370,6 +370,56 @@ mod flame {
         assert!(centroid_x(1.0) > centroid_x(0.0) + 2.0);
     }
 
+    /// A model of 30 fps footage rendered at 60 fps steps its process once every two
+    /// frames: the even frames are the 30 fps render's, the odd ones lie between them, and
+    /// chunks and loops keep their guarantees at the new rate.
+    #[test]
+    fn output_at_twice_the_footage_rate_resamples_the_process_in_time() {
+        let (_, mut t) = trained(60, 5);
+        t.model.summary.fps = Some(30.0);
+        let size = Size::new(48, 48).unwrap();
+        let c = Controls::default();
+        let at = |fps: f64, n: usize| {
+            Synthesiser::new_at(&t.model, c.clone(), 3, Some(fps))
+                .unwrap()
+                .frames(size, n)
+                .unwrap()
+        };
+        let (at30, at60) = (at(30.0, 10), at(60.0, 20));
+        for k in 0..10 {
+            assert_eq!(at30[k], at60[2 * k], "frame {k} at 30 fps");
+        }
+        // the odd frames' states are the midpoints of their neighbours'
+        let mut s60 = Synthesiser::new_at(&t.model, c.clone(), 3, Some(60.0)).unwrap();
+        let mut frame = GrayFrame::new(size);
+        let states: Vec<Vec<f64>> = (0..20)
+            .map(|_| {
+                s60.next_frame_into(&mut frame);
+                s60.controlled_state().to_vec()
+            })
+            .collect();
+        for k in 0..9 {
+            let (a, m, b) = (&states[2 * k], &states[2 * k + 1], &states[2 * k + 2]);
+            assert_ne!(a, b);
+            // (widths are clamped at 0.02 after interpolation)
+            for i in (0..a.len()).filter(|&i| [a[i], m[i], b[i]].iter().all(|&v| v != 0.02)) {
+                assert!(
+                    (m[i] - 0.5 * (a[i] + b[i])).abs() < 1e-9,
+                    "frame {}, {i}",
+                    2 * k + 1
+                );
+            }
+        }
+        let mut part = Synthesiser::new_at(&t.model, c.clone(), 3, Some(60.0)).unwrap();
+        part.skip(7);
+        assert_eq!(&at60[7..12], &part.frames(size, 5).unwrap()[..]);
+        let mut l = Synthesiser::looping_at(&t.model, c.clone(), 3, 40, Some(60.0)).unwrap();
+        let f = l.frames(size, 41).unwrap();
+        assert_eq!(f[40], f[0]);
+        assert_ne!(f[1], f[0]);
+        assert!(Synthesiser::new_at(&t.model, c, 3, Some(0.0)).is_err());
+    }
+
     /// Checks one synthesised frame: its silhouette (above 20% of its maximum) is one
     /// connected flame, and its bright core (above 70%) is non-empty, strictly inside the
     /// silhouette (every core pixel's four neighbours are in it) and in its lower half.
@@ -379,7 +429,11 @@ mod flame {
         let max = f.max();
         let (w, h) = (f.width(), f.height());
         let inside = |x: i64, y: i64| {
-            x >= 0 && y >= 0 && x < w as i64 && y < h as i64 && f.get(x as u32, y as u32) > 0.2 * max
+            x >= 0
+                && y >= 0
+                && x < w as i64
+                && y < h as i64
+                && f.get(x as u32, y as u32) > 0.2 * max
         };
         let (mut top, mut bottom, mut core_y, mut core_n) = (h, 0, 0.0, 0usize);
         for y in 0..h {
@@ -394,7 +448,10 @@ mod flame {
                     let interior = [(1, 0), (-1, 0), (0, 1), (0, -1)]
                         .iter()
                         .all(|(dx, dy)| inside(xi + dx, yi + dy));
-                    assert!(interior, "{what}: core pixel ({x}, {y}) on the silhouette's edge");
+                    assert!(
+                        interior,
+                        "{what}: core pixel ({x}, {y}) on the silhouette's edge"
+                    );
                     core_y += y as f64;
                     core_n += 1;
                 }
