@@ -30,7 +30,9 @@ ignis learned synth candle.flame --wind 0:0,150:1.5,300:-1 --palette blue-gas -o
 ignis learned synth candle.flame --frames 64 --size 128x128 -o sheet.png     # looping flipbook + sheet.json\n  \
 ignis learned synth candle.flame --frames 1000 --chunk 100..200 -o out/%04d.png  # one farm job\n\n\
 Loops (the default for GIFs and flipbooks) are a sample of the learned process conditioned on returning to its\n\
-start state (an exact Kalman bridge), so the step across the seam is one of the process's own."
+start state (an exact Kalman bridge), so the step across the seam is one of the process's own.\n\
+The process steps at the training footage's frame rate (recorded in the model); --fps 60 renders the same motion\n\
+in twice the frames (a frame between two process steps shows the state interpolated between them)."
     )]
     Synth(SynthArgs),
     /// Describe a model: parameters, fit summary, likelihoods, spectral radius; optionally
