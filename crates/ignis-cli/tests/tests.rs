@@ -1157,3 +1157,74 @@ mod realism {
         }
     }
 }
+
+mod learned {
+    use super::*;
+
+    /// `ignis learned train` on 90 frames of candle.mp4 (cropped as the demo crops it),
+    /// then `synth` at the footage's rate and at 60 fps: the model records the footage's
+    /// 30 fps, a 60 fps render's even frames are the 30 fps render's (the process steps
+    /// at the footage's rate), a 60 fps chunk equals the full render, and an `--fps` out
+    /// of range is refused with nothing written.
+    #[test]
+    fn synth_at_60_fps_runs_the_process_at_the_footage_rate() {
+        let Some(clip) = data("candle.mp4") else {
+            return;
+        };
+        let dir = tempfile::tempdir().unwrap();
+        let model = dir.path().join("c.flame");
+        let (clip, model_s) = (clip.to_str().unwrap(), model.to_str().unwrap());
+        ignis_ok(&[
+            "learned",
+            "train",
+            clip,
+            "-o",
+            model_s,
+            "--range",
+            "0..90",
+            "--crop",
+            "140,150,160,166",
+            "--black-level",
+            "0.7",
+            "--keep-multiple",
+            "--particles",
+            "30",
+            "--max-iterations",
+            "3",
+            "-q",
+        ]);
+        let o = ignis_ok(&["learned", "inspect", model_s, "--json"]);
+        let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        assert_eq!(v["summary"]["fps"].as_f64(), Some(30.0), "{v}");
+        let synth = |fps: &str, frames: &str, extra: &[&str], out: &Path| {
+            let pat = out.join("%04d.png");
+            let mut a = vec![
+                "learned", "synth", model_s, "--frames", frames, "--size", "32x32", "--fps", fps,
+            ];
+            a.extend_from_slice(extra);
+            a.extend(["-q", "-o", pat.to_str().unwrap()]);
+            ignis(&a)
+        };
+        let (d30, d60, dc) = (
+            dir.path().join("30"),
+            dir.path().join("60"),
+            dir.path().join("c"),
+        );
+        assert!(synth("30", "6", &[], &d30).status.success());
+        assert!(synth("60", "12", &[], &d60).status.success());
+        let read = |d: &Path, n: usize| std::fs::read(d.join(format!("{n:04}.png"))).unwrap();
+        for k in 0..6 {
+            assert!(read(&d30, k) == read(&d60, 2 * k), "frame {k}");
+        }
+        assert!(read(&d60, 1) != read(&d60, 0) && read(&d60, 1) != read(&d60, 2));
+        assert!(synth("60", "12", &["--chunk", "5..12"], &dc)
+            .status
+            .success());
+        for n in 5..12 {
+            assert!(read(&dc, n) == read(&d60, n), "chunk frame {n}");
+        }
+        let bad = dir.path().join("bad");
+        assert_fails(&synth("0.5", "4", &[], &bad), "fps");
+        assert!(!bad.exists());
+    }
+}

@@ -225,10 +225,7 @@ impl Arp {
                 }
             }
         }
-        let mut p = Mat::<f64>::zeros(m, m);
-        for _ in 0..len {
-            p = &f * &p * f.transpose() + &q;
-        }
+        let mut p = step_covariance(&f, &q, len);
         // r = z_0 − z̃_N, newest first
         let init = &init[init.len() - k..];
         let r = Mat::from_fn(m, 1, |i, _| {
@@ -265,6 +262,28 @@ impl Arp {
     }
 }
 
+/// `Σ_{i<len} Fⁱ Q Fⁱᵀ`: the covariance of the companion state `len` steps after a known
+/// start, by doubling (`S_{a+b} = S_a + Fᵃ S_b Fᵃᵀ`) in `O(log len)` matrix products
+/// instead of `len` — the loop bridge's cost would otherwise grow with the loop's length.
+fn step_covariance(f: &Mat<f64>, q: &Mat<f64>, len: usize) -> Mat<f64> {
+    let m = f.nrows();
+    let (mut acc, mut acc_pow) = (Mat::<f64>::zeros(m, m), Mat::<f64>::identity(m, m));
+    let (mut s, mut fm) = (q.clone(), f.clone());
+    let mut n = len;
+    while n > 0 {
+        if n & 1 == 1 {
+            acc = &acc + &acc_pow * &s * acc_pow.transpose();
+            acc_pow = &acc_pow * &fm;
+        }
+        n >>= 1;
+        if n > 0 {
+            s = &s + &fm * &s * fm.transpose();
+            fm = &fm * &fm;
+        }
+    }
+    acc
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -276,6 +295,25 @@ mod tests {
             vec![0.3, 0.0, 0.05, 0.2],
         )
         .unwrap()
+    }
+
+    #[test]
+    fn doubled_step_covariance_equals_the_recursion() {
+        let a = ar2();
+        let f = a.companion();
+        let q = Mat::from_fn(4, 4, |i, j| if i == j { 0.3 + 0.1 * i as f64 } else { 0.0 });
+        for len in [0usize, 1, 2, 3, 7, 64, 100] {
+            let mut p = Mat::<f64>::zeros(4, 4);
+            for _ in 0..len {
+                p = &f * &p * f.transpose() + &q;
+            }
+            let d = step_covariance(&f, &q, len);
+            for i in 0..4 {
+                for j in 0..4 {
+                    assert!((p[(i, j)] - d[(i, j)]).abs() <= 1e-12 * (1.0 + p[(i, j)].abs()));
+                }
+            }
+        }
     }
 
     #[test]

@@ -68,6 +68,11 @@ pub struct FitSummary {
     pub explained_variance: f64,
     /// Source frame size.
     pub source_size: Size,
+    /// Frame rate of the footage (one process step per footage frame), when known:
+    /// synthesis at another output rate resamples the process in time
+    /// ([`crate::Synthesiser::new_at`]). Set by the caller that read the footage.
+    #[serde(default)]
+    pub fps: Option<f64>,
 }
 
 /// A trained flame model: shape settings, eigenflames and the learned ARP.
@@ -239,6 +244,7 @@ pub fn train(
             run_len: best.len(),
             explained_variance: explained,
             source_size: src,
+            fps: None,
         },
         placement,
         init: run_states[run_states.len() - k..].to_vec(),
@@ -288,12 +294,52 @@ impl FlameModel {
         render_into(normalised, &shape, place, &self.shape, scratch, out);
     }
 
-    /// The default placement (mean training centroid and tilt) for an output of `size`.
+    /// The default placement for an output of `size`: the mean training tilt, centred
+    /// across, at the mean training centroid's height (as a fraction of the frame) unless
+    /// that cuts the mean flame off. Footage is often cropped close to the flame (its base
+    /// on the crop's edge) and the output's aspect may differ from the footage's, so the
+    /// centroid's fractions alone can put the flame half outside the frame; the mean
+    /// flame's extent along its axis ([`FlameModel::mean_extent`]) is kept inside the
+    /// frame with a margin of 4% of the frame height (centred when it is taller).
     pub fn placement_for(&self, size: Size) -> Placement {
+        let h = size.height as f64;
+        let sv = self.state_mean[self.shape.n_path + self.shape.n_width] * h;
+        let (below, above) = self.mean_extent();
+        let margin = 0.04 * h;
+        let (lo, hi) = (margin + above * sv, h - margin - below * sv);
+        let cy = self.placement.cy * h;
         Placement {
-            cx: self.placement.cx * size.width as f64,
-            cy: self.placement.cy * size.height as f64,
+            cx: 0.5 * size.width as f64,
+            cy: if lo <= hi {
+                cy.clamp(lo, hi)
+            } else {
+                0.5 * (lo + hi)
+            },
             tilt: self.placement.tilt,
+        }
+    }
+
+    /// How far the mean flame reaches below and above its centroid along its axis, in
+    /// `σ_v`: the outermost rows of the mean normalised image holding at least 2% of the
+    /// brightest row's light.
+    pub fn mean_extent(&self) -> (f64, f64) {
+        let ns = self.shape.norm_size as usize;
+        let rows: Vec<f64> = self
+            .pca
+            .mean
+            .chunks(ns)
+            .map(|r| r.iter().map(|&v| v.max(0.0) as f64).sum())
+            .collect();
+        let peak = rows.iter().copied().fold(0.0, f64::max);
+        let lit: Vec<usize> = (0..rows.len())
+            .filter(|&r| peak > 0.0 && rows[r] >= 0.02 * peak)
+            .collect();
+        match (lit.first(), lit.last()) {
+            (Some(&top), Some(&bottom)) => (
+                -self.shape.row_v(bottom as f64 + 0.5),
+                self.shape.row_v(top as f64 - 0.5),
+            ),
+            _ => (self.shape.below, self.shape.above),
         }
     }
 
@@ -451,6 +497,13 @@ impl FlameModel {
         }
         let f: ModelFile =
             serde_json::from_slice(body).map_err(|e| bad(format!("corrupt model body: {e}")))?;
+        if let Some(fps) = f.summary.fps {
+            if !(fps > 0.0 && fps <= 1000.0) {
+                return Err(bad(format!(
+                    "footage frame rate {fps} is outside (0, 1000]"
+                )));
+            }
+        }
         if f.arp.order() == 0 {
             return Err(bad(
                 "the ARP has order 0 (no dynamics to synthesise from); retrain the model".into(),

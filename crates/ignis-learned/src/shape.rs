@@ -5,6 +5,8 @@
 //! (eigenflames are fitted on the images this module normalises).
 //!
 //! Per frame:
+//! 0. Bright regions other than the main flame (reflections, a lit rim, sparks) are
+//!    blacked out ([`drop_other_regions`]), so one flame is modelled.
 //! 1. The global moments give the [`Pose`]: centroid, main-axis tilt and the height
 //!    measure `σ_v` (deviation along the main axis). Coordinates become `(u, v)`: `v` up the
 //!    main axis, `u` across it, both in units of `σ_v` and centred on the centroid.
@@ -46,7 +48,8 @@ pub struct ShapeParams {
     /// Canonical half-width across the axis, in slice widths. Default 3.5.
     pub half_width: f64,
     /// Skip frames whose thresholded flame has more than one sizeable component (§5).
-    /// Default true.
+    /// Default true. Kept frames (all of them when false) are modelled by their main
+    /// flame only: other bright regions are blacked out first ([`drop_other_regions`]).
     pub skip_multiple: bool,
     /// Threshold for the component test, as a fraction of the frame's maximum. Default 0.2.
     pub component_threshold: f32,
@@ -121,7 +124,7 @@ impl ShapeParams {
     }
 
     /// `v` of normalised row `r` (top row = `above`).
-    fn row_v(&self, r: f64) -> f64 {
+    pub(crate) fn row_v(&self, r: f64) -> f64 {
         self.above - (r + 0.5) / self.norm_size as f64 * (self.above + self.below)
     }
 
@@ -249,6 +252,97 @@ pub fn count_flames(frame: &GrayFrame, thr: f32, min_frac: f32) -> usize {
     count
 }
 
+/// Labels the 4-connected components of `mask` (`w × h`): 0 outside, 1.. inside.
+fn label_components(mask: &[bool], w: usize, h: usize) -> (Vec<u32>, u32) {
+    let mut label = vec![0u32; w * h];
+    let mut stack = Vec::new();
+    let mut n = 0;
+    for start in 0..w * h {
+        if !mask[start] || label[start] != 0 {
+            continue;
+        }
+        n += 1;
+        label[start] = n;
+        stack.push(start);
+        while let Some(i) = stack.pop() {
+            let (x, y) = (i % w, i / w);
+            let near = [
+                (x > 0).then(|| i - 1),
+                (x + 1 < w).then(|| i + 1),
+                (y > 0).then(|| i - w),
+                (y + 1 < h).then(|| i + w),
+            ];
+            for j in near.into_iter().flatten() {
+                if mask[j] && label[j] == 0 {
+                    label[j] = n;
+                    stack.push(j);
+                }
+            }
+        }
+    }
+    (label, n)
+}
+
+/// The frame with every bright region but the main flame blacked out, or `None` when
+/// there is nothing to drop.
+///
+/// Footage of one flame holds other lit regions: its reflection in a glass, a lit rim,
+/// sparks. Left in, they pull the slice moments sideways (a bent tip) and the eigenflames
+/// learn them as a second shape. Regions are the 4-connected components above a quarter of
+/// the component threshold (`thr · max / 4`, low, so a flame's dim edge stays attached to
+/// it) on the same ≤ 128-pixel copy as [`count_flames`]; the main flame is the one holding
+/// the most light. The others, grown by one cell, are set to zero; the main flame's glow
+/// between regions is kept.
+pub fn drop_other_regions(frame: &GrayFrame, thr: f32) -> Option<GrayFrame> {
+    let f = (frame.width().max(frame.height()) as usize).div_ceil(128);
+    let (d, w, h) = box_down(frame, f);
+    let max = d.iter().copied().fold(0.0f32, f32::max);
+    if !(max > 0.0) {
+        return None;
+    }
+    let lo = 0.25 * thr * max;
+    let mask: Vec<bool> = d.iter().map(|&v| v > lo).collect();
+    let (label, n) = label_components(&mask, w, h);
+    if n <= 1 {
+        return None;
+    }
+    let mut mass = vec![0.0f64; n as usize + 1];
+    label
+        .iter()
+        .zip(&d)
+        .for_each(|(&l, &v)| mass[l as usize] += v as f64);
+    let main = (1..=n)
+        .max_by(|&a, &b| mass[a as usize].total_cmp(&mass[b as usize]))
+        .expect("n ≥ 2");
+    // Cells to black out: other regions and their 8-neighbours outside the main flame.
+    let mut drop = vec![false; w * h];
+    for y in 0..h {
+        for x in 0..w {
+            let l = label[y * w + x];
+            if l == 0 || l == main {
+                continue;
+            }
+            for yy in y.saturating_sub(1)..(y + 2).min(h) {
+                for xx in x.saturating_sub(1)..(x + 2).min(w) {
+                    if label[yy * w + xx] != main {
+                        drop[yy * w + xx] = true;
+                    }
+                }
+            }
+        }
+    }
+    let mut out = frame.clone();
+    for (y, row) in out.rows_mut().enumerate() {
+        let o = (y / f) * w;
+        for (x, v) in row.iter_mut().enumerate() {
+            if drop[o + x / f] {
+                *v = 0.0;
+            }
+        }
+    }
+    Some(out)
+}
+
 /// The result of normalising one frame.
 #[derive(Clone, Debug)]
 pub struct Normalised {
@@ -268,14 +362,19 @@ pub fn normalise(frame: &GrayFrame, p: &ShapeParams) -> std::result::Result<Norm
     } else {
         frame
     };
+    if frame.max() > 0.0
+        && p.skip_multiple
+        && count_flames(frame, p.component_threshold, p.min_component) > 1
+    {
+        return Err(Skip::Multiple);
+    }
+    let isolated = drop_other_regions(frame, p.component_threshold);
+    let frame = isolated.as_ref().unwrap_or(frame);
     let moments = Moments::of(frame);
     let pose = match moments.pose() {
         Some(pose) if pose.sigma_v > 0.25 && frame.max() > 0.0 => pose,
         _ => return Err(Skip::Dark),
     };
-    if p.skip_multiple && count_flames(frame, p.component_threshold, p.min_component) > 1 {
-        return Err(Skip::Multiple);
-    }
     let ns = p.norm_size as usize;
     let sv = pose.sigma_v;
     // Anti-alias: the canonical grid spacing along v in source pixels.

@@ -159,6 +159,14 @@ pub struct Synthesiser<'m> {
     rng: Rng,
     /// The last `K` states, newest first.
     hist: Vec<Vec<f64>>,
+    /// The state before `hist[0]` (kept for interpolation when `K` is 1).
+    prev: Vec<f64>,
+    /// The current output frame's state, before controls (interpolated in time).
+    raw: Vec<f64>,
+    /// Process steps per output frame: the model's frame rate over the output's.
+    rate: f64,
+    /// Output frames rendered or skipped so far.
+    frame: u64,
     next: Vec<f64>,
     noise: Vec<f64>,
     shown: Vec<f64>,
@@ -176,16 +184,35 @@ pub struct Synthesiser<'m> {
 const MAX_LOOP_VALUES: usize = 64 << 20;
 
 impl<'m> Synthesiser<'m> {
-    /// Starts from the model's last training states; the same model, controls and seed
-    /// give the same frames.
+    /// Starts from the model's last training states, one process step per output frame;
+    /// the same model, controls and seed give the same frames.
     pub fn new(model: &'m FlameModel, controls: Controls, seed: u64) -> Result<Synthesiser<'m>> {
+        Synthesiser::new_at(model, controls, seed, None)
+    }
+
+    /// As [`Synthesiser::new`], for output at `output_fps` frames per second: the process
+    /// runs at the footage's rate (one step per training frame, [`steps_per_frame`]) and
+    /// every output frame shows the state at its own time, interpolated linearly between
+    /// the two process steps around it, so a 60 fps render of a 30 fps model flickers at
+    /// the footage's frequencies, not twice them. `None`, or a model that does not know
+    /// its footage's rate, gives one step per frame.
+    pub fn new_at(
+        model: &'m FlameModel,
+        controls: Controls,
+        seed: u64,
+        output_fps: Option<f64>,
+    ) -> Result<Synthesiser<'m>> {
         controls.validate()?;
+        let rate = steps_per_frame(model, output_fps)?;
         let n = model.n_state();
         Ok(Synthesiser {
             model,
             controls,
             rng: Rng::new(seed),
             hist: model.init.iter().rev().cloned().collect(),
+            prev: vec![0.0; n],
+            raw: vec![0.0; n],
+            frame: 0,
             next: vec![0.0; n],
             noise: vec![0.0; n],
             shown: vec![0.0; n],
@@ -194,6 +221,7 @@ impl<'m> Synthesiser<'m> {
             t: 0,
             exposure: exposure(model),
             looped: None,
+            rate,
         })
     }
 
@@ -208,29 +236,49 @@ impl<'m> Synthesiser<'m> {
         seed: u64,
         frames: u32,
     ) -> Result<Synthesiser<'m>> {
-        let mut s = Synthesiser::new(model, controls, seed)?;
-        if (frames as usize).saturating_mul(model.n_state()) > MAX_LOOP_VALUES {
+        Synthesiser::looping_at(model, controls, seed, frames, None)
+    }
+
+    /// As [`Synthesiser::looping`], for output at `output_fps` (see
+    /// [`Synthesiser::new_at`]): the loop holds the whole number of process steps nearest
+    /// to `frames` output frames' time, and output frame `t` shows the loop's state at
+    /// `t · steps / frames`, interpolated cyclically, so the period is exactly `frames`.
+    pub fn looping_at(
+        model: &'m FlameModel,
+        controls: Controls,
+        seed: u64,
+        frames: u32,
+        output_fps: Option<f64>,
+    ) -> Result<Synthesiser<'m>> {
+        let mut s = Synthesiser::new_at(model, controls, seed, output_fps)?;
+        if frames < 2 {
+            return Err(LearnedError::bad(
+                "frames",
+                format!("a loop needs at least 2 frames, not {frames}"),
+            ));
+        }
+        let steps = ((frames as f64 * s.rate).round() as usize).max(2);
+        if steps.saturating_mul(model.n_state()) > MAX_LOOP_VALUES {
             return Err(LearnedError::bad(
                 "frames",
                 format!(
                     "a loop of {frames} frames holds {} state values, over the limit of {MAX_LOOP_VALUES}; loop fewer frames",
-                    frames as usize * model.n_state()
+                    steps * model.n_state()
                 ),
             ));
         }
-        let states = model
-            .arp
-            .simulate_loop(&model.init, frames as usize, seed)?;
+        let start = loop_start(model, seed)?;
+        let states = model.arp.simulate_loop(&start, steps, seed)?;
+        s.rate = steps as f64 / frames as f64;
         s.looped = Some(states);
         Ok(s)
     }
 
-    /// Skips `n` frames without rendering them (only the cheap state steps run), so the
-    /// next frame is exactly the one a full run would render there: a render-farm chunk.
+    /// Skips `n` output frames without rendering them (only the cheap process steps run,
+    /// when the next frame needs them), so the next frame is exactly the one a full run
+    /// would render there: a render-farm chunk.
     pub fn skip(&mut self, n: u64) {
-        for _ in 0..n {
-            self.step();
-        }
+        self.frame += n;
     }
 
     /// Changes the controls from the next frame on (for interactive steering).
@@ -240,8 +288,10 @@ impl<'m> Synthesiser<'m> {
         Ok(())
     }
 
-    /// Samples the next state from the ARP (eq. 2), before controls.
+    /// Samples the next state of the process from the ARP (eq. 2), before controls: one
+    /// process step (see [`Synthesiser::new_at`] for output frames at another rate).
     pub fn step(&mut self) -> &[f64] {
+        self.prev.copy_from_slice(&self.hist[0]);
         if let Some(states) = &self.looped {
             let x = &states[(self.t % states.len() as u64) as usize];
             let mut last = self.hist.pop().expect("order ≥ 1");
@@ -262,12 +312,32 @@ impl<'m> Synthesiser<'m> {
         &self.hist[0]
     }
 
-    /// The latest state with the controls applied (what is rendered).
+    /// Sets `raw` to the state at the next output frame's time: process step
+    /// `i = ⌊frame · rate⌋` and, between steps, the linear blend towards step `i + 1`.
+    fn frame_state(&mut self) {
+        let tau = self.frame as f64 * self.rate;
+        let i = tau.floor() as u64;
+        let frac = tau - i as f64;
+        let need = if frac > 1e-9 { i + 2 } else { i + 1 };
+        while self.t < need {
+            self.step();
+        }
+        if frac > 1e-9 {
+            let (a, b) = (&self.prev, &self.hist[0]);
+            for ((r, &a), &b) in self.raw.iter_mut().zip(a).zip(b) {
+                *r = a + frac * (b - a);
+            }
+        } else {
+            self.raw.copy_from_slice(&self.hist[0]);
+        }
+    }
+
+    /// The current output frame's state with the controls applied (what is rendered).
     pub fn controlled_state(&mut self) -> &[f64] {
         let s = &self.model.shape;
         let (np, nw) = (s.n_path, s.n_width);
-        self.shown.copy_from_slice(&self.hist[0]);
-        let wind = self.controls.wind.at(self.t.saturating_sub(1) as f64);
+        self.shown.copy_from_slice(&self.raw);
+        let wind = self.controls.wind.at(self.frame as f64);
         for i in 0..np {
             let t = (i as f64 + 0.5) / np as f64;
             self.shown[i] += wind * t * t / self.controls.height;
@@ -283,15 +353,14 @@ impl<'m> Synthesiser<'m> {
 
     /// Samples the next state and renders it into `out` at the model's mean placement.
     pub fn next_frame_into(&mut self, out: &mut GrayFrame) {
-        self.step();
+        self.frame_state();
         self.controlled_state();
         let mut place = self.model.placement_for(out.size());
         // Scaling and lengthening keep the flame's base where it was: move the centroid
         // up by the extra height below it.
         let base_drop = self.model.shape.below * 0.5;
         let grow = self.controls.height * self.controls.scale - 1.0;
-        let h0 =
-            self.hist[0][self.model.shape.n_path + self.model.shape.n_width] * out.height() as f64;
+        let h0 = self.raw[self.model.shape.n_path + self.model.shape.n_width] * out.height() as f64;
         place.cy -= grow * base_drop * h0;
         let (shape, w) = self.model.split(&self.shown);
         self.normalised.resize(self.model.pca.n_pixels(), 0.0);
@@ -310,6 +379,7 @@ impl<'m> Synthesiser<'m> {
             let e = self.exposure;
             out.data_mut().iter_mut().for_each(|v| *v *= e);
         }
+        self.frame += 1;
     }
 
     /// Renders `frames` frames of `size` (a convenience over [`Self::next_frame_into`]).
@@ -323,6 +393,44 @@ impl<'m> Synthesiser<'m> {
             })
             .collect())
     }
+}
+
+/// The state a loop starts from and returns to: the process run on from the model's last
+/// training states until their influence has decayed to 0.1% (`ρⁿ ≤ 10⁻³` for spectral
+/// radius `ρ`, 2K..=2000 steps). The last training state can be far from typical — a run
+/// of usable frames often ends where the flame dips or leaves the crop — and a loop
+/// conditioned on an atypical state passes through it every cycle with large steps around
+/// it (measured on `candle.mp4`: wrap 1.8–3.2× the median step). A state of the running
+/// process is as ordinary as any other.
+fn loop_start(model: &FlameModel, seed: u64) -> Result<Vec<Vec<f64>>> {
+    let k = model.arp.order();
+    let rho = model.report.spectral_radius;
+    let burn = if rho > 0.0 && rho < 1.0 {
+        (3.0 * std::f64::consts::LN_10 / -rho.ln()).ceil() as usize
+    } else {
+        2000
+    };
+    let burn = burn.clamp(2 * k, 2000);
+    let run = model
+        .arp
+        .simulate(&model.init, burn, seed ^ 0x6c6f_6f70_5f73_7461)?;
+    Ok(run[burn - k..].to_vec())
+}
+
+/// Process steps per output frame at `output_fps`: the footage's frame rate the model
+/// was trained at over `output_fps`; 1 when either is unknown. `output_fps` must be in
+/// `1..=1000`.
+pub fn steps_per_frame(model: &FlameModel, output_fps: Option<f64>) -> Result<f64> {
+    let Some(out) = output_fps else {
+        return Ok(1.0);
+    };
+    if !(1.0..=1000.0).contains(&out) {
+        return Err(LearnedError::bad(
+            "fps",
+            format!("{out} frames per second is outside 1..=1000"),
+        ));
+    }
+    Ok(model.summary.fps.map_or(1.0, |m| m / out))
 }
 
 /// The intensity scale of synthesised frames: footage is exposed so a flame's core is at

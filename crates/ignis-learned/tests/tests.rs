@@ -369,6 +369,138 @@ mod flame {
         };
         assert!(centroid_x(1.0) > centroid_x(0.0) + 2.0);
     }
+
+    /// A model of 30 fps footage rendered at 60 fps steps its process once every two
+    /// frames: the even frames are the 30 fps render's, the odd ones lie between them, and
+    /// chunks and loops keep their guarantees at the new rate.
+    #[test]
+    fn output_at_twice_the_footage_rate_resamples_the_process_in_time() {
+        let (_, mut t) = trained(60, 5);
+        t.model.summary.fps = Some(30.0);
+        let size = Size::new(48, 48).unwrap();
+        let c = Controls::default();
+        let at = |fps: f64, n: usize| {
+            Synthesiser::new_at(&t.model, c.clone(), 3, Some(fps))
+                .unwrap()
+                .frames(size, n)
+                .unwrap()
+        };
+        let (at30, at60) = (at(30.0, 10), at(60.0, 20));
+        for k in 0..10 {
+            assert_eq!(at30[k], at60[2 * k], "frame {k} at 30 fps");
+        }
+        // the odd frames' states are the midpoints of their neighbours'
+        let mut s60 = Synthesiser::new_at(&t.model, c.clone(), 3, Some(60.0)).unwrap();
+        let mut frame = GrayFrame::new(size);
+        let states: Vec<Vec<f64>> = (0..20)
+            .map(|_| {
+                s60.next_frame_into(&mut frame);
+                s60.controlled_state().to_vec()
+            })
+            .collect();
+        for k in 0..9 {
+            let (a, m, b) = (&states[2 * k], &states[2 * k + 1], &states[2 * k + 2]);
+            assert_ne!(a, b);
+            // (widths are clamped at 0.02 after interpolation)
+            for i in (0..a.len()).filter(|&i| [a[i], m[i], b[i]].iter().all(|&v| v != 0.02)) {
+                assert!(
+                    (m[i] - 0.5 * (a[i] + b[i])).abs() < 1e-9,
+                    "frame {}, {i}",
+                    2 * k + 1
+                );
+            }
+        }
+        let mut part = Synthesiser::new_at(&t.model, c.clone(), 3, Some(60.0)).unwrap();
+        part.skip(7);
+        assert_eq!(&at60[7..12], &part.frames(size, 5).unwrap()[..]);
+        let mut l = Synthesiser::looping_at(&t.model, c.clone(), 3, 40, Some(60.0)).unwrap();
+        let f = l.frames(size, 41).unwrap();
+        assert_eq!(f[40], f[0]);
+        assert_ne!(f[1], f[0]);
+        assert!(Synthesiser::new_at(&t.model, c, 3, Some(0.0)).is_err());
+    }
+
+    /// Checks one synthesised frame: its silhouette (above 20% of its maximum) is one
+    /// connected flame, and its bright core (above 70%) is non-empty, strictly inside the
+    /// silhouette (every core pixel's four neighbours are in it) and in its lower half.
+    fn assert_one_flame_with_core_inside(f: &GrayFrame, what: &str) {
+        let regions = ignis_learned::shape::count_flames(f, 0.2, 0.01);
+        assert_eq!(regions, 1, "{what}: {regions} regions above 20%");
+        let max = f.max();
+        let (w, h) = (f.width(), f.height());
+        let inside = |x: i64, y: i64| {
+            x >= 0
+                && y >= 0
+                && x < w as i64
+                && y < h as i64
+                && f.get(x as u32, y as u32) > 0.2 * max
+        };
+        let (mut top, mut bottom, mut core_y, mut core_n) = (h, 0, 0.0, 0usize);
+        for y in 0..h {
+            for x in 0..w {
+                let v = f.get(x, y);
+                if v > 0.2 * max {
+                    top = top.min(y);
+                    bottom = bottom.max(y);
+                }
+                if v > 0.7 * max {
+                    let (xi, yi) = (x as i64, y as i64);
+                    let interior = [(1, 0), (-1, 0), (0, 1), (0, -1)]
+                        .iter()
+                        .all(|(dx, dy)| inside(xi + dx, yi + dy));
+                    assert!(
+                        interior,
+                        "{what}: core pixel ({x}, {y}) on the silhouette's edge"
+                    );
+                    core_y += y as f64;
+                    core_n += 1;
+                }
+            }
+        }
+        assert!(core_n > 0, "{what}: no bright core");
+        let core_y = core_y / core_n as f64;
+        let mid = 0.5 * (top + bottom) as f64;
+        assert!(
+            core_y > mid,
+            "{what}: core at row {core_y:.1}, above the silhouette's middle row {mid:.1}"
+        );
+    }
+
+    /// Issue 16: a model trained on one teardrop flame synthesises one connected flame with
+    /// its bright core inside — also when the footage holds a second bright region (a
+    /// reflection in a glass above and beside the flame, as in `candle.mp4`) and frames
+    /// with several regions are kept: only the main flame is modelled.
+    #[test]
+    fn a_teardrop_flame_is_synthesised_as_one_flame_with_its_core_inside() {
+        let size = Size::new(96, 96).unwrap();
+        let clip = synthetic::flame_clip(size, 80, 4);
+        let reflected: Vec<GrayFrame> = clip
+            .iter()
+            .map(|f| {
+                GrayFrame::from_fn(size, |x, y| {
+                    let d2 = (x as f32 - 76.0).powi(2) + (y as f32 - 12.0).powi(2);
+                    f.get(x, y) + 0.7 * (-d2 / 12.0).exp()
+                })
+            })
+            .collect();
+        for (what, frames) in [("teardrop", clip), ("teardrop + reflection", reflected)] {
+            let mut p = TrainParams {
+                em: EmParams {
+                    particles: 50,
+                    max_iterations: 4,
+                    seed: 4,
+                    ..EmParams::default()
+                },
+                ..TrainParams::default()
+            };
+            p.shape.skip_multiple = false;
+            let t = train(frames, &p, &mut ignis_core::progress::NoProgress).unwrap();
+            let mut s = Synthesiser::new(&t.model, Controls::default(), 2).unwrap();
+            for (i, f) in s.frames(size, 30).unwrap().iter().enumerate().step_by(5) {
+                assert_one_flame_with_core_inside(f, &format!("{what}, frame {i}"));
+            }
+        }
+    }
 }
 
 mod bad_input {

@@ -255,8 +255,8 @@ pub const CLASSIC_DIAMETER: f64 = 1.0;
 pub const CANDLE_DIAMETER: f64 = 0.02;
 
 /// A learned flame trained from `candle.mp4` as the demo trains it (the flame cropped out of
-/// its glass, the wax glow below a black level), synthesised for the model's own frame rate
-/// (the footage's: one process step per footage frame).
+/// its glass, the wax glow below a black level), synthesised at [`FPS`] like every row: the
+/// process steps at the footage's rate, resampled in time for the output.
 fn learned_row(
     g: &Global,
     clip: &Path,
@@ -275,7 +275,7 @@ fn learned_row(
         "--range",
         "0..300",
         "--crop",
-        "140,150,120,260",
+        "140,150,160,166",
         "--black-level",
         "0.7",
         "--keep-multiple",
@@ -287,12 +287,12 @@ fn learned_row(
     let sp = g.spinner("training a learned flame on candle.mp4");
     let model = crate::learned::train(&a, &Global { quiet: true })?;
     sp.finish_and_clear();
-    let fps = ignis_media::probe(clip).map(|i| i.fps).unwrap_or(30.0);
+    let fps = FPS;
     let frames = (SECONDS * fps) as usize;
     let frames = if quick { frames.min(120) } else { frames };
     let palette = ignis_core::Palette::preset("candle")?;
     let size = Size::new(256, 256)?;
-    let mut synth = ignis_learned::Synthesiser::new(&model, Default::default(), 1)?;
+    let mut synth = ignis_learned::Synthesiser::new_at(&model, Default::default(), 1, Some(fps))?;
     let mut images = Vec::with_capacity(frames);
     for _ in 0..frames {
         let mut f = GrayFrame::new(size);
