@@ -57,8 +57,27 @@ fn main() {
         t("morph_rgba", &mut || {
             std::hint::black_box(morph_rgba(&ca, &cb, &f, &g, 0.5).unwrap());
         });
+        t("clone of one RGBA frame", &mut || {
+            std::hint::black_box(ca.clone());
+        });
+        t("warp_rgba", &mut || {
+            std::hint::black_box(warp_rgba(&ca, &f, 0.5));
+        });
         t("morph_gray", &mut || {
             std::hint::black_box(morph_gray(&la, &lb, &f, &g, 0.5).unwrap());
+        });
+        let s256 = Size::new(256, 256).unwrap();
+        let (sa, sb) = (
+            bench::texture(s256, 3, [0.0; 2], 1.5).to_rgba(),
+            bench::texture(s256, 3, [1.5, -1.0], 1.5).to_rgba(),
+        );
+        let vp = VectorParams::default();
+        t("motion_vector_pair 256", &mut || {
+            std::hint::black_box(motion_vector_pair(&sa, &sb, &vp).unwrap());
+        });
+        let (ga, gb) = (luma(&sa), luma(&sb));
+        t("flow_pair 256", &mut || {
+            std::hint::black_box(flow_pair(&ga, &gb, &p).unwrap());
         });
         t("whole morph_1080p case", &mut || {
             let (la, lb) = (luma(&ca), luma(&cb));
