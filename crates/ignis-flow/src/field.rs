@@ -70,6 +70,7 @@ impl FlowField {
 
     /// The vector at `(x, y)` (field pixels), bilinearly interpolated; positions outside the
     /// field are clamped to its edge, non-finite positions read as the edge at 0.
+    #[inline]
     pub fn at(&self, x: f32, y: f32) -> [f32; 2] {
         if self.data.is_empty() {
             return [0.0; 2];
