@@ -127,15 +127,18 @@ impl RowTaps {
     /// are finite: fields and `t` are checked finite by their constructors).
     #[inline(always)]
     fn fill(&mut self, xs: &[f32], ys: &[f32], w: u32, h: u32) {
-        let (wm, hm) = ((w - 1) as f32, (h - 1) as f32);
+        // Bounded by 2²⁴ as well (far above `MAX_SIDE`) so the unchecked conversions
+        // below stay in `i32` range even for a `Size` built without its checks.
+        let bound = |n: u32| (n - 1).min(1 << 24) as f32;
+        let (wm, hm) = (bound(w), bound(h));
         let n = xs.len();
         let (base, sx, sy) = (&mut self.base[..n], &mut self.sx[..n], &mut self.sy[..n]);
         let (wx, wy) = (&mut self.wx[..n], &mut self.wy[..n]);
         for i in 0..n {
             let x = xs[i].max(0.0).min(wm);
             let y = ys[i].max(0.0).min(hm);
-            // SAFETY: `max` maps NaN to 0, so `x, y` are finite, in `0..=w−1` and
-            // `0..=h−1` (below 2³¹): the conversions are exact truncations, i.e. floor.
+            // SAFETY: `max` maps NaN to 0, so `x, y` are finite and in `0..=2²⁴` (within
+            // `0..=w−1`, `0..=h−1`): the conversions are exact truncations, i.e. floor.
             // (Unchecked, they vectorise; `as` adds saturation and NaN handling.)
             let (x0, y0) = unsafe { (x.to_int_unchecked::<i32>(), y.to_int_unchecked::<i32>()) };
             wx[i] = x - x0 as f32;
