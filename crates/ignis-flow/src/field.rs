@@ -70,6 +70,7 @@ impl FlowField {
 
     /// The vector at `(x, y)` (field pixels), bilinearly interpolated; positions outside the
     /// field are clamped to its edge, non-finite positions read as the edge at 0.
+    #[inline]
     pub fn at(&self, x: f32, y: f32) -> [f32; 2] {
         if self.data.is_empty() {
             return [0.0; 2];
@@ -106,7 +107,7 @@ impl FlowField {
         use rayon::prelude::*;
         data.par_chunks_mut(w)
             .enumerate()
-            .for_each(|(y, row)| map.row(y, row));
+            .for_each_init(|| map.scratch(), |v, (y, row)| map.row(y, row, v));
         FlowField { size, data }
     }
 
@@ -168,20 +169,33 @@ impl<'a> FieldMap<'a> {
         }
     }
 
-    /// Fills `out` with the (scaled) vectors of target row `y`.
+    /// The field's width (the scratch length [`FieldMap::row`] needs).
+    pub(crate) fn field_width(&self) -> usize {
+        self.field.size.width as usize
+    }
+
+    /// Scratch for [`FieldMap::row`]: one field row.
+    pub(crate) fn scratch(&self) -> Vec<[f32; 2]> {
+        vec![[0.0; 2]; self.field.size.width as usize]
+    }
+
+    /// Fills `out` with the (scaled) vectors of target row `y`. The field's two rows are
+    /// interpolated vertically (and scaled) once into `v` (from [`FieldMap::scratch`]), so
+    /// each target pixel reads two vectors instead of four.
     #[inline(always)]
-    pub(crate) fn row(&self, y: usize, out: &mut [[f32; 2]]) {
+    pub(crate) fn row(&self, y: usize, out: &mut [[f32; 2]], v: &mut [[f32; 2]]) {
         let (y0, y1, wy) = self.ys[y];
         let w = self.field.size.width as usize;
         let r0 = &self.field.data[y0 as usize * w..(y0 as usize + 1) * w];
         let r1 = &self.field.data[y1 as usize * w..(y1 as usize + 1) * w];
-        for (o, &(x0, x1, wx)) in out.iter_mut().zip(&self.xs) {
-            let (x0, x1) = (x0 as usize, x1 as usize);
+        for ((o, a), b) in v[..w].iter_mut().zip(r0).zip(r1) {
             for c in 0..2 {
-                let top = r0[x0][c] + (r0[x1][c] - r0[x0][c]) * wx;
-                let bot = r1[x0][c] + (r1[x1][c] - r1[x0][c]) * wx;
-                o[c] = (top + (bot - top) * wy) * self.scale[c];
+                o[c] = (a[c] + (b[c] - a[c]) * wy) * self.scale[c];
             }
+        }
+        for (o, &(x0, x1, wx)) in out.iter_mut().zip(&self.xs) {
+            let (p, q) = (v[x0 as usize], v[x1 as usize]);
+            *o = [p[0] + (q[0] - p[0]) * wx, p[1] + (q[1] - p[1]) * wx];
         }
     }
 }

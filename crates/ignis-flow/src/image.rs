@@ -75,28 +75,29 @@ pub(crate) fn area_resize(src: &[f32], sw: usize, sh: usize, w: usize, h: usize)
     }
     let xw = area_weights(sw, w);
     let yw = area_weights(sh, h);
-    // Horizontal pass: sh rows of w outputs.
-    let mut tmp = vec![0.0f32; w * sh];
-    tmp.par_chunks_mut(w).enumerate().for_each(|(y, out)| {
-        let src = &src[y * sw..(y + 1) * sw];
+    // Vertical pass first: h rows of sw, each a weighted sum of whole source rows
+    // (contiguous, vectorisable), so the gather-heavy horizontal pass runs on h rows
+    // instead of sh.
+    let mut tmp = vec![0.0f32; sw * h];
+    tmp.par_chunks_mut(sw).enumerate().for_each(|(y, out)| {
+        let (start, ws) = &yw[y];
+        for (k, &wt) in ws.iter().enumerate() {
+            let r = &src[(start + k) * sw..(start + k + 1) * sw];
+            for (o, &v) in out.iter_mut().zip(r) {
+                *o += v * wt;
+            }
+        }
+    });
+    // Horizontal pass.
+    let mut data = vec![0.0f32; w * h];
+    data.par_chunks_mut(w).enumerate().for_each(|(y, out)| {
+        let src = &tmp[y * sw..(y + 1) * sw];
         for (o, (start, ws)) in out.iter_mut().zip(&xw) {
             let mut s = 0.0;
             for (k, &wt) in ws.iter().enumerate() {
                 s += src[start + k] * wt;
             }
             *o = s;
-        }
-    });
-    // Vertical pass.
-    let mut data = vec![0.0f32; w * h];
-    data.par_chunks_mut(w).enumerate().for_each(|(y, out)| {
-        let (start, ws) = &yw[y];
-        out.fill(0.0);
-        for (k, &wt) in ws.iter().enumerate() {
-            let r = &tmp[(start + k) * w..(start + k + 1) * w];
-            for (o, &v) in out.iter_mut().zip(r) {
-                *o += v * wt;
-            }
         }
     });
     Img::new(w, h, data)

@@ -127,17 +127,23 @@ impl RowTaps {
     /// are finite: fields and `t` are checked finite by their constructors).
     #[inline(always)]
     fn fill(&mut self, xs: &[f32], ys: &[f32], w: u32, h: u32) {
-        let (wm, hm) = ((w - 1) as f32, (h - 1) as f32);
+        // Bounded by 2²⁴ as well (far above `MAX_SIDE`) so the unchecked conversions
+        // below stay in `i32` range even for a `Size` built without its checks.
+        let bound = |n: u32| (n - 1).min(1 << 24) as f32;
+        let (wm, hm) = (bound(w), bound(h));
         let n = xs.len();
         let (base, sx, sy) = (&mut self.base[..n], &mut self.sx[..n], &mut self.sy[..n]);
         let (wx, wy) = (&mut self.wx[..n], &mut self.wy[..n]);
         for i in 0..n {
             let x = xs[i].max(0.0).min(wm);
             let y = ys[i].max(0.0).min(hm);
-            // Non-negative after the clamp, so truncation is floor.
-            let (x0, y0) = (x as u32, y as u32);
+            // SAFETY: `max` maps NaN to 0, so `x, y` are finite and in `0..=2²⁴` (within
+            // `0..=w−1`, `0..=h−1`): the conversions are exact truncations, i.e. floor.
+            // (Unchecked, they vectorise; `as` adds saturation and NaN handling.)
+            let (x0, y0) = unsafe { (x.to_int_unchecked::<i32>(), y.to_int_unchecked::<i32>()) };
             wx[i] = x - x0 as f32;
             wy[i] = y - y0 as f32;
+            let (x0, y0) = (x0 as u32, y0 as u32);
             sx[i] = (x0 < w - 1) as u32;
             sy[i] = if y0 < h - 1 { w } else { 0 };
             base[i] = y0 * w + x0;
@@ -169,17 +175,20 @@ impl RowTaps {
             (d[b + sy + sx], wx * wy),
         ];
         for (p, k) in taps {
+            // `[r, g, b, 1] · a` in one 4-lane product (the compiler vectorises it).
             let a = p[3] * k * scale;
-            acc[0] += p[0] * a;
-            acc[1] += p[1] * a;
-            acc[2] += p[2] * a;
-            acc[3] += a;
+            let q = [p[0], p[1], p[2], 1.0];
+            for c in 0..4 {
+                acc[c] += q[c] * a;
+            }
         }
     }
 }
 
 /// Per-thread scratch of a warp or morph row.
 struct RowScratch {
+    /// One field row (see [`FieldMap::row`]), grown to the field's width on first use.
+    v: Vec<[f32; 2]>,
     fa: Vec<[f32; 2]>,
     fb: Vec<[f32; 2]>,
     xs: Vec<f32>,
@@ -192,6 +201,7 @@ struct RowScratch {
 impl RowScratch {
     fn new(n: usize) -> RowScratch {
         RowScratch {
+            v: Vec::new(),
             fa: vec![[0.0; 2]; n],
             fb: vec![[0.0; 2]; n],
             xs: vec![0.0; n],
@@ -205,7 +215,8 @@ impl RowScratch {
     /// Taps into `ka` for `x + t·F(x)` along row `y`, `F` read through `map`.
     #[inline(always)]
     fn warp_taps(&mut self, map: &FieldMap<'_>, y: usize, t: f32, size: Size) {
-        map.row(y, &mut self.fa);
+        self.v.resize(map.field_width(), [0.0; 2]);
+        map.row(y, &mut self.fa, &mut self.v);
         RowScratch::along(&mut self.xs, &mut self.ys, &self.fa, y, t);
         self.ka.fill(&self.xs, &self.ys, size.width, size.height);
     }
@@ -413,8 +424,9 @@ impl<'a> MorphPlan<'a> {
     /// (`s.wa`) per pixel.
     #[inline(always)]
     fn row(&self, y: usize, s: &mut RowScratch) {
-        self.fwd.row(y, &mut s.fa);
-        self.bwd.row(y, &mut s.fb);
+        s.v.resize(self.fwd.field_width().max(self.bwd.field_width()), [0.0; 2]);
+        self.fwd.row(y, &mut s.fa, &mut s.v);
+        self.bwd.row(y, &mut s.fb, &mut s.v);
         let t = self.t;
         let (w, h) = (self.size.width, self.size.height);
         RowScratch::along(&mut s.xs, &mut s.ys, &s.fa, y, -t);
