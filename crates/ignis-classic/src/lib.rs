@@ -40,6 +40,8 @@
 //! bottom. With [`SourceEdge::Top`] the same simulation runs and the rows are mirrored when a
 //! frame is taken, so the fire hangs down from the top.
 
+pub mod motion;
+
 use ignis_core::{GrayFrame, Palette, RgbaFrame, Rng, Size};
 use rayon::prelude::*;
 

@@ -6,7 +6,9 @@
 //! and with a plain cross-fade. Error: mean absolute difference from the true dropped frame
 //! in 8-bit sRGB levels of the colour composited over black. Each row also reports the same
 //! vectors on unquantised colour, and a variant whose vectors come from flows to the true
-//! in-between frames (marked `uses_in_between_frame`).
+//! in-between frames (marked `uses_in_between_frame`). A `diagnosis` per row separates the
+//! causes: vector quantisation, gating, flow resolution, the generator's own motion, and a
+//! per-pixel best-velocity bound (what any vector sheet could reach with this blend).
 
 use crate::global::Global;
 use crate::output::flow_source;
@@ -16,6 +18,9 @@ use ignis_media::write::motion::{linear_blend, mv_blend};
 use ignis_media::{FlipbookOptions, ReadOptions, WriteOptions};
 use serde_json::json;
 use std::time::Instant;
+
+/// One motion vector per pixel, `[dx, dy]` in pixels.
+type Field = Vec<[f32; 2]>;
 
 /// Goal: motion-vector blend error at least 30% below the cross-fade's.
 const GOAL_REDUCTION: f64 = 0.30;
@@ -92,7 +97,12 @@ fn in_between_vectors(frames: &[RgbaFrame]) -> Result<Vec<Vec<[f32; 2]>>> {
 }
 
 /// Exports `frames[0::2]` with motion vectors, rebuilds the odd frames, returns the row.
-fn case(name: &str, frames: &[RgbaFrame], dir: &std::path::Path) -> Result<serde_json::Value> {
+fn case(
+    name: &str,
+    frames: &[RgbaFrame],
+    dir: &std::path::Path,
+    model: Option<Vec<Vec<[f32; 2]>>>,
+) -> Result<serde_json::Value> {
     let kept: Vec<RgbaFrame> = frames.iter().step_by(2).cloned().collect();
     let path = dir.join(format!("{name}.png"));
     let opts = WriteOptions {
@@ -131,6 +141,7 @@ fn case(name: &str, frames: &[RgbaFrame], dir: &std::path::Path) -> Result<serde
             "sheet": figures_of(blend_errors(&fb.frames, &mid, frames)),
             "exact_colour": figures_of(blend_errors(&kept, &mid, frames)),
         },
+        "diagnosis": diagnosis(&kept, frames, &mv, model)?,
     });
     if let (Some(r), serde_json::Value::Object(e)) = (row.as_object_mut(), extra) {
         r.extend(e);
@@ -138,28 +149,34 @@ fn case(name: &str, frames: &[RgbaFrame], dir: &std::path::Path) -> Result<serde
     Ok(row)
 }
 
-fn classic(n: usize) -> Result<Vec<RgbaFrame>> {
+/// Classic frames (one step each) and the model's velocity per key frame (two steps).
+fn classic(n: usize) -> Result<(Vec<RgbaFrame>, Vec<Field>)> {
     use ignis_classic::{ClassicFire, ClassicParams};
-    let mut fire = ClassicFire::new(ClassicParams {
+    let params = ClassicParams {
         size: Size::new(160, 120)?,
         seed: 7,
         ..Default::default()
-    })?;
+    };
+    let [vx, vy] = ignis_classic::motion::velocity_per_step(&params);
+    let model = vec![vec![[2.0 * vx, 2.0 * vy]; params.size.pixels()]; n.div_ceil(2)];
+    let mut fire = ClassicFire::new(params)?;
     let palette = ignis_core::Palette::preset("classic")?;
     for _ in 0..60 {
         fire.step();
     }
-    Ok((0..n)
+    let frames = (0..n)
         .map(|_| {
             fire.step();
             fire.rgba(&palette)
         })
-        .collect())
+        .collect();
+    Ok((frames, model))
 }
 
-fn volume(n: usize, preset: ignis_volume::Preset) -> Result<Vec<RgbaFrame>> {
+/// `n` frames of a volume preset at `rate` times its frame rate.
+fn volume(n: usize, preset: ignis_volume::Preset, rate: f32) -> Result<Vec<RgbaFrame>> {
     let mut scene = ignis_volume::FireScene::preset(preset).with_size(Size::new(128, 128)?);
-    scene.fps *= 2.0; // twice the preset's frame rate
+    scene.fps *= rate;
     let mut anim = scene.animator()?;
     (0..n)
         .map(|_| Ok(anim.next_frame()?.image))
@@ -183,7 +200,7 @@ fn footage(name: &str, n: usize) -> Result<Option<Vec<RgbaFrame>>> {
 
 /// The table: one row per case, plus the flow and flipbook timings.
 pub fn figures(g: &Global, quick: bool) -> Result<serde_json::Value> {
-    let n = if quick { 9 } else { 25 };
+    let n: usize = if quick { 9 } else { 25 };
     let dir = tempfile::tempdir()?;
     let mut rows = Vec::new();
     let sp = g.spinner("exporting at half rate and rebuilding the dropped frames");
@@ -195,19 +212,26 @@ pub fn figures(g: &Global, quick: bool) -> Result<serde_json::Value> {
             ignis_flow::bench::texture(Size::new(128, 128).unwrap(), 3, d, 1.5).to_rgba()
         })
         .collect();
-    rows.push(case("moving-texture", &shift, dir.path())?);
-    rows.push(case("classic", &classic(n)?, dir.path())?);
+    let truth = vec![vec![[1.5f32 * 2.0, -2.0]; 128 * 128]; n.div_ceil(2)];
+    rows.push(case("moving-texture", &shift, dir.path(), Some(truth))?);
+    let mut held = serde_json::Map::new();
+    let (frames, model) = classic(n)?;
+    rows.push(case("classic", &frames, dir.path(), Some(model))?);
+    held.insert("classic".into(), held_out(&classic(2 * n - 1)?.0)?);
     for p in [ignis_volume::Preset::Candle, ignis_volume::Preset::Campfire] {
-        rows.push(case(
-            &format!("volume-{}", p.name()),
-            &volume(n, p)?,
-            dir.path(),
-        )?);
+        let name = format!("volume-{}", p.name());
+        rows.push(case(&name, &volume(n, p, 2.0)?, dir.path(), None)?);
+        held.insert(name, held_out(&volume(2 * n - 1, p, 4.0)?)?);
     }
     let mut skipped = Vec::new();
     for clip in ["candle.mp4", "campfire.mp4"] {
         match footage(clip, n)? {
-            Some(frames) => rows.push(case(clip, &frames, dir.path())?),
+            Some(frames) => {
+                rows.push(case(clip, &frames, dir.path(), None)?);
+                if let Some(f) = footage(clip, 2 * n - 1)? {
+                    held.insert(clip.to_string(), held_out(&f)?);
+                }
+            }
             None => skipped.push(format!("{clip}: ../shared/data not found")),
         }
     }
@@ -265,9 +289,12 @@ pub fn figures(g: &Global, quick: bool) -> Result<serde_json::Value> {
             "exact_colour": "the same vectors on the unquantised key frames (what the --hdr EXR colour sheet gives): separates the 8-bit sheet's rounding from the blend",
             "in_between_flow": "velocities from flows key -> true in-between frames (uses the dropped frames: possible only when the exporter has them, e.g. decimated footage or a generator rendered at twice the rate); vectors unquantised",
             "key_frame_change": "mean |error| between consecutive key frames: how much there is to blend",
+            "held_out_t": "error_reduction at blends t = 0.25 / 0.5 / 0.75 with key frames every 4th frame (footage: every 4th source frame), default vs loose gating, vectors unquantised: checks a change on frames it was not tuned on",
+            "diagnosis": "error_reduction of other vectors on the unquantised key frames: gated_sheet_16bit (the sheet's vectors read back), gated_unquantised (the same before 16-bit encoding), raw_flow / raw_flow_full_res (ungated DIS velocities, finest pyramid level 1 / 0), raw_flow_halved, gated_loose (consistency 8 px, explained 0.05), model (the generator's own motion: exact shift for the texture, ignis_classic::motion for classic), best_per_pixel_bound (per pixel the best velocity within 4 px chosen by looking at the true frame: a bound no vector sheet can beat)",
         },
         "goal_error_reduction": GOAL_REDUCTION,
         "blend": rows,
+        "held_out_t": held,
         "skipped": skipped,
         "flipbook_64x256_mv_s": (flipbook_s * 1000.0).round() / 1000.0,
         "flipbook_64x256_mv_cpu_s": flipbook_cpu_s,
@@ -276,4 +303,179 @@ pub fn figures(g: &Global, quick: bool) -> Result<serde_json::Value> {
         "flipbook_goal_met": flipbook_s <= GOAL_FLIPBOOK_S,
         "flow": flow,
     }))
+}
+
+/// Frame `k`'s velocity from the flows of each pair `(k → k+1, k+1 → k)`: the mean of its
+/// forward and reversed backward motion, one side at the ends (as the flipbook writer).
+fn velocities(pairs: &[(Field, Field)]) -> Vec<Field> {
+    let n = pairs.len() + 1;
+    (0..n)
+        .map(|k| {
+            let ahead = (k < pairs.len()).then(|| &pairs[k].0);
+            let behind = (k > 0).then(|| &pairs[k - 1].1);
+            match (ahead, behind) {
+                (Some(f), Some(b)) => f
+                    .iter()
+                    .zip(b)
+                    .map(|(f, b)| [0.5 * (f[0] - b[0]), 0.5 * (f[1] - b[1])])
+                    .collect(),
+                (Some(f), None) => f.clone(),
+                (None, Some(b)) => b.iter().map(|b| [-b[0], -b[1]]).collect(),
+                (None, None) => unreachable!("at least two key frames"),
+            }
+        })
+        .collect()
+}
+
+/// Velocities from the plain (ungated) flow at `finest` pyramid level.
+fn raw_velocities(keys: &[RgbaFrame], finest: u32) -> Result<Vec<Vec<[f32; 2]>>> {
+    let p = ignis_flow::FlowParams {
+        finest_scale: finest,
+        ..Default::default()
+    };
+    let pairs = keys
+        .windows(2)
+        .map(|w| {
+            let (f, b) =
+                ignis_flow::flow_pair(&ignis_flow::luma(&w[0]), &ignis_flow::luma(&w[1]), &p)?;
+            Ok((f.into_vec(), b.into_vec()))
+        })
+        .collect::<Result<Vec<_>>>()?;
+    Ok(velocities(&pairs))
+}
+
+/// Gated velocities ([`ignis_flow::motion_vector_pair`]) unquantised.
+fn gated_velocities(keys: &[RgbaFrame]) -> Result<Vec<Vec<[f32; 2]>>> {
+    gated_with(keys, &ignis_flow::VectorParams::default())
+}
+
+fn gated_with(keys: &[RgbaFrame], p: &ignis_flow::VectorParams) -> Result<Vec<Vec<[f32; 2]>>> {
+    let pairs = keys
+        .windows(2)
+        .map(|w| {
+            let (f, b) = ignis_flow::motion_vector_pair(&w[0], &w[1], p)?;
+            Ok((f.into_vec(), b.into_vec()))
+        })
+        .collect::<Result<Vec<_>>>()?;
+    Ok(velocities(&pairs))
+}
+
+/// Lower bound of the blend's error: per dropped pixel, the best velocity on a 0.25 px grid
+/// within ±`r` px (the same vector for both key frames), chosen by looking at the truth.
+fn best_per_pixel(keys: &[RgbaFrame], truth: &[RgbaFrame], r: f32) -> f64 {
+    use ignis_core::palette::linear_to_srgb;
+    use ignis_media::write::motion::sample_bilinear;
+    use rayon::prelude::*;
+    let steps = (r / 0.25).round() as i32;
+    let enc =
+        |p: [f32; 4]| [0, 1, 2].map(|c| linear_to_srgb((p[c] * p[3]).clamp(0.0, 1.0)) * 255.0);
+    let mut total = 0.0;
+    for k in 0..keys.len() - 1 {
+        let (a, b, t) = (&keys[k], &keys[k + 1], &truth[2 * k + 1]);
+        let w = a.width() as usize;
+        let sum: f64 = t
+            .data()
+            .par_iter()
+            .enumerate()
+            .map(|(i, &q)| {
+                let want = enc(q);
+                let (x, y) = ((i % w) as f32 + 0.5, (i / w) as f32 + 0.5);
+                let mut best = f32::MAX;
+                for sy in -steps..=steps {
+                    for sx in -steps..=steps {
+                        let (u, v) = (sx as f32 * 0.25, sy as f32 * 0.25);
+                        let p = sample_bilinear(a, x - u * 0.5, y - v * 0.5);
+                        let n = sample_bilinear(b, x + u * 0.5, y + v * 0.5);
+                        let m = [0, 1, 2, 3].map(|c| 0.5 * (p[c] + n[c]));
+                        let got = enc(m);
+                        let e = (0..3).map(|c| (got[c] - want[c]).abs()).sum::<f32>();
+                        best = best.min(e);
+                    }
+                }
+                best as f64 / 3.0
+            })
+            .sum();
+        total += sum / t.data().len() as f64;
+    }
+    total / (keys.len() - 1) as f64
+}
+
+/// Per-case diagnosis on the unquantised key frames at blend 0.5: which vectors help.
+fn diagnosis(
+    keys: &[RgbaFrame],
+    truth: &[RgbaFrame],
+    sheet_mv: &[Vec<[f32; 2]>],
+    model: Option<Vec<Vec<[f32; 2]>>>,
+) -> Result<serde_json::Value> {
+    let plain = blend_errors(
+        keys,
+        &vec![vec![[0.0; 2]; keys[0].size().pixels()]; keys.len()],
+        truth,
+    )
+    .1;
+    let red = |mv: &[Vec<[f32; 2]>]| r3(1.0 - blend_errors(keys, mv, truth).0 / plain.max(1e-12));
+    let raw1 = raw_velocities(keys, 1)?;
+    let max_v = raw1
+        .iter()
+        .flatten()
+        .map(|v| v[0].abs().max(v[1].abs()))
+        .fold(0f32, f32::max);
+    let mut d = json!({
+        "plain_error": r3(plain),
+        "gated_sheet_16bit": red(sheet_mv),
+        "gated_unquantised": red(&gated_velocities(keys)?),
+        "raw_flow": red(&raw1),
+        "raw_flow_full_res": red(&raw_velocities(keys, 0)?),
+        "max_raw_velocity_px": r3(max_v as f64),
+        "best_per_pixel_bound": r3(1.0 - best_per_pixel(keys, truth, 4.0) / plain.max(1e-12)),
+    });
+    let half: Vec<Vec<[f32; 2]>> = raw1
+        .iter()
+        .map(|f| f.iter().map(|v| [v[0] * 0.5, v[1] * 0.5]).collect())
+        .collect();
+    d["raw_flow_halved"] = json!(red(&half));
+    let loose = ignis_flow::VectorParams {
+        consistency_px: 8.0,
+        explained: 0.05,
+        ..Default::default()
+    };
+    d["gated_loose"] = json!(red(&gated_with(keys, &loose)?));
+    if let Some(m) = model {
+        d["model"] = json!(red(&m));
+    }
+    Ok(d)
+}
+
+/// Held-out blends: key frames every 4th of `frames`, the three frames between each pair
+/// rebuilt at t = 0.25, 0.5, 0.75 with the writer's default vectors and with looser gating
+/// (so a change tuned at t = 0.5 on every other frame is checked on frames it never saw).
+fn held_out(frames: &[RgbaFrame]) -> Result<serde_json::Value> {
+    let keys: Vec<RgbaFrame> = frames.iter().step_by(4).cloned().collect();
+    let loose = ignis_flow::VectorParams {
+        consistency_px: 8.0,
+        explained: 0.05,
+        ..Default::default()
+    };
+    let sets = [
+        ("gated", gated_velocities(&keys)?),
+        ("gated_loose", gated_with(&keys, &loose)?),
+    ];
+    let mut out = serde_json::Map::new();
+    for (name, mv) in &sets {
+        let mut per_t = serde_json::Map::new();
+        for (j, t) in [0.25f32, 0.5, 0.75].into_iter().enumerate() {
+            let (mut e_mv, mut e_plain) = (0.0, 0.0);
+            for k in 0..keys.len() - 1 {
+                let truth = &frames[4 * k + j + 1];
+                e_mv += error(
+                    &mv_blend(&keys[k], &keys[k + 1], &mv[k], &mv[k + 1], t),
+                    truth,
+                );
+                e_plain += error(&linear_blend(&keys[k], &keys[k + 1], t), truth);
+            }
+            per_t.insert(format!("t{t}"), json!(r3(1.0 - e_mv / e_plain.max(1e-12))));
+        }
+        out.insert(name.to_string(), serde_json::Value::Object(per_t));
+    }
+    Ok(serde_json::Value::Object(out))
 }
