@@ -121,12 +121,13 @@ pub struct Sparkle {
 
 /// Cell size of [`ClassicParams::preset`], pixels: the article's per-pixel buffer is all
 /// fine noise (a spatial spectrum falling as `k^-2`, where real flames fall about as
-/// `k^-3.3`); simulating on 5-pixel cells, interpolated smoothly, gives the larger-scale
+/// `k^-3.3`); simulating on 6-pixel cells, interpolated smoothly, gives the larger-scale
 /// tongues of a real fire.
-pub const PRESET_CELL: u32 = 5;
-/// Puffing depth of [`ClassicParams::preset`]: the source heat dips to a fifth at the
-/// bottom of each puff, so the flames visibly lengthen and shorten at the law's rate.
-pub const PRESET_PUFF: f32 = 0.8;
+pub const PRESET_CELL: u32 = 6;
+/// Puffing depth of [`ClassicParams::preset`]: the source heat dips to half at the bottom
+/// of each puff, so the flames visibly lengthen and shorten at the law's rate (shallower
+/// puffs lose to the random source's slow drift at 30 fps).
+pub const PRESET_PUFF: f32 = 0.5;
 
 /// Parameters of the classic fire. Every field has a sensible default: the article's fire
 /// exactly ([`ClassicParams::preset`] is the fire Ignis renders by default).
@@ -796,7 +797,11 @@ impl ClassicFire {
         let mut out = if self.params.cell == 1 {
             self.buf.clone()
         } else {
-            upsample(&self.buf, self.w, self.h, ow, oh, self.params.cell as usize)
+            // the flames above the source line fill the frame: the raw source line (a row
+            // of random hot cells, the brightest and sharpest thing in the buffer) and the
+            // dead edge below it are not shown
+            let shown = self.h - self.params.edge as usize - 1;
+            upsample(&self.buf[..shown * self.w], self.w, shown, ow, oh)
         };
         if self.params.source_edge == SourceEdge::Top {
             out = out.chunks_exact(ow).rev().flatten().copied().collect();
@@ -805,26 +810,26 @@ impl ClassicFire {
     }
 }
 
-/// For each of `n` output samples of cells `cell` wide over `len` cells: the two cells
-/// around the sample's centre and the second one's weight in 256ths.
-fn taps(n: usize, len: usize, cell: usize) -> Vec<(usize, usize, u32)> {
+/// For each of `n` output samples spread evenly over `len` cells: the two cells around the
+/// sample's centre and the second one's weight in 256ths.
+fn taps(n: usize, len: usize) -> Vec<(usize, usize, u32)> {
     (0..n)
         .map(|x| {
-            // centre of output pixel x in cell units, minus a half: (2x + 1 − cell) / 2cell
-            let num = 2 * x as i64 + 1 - cell as i64;
-            let den = 2 * cell as i64;
+            // centre of output pixel x in cell units, minus a half: ((2x + 1)·len − n) / 2n
+            let num = (2 * x as i64 + 1) * len as i64 - n as i64;
+            let den = 2 * n as i64;
             let i0 = num.div_euclid(den);
             let frac = num.rem_euclid(den);
-            let wt = ((frac * 256 + cell as i64) / den) as u32;
+            let wt = ((frac * 256 + n as i64) / den) as u32;
             let c = |i: i64| i.clamp(0, len as i64 - 1) as usize;
             (c(i0), c(i0 + 1), wt)
         })
         .collect()
 }
 
-/// `src` (`w`×`h` cells) bilinearly interpolated to `ow`×`oh` pixels of `cell` each.
-fn upsample(src: &[u8], w: usize, h: usize, ow: usize, oh: usize, cell: usize) -> Vec<u8> {
-    let (tx, ty) = (taps(ow, w, cell), taps(oh, h, cell));
+/// `src` (`w`×`h` cells) bilinearly interpolated to `ow`×`oh` pixels.
+fn upsample(src: &[u8], w: usize, h: usize, ow: usize, oh: usize) -> Vec<u8> {
+    let (tx, ty) = (taps(ow, w), taps(oh, h));
     // each cell row interpolated across, in 256ths
     let wide: Vec<u16> = src
         .chunks_exact(w)
@@ -1370,8 +1375,8 @@ mod tests {
     /// cells of 1 px are the buffer itself.
     #[test]
     fn upsample_interpolates_between_cell_centres() {
-        assert_eq!(upsample(&[77; 6], 3, 2, 12, 8, 4), vec![77; 96]);
-        let ramp = upsample(&[0, 255], 2, 1, 8, 1, 4);
+        assert_eq!(upsample(&[77; 6], 3, 2, 12, 8), vec![77; 96]);
+        let ramp = upsample(&[0, 255], 2, 1, 8, 1);
         assert_eq!(&ramp[..2], &[0, 0]);
         assert_eq!(&ramp[6..], &[255, 255]);
         assert!(ramp.windows(2).all(|w| w[0] <= w[1]), "{ramp:?}");
@@ -1381,7 +1386,7 @@ mod tests {
                 "{ramp:?}"
             );
         }
-        let taps1 = taps(5, 5, 1);
+        let taps1 = taps(5, 5);
         assert!(taps1
             .iter()
             .enumerate()

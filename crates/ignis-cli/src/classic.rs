@@ -16,8 +16,8 @@ ignis classic --frames 48 -o frames/%04d.exr                           # linear 
 ignis classic --frames 120 --loop -o loop.mp4                          # a seamless loop as MP4\n  \
 ignis classic --frames 1000 --chunk 0..100 -o frames/%04d.png          # job 1 of 10 on a farm\n  \
 ignis classic --cell 1 --puff 0 -o article.mp4                         # the 1999 article's fire exactly\n\n\
-Realism: by default the fire is a 1 m fire bed simulated on 5-px cells that puffs at 1.5/√D Hz\n\
-(--diameter D), so it meets the flicker law and real footage's spatial spectrum (ignis bench realism).\n\n\
+Realism: by default the fire is a 1 m fire bed simulated on 6-px cells that puffs at 1.5/√D Hz\n\
+(--diameter D); `ignis bench realism` measures it against that law and campfire footage.\n\n\
 Loops (the default for GIFs and flipbooks): the source line and sparklies repeat every N frames and the\n\
 fire is stepped until its buffer repeats exactly, so frame N equals frame 0 byte for byte."
 )]
@@ -62,10 +62,11 @@ pub struct Args {
     #[arg(long, default_value = "article", value_parser = ["article", "buffered"])]
     pub kernel: String,
     /// Simulation cell size in pixels: the buffer is SIZE / CELL, interpolated smoothly to
-    /// SIZE. 5 (the default) gives real flames' large-scale structure; 1 is the article's
+    /// SIZE. 6 (the default) gives real flames' large-scale structure; 1 is the article's
     /// per-pixel buffer (with --puff 0: the article's fire exactly).
-    #[arg(long, default_value_t = ignis_classic::PRESET_CELL)]
-    pub cell: u32,
+    /// [default: 6, fewer on frames under 96 px so the buffer keeps 16 cells a side]
+    #[arg(long)]
+    pub cell: Option<u32>,
     /// Puffing depth 0–1 (0 = off): the source heat rises and falls at 1.5/√DIAMETER Hz, the
     /// puffing frequency of a real flame of that width (a model addition beyond the article).
     #[arg(long, default_value_t = ignis_classic::PRESET_PUFF)]
@@ -118,7 +119,10 @@ impl Args {
                 Kernel::Article
             },
             seed: self.seed,
-            cell: self.cell,
+            cell: self.cell.unwrap_or_else(|| {
+                let side = self.size.width.min(self.size.height);
+                ignis_classic::PRESET_CELL.min(side / 16).max(1)
+            }),
             puff: self.puff,
             diameter: self.diameter,
             fps: self.out.fps as f32,
