@@ -36,6 +36,14 @@
 //! folded into `0..=heat` (folding is what the clamped walk's reflection at the ends
 //! does); the Perlin source walks a noise lattice periodic in time.
 //!
+//! Realism (issue 16 §2; additions beyond the article, off in [`ClassicParams::default`],
+//! on in [`ClassicParams::preset`]): the fire has a physical width
+//! ([`ClassicParams::diameter`]) and *puffs* like a buoyant diffusion flame, its source heat
+//! scaled by a raised-cosine wave at `1.5/√D` Hz ([`ClassicParams::puff`]); and it can be
+//! simulated on cells larger than a pixel ([`ClassicParams::cell`]), bilinearly
+//! interpolated to the output, since a per-pixel buffer is all fine noise. In a loop the
+//! wave makes a whole number of puffs per period, so the inputs still repeat.
+//!
 //! Buffer convention: row 0 is the top; the fire burns upwards from the source line at the
 //! bottom. With [`SourceEdge::Top`] the same simulation runs and the rows are mirrored when a
 //! frame is taken, so the fire hangs down from the top.
@@ -113,15 +121,27 @@ pub struct Sparkle {
     pub boost: u8,
 }
 
-/// Parameters of the classic fire. Every field has a sensible default.
+/// Cell size of [`ClassicParams::preset`], pixels: the article's per-pixel buffer is all
+/// fine noise (a spatial spectrum falling as `k^-2`, where real flames fall about as
+/// `k^-3.3`); simulating on 6-pixel cells, interpolated smoothly, gives the larger-scale
+/// tongues of a real fire.
+pub const PRESET_CELL: u32 = 6;
+/// Puffing depth of [`ClassicParams::preset`]: the source heat dips to half at the bottom
+/// of each puff, so the flames visibly lengthen and shorten at the law's rate (shallower
+/// puffs lose to the random source's slow drift at 30 fps).
+pub const PRESET_PUFF: f32 = 0.5;
+
+/// Parameters of the classic fire. Every field has a sensible default: the article's fire
+/// exactly ([`ClassicParams::preset`] is the fire Ignis renders by default).
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(default)]
 pub struct ClassicParams {
-    /// Buffer size in pixels. Default 320×200.
+    /// Frame size in pixels (the buffer is this in cells, [`ClassicParams::grid`]). Default
+    /// 320×200.
     pub size: Size,
     /// BURNFADE: subtracted after averaging, `0..=255`. Larger = shorter flames. Default 1.
     pub fade: u8,
-    /// DONTBURN: pixels at each edge that never burn, ≥ 1 (the filter reads one pixel to
+    /// DONTBURN: cells at each edge that never burn, ≥ 1 (the filter reads one pixel to
     /// each side and one below). Default 1.
     pub edge: u32,
     /// Hottest value the source line (and the sparklies) may write, `1..=255`. Default 255.
@@ -136,6 +156,22 @@ pub struct ClassicParams {
     pub kernel: Kernel,
     /// Seed of every random choice.
     pub seed: u64,
+    /// Simulation cell size in pixels, ≥ 1: the buffer is `size / cell` (rounded up) and
+    /// frames are brought to `size` by bilinear interpolation. 1 is the article's buffer,
+    /// pixel for pixel; larger cells give the larger-scale structure of real flames
+    /// instead of pixel-level noise. Default 1.
+    pub cell: u32,
+    /// Puffing (a model addition beyond the article): the source line's heat is scaled by
+    /// `1 − puff·(½ − ½·cos 2πft)` with `f = 1.5/√diameter` Hz, the puffing frequency of a
+    /// buoyant diffusion flame (Cetegen & Ahmed 1993), so the flames lengthen and shorten
+    /// at that rate. `0..=1`; 0 disables it. Default 0.
+    pub puff: f32,
+    /// The physical width of the fire the buffer shows, metres (> 0): sets the puffing
+    /// frequency. Default 1.
+    pub diameter: f32,
+    /// Frames per second the fire is played at (> 0): one step is one frame, so this turns
+    /// the puffing frequency into frames. Default 30.
+    pub fps: f32,
 }
 
 impl Default for ClassicParams {
@@ -156,6 +192,10 @@ impl Default for ClassicParams {
             }),
             kernel: Kernel::Article,
             seed: 0,
+            cell: 1,
+            puff: 0.0,
+            diameter: 1.0,
+            fps: 30.0,
         }
     }
 }
@@ -163,7 +203,32 @@ impl Default for ClassicParams {
 impl ClassicParams {
     /// Checks every field and their combinations.
     pub fn validate(&self) -> Result<(), ClassicError> {
-        let s = Size::new(self.size.width, self.size.height)?;
+        Size::new(self.size.width, self.size.height)?;
+        if self.cell == 0 {
+            return Err(bad(
+                "cell",
+                "must be at least 1 pixel (1 = the article's buffer)",
+            ));
+        }
+        if !(0.0..=1.0).contains(&self.puff) {
+            return Err(bad(
+                "puff",
+                format!("{}: must be 0..=1 (0 = off)", self.puff),
+            ));
+        }
+        if !(self.diameter > 0.0 && self.diameter.is_finite()) {
+            return Err(bad(
+                "diameter",
+                format!("{}: must be a positive number of metres", self.diameter),
+            ));
+        }
+        if !(self.fps > 0.0 && self.fps.is_finite()) {
+            return Err(bad(
+                "fps",
+                format!("{}: must be a positive frame rate", self.fps),
+            ));
+        }
+        let s = self.grid();
         if self.edge == 0 {
             return Err(bad(
                 "edge",
@@ -175,8 +240,9 @@ impl ClassicParams {
             return Err(bad(
                 "size",
                 format!(
-                    "{s} is too small for an edge of {}; use at least {min_side}x{min_side}",
-                    self.edge
+                    "{} with cells of {} px is a {s} buffer, too small for an edge of {}; \
+                     use a buffer of at least {min_side}x{min_side} cells",
+                    self.size, self.cell, self.edge
                 ),
             ));
         }
@@ -195,6 +261,34 @@ impl ClassicParams {
             }
         }
         Ok(())
+    }
+
+    /// The classic preset (what `ignis classic` renders by default): the article's fire
+    /// (random source, sparklies, fade 1) standing for a fire bed [`ClassicParams::diameter`]
+    /// = 1 m wide, simulated on cells of [`PRESET_CELL`] pixels and puffing with depth
+    /// [`PRESET_PUFF`]. Measured by `ignis bench realism` against the puffing law and
+    /// `campfire.mp4`'s spectral slope (crate `benches/README.md`).
+    pub fn preset() -> ClassicParams {
+        ClassicParams {
+            cell: PRESET_CELL,
+            puff: PRESET_PUFF,
+            diameter: 1.0,
+            ..Default::default()
+        }
+    }
+
+    /// The simulation buffer's size: [`ClassicParams::size`] in cells, rounded up.
+    pub fn grid(&self) -> Size {
+        let c = self.cell.max(1);
+        Size {
+            width: self.size.width.div_ceil(c),
+            height: self.size.height.div_ceil(c),
+        }
+    }
+
+    /// The puffing frequency `1.5/√diameter`, Hz.
+    pub fn puff_hz(&self) -> f64 {
+        1.5 / f64::from(self.diameter).sqrt()
     }
 }
 
@@ -265,7 +359,8 @@ impl ClassicFire {
     /// A cold (all-black) fire. Fails on invalid parameters before allocating.
     pub fn new(params: ClassicParams) -> Result<ClassicFire, ClassicError> {
         params.validate()?;
-        let (w, h) = (params.size.width as usize, params.size.height as usize);
+        let grid = params.grid();
+        let (w, h) = (grid.width as usize, grid.height as usize);
         let mut rng = Rng::new(params.seed);
         let noise = Perlin1::new(&mut rng);
         // Start the random source line at random levels: the article's "wall of flame".
@@ -595,6 +690,8 @@ impl ClassicFire {
             }
         }
         let line = &mut self.source;
+        // the Perlin feature size is in pixels; the line is in cells
+        let cell = self.params.cell as f32;
         match (self.params.source, self.looping.as_mut(), k) {
             (SourceMode::Random { drift }, Some(l), Some(k)) => {
                 // the walk bridged back to its start over the period: after step `j`
@@ -615,7 +712,7 @@ impl ClassicFire {
             (SourceMode::Perlin { scale, .. }, Some(l), Some(k)) => {
                 let t = k as f32 * l.speed;
                 for (i, p) in line.iter_mut().enumerate() {
-                    let x = (i + e) as f32 / scale;
+                    let x = (i + e) as f32 * cell / scale;
                     let n = self.noise.turbulence_periodic(x, t, Some(l.cells));
                     *p = ((0.5 + 0.5 * n).clamp(0.0, 1.0) * heat as f32).round() as u8;
                 }
@@ -630,50 +727,129 @@ impl ClassicFire {
             (SourceMode::Perlin { scale, speed }, _, _) => {
                 let t = self.frame as f32 * speed;
                 for (i, p) in line.iter_mut().enumerate() {
-                    let x = (i + e) as f32 / scale;
+                    let x = (i + e) as f32 * cell / scale;
                     let n = self.noise.turbulence(x, t);
                     *p = ((0.5 + 0.5 * n).clamp(0.0, 1.0) * heat as f32).round() as u8;
                 }
             }
         }
         let y = self.source_row();
-        self.buf[y * w + e..y * w + w - e].copy_from_slice(&self.source);
+        let gain = self.puff_gain();
+        let row = &mut self.buf[y * w + e..y * w + w - e];
+        match gain {
+            None => row.copy_from_slice(&self.source),
+            Some(g) => {
+                for (o, &v) in row.iter_mut().zip(&self.source) {
+                    *o = ((v as u32 * g + 128) >> 8) as u8;
+                }
+            }
+        }
         self.update_top();
         self.frame += 1;
     }
 
-    /// The current frame as linear intensities `0..=1` (value / 255), mirrored for a top
-    /// source edge.
-    pub fn gray(&self) -> GrayFrame {
-        let size = self.params.size;
-        let mut data = Vec::with_capacity(self.w * self.h);
-        let rows: Box<dyn Iterator<Item = &[u8]>> = match self.params.source_edge {
-            SourceEdge::Bottom => Box::new(self.buf.chunks_exact(self.w)),
-            SourceEdge::Top => Box::new(self.buf.chunks_exact(self.w).rev()),
-        };
-        for row in rows {
-            data.extend(row.iter().map(|&v| v as f32 / 255.0));
+    /// The puffing wave's gain on the source line this frame, in 256ths (`None`: off). A
+    /// loop puffs a whole number of times over its period (the nearest to the law's
+    /// frequency; none when the loop is shorter than half a puff).
+    fn puff_gain(&self) -> Option<u32> {
+        let p = &self.params;
+        if p.puff <= 0.0 {
+            return None;
         }
-        GrayFrame::from_vec(size, data).expect("buffer matches size")
+        let per_frame = p.puff_hz() / f64::from(p.fps);
+        let phase = match &self.looping {
+            Some(l) => {
+                let cycles = (l.period as f64 * per_frame).round();
+                if cycles == 0.0 {
+                    return None;
+                }
+                (self.frame % l.period) as f64 * cycles / l.period as f64
+            }
+            None => self.frame as f64 * per_frame,
+        };
+        let dip = 0.5 - 0.5 * (std::f64::consts::TAU * phase.fract()).cos();
+        Some(((1.0 - f64::from(p.puff) * dip) * 256.0).round() as u32)
+    }
+
+    /// The current frame as linear intensities `0..=1` (value / 255) at
+    /// [`ClassicParams::size`]: the buffer's bytes as [`ClassicFire::frame_bytes`] gives them.
+    pub fn gray(&self) -> GrayFrame {
+        let data = self
+            .frame_bytes()
+            .iter()
+            .map(|&v| v as f32 / 255.0)
+            .collect();
+        GrayFrame::from_vec(self.params.size, data).expect("buffer matches size")
     }
 
     /// The current frame through `palette`, indexing the table by the byte value exactly
     /// as the article's 256-entry palette does.
     pub fn rgba(&self, palette: &Palette) -> RgbaFrame {
-        let idx: Vec<u8> = match self.params.source_edge {
-            SourceEdge::Bottom => self.buf.clone(),
-            SourceEdge::Top => self
-                .buf
-                .chunks_exact(self.w)
-                .rev()
-                .flatten()
-                .copied()
-                .collect(),
-        };
         palette
-            .apply_indexed(self.params.size, &idx)
+            .apply_indexed(self.params.size, &self.frame_bytes())
             .expect("buffer matches size")
     }
+
+    /// The frame's bytes at [`ClassicParams::size`], row 0 at the top: the buffer itself
+    /// for cells of 1 pixel, else bilinearly interpolated between cell centres (integer
+    /// arithmetic, so the same bytes everywhere); mirrored for a top source edge.
+    pub fn frame_bytes(&self) -> Vec<u8> {
+        let size = self.params.size;
+        let (ow, oh) = (size.width as usize, size.height as usize);
+        let mut out = if self.params.cell == 1 {
+            self.buf.clone()
+        } else {
+            // the flames above the source line fill the frame: the raw source line (a row
+            // of random hot cells, the brightest and sharpest thing in the buffer) and the
+            // dead edge below it are not shown
+            let shown = self.h - self.params.edge as usize - 1;
+            upsample(&self.buf[..shown * self.w], self.w, shown, ow, oh)
+        };
+        if self.params.source_edge == SourceEdge::Top {
+            out = out.chunks_exact(ow).rev().flatten().copied().collect();
+        }
+        out
+    }
+}
+
+/// For each of `n` output samples spread evenly over `len` cells: the two cells around the
+/// sample's centre and the second one's weight in 256ths.
+fn taps(n: usize, len: usize) -> Vec<(usize, usize, u32)> {
+    (0..n)
+        .map(|x| {
+            // centre of output pixel x in cell units, minus a half: ((2x + 1)·len − n) / 2n
+            let num = (2 * x as i64 + 1) * len as i64 - n as i64;
+            let den = 2 * n as i64;
+            let i0 = num.div_euclid(den);
+            let frac = num.rem_euclid(den);
+            let wt = ((frac * 256 + n as i64) / den) as u32;
+            let c = |i: i64| i.clamp(0, len as i64 - 1) as usize;
+            (c(i0), c(i0 + 1), wt)
+        })
+        .collect()
+}
+
+/// `src` (`w`×`h` cells) bilinearly interpolated to `ow`×`oh` pixels.
+fn upsample(src: &[u8], w: usize, h: usize, ow: usize, oh: usize) -> Vec<u8> {
+    let (tx, ty) = (taps(ow, w), taps(oh, h));
+    // each cell row interpolated across, in 256ths
+    let wide: Vec<u16> = src
+        .chunks_exact(w)
+        .flat_map(|row| {
+            tx.iter()
+                .map(move |&(a, b, t)| (row[a] as u32 * (256 - t) + row[b] as u32 * t) as u16)
+        })
+        .collect();
+    let mut out = Vec::with_capacity(ow * oh);
+    for &(a, b, t) in &ty {
+        let (ra, rb) = (&wide[a * ow..(a + 1) * ow], &wide[b * ow..(b + 1) * ow]);
+        out.extend(
+            ra.iter()
+                .zip(rb)
+                .map(|(&p, &q)| ((p as u32 * (256 - t) + q as u32 * t + 32768) >> 16) as u8),
+        );
+    }
+    out
 }
 
 /// Burns the rows of `band` (a whole number of rows of width `w`), top to bottom; `below` is
@@ -1139,6 +1315,102 @@ mod tests {
                 assert_eq!(short_a.frame_number(), short_b.frame_number());
             }
         }
+    }
+
+    /// The preset's additions keep the loop exact: cells of 3 px with puffing at 1.5 Hz and
+    /// 30 fps, over loops of 3 frames (too short for a puff: off) and 40 (three puffs), both
+    /// sources; the written frames (interpolated) repeat too.
+    #[test]
+    fn puffing_coarse_fire_loops_exactly() {
+        for source in [
+            SourceMode::Random { drift: 48 },
+            SourceMode::Perlin {
+                scale: 36.0,
+                speed: 0.08,
+            },
+        ] {
+            for n in [3u32, 40] {
+                let p = ClassicParams {
+                    source,
+                    cell: 3,
+                    puff: 0.8,
+                    ..params(144, 108)
+                };
+                let mut f = ClassicFire::new_looping(p, n).unwrap();
+                assert!(f.settle_loop(60, 8000).is_some(), "{source:?} N={n}");
+                let first = f.frame_bytes();
+                assert_eq!(first.len(), 144 * 108);
+                assert!(first.iter().any(|&v| v > 0), "burning");
+                for _ in 0..n {
+                    f.step_par();
+                }
+                assert_eq!(f.frame_bytes(), first, "{source:?} N={n}");
+            }
+        }
+    }
+
+    /// The puffing wave's gain: full heat at the top of a puff, `1 − puff` at the bottom,
+    /// half a period (20 frames at 1.5 Hz and 60 fps) apart; off at depth 0.
+    #[test]
+    fn puff_gain_follows_the_law() {
+        let p = ClassicParams {
+            puff: 0.8,
+            fps: 60.0,
+            ..params(32, 32)
+        };
+        let mut f = ClassicFire::new(p.clone()).unwrap();
+        assert_eq!(f.puff_gain(), Some(256));
+        for _ in 0..20 {
+            f.step();
+        }
+        assert_eq!(f.puff_gain(), Some(51)); // round(0.2 · 256)
+        for _ in 0..20 {
+            f.step();
+        }
+        assert_eq!(f.puff_gain(), Some(256));
+        let off = ClassicFire::new(ClassicParams { puff: 0.0, ..p }).unwrap();
+        assert_eq!(off.puff_gain(), None);
+    }
+
+    /// Bilinear interpolation between cell centres: a constant stays constant, a step
+    /// between two cells becomes a symmetric ramp clamped at the outer half-cells, and
+    /// cells of 1 px are the buffer itself.
+    #[test]
+    fn upsample_interpolates_between_cell_centres() {
+        assert_eq!(upsample(&[77; 6], 3, 2, 12, 8), vec![77; 96]);
+        let ramp = upsample(&[0, 255], 2, 1, 8, 1);
+        assert_eq!(&ramp[..2], &[0, 0]);
+        assert_eq!(&ramp[6..], &[255, 255]);
+        assert!(ramp.windows(2).all(|w| w[0] <= w[1]), "{ramp:?}");
+        for i in 0..8 {
+            assert!(
+                (ramp[i] as i32 + ramp[7 - i] as i32 - 255).abs() <= 1,
+                "{ramp:?}"
+            );
+        }
+        let taps1 = taps(5, 5);
+        assert!(taps1
+            .iter()
+            .enumerate()
+            .all(|(i, &(a, _, t))| a == i && t == 0));
+        let f = ClassicFire::new(ClassicParams {
+            cell: 4,
+            ..params(50, 30)
+        })
+        .unwrap();
+        assert_eq!(f.params().grid(), Size::new(13, 8).unwrap());
+        assert!(ClassicFire::new(ClassicParams {
+            cell: 0,
+            ..params(50, 30)
+        })
+        .is_err());
+        // 12x12 px in cells of 4 is 3x3: too small for an edge of 1
+        let e = ClassicFire::new(ClassicParams {
+            cell: 4,
+            ..params(12, 12)
+        })
+        .unwrap_err();
+        assert!(e.to_string().contains("cells of 4 px"), "{e}");
     }
 
     #[test]

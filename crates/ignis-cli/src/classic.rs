@@ -14,12 +14,15 @@ use std::path::PathBuf;
 ignis classic --source perlin --palette blue-gas -o sheet.png          # flipbook + sheet.json\n  \
 ignis classic --frames 48 -o frames/%04d.exr                           # linear EXR sequence\n  \
 ignis classic --frames 120 --loop -o loop.mp4                          # a seamless loop as MP4\n  \
-ignis classic --frames 1000 --chunk 0..100 -o frames/%04d.png          # job 1 of 10 on a farm\n\n\
+ignis classic --frames 1000 --chunk 0..100 -o frames/%04d.png          # job 1 of 10 on a farm\n  \
+ignis classic --cell 1 --puff 0 -o article.mp4                         # the 1999 article's fire exactly\n\n\
+Realism: by default the fire is a 1 m fire bed simulated on 6-px cells that puffs at 1.5/√D Hz\n\
+(--diameter D); `ignis bench realism` measures it against that law and campfire footage.\n\n\
 Loops (the default for GIFs and flipbooks): the source line and sparklies repeat every N frames and the\n\
 fire is stepped until its buffer repeats exactly, so frame N equals frame 0 byte for byte."
 )]
 pub struct Args {
-    /// Buffer size WIDTHxHEIGHT.
+    /// Frame size WIDTHxHEIGHT (the simulation buffer is this divided by --cell).
     #[arg(long, default_value = "320x200")]
     pub size: Size,
     /// Number of frames to write.
@@ -28,7 +31,7 @@ pub struct Args {
     /// BURNFADE: subtracted after the box filter (0–255); larger = shorter flames.
     #[arg(long, default_value_t = 1)]
     pub fade: u8,
-    /// DONTBURN: pixels at each edge that never burn (≥ 1).
+    /// DONTBURN: cells at each edge that never burn (≥ 1).
     #[arg(long, default_value_t = 1)]
     pub edge: u32,
     /// Hottest value of the source line (1–255).
@@ -58,6 +61,19 @@ pub struct Args {
     /// `article` (the article's exact in-place loop) or `buffered` (double-buffered, SIMD).
     #[arg(long, default_value = "article", value_parser = ["article", "buffered"])]
     pub kernel: String,
+    /// Simulation cell size in pixels: the buffer is SIZE / CELL, interpolated smoothly to
+    /// SIZE. 6 (the default) gives real flames' large-scale structure; 1 is the article's
+    /// per-pixel buffer (with --puff 0: the article's fire exactly).
+    /// [default: 6, fewer on frames under 96 px so the buffer keeps 16 cells a side]
+    #[arg(long)]
+    pub cell: Option<u32>,
+    /// Puffing depth 0–1 (0 = off): the source heat rises and falls at 1.5/√DIAMETER Hz, the
+    /// puffing frequency of a real flame of that width (a model addition beyond the article).
+    #[arg(long, default_value_t = ignis_classic::PRESET_PUFF)]
+    pub puff: f32,
+    /// The physical width of the fire, metres: sets the puffing frequency (1 m: 1.5 Hz).
+    #[arg(long, default_value_t = 1.0)]
+    pub diameter: f32,
     /// Frames simulated before the first written frame, so the fire is burning from frame 0.
     #[arg(long, default_value_t = 60)]
     pub warmup: u32,
@@ -103,6 +119,13 @@ impl Args {
                 Kernel::Article
             },
             seed: self.seed,
+            cell: self.cell.unwrap_or_else(|| {
+                let side = self.size.width.min(self.size.height);
+                ignis_classic::PRESET_CELL.min(side / 16).max(1)
+            }),
+            puff: self.puff,
+            diameter: self.diameter,
+            fps: self.out.fps as f32,
         }
     }
 }

@@ -278,7 +278,7 @@ mod eigen {
     use super::*;
 
     /// A small database trained by the CLI from Ignis's synthetic clips (no footage).
-    fn train_db(dir: &Path) -> PathBuf {
+    pub(super) fn train_db(dir: &Path) -> PathBuf {
         let cfg = dir.join("clips.toml");
         std::fs::write(
             &cfg,
@@ -742,18 +742,25 @@ mod loops_and_chunks {
     /// Frames 0..40 written in chunks 0..13, 13..27, 27..40 into one directory equal the
     /// full render's files byte for byte, named by their frame numbers.
     fn chunks_equal_full(generator: &[&str]) {
+        let mut a = generator.to_vec();
+        a.extend(["--frames", "40"]);
+        chunks_equal(&a);
+    }
+
+    /// [`chunks_equal_full`] for a command whose arguments already make 40 frames.
+    fn chunks_equal(generator: &[&str]) {
         let t = tempfile::tempdir().unwrap();
         let full = t.path().join("full");
         let parts = t.path().join("parts");
         let pat = |d: &Path| d.join("%04d.png").to_string_lossy().into_owned();
         let mut a: Vec<&str> = generator.to_vec();
         let full_pat = pat(&full);
-        a.extend(["--frames", "40", "-q", "-o", &full_pat]);
+        a.extend(["-q", "-o", &full_pat]);
         ignis_ok(&a);
         let parts_pat = pat(&parts);
         for chunk in ["0..13", "13..27", "27..40"] {
             let mut a: Vec<&str> = generator.to_vec();
-            a.extend(["--frames", "40", "--chunk", chunk, "-q", "-o", &parts_pat]);
+            a.extend(["--chunk", chunk, "-q", "-o", &parts_pat]);
             ignis_ok(&a);
         }
         let names = files_in(&full);
@@ -772,6 +779,57 @@ mod loops_and_chunks {
     fn classic_chunks_equal_the_full_render() {
         chunks_equal_full(&["classic", "--size", "32x24", "--warmup", "10"]);
         chunks_equal_full(&["classic", "--size", "32x24", "--loop", "--source", "perlin"]);
+    }
+
+    /// `eigen animate --chunk`: a 40-frame scenario of one motion, and one of two motions
+    /// joined by morphs (the chunks cut into both morph runs, the second wrapping to frame
+    /// 0) equal the full render; a chunk past the scenario's end is refused, nothing written.
+    #[test]
+    fn eigen_animate_chunks_equal_the_full_render() {
+        let t = tempfile::tempdir().unwrap();
+        let db = super::eigen::train_db(t.path());
+        let dbs = db.to_string_lossy().into_owned();
+        let plain = format!(
+            "database = {dbs:?}\nsequence = [\"calm\"]\nloop = false\n\n\
+             [motions.calm]\nclip = \"candle\"\nstart = 0\nend = 40\n"
+        );
+        let morphs = format!(
+            "database = {dbs:?}\nsequence = [\"one\", \"two\"]\nloop = true\n\n\
+             [motions.one]\nclip = \"candle\"\nstart = 0\nend = 14\n\n\
+             [motions.two]\nclip = \"campfire\"\nstart = 20\nend = 31\n\n\
+             [[join]]\nmethod = \"morph\"\nsteps = 6\n\n[[join]]\nmethod = \"morph\"\nsteps = 6\n"
+        );
+        for (name, text) in [("plain.toml", plain), ("morphs.toml", morphs)] {
+            let scene = t.path().join(name);
+            std::fs::write(&scene, text).unwrap();
+            let o = ignis_ok(&[
+                "eigen",
+                "animate",
+                scene.to_str().unwrap(),
+                "--dry-run",
+                "-o",
+                "x.png",
+            ]);
+            assert!(
+                String::from_utf8_lossy(&o.stdout).contains("\n40 frames"),
+                "{name}: the scenario must make 40 frames: {}",
+                String::from_utf8_lossy(&o.stdout)
+            );
+            chunks_equal(&["eigen", "animate", scene.to_str().unwrap()]);
+            let out = t.path().join("bad");
+            let pat = out.join("%04d.png");
+            let r = ignis(&[
+                "eigen",
+                "animate",
+                scene.to_str().unwrap(),
+                "--chunk",
+                "30..41",
+                "-o",
+                pat.to_str().unwrap(),
+            ]);
+            assert_fails(&r, "inside 0..40");
+            assert!(!out.exists(), "{name}: a refused chunk wrote something");
+        }
     }
 
     #[test]
@@ -1128,6 +1186,58 @@ mod realism {
             })
             .collect();
         median_slope(&frames).unwrap()
+    }
+
+    /// The classic preset's median spectral slope over eight 320×200 frames played at 60 fps
+    /// (the issue's measurement rate), 7 frames apart (spread over the phases of its 40-frame
+    /// puff: one frame's slope swings with the puff, from about −2 near its top to about −3.6
+    /// near its bottom), is within 0.4 of `campfire.mp4`'s (the bench's ±0.3 is on the median
+    /// of a longer run); the article's per-pixel fire (`cell 1`, no puff) is not. Known
+    /// limit: played at 30 fps (puffs of 20 frames) the same median is shallower, ≈ −2.7.
+    #[test]
+    fn classic_preset_slope_against_campfire_footage() {
+        let Some(campfire) = data("campfire.mp4") else {
+            println!("skipped: ../shared/data/campfire.mp4 not found");
+            return;
+        };
+        if !has_ffmpeg() {
+            println!("skipped: ffmpeg not found");
+            return;
+        }
+        let f = median_slope(&footage_frames(&campfire, &[50, 250, 450])).unwrap();
+        let palette = ignis_core::Palette::preset("classic").unwrap();
+        let slope = |p: ignis_classic::ClassicParams| {
+            let mut fire = ignis_classic::ClassicFire::new(p).unwrap();
+            for _ in 0..60 {
+                fire.step();
+            }
+            let frames: Vec<_> = (0..8)
+                .map(|_| {
+                    for _ in 0..7 {
+                        fire.step();
+                    }
+                    display_luma(&palette.apply(&fire.gray()), [0.0; 3])
+                })
+                .collect();
+            median_slope(&frames).unwrap()
+        };
+        let preset = ignis_classic::ClassicParams {
+            seed: 4,
+            fps: 60.0,
+            ..ignis_classic::ClassicParams::preset()
+        };
+        let s = slope(preset.clone());
+        let article = slope(ignis_classic::ClassicParams {
+            cell: 1,
+            puff: 0.0,
+            ..preset
+        });
+        println!("classic preset slope {s:.2}, article {article:.2}, campfire.mp4 {f:.2}");
+        assert!(
+            (s - f).abs() <= 0.4,
+            "classic preset {s} vs campfire.mp4 {f}"
+        );
+        assert!((article - f).abs() > 0.4, "article {article} vs {f}");
     }
 
     /// Real flames measure between −4.5 and −3 on both clips; the campfire-kind presets are

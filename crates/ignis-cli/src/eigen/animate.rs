@@ -20,6 +20,12 @@ pub struct AnimateArgs {
     /// Only find the transitions and print the table; write nothing.
     #[arg(long)]
     pub dry_run: bool,
+    /// Write only frames A..B (A included, B excluded) of the scenario's N-frame render,
+    /// byte for byte as the full render writes them (sequence files keep their frame
+    /// numbers), for splitting a render across machines. Only the frames of the chunk (and
+    /// the two ends of a morph it cuts into) are rendered.
+    #[arg(long, value_name = "A..B")]
+    pub chunk: Option<crate::frames::Chunk>,
     #[command(flatten)]
     pub footage: FootageArgs,
     #[command(flatten)]
@@ -36,23 +42,134 @@ pub fn write_plan(
     out: &crate::output::OutputArgs,
     g: &Global,
 ) -> Result<Size> {
+    write_plan_chunk(db, plan, None, look, footage, out, g)
+}
+
+/// [`write_plan`] of only the frames `chunk` of the plan (all of them for `None`), as the
+/// full render writes them: sequence files keep their frame numbers and a chunk is not
+/// marked as a loop. `chunk` must lie inside the plan (see [`check_chunk`]).
+pub fn write_plan_chunk(
+    db: &EigenfireDb,
+    plan: &Plan,
+    chunk: Option<std::ops::Range<usize>>,
+    look: &ignis_eigen::scenario::Look,
+    footage: &FootageArgs,
+    out: &crate::output::OutputArgs,
+    g: &Global,
+) -> Result<Size> {
     let opts = footage.options()?;
     let mut sources = footage.sources(db)?;
     let size = opts.size.unwrap_or_else(|| render::output_size(db, plan));
-    let mut w = out.create(size)?;
-    let bar = g.progress(plan.frames.len() as u64, "rendering");
+    let n = plan.frames.len();
+    let (sub, emit) = match &chunk {
+        Some(r) if *r != (0..n) => {
+            let (sub, emit) = chunk_plan(db, plan, r.clone());
+            (Some(sub), emit)
+        }
+        _ => (None, vec![true; n]),
+    };
+    let mut wopts = out.write_options();
+    if let Some(r) = chunk.as_ref().filter(|r| **r != (0..n)) {
+        wopts.loop_ = false;
+        wopts.first_frame = r.start as u64;
+    }
+    let mut w = out.create_with(size, &wopts)?;
+    let bar = g.progress(emit.iter().filter(|&&e| e).count() as u64, "rendering");
+    let mut at = 0usize;
     let mut sink = |f: RgbaFrame| -> ignis_eigen::Result<()> {
+        let keep = emit.get(at).copied().unwrap_or(false);
+        at += 1;
+        if !keep {
+            return Ok(());
+        }
+        bar.inc(1);
         w.push(&f).map_err(|e| EigenError::BadParameter {
             name: "output".into(),
             reason: format!("{}: {e}", out.output.display()),
         })
     };
-    render::render_plan_with(db, plan, look, &opts, &mut sources, &mut sink, &mut |n| {
-        bar.set_position(n as u64)
-    })?;
+    let plan = sub.as_ref().unwrap_or(plan);
+    render::render_plan_with(db, plan, look, &opts, &mut sources, &mut sink, &mut |_| {})?;
     bar.finish_and_clear();
     out.finish(w, g)?;
     Ok(size)
+}
+
+/// `--chunk A..B` checked against a plan of `n` frames.
+pub fn check_chunk(chunk: crate::frames::Chunk, n: usize) -> Result<std::ops::Range<usize>> {
+    let (a, b) = (chunk.start as usize, chunk.end as usize);
+    anyhow::ensure!(
+        a < b && b <= n,
+        "--chunk {a}..{b} is not a range of frames inside 0..{n} (the scenario renders {n} frames); give A..B with A < B ≤ {n}"
+    );
+    Ok(a..b)
+}
+
+/// The plan that renders frames `range` of `plan` and as little else as gives the same
+/// bytes, and which of its frames (in render order) are the chunk's. Every frame of a plan
+/// renders on its own except a morph, made from the two frames around its run: a run the
+/// chunk cuts into is kept whole, between copies of its two end frames. The output view
+/// depends on which clips the plan shows, so one frame of each clip the chunk lacks is put
+/// first (rendered, not written).
+fn chunk_plan(db: &EigenfireDb, plan: &Plan, range: std::ops::Range<usize>) -> (Plan, Vec<bool>) {
+    use ignis_eigen::scenario::MorphRun;
+    use ignis_eigen::transition::FrameRef;
+    let n = plan.frames.len();
+    let clip_of = |i: usize| match plan.frames[i].source {
+        FrameRef::Db(r) => db.row_origin(r).map(|(c, _)| c.name.clone()),
+        FrameRef::Weights(_) => None,
+    };
+    // (index in the plan, written)
+    let mut picks: Vec<(usize, bool)> = Vec::new();
+    let mut morphs = Vec::new();
+    let mut i = range.start;
+    while i < range.end {
+        if let Some(r) = plan
+            .morphs
+            .iter()
+            .find(|r| r.start <= i && i < r.start + r.len)
+        {
+            let (a, b) = r.endpoints(n);
+            if picks.last().map(|p| p.0) != Some(a) {
+                picks.push((a, false));
+            }
+            morphs.push(picks.len()..picks.len() + r.len);
+            picks.extend((r.start..r.start + r.len).map(|j| (j, range.contains(&j))));
+            picks.push((b, false));
+            i = r.start + r.len;
+        } else {
+            match picks.last_mut() {
+                // the end frame of the run just kept
+                Some((j, w)) if *j == i => *w = true,
+                _ => picks.push((i, true)),
+            }
+            i += 1;
+        }
+    }
+    let mut shown: Vec<Option<String>> = picks.iter().map(|p| clip_of(p.0)).collect();
+    let mut extra = Vec::new();
+    for j in 0..n {
+        if let Some(c) = clip_of(j) {
+            if !shown.contains(&Some(c.clone())) {
+                shown.push(Some(c));
+                extra.push((j, false));
+            }
+        }
+    }
+    let lead = extra.len();
+    extra.extend(picks);
+    let sub = Plan {
+        frames: extra.iter().map(|p| plan.frames[p.0].clone()).collect(),
+        morphs: morphs
+            .into_iter()
+            .map(|m| MorphRun {
+                start: m.start + lead,
+                len: m.len(),
+            })
+            .collect(),
+        ..plan.clone()
+    };
+    (sub, extra.iter().map(|p| p.1).collect())
 }
 
 /// Output size and where the footage comes from (`eigen animate`, `eigen loop`).
@@ -314,16 +431,20 @@ pub fn animate_cmd(a: &AnimateArgs, g: &Global) -> Result<Plan> {
             Some(ignis_media::Format::Gif | ignis_media::Format::Flipbook)
         );
     print_table(g, &plan, &sc, out_loops);
+    let chunk = a
+        .chunk
+        .map(|c| check_chunk(c, plan.frames.len()))
+        .transpose()?;
     if a.dry_run {
         return Ok(plan);
     }
     let mut look = sc.look.clone();
     a.footage.adjust_look(&mut look, g);
-    let size = write_plan(&db, &plan, &look, &a.footage, &a.out, g)
+    let size = write_plan_chunk(&db, &plan, chunk.clone(), &look, &a.footage, &a.out, g)
         .with_context(|| format!("rendering {}", a.scenario.display()))?;
     g.say(format!(
         "{} frames at {size}, colour {}{}{}",
-        plan.frames.len(),
+        chunk.map_or(plan.frames.len(), |r| r.len()),
         look.mode.name(),
         if look.bloom.is_some() { " + bloom" } else { "" },
         if look.smoke.is_some() { " + smoke" } else { "" },
