@@ -443,7 +443,14 @@ mod tests {
         assert_eq!(got[2], None);
         // Successive calls continue one reader forward, or reopen for an earlier frame;
         // either way each index gets its own frame.
-        for want in [&[0usize, 1][..], &[1, 2], &[3, 4], &[0, 2, 2, 3], &[4], &[2, 3]] {
+        for want in [
+            &[0usize, 1][..],
+            &[1, 2],
+            &[3, 4],
+            &[0, 2, 2, 3],
+            &[4],
+            &[2, 3],
+        ] {
             let got = m.frames_at(want).unwrap();
             for (g, &i) in got.iter().zip(want) {
                 assert_eq!(g.as_ref(), Some(&seq[i]), "frame {i} after earlier reads");

@@ -170,14 +170,20 @@ fn stored_masks_are_the_pipeline_masks() {
         assert_eq!(db.source_mask(row).unwrap().unwrap(), want, "row {row}");
     }
     // A corrupt mask file is a database error naming it, not a panic or a wrong frame.
-    let mf = t.path().join("fire.db").join(&c.mask_file.as_ref().unwrap().file);
+    let mf = t
+        .path()
+        .join("fire.db")
+        .join(&c.mask_file.as_ref().unwrap().file);
     let mut b = std::fs::read(&mf).unwrap();
     let last = b.len() - 1;
     b[last] ^= 0x5a;
     std::fs::write(&mf, b).unwrap();
     let db = EigenfireDb::open(&t.path().join("fire.db")).unwrap();
     let e = db.source_mask(0).unwrap_err().to_string();
-    assert!(e.contains("masks/tall.rle") && e.contains("checksum"), "{e}");
+    assert!(
+        e.contains("masks/tall.rle") && e.contains("checksum"),
+        "{e}"
+    );
 }
 
 /// Streaming in batches changes nothing: one frame at a time, small batches, the default

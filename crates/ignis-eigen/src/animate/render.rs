@@ -711,19 +711,24 @@ fn render_frames(
         } else {
             Layers::default()
         };
-        // Grey frames: from the footage, stored, or reconstructed in one matrix product.
+        // Grey frames: from the footage, stored, or reconstructed.
         let slow: Vec<&PlanFrame> = frames
             .iter()
             .filter(|f| from_source(f).is_none() && stored_frame(f).is_none())
             .collect();
         let ws: Vec<Vec<f32>> = slow.iter().map(|f| weights_of(f)).collect();
         let refs: Vec<&[f32]> = ws.iter().map(Vec::as_slice).collect();
-        let mut recon = if refs.is_empty() {
-            Vec::new()
-        } else {
-            db.reconstruct_batch(&refs, plan.e_render)?
-        }
-        .into_iter();
+        // One product per frame: a product over several frames sums in an order that
+        // depends on how many there are, and the output must not depend on the batch.
+        let recon: Vec<Result<Vec<GrayFrame>>> = refs
+            .par_iter()
+            .map(|w| db.reconstruct_batch(std::slice::from_ref(w), plan.e_render))
+            .collect();
+        let mut recon = recon
+            .into_iter()
+            .collect::<Result<Vec<_>>>()?
+            .into_iter()
+            .flatten();
         let mut greys: Vec<(GrayFrame, Option<&GrayFrame>)> = Vec::with_capacity(frames.len());
         for (j, f) in frames.iter().enumerate() {
             if let Some(r) = from_source(f) {
@@ -924,7 +929,11 @@ mod tests {
                         } else {
                             0.0
                         };
-                        assert_eq!(got[(v * out.width as i64 + u) as usize], want, "{d:?} {u},{v}");
+                        assert_eq!(
+                            got[(v * out.width as i64 + u) as usize],
+                            want,
+                            "{d:?} {u},{v}"
+                        );
                     }
                 }
             }

@@ -196,7 +196,11 @@ mod tests {
     fn sample(w: u32, h: u32, seed: u32) -> GrayImage {
         GrayImage::from_fn(w, h, |x, y| {
             let v = (x * 7 + y * 13 + seed * 5) % 11;
-            image::Luma([if v < 4 || (x == w - 1 && y % 2 == 0) { 255 } else { 0 }])
+            image::Luma([if v < 4 || (x == w - 1 && y % 2 == 0) {
+                255
+            } else {
+                0
+            }])
         })
     }
 

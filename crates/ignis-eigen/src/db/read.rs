@@ -652,7 +652,11 @@ impl EigenfireDb {
         let j = row - clip.first_row;
         mf.mask(j).map(Some).map_err(|reason| EigenError::Database {
             db: self.dir.clone(),
-            file: clip.mask_file.as_ref().map(|f| f.file.clone()).unwrap_or_default(),
+            file: clip
+                .mask_file
+                .as_ref()
+                .map(|f| f.file.clone())
+                .unwrap_or_default(),
             reason,
         })
     }

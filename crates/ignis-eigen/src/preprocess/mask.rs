@@ -269,11 +269,7 @@ pub fn hsv_mask(frame: &RgbaFrame, layers: &[MaskLayer]) -> GrayImage {
     let (w, h) = (frame.width(), frame.height());
     let mut out = GrayImage::new(w, h);
     for (px, o) in frame.data().iter().zip(out.as_mut().iter_mut()) {
-        let (hh, s, v) = rgb_to_hsv(
-            srgb_encode(px[0]),
-            srgb_encode(px[1]),
-            srgb_encode(px[2]),
-        );
+        let (hh, s, v) = rgb_to_hsv(srgb_encode(px[0]), srgb_encode(px[1]), srgb_encode(px[2]));
         let mut m = false;
         for l in layers {
             let inside = l.range.contains(hh, s, v);
@@ -348,11 +344,8 @@ pub fn flame_mask(frame: &RgbaFrame, p: &MaskParams, isolate: bool) -> GrayImage
                 b.as_mut()[i] = 255;
                 stack.push(i);
             } else {
-                let (_, sat, _) = rgb_to_hsv(
-                    srgb_encode(px[0]),
-                    srgb_encode(px[1]),
-                    srgb_encode(px[2]),
-                );
+                let (_, sat, _) =
+                    rgb_to_hsv(srgb_encode(px[0]), srgb_encode(px[1]), srgb_encode(px[2]));
                 cand[i] = sat >= p.isolate_saturation;
             }
         }

@@ -322,8 +322,10 @@ fn mask_bounds(mask: &GrayImage) -> Option<(u32, u32, u32, u32)> {
     let w = mask.width() as usize;
     let mut b: Option<(u32, u32, u32, u32)> = None;
     for (y, row) in mask.as_raw().chunks_exact(w.max(1)).enumerate() {
-        let (Some(a), Some(z)) = (row.iter().position(|&v| v > 0), row.iter().rposition(|&v| v > 0))
-        else {
+        let (Some(a), Some(z)) = (
+            row.iter().position(|&v| v > 0),
+            row.iter().rposition(|&v| v > 0),
+        ) else {
             continue;
         };
         let (a, z, y) = (a as u32, z as u32, y as u32);
@@ -440,7 +442,10 @@ mod tests {
                 let a = feather(&m, longer);
                 let b = feather_whole(&m, longer);
                 assert!(
-                    a.data().iter().zip(b.data()).all(|(p, q)| p.to_bits() == q.to_bits()),
+                    a.data()
+                        .iter()
+                        .zip(b.data())
+                        .all(|(p, q)| p.to_bits() == q.to_bits()),
                     "longer {longer}"
                 );
             }
