@@ -301,7 +301,7 @@ pub fn feather(mask: &GrayImage, longer: u32) -> GrayFrame {
     );
     let crop = image::imageops::crop_imm(mask, x0, y0, x1 - x0, y1 - y0).to_image();
     let d = imageproc::morphology::dilate(&crop, imageproc::distance_transform::Norm::L2, r);
-    let b = imageproc::filter::gaussian_blur_f32(&d, r as f32 * 0.5);
+    let b = gaussian_blur_u8(&d, r as f32 * 0.5);
     let (cw, w) = ((x1 - x0) as usize, size.width as usize);
     for (cy, (brow, mrow)) in b
         .as_raw()
@@ -312,6 +312,62 @@ pub fn feather(mask: &GrayImage, longer: u32) -> GrayFrame {
         let at = (y0 as usize + cy) * w + x0 as usize;
         for ((o, &v), &mv) in out.data_mut()[at..at + cw].iter_mut().zip(brow).zip(mrow) {
             *o = if mv > 0 { 1.0 } else { v as f32 / 255.0 };
+        }
+    }
+    out
+}
+
+/// `imageproc::filter::gaussian_blur_f32` on a grey image, bit for bit (the same kernel,
+/// the same order of sums, clamp-to-edge, truncation to 8 bits after each pass), with
+/// whole rows summed at once so the compiler vectorises it.
+fn gaussian_blur_u8(img: &GrayImage, sigma: f32) -> GrayImage {
+    let pdf = |x: f32| {
+        (sigma * (2.0 * std::f32::consts::PI).sqrt()).recip()
+            * (-x.powi(2) / (2.0 * sigma.powi(2))).exp()
+    };
+    let kr = (2.0 * sigma).ceil() as usize;
+    let mut kernel = vec![0.0f32; 2 * kr + 1];
+    for i in 0..kr + 1 {
+        let v = pdf(i as f32);
+        kernel[kr + i] = v;
+        kernel[kr - i] = v;
+    }
+    let sum: f32 = kernel.iter().sum();
+    kernel.iter_mut().for_each(|x| *x /= sum);
+    let (w, h) = (img.width() as usize, img.height() as usize);
+    if w == 0 || h == 0 {
+        return img.clone();
+    }
+    // Horizontal: each row padded by its edge values.
+    let mut tmp = vec![0u8; w * h];
+    let mut pad = vec![0.0f32; w + 2 * kr];
+    let mut acc = vec![0.0f32; w];
+    for (src, dst) in img.as_raw().chunks_exact(w).zip(tmp.chunks_exact_mut(w)) {
+        for (j, p) in pad.iter_mut().enumerate() {
+            *p = src[j.saturating_sub(kr).min(w - 1)] as f32;
+        }
+        acc.fill(0.0);
+        for (i, &k) in kernel.iter().enumerate() {
+            for (a, &p) in acc.iter_mut().zip(&pad[i..i + w]) {
+                *a = *a + p * k;
+            }
+        }
+        for (d, &a) in dst.iter_mut().zip(&acc) {
+            *d = a as u8;
+        }
+    }
+    // Vertical: rows clamped to the image.
+    let mut out = GrayImage::new(w as u32, h as u32);
+    for (y, dst) in out.chunks_exact_mut(w).enumerate() {
+        acc.fill(0.0);
+        for (i, &k) in kernel.iter().enumerate() {
+            let sy = (y + i).saturating_sub(kr).min(h - 1);
+            for (a, &p) in acc.iter_mut().zip(&tmp[sy * w..sy * w + w]) {
+                *a = *a + p as f32 * k;
+            }
+        }
+        for (d, &a) in dst.iter_mut().zip(&acc) {
+            *d = a as u8;
         }
     }
     out
@@ -419,6 +475,25 @@ pub fn preprocess_stages(frame: &RgbaFrame, pose: &ClipPose, p: &PreprocessParam
 mod tests {
     use super::*;
     use crate::synthetic::{synthetic_clip, SyntheticParams};
+
+    /// The row-wise Gaussian is imageproc's, bit for bit, for every radius the feather
+    /// uses and images narrower than the kernel.
+    #[test]
+    fn gaussian_blur_u8_equals_imageproc() {
+        for (w, h) in [(61u32, 37u32), (5, 3), (1, 9)] {
+            let img = GrayImage::from_fn(w, h, |x, y| {
+                image::Luma([((x * 37 + y * 91 + x * y * 7) % 256) as u8])
+            });
+            for r in 2..=40u8 {
+                let s = r as f32 * 0.5;
+                assert_eq!(
+                    gaussian_blur_u8(&img, s),
+                    imageproc::filter::gaussian_blur_f32(&img, s),
+                    "{w}x{h} sigma {s}"
+                );
+            }
+        }
+    }
 
     /// The bounding-box feather is the whole-frame feather, bit for bit: blobs inside,
     /// at the edges and corners, two far apart, an empty mask; small and large radii.
