@@ -349,7 +349,7 @@ fn gaussian_blur_u8(img: &GrayImage, sigma: f32) -> GrayImage {
         acc.fill(0.0);
         for (i, &k) in kernel.iter().enumerate() {
             for (a, &p) in acc.iter_mut().zip(&pad[i..i + w]) {
-                *a = *a + p * k;
+                *a += p * k;
             }
         }
         for (d, &a) in dst.iter_mut().zip(&acc) {
@@ -363,7 +363,7 @@ fn gaussian_blur_u8(img: &GrayImage, sigma: f32) -> GrayImage {
         for (i, &k) in kernel.iter().enumerate() {
             let sy = (y + i).saturating_sub(kr).min(h - 1);
             for (a, &p) in acc.iter_mut().zip(&tmp[sy * w..sy * w + w]) {
-                *a = *a + p as f32 * k;
+                *a += p as f32 * k;
             }
         }
         for (d, &a) in dst.iter_mut().zip(&acc) {
