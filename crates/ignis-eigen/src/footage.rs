@@ -236,7 +236,32 @@ mod media {
         info: FootageInfo,
         /// How errors name the footage (default: its path).
         label: String,
+        /// The reader [`Footage::frames_at`] left off at, continued by the next call that
+        /// asks for later frames (a render reads its batches in order: one decode pass,
+        /// no seek per batch).
+        cursor: Cursor,
     }
+
+    /// An open reader and the index of the frame it yields next. A clone starts without
+    /// one (readers are not shared).
+    #[derive(Default)]
+    struct Cursor(std::sync::Mutex<Option<(usize, ignis_media::FrameReader)>>);
+
+    impl Clone for Cursor {
+        fn clone(&self) -> Cursor {
+            Cursor::default()
+        }
+    }
+
+    impl std::fmt::Debug for Cursor {
+        fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+            f.write_str("Cursor")
+        }
+    }
+
+    /// Farthest, in frames, [`Footage::frames_at`] decodes forward from its cursor instead
+    /// of seeking (a seek decodes from the previous key frame anyway).
+    const MAX_SKIP: usize = 256;
 
     impl MediaFootage {
         /// Probes `path`. The recorded source is the absolute path (a database is used
@@ -252,6 +277,7 @@ mod media {
                 path: path.to_path_buf(),
                 scale: None,
                 label: path.display().to_string(),
+                cursor: Cursor::default(),
                 info: FootageInfo {
                     source: abs.display().to_string(),
                     fps: probed.fps,
@@ -264,6 +290,7 @@ mod media {
         /// Every frame resized to `size` as it is decoded (tests and previews).
         pub fn scaled(mut self, size: Size) -> MediaFootage {
             self.scale = Some(size);
+            self.cursor = Cursor::default();
             self.info.size = size;
             self
         }
@@ -309,8 +336,10 @@ mod media {
                 f.map_err(|e| self.fail(Some(start + i), e))
             })))
         }
-        /// Reads only `indices[0]..=indices[last]` (a bounded range: the decoder stops
-        /// there), cut at the end of the source when its length is known.
+        /// Reads `indices[0]..=indices[last]` in one forward pass, continuing the reader
+        /// the previous call left off when it is at or a little before `indices[0]`
+        /// (else it opens one there); the reader is kept for the next call. Frames past
+        /// the end of the source are `None`.
         fn frames_at(&self, indices: &[usize]) -> Result<Vec<Option<RgbaFrame>>> {
             let (Some(&lo), Some(&hi)) = (indices.first(), indices.last()) else {
                 return Ok(Vec::new());
@@ -319,19 +348,30 @@ mod media {
             if lo >= end {
                 return Ok(vec![None; indices.len()]);
             }
-            let reader = self.read(lo, Some(end))?;
+            let mut guard = self.cursor.0.lock().unwrap_or_else(|e| e.into_inner());
+            let (mut n, mut reader) = match guard.take() {
+                Some((at, r)) if at <= lo && lo - at <= MAX_SKIP => (at, r),
+                _ => (lo, self.read(lo, None)?),
+            };
             let mut out = vec![None; indices.len()];
             let mut want = indices.iter().enumerate().peekable();
-            for (i, f) in reader.enumerate() {
-                let n = lo + i;
+            while want.peek().is_some() {
+                let Some(f) = reader.next() else { break };
                 let f = f.map_err(|e| self.fail(Some(n), e))?;
-                while let Some((j, _)) = want.next_if(|(_, &w)| w == n) {
-                    out[j] = Some(f.clone());
+                n += 1;
+                let mut hits = Vec::new();
+                while let Some((j, _)) = want.next_if(|(_, &w)| w == n - 1) {
+                    hits.push(j);
                 }
-                if want.peek().is_none() {
-                    break;
+                // The last wanted copy takes the frame itself (no copy for distinct indices).
+                if let Some((&last, rest)) = hits.split_last() {
+                    for &j in rest {
+                        out[j] = Some(f.clone());
+                    }
+                    out[last] = Some(f);
                 }
             }
+            *guard = Some((n, reader));
             Ok(out)
         }
     }
@@ -401,6 +441,21 @@ mod tests {
         assert_eq!(got[0].as_ref(), Some(&seq[1]));
         assert_eq!(got[1].as_ref(), Some(&seq[4]));
         assert_eq!(got[2], None);
+        // Successive calls continue one reader forward, or reopen for an earlier frame;
+        // either way each index gets its own frame.
+        for want in [
+            &[0usize, 1][..],
+            &[1, 2],
+            &[3, 4],
+            &[0, 2, 2, 3],
+            &[4],
+            &[2, 3],
+        ] {
+            let got = m.frames_at(want).unwrap();
+            for (g, &i) in got.iter().zip(want) {
+                assert_eq!(g.as_ref(), Some(&seq[i]), "frame {i} after earlier reads");
+            }
+        }
         let e = MediaFootage::open(&dir.path().join("missing.mp4")).unwrap_err();
         assert!(matches!(e, EigenError::Decode { frame: None, .. }), "{e}");
         assert!(e.to_string().contains("missing.mp4"), "{e}");

@@ -554,8 +554,15 @@ struct Collected {
     data: DataMatrix,
     /// Rotation of every training frame (pose normalisation).
     angles: Vec<f32>,
-    /// Per clip, its stored pre-processed frames (`store_frames`).
-    frames_files: Vec<Option<FileEntry>>,
+    /// Per clip, its stored files.
+    frames_files: Vec<ClipFiles>,
+}
+
+/// A clip's own database files: its pre-processed frames (`store_frames`) and masks.
+#[derive(Clone)]
+struct ClipFiles {
+    frames: Option<FileEntry>,
+    masks: FileEntry,
 }
 
 /// The fitted model: PCA, weights (M×k row-major), angles, stored frames per clip.
@@ -563,7 +570,7 @@ struct Fitted {
     pca: Pca,
     weights: Vec<f32>,
     angles: Vec<f32>,
-    frames_files: Vec<Option<FileEntry>>,
+    frames_files: Vec<ClipFiles>,
 }
 
 /// Where pass 2 puts each training frame.
@@ -626,7 +633,7 @@ fn collect(
 }
 
 /// Pass 2 over one clip: its frames go to `sink` (column/row `angles.len()` on), their
-/// angles to `angles`; returns the entry of its stored frames when `store_frames`.
+/// angles to `angles`, their masks to `masks/<clip>.rle`; returns the clip's files.
 #[allow(clippy::too_many_arguments)]
 fn collect_clip(
     c: &ClipInput<'_>,
@@ -637,7 +644,7 @@ fn collect_clip(
     sink: &mut Sink,
     angles: &mut Vec<f32>,
     progress: &mut dyn Progress,
-) -> Result<Option<FileEntry>> {
+) -> Result<ClipFiles> {
     let name = &c.spec.name;
     let frame_size = pre.pose.frame();
     progress.stage(&format!("pre-process {name}"), plan.frames as u64);
@@ -652,6 +659,8 @@ fn collect_clip(
     } else {
         None
     };
+    let src = c.footage.info().size;
+    let mut masks = crate::db::masks::MaskWriter::new(src.width, src.height);
     let (mut done, mut lit) = (0, 0);
     for (_, f) in training_frames(c, plan.start, plan.end)? {
         if done == plan.frames {
@@ -673,6 +682,9 @@ fn collect_clip(
         if let Some(w) = fw.as_mut() {
             w.write_f32(pr.frame.data())?;
         }
+        masks
+            .push(&pr.mask)
+            .map_err(|r| EigenError::clip(name, format!("frame {done}: {r}")))?;
         angles.push(pr.angle);
         done += 1;
         progress.inc(1);
@@ -690,13 +702,15 @@ fn collect_clip(
     if lit == 0 {
         return Err(EigenError::clip(name, "the mask removes every pixel in every frame; widen the HSV ranges (e.g. lower the V minimum of [[preprocess.mask.layers]])"));
     }
-    match fw {
+    let frames = match fw {
         Some(w) => {
             w.finish()?;
-            Ok(Some(writer.entry(&rel)?))
+            Some(writer.entry(&rel)?)
         }
-        None => Ok(None),
-    }
+        None => None,
+    };
+    let masks = writer.write_bytes(&format!("masks/{name}.rle"), &masks.into_bytes())?;
+    Ok(ClipFiles { frames, masks })
 }
 
 /// Fits the PCA to the data matrix and projects every training frame: the weights are
@@ -799,7 +813,8 @@ fn write_model(
             frames: plan.frames,
             pose: plan.pose,
             thresholds: thresholds(wref, first_row..first_row + plan.frames, e_detect),
-            frames_file: ff.clone(),
+            frames_file: ff.frames.clone(),
+            mask_file: Some(ff.masks.clone()),
             source_check: db::source_check(&info.source, info.frame_count)?,
             static_lit: Some(plan.static_lit),
         });

@@ -69,6 +69,7 @@ fn render(
         &RenderOptions {
             size,
             from_database: false,
+            batch: None,
         },
         &mut SyntheticSources,
         &mut |f| {
@@ -115,6 +116,103 @@ fn assert_no_flame_pixel_lost(f: &RgbaFrame, pose: &ClipPose, p: &PreprocessPara
         }
     }
     assert!(flame > 100, "the mask found the flame ({flame} px)");
+}
+
+/// Original colouring with bloom, smoke and the matte: every per-frame layer the footage
+/// path makes.
+fn original_look() -> Look {
+    Look {
+        mode: ColourMode::Original,
+        bloom: Some(ignis_core::post::BloomParams::default()),
+        smoke: Some(ignis_eigen::colour::SmokeParams::default()),
+        ..grey_look()
+    }
+}
+
+fn render_batched(db: &EigenfireDb, clip: &str, batch: Option<usize>) -> Vec<RgbaFrame> {
+    let (plan, _) = loop_plan(db, clip, 1..11, Transition::Auto, 8, 0).unwrap();
+    let mut out = Vec::new();
+    render_plan_with(
+        db,
+        &plan,
+        &original_look(),
+        &RenderOptions {
+            size: None,
+            from_database: false,
+            batch,
+        },
+        &mut SyntheticSources,
+        &mut |f| {
+            out.push(f);
+            Ok(())
+        },
+        &mut |_| {},
+    )
+    .unwrap();
+    out
+}
+
+/// Training stores every frame's pre-processing mask; rendering reads it back instead of
+/// making it again: it is the mask the pipeline makes for that source frame, exactly.
+#[test]
+fn stored_masks_are_the_pipeline_masks() {
+    let t = tempfile::tempdir().unwrap();
+    let p = synth(FlameStyle::Candle, 90, 160, 12);
+    let db = train_db(t.path(), &[input("tall", p.clone())]);
+    let c = db.clip("tall").unwrap();
+    assert!(c.mask_file.is_some());
+    assert!(db.verify().is_empty(), "{:?}", db.verify());
+    let pre = &db.manifest().preprocess;
+    for row in 0..db.n_frames() {
+        let (_, f) = db.row_origin(row).unwrap();
+        let frame = synthetic_frame(&p, f).unwrap();
+        let want = frame_mask(&frame, pre, c.pose.isolate).mask;
+        assert_eq!(db.source_mask(row).unwrap().unwrap(), want, "row {row}");
+    }
+    // A corrupt mask file is a database error naming it, not a panic or a wrong frame.
+    let mf = t
+        .path()
+        .join("fire.db")
+        .join(&c.mask_file.as_ref().unwrap().file);
+    let mut b = std::fs::read(&mf).unwrap();
+    let last = b.len() - 1;
+    b[last] ^= 0x5a;
+    std::fs::write(&mf, b).unwrap();
+    let db = EigenfireDb::open(&t.path().join("fire.db")).unwrap();
+    let e = db.source_mask(0).unwrap_err().to_string();
+    assert!(
+        e.contains("masks/tall.rle") && e.contains("checksum"),
+        "{e}"
+    );
+}
+
+/// Streaming in batches changes nothing: one frame at a time, small batches, the default
+/// and the whole plan at once give the same bytes (a wide sheet: whole-pixel shifts; a
+/// tall flame: pose rotation, resampled).
+#[test]
+fn batched_render_equals_unbatched_byte_for_byte() {
+    for (name, p) in [
+        ("sheet", synth(FlameStyle::Campfire, 160, 90, 12)),
+        ("tall", synth(FlameStyle::Candle, 90, 160, 12)),
+    ] {
+        let t = tempfile::tempdir().unwrap();
+        let db = train_db(t.path(), &[input(name, p)]);
+        let whole = render_batched(&db, name, Some(1000));
+        assert!(!whole.is_empty());
+        for b in [Some(1), Some(3), None] {
+            let got = render_batched(&db, name, b);
+            assert_eq!(got.len(), whole.len());
+            for (i, (a, w)) in got.iter().zip(&whole).enumerate() {
+                let same = a.size() == w.size()
+                    && a.data()
+                        .iter()
+                        .flatten()
+                        .zip(w.data().iter().flatten())
+                        .all(|(x, y)| x.to_bits() == y.to_bits());
+                assert!(same, "{name}: frame {i} differs with batch {b:?}");
+            }
+        }
+    }
 }
 
 #[test]
@@ -215,6 +313,7 @@ fn clips_of_different_sizes_render_at_their_own_size_or_a_common_one() {
             &RenderOptions {
                 size: Some(bad),
                 from_database: false,
+                batch: None,
             },
             &mut SyntheticSources,
             &mut |_| Ok(()),

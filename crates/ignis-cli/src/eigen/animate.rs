@@ -228,6 +228,7 @@ impl FootageArgs {
         Ok(render::RenderOptions {
             size: self.size,
             from_database: self.from_database,
+            batch: None,
         })
     }
 

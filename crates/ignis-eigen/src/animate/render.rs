@@ -76,6 +76,15 @@ pub struct RenderOptions {
     /// pre-processed frames or reconstructions (`--from-database`). Original colouring
     /// still reads the footage; choose another colouring with it.
     pub from_database: bool,
+    /// Frames rendered together (their footage frames and layers are what is held in
+    /// memory); `None` = [`default_batch`]. The output does not depend on it.
+    pub batch: Option<usize>,
+}
+
+/// Frames per batch by default: three per worker thread (enough to keep every thread
+/// busy), 4 to 16.
+pub fn default_batch() -> usize {
+    (3 * rayon::current_num_threads()).clamp(4, 16)
 }
 
 /// A rectangle of the common frame, in frame pixels.
@@ -242,6 +251,71 @@ struct Layers {
     grey: HashMap<usize, (GrayFrame, GrayFrame)>,
 }
 
+/// The layers of one database row (see [`Layers`]).
+#[derive(Default)]
+struct FrameLayers {
+    original: Option<RgbaFrame>,
+    smoke: Option<RgbaFrame>,
+    grey: Option<(GrayFrame, GrayFrame)>,
+}
+
+/// When a source frame of `clip` (at pose angle `angle`) goes to the output by a
+/// whole-pixel shift alone — scale 1, no rotation, a whole-pixel offset and the view shown
+/// at its own size —, that shift `(dx, dy)`: output `(u, v)` = source `(u − dx, v − dy)`,
+/// black outside the source. Exactly what the warp, the crop and the (identity) resize do
+/// on such frames, without resampling.
+fn shift_only(
+    clip: &ClipEntry,
+    angle: f32,
+    pose_p: &crate::pose::PoseParams,
+    geo: Geometry,
+) -> Option<(i64, i64)> {
+    if geo.out.width != geo.view.w || geo.out.height != geo.view.h {
+        return None;
+    }
+    let (ox, oy) = crate::pose::whole_pixel_offset(&clip.pose, angle, pose_p)?;
+    Some((ox - geo.view.x as i64, oy - geo.view.y as i64))
+}
+
+/// `data` (a `src`-sized image) shifted by `(dx, dy)` into an `out`-sized one (see
+/// [`shift_only`]); returned as it is when nothing moves.
+fn shift_pixels<T: Copy + Default + Send + Sync>(
+    data: Vec<T>,
+    src: Size,
+    out: Size,
+    (dx, dy): (i64, i64),
+) -> Vec<T> {
+    if (dx, dy) == (0, 0) && src == out {
+        return data;
+    }
+    let (sw, sh, ow) = (src.width as i64, src.height as i64, out.width as usize);
+    let mut o = vec![T::default(); out.pixels()];
+    o.par_chunks_mut(ow).enumerate().for_each(|(v, row)| {
+        let sy = v as i64 - dy;
+        if sy < 0 || sy >= sh {
+            return;
+        }
+        // Output columns u with 0 <= u - dx < sw.
+        let u0 = dx.max(0).min(ow as i64) as usize;
+        let u1 = (sw + dx).clamp(0, ow as i64) as usize;
+        if u0 < u1 {
+            let s0 = (sy * sw + u0 as i64 - dx) as usize;
+            row[u0..u1].copy_from_slice(&data[s0..s0 + (u1 - u0)]);
+        }
+    });
+    o
+}
+
+fn shift_rgba(f: RgbaFrame, out: Size, d: (i64, i64)) -> RgbaFrame {
+    let src = f.size();
+    RgbaFrame::from_vec(out, shift_pixels(f.into_vec(), src, out, d)).expect("out-sized")
+}
+
+fn shift_gray(g: GrayFrame, out: Size, d: (i64, i64)) -> GrayFrame {
+    let src = g.size();
+    GrayFrame::from_vec(out, shift_pixels(g.into_vec(), src, out, d)).expect("out-sized")
+}
+
 /// Where the layers go: the common frame, the view of it and the output size.
 #[derive(Clone, Copy)]
 struct Geometry {
@@ -283,21 +357,24 @@ fn load_layers(
         if mine.is_empty() {
             continue;
         }
-        let warp_c = |f: &RgbaFrame, r: usize| {
-            view_rgba(
+        let shift = |r: usize| shift_only(clip, db.angle(r), &pose_p, geo);
+        let warp_c = |f: &RgbaFrame, r: usize| match shift(r) {
+            Some(d) => shift_rgba(f.clone(), geo.out, d),
+            None => view_rgba(
                 warp_rgba(f, &clip.pose, db.angle(r), &pose_p),
                 geo.frame,
                 geo.view,
                 geo.out,
-            )
+            ),
         };
-        let warp_g = |g: &GrayFrame, r: usize| {
-            view_gray(
-                &crate::pose::warp(g, &clip.pose, db.angle(r), &pose_p),
+        let warp_g = |g: GrayFrame, r: usize| match shift(r) {
+            Some(d) => shift_gray(g, geo.out, d),
+            None => view_gray(
+                &crate::pose::warp(&g, &clip.pose, db.angle(r), &pose_p),
                 geo.frame,
                 geo.view,
                 geo.out,
-            )
+            ),
         };
         let is_colour = |r: usize| want_original && colour_rows.contains(&r);
         let is_grey = |r: usize| grey_rows.contains(&r);
@@ -332,10 +409,12 @@ fn load_layers(
                 .filter_map(|(&f, g)| g.map(|g| (f, g)))
                 .collect();
             let shown = || path.map_or(clip.source.clone(), |p| p.display().to_string());
-            for &(r, f) in &mine {
-                if !(is_colour(r) || is_grey(r)) {
-                    continue;
-                }
+            let work: Vec<(usize, usize)> = mine
+                .iter()
+                .copied()
+                .filter(|&(r, _)| is_colour(r) || is_grey(r))
+                .collect();
+            for &(_, f) in &work {
                 let cur = by_frame.get(&f).ok_or_else(|| {
                     EigenError::clip(
                         &clip.name,
@@ -353,22 +432,51 @@ fn load_layers(
                         ),
                     ));
                 }
-                if is_grey(r) {
-                    let sg = crate::preprocess::source_grey(cur, &clip.pose, pre);
-                    layers
-                        .grey
-                        .insert(r, (warp_g(&sg.grey, r), warp_g(&sg.matte, r)));
-                }
-                if is_colour(r) {
-                    let cur_w = warp_c(cur, r);
-                    if let Some(sp) = &look.smoke {
-                        let nf = neighbour(f);
-                        if let Some(next) = by_frame.get(&nf) {
-                            let s = synthetic_smoke(&cur_w, &warp_c(next, r), sp)?;
-                            layers.smoke.insert(r, s);
-                        }
+            }
+            // Every frame's layers at once (the pre-processing of one frame is mostly
+            // sequential; frames are independent).
+            let made: Vec<Result<FrameLayers>> = work
+                .par_iter()
+                .map(|&(r, f)| {
+                    let cur = &by_frame[&f];
+                    let mut fl = FrameLayers::default();
+                    if is_grey(r) {
+                        // The mask training made for this very frame (the footage is the
+                        // training footage: not replaced under [originals]), else made now.
+                        let stored = match path {
+                            None => db.source_mask(r)?,
+                            Some(_) => None,
+                        };
+                        let sg = match stored {
+                            Some(m) if (m.width(), m.height()) == (cur.width(), cur.height()) => {
+                                crate::preprocess::source_grey_with_mask(cur, &m, &clip.pose, pre)
+                            }
+                            _ => crate::preprocess::source_grey(cur, &clip.pose, pre),
+                        };
+                        fl.grey = Some((warp_g(sg.grey, r), warp_g(sg.matte, r)));
                     }
-                    layers.original.insert(r, cur_w);
+                    if is_colour(r) {
+                        let cur_w = warp_c(cur, r);
+                        if let Some(sp) = &look.smoke {
+                            if let Some(next) = by_frame.get(&neighbour(f)) {
+                                fl.smoke = Some(synthetic_smoke(&cur_w, &warp_c(next, r), sp)?);
+                            }
+                        }
+                        fl.original = Some(cur_w);
+                    }
+                    Ok(fl)
+                })
+                .collect();
+            for (&(r, _), fl) in work.iter().zip(made) {
+                let fl = fl?;
+                if let Some(g) = fl.grey {
+                    layers.grey.insert(r, g);
+                }
+                if let Some(s) = fl.smoke {
+                    layers.smoke.insert(r, s);
+                }
+                if let Some(o) = fl.original {
+                    layers.original.insert(r, o);
                 }
             }
         }
@@ -382,7 +490,7 @@ fn load_layers(
             let got = sources.open(clip, Some(mp))?.frames_at(&frames)?;
             for (&(r, _), g) in need.iter().zip(got) {
                 if let Some(g) = g {
-                    layers.mask.insert(r, warp_g(&g.luminance(), r));
+                    layers.mask.insert(r, warp_g(g.luminance(), r));
                 }
             }
         }
@@ -419,8 +527,9 @@ pub fn render_plan(
 /// colouring (original, Algorithm 2 with smoke and custom masks; synthetic; palette;
 /// grey) and the alpha matte (the grey frame and its bloom, limited to the
 /// pre-processing mask's feathered matte on frames made from the footage). Frames go to
-/// `sink` in order; `progress(done)` counts them. Footage is read per batch of 16 frames
-/// (no whole-clip copy). The result does not depend on the thread count.
+/// `sink` in order; `progress(done)` counts them. Footage is read per batch of
+/// `opts.batch` frames, in order (no whole-clip copy). The result does not depend on the
+/// thread count or the batch size.
 pub fn render_plan_with(
     db: &EigenfireDb,
     plan: &Plan,
@@ -514,7 +623,7 @@ pub fn render_plan_with(
 pub const MORPH_FLOW_SIDE: u32 = 384;
 
 /// Renders `frames` (no morph runs among them) of `plan` into `sink`, in order.
-// Long on purpose: per batch of 16 it chooses each frame's grey source (footage, stored
+// Long on purpose: per batch it chooses each frame's grey source (footage, stored
 // frame or reconstruction) and the layers they share, then finishes them in parallel
 // ([`finish_frame`]); the per-frame rules are closures over that shared batch state.
 #[allow(clippy::too_many_arguments)]
@@ -575,9 +684,9 @@ fn render_frames(
         }
         w
     };
-    const BATCH: usize = 16;
-    for start in (0..all_frames.len()).step_by(BATCH) {
-        let end = (start + BATCH).min(all_frames.len());
+    let batch = opts.batch.unwrap_or_else(default_batch).max(1);
+    for start in (0..all_frames.len()).step_by(batch) {
+        let end = (start + batch).min(all_frames.len());
         let frames = &all_frames[start..end];
         let colour_rows: Vec<usize> = if needs_rows {
             rows[start..end].to_vec()
@@ -602,19 +711,24 @@ fn render_frames(
         } else {
             Layers::default()
         };
-        // Grey frames: from the footage, stored, or reconstructed in one matrix product.
+        // Grey frames: from the footage, stored, or reconstructed.
         let slow: Vec<&PlanFrame> = frames
             .iter()
             .filter(|f| from_source(f).is_none() && stored_frame(f).is_none())
             .collect();
         let ws: Vec<Vec<f32>> = slow.iter().map(|f| weights_of(f)).collect();
         let refs: Vec<&[f32]> = ws.iter().map(Vec::as_slice).collect();
-        let mut recon = if refs.is_empty() {
-            Vec::new()
-        } else {
-            db.reconstruct_batch(&refs, plan.e_render)?
-        }
-        .into_iter();
+        // One product per frame: a product over several frames sums in an order that
+        // depends on how many there are, and the output must not depend on the batch.
+        let recon: Vec<Result<Vec<GrayFrame>>> = refs
+            .par_iter()
+            .map(|w| db.reconstruct_batch(std::slice::from_ref(w), plan.e_render))
+            .collect();
+        let mut recon = recon
+            .into_iter()
+            .collect::<Result<Vec<_>>>()?
+            .into_iter()
+            .flatten();
         let mut greys: Vec<(GrayFrame, Option<&GrayFrame>)> = Vec::with_capacity(frames.len());
         for (j, f) in frames.iter().enumerate() {
             if let Some(r) = from_source(f) {
@@ -783,4 +897,46 @@ pub fn loop_plan(
         loops: true,
     };
     Ok((plan, report))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `shift_pixels` is the per-pixel rule of `shift_only`: output (u, v) = source
+    /// (u − dx, v − dy), zero outside; for shifts in every direction, in and out of range.
+    #[test]
+    fn shift_pixels_matches_the_per_pixel_rule() {
+        let src = Size {
+            width: 7,
+            height: 5,
+        };
+        let data: Vec<f32> = (0..src.pixels()).map(|i| i as f32 + 1.0).collect();
+        for out in [
+            src,
+            Size {
+                width: 9,
+                height: 4,
+            },
+        ] {
+            for d in [(0, 0), (2, -1), (-3, 2), (8, 0), (0, -6), (-9, -9)] {
+                let got = shift_pixels(data.clone(), src, out, d);
+                for v in 0..out.height as i64 {
+                    for u in 0..out.width as i64 {
+                        let (sx, sy) = (u - d.0, v - d.1);
+                        let want = if sx >= 0 && sy >= 0 && sx < 7 && sy < 5 {
+                            data[(sy * 7 + sx) as usize]
+                        } else {
+                            0.0
+                        };
+                        assert_eq!(
+                            got[(v * out.width as i64 + u) as usize],
+                            want,
+                            "{d:?} {u},{v}"
+                        );
+                    }
+                }
+            }
+        }
+    }
 }

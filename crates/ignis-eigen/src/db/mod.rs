@@ -24,6 +24,7 @@
 //! Departure: the thesis writes an XML file plus binary packages; JSON + `.npy` are used
 //! so that numpy and any JSON reader can open the database.
 
+pub mod masks;
 mod read;
 mod write;
 
@@ -110,6 +111,11 @@ pub struct ClipEntry {
     pub thresholds: Thresholds,
     /// `frames/<name>.npy` when the full-resolution pre-processed frames are stored.
     pub frames_file: Option<FileEntry>,
+    /// `masks/<name>.rle`: every training frame's pre-processing mask at the source size
+    /// ([`masks`]), so rendering from the footage reads it instead of making it again.
+    /// `None` in databases from before it was stored (rendering then makes the masks).
+    #[serde(default)]
+    pub mask_file: Option<FileEntry>,
     /// What the source video was at training (size in bytes, SHA-256, frame count), so a
     /// changed or replaced source is caught before its frames are used; `None` for
     /// sources that are not files (synthetic clips).
@@ -404,6 +410,12 @@ impl Manifest {
                     return bad(format!("frames_file `{}` is not in frames/", f.file));
                 }
             }
+            if let Some(f) = &c.mask_file {
+                check_rel_name(&f.file)?;
+                if !f.file.starts_with("masks/") {
+                    return bad(format!("mask_file `{}` is not in masks/", f.file));
+                }
+            }
         }
         if row != m {
             return Err(format!(
@@ -440,7 +452,8 @@ impl Manifest {
         let files = [&self.mean, &self.eigenvalues, &self.weights, &self.angles]
             .into_iter()
             .chain(self.packs.iter().map(|p| &p.entry))
-            .chain(self.clips.iter().filter_map(|c| c.frames_file.as_ref()));
+            .chain(self.clips.iter().filter_map(|c| c.frames_file.as_ref()))
+            .chain(self.clips.iter().filter_map(|c| c.mask_file.as_ref()));
         for f in files {
             check_rel_name(&f.file)?;
             if f.sha256.len() != 64 || !f.sha256.bytes().all(|b| b.is_ascii_hexdigit()) {

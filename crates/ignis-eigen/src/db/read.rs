@@ -83,6 +83,8 @@ pub struct EigenfireDb {
     angles: Vec<f32>,
     packs: Vec<OnceLock<std::result::Result<Mapped, String>>>,
     frames: Vec<OnceLock<std::result::Result<Mapped, String>>>,
+    /// Per clip, its stored masks (read and checked on first use).
+    masks: Vec<OnceLock<std::result::Result<super::masks::MaskFile, String>>>,
 }
 
 impl std::fmt::Debug for EigenfireDb {
@@ -217,6 +219,7 @@ impl EigenfireDb {
         let angles = load(&manifest.angles, &[m])?.f32().into_owned();
         let packs = manifest.packs.iter().map(|_| OnceLock::new()).collect();
         let frames = manifest.clips.iter().map(|_| OnceLock::new()).collect();
+        let masks = manifest.clips.iter().map(|_| OnceLock::new()).collect();
         Ok(EigenfireDb {
             dir: dir.to_path_buf(),
             manifest,
@@ -227,6 +230,7 @@ impl EigenfireDb {
             angles,
             packs,
             frames,
+            masks,
         })
     }
 
@@ -408,6 +412,11 @@ impl EigenfireDb {
             }
         }
         for (c, clip) in self.manifest.clips.iter().enumerate() {
+            if let Some(f) = &clip.mask_file {
+                if let Err(e) = self.mask_file(c) {
+                    bad.push((f.file.clone(), e.to_string()));
+                }
+            }
             if clip.frames_file.is_some() {
                 if let Err(e) = self.frames_map(c) {
                     bad.push((
@@ -584,6 +593,74 @@ impl EigenfireDb {
         })
     }
 
+    /// Clip `c`'s stored masks, read and checked (size, SHA-256, layout) on first use;
+    /// `None` when the database has none for it.
+    fn mask_file(&self, c: usize) -> Result<Option<&super::masks::MaskFile>> {
+        let clip = &self.manifest.clips[c];
+        let Some(e) = clip.mask_file.as_ref() else {
+            return Ok(None);
+        };
+        let r = self.masks[c].get_or_init(|| {
+            use std::io::Read;
+            let f = open_regular(&self.dir, &e.file)?;
+            let mut bytes = Vec::new();
+            f.take(e.bytes.saturating_add(1))
+                .read_to_end(&mut bytes)
+                .map_err(|e| format!("cannot read ({e})"))?;
+            if bytes.len() as u64 != e.bytes {
+                return Err(format!(
+                    "truncated or resized: {} bytes, the manifest says {}",
+                    bytes.len(),
+                    e.bytes
+                ));
+            }
+            let h = sha256_hex(&bytes);
+            if h != e.sha256 {
+                return Err(format!(
+                    "checksum mismatch (corrupt): sha256 {h}, the manifest says {}",
+                    e.sha256
+                ));
+            }
+            let s = clip.source_size;
+            super::masks::MaskFile::parse(bytes, s.width, s.height, clip.frames)
+        });
+        match r {
+            Ok(m) => Ok(Some(m)),
+            Err(reason) => Err(EigenError::Database {
+                db: self.dir.clone(),
+                file: e.file.clone(),
+                reason: reason.clone(),
+            }),
+        }
+    }
+
+    /// The pre-processing mask training made for database row `row` (0/255 at the clip's
+    /// source size), `None` when the database does not store masks or has no such row.
+    pub fn source_mask(&self, row: usize) -> Result<Option<image::GrayImage>> {
+        let Some((clip, _)) = self.row_origin(row) else {
+            return Ok(None);
+        };
+        let c = self
+            .manifest
+            .clips
+            .iter()
+            .position(|x| x.name == clip.name)
+            .expect("row_origin's clip");
+        let Some(mf) = self.mask_file(c)? else {
+            return Ok(None);
+        };
+        let j = row - clip.first_row;
+        mf.mask(j).map(Some).map_err(|reason| EigenError::Database {
+            db: self.dir.clone(),
+            file: clip
+                .mask_file
+                .as_ref()
+                .map(|f| f.file.clone())
+                .unwrap_or_default(),
+            reason,
+        })
+    }
+
     /// The stored full-resolution pre-processed frame (§7.1.2 fast path) of clip `clip`,
     /// source frame `frame`.
     pub fn preprocessed_frame(&self, clip: &str, frame: usize) -> Result<GrayFrame> {
@@ -612,7 +689,7 @@ impl EigenfireDb {
         b += m
             .clips
             .iter()
-            .filter_map(|c| c.frames_file.as_ref())
+            .flat_map(|c| c.frames_file.iter().chain(&c.mask_file))
             .map(|f| f.bytes)
             .sum::<u64>();
         b + std::fs::metadata(self.dir.join("manifest.json"))

@@ -52,6 +52,16 @@ impl DbWriter {
         self.entry(rel)
     }
 
+    /// Writes the bytes `rel` (e.g. `masks/<clip>.rle`) and returns its manifest entry.
+    pub fn write_bytes(&self, rel: &str, bytes: &[u8]) -> Result<FileEntry> {
+        let path = self.tmp.join(rel);
+        if let Some(dir) = path.parent() {
+            std::fs::create_dir_all(dir).map_err(|e| EigenError::io(dir, e))?;
+        }
+        std::fs::write(&path, bytes).map_err(|e| EigenError::io(&path, e))?;
+        self.entry(rel)
+    }
+
     /// The manifest entry (size, SHA-256) of a finished file `rel`.
     pub fn entry(&self, rel: &str) -> Result<FileEntry> {
         file_entry(&self.tmp, rel)

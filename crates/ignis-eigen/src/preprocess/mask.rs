@@ -9,7 +9,7 @@
 //! [`image::GrayImage`], 255 = inside, 0 = outside.
 
 use crate::error::{EigenError, Result};
-use ignis_core::palette::linear_to_srgb;
+use ignis_core::palette::{linear_to_srgb, srgb_to_linear};
 use ignis_core::RgbaFrame;
 use image::GrayImage;
 use imageproc::distance_transform::Norm;
@@ -269,11 +269,7 @@ pub fn hsv_mask(frame: &RgbaFrame, layers: &[MaskLayer]) -> GrayImage {
     let (w, h) = (frame.width(), frame.height());
     let mut out = GrayImage::new(w, h);
     for (px, o) in frame.data().iter().zip(out.as_mut().iter_mut()) {
-        let (hh, s, v) = rgb_to_hsv(
-            linear_to_srgb(px[0]),
-            linear_to_srgb(px[1]),
-            linear_to_srgb(px[2]),
-        );
+        let (hh, s, v) = rgb_to_hsv(srgb_encode(px[0]), srgb_encode(px[1]), srgb_encode(px[2]));
         let mut m = false;
         for l in layers {
             let inside = l.range.contains(hh, s, v);
@@ -348,11 +344,8 @@ pub fn flame_mask(frame: &RgbaFrame, p: &MaskParams, isolate: bool) -> GrayImage
                 b.as_mut()[i] = 255;
                 stack.push(i);
             } else {
-                let (_, sat, _) = rgb_to_hsv(
-                    linear_to_srgb(px[0]),
-                    linear_to_srgb(px[1]),
-                    linear_to_srgb(px[2]),
-                );
+                let (_, sat, _) =
+                    rgb_to_hsv(srgb_encode(px[0]), srgb_encode(px[1]), srgb_encode(px[2]));
                 cand[i] = sat >= p.isolate_saturation;
             }
         }
@@ -407,6 +400,53 @@ fn grow_into(open: &mut [bool], mut stack: Vec<usize>, w: usize) -> GrayImage {
     out
 }
 
+/// Tables for [`srgb_encode`] and [`srgb_encode8`].
+struct SrgbTables {
+    /// The 256 linear values of 8-bit sRGB codes (as decoders make them), ascending.
+    lin: [f32; 256],
+    /// `linear_to_srgb` of each.
+    enc: [f32; 256],
+    /// `bound[k]` (k ≥ 1): the linear value half-way between codes `k − 1` and `k`.
+    bound: [f32; 256],
+}
+
+fn srgb_tables() -> &'static SrgbTables {
+    static T: std::sync::OnceLock<SrgbTables> = std::sync::OnceLock::new();
+    T.get_or_init(|| {
+        let lin = std::array::from_fn(|k| srgb_to_linear(k as f32 / 255.0));
+        SrgbTables {
+            lin,
+            enc: lin.map(linear_to_srgb),
+            bound: std::array::from_fn(|k| srgb_to_linear((k as f32 - 0.5).max(0.0) / 255.0)),
+        }
+    })
+}
+
+/// `linear_to_srgb(c)`, exactly, fast for the values footage decoded from 8-bit sRGB
+/// holds (a table look-up instead of a `powf`; other values take the formula).
+pub fn srgb_encode(c: f32) -> f32 {
+    let t = srgb_tables();
+    let k = t.lin.partition_point(|&v| v < c);
+    if k < 256 && t.lin[k].to_bits() == c.to_bits() {
+        t.enc[k]
+    } else {
+        linear_to_srgb(c)
+    }
+}
+
+/// `(linear_to_srgb(c) * 255).round() as u8` for `c` in `0..=1`, exactly: the code from
+/// the table of half-way values, the formula for values within a hair of a half-way
+/// value (where rounding of the table and the formula could disagree).
+pub fn srgb_encode8(c: f32) -> u8 {
+    let t = srgb_tables();
+    let k = t.bound[1..].partition_point(|&b| b <= c);
+    let near = |b: f32| (c - b).abs() <= b * 1e-4 + 1e-9;
+    if near(t.bound[k.max(1)]) || (k < 255 && near(t.bound[k + 1])) {
+        return (linear_to_srgb(c) * 255.0).round() as u8;
+    }
+    k as u8
+}
+
 /// sRGB-encoded luminance of a linear frame, 8-bit.
 pub fn luma8(frame: &RgbaFrame) -> Vec<u8> {
     frame
@@ -414,7 +454,7 @@ pub fn luma8(frame: &RgbaFrame) -> Vec<u8> {
         .iter()
         .map(|p| {
             let l = 0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2];
-            (linear_to_srgb(l.clamp(0.0, 1.0)) * 255.0).round() as u8
+            srgb_encode8(l.clamp(0.0, 1.0))
         })
         .collect()
 }
@@ -424,7 +464,7 @@ pub fn value8(frame: &RgbaFrame) -> Vec<u8> {
     frame
         .data()
         .iter()
-        .map(|p| (linear_to_srgb(p[0].max(p[1]).max(p[2]).clamp(0.0, 1.0)) * 255.0).round() as u8)
+        .map(|p| srgb_encode8(p[0].max(p[1]).max(p[2]).clamp(0.0, 1.0)))
         .collect()
 }
 
@@ -842,6 +882,28 @@ mod tests {
         assert!(mask_area(&m) < 600, "{} px", mask_area(&m));
         // Without isolation the plate is kept.
         assert!(flame_mask(&f, &p, false).get_pixel(20, 60)[0] > 0);
+    }
+
+    #[test]
+    fn srgb_tables_agree_with_the_formula() {
+        let t = srgb_tables();
+        for k in 0..256 {
+            assert_eq!(srgb_encode(t.lin[k]), linear_to_srgb(t.lin[k]));
+        }
+        // A dense sweep, the half-way values and a few ulps either side of them.
+        let mut xs: Vec<f32> = (0..=200_000).map(|i| i as f32 / 200_000.0).collect();
+        for &b in &t.bound {
+            let bits = b.to_bits();
+            xs.extend((bits.saturating_sub(8)..bits + 8).map(f32::from_bits));
+        }
+        for x in xs.into_iter().filter(|x| (0.0..=1.0).contains(x)) {
+            assert_eq!(srgb_encode(x), linear_to_srgb(x), "{x}");
+            assert_eq!(
+                srgb_encode8(x),
+                (linear_to_srgb(x) * 255.0).round() as u8,
+                "{x}"
+            );
+        }
     }
 
     #[test]

@@ -200,11 +200,13 @@ pub struct Processed {
     pub angle: f32,
     /// Pixels left in the mask.
     pub mask_pixels: usize,
+    /// The binary mask (0/255) at the source size, before pose normalisation.
+    pub mask: GrayImage,
 }
 
 /// Runs the whole per-frame pipeline with a clip pose already found.
 pub fn preprocess_frame(frame: &RgbaFrame, pose: &ClipPose, p: &PreprocessParams) -> Processed {
-    let src = source_grey(frame, pose, p);
+    let (src, mask) = source_grey_and_mask(frame, pose, p);
     let out = warp(&src.grey, pose, src.angle, &p.pose);
     let train = resize(&out, p.training_size());
     Processed {
@@ -212,6 +214,7 @@ pub fn preprocess_frame(frame: &RgbaFrame, pose: &ClipPose, p: &PreprocessParams
         train,
         angle: src.angle,
         mask_pixels: src.mask_pixels,
+        mask,
     }
 }
 
@@ -232,9 +235,33 @@ pub struct SourceGrey {
 /// isolation, everything outside the feathered mask removed (Hermite alone keeps
 /// anything brighter than `i_max`, e.g. a lit jar).
 pub fn source_grey(frame: &RgbaFrame, pose: &ClipPose, p: &PreprocessParams) -> SourceGrey {
+    source_grey_and_mask(frame, pose, p).0
+}
+
+/// [`source_grey`] and the binary mask it came from (what training stores).
+fn source_grey_and_mask(
+    frame: &RgbaFrame,
+    pose: &ClipPose,
+    p: &PreprocessParams,
+) -> (SourceGrey, GrayImage) {
     let fm = frame_mask(frame, p, pose.isolate);
-    let mut grey = hermite_darken(&frame.luminance(), Some(&fm.mask), &p.hermite);
-    let matte = feather(&fm.mask, frame.width().max(frame.height()));
+    let mut sg = source_grey_with_mask(frame, &fm.mask, pose, p);
+    sg.angle = fm.angle.unwrap_or(0.0);
+    (sg, fm.mask)
+}
+
+/// [`source_grey`] from a mask already made (stored at training, see
+/// [`crate::db::masks`]): the same Hermite darkening, matte and isolation; `angle` is 0
+/// (the caller has the database's). Identical to [`source_grey`] when `mask` is
+/// [`frame_mask`]'s for this frame.
+pub fn source_grey_with_mask(
+    frame: &RgbaFrame,
+    mask: &GrayImage,
+    pose: &ClipPose,
+    p: &PreprocessParams,
+) -> SourceGrey {
+    let mut grey = hermite_darken(&frame.luminance(), Some(mask), &p.hermite);
+    let matte = feather(mask, frame.width().max(frame.height()));
     if pose.isolate {
         for (g, &m) in grey.data_mut().iter_mut().zip(matte.data()) {
             *g *= m;
@@ -243,15 +270,133 @@ pub fn source_grey(frame: &RgbaFrame, pose: &ClipPose, p: &PreprocessParams) -> 
     SourceGrey {
         grey,
         matte,
-        angle: fm.angle.unwrap_or(0.0),
-        mask_pixels: mask_area(&fm.mask),
+        angle: 0.0,
+        mask_pixels: mask_area(mask),
     }
 }
 
 /// A soft matte from a binary mask: 1 inside the mask, and outside it the mask dilated by
 /// and blurred over about 1 % of the frame's longer side (at least 2 px), so the flame's
 /// glow fades out instead of being cut.
+///
+/// Computed on the mask's bounding box grown by the dilation and twice the blur's reach
+/// (everything farther is 0 either way), so a small flame in a large frame costs little;
+/// the result is the same as over the whole frame.
 pub fn feather(mask: &GrayImage, longer: u32) -> GrayFrame {
+    let r = ((longer as f32 * 0.01).round() as u8).clamp(2, 40);
+    let size = Size {
+        width: mask.width(),
+        height: mask.height(),
+    };
+    let mut out = GrayFrame::new(size);
+    let Some(e) = mask_bounds(mask) else {
+        return out;
+    };
+    // Dilation reach r, blur reach ceil(2σ) = r (σ = r/2), twice, and a little slack.
+    let m = 3 * r as u32 + 2;
+    let (x0, y0) = (e.0.saturating_sub(m), e.1.saturating_sub(m));
+    let (x1, y1) = (
+        (e.2 + m + 1).min(mask.width()),
+        (e.3 + m + 1).min(mask.height()),
+    );
+    let crop = image::imageops::crop_imm(mask, x0, y0, x1 - x0, y1 - y0).to_image();
+    let d = imageproc::morphology::dilate(&crop, imageproc::distance_transform::Norm::L2, r);
+    let b = gaussian_blur_u8(&d, r as f32 * 0.5);
+    let (cw, w) = ((x1 - x0) as usize, size.width as usize);
+    for (cy, (brow, mrow)) in b
+        .as_raw()
+        .chunks_exact(cw)
+        .zip(crop.as_raw().chunks_exact(cw))
+        .enumerate()
+    {
+        let at = (y0 as usize + cy) * w + x0 as usize;
+        for ((o, &v), &mv) in out.data_mut()[at..at + cw].iter_mut().zip(brow).zip(mrow) {
+            *o = if mv > 0 { 1.0 } else { v as f32 / 255.0 };
+        }
+    }
+    out
+}
+
+/// `imageproc::filter::gaussian_blur_f32` on a grey image, bit for bit (the same kernel,
+/// the same order of sums, clamp-to-edge, truncation to 8 bits after each pass), with
+/// whole rows summed at once so the compiler vectorises it.
+fn gaussian_blur_u8(img: &GrayImage, sigma: f32) -> GrayImage {
+    let pdf = |x: f32| {
+        (sigma * (2.0 * std::f32::consts::PI).sqrt()).recip()
+            * (-x.powi(2) / (2.0 * sigma.powi(2))).exp()
+    };
+    let kr = (2.0 * sigma).ceil() as usize;
+    let mut kernel = vec![0.0f32; 2 * kr + 1];
+    for i in 0..kr + 1 {
+        let v = pdf(i as f32);
+        kernel[kr + i] = v;
+        kernel[kr - i] = v;
+    }
+    let sum: f32 = kernel.iter().sum();
+    kernel.iter_mut().for_each(|x| *x /= sum);
+    let (w, h) = (img.width() as usize, img.height() as usize);
+    if w == 0 || h == 0 {
+        return img.clone();
+    }
+    // Horizontal: each row padded by its edge values.
+    let mut tmp = vec![0u8; w * h];
+    let mut pad = vec![0.0f32; w + 2 * kr];
+    let mut acc = vec![0.0f32; w];
+    for (src, dst) in img.as_raw().chunks_exact(w).zip(tmp.chunks_exact_mut(w)) {
+        for (j, p) in pad.iter_mut().enumerate() {
+            *p = src[j.saturating_sub(kr).min(w - 1)] as f32;
+        }
+        acc.fill(0.0);
+        for (i, &k) in kernel.iter().enumerate() {
+            for (a, &p) in acc.iter_mut().zip(&pad[i..i + w]) {
+                *a += p * k;
+            }
+        }
+        for (d, &a) in dst.iter_mut().zip(&acc) {
+            *d = a as u8;
+        }
+    }
+    // Vertical: rows clamped to the image.
+    let mut out = GrayImage::new(w as u32, h as u32);
+    for (y, dst) in out.chunks_exact_mut(w).enumerate() {
+        acc.fill(0.0);
+        for (i, &k) in kernel.iter().enumerate() {
+            let sy = (y + i).saturating_sub(kr).min(h - 1);
+            for (a, &p) in acc.iter_mut().zip(&tmp[sy * w..sy * w + w]) {
+                *a += p as f32 * k;
+            }
+        }
+        for (d, &a) in dst.iter_mut().zip(&acc) {
+            *d = a as u8;
+        }
+    }
+    out
+}
+
+/// The inclusive bounds `(x0, y0, x1, y1)` of a mask's non-zero pixels; `None` if empty.
+fn mask_bounds(mask: &GrayImage) -> Option<(u32, u32, u32, u32)> {
+    let w = mask.width() as usize;
+    let mut b: Option<(u32, u32, u32, u32)> = None;
+    for (y, row) in mask.as_raw().chunks_exact(w.max(1)).enumerate() {
+        let (Some(a), Some(z)) = (
+            row.iter().position(|&v| v > 0),
+            row.iter().rposition(|&v| v > 0),
+        ) else {
+            continue;
+        };
+        let (a, z, y) = (a as u32, z as u32, y as u32);
+        b = Some(match b {
+            None => (a, y, z, y),
+            Some((x0, y0, x1, _)) => (x0.min(a), y0, x1.max(z), y),
+        });
+    }
+    b
+}
+
+/// [`feather`] over the whole frame, as it was first written: the reference the
+/// bounding-box version is tested against.
+#[cfg(test)]
+fn feather_whole(mask: &GrayImage, longer: u32) -> GrayFrame {
     let r = ((longer as f32 * 0.01).round() as u8).clamp(2, 40);
     let d = imageproc::morphology::dilate(mask, imageproc::distance_transform::Norm::L2, r);
     let b = imageproc::filter::gaussian_blur_f32(&d, r as f32 * 0.5);
@@ -330,6 +475,57 @@ pub fn preprocess_stages(frame: &RgbaFrame, pose: &ClipPose, p: &PreprocessParam
 mod tests {
     use super::*;
     use crate::synthetic::{synthetic_clip, SyntheticParams};
+
+    /// The row-wise Gaussian is imageproc's, bit for bit, for every radius the feather
+    /// uses and images narrower than the kernel.
+    #[test]
+    fn gaussian_blur_u8_equals_imageproc() {
+        for (w, h) in [(61u32, 37u32), (5, 3), (1, 9)] {
+            let img = GrayImage::from_fn(w, h, |x, y| {
+                image::Luma([((x * 37 + y * 91 + x * y * 7) % 256) as u8])
+            });
+            for r in 2..=40u8 {
+                let s = r as f32 * 0.5;
+                assert_eq!(
+                    gaussian_blur_u8(&img, s),
+                    imageproc::filter::gaussian_blur_f32(&img, s),
+                    "{w}x{h} sigma {s}"
+                );
+            }
+        }
+    }
+
+    /// The bounding-box feather is the whole-frame feather, bit for bit: blobs inside,
+    /// at the edges and corners, two far apart, an empty mask; small and large radii.
+    #[test]
+    fn feather_on_the_bounding_box_equals_the_whole_frame() {
+        let (w, h) = (150u32, 90u32);
+        let blob = |cx: i32, cy: i32, rr: i32| {
+            move |x: u32, y: u32| (x as i32 - cx).pow(2) + (y as i32 - cy).pow(2) <= rr * rr
+        };
+        let shapes: Vec<Box<dyn Fn(u32, u32) -> bool>> = vec![
+            Box::new(blob(75, 45, 10)),
+            Box::new(blob(0, 0, 6)),
+            Box::new(blob(149, 89, 4)),
+            Box::new(|x, y| blob(20, 70, 5)(x, y) || blob(130, 10, 3)(x, y)),
+            Box::new(|x, _| x == 149),
+            Box::new(|_, _| false),
+        ];
+        for f in &shapes {
+            let m = GrayImage::from_fn(w, h, |x, y| image::Luma([if f(x, y) { 255 } else { 0 }]));
+            for longer in [150, 700, 4000] {
+                let a = feather(&m, longer);
+                let b = feather_whole(&m, longer);
+                assert!(
+                    a.data()
+                        .iter()
+                        .zip(b.data())
+                        .all(|(p, q)| p.to_bits() == q.to_bits()),
+                    "longer {longer}"
+                );
+            }
+        }
+    }
 
     #[test]
     fn toml_roundtrip_and_defaults() {
