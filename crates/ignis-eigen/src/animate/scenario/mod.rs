@@ -354,6 +354,10 @@ fn morph_join(
 pub struct MorphRun {
     pub start: usize,
     pub len: usize,
+    /// The scenario fixed the count (`frames = N`); else `len` is the planner's estimate
+    /// and the renderer chooses the count from the rendered frames
+    /// ([`crate::animate::morph`]).
+    pub fixed: bool,
 }
 
 impl MorphRun {
