@@ -397,8 +397,9 @@ pub(crate) fn render_with_morphs(
     let mut keep_full = vec![false; n];
     let in_run = |i: usize| runs.iter().any(|r| i >= r.start && i < r.start + r.len);
     for r in &runs {
-        for i in r.start.saturating_sub(NEIGHBOURS)..r.start {
-            want[i] = !in_run(i);
+        let from = r.start.saturating_sub(NEIGHBOURS);
+        for (i, w) in want.iter_mut().enumerate().take(r.start).skip(from) {
+            *w = !in_run(i);
         }
         if r.start > 0 {
             keep_full[r.start - 1] = true;
