@@ -1338,3 +1338,113 @@ mod learned {
         assert!(!bad.exists());
     }
 }
+
+/// Issue 15: morph transitions on real footage, measured on the frames the CLI wrote.
+mod transitions {
+    use super::*;
+    use ignis_core::loopq;
+
+    /// Metric frames (grey, 128 px wide, over black: what the writers measure) of the
+    /// numbered PNGs in `dir`, in order.
+    fn metric_frames(dir: &Path) -> Vec<ignis_core::GrayFrame> {
+        let mut names: Vec<PathBuf> = std::fs::read_dir(dir)
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .collect();
+        names.sort();
+        names
+            .iter()
+            .map(|p| loopq::metric_frame_rgba(&ignis_media::read_image(p).unwrap(), [0.0; 3]))
+            .collect()
+    }
+
+    /// The worst step of the join (from the last frame of the first motion, `a`, to the
+    /// first of the second, `b`) over the written sequence's median step, and the join's
+    /// ghost: the softest of frames `a..=b` over the median sharpness of its ±15
+    /// neighbours (cyclic, as `loopq`).
+    fn join_quality(f: &[ignis_core::GrayFrame], a: usize, b: usize) -> (f64, f64) {
+        let steps = loopq::steps(f, false).unwrap();
+        let median = loopq::median(&mut steps.clone());
+        let worst = steps[a..b].iter().copied().fold(0.0, f64::max) / median;
+        let sharp: Vec<f64> = f.iter().map(loopq::sharpness).collect();
+        let n = sharp.len() as isize;
+        let r = loopq::GHOST_RADIUS as isize;
+        let ghost = (a..=b)
+            .map(|t| {
+                let mut w: Vec<f64> = (-r..=r)
+                    .map(|o| sharp[(t as isize + o).rem_euclid(n) as usize])
+                    .collect();
+                sharp[t] / loopq::median(&mut w).max(1e-9)
+            })
+            .fold(f64::INFINITY, f64::min);
+        (worst, ghost)
+    }
+
+    /// A transition candle → campfire, and one between two distant ranges of campfire,
+    /// with `method = "morph"` (in-betweens chosen from the rendered frames): worst step
+    /// ≤ 1.5× the median step and ghost ≥ 0.8 on the written frames.
+    #[test]
+    fn morph_joins_meet_the_transition_goal() {
+        let (Some(candle), Some(campfire)) = (data("candle.mp4"), data("campfire.mp4")) else {
+            return;
+        };
+        if !has_ffmpeg() {
+            return;
+        }
+        let t = tempfile::tempdir().unwrap();
+        let db = t.path().join("cc.db");
+        ignis_ok(&[
+            "eigen",
+            "train",
+            "-q",
+            candle.to_str().unwrap(),
+            campfire.to_str().unwrap(),
+            "--end",
+            "160",
+            "-o",
+            db.to_str().unwrap(),
+        ]);
+        let cases = [
+            ("clips", ("candle", 10, 90), ("campfire", 60, 140)),
+            ("ranges", ("campfire", 0, 60), ("campfire", 100, 160)),
+        ];
+        for (name, (ca, a0, a1), (cb, b0, b1)) in cases {
+            let scenario = t.path().join(format!("{name}.toml"));
+            std::fs::write(
+                &scenario,
+                format!(
+                    "database = \"cc.db\"\nsequence = [\"a\", \"b\"]\n\
+                     [motions.a]\nclip = \"{ca}\"\nstart = {a0}\nend = {a1}\n\
+                     [motions.b]\nclip = \"{cb}\"\nstart = {b0}\nend = {b1}\n\
+                     [transition]\nmethod = \"morph\"\n[colour]\nmode = \"original\"\n"
+                ),
+            )
+            .unwrap();
+            let dir = t.path().join(name);
+            let pat = dir.join("%04d.png");
+            ignis_ok(&[
+                "eigen",
+                "animate",
+                "-q",
+                scenario.to_str().unwrap(),
+                "-o",
+                pat.to_str().unwrap(),
+            ]);
+            let f = metric_frames(&dir);
+            let (la, lb) = (a1 - a0, b1 - b0);
+            assert!(
+                f.len() > la + lb,
+                "{name}: {} frames, no in-betweens",
+                f.len()
+            );
+            let (a, b) = (la - 1, f.len() - lb);
+            let (worst, ghost) = join_quality(&f, a, b);
+            eprintln!(
+                "{name}: {} in-betweens, worst step {worst:.3}, ghost {ghost:.3}",
+                b - a - 1
+            );
+            assert!(worst <= 1.5, "{name}: worst step {worst:.3} > 1.5");
+            assert!(ghost >= 0.8, "{name}: ghost {ghost:.3} < 0.8");
+        }
+    }
+}

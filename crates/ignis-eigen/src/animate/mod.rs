@@ -17,6 +17,7 @@
 
 pub mod colour;
 pub mod loops;
+pub mod morph;
 pub mod render;
 pub mod scenario;
 

@@ -18,7 +18,7 @@ use crate::animate::has_stored_frames;
 use crate::colour::{original_colouring, synthetic_smoke, warp_rgba, OriginalColour};
 use crate::db::{ClipEntry, EigenfireDb};
 use crate::error::{EigenError, Result};
-use crate::scenario::{ColourMode, Look, MorphRun, Plan, PlanFrame};
+use crate::scenario::{ColourMode, Look, Plan, PlanFrame};
 use crate::transition::FrameRef;
 
 /// Where rendering reads footage: [`crate::footage::SyntheticSources`] for Ignis's own
@@ -318,7 +318,7 @@ fn shift_gray(g: GrayFrame, out: Size, d: (i64, i64)) -> GrayFrame {
 
 /// Where the layers go: the common frame, the view of it and the output size.
 #[derive(Clone, Copy)]
-struct Geometry {
+pub(crate) struct Geometry {
     frame: Size,
     view: View,
     out: Size,
@@ -544,78 +544,14 @@ pub fn render_plan_with(
     let out = opts.size.unwrap_or(default_size);
     check_output_size(out)?;
     let geo = Geometry { frame, view, out };
-    let n = plan.frames.len();
-    let mut runs: Vec<&MorphRun> = plan.morphs.iter().collect();
-    runs.sort_by_key(|r| r.start);
-    for r in &runs {
-        let (a, b) = r.endpoints(n.max(1));
-        let inside = |i: usize| i >= r.start && i < r.start + r.len;
-        if n == 0 || r.len == 0 || r.start + r.len > n || inside(a) || inside(b) {
-            return Err(EigenError::bad(
-                "plan",
-                format!(
-                    "morph run {}..{} does not sit between two real frames of the {n}-frame plan",
-                    r.start,
-                    r.start + r.len
-                ),
-            ));
-        }
-    }
-    let mut done = 0;
-    let mut at = 0;
-    let mut count = |f: RgbaFrame, sink: &mut dyn FnMut(RgbaFrame) -> Result<()>| {
-        sink(f)?;
-        done += 1;
-        progress(done);
-        Ok::<(), EigenError>(())
-    };
-    for r in runs {
-        if r.start < at {
-            return Err(EigenError::bad("plan", "morph runs overlap"));
-        }
-        render_frames(
-            db,
-            plan,
-            &plan.frames[at..r.start],
-            look,
-            opts,
-            geo,
-            sources,
-            &mut |f| count(f, sink),
-        )?;
-        // The two endpoint frames, rendered once, and the flow between them once.
-        let (a, b) = r.endpoints(n);
-        let ends = [plan.frames[a].clone(), plan.frames[b].clone()];
-        let mut got = Vec::with_capacity(2);
-        render_frames(db, plan, &ends, look, opts, geo, sources, &mut |f| {
-            got.push(f);
-            Ok(())
-        })?;
-        let (fa, fb) = (&got[0], &got[1]);
-        let p = ignis_flow::FlowParams {
-            max_side: MORPH_FLOW_SIDE,
-            ..Default::default()
-        };
-        let flow_err = |e: ignis_flow::FlowError| EigenError::bad("morph", e.to_string());
-        let (la, lb) = rayon::join(|| ignis_flow::luma(fa), || ignis_flow::luma(fb));
-        let (fw, bw) = ignis_flow::flow_pair_reduced(&la, &lb, &p).map_err(flow_err)?;
-        for k in 0..r.len {
-            let t = (k + 1) as f32 / (r.len + 1) as f32;
-            let m = ignis_flow::morph_rgba(fa, fb, &fw, &bw, t).map_err(flow_err)?;
-            count(m, sink)?;
-        }
-        at = r.start + r.len;
-    }
-    render_frames(
+    let ctx = super::morph::Ctx {
         db,
         plan,
-        &plan.frames[at..],
         look,
         opts,
         geo,
-        sources,
-        &mut |f| count(f, sink),
-    )
+    };
+    super::morph::render_with_morphs(&ctx, sources, sink, progress).map(|_| ())
 }
 
 /// Longest side of the flow's working size for morph joins (full-resolution frames are
@@ -627,7 +563,7 @@ pub const MORPH_FLOW_SIDE: u32 = 384;
 // frame or reconstruction) and the layers they share, then finishes them in parallel
 // ([`finish_frame`]); the per-frame rules are closures over that shared batch state.
 #[allow(clippy::too_many_arguments)]
-fn render_frames(
+pub(crate) fn render_frames(
     db: &EigenfireDb,
     plan: &Plan,
     all_frames: &[PlanFrame],

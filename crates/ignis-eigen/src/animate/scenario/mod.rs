@@ -292,7 +292,10 @@ struct MorphSpec {
 /// [`MORPH_STEP`] × the footage's median step. The plan's frames for it carry the
 /// linearly interpolated weights (what the planner measures and what a renderer that does
 /// not know morphs shows); [`crate::render::render_plan_with`] renders them as the
-/// motion-compensated morph of the two rendered endpoint frames ([`Plan::morphs`]).
+/// motion-compensated morph of the two rendered endpoint frames ([`Plan::morphs`]), and —
+/// unless `frames` was given — chooses the count again there from the rendered frames
+/// ([`crate::animate::morph`]), so the written join may have another count than this
+/// estimate.
 fn morph_join(
     space: &WeightSpace,
     ra: &Range<usize>,
@@ -354,6 +357,10 @@ fn morph_join(
 pub struct MorphRun {
     pub start: usize,
     pub len: usize,
+    /// The scenario fixed the count (`frames = N`); else `len` is the planner's estimate
+    /// and the renderer chooses the count from the rendered frames
+    /// ([`crate::animate::morph`]).
+    pub fixed: bool,
 }
 
 impl MorphRun {

@@ -229,6 +229,10 @@ impl Scenario {
                     morphs.push(MorphRun {
                         start: frames.len(),
                         len: n,
+                        fixed: self.joins[i]
+                            .morph
+                            .as_ref()
+                            .is_some_and(|m| m.frames.is_some()),
                     });
                 }
                 for (t, f) in j.join.frames.iter().enumerate() {

@@ -1,0 +1,660 @@
+//! Morph joins at render time (issue 15): the motion-compensated in-betweens of a plan's
+//! morph runs ([`MorphRun`]), made from the two *rendered* endpoint frames.
+//!
+//! The planner only knows PCA weights; how far apart two frames really are shows only once
+//! they are rendered (two clips of different size and brightness, a reconstruction against
+//! the footage's own frame). So, per run: the endpoints and up to [`NEIGHBOURS`] real
+//! frames on each side are rendered, the footage's own median step is measured on them
+//! (grey 128-px metric frames of `ignis_core::loopq`, what the written output is judged
+//! on), the flow between the endpoints is computed once, and in-betweens are added until
+//! every step of the join is within [`MORPH_STEP`] × that median — at most [`max_frames`]
+//! (2 s of the footage); a run that hits the bound keeps it (the join is then as smooth as
+//! 2 s allow). A run whose count the scenario fixed (`frames = N`) keeps its count.
+//!
+//! The in-betweens are a detail-preserving blend of the two frames warped toward each other
+//! along the flow (after Heitz & Neyret, *High-Performance By-Example Noise using a
+//! Histogram-Preserving Blending Operator*, HPG 2018, §3: a blend of two uncorrelated
+//! textures has the variance of each scaled by (1−t)² + t², half at t = ½, so the in-between
+//! looks soft — the loop metric's *ghost*). Each frame is split into its local mean (a box
+//! mean of [`detail_radius`]) and the detail around it; the mean is blended plainly (shape,
+//! brightness, alpha stay the plain morph's) and the blended detail is scaled so its energy is
+//! the interpolation of the two warped frames' — measured per frame, so well-aligned similar
+//! frames (correlated detail) get a gain near 1, unrelated ones up to 1/√((1−t)² + t²).
+
+use std::collections::HashMap;
+
+use ignis_core::loopq;
+use ignis_core::{GrayFrame, RgbaFrame, Size};
+
+use crate::db::EigenfireDb;
+use crate::error::{EigenError, Result};
+use crate::render::{render_frames, Geometry, RenderOptions, MORPH_FLOW_SIDE};
+use crate::scenario::{Look, MorphRun, Plan, MORPH_STEP};
+
+pub use crate::footage::FootageOpener;
+
+/// Real frames rendered on each side of a morph run to measure the footage's median step.
+pub const NEIGHBOURS: usize = 8;
+
+/// Most in-betweens of an automatic morph run: 2 s at the database's highest frame rate.
+pub fn max_frames(db: &EigenfireDb) -> usize {
+    let fps = db
+        .manifest()
+        .clips
+        .iter()
+        .map(|c| c.fps / c.stride.max(1) as f64)
+        .filter(|f| f.is_finite() && *f > 0.0)
+        .fold(0.0, f64::max);
+    ((2.0 * if fps > 0.0 { fps } else { 30.0 }).ceil() as usize).max(1)
+}
+
+/// Side of the box mean that separates a frame's detail from its local mean: a 64th of the
+/// frame's longer side (2 px on a 128-px metric frame), at least 1.
+pub fn detail_radius(size: Size) -> usize {
+    (size.width.max(size.height) as usize / 64).max(1)
+}
+
+/// What a morph run became when rendered.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MorphOutcome {
+    /// In-betweens written.
+    pub frames: usize,
+    /// The footage's median step near the join (metric frames), 0 when not measurable.
+    pub median_step: f64,
+    /// Largest step of the join (into, within and out of the in-betweens) over that median,
+    /// measured on the rendered frames' metric frames (NaN when not measurable).
+    pub worst_step: f64,
+    /// Whether [`max_frames`] stopped the count short of the goal.
+    pub bound_hit: bool,
+}
+
+/// Box mean of radius `r` (edge-clamped window), separable, for `C` channels.
+fn box_mean<const C: usize>(d: &[[f32; C]], size: Size, r: usize) -> Vec<[f32; C]> {
+    let (w, h) = (size.width as usize, size.height as usize);
+    let pass = |src: &[[f32; C]], len: usize, stride: usize, lines: usize, step: usize| {
+        let mut out = vec![[0.0f32; C]; src.len()];
+        for l in 0..lines {
+            let at = |i: usize| l * step + i * stride;
+            let mut acc = [0.0f64; C];
+            let (lo0, hi0) = (0usize, r.min(len - 1));
+            for i in lo0..=hi0 {
+                for c in 0..C {
+                    acc[c] += f64::from(src[at(i)][c]);
+                }
+            }
+            for i in 0..len {
+                let (lo, hi) = (i.saturating_sub(r), (i + r).min(len - 1));
+                let n = (hi - lo + 1) as f64;
+                for c in 0..C {
+                    out[at(i)][c] = (acc[c] / n) as f32;
+                }
+                if i + r + 1 < len {
+                    for c in 0..C {
+                        acc[c] += f64::from(src[at(i + r + 1)][c]);
+                    }
+                }
+                if i >= r {
+                    for c in 0..C {
+                        acc[c] -= f64::from(src[at(i - r)][c]);
+                    }
+                }
+            }
+        }
+        out
+    };
+    if w == 0 || h == 0 {
+        return d.to_vec();
+    }
+    let rows = pass(d, w, 1, h, w);
+    pass(&rows, h, w, w, 1)
+}
+
+/// The detail-preserving blend of `a` and `b` (`t` of the way to `b`) on `C`-channel
+/// pixels; see the module doc. Returns the blended pixels (not clamped).
+fn detail_blend<const C: usize>(
+    a: &[[f32; C]],
+    b: &[[f32; C]],
+    size: Size,
+    t: f32,
+) -> Vec<[f32; C]> {
+    let r = detail_radius(size);
+    let (ma, mb) = rayon::join(|| box_mean(a, size, r), || box_mean(b, size, r));
+    let s = 1.0 - t;
+    let energy = |x: &[[f32; C]], m: &[[f32; C]]| -> f64 {
+        x.iter()
+            .zip(m)
+            .map(|(p, q)| (0..C).map(|c| f64::from(p[c] - q[c]).powi(2)).sum::<f64>())
+            .sum()
+    };
+    let (ea, eb) = (energy(a, &ma), energy(b, &mb));
+    let mixed = |i: usize, c: usize| s * (a[i][c] - ma[i][c]) + t * (b[i][c] - mb[i][c]);
+    let em: f64 = (0..a.len())
+        .map(|i| (0..C).map(|c| f64::from(mixed(i, c)).powi(2)).sum::<f64>())
+        .sum();
+    let want = f64::from(s) * ea + f64::from(t) * eb;
+    let bound = 1.0 / f64::from(s * s + t * t).sqrt();
+    let gain = if em > 0.0 {
+        (want / em).sqrt().clamp(1.0, bound) as f32
+    } else {
+        1.0
+    };
+    (0..a.len())
+        .map(|i| std::array::from_fn(|c| s * ma[i][c] + t * mb[i][c] + gain * mixed(i, c)))
+        .collect()
+}
+
+/// The detail-preserving blend of two grey frames of one size.
+pub fn detail_blend_gray(a: &GrayFrame, b: &GrayFrame, t: f32) -> GrayFrame {
+    let wrap = |f: &GrayFrame| f.data().iter().map(|&v| [v]).collect::<Vec<[f32; 1]>>();
+    let out = detail_blend(&wrap(a), &wrap(b), a.size(), t);
+    GrayFrame::from_vec(a.size(), out.into_iter().map(|p| p[0].max(0.0)).collect())
+        .expect("sized from a")
+}
+
+/// The detail-preserving blend of two colour frames of one size (straight alpha), on
+/// premultiplied values; alpha clamped to `0..=1`, colour to at least 0.
+pub fn detail_blend_rgba(a: &RgbaFrame, b: &RgbaFrame, t: f32) -> RgbaFrame {
+    let pm = |f: &RgbaFrame| -> Vec<[f32; 4]> {
+        f.data()
+            .iter()
+            .map(|p| [p[0] * p[3], p[1] * p[3], p[2] * p[3], p[3]])
+            .collect()
+    };
+    let out = detail_blend(&pm(a), &pm(b), a.size(), t)
+        .into_iter()
+        .map(|p| {
+            let al = p[3].clamp(0.0, 1.0);
+            if al <= 1e-6 {
+                [0.0; 4]
+            } else {
+                [
+                    p[0].max(0.0) / al,
+                    p[1].max(0.0) / al,
+                    p[2].max(0.0) / al,
+                    al,
+                ]
+            }
+        })
+        .collect();
+    RgbaFrame::from_vec(a.size(), out).expect("sized from a")
+}
+
+/// The in-between `t` of the way from `a` to `b`: both warped toward it along the flow
+/// (`fw` = a→b, `bw` = b→a), then [`detail_blend_rgba`].
+pub fn inbetween_rgba(
+    a: &RgbaFrame,
+    b: &RgbaFrame,
+    fw: &ignis_flow::FlowField,
+    bw: &ignis_flow::FlowField,
+    t: f32,
+) -> RgbaFrame {
+    let (wa, wb) = rayon::join(
+        || ignis_flow::warp_rgba(a, fw, -t),
+        || ignis_flow::warp_rgba(b, bw, -(1.0 - t)),
+    );
+    detail_blend_rgba(&wa, &wb, t)
+}
+
+/// [`inbetween_rgba`] for grey frames.
+pub fn inbetween_gray(
+    a: &GrayFrame,
+    b: &GrayFrame,
+    fw: &ignis_flow::FlowField,
+    bw: &ignis_flow::FlowField,
+    t: f32,
+) -> GrayFrame {
+    let wa = ignis_flow::warp_gray(a, fw, -t);
+    let wb = ignis_flow::warp_gray(b, bw, -(1.0 - t));
+    detail_blend_gray(&wa, &wb, t)
+}
+
+/// Samples of the morph path `ma` → `mb` used to space the in-betweens evenly.
+const PATH_SAMPLES: usize = 48;
+
+/// Times of `n` in-betweens spaced evenly along the path whose cumulative step length at
+/// the uniform times `k / (len − 1)` is `arc` (a morph does not move at an even pace in
+/// t: the warps and the detail gain bunch the change up).
+fn even_times(arc: &[f64], n: usize) -> Vec<f32> {
+    let total = *arc.last().unwrap_or(&0.0);
+    let m = arc.len().saturating_sub(1).max(1);
+    (1..=n)
+        .map(|k| {
+            let want = total * k as f64 / (n + 1) as f64;
+            if total <= 0.0 {
+                return k as f32 / (n + 1) as f32;
+            }
+            let i = arc.partition_point(|&v| v < want).clamp(1, m);
+            let (lo, hi) = (arc[i - 1], arc[i]);
+            let f = if hi > lo {
+                (want - lo) / (hi - lo)
+            } else {
+                0.0
+            };
+            ((i - 1) as f64 + f) as f32 / m as f32
+        })
+        .collect()
+}
+
+/// The fewest in-betweens (from 1 up to `max`) of the metric frames `ma` → `mb`, spaced
+/// evenly along the path, whose every step is within `limit`; returns their times, the
+/// largest step and whether `max` was hit.
+pub fn choose_times(
+    ma: &GrayFrame,
+    mb: &GrayFrame,
+    fw: &ignis_flow::FlowField,
+    bw: &ignis_flow::FlowField,
+    limit: f64,
+    max: usize,
+) -> (Vec<f32>, f64, bool) {
+    use rayon::prelude::*;
+    let at = |t: f32| inbetween_gray(ma, mb, fw, bw, t);
+    let path: Vec<GrayFrame> = (0..=PATH_SAMPLES)
+        .into_par_iter()
+        .map(|k| match k {
+            0 => ma.clone(),
+            k if k == PATH_SAMPLES => mb.clone(),
+            k => at(k as f32 / PATH_SAMPLES as f32),
+        })
+        .collect();
+    let mut arc = vec![0.0];
+    for p in path.windows(2) {
+        arc.push(arc[arc.len() - 1] + loopq::rms_diff(&p[0], &p[1]));
+    }
+    let worst_with = |times: &[f32]| -> f64 {
+        let mids: Vec<GrayFrame> = times.par_iter().map(|&t| at(t)).collect();
+        let mut chain: Vec<&GrayFrame> = vec![ma];
+        chain.extend(mids.iter());
+        chain.push(mb);
+        steps_of(&chain).into_iter().fold(0.0, f64::max)
+    };
+    let mut last = (Vec::new(), f64::INFINITY);
+    for n in 1..=max.max(1) {
+        let times = even_times(&arc, n);
+        let w = worst_with(&times);
+        if w <= limit {
+            return (times, w, false);
+        }
+        last = (times, w);
+    }
+    (last.0, last.1, true)
+}
+
+/// The metric frame of a rendered frame (as an opaque writer over black shows it).
+fn metric(f: &RgbaFrame) -> GrayFrame {
+    loopq::metric_frame_rgba(f, [0.0; 3])
+}
+
+/// Steps between consecutive metric frames.
+fn steps_of(frames: &[&GrayFrame]) -> Vec<f64> {
+    frames
+        .windows(2)
+        .map(|p| loopq::rms_diff(p[0], p[1]))
+        .collect()
+}
+
+/// Where rendered frames go, counting them and keeping what the morph runs need: the
+/// metric frames of the real frames near a run (`want`) and the full frame before each run.
+struct Out<'s> {
+    sink: &'s mut dyn FnMut(RgbaFrame) -> Result<()>,
+    progress: &'s mut dyn FnMut(usize),
+    done: usize,
+    want: Vec<bool>,
+    keep_full: Vec<bool>,
+    metric: HashMap<usize, GrayFrame>,
+    full: HashMap<usize, RgbaFrame>,
+}
+
+impl Out<'_> {
+    fn emit(&mut self, f: RgbaFrame) -> Result<()> {
+        (self.sink)(f)?;
+        self.done += 1;
+        (self.progress)(self.done);
+        Ok(())
+    }
+    /// Plan frame `i` (a real frame).
+    fn real(&mut self, i: usize, f: RgbaFrame) -> Result<()> {
+        if self.want[i] {
+            self.metric.insert(i, metric(&f));
+        }
+        if self.keep_full[i] {
+            self.full.insert(i, f.clone());
+        }
+        self.emit(f)
+    }
+}
+
+/// The plan's morph runs, sorted, each checked to sit between two real frames and not to
+/// overlap the next.
+fn checked_runs(plan: &Plan) -> Result<Vec<&MorphRun>> {
+    let n = plan.frames.len();
+    let mut runs: Vec<&MorphRun> = plan.morphs.iter().collect();
+    runs.sort_by_key(|r| r.start);
+    for r in &runs {
+        let (a, b) = r.endpoints(n.max(1));
+        let inside = |i: usize| i >= r.start && i < r.start + r.len;
+        if n == 0 || r.len == 0 || r.start + r.len > n || inside(a) || inside(b) {
+            return Err(EigenError::bad(
+                "plan",
+                format!(
+                    "morph run {}..{} does not sit between two real frames of the {n}-frame plan",
+                    r.start,
+                    r.start + r.len
+                ),
+            ));
+        }
+    }
+    if runs.windows(2).any(|p| p[1].start < p[0].start + p[0].len) {
+        return Err(EigenError::bad("plan", "morph runs overlap"));
+    }
+    Ok(runs)
+}
+
+/// Everything [`render_with_morphs`] renders with.
+pub(crate) struct Ctx<'c> {
+    pub db: &'c EigenfireDb,
+    pub plan: &'c Plan,
+    pub look: &'c Look,
+    pub opts: &'c RenderOptions,
+    pub geo: Geometry,
+}
+
+impl Ctx<'_> {
+    fn render(
+        &self,
+        range: std::ops::Range<usize>,
+        sources: &mut dyn FootageOpener,
+    ) -> Result<Vec<RgbaFrame>> {
+        let mut got = Vec::with_capacity(range.len());
+        let c = self;
+        render_frames(
+            c.db,
+            c.plan,
+            &c.plan.frames[range],
+            c.look,
+            c.opts,
+            c.geo,
+            sources,
+            &mut |f| {
+                got.push(f);
+                Ok(())
+            },
+        )?;
+        Ok(got)
+    }
+}
+
+/// Renders the whole plan into `sink` in order — real frames in batches, each morph run as
+/// its in-betweens (see the module doc) — and returns what each run became.
+pub(crate) fn render_with_morphs(
+    c: &Ctx,
+    sources: &mut dyn FootageOpener,
+    sink: &mut dyn FnMut(RgbaFrame) -> Result<()>,
+    progress: &mut dyn FnMut(usize),
+) -> Result<Vec<MorphOutcome>> {
+    let n = c.plan.frames.len();
+    let runs = checked_runs(c.plan)?;
+    let mut want = vec![false; n];
+    let mut keep_full = vec![false; n];
+    let in_run = |i: usize| runs.iter().any(|r| i >= r.start && i < r.start + r.len);
+    for r in &runs {
+        let from = r.start.saturating_sub(NEIGHBOURS);
+        for (i, w) in want.iter_mut().enumerate().take(r.start).skip(from) {
+            *w = !in_run(i);
+        }
+        if r.start > 0 {
+            keep_full[r.start - 1] = true;
+        }
+        if r.start + r.len == n {
+            for (i, w) in want.iter_mut().enumerate().take(NEIGHBOURS.min(n)) {
+                *w = !in_run(i);
+            }
+        }
+    }
+    let mut out = Out {
+        sink,
+        progress,
+        done: 0,
+        want,
+        keep_full,
+        metric: HashMap::new(),
+        full: HashMap::new(),
+    };
+    let mut outcomes = Vec::with_capacity(runs.len());
+    let mut at = 0;
+    for (k, r) in runs.iter().enumerate() {
+        for (j, f) in c.render(at..r.start, sources)?.into_iter().enumerate() {
+            out.real(at + j, f)?;
+        }
+        let next = runs.get(k + 1).map_or(n, |q| q.start);
+        at = morph_run(c, r, next, sources, &mut out, &mut outcomes)?;
+    }
+    for (j, f) in c.render(at..n, sources)?.into_iter().enumerate() {
+        out.real(at + j, f)?;
+    }
+    Ok(outcomes)
+}
+
+/// One morph run: its endpoints and neighbours, the count, the in-betweens, then the real
+/// frames rendered after it; returns the plan index rendering continues from.
+fn morph_run(
+    c: &Ctx,
+    r: &MorphRun,
+    next: usize,
+    sources: &mut dyn FootageOpener,
+    out: &mut Out,
+    outcomes: &mut Vec<MorphOutcome>,
+) -> Result<usize> {
+    let n = c.plan.frames.len();
+    let (a, b) = r.endpoints(n);
+    let fa = match out.full.remove(&a) {
+        Some(f) => f,
+        None => c.render(a..a + 1, sources)?.remove(0),
+    };
+    // The real frames after the run: rendered now (and written after it) unless the run
+    // wraps to the plan's start, whose frames are already written.
+    let wraps = b < r.start;
+    let after: Vec<RgbaFrame> = if wraps {
+        Vec::new()
+    } else {
+        c.render(b..(b + NEIGHBOURS).min(next).max(b + 1), sources)?
+    };
+    let fb = match after.first() {
+        Some(f) => f.clone(),
+        None => c.render(b..b + 1, sources)?.remove(0),
+    };
+    let (ma, mb) = (metric(&fa), metric(&fb));
+    // The footage's median step: real frames consecutive up to `a`, and from `b` on.
+    let before: Vec<&GrayFrame> = (0..NEIGHBOURS)
+        .map_while(|o| a.checked_sub(o).and_then(|i| out.metric.get(&i)))
+        .collect::<Vec<_>>()
+        .into_iter()
+        .rev()
+        .collect();
+    let after_m: Vec<GrayFrame> = if wraps {
+        (b..b + NEIGHBOURS)
+            .map_while(|i| out.metric.get(&i).cloned())
+            .collect()
+    } else {
+        after.iter().map(metric).collect()
+    };
+    let mut steps = steps_of(&before);
+    steps.extend(steps_of(&after_m.iter().collect::<Vec<_>>()));
+    let median = loopq::median(&mut steps.clone());
+    let p = ignis_flow::FlowParams {
+        max_side: MORPH_FLOW_SIDE,
+        ..Default::default()
+    };
+    let flow_err = |e: ignis_flow::FlowError| EigenError::bad("morph", e.to_string());
+    let (la, lb) = rayon::join(|| ignis_flow::luma(&fa), || ignis_flow::luma(&fb));
+    let (fw, bw) = ignis_flow::flow_pair_reduced(&la, &lb, &p).map_err(flow_err)?;
+    let measurable = steps.len() >= 2 && median > 0.0;
+    // The worst step of the rendered in-betweens at `times`, on their metric frames.
+    let real_worst = |times: &[f32]| -> f64 {
+        let mut chain = vec![ma.clone()];
+        chain.extend(
+            times
+                .iter()
+                .map(|&t| metric(&inbetween_rgba(&fa, &fb, &fw, &bw, t))),
+        );
+        chain.push(mb.clone());
+        steps_of(&chain.iter().collect::<Vec<_>>())
+            .into_iter()
+            .fold(0.0, f64::max)
+    };
+    let (times, mut worst, bound_hit) = if r.fixed || !measurable {
+        let n = r.len;
+        let even = (1..=n).map(|k| k as f32 / (n + 1) as f32).collect();
+        (even, f64::NAN, false)
+    } else {
+        // Chosen on the metric-size morph, then checked on the rendered frames once: when
+        // they step further than predicted, the goal is tightened by that ratio.
+        let (goal, max) = (MORPH_STEP * median, max_frames(c.db));
+        let (times, predicted, hit) = choose_times(&ma, &mb, &fw, &bw, goal, max);
+        let real = real_worst(&times);
+        if real <= goal || hit || predicted <= 0.0 {
+            (times, real, hit)
+        } else {
+            let (times, _, hit) = choose_times(&ma, &mb, &fw, &bw, goal * predicted / real, max);
+            (times, f64::NAN, hit)
+        }
+    };
+    let count = times.len();
+    let mut chain = vec![ma.clone()];
+    for &t in &times {
+        let f = inbetween_rgba(&fa, &fb, &fw, &bw, t);
+        chain.push(metric(&f));
+        out.emit(f)?;
+    }
+    chain.push(mb.clone());
+    if worst.is_nan() && measurable {
+        worst = steps_of(&chain.iter().collect::<Vec<_>>())
+            .into_iter()
+            .fold(0.0, f64::max);
+    }
+    outcomes.push(MorphOutcome {
+        frames: count,
+        median_step: if measurable { median } else { 0.0 },
+        worst_step: if measurable { worst / median } else { f64::NAN },
+        bound_hit,
+    });
+    let resume = r.start + r.len;
+    if wraps {
+        return Ok(resume);
+    }
+    let got = after.len();
+    for (j, f) in after.into_iter().enumerate() {
+        out.real(b + j, f)?;
+    }
+    Ok(b + got)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn noise(size: Size, seed: u64) -> GrayFrame {
+        let mut rng = ignis_core::Rng::new(seed);
+        let d = (0..size.pixels())
+            .map(|_| rng.uniform(0.0, 1.0) as f32)
+            .collect();
+        GrayFrame::from_vec(size, d).unwrap()
+    }
+
+    #[test]
+    fn detail_blend_keeps_detail_of_unrelated_frames() {
+        let size = Size::new(96, 64).unwrap();
+        let (a, b) = (noise(size, 1), noise(size, 2));
+        let plain = crate::loops::blend(&a, &b, 0.5);
+        let kept = detail_blend_gray(&a, &b, 0.5);
+        let (sa, sb) = (loopq::sharpness(&a), loopq::sharpness(&b));
+        let (sp, sk) = (loopq::sharpness(&plain), loopq::sharpness(&kept));
+        // The plain blend of two uncorrelated textures loses about 1 − 1/√2 of the detail.
+        assert!(sp < 0.8 * 0.5 * (sa + sb), "plain {sp} vs {sa} {sb}");
+        assert!(sk > 0.9 * 0.5 * (sa + sb), "kept {sk} vs {sa} {sb}");
+        // The local mean is the plain blend's.
+        let r = detail_radius(size);
+        let m = |f: &GrayFrame| {
+            box_mean(
+                &f.data().iter().map(|&v| [v]).collect::<Vec<_>>(),
+                size,
+                r * 3,
+            )
+        };
+        let (mp, mk) = (m(&plain), m(&kept));
+        let d = mp
+            .iter()
+            .zip(&mk)
+            .map(|(x, y)| (x[0] - y[0]).abs())
+            .fold(0.0f32, f32::max);
+        assert!(d < 0.05, "local means differ by {d}");
+    }
+
+    #[test]
+    fn detail_blend_of_identical_frames_is_the_frame() {
+        let size = Size::new(40, 30).unwrap();
+        let a = noise(size, 3);
+        let m = detail_blend_gray(&a, &a, 0.3);
+        let d = loopq::rms_diff(&a, &m);
+        assert!(d < 1e-5, "{d}");
+        let rgba = RgbaFrame::from_vec(
+            size,
+            a.data().iter().map(|&v| [v, v * 0.5, 0.1, 0.8]).collect(),
+        )
+        .unwrap();
+        let m = detail_blend_rgba(&rgba, &rgba, 0.7);
+        for (p, q) in rgba.data().iter().zip(m.data()) {
+            for c in 0..4 {
+                assert!((p[c] - q[c]).abs() < 1e-4);
+            }
+        }
+    }
+
+    #[test]
+    fn even_times_follow_the_arc() {
+        // A path that covers its first half in a tenth of the time.
+        let arc: Vec<f64> = (0..=10)
+            .map(|k| {
+                if k == 0 {
+                    0.0
+                } else {
+                    0.5 + 0.5 * (k - 1) as f64 / 9.0
+                }
+            })
+            .collect();
+        let t = even_times(&arc, 1);
+        assert!((t[0] - 0.1).abs() < 1e-6, "{t:?}");
+        let flat = even_times(&[0.0, 0.0], 3);
+        assert_eq!(flat, vec![0.25, 0.5, 0.75]);
+    }
+
+    #[test]
+    fn box_mean_is_the_window_mean() {
+        let size = Size::new(5, 3).unwrap();
+        let d: Vec<[f32; 1]> = (0..15).map(|i| [i as f32]).collect();
+        let m = box_mean(&d, size, 1);
+        // Centre pixel (2, 1): mean of rows 0..=2, columns 1..=3.
+        let want = [1.0, 2.0, 3.0, 6.0, 7.0, 8.0, 11.0, 12.0, 13.0]
+            .iter()
+            .sum::<f32>()
+            / 9.0;
+        assert!((m[7][0] - want).abs() < 1e-5);
+        // Corner (0, 0): rows 0..=1, columns 0..=1.
+        assert!((m[0][0] - (0.0 + 1.0 + 5.0 + 6.0) / 4.0).abs() < 1e-5);
+    }
+
+    #[test]
+    fn count_grows_until_steps_fit() {
+        let size = Size::new(64, 48).unwrap();
+        let (a, b) = (noise(size, 4), noise(size, 5));
+        let zero = ignis_flow::FlowField::zero(size);
+        let d = loopq::rms_diff(&a, &b);
+        let (t, worst, hit) = choose_times(&a, &b, &zero, &zero, d / 4.0, 60);
+        assert!(
+            !hit && worst <= d / 4.0 && t.len() >= 3,
+            "{t:?} {worst} {d}"
+        );
+        assert!(t.windows(2).all(|p| p[0] < p[1]) && t[0] > 0.0 && t[t.len() - 1] < 1.0);
+        let (t2, _, hit2) = choose_times(&a, &b, &zero, &zero, d / 100.0, 5);
+        assert!(hit2 && t2.len() == 5);
+    }
+}
