@@ -110,7 +110,9 @@ pub fn check_chunk(chunk: crate::frames::Chunk, n: usize) -> Result<std::ops::Ra
 /// renders on its own except a morph, made from the two frames around its run: a run the
 /// chunk cuts into is kept whole, between copies of its two end frames. The output view
 /// depends on which clips the plan shows, so one frame of each clip the chunk lacks is put
-/// first (rendered, not written).
+/// first (rendered, not written). Automatic morph runs must be resolved
+/// ([`ignis_eigen::animate::morph::resolve`]): their in-betweens would otherwise be chosen from
+/// the chunk's neighbours, not the full render's.
 fn chunk_plan(db: &EigenfireDb, plan: &Plan, range: std::ops::Range<usize>) -> (Plan, Vec<bool>) {
     use ignis_eigen::scenario::MorphRun;
     use ignis_eigen::transition::FrameRef;
@@ -133,7 +135,7 @@ fn chunk_plan(db: &EigenfireDb, plan: &Plan, range: std::ops::Range<usize>) -> (
             if picks.last().map(|p| p.0) != Some(a) {
                 picks.push((a, false));
             }
-            morphs.push(picks.len()..picks.len() + r.len);
+            morphs.push((picks.len()..picks.len() + r.len, r));
             picks.extend((r.start..r.start + r.len).map(|j| (j, range.contains(&j))));
             picks.push((b, false));
             i = r.start + r.len;
@@ -162,9 +164,11 @@ fn chunk_plan(db: &EigenfireDb, plan: &Plan, range: std::ops::Range<usize>) -> (
         frames: extra.iter().map(|p| plan.frames[p.0].clone()).collect(),
         morphs: morphs
             .into_iter()
-            .map(|m| MorphRun {
+            .map(|(m, r)| MorphRun {
                 start: m.start + lead,
                 len: m.len(),
+                fixed: r.fixed,
+                times: r.times.clone(),
             })
             .collect(),
         ..plan.clone()
@@ -432,15 +436,27 @@ pub fn animate_cmd(a: &AnimateArgs, g: &Global) -> Result<Plan> {
             Some(ignis_media::Format::Gif | ignis_media::Format::Flipbook)
         );
     print_table(g, &plan, &sc, out_loops);
-    let chunk = a
-        .chunk
-        .map(|c| check_chunk(c, plan.frames.len()))
-        .transpose()?;
     if a.dry_run {
+        a.chunk
+            .map(|c| check_chunk(c, plan.frames.len()))
+            .transpose()?;
         return Ok(plan);
     }
     let mut look = sc.look.clone();
     a.footage.adjust_look(&mut look, g);
+    // The morph joins' in-between counts come from the rendered frames: chosen first, so
+    // the frame count (what `--chunk` ranges over, the progress bar) is the one written.
+    let plan = if plan.morphs.iter().any(|r| r.times.is_none() && !r.fixed) {
+        let mut sources = a.footage.sources(&db)?;
+        ignis_eigen::animate::morph::resolve(&db, &plan, &look, &a.footage.options()?, &mut sources)
+            .with_context(|| format!("choosing the morph joins of {}", a.scenario.display()))?
+    } else {
+        plan
+    };
+    let chunk = a
+        .chunk
+        .map(|c| check_chunk(c, plan.frames.len()))
+        .transpose()?;
     let size = write_plan_chunk(&db, &plan, chunk.clone(), &look, &a.footage, &a.out, g)
         .with_context(|| format!("rendering {}", a.scenario.display()))?;
     g.say(format!(

@@ -332,7 +332,13 @@ fn checked_runs(plan: &Plan) -> Result<Vec<&MorphRun>> {
     for r in &runs {
         let (a, b) = r.endpoints(n.max(1));
         let inside = |i: usize| i >= r.start && i < r.start + r.len;
-        if n == 0 || r.len == 0 || r.start + r.len > n || inside(a) || inside(b) {
+        if n == 0
+            || r.len == 0
+            || r.start + r.len > n
+            || inside(a)
+            || inside(b)
+            || r.times.as_ref().is_some_and(|t| t.len() != r.len)
+        {
             return Err(EigenError::bad(
                 "plan",
                 format!(
@@ -434,6 +440,184 @@ pub(crate) fn render_with_morphs(
     Ok(outcomes)
 }
 
+/// The flows between a run's two end frames (forward, backward), at [`MORPH_FLOW_SIDE`].
+fn end_flows(
+    fa: &RgbaFrame,
+    fb: &RgbaFrame,
+) -> Result<(ignis_flow::FlowField, ignis_flow::FlowField)> {
+    let p = ignis_flow::FlowParams {
+        max_side: MORPH_FLOW_SIDE,
+        ..Default::default()
+    };
+    let flow_err = |e: ignis_flow::FlowError| EigenError::bad("morph", e.to_string());
+    let (la, lb) = rayon::join(|| ignis_flow::luma(fa), || ignis_flow::luma(fb));
+    ignis_flow::flow_pair_reduced(&la, &lb, &p).map_err(flow_err)
+}
+
+/// How a run's in-betweens were chosen.
+struct Choice {
+    times: Vec<f32>,
+    /// Largest step of the rendered join (NaN: not measured yet).
+    worst: f64,
+    bound_hit: bool,
+    median: f64,
+    measurable: bool,
+}
+
+/// The in-betweens' times of run `r` between the rendered end frames, given the steps of the
+/// real frames around it (see the module doc): the resolved times of a resolved plan, the
+/// scenario's fixed count evenly in t, else the fewest that keep every step within
+/// [`MORPH_STEP`] × the median step.
+fn choose_run(
+    c: &Ctx,
+    r: &MorphRun,
+    (fa, fb): (&RgbaFrame, &RgbaFrame),
+    (ma, mb): (&GrayFrame, &GrayFrame),
+    (fw, bw): (&ignis_flow::FlowField, &ignis_flow::FlowField),
+    steps: &[f64],
+) -> Choice {
+    let median = loopq::median(&mut steps.to_vec());
+    let measurable = steps.len() >= 2 && median > 0.0;
+    // The worst step of the rendered in-betweens at `times`, on their metric frames.
+    let real_worst = |times: &[f32]| -> f64 {
+        let mut chain = vec![ma.clone()];
+        chain.extend(
+            times
+                .iter()
+                .map(|&t| metric(&inbetween_rgba(fa, fb, fw, bw, t))),
+        );
+        chain.push(mb.clone());
+        steps_of(&chain.iter().collect::<Vec<_>>())
+            .into_iter()
+            .fold(0.0, f64::max)
+    };
+    let (times, worst, bound_hit) = if let Some(t) = &r.times {
+        (t.clone(), f64::NAN, false)
+    } else if r.fixed || !measurable {
+        let n = r.len;
+        let even = (1..=n).map(|k| k as f32 / (n + 1) as f32).collect();
+        (even, f64::NAN, false)
+    } else {
+        // Chosen on the metric-size morph, then checked on the rendered frames once: when
+        // they step further than predicted, the goal is tightened by that ratio.
+        let (goal, max) = (MORPH_STEP * median, max_frames(c.db));
+        let (times, predicted, hit) = choose_times(ma, mb, fw, bw, goal, max);
+        let real = real_worst(&times);
+        if real <= goal || hit || predicted <= 0.0 {
+            (times, real, hit)
+        } else {
+            let (times, _, hit) = choose_times(ma, mb, fw, bw, goal * predicted / real, max);
+            (times, f64::NAN, hit)
+        }
+    };
+    Choice {
+        times,
+        worst,
+        bound_hit,
+        median,
+        measurable,
+    }
+}
+
+/// `plan` with the in-betweens of every automatic morph run chosen now
+/// ([`MorphRun::times`]), so its frame count is the count the render writes and any range of
+/// it renders the same frames as the whole (`--chunk`). Renders each run's end frames and the
+/// real frames around it that the full render measures (the same frames, so the same
+/// choice); the rest of the plan is not rendered.
+pub fn resolve(
+    db: &EigenfireDb,
+    plan: &Plan,
+    look: &Look,
+    opts: &RenderOptions,
+    sources: &mut dyn FootageOpener,
+) -> Result<Plan> {
+    let geo = crate::render::geometry(db, plan, opts)?;
+    let c = Ctx {
+        db,
+        plan,
+        look,
+        opts,
+        geo,
+    };
+    let n = plan.frames.len();
+    let runs = checked_runs(plan)?;
+    let in_run = |i: usize| runs.iter().any(|r| i >= r.start && i < r.start + r.len);
+    let mut frames = Vec::with_capacity(n);
+    let mut morphs = Vec::with_capacity(runs.len());
+    let mut at = 0;
+    for (k, r) in runs.iter().enumerate() {
+        frames.extend_from_slice(&plan.frames[at..r.start]);
+        let start = frames.len();
+        let times = if r.fixed || r.times.is_some() {
+            r.times.clone()
+        } else {
+            let next = runs.get(k + 1).map_or(n, |q| q.start);
+            Some(resolve_run(&c, r, next, &in_run, sources)?)
+        };
+        let len = times.as_ref().map_or(r.len, Vec::len);
+        frames.extend(std::iter::repeat_n(plan.frames[r.start].clone(), len));
+        morphs.push(MorphRun {
+            start,
+            len,
+            fixed: r.fixed,
+            times,
+        });
+        at = r.start + r.len;
+    }
+    frames.extend_from_slice(&plan.frames[at..]);
+    Ok(Plan {
+        frames,
+        morphs,
+        ..plan.clone()
+    })
+}
+
+/// [`choose_run`] for one automatic run of [`resolve`], from the frames the full render
+/// measures: the real frames consecutive up to the run's first end (none for a run at the
+/// plan's start, whose end frame is rendered last) and from its second end up to
+/// [`NEIGHBOURS`] (stopping at the next run; a run wrapping to the start: the plan's first
+/// real frames).
+fn resolve_run(
+    c: &Ctx,
+    r: &MorphRun,
+    next: usize,
+    in_run: &dyn Fn(usize) -> bool,
+    sources: &mut dyn FootageOpener,
+) -> Result<Vec<f32>> {
+    let n = c.plan.frames.len();
+    let (a, b) = r.endpoints(n);
+    let before_n = if r.start == 0 {
+        0
+    } else {
+        (0..NEIGHBOURS)
+            .take_while(|&o| a.checked_sub(o).is_some_and(|i| !in_run(i)))
+            .count()
+    };
+    let after_range = if b < r.start {
+        0..(0..NEIGHBOURS.min(n)).take_while(|&i| !in_run(i)).count()
+    } else {
+        b..(b + NEIGHBOURS).min(next).max(b + 1)
+    };
+    let before = c.render(a + 1 - before_n.max(1)..a + 1, sources)?;
+    let fa = before
+        .last()
+        .cloned()
+        .ok_or_else(|| EigenError::bad("morph", "no end frame"))?;
+    let before = &before[before.len() - before_n..];
+    let after = c.render(after_range.clone(), sources)?;
+    let fb = match after.first() {
+        Some(f) if after_range.start == b => f.clone(),
+        _ => c.render(b..b + 1, sources)?.remove(0),
+    };
+    let (ma, mb) = (metric(&fa), metric(&fb));
+    let bm: Vec<GrayFrame> = before.iter().map(metric).collect();
+    let am: Vec<GrayFrame> = after.iter().map(metric).collect();
+    let mut steps = steps_of(&bm.iter().collect::<Vec<_>>());
+    steps.extend(steps_of(&am.iter().collect::<Vec<_>>()));
+    let (fw, bw) = end_flows(&fa, &fb)?;
+    Ok(choose_run(c, r, (&fa, &fb), (&ma, &mb), (&fw, &bw), &steps).times)
+}
+
 /// One morph run: its endpoints and neighbours, the count, the in-betweens, then the real
 /// frames rendered after it; returns the plan index rendering continues from.
 fn morph_run(
@@ -479,45 +663,10 @@ fn morph_run(
     };
     let mut steps = steps_of(&before);
     steps.extend(steps_of(&after_m.iter().collect::<Vec<_>>()));
-    let median = loopq::median(&mut steps.clone());
-    let p = ignis_flow::FlowParams {
-        max_side: MORPH_FLOW_SIDE,
-        ..Default::default()
-    };
-    let flow_err = |e: ignis_flow::FlowError| EigenError::bad("morph", e.to_string());
-    let (la, lb) = rayon::join(|| ignis_flow::luma(&fa), || ignis_flow::luma(&fb));
-    let (fw, bw) = ignis_flow::flow_pair_reduced(&la, &lb, &p).map_err(flow_err)?;
-    let measurable = steps.len() >= 2 && median > 0.0;
-    // The worst step of the rendered in-betweens at `times`, on their metric frames.
-    let real_worst = |times: &[f32]| -> f64 {
-        let mut chain = vec![ma.clone()];
-        chain.extend(
-            times
-                .iter()
-                .map(|&t| metric(&inbetween_rgba(&fa, &fb, &fw, &bw, t))),
-        );
-        chain.push(mb.clone());
-        steps_of(&chain.iter().collect::<Vec<_>>())
-            .into_iter()
-            .fold(0.0, f64::max)
-    };
-    let (times, mut worst, bound_hit) = if r.fixed || !measurable {
-        let n = r.len;
-        let even = (1..=n).map(|k| k as f32 / (n + 1) as f32).collect();
-        (even, f64::NAN, false)
-    } else {
-        // Chosen on the metric-size morph, then checked on the rendered frames once: when
-        // they step further than predicted, the goal is tightened by that ratio.
-        let (goal, max) = (MORPH_STEP * median, max_frames(c.db));
-        let (times, predicted, hit) = choose_times(&ma, &mb, &fw, &bw, goal, max);
-        let real = real_worst(&times);
-        if real <= goal || hit || predicted <= 0.0 {
-            (times, real, hit)
-        } else {
-            let (times, _, hit) = choose_times(&ma, &mb, &fw, &bw, goal * predicted / real, max);
-            (times, f64::NAN, hit)
-        }
-    };
+    let (fw, bw) = end_flows(&fa, &fb)?;
+    let ch = choose_run(c, r, (&fa, &fb), (&ma, &mb), (&fw, &bw), &steps);
+    let (times, mut worst, bound_hit, median, measurable) =
+        (ch.times, ch.worst, ch.bound_hit, ch.median, ch.measurable);
     let count = times.len();
     let mut chain = vec![ma.clone()];
     for &t in &times {

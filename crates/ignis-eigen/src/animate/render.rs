@@ -539,11 +539,7 @@ pub fn render_plan_with(
     sink: &mut dyn FnMut(RgbaFrame) -> Result<()>,
     progress: &mut dyn FnMut(usize),
 ) -> Result<()> {
-    let frame = db.manifest().frame_size;
-    let (view, default_size) = output_view(db, plan);
-    let out = opts.size.unwrap_or(default_size);
-    check_output_size(out)?;
-    let geo = Geometry { frame, view, out };
+    let geo = geometry(db, plan, opts)?;
     let ctx = super::morph::Ctx {
         db,
         plan,
@@ -552,6 +548,15 @@ pub fn render_plan_with(
         geo,
     };
     super::morph::render_with_morphs(&ctx, sources, sink, progress).map(|_| ())
+}
+
+/// Where `plan`'s frames are cut from and the size they are written at (checked).
+pub(crate) fn geometry(db: &EigenfireDb, plan: &Plan, opts: &RenderOptions) -> Result<Geometry> {
+    let frame = db.manifest().frame_size;
+    let (view, default_size) = output_view(db, plan);
+    let out = opts.size.unwrap_or(default_size);
+    check_output_size(out)?;
+    Ok(Geometry { frame, view, out })
 }
 
 /// Longest side of the flow's working size for morph joins (full-resolution frames are

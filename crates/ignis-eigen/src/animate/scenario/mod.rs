@@ -353,7 +353,7 @@ fn morph_join(
 /// motion-compensated in-betweens (t = (k + 1) / (len + 1)) of the rendered frame before
 /// the run (`start − 1`, or the plan's last frame when `start` is 0) and the one after it
 /// (`start + len`, wrapping to frame 0).
-#[derive(Clone, Debug, PartialEq, Eq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct MorphRun {
     pub start: usize,
     pub len: usize,
@@ -361,6 +361,10 @@ pub struct MorphRun {
     /// and the renderer chooses the count from the rendered frames
     /// ([`crate::animate::morph`]).
     pub fixed: bool,
+    /// The in-betweens' times, already chosen from the rendered frames (`len` of them): a
+    /// plan made by [`crate::animate::morph::resolve`], whose frame count is the one the
+    /// render writes (what `--chunk` needs). `None`: chosen while rendering.
+    pub times: Option<Vec<f32>>,
 }
 
 impl MorphRun {

@@ -233,6 +233,7 @@ impl Scenario {
                             .morph
                             .as_ref()
                             .is_some_and(|m| m.frames.is_some()),
+                        times: None,
                     });
                 }
                 for (t, f) in j.join.frames.iter().enumerate() {
