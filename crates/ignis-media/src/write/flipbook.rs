@@ -626,8 +626,8 @@ impl Sink for FlipbookSink {
         let area = (self.frames.len() as u64 + 1) * cw * ch;
         if area > MAX_PIXELS {
             return Err(MediaError::LimitExceeded(format!(
-                "a flipbook of {} frames of {cw}x{ch} cells exceeds {MAX_PIXELS} pixels; use fewer or smaller frames",
-                self.frames.len() + 1
+                "a flipbook sheet holds at most {MAX_PIXELS} pixels: {} frames of {cw}x{ch} cells fit, this animation has more; write a frame sequence (`-o dir/%04d.png`), or fewer or smaller frames",
+                MAX_PIXELS / (cw * ch)
             )));
         }
         self.frames.push(frame.clone());
