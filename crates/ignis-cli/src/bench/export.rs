@@ -313,16 +313,11 @@ fn velocities(pairs: &[(Field, Field)]) -> Vec<Field> {
         .map(|k| {
             let ahead = (k < pairs.len()).then(|| &pairs[k].0);
             let behind = (k > 0).then(|| &pairs[k - 1].1);
-            match (ahead, behind) {
-                (Some(f), Some(b)) => f
-                    .iter()
-                    .zip(b)
-                    .map(|(f, b)| [0.5 * (f[0] - b[0]), 0.5 * (f[1] - b[1])])
-                    .collect(),
-                (Some(f), None) => f.clone(),
-                (None, Some(b)) => b.iter().map(|b| [-b[0], -b[1]]).collect(),
-                (None, None) => unreachable!("at least two key frames"),
-            }
+            ignis_media::write::motion::frame_velocity(
+                ahead.map(Vec::as_slice),
+                behind.map(Vec::as_slice),
+            )
+            .expect("at least two key frames")
         })
         .collect()
 }

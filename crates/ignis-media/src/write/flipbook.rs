@@ -534,16 +534,11 @@ impl FlipbookSink {
             for k in 0..per {
                 let ahead = (k < pairs).then(|| &fwd[k]);
                 let behind = (k > 0 || self.loop_).then(|| &bwd[(k + pairs - 1) % pairs]);
-                let mv = match (ahead, behind) {
-                    (Some(f), Some(b)) => f
-                        .iter()
-                        .zip(b)
-                        .map(|(f, b)| [0.5 * (f[0] - b[0]), 0.5 * (f[1] - b[1])])
-                        .collect(),
-                    (Some(f), None) => f.clone(),
-                    (None, Some(b)) => b.iter().map(|b| [-b[0], -b[1]]).collect(),
-                    (None, None) => unreachable!("per >= 2"),
-                };
+                let mv = super::motion::frame_velocity(
+                    ahead.map(Vec::as_slice),
+                    behind.map(Vec::as_slice),
+                )
+                .expect("per >= 2: every frame has a neighbour");
                 out.push(mv);
             }
         }

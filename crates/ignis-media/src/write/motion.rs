@@ -77,6 +77,26 @@ impl PartialEq for MotionSource {
 /// The 16-bit code of zero motion.
 pub const MV_NEUTRAL: u16 = 32768;
 
+/// A frame's velocity: the mean of its flow to the next frame (`ahead`) and its reversed
+/// flow to the previous frame (`behind` is the pair (previous, frame)'s backward flow, frame
+/// → previous), one side at the ends of a one-shot; `None` without either.
+pub fn frame_velocity(
+    ahead: Option<&[[f32; 2]]>,
+    behind: Option<&[[f32; 2]]>,
+) -> Option<Vec<[f32; 2]>> {
+    match (ahead, behind) {
+        (Some(f), Some(b)) => Some(
+            f.iter()
+                .zip(b)
+                .map(|(f, b)| [0.5 * (f[0] - b[0]), 0.5 * (f[1] - b[1])])
+                .collect(),
+        ),
+        (Some(f), None) => Some(f.to_vec()),
+        (None, Some(b)) => Some(b.iter().map(|b| [-b[0], -b[1]]).collect()),
+        (None, None) => None,
+    }
+}
+
 /// Encodes one motion component `m` (tile-UV units) at strength `scale` as 16 bits:
 /// `32768 + round(m / scale * 32767)`, clamped to `[1, 65535]` (symmetric around zero).
 pub fn encode_mv16(m: f32, scale: f32) -> u16 {
