@@ -1395,8 +1395,9 @@ mod transitions {
     }
 
     /// A transition candle → campfire, and one between two distant ranges of campfire,
-    /// with `method = "morph"` (in-betweens chosen from the rendered frames): worst step
-    /// ≤ 1.5× the median step and ghost ≥ 0.8 on the written frames.
+    /// with `method = "morph"` (in-betweens chosen from the rendered frames), and
+    /// candle → campfire with `method = "auto"`: worst step ≤ 1.5× the median step and
+    /// ghost ≥ 0.8 on the written frames.
     #[test]
     fn morph_joins_meet_the_transition_goal() {
         let (Some(candle), Some(campfire)) = (data("candle.mp4"), data("campfire.mp4")) else {
@@ -1419,10 +1420,23 @@ mod transitions {
             db.to_str().unwrap(),
         ]);
         let cases = [
-            ("clips", ("candle", 10, 90), ("campfire", 60, 140)),
-            ("ranges", ("campfire", 0, 60), ("campfire", 100, 160)),
+            ("clips", "morph", ("candle", 10, 90), ("campfire", 60, 140)),
+            (
+                "ranges",
+                "morph",
+                ("campfire", 0, 60),
+                ("campfire", 100, 160),
+            ),
+            // `auto` between two clips: no real-frame path is within the seam bound, so
+            // it takes the morph (the in-betweens again chosen from the rendered frames).
+            (
+                "clips-auto",
+                "auto",
+                ("candle", 10, 90),
+                ("campfire", 60, 140),
+            ),
         ];
-        for (name, (ca, a0, a1), (cb, b0, b1)) in cases {
+        for (name, method, (ca, a0, a1), (cb, b0, b1)) in cases {
             let scenario = t.path().join(format!("{name}.toml"));
             std::fs::write(
                 &scenario,
@@ -1430,7 +1444,7 @@ mod transitions {
                     "database = \"cc.db\"\nsequence = [\"a\", \"b\"]\n\
                      [motions.a]\nclip = \"{ca}\"\nstart = {a0}\nend = {a1}\n\
                      [motions.b]\nclip = \"{cb}\"\nstart = {b0}\nend = {b1}\n\
-                     [transition]\nmethod = \"morph\"\n[colour]\nmode = \"original\"\n"
+                     [transition]\nmethod = \"{method}\"\n[colour]\nmode = \"original\"\n"
                 ),
             )
             .unwrap();

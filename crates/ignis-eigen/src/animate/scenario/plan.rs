@@ -10,7 +10,7 @@ use ignis_core::progress::Progress;
 
 use super::{
     morph_join, JoinSpec, MorphRun, MotionSpec, Plan, PlanFrame, PlannedJoin, Scenario,
-    AUTO_MORPH_ABOVE,
+    AUTO_MORPH_ABOVE, MORPH_STEP,
 };
 use crate::animate;
 use crate::db::{ClipEntry, EigenfireDb};
@@ -295,10 +295,25 @@ fn choose_join(
     match transition::transition(space, ra.clone(), rb.clone(), &spec.transition, rec) {
         Ok(j) if j.seam_ratio > AUTO_MORPH_ABOVE => {
             let mj = morph("");
-            if mj.seam_ratio < j.seam_ratio {
+            // An automatic morph's count is chosen again on the rendered frames, so that
+            // every step is within MORPH_STEP × the footage's median step there (up to
+            // `morph::max_frames`); the weight-space estimate overstates how far apart two
+            // clips look (weights of different clips are far apart in E dimensions).
+            let automatic = spec.morph.as_ref().is_some_and(|m| m.frames.is_none());
+            let morph_seam = if automatic {
+                mj.seam_ratio.min(MORPH_STEP)
+            } else {
+                mj.seam_ratio
+            };
+            if morph_seam < j.seam_ratio {
+                let held = if automatic {
+                    format!(" (its steps are held within {MORPH_STEP}× the footage's median step on the rendered frames)")
+                } else {
+                    String::new()
+                };
                 let why = format!(
-                    "auto: {} gave seam ratio {:.2} (> {AUTO_MORPH_ABOVE}), the morph {:.2}; {}",
-                    j.method, j.seam_ratio, mj.seam_ratio, mj.why
+                    "auto: {} gave seam ratio {:.2} (> {AUTO_MORPH_ABOVE}), the morph {:.2}{held}; {}",
+                    j.method, j.seam_ratio, morph_seam, mj.why
                 );
                 Ok(Join { why, ..mj })
             } else {
