@@ -254,6 +254,23 @@ pub fn shade_periodic(
     offset: [f32; 4],
     profile: &FireProfile,
 ) -> [f32; 4] {
+    shade_with(tex, noise, profile, || {
+        let scale = noise_scale(radius, length, noise.frequency);
+        let scroll = scroll_time(pl.scroll_time, length, pl.scroll_length);
+        let p = noise_position(tex, pl.time, scroll, scale, offset);
+        turbulence_periodic(p, noise.octaves, noise.gain, noise.lacunarity, pl.period)
+    })
+}
+
+/// The profile colour at `tex` displaced by the turbulence `turb()` (eq. 13–14), which is
+/// only evaluated where the profile's column is lit and the noise is on.
+#[inline]
+fn shade_with(
+    tex: [f32; 3],
+    noise: &NoiseParams,
+    profile: &FireProfile,
+    turb: impl FnOnce() -> f32,
+) -> [f32; 4] {
     let u = radial_u(tex);
     if profile.column_empty(u) {
         return [0.0; 4];
@@ -261,10 +278,7 @@ pub fn shade_periodic(
     let turb = if noise.octaves == 0 || noise.stability == 0.0 {
         0.0
     } else {
-        let scale = noise_scale(radius, length, noise.frequency);
-        let scroll = scroll_time(pl.scroll_time, length, pl.scroll_length);
-        let p = noise_position(tex, pl.time, scroll, scale, offset);
-        turbulence_periodic(p, noise.octaves, noise.gain, noise.lacunarity, pl.period)
+        turb()
     };
     let [u, v] = profile_uv(tex, turb, noise.stability);
     profile.sample(u, v)
@@ -282,13 +296,7 @@ pub fn shade_looped(
     offset: [f32; 4],
     profile: &FireProfile,
 ) -> [f32; 4] {
-    let u = radial_u(tex);
-    if profile.column_empty(u) {
-        return [0.0; 4];
-    }
-    let turb = if noise.octaves == 0 || noise.stability == 0.0 {
-        0.0
-    } else {
+    shade_with(tex, noise, profile, || {
         let scale = noise_scale(radius, length[0], noise.frequency);
         let t = |time: f32| {
             let scroll = scroll_time(time, length[0], length[1]);
@@ -303,9 +311,7 @@ pub fn shade_looped(
         } else {
             first + m.b * t(m.time - m.period)
         }
-    };
-    let [u, v] = profile_uv(tex, turb, noise.stability);
-    profile.sample(u, v)
+    })
 }
 
 /// The whole mapping of eq. (9)–(14) for one sample: the profile colour (straight alpha)
