@@ -60,17 +60,29 @@ fn render(
     range: std::ops::Range<usize>,
     size: Option<Size>,
 ) -> Vec<RgbaFrame> {
+    let opts = RenderOptions {
+        size,
+        from_database: false,
+        batch: None,
+    };
+    render_with(db, clip, range, &grey_look(), &opts)
+}
+
+/// A loop of `range` of `clip` rendered with `look` and `opts`.
+fn render_with(
+    db: &EigenfireDb,
+    clip: &str,
+    range: std::ops::Range<usize>,
+    look: &Look,
+    opts: &RenderOptions,
+) -> Vec<RgbaFrame> {
     let (plan, _) = loop_plan(db, clip, range, Transition::Auto, 8, 0).unwrap();
     let mut out = Vec::new();
     render_plan_with(
         db,
         &plan,
-        &grey_look(),
-        &RenderOptions {
-            size,
-            from_database: false,
-            batch: None,
-        },
+        look,
+        opts,
         &mut SyntheticSources,
         &mut |f| {
             out.push(f);
@@ -130,26 +142,12 @@ fn original_look() -> Look {
 }
 
 fn render_batched(db: &EigenfireDb, clip: &str, batch: Option<usize>) -> Vec<RgbaFrame> {
-    let (plan, _) = loop_plan(db, clip, 1..11, Transition::Auto, 8, 0).unwrap();
-    let mut out = Vec::new();
-    render_plan_with(
-        db,
-        &plan,
-        &original_look(),
-        &RenderOptions {
-            size: None,
-            from_database: false,
-            batch,
-        },
-        &mut SyntheticSources,
-        &mut |f| {
-            out.push(f);
-            Ok(())
-        },
-        &mut |_| {},
-    )
-    .unwrap();
-    out
+    let opts = RenderOptions {
+        size: None,
+        from_database: false,
+        batch,
+    };
+    render_with(db, clip, 1..11, &original_look(), &opts)
 }
 
 /// Training stores every frame's pre-processing mask; rendering reads it back instead of
