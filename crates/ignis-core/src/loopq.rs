@@ -243,6 +243,39 @@ fn same_size(frames: &[GrayFrame]) -> Result<()> {
     Ok(())
 }
 
+/// Parameter values (in `0..=1`) at which a path reaches the given fractions of its length:
+/// `arc` is the path's cumulative step length sampled at the uniform parameters
+/// `k / (arc.len() − 1)` (`arc[0] = 0`, non-decreasing), and each fraction `f` in `0..=1`
+/// maps to the parameter where the arc reaches `f × total`, linearly between samples.
+/// A path of zero length maps fractions to themselves.
+///
+/// This is constant-speed re-timing: a generator whose time is a continuous parameter
+/// (a noise phase, a state interpolated between steps) renders frames at the returned
+/// parameters so every step covers the same measured distance — the in-betweens of a
+/// morph (fractions `k / (n + 1)`) or the frames of a loop (fractions `k / n`, the last
+/// step back to the start as long as the others).
+pub fn arc_times(arc: &[f64], fractions: impl IntoIterator<Item = f64>) -> Vec<f64> {
+    let total = arc.last().copied().unwrap_or(0.0);
+    let m = arc.len().saturating_sub(1).max(1);
+    fractions
+        .into_iter()
+        .map(|f| {
+            if total.is_nan() || total <= 0.0 {
+                return f;
+            }
+            let want = total * f;
+            let i = arc.partition_point(|&v| v < want).clamp(1, m);
+            let (lo, hi) = (arc[i - 1], arc[i]);
+            let frac = if hi > lo {
+                ((want - lo) / (hi - lo)).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            ((i - 1) as f64 + frac) / m as f64
+        })
+        .collect()
+}
+
 /// Area-average resize (each output pixel the coverage-weighted mean of the input pixels
 /// under it); exact copy when the size is unchanged. Separable: rows, then columns.
 pub fn area_resize(src: &GrayFrame, size: Size) -> GrayFrame {
@@ -297,6 +330,21 @@ fn area_weights(src: usize, dst: usize) -> Vec<Vec<(usize, f32)>> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn arc_times_follow_the_path_length() {
+        // All of the length is in the second half: the midpoint of the length is at 0.75.
+        let arc = [0.0, 0.0, 1.0];
+        let t = arc_times(&arc, [0.0, 0.5, 1.0]);
+        assert_eq!(t, vec![0.0, 0.75, 1.0]);
+        // Even pace: parameters equal fractions.
+        let even = arc_times(&[0.0, 1.0, 2.0, 3.0], (0..4).map(|k| k as f64 / 3.0));
+        for (k, v) in even.iter().enumerate() {
+            assert!((v - k as f64 / 3.0).abs() < 1e-12);
+        }
+        // A still path keeps the fractions.
+        assert_eq!(arc_times(&[0.0, 0.0], [0.25]), vec![0.25]);
+    }
 
     fn frame(size: Size, f: impl Fn(u32, u32) -> f32) -> GrayFrame {
         GrayFrame::from_fn(size, f)

@@ -334,23 +334,9 @@ const PATH_SAMPLES: usize = 48;
 /// the uniform times `k / (len − 1)` is `arc` (a morph does not move at an even pace in
 /// t: the warps and the detail gain bunch the change up).
 fn even_times(arc: &[f64], n: usize) -> Vec<f32> {
-    let total = *arc.last().unwrap_or(&0.0);
-    let m = arc.len().saturating_sub(1).max(1);
-    (1..=n)
-        .map(|k| {
-            let want = total * k as f64 / (n + 1) as f64;
-            if total <= 0.0 {
-                return k as f32 / (n + 1) as f32;
-            }
-            let i = arc.partition_point(|&v| v < want).clamp(1, m);
-            let (lo, hi) = (arc[i - 1], arc[i]);
-            let f = if hi > lo {
-                (want - lo) / (hi - lo)
-            } else {
-                0.0
-            };
-            ((i - 1) as f64 + f) as f32 / m as f32
-        })
+    loopq::arc_times(arc, (1..=n).map(|k| k as f64 / (n + 1) as f64))
+        .into_iter()
+        .map(|t| t as f32)
         .collect()
 }
 
