@@ -48,6 +48,7 @@
 //! bottom. With [`SourceEdge::Top`] the same simulation runs and the rows are mirrored when a
 //! frame is taken, so the fire hangs down from the top.
 
+mod even;
 pub mod motion;
 
 use ignis_core::{GrayFrame, Palette, RgbaFrame, Rng, Size};
@@ -335,6 +336,9 @@ struct Looping {
     /// Perlin source: lattice cells of time per period (octave 0) and noise time per frame.
     cells: i64,
     speed: f32,
+    /// Once [`ClassicFire::even_loop_steps`] has re-timed the replayed loop: where each of
+    /// its frames sits between two kept states (see [`even`]).
+    even: Option<Vec<even::Slot>>,
 }
 
 /// The most memory a looping fire keeps to replay its loop; longer or larger loops settle
@@ -421,6 +425,7 @@ impl ClassicFire {
             replay: None,
             cells,
             speed,
+            even: None,
         });
         Ok(fire)
     }
@@ -523,6 +528,45 @@ impl ClassicFire {
         }
     }
 
+    /// Buffer rows a frame shows, from the top: all of them for cells of 1 pixel; else the
+    /// flames above the source line fill the frame: the raw source line (a row of random
+    /// hot cells, the brightest and sharpest thing in the buffer) and the dead edge below
+    /// it are not shown.
+    fn shown_rows(&self) -> usize {
+        if self.params.cell == 1 {
+            self.h
+        } else {
+            self.h - self.params.edge as usize - 1
+        }
+    }
+
+    /// Re-times a found loop so that its frames change by even steps (see [`even`]): frame
+    /// `k` shows the kept loop states blended at the time where the loop has covered `k/N`
+    /// of its measured path, measured through `palette` over `background` (linear RGB) as
+    /// the loop metric sees the written frames. Only for the fire's additions beyond the
+    /// article (cells over 1 pixel or puffing), whose steps vary with the puff; the
+    /// article's own fire keeps its true frames (its steps are even already). Returns
+    /// whether the loop is re-timed: not when no loop is being replayed
+    /// ([`ClassicFire::settle_loop`] found none, or it is over 128 MiB), for the article's
+    /// fire, or when no re-timing is more even. The fire's buffer and stepping are
+    /// unchanged; [`ClassicFire::frame_bytes`] (and so `gray`, `rgba`) show the re-timed
+    /// frames until the replay ends.
+    pub fn even_loop_steps(&mut self, palette: &Palette, background: [f32; 3]) -> bool {
+        if self.params.cell == 1 && self.params.puff <= 0.0 {
+            return false;
+        }
+        let (w, shown) = (self.w, self.shown_rows());
+        let Some(l) = self.looping.as_mut() else {
+            return false;
+        };
+        let Some(ring) = l.replay.as_ref() else {
+            return false;
+        };
+        let luma = metric_luma(palette, background);
+        l.even = even::even_slots(ring, w, shown, &luma);
+        l.even.is_some()
+    }
+
     pub fn params(&self) -> &ClassicParams {
         &self.params
     }
@@ -546,6 +590,7 @@ impl ClassicFire {
         let Some(l) = self.looping.as_mut() else {
             return;
         };
+        l.even = None;
         if l.replay.take().is_none() {
             return;
         }
@@ -793,23 +838,44 @@ impl ClassicFire {
     /// The frame's bytes at [`ClassicParams::size`], row 0 at the top: the buffer itself
     /// for cells of 1 pixel, else bilinearly interpolated between cell centres (integer
     /// arithmetic, so the same bytes everywhere); mirrored for a top source edge.
+    ///
+    /// A loop re-timed by [`ClassicFire::even_loop_steps`] shows, in place of the buffer,
+    /// the blend of two kept loop states its frame number stands for.
     pub fn frame_bytes(&self) -> Vec<u8> {
         let size = self.params.size;
         let (ow, oh) = (size.width as usize, size.height as usize);
+        let evened = self.looping.as_ref().and_then(|l| {
+            let (ring, slots) = (l.replay.as_ref()?, l.even.as_ref()?);
+            let slot = slots[(self.frame % l.period) as usize];
+            Some(even::blend(ring, slot, self.w, self.h))
+        });
+        let buf = evened.as_deref().unwrap_or(&self.buf);
         let mut out = if self.params.cell == 1 {
-            self.buf.clone()
+            buf.to_vec()
         } else {
-            // the flames above the source line fill the frame: the raw source line (a row
-            // of random hot cells, the brightest and sharpest thing in the buffer) and the
-            // dead edge below it are not shown
-            let shown = self.h - self.params.edge as usize - 1;
-            upsample(&self.buf[..shown * self.w], self.w, shown, ow, oh)
+            let shown = self.shown_rows();
+            upsample(&buf[..shown * self.w], self.w, shown, ow, oh)
         };
         if self.params.source_edge == SourceEdge::Top {
             out = out.chunks_exact(ow).rev().flatten().copied().collect();
         }
         out
     }
+}
+
+/// The loop metric's grey (`ignis_core::loopq`) of each palette entry shown over
+/// `background`.
+fn metric_luma(palette: &Palette, background: [f32; 3]) -> [f32; 256] {
+    let one = Size {
+        width: 1,
+        height: 1,
+    };
+    std::array::from_fn(|v| {
+        let px = palette
+            .apply_indexed(one, &[v as u8])
+            .expect("one entry for one pixel");
+        ignis_core::loopq::metric_frame_rgba(&px, background).data()[0]
+    })
 }
 
 /// For each of `n` output samples spread evenly over `len` cells: the two cells around the

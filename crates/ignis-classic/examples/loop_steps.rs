@@ -1,0 +1,47 @@
+//! Loop smoothness of the classic fire as `ignis classic --loop` writes it: the largest
+//! step and the wrap step of the grey 128-px metric frames (`ignis_core::loopq`) over the
+//! median step, with and without even re-timing, and the time the re-timing took.
+//! `cargo run --release -p ignis-classic --example loop_steps -- SEED N [CELL PUFF FPS WxH]`
+use ignis_classic::{ClassicFire, ClassicParams};
+use ignis_core::{loopq, Palette};
+
+fn main() {
+    let a: Vec<String> = std::env::args().skip(1).collect();
+    let arg = |i: usize, d: &str| a.get(i).cloned().unwrap_or_else(|| d.to_string());
+    let seed: u64 = arg(0, "1").parse().expect("seed");
+    let n: u32 = arg(1, "120").parse().expect("frames");
+    let p = ClassicParams {
+        size: arg(5, "320x200").parse().expect("size"),
+        seed,
+        cell: arg(2, "6").parse().expect("cell"),
+        puff: arg(3, "0.5").parse().expect("puff"),
+        fps: arg(4, "30").parse().expect("fps"),
+        ..ClassicParams::preset()
+    };
+    let palette = Palette::preset("classic").expect("palette");
+    let mut fire = ClassicFire::new_looping(p, n).expect("fire");
+    let settled = fire.settle_loop(60, 4000);
+    let measure = |fire: &mut ClassicFire| {
+        let frames: Vec<_> = (0..n)
+            .map(|_| {
+                fire.step_par();
+                loopq::metric_frame_rgba(&fire.rgba(&palette), [0.0; 3])
+            })
+            .collect();
+        let s = loopq::steps(&frames, true).expect("steps");
+        let med = loopq::median(&mut s.clone());
+        let max = s.iter().copied().fold(0.0, f64::max);
+        let ghost = loopq::loop_quality(&frames).expect("quality").ghost;
+        (max / med, s[s.len() - 1] / med, ghost)
+    };
+    let before = measure(&mut fire);
+    let t = std::time::Instant::now();
+    let evened = fire.even_loop_steps(&palette, [0.0; 3]);
+    let ms = t.elapsed().as_secs_f64() * 1e3;
+    let after = measure(&mut fire);
+    println!(
+        "seed {seed} N {n}: settled {settled:?}; steps max/median {:.3} wrap {:.3} ghost {:.3} \
+         -> evened {evened} ({ms:.2} ms): {:.3} wrap {:.3} ghost {:.3}",
+        before.0, before.1, before.2, after.0, after.1, after.2
+    );
+}
