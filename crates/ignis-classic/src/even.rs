@@ -12,8 +12,8 @@
 //! moves a third of a cell per step, so a blend of neighbours is the state between them
 //! rather than a double image). Each output frame `k` is then shown at the time where the
 //! path has covered `k / N` of its length ([`ignis_core::loopq::arc_times`]), measured on a
-//! cheap proxy of the metric frames: the buffer's shown cells (sampled to at most
-//! [`PROXY_SIDE`] a side) through the palette's metric luma. A blend across a state is a
+//! cheap proxy of the metric frames: the buffer's shown cells interpolated to
+//! [`PROXY_WIDTH`] pixels wide and looked up in the palette's metric luma. A blend across a state is a
 //! chord, a little shorter than the path through it, so the times are refined a few
 //! rounds on the chords of the frames actually shown, keeping the most even round.
 //!
@@ -23,12 +23,12 @@
 use crate::Kept;
 use ignis_core::loopq::{arc_times, median};
 
-/// Proxy frames sample the buffer's shown cells at most this many a side (about the
-/// metric frame's 128 px, where the cells are finer than that).
-const PROXY_SIDE: usize = 96;
+/// Width of the proxy frames, pixels (the metric frame's is 128; narrower frames keep
+/// their width).
+const PROXY_WIDTH: usize = 64;
 
 /// Refinement rounds on the shown frames' chords after the first re-timing.
-const ROUNDS: usize = 3;
+const ROUNDS: usize = 10;
 
 /// Blend weights are in 256ths.
 const ONE: u32 = 256;
@@ -112,44 +112,22 @@ fn dist2(a: &[f32], b: &[f32]) -> f64 {
     f64::from(s) / a.len().max(1) as f64
 }
 
-/// The kept state's shown cells (`shown` rows of `w` from the top) sampled every `stride`
-/// cells from the middle of each stride, through the luma table and smoothed by
-/// `[1 4 1] / 6` across and down: about what bilinear interpolation between cell centres
-/// and the metric's area average leave of the cells.
+/// The kept state's shown cells (`shown` rows of `w` from the top) bilinearly
+/// interpolated to the proxy's `pw`×`ph` (as the frame interpolates them to its size)
+/// and looked up in the luma table.
 fn sample(
     (top, rows): &Kept,
-    w: usize,
-    shown: usize,
-    stride: usize,
+    (w, shown): (usize, usize),
+    (pw, ph): (usize, usize),
     luma: &[f32; 256],
 ) -> Vec<f32> {
-    let at = |x: usize, y: usize| {
-        luma[if y < *top {
-            0
-        } else {
-            rows[(y - top) * w + x] as usize
-        }]
-    };
-    let xs: Vec<usize> = (stride / 2..w).step_by(stride).collect();
-    let g: Vec<f32> = (stride / 2..shown)
-        .step_by(stride)
-        .flat_map(|y| xs.iter().map(move |&x| at(x, y)))
-        .collect();
-    let (sw, sh) = (xs.len(), g.len() / xs.len().max(1));
-    let smooth = |a: f32, b: f32, c: f32| (a + 4.0 * b + c) / 6.0;
-    let mut across = vec![0.0f32; g.len()];
-    for y in 0..sh {
-        let r = &g[y * sw..(y + 1) * sw];
-        for x in 0..sw {
-            across[y * sw + x] = smooth(r[x.saturating_sub(1)], r[x], r[(x + 1).min(sw - 1)]);
-        }
+    let mut cells = vec![0u8; w * shown];
+    if *top < shown {
+        cells[top * w..].copy_from_slice(&rows[..(shown - top) * w]);
     }
-    (0..sh * sw)
-        .map(|i| {
-            let (y, x) = (i / sw, i % sw);
-            let v = |y: usize| across[y * sw + x];
-            smooth(v(y.saturating_sub(1)), v(y), v((y + 1).min(sh - 1)))
-        })
+    crate::upsample(&cells, w, shown, pw, ph)
+        .into_iter()
+        .map(|v| luma[v as usize])
         .collect()
 }
 
@@ -180,22 +158,24 @@ fn slots_at(t: &[f64], n: usize) -> Vec<Slot> {
 }
 
 /// The even re-timing of the loop `ring` (state `j` is the loop's frame `j`; `w` cells
-/// wide, the top `shown` rows shown), for a palette whose metric luma of value `v` is
-/// `luma[v]`: one [`Slot`] per output frame, frame 0 on state 0. `None` when the loop is
-/// too short to re-time (under 3 frames) or no re-timing is more even than the states
-/// as they are.
+/// wide, the top `shown` rows shown as a frame of `frame` = (width, height) pixels), for
+/// a palette whose metric luma of value `v` is `luma[v]`: one [`Slot`] per output frame,
+/// frame 0 on state 0. `None` when the loop is too short to re-time (under 3 frames) or
+/// no re-timing is more even than the states as they are.
 pub(crate) fn even_slots(
     ring: &[Kept],
-    w: usize,
-    shown: usize,
+    (w, shown): (usize, usize),
+    frame: (usize, usize),
     luma: &[f32; 256],
 ) -> Option<Vec<Slot>> {
     let n = ring.len();
     if n < 3 {
         return None;
     }
-    let stride = w.max(shown).div_ceil(PROXY_SIDE).max(1);
-    let proxy = Proxy::new(ring.iter().map(|k| sample(k, w, shown, stride, luma)).collect());
+    let pw = frame.0.clamp(1, PROXY_WIDTH);
+    let ph = ((pw * frame.1) as f64 / frame.0.max(1) as f64).round().max(2.0) as usize;
+    let states = ring.iter().map(|k| sample(k, (w, shown), (pw, ph), luma));
+    let proxy = Proxy::new(states.collect());
     let mut slots: Vec<Slot> = (0..n).map(|at| Slot { at, f: 0 }).collect();
     let mut best: Option<(f64, Vec<Slot>)> = None;
     for round in 0..=ROUNDS {
@@ -276,7 +256,7 @@ mod tests {
             .map(|&v| (0, vec![(40 + v) as u8; w * h]))
             .collect();
         let luma: [f32; 256] = std::array::from_fn(|i| i as f32 / 255.0);
-        let slots = even_slots(&ring, w, h, &luma).expect("re-timed");
+        let slots = even_slots(&ring, (w, h), (w, h), &luma).expect("re-timed");
         assert_eq!(slots[0], Slot { at: 0, f: 0 });
         let shown: Vec<f32> = slots
             .iter()
@@ -286,7 +266,7 @@ mod tests {
         let steps: Vec<f32> = (0..n)
             .map(|k| (shown[(k + 1) % n] - shown[k]).abs())
             .collect();
-        let proxy = Proxy::new(ring.iter().map(|k| sample(k, w, h, 1, &luma)).collect());
+        let proxy = Proxy::new(ring.iter().map(|k| sample(k, (w, h), (w, h), &luma)).collect());
         let before = unevenness(&proxy.chords(&(0..n).map(|at| Slot { at, f: 0 }).collect::<Vec<_>>()));
         let med = median(&mut steps.iter().map(|&s| f64::from(s)).collect::<Vec<_>>());
         let max = steps.iter().copied().fold(0.0, f32::max);
@@ -298,9 +278,9 @@ mod tests {
     fn short_or_still_loops_are_left_alone() {
         let luma: [f32; 256] = std::array::from_fn(|i| i as f32);
         let two: Vec<Kept> = vec![(0, vec![1; 4]), (0, vec![9; 4])];
-        assert!(even_slots(&two, 2, 2, &luma).is_none());
+        assert!(even_slots(&two, (2, 2), (2, 2), &luma).is_none());
         let still: Vec<Kept> = vec![(0, vec![5; 4]); 6];
-        assert!(even_slots(&still, 2, 2, &luma).is_none());
+        assert!(even_slots(&still, (2, 2), (2, 2), &luma).is_none());
     }
 
     #[test]

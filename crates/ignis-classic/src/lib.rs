@@ -486,15 +486,43 @@ impl ClassicFire {
     /// `t` equals frame `t − N`, every frame from `t − N` on is on the loop, and so is the
     /// whole-period check's frame 0 (`≥ t − N`). Without a repeat it stops where the
     /// whole-period settle stops, on the same buffer.
+    ///
+    /// Cheaper settling: no row reads the row above it, so the rows from any row `y` down
+    /// to the source line are a fire of their own, driven by the same periodic source. Once
+    /// they equal their values a period before they repeat from then on, so from the
+    /// source up, each row found equal to its kept value a period before joins a
+    /// *periodic band* that is copied from the kept frame instead of burnt: only the rows
+    /// above the band burn, and the band grows upwards as the fire settles.
     fn settle_by_frames(&mut self, period: u64, min_frames: u64, max_frames: u64) -> Option<u64> {
-        let w = self.w;
+        let (w, e) = (self.w, self.params.edge as usize);
         let mut ring: Vec<Kept> = vec![(0, Vec::new()); period as usize];
         let last = max_frames.div_ceil(period).max(1) * period;
         let mut stepped = 0u64;
+        // rows band..bottom are known to repeat with the period
+        let bottom = self.h - e;
+        let mut band = bottom;
         loop {
-            self.step_par();
+            self.burn_to(band, true);
             stepped += 1;
             let (top, kept) = &mut ring[(self.frame % period) as usize];
+            if band < bottom {
+                self.copy_band(band..bottom, (*top, kept));
+            }
+            if stepped > period {
+                // grow the band by the rows that equal theirs a period before
+                let old_row = |y: usize| (y >= *top).then(|| &kept[(y - *top) * w..(y - *top + 1) * w]);
+                while band > e {
+                    let row = &self.buf[(band - 1) * w..band * w];
+                    let same = match old_row(band - 1) {
+                        Some(old) => old == row,
+                        None => row.iter().all(|&v| v == 0),
+                    };
+                    if !same {
+                        break;
+                    }
+                    band -= 1;
+                }
+            }
             if stepped > period
                 && stepped >= min_frames
                 && *top == self.top
@@ -563,8 +591,31 @@ impl ClassicFire {
             return false;
         };
         let luma = metric_luma(palette, background);
-        l.even = even::even_slots(ring, w, shown, &luma);
+        let size = self.params.size;
+        let frame = (size.width as usize, size.height as usize);
+        l.even = even::even_slots(ring, (w, shown), frame, &luma);
         l.even.is_some()
+    }
+
+    /// Puts `rows` of a kept frame (its top and rows from there down) into the buffer after
+    /// a step that did not burn them, and moves `top` to the topmost non-zero row again
+    /// (the step looked for it among rows it had not burnt).
+    fn copy_band(&mut self, rows: std::ops::Range<usize>, (top, kept): (usize, &[u8])) {
+        let w = self.w;
+        for y in rows.clone() {
+            let row = &mut self.buf[y * w..(y + 1) * w];
+            if y < top {
+                row.fill(0);
+            } else {
+                row.copy_from_slice(&kept[(y - top) * w..(y - top + 1) * w]);
+            }
+        }
+        if self.top >= rows.start {
+            self.top = rows.start;
+            while self.top < self.h && self.buf[self.top * w..(self.top + 1) * w].iter().all(|&v| v == 0) {
+                self.top += 1;
+            }
+        }
     }
 
     pub fn params(&self) -> &ClassicParams {
@@ -656,19 +707,7 @@ impl ClassicFire {
         if self.replay_step() {
             return;
         }
-        let (w, h, e) = (self.w, self.h, self.params.edge as usize);
-        let first = self.first_burning_row();
-        let below = self.buf[(h - e) * w..(h - e + 1) * w].to_vec();
-        burn_band(
-            &mut self.buf[first * w..(h - e) * w],
-            w,
-            e,
-            &below,
-            self.params.fade,
-            self.params.kernel,
-            &mut self.scratch,
-        );
-        self.after_burn();
+        self.burn_to(self.h - self.params.edge as usize, false);
     }
 
     /// The first row a step must burn: the one just above the topmost row that may be
@@ -684,18 +723,31 @@ impl ClassicFire {
         if self.replay_step() {
             return;
         }
-        let (w, h, e) = (self.w, self.h, self.params.edge as usize);
-        let first = self.first_burning_row();
-        let rows = h - e - first;
-        if rows * w < PAR_MIN_PIXELS {
-            // too little to burn for threads to pay (the usual case under a low flame)
-            return self.step();
+        self.burn_to(self.h - self.params.edge as usize, true);
+    }
+
+    /// One frame: burns the rows from the first burning row down to row `end` (not
+    /// included; its old values feed the last burnt row), over rayon's threads when `par`
+    /// and there is enough to burn, then the sparklies and the source line. `end` is the
+    /// bottom edge for a whole step; [`ClassicFire::settle_by_frames`] stops above the rows
+    /// it already knows to be periodic.
+    fn burn_to(&mut self, end: usize, par: bool) {
+        let (w, e) = (self.w, self.params.edge as usize);
+        let first = self.first_burning_row().min(end);
+        let rows = end - first;
+        let (fade, kernel) = (self.params.fade, self.params.kernel);
+        if !par || rows * w < PAR_MIN_PIXELS {
+            // one thread (also when too little to burn for threads to pay: the usual case
+            // under a low flame)
+            let below = self.buf[end * w..(end + 1) * w].to_vec();
+            let band = &mut self.buf[first * w..end * w];
+            burn_band(band, w, e, &below, fade, kernel, &mut self.scratch);
+            return self.after_burn();
         }
         let threads = rayon::current_num_threads().max(1);
         // bands of at least 16 rows, about four per thread for load balance
         let band = rows.div_ceil(threads * 4).max(16);
-        let (fade, kernel) = (self.params.fade, self.params.kernel);
-        let region = &mut self.buf[first * w..(h - e + 1) * w];
+        let region = &mut self.buf[first * w..(end + 1) * w];
         // the old row just below each band, copied before any band changes it
         let belows: Vec<Vec<u8>> = (0..rows.div_ceil(band))
             .map(|b| {
@@ -1477,6 +1529,37 @@ mod tests {
         })
         .unwrap_err();
         assert!(e.to_string().contains("cells of 4 px"), "{e}");
+    }
+
+    /// Re-timing needs a replayed loop and a fire beyond the article's; changing the fade
+    /// (which leaves the replay) drops it, and frames show the simulated buffer again.
+    #[test]
+    fn even_steps_only_while_replaying_the_loop() {
+        let palette = Palette::preset("classic").unwrap();
+        let preset = ClassicParams {
+            cell: 3,
+            ..ClassicParams::preset()
+        };
+        let p = ClassicParams {
+            size: Size::new(60, 48).unwrap(),
+            ..preset
+        };
+        let mut plain = ClassicFire::new(p.clone()).unwrap();
+        plain.settle_loop(30, 100);
+        assert!(!plain.even_loop_steps(&palette, [0.0; 3]));
+        let mut article = ClassicFire::new_looping(params(60, 48), 12).unwrap();
+        article.settle_loop(60, 4000).unwrap();
+        assert!(!article.even_loop_steps(&palette, [0.0; 3]));
+        let mut f = ClassicFire::new_looping(p, 16).unwrap();
+        assert!(!f.even_loop_steps(&palette, [0.0; 3]), "not settled yet");
+        f.settle_loop(60, 4000).unwrap();
+        assert!(f.even_loop_steps(&palette, [0.0; 3]));
+        f.set_fade(2);
+        assert!(f.looping.as_ref().unwrap().even.is_none());
+        f.step();
+        let shown = f.h - 2;
+        let want = upsample(&f.buf[..shown * f.w], f.w, shown, 60, 48);
+        assert_eq!(f.frame_bytes(), want);
     }
 
     #[test]

@@ -264,3 +264,105 @@ mod realism {
         );
     }
 }
+
+/// Issue 16's loop goals on the frames a looping render writes (palette `classic` over
+/// black, grey 128-px metric frames of `ignis_core::loopq`): the wrap step at most 1.1× and
+/// every step at most 1.2× the loop's median step, for the preset (re-timed to even
+/// steps) and the article's fire (true frames), over a few seeds, sizes and lengths.
+mod loops {
+    use super::*;
+    use ignis_core::{loopq, Palette};
+
+    /// The loop's largest step and its wrap step over the median step, as written: settled
+    /// after the CLI's 60-frame warm-up, re-timed, then `n` frames stepped and drawn.
+    fn loop_steps(p: ClassicParams, n: u32) -> (f64, f64, bool) {
+        let palette = Palette::preset("classic").unwrap();
+        let mut f = ClassicFire::new_looping(p, n).unwrap();
+        assert!(f.settle_loop(60, 4000).is_some(), "settles");
+        let evened = f.even_loop_steps(&palette, [0.0; 3]);
+        let frames: Vec<_> = (0..n)
+            .map(|_| {
+                f.step_par();
+                loopq::metric_frame_rgba(&f.rgba(&palette), [0.0; 3])
+            })
+            .collect();
+        let s = loopq::steps(&frames, true).unwrap();
+        let med = loopq::median(&mut s.clone());
+        let max = s.iter().copied().fold(0.0, f64::max);
+        (max / med, s[s.len() - 1] / med, evened)
+    }
+
+    #[test]
+    fn every_preset_loops_with_even_steps() {
+        // (size, cells of the preset as the CLI picks them: 6, or side / 16 when smaller)
+        for (size, cell, n) in [((96, 64), 4, 30), ((128, 96), 6, 48), ((160, 100), 6, 24)] {
+            for seed in [1, 2, 3] {
+                let size = Size::new(size.0, size.1).unwrap();
+                let preset = ClassicParams {
+                    size,
+                    seed,
+                    cell,
+                    ..ClassicParams::preset()
+                };
+                let article = ClassicParams {
+                    size,
+                    seed,
+                    ..ClassicParams::default()
+                };
+                for (name, p, retimed) in [("preset", preset, true), ("article", article, false)] {
+                    let (max, wrap, evened) = loop_steps(p, n);
+                    println!("{name} {size} N={n} seed {seed}: steps ≤ {max:.3}, wrap {wrap:.3}");
+                    assert_eq!(evened, retimed, "{name} {size} N={n} seed {seed}");
+                    assert!(max <= 1.2, "{name} {size} N={n} seed {seed}: step {max:.3}");
+                    assert!(wrap <= 1.1, "{name} {size} N={n} seed {seed}: wrap {wrap:.3}");
+                }
+            }
+        }
+    }
+
+    /// The re-timed loop is still exact and its frames depend only on their number in the
+    /// loop (so any chunk of it renders the same bytes): frames `N` apart are equal and a
+    /// second fire stepped straight to frame `k` shows frame `k`'s bytes.
+    #[test]
+    fn re_timed_loop_is_exact_and_any_frame_renders_alike() {
+        let p = ClassicParams {
+            size: Size::new(96, 64).unwrap(),
+            seed: 5,
+            cell: 4,
+            ..ClassicParams::preset()
+        };
+        let palette = Palette::preset("classic").unwrap();
+        let n = 20;
+        let settled = |p: &ClassicParams| {
+            let mut f = ClassicFire::new_looping(p.clone(), n).unwrap();
+            f.settle_loop(60, 4000).unwrap();
+            assert!(f.even_loop_steps(&palette, [0.0; 3]));
+            f
+        };
+        let mut f = settled(&p);
+        let mut first = Vec::new();
+        for k in 0..2 * n {
+            f.step_par();
+            let bytes = f.frame_bytes();
+            if k < n {
+                first.push(bytes);
+            } else {
+                assert_eq!(bytes, first[(k - n) as usize], "frame {k}");
+            }
+        }
+        let mut g = settled(&p);
+        for _ in 0..13 {
+            g.step();
+        }
+        assert_eq!(g.frame_bytes(), first[12]);
+        // a re-timed frame is a blend, not always a kept state: some frame differs from
+        // the plain loop's frame of its number
+        let mut plain = ClassicFire::new_looping(p, n).unwrap();
+        plain.settle_loop(60, 4000).unwrap();
+        let differs = (0..n).any(|k| {
+            plain.step();
+            plain.frame_bytes() != first[k as usize]
+        });
+        assert!(differs, "the re-timing moved some frame");
+    }
+}

@@ -76,7 +76,8 @@ pub fn figures(quick: bool) -> Result<serde_json::Value> {
 const REPEATS: usize = 15;
 
 /// The cost of an `n`-frame seamless loop of `params` against the plain animation, each as
-/// `ignis classic` renders it (warm-up 60 frames; the loop settled until its buffer repeats).
+/// `ignis classic` renders it (warm-up 60 frames; the loop settled until its buffer repeats
+/// and re-timed to even steps).
 fn loop_case(params: ClassicParams, n: u32) -> Result<serde_json::Value> {
     let palette = ignis_core::Palette::preset("classic")?;
     let cap = (16 * n as u64)
@@ -100,6 +101,9 @@ fn loop_case(params: ClassicParams, n: u32) -> Result<serde_json::Value> {
             ClassicFire::new(params.clone())?
         };
         settled = fire.settle_loop(60, cap).unwrap_or(cap);
+        if looping {
+            fire.even_loop_steps(&palette, [0.0; 3]);
+        }
         for _ in 0..n {
             fire.step_par();
             std::hint::black_box(fire.rgba(&palette));
