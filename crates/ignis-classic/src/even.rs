@@ -22,10 +22,11 @@
 
 use crate::Kept;
 use ignis_core::loopq::{arc_times, median};
+use rayon::prelude::*;
 
 /// Width of the proxy frames, pixels (the metric frame's is 128; narrower frames keep
-/// their width).
-const PROXY_WIDTH: usize = 64;
+/// their width): a third of the metric's pixels, plenty for whole-frame RMS steps.
+const PROXY_WIDTH: usize = 48;
 
 /// Refinement rounds on the shown frames' chords after the first re-timing.
 const ROUNDS: usize = 10;
@@ -53,13 +54,19 @@ struct Proxy {
 }
 
 /// States this far apart (cyclically) have their distance computed up front.
-const NEAR: usize = 4;
+const NEAR: usize = 3;
 
 impl Proxy {
     fn new(states: Vec<Vec<f32>>) -> Proxy {
         let n = states.len();
         let near = (0..n)
-            .map(|i| std::array::from_fn(|d| dist2(&states[i], &states[(i + d) % n])))
+            .into_par_iter()
+            .map(|i| {
+                std::array::from_fn(|d| match d {
+                    0 => 0.0,
+                    _ => dist2(&states[i], &states[(i + d) % n]),
+                })
+            })
             .collect();
         Proxy { states, near }
     }
@@ -106,29 +113,59 @@ impl Proxy {
     }
 }
 
-/// Mean squared difference of two proxy frames.
+/// Mean squared difference of two proxy frames (eight running sums, so the loop
+/// vectorises; always summed in the same order, so the same bytes everywhere).
 fn dist2(a: &[f32], b: &[f32]) -> f64 {
-    let s: f32 = a.iter().zip(b).map(|(&x, &y)| (x - y) * (x - y)).sum();
-    f64::from(s) / a.len().max(1) as f64
+    let mut acc = [0.0f32; 8];
+    let (ca, cb) = (a.chunks_exact(8), b.chunks_exact(8));
+    let tail: f32 = ca
+        .remainder()
+        .iter()
+        .zip(cb.remainder())
+        .map(|(&x, &y)| (x - y) * (x - y))
+        .sum();
+    for (x, y) in ca.zip(cb) {
+        for i in 0..8 {
+            let d = x[i] - y[i];
+            acc[i] += d * d;
+        }
+    }
+    let s: f64 = acc.iter().map(|&v| f64::from(v)).sum::<f64>() + f64::from(tail);
+    s / a.len().max(1) as f64
 }
 
-/// The kept state's shown cells (`shown` rows of `w` from the top) bilinearly
-/// interpolated to the proxy's `pw`×`ph` (as the frame interpolates them to its size)
-/// and looked up in the luma table.
-fn sample(
-    (top, rows): &Kept,
-    (w, shown): (usize, usize),
-    (pw, ph): (usize, usize),
-    luma: &[f32; 256],
-) -> Vec<f32> {
-    let mut cells = vec![0u8; w * shown];
-    if *top < shown {
-        cells[top * w..].copy_from_slice(&rows[..(shown - top) * w]);
+/// Bilinear taps from the shown cells to the proxy frame, as the frame's own
+/// interpolation ([`crate::taps`]).
+struct Taps {
+    w: usize,
+    x: Vec<(usize, usize, u32)>,
+    y: Vec<(usize, usize, u32)>,
+}
+
+/// The kept state's shown cells bilinearly interpolated to the proxy frame (as the frame
+/// interpolates them to its size, in 256ths and rounded the same way) and looked up in
+/// the luma table.
+fn sample((top, rows): &Kept, taps: &Taps, luma: &[f32; 256]) -> Vec<f32> {
+    let (w, pw) = (taps.w, taps.x.len());
+    // each shown cell row interpolated across, in 256ths (rows above the kept top are 0)
+    let shown = taps.y.iter().map(|&(_, b, _)| b + 1).max().unwrap_or(0);
+    let mut wide = vec![0u32; shown * pw];
+    for y in (*top).min(shown)..shown {
+        let r = &rows[(y - top) * w..(y - top + 1) * w];
+        for (o, &(a, b, t)) in wide[y * pw..(y + 1) * pw].iter_mut().zip(&taps.x) {
+            *o = r[a] as u32 * (256 - t) + r[b] as u32 * t;
+        }
     }
-    crate::upsample(&cells, w, shown, pw, ph)
-        .into_iter()
-        .map(|v| luma[v as usize])
-        .collect()
+    let mut out = Vec::with_capacity(pw * taps.y.len());
+    for &(a, b, t) in &taps.y {
+        let (ra, rb) = (&wide[a * pw..(a + 1) * pw], &wide[b * pw..(b + 1) * pw]);
+        out.extend(
+            ra.iter()
+                .zip(rb)
+                .map(|(&p, &q)| luma[((p * (256 - t) + q * t + 32768) >> 16) as usize]),
+        );
+    }
+    out
 }
 
 /// Largest chord over the median (how uneven a loop's steps are).
@@ -173,8 +210,15 @@ pub(crate) fn even_slots(
         return None;
     }
     let pw = frame.0.clamp(1, PROXY_WIDTH);
-    let ph = ((pw * frame.1) as f64 / frame.0.max(1) as f64).round().max(2.0) as usize;
-    let states = ring.iter().map(|k| sample(k, (w, shown), (pw, ph), luma));
+    let ph = ((pw * frame.1) as f64 / frame.0.max(1) as f64)
+        .round()
+        .max(2.0) as usize;
+    let taps = Taps {
+        w,
+        x: crate::taps(pw, w),
+        y: crate::taps(ph, shown),
+    };
+    let states = ring.par_iter().map(|k| sample(k, &taps, luma));
     let proxy = Proxy::new(states.collect());
     let mut slots: Vec<Slot> = (0..n).map(|at| Slot { at, f: 0 }).collect();
     let mut best: Option<(f64, Vec<Slot>)> = None;
@@ -266,8 +310,14 @@ mod tests {
         let steps: Vec<f32> = (0..n)
             .map(|k| (shown[(k + 1) % n] - shown[k]).abs())
             .collect();
-        let proxy = Proxy::new(ring.iter().map(|k| sample(k, (w, h), (w, h), &luma)).collect());
-        let before = unevenness(&proxy.chords(&(0..n).map(|at| Slot { at, f: 0 }).collect::<Vec<_>>()));
+        let taps = Taps {
+            w,
+            x: crate::taps(w, w),
+            y: crate::taps(h, h),
+        };
+        let proxy = Proxy::new(ring.iter().map(|k| sample(k, &taps, &luma)).collect());
+        let before =
+            unevenness(&proxy.chords(&(0..n).map(|at| Slot { at, f: 0 }).collect::<Vec<_>>()));
         let med = median(&mut steps.iter().map(|&s| f64::from(s)).collect::<Vec<_>>());
         let max = steps.iter().copied().fold(0.0, f32::max);
         assert!(before > 2.0, "the states are uneven: {before}");

@@ -34,7 +34,16 @@
 //! and leaves every frame a true frame of the article's simulation: no cut and no blend.
 //! The random source becomes a random walk bridged back to its start over the loop and
 //! folded into `0..=heat` (folding is what the clamped walk's reflection at the ends
-//! does); the Perlin source walks a noise lattice periodic in time.
+//! does); the Perlin source walks a noise lattice periodic in time. Since no row reads the
+//! row above it, the rows settle from the source up, and the settle copies the rows
+//! already found periodic instead of burning them.
+//!
+//! Even steps ([`ClassicFire::even_loop_steps`], module `even`): the preset's puffing and
+//! its source's slow heat drift make an exact loop's steps vary by ±30 % (it seems to
+//! speed up and slow down, and the wrap is as uneven as any step), so its frames are
+//! re-timed at constant speed: frame `k` shows two neighbouring kept states blended at the
+//! time where the loop has covered `k/N` of its measured path. The article's own fire
+//! keeps its true frames (its steps are even to about 1.15× already).
 //!
 //! Realism (issue 16 §2; additions beyond the article, off in [`ClassicParams::default`],
 //! on in [`ClassicParams::preset`]): the fire has a physical width
@@ -510,7 +519,8 @@ impl ClassicFire {
             }
             if stepped > period {
                 // grow the band by the rows that equal theirs a period before
-                let old_row = |y: usize| (y >= *top).then(|| &kept[(y - *top) * w..(y - *top + 1) * w]);
+                let old_row =
+                    |y: usize| (y >= *top).then(|| &kept[(y - *top) * w..(y - *top + 1) * w]);
                 while band > e {
                     let row = &self.buf[(band - 1) * w..band * w];
                     let same = match old_row(band - 1) {
@@ -612,7 +622,11 @@ impl ClassicFire {
         }
         if self.top >= rows.start {
             self.top = rows.start;
-            while self.top < self.h && self.buf[self.top * w..(self.top + 1) * w].iter().all(|&v| v == 0) {
+            while self.top < self.h
+                && self.buf[self.top * w..(self.top + 1) * w]
+                    .iter()
+                    .all(|&v| v == 0)
+            {
                 self.top += 1;
             }
         }
@@ -916,18 +930,19 @@ impl ClassicFire {
 }
 
 /// The loop metric's grey (`ignis_core::loopq`) of each palette entry shown over
-/// `background`.
+/// `background`: the metric frame of a 16×16 frame of the 256 entries (a frame that
+/// narrow is measured at its own size, pixel for pixel).
 fn metric_luma(palette: &Palette, background: [f32; 3]) -> [f32; 256] {
-    let one = Size {
-        width: 1,
-        height: 1,
+    let side = Size {
+        width: 16,
+        height: 16,
     };
-    std::array::from_fn(|v| {
-        let px = palette
-            .apply_indexed(one, &[v as u8])
-            .expect("one entry for one pixel");
-        ignis_core::loopq::metric_frame_rgba(&px, background).data()[0]
-    })
+    let all: Vec<u8> = (0..=255).collect();
+    let frame = palette
+        .apply_indexed(side, &all)
+        .expect("256 entries for 16x16 pixels");
+    let metric = ignis_core::loopq::metric_frame_rgba(&frame, background);
+    std::array::from_fn(|v| metric.data()[v])
 }
 
 /// For each of `n` output samples spread evenly over `len` cells: the two cells around the

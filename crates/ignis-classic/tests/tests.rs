@@ -314,7 +314,10 @@ mod loops {
                     println!("{name} {size} N={n} seed {seed}: steps ≤ {max:.3}, wrap {wrap:.3}");
                     assert_eq!(evened, retimed, "{name} {size} N={n} seed {seed}");
                     assert!(max <= 1.2, "{name} {size} N={n} seed {seed}: step {max:.3}");
-                    assert!(wrap <= 1.1, "{name} {size} N={n} seed {seed}: wrap {wrap:.3}");
+                    assert!(
+                        wrap <= 1.1,
+                        "{name} {size} N={n} seed {seed}: wrap {wrap:.3}"
+                    );
                 }
             }
         }

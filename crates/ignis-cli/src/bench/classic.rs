@@ -86,6 +86,9 @@ fn loop_case(params: ClassicParams, n: u32) -> Result<serde_json::Value> {
     // the best of several alternating runs: on a loaded machine a single run of a few
     // milliseconds measures the other processes
     let mut times = [f64::INFINITY; 2];
+    // and the CPU time of all runs of each (every thread of the process): steadier than
+    // the wall clock when other processes share the cores
+    let mut cpu = [0u64; 2];
     let mut settled = 0;
     for (i, looping) in [false, true]
         .into_iter()
@@ -95,6 +98,7 @@ fn loop_case(params: ClassicParams, n: u32) -> Result<serde_json::Value> {
     {
         let i = i % 2;
         let t = Instant::now();
+        let c = process_cpu_ns();
         let mut fire = if looping {
             ClassicFire::new_looping(params.clone(), n)?
         } else {
@@ -109,7 +113,11 @@ fn loop_case(params: ClassicParams, n: u32) -> Result<serde_json::Value> {
             std::hint::black_box(fire.rgba(&palette));
         }
         times[i] = times[i].min(t.elapsed().as_secs_f64());
+        if let (Some(a), Some(b)) = (c, process_cpu_ns()) {
+            cpu[i] += b.saturating_sub(a);
+        }
     }
+    let cpu_ms = |c: u64| (c as f64 / REPEATS as f64 / 1e5).round() / 10.0;
     Ok(serde_json::json!({
         "case": format!(
             "{} (cells of {} px, puff {}), {n} frames through the palette",
@@ -120,6 +128,25 @@ fn loop_case(params: ClassicParams, n: u32) -> Result<serde_json::Value> {
         "settle_frames": settled,
         "timing": format!("best of {REPEATS} alternating runs each, wall clock"),
         "overhead": ((times[1] / times[0] - 1.0) * 1000.0).round() / 1000.0,
+        "plain_cpu_ms": cpu_ms(cpu[0]),
+        "looping_cpu_ms": cpu_ms(cpu[1]),
+        "cpu_overhead": if cpu[0] > 0 {
+            ((cpu[1] as f64 / cpu[0] as f64 - 1.0) * 1000.0).round() / 1000.0
+        } else {
+            f64::NAN
+        },
+        "cpu_timing": "CPU time of every thread, mean of the same runs (Linux; 0 elsewhere)",
         "goal_overhead": 0.1,
     }))
+}
+
+/// CPU time so far of every thread of this process, ns (the first field of each thread's
+/// `/proc/self/task/*/schedstat`); `None` where that is not available.
+fn process_cpu_ns() -> Option<u64> {
+    let mut total = 0u64;
+    for task in std::fs::read_dir("/proc/self/task").ok()? {
+        let stat = std::fs::read_to_string(task.ok()?.path().join("schedstat")).ok()?;
+        total += stat.split_whitespace().next()?.parse::<u64>().ok()?;
+    }
+    Some(total)
 }
