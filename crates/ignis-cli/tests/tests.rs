@@ -789,6 +789,8 @@ mod loops_and_chunks {
     fn classic_chunks_equal_the_full_render() {
         chunks_equal_full(&["classic", "--size", "32x24", "--warmup", "10"]);
         chunks_equal_full(&["classic", "--size", "32x24", "--loop", "--source", "perlin"]);
+        // the preset's cells (4 px here) and its loop re-timed to even steps
+        chunks_equal_full(&["classic", "--size", "96x64", "--loop"]);
     }
 
     /// `eigen animate --chunk`: a 40-frame scenario of one motion, and one of two motions
@@ -1473,6 +1475,60 @@ mod transitions {
             );
             assert!(worst <= 1.5, "{name}: worst step {worst:.3} > 1.5");
             assert!(ghost >= 0.8, "{name}: ghost {ghost:.3} < 0.8");
+        }
+    }
+}
+
+/// Issue 16's loop goals on what `ignis classic` writes: a looping PNG sequence of the
+/// default preset (re-timed to even steps) and of the article's fire (`--cell 1 --puff 0`,
+/// true frames), read back as metric frames: every step at most 1.2× the median step and
+/// the wrap (last frame back to the first) at most 1.1×; the flipbook JSON's measured seam
+/// agrees.
+mod classic_loops {
+    use super::*;
+    use ignis_core::loopq;
+
+    #[test]
+    fn written_classic_loops_have_even_steps() {
+        let t = tempfile::tempdir().unwrap();
+        for (name, extra) in [
+            ("preset", vec![]),
+            ("article", vec!["--cell", "1", "--puff", "0"]),
+        ] {
+            for seed in ["2", "7"] {
+                let dir = t.path().join(format!("{name}-{seed}"));
+                let pat = dir.join("%04d.png").to_string_lossy().into_owned();
+                let mut a = vec!["--seed", seed, "--loop"];
+                a.extend(&extra);
+                let o = classic("128x96", "36", &a, Path::new(&pat));
+                assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+                let mut names: Vec<PathBuf> = std::fs::read_dir(&dir)
+                    .unwrap()
+                    .map(|e| e.unwrap().path())
+                    .collect();
+                names.sort();
+                let frames: Vec<_> = names
+                    .iter()
+                    .map(|p| {
+                        loopq::metric_frame_rgba(&ignis_media::read_image(p).unwrap(), [0.0; 3])
+                    })
+                    .collect();
+                assert_eq!(frames.len(), 36);
+                let s = loopq::steps(&frames, true).unwrap();
+                let med = loopq::median(&mut s.clone());
+                let max = s.iter().copied().fold(0.0, f64::max) / med;
+                let wrap = s[s.len() - 1] / med;
+                println!("{name} seed {seed}: steps ≤ {max:.3}, wrap {wrap:.3}");
+                assert!(max <= 1.2, "{name} seed {seed}: step {max:.3} > 1.2");
+                assert!(wrap <= 1.1, "{name} seed {seed}: wrap {wrap:.3} > 1.1");
+                let sheet = t.path().join(format!("{name}-{seed}.png"));
+                let o = classic("128x96", "36", &a, &sheet);
+                assert!(o.status.success());
+                let j = read_json(&sheet.with_extension("json"));
+                assert_eq!(j["loop"], true);
+                let seam = j["loop_quality"]["seam"].as_f64().unwrap();
+                assert!(seam <= 1.2, "{name} seed {seed}: flipbook seam {seam:.3}");
+            }
         }
     }
 }
