@@ -43,7 +43,7 @@
 //! speed up and slow down, and the wrap is as uneven as any step), so its frames are
 //! re-timed at constant speed: frame `k` shows two neighbouring kept states blended at the
 //! time where the loop has covered `k/N` of its measured path. The article's own fire
-//! keeps its true frames (its steps are even to about 1.15× already).
+//! keeps its true frames (its steps are within about 1.1–1.2× of the median already).
 //!
 //! Realism (issue 16 §2; additions beyond the article, off in [`ClassicParams::default`],
 //! on in [`ClassicParams::preset`]): the fire has a physical width
@@ -583,7 +583,7 @@ impl ClassicFire {
     /// of its measured path, measured through `palette` over `background` (linear RGB) as
     /// the loop metric sees the written frames. Only for the fire's additions beyond the
     /// article (cells over 1 pixel or puffing), whose steps vary with the puff; the
-    /// article's own fire keeps its true frames (its steps are even already). Returns
+    /// article's own fire keeps its true frames (its steps are close to even already). Returns
     /// whether the loop is re-timed: not when no loop is being replayed
     /// ([`ClassicFire::settle_loop`] found none, or it is over 128 MiB), for the article's
     /// fire, or when no re-timing is more even. The fire's buffer and stepping are
