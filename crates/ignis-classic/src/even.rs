@@ -13,9 +13,9 @@
 //! rather than a double image). Each output frame `k` is then shown at the time where the
 //! path has covered `k / N` of its length ([`ignis_core::loopq::arc_times`]), measured on a
 //! cheap proxy of the metric frames: the buffer's shown cells interpolated to
-//! [`PROXY_WIDTH`] pixels wide and looked up in the palette's metric luma. A blend across a state is a
-//! chord, a little shorter than the path through it, so the times are refined a few
-//! rounds on the chords of the frames actually shown, keeping the most even round.
+//! [`PROXY_WIDTH`] pixels wide and looked up in the palette's metric luma. A blend across
+//! a state is a chord, a little shorter than the path through it, so the times are refined
+//! for a few rounds on the chords of the frames actually shown, keeping the most even.
 //!
 //! The times depend only on the kept states and the palette, so any frame range of the
 //! loop gives the same bytes (`--chunk`), at any thread count.
@@ -281,8 +281,9 @@ pub(crate) fn blend(ring: &[Kept], slot: Slot, w: usize, h: usize) -> Vec<u8> {
 mod tests {
     use super::*;
 
-    /// States along a path whose steps alternate 1 and 3 units: re-timed, every shown step
-    /// is within 5 % of the others (a straight path, so chords are the arc).
+    /// States along a path there and back whose steps alternate 4 and 12 grey levels:
+    /// re-timed, the largest shown step is within 15 % of the median (rounding to whole
+    /// levels is the rest), where the states' own steps differ threefold.
     #[test]
     fn uneven_straight_path_is_evened() {
         let (w, h) = (4usize, 2usize);
