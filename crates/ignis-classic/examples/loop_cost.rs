@@ -22,11 +22,22 @@ fn main() {
         puff: 0.0,
         ..base.clone()
     };
+    let case = std::env::var("CASE").ok();
     for (name, p) in [("preset", base), ("article", article)] {
+        if case.as_deref().is_some_and(|c| c != name) {
+            continue;
+        }
         let n = 120;
         let mut cpu: [Vec<u64>; 2] = [Vec::new(), Vec::new()];
+        // ONLY=plain or ONLY=loop runs just that case, CASE=preset or CASE=article just
+        // that fire (for instruction counts under valgrind, which other processes do not
+        // disturb)
+        let only = std::env::var("ONLY").ok();
         for i in 0..2 * runs {
             let looping = i % 2 == 1;
+            if only.as_deref().is_some_and(|o| (o == "loop") != looping) {
+                continue;
+            }
             let c = cpu_ns();
             let mut fire = if looping {
                 ClassicFire::new_looping(p.clone(), n).expect("fire")
@@ -46,6 +57,9 @@ fn main() {
         // other processes only ever add time: the least and the median of the runs
         for c in cpu.iter_mut() {
             c.sort_unstable();
+        }
+        if only.is_some() {
+            continue;
         }
         let (min, med) = (|k: usize| cpu[k][0] as f64, |k: usize| cpu[k][runs / 2] as f64);
         println!(
