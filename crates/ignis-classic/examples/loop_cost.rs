@@ -61,7 +61,10 @@ fn main() {
         if only.is_some() {
             continue;
         }
-        let (min, med) = (|k: usize| cpu[k][0] as f64, |k: usize| cpu[k][runs / 2] as f64);
+        let (min, med) = (
+            |k: usize| cpu[k][0] as f64,
+            |k: usize| cpu[k][runs / 2] as f64,
+        );
         println!(
             "{name}: plain {:.2} / {:.2} ms CPU (least / median), looping {:.2} / {:.2}, \
              overhead {:+.1} % / {:+.1} %",

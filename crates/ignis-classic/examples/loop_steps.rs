@@ -46,6 +46,22 @@ fn main() {
     let evened = fire.even_loop_steps(&palette, [0.0; 3]);
     let ms = (cpu_ns() - c) as f64 / 1e6;
     let after = measure(&mut fire);
+    if std::env::var("FLICKER").is_ok() {
+        // the puffing measured on the re-timed loop as `ignis bench realism` measures a
+        // render: the upper flame's brightness spectrum over one pass of the loop
+        use ignis_core::realism::{display_luma, flicker, reduce};
+        let lit: Vec<_> = (0..n)
+            .map(|_| {
+                fire.step_par();
+                reduce(display_luma(&fire.rgba(&palette), [0.0; 3]), 128)
+            })
+            .collect();
+        let f = flicker(&lit, f64::from(fire.params().fps)).expect("flicker");
+        println!(
+            "re-timed loop flicker {:.2} Hz (peak {:.0})",
+            f.hz, f.peak_ratio
+        );
+    }
     println!(
         "seed {seed} N {n}: settled {settled:?}; steps max/median {:.3} wrap {:.3} ghost {:.3} \
          -> evened {evened} ({ms:.2} ms CPU): {:.3} wrap {:.3} ghost {:.3}",
