@@ -42,8 +42,9 @@
 //! its source's slow heat drift make an exact loop's steps vary by ±30 % (it seems to
 //! speed up and slow down, and the wrap is as uneven as any step), so its frames are
 //! re-timed at constant speed: frame `k` shows two neighbouring kept states blended at the
-//! time where the loop has covered `k/N` of its measured path. The article's own fire
-//! keeps its true frames (its steps are within about 1.1–1.2× of the median already).
+//! time where the loop has covered `k/N` of its measured path. Per-pixel buffers (the
+//! article's fire) keep their true frames: a blend of fine noise is a double exposure, and
+//! the article's steps are within about 1.1–1.2× of the median already.
 //!
 //! Realism (issue 16 §2; additions beyond the article, off in [`ClassicParams::default`],
 //! on in [`ClassicParams::preset`]): the fire has a physical width
@@ -581,16 +582,18 @@ impl ClassicFire {
     /// Re-times a found loop so that its frames change by even steps (see [`even`]): frame
     /// `k` shows the kept loop states blended at the time where the loop has covered `k/N`
     /// of its measured path, measured through `palette` over `background` (linear RGB) as
-    /// the loop metric sees the written frames. Only for the fire's additions beyond the
-    /// article (cells over 1 pixel or puffing), whose steps vary with the puff; the
-    /// article's own fire keeps its true frames (its steps are close to even already). Returns
-    /// whether the loop is re-timed: not when no loop is being replayed
-    /// ([`ClassicFire::settle_loop`] found none, or it is over 128 MiB), for the article's
-    /// fire, or when no re-timing is more even. The fire's buffer and stepping are
+    /// the loop metric sees the written frames. Only for fires simulated on cells over 1
+    /// pixel (the preset), whose frames interpolate the cells smoothly, so a blend of
+    /// neighbouring states is the state between them; a per-pixel buffer keeps its true
+    /// frames (a blend of its fine noise is a double exposure: re-timed, a puffing per-pixel
+    /// fire's steps would reach 2.4× the median), and the article's own fire is close to
+    /// even already. Returns whether the loop is re-timed: not when no loop is being
+    /// replayed ([`ClassicFire::settle_loop`] found none, or it is over 128 MiB), for cells
+    /// of 1 pixel, or when no re-timing is more even. The fire's buffer and stepping are
     /// unchanged; [`ClassicFire::frame_bytes`] (and so `gray`, `rgba`) show the re-timed
     /// frames until the replay ends.
     pub fn even_loop_steps(&mut self, palette: &Palette, background: [f32; 3]) -> bool {
-        if self.params.cell == 1 && self.params.puff <= 0.0 {
+        if self.params.cell == 1 {
             return false;
         }
         let (w, shown) = (self.w, self.shown_rows());
@@ -1546,7 +1549,7 @@ mod tests {
         assert!(e.to_string().contains("cells of 4 px"), "{e}");
     }
 
-    /// Re-timing needs a replayed loop and a fire beyond the article's; changing the fade
+    /// Re-timing needs a replayed loop of a fire on cells over 1 pixel; changing the fade
     /// (which leaves the replay) drops it, and frames show the simulated buffer again.
     #[test]
     fn even_steps_only_while_replaying_the_loop() {
@@ -1562,9 +1565,19 @@ mod tests {
         let mut plain = ClassicFire::new(p.clone()).unwrap();
         plain.settle_loop(30, 100);
         assert!(!plain.even_loop_steps(&palette, [0.0; 3]));
-        let mut article = ClassicFire::new_looping(params(60, 48), 12).unwrap();
-        article.settle_loop(60, 4000).unwrap();
-        assert!(!article.even_loop_steps(&palette, [0.0; 3]));
+        // per-pixel buffers keep their true frames, puffing or not
+        for puff in [0.0, 0.5] {
+            let mut fine = ClassicFire::new_looping(
+                ClassicParams {
+                    puff,
+                    ..params(60, 48)
+                },
+                12,
+            )
+            .unwrap();
+            fine.settle_loop(60, 4000).unwrap();
+            assert!(!fine.even_loop_steps(&palette, [0.0; 3]), "puff {puff}");
+        }
         let mut f = ClassicFire::new_looping(p, 16).unwrap();
         assert!(!f.even_loop_steps(&palette, [0.0; 3]), "not settled yet");
         f.settle_loop(60, 4000).unwrap();

@@ -20,8 +20,8 @@ Realism: by default the fire is a 1 m fire bed simulated on 6-px cells that puff
 (--diameter D); `ignis bench realism` measures it against that law and campfire footage.\n\n\
 Loops (the default for GIFs and flipbooks): the source line and sparklies repeat every N frames and the\n\
 fire is stepped until its buffer repeats exactly, so frame N equals frame 0 byte for byte. With cells\n\
-over 1 px or puffing, the loop is then re-timed at constant speed (frames blend neighbouring states), so\n\
-every step, the wrap included, is within about 15% of the median step."
+over 1 px (the default), the loop is then re-timed at constant speed (frames blend neighbouring states),\n\
+so every step, the wrap included, is within about 15% of the median step."
 )]
 pub struct Args {
     /// Frame size WIDTHxHEIGHT (the simulation buffer is this divided by --cell).
