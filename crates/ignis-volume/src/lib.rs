@@ -18,6 +18,7 @@
 
 pub mod error;
 pub mod lattice;
+pub mod looping;
 pub mod mapping;
 pub mod motion;
 pub mod noise;
@@ -28,6 +29,7 @@ pub mod spline;
 
 pub use error::{Result, VolumeError};
 pub use lattice::{Cell, Lattice, Puff};
+pub use looping::LoopTiming;
 pub use mapping::NoiseParams;
 pub use motion::{Collision, Keyframe, Obstacle, ParticleSim, Script, SimParams};
 pub use noise::NoiseKind;
