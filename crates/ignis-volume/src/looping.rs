@@ -85,33 +85,26 @@ pub fn loop_blend_frames(frames: u32) -> u32 {
 /// Errors when the preview's length is not a multiple of `frames` or its frames differ in
 /// size.
 pub fn even_step_times(preview: &[GrayFrame], frames: u32) -> Result<Vec<f64>, String> {
-    let n = frames as usize;
-    if n == 0 || preview.is_empty() || !preview.len().is_multiple_of(n) {
-        return Err(format!(
-            "a preview of {} frames for a loop of {frames}",
-            preview.len()
-        ));
+    let mut d = PreviewDistances::builder(preview.len(), frames)?;
+    for f in preview {
+        d.push(f.clone())?;
     }
-    let k = preview.len() / n;
-    let d = PreviewDistances::new(preview, k)?;
-    let mut t: Vec<f64> = (0..=n).map(|i| (i * k) as f64).collect();
-    relax(&d, &mut t, k as f64);
-    Ok(t[..n]
-        .iter()
-        .map(|&t| (t / k as f64).clamp(0.0, f64::from(frames)))
-        .collect())
+    Ok(d.finish()?.even_step_times())
 }
 
 /// Sweeps over the interior times of `t` (in samples, `per_frame` to a frame; `t[0]` and
 /// the last fixed), each moved towards where its two steps are equal (over-relaxed by
 /// [`RELAX_OVERSHOOT`]) but no step shorter than [`MIN_STEP`] or longer than
 /// [`MAX_STEP`] frames, until the longest step is within 0.5 % of the shortest, the
-/// spread stops shrinking, or 2,000 sweeps (each `O(frames)` cheap look-ups).
+/// spread stops shrinking, or 2,000 sweeps (fewer for loops over 2,000 frames: ~4 million
+/// moves in all, each ~60 cheap look-ups).
 fn relax(d: &PreviewDistances, t: &mut [f64], per_frame: f64) {
     let n = t.len() - 1;
     let (short, long) = (MIN_STEP * per_frame, MAX_STEP * per_frame);
     let (mut best, mut stalled) = (f64::INFINITY, 0);
-    for _ in 0..2000 {
+    // a long loop's sweeps are long: at most ~4 million moves in all (each ~60 look-ups)
+    let sweeps = (4_000_000 / n.max(1)).clamp(20, 2000);
+    for _ in 0..sweeps {
         let steps = t.windows(2).map(|w| d.between(w[0], w[1]));
         let (lo, hi) = steps.fold((f64::MAX, 0.0f64), |(a, b), s| (a.min(s), b.max(s)));
         // even (or a preview that never changes: nothing to even out)
@@ -161,31 +154,109 @@ const MAX_STEP: f64 = 1.6;
 
 /// RMS differences between the frames of a cyclic preview up to `span − 1` samples apart,
 /// and the distance between any two loop times (in samples) interpolated from them.
-struct PreviewDistances {
+pub(crate) struct PreviewDistances {
     /// `d[i][o]`: from sample `i` to sample `(i + o) mod m`, `o < span`.
     d: Vec<Vec<f64>>,
     span: usize,
+    /// Output frames of the loop.
+    frames: usize,
+}
+
+/// [`PreviewDistances`] built from preview frames pushed one at a time, holding only the
+/// first and the latest `span` of them (a long loop's preview is not kept in memory).
+pub(crate) struct DistanceBuilder {
+    m: usize,
+    frames: usize,
+    span: usize,
+    first: Vec<GrayFrame>,
+    recent: std::collections::VecDeque<GrayFrame>,
+    pushed: usize,
+    d: Vec<Vec<f64>>,
+}
+
+impl DistanceBuilder {
+    /// Adds the next preview frame (in loop order).
+    pub fn push(&mut self, f: GrayFrame) -> Result<(), String> {
+        let j = self.pushed;
+        if j >= self.m {
+            return Err(format!("more than {} preview frames", self.m));
+        }
+        if let Some(g) = self.first.first().filter(|g| g.size() != f.size()) {
+            return Err(format!("preview frames of {} and {}", g.size(), f.size()));
+        }
+        // distances from the latest frames (up to span − 1 back) to this one
+        let back = self.recent.len();
+        for (o, g) in self.recent.iter().enumerate() {
+            let i = j - (back - o);
+            self.d[i][j - i] = ignis_core::loopq::rms_diff(g, &f);
+        }
+        if self.first.len() < self.span - 1 {
+            self.first.push(f.clone());
+        }
+        self.recent.push_back(f);
+        if self.recent.len() > self.span - 1 {
+            self.recent.pop_front();
+        }
+        self.pushed += 1;
+        Ok(())
+    }
+
+    /// The distances, once all `m` frames are in: the last frames' steps past the loop's
+    /// end are to its first frames.
+    pub fn finish(mut self) -> Result<PreviewDistances, String> {
+        if self.pushed != self.m {
+            return Err(format!("{} of {} preview frames", self.pushed, self.m));
+        }
+        let m = self.m;
+        let back = self.recent.len();
+        for (o, g) in self.recent.iter().enumerate() {
+            let i = m - (back - o);
+            for (q, h) in self.first.iter().enumerate() {
+                let off = m - i + q;
+                if off < self.span {
+                    self.d[i][off] = ignis_core::loopq::rms_diff(g, h);
+                }
+            }
+        }
+        Ok(PreviewDistances {
+            d: self.d,
+            span: self.span,
+            frames: self.frames,
+        })
+    }
 }
 
 impl PreviewDistances {
-    fn new(preview: &[GrayFrame], per_frame: usize) -> Result<PreviewDistances, String> {
-        let m = preview.len();
-        let span = ((MAX_STEP * per_frame as f64).ceil() as usize + 2).min(m + 1);
-        if let Some(f) = preview.iter().find(|f| f.size() != preview[0].size()) {
-            return Err(format!(
-                "preview frames of {} and {}",
-                preview[0].size(),
-                f.size()
-            ));
+    /// A builder for the `m` preview frames (a whole number ≥ 1 per output frame) of an
+    /// `frames`-frame loop.
+    pub fn builder(m: usize, frames: u32) -> Result<DistanceBuilder, String> {
+        let n = frames as usize;
+        if n == 0 || m == 0 || !m.is_multiple_of(n) {
+            return Err(format!("a preview of {m} frames for a loop of {frames}"));
         }
-        let d = (0..m)
-            .map(|i| {
-                (0..span)
-                    .map(|o| ignis_core::loopq::rms_diff(&preview[i], &preview[(i + o) % m]))
-                    .collect()
-            })
-            .collect();
-        Ok(PreviewDistances { d, span })
+        let per_frame = m / n;
+        let span = ((MAX_STEP * per_frame as f64).ceil() as usize + 2).min(m + 1);
+        Ok(DistanceBuilder {
+            m,
+            frames: n,
+            span,
+            first: Vec::new(),
+            recent: Default::default(),
+            pushed: 0,
+            d: vec![vec![0.0; span]; m],
+        })
+    }
+
+    /// [`even_step_times`] from these distances.
+    pub fn even_step_times(&self) -> Vec<f64> {
+        let n = self.frames;
+        let k = self.d.len() / n;
+        let mut t: Vec<f64> = (0..=n).map(|i| (i * k) as f64).collect();
+        relax(self, &mut t, k as f64);
+        t[..n]
+            .iter()
+            .map(|&t| (t / k as f64).clamp(0.0, n as f64))
+            .collect()
     }
 
     /// Distance from sample `i` (any integer) to `i + o`, `0 ≤ o < span`.
@@ -437,6 +508,38 @@ mod tests {
         }
         assert!(even_step_times(&[], 3).is_err());
         assert!(even_step_times(&vec![frame(0.0, 0.0); 5], 3).is_err());
+    }
+
+    /// The distances built from frames pushed one at a time (holding only a few) are the
+    /// RMS differences of the cyclic preview, past its end too, for short and long loops.
+    #[test]
+    fn streamed_distances_wrap_around_the_loop() {
+        let size = ignis_core::Size::new(3, 1).unwrap();
+        for (m, frames) in [(2usize, 1u32), (2, 2), (3, 3), (8, 4), (24, 12)] {
+            let preview: Vec<_> = (0..m)
+                .map(|j| {
+                    let v = (0..3)
+                        .map(|x| ((j * 7 + x * 3) % 11) as f32 / 10.0)
+                        .collect();
+                    GrayFrame::from_vec(size, v).unwrap()
+                })
+                .collect();
+            let mut b = PreviewDistances::builder(m, frames).unwrap();
+            for f in &preview {
+                b.push(f.clone()).unwrap();
+            }
+            assert!(b.push(preview[0].clone()).is_err());
+            let d = b.finish().unwrap();
+            for i in 0..m {
+                for o in 0..d.span {
+                    let want = ignis_core::loopq::rms_diff(&preview[i], &preview[(i + o) % m]);
+                    assert_eq!(d.d[i][o], want, "m {m}, i {i}, o {o}");
+                }
+            }
+        }
+        assert!(PreviewDistances::builder(5, 2).is_err());
+        let b = PreviewDistances::builder(4, 2).unwrap();
+        assert!(b.finish().is_err());
     }
 
     /// A simulation track interpolates between whole frames (the last towards frame 0)

@@ -37,7 +37,7 @@
 use crate::error::{Result, VolumeError};
 use crate::lattice::{Lattice, Puff};
 pub use crate::looping::loop_blend_frames;
-use crate::looping::{LoopScript, LoopTiming, Looping, SimTrack};
+use crate::looping::{LoopScript, LoopTiming, Looping, PreviewDistances, SimTrack};
 use crate::mapping::NoiseParams;
 use crate::motion::{
     deflect_points, Collision, Keyframe, Obstacle, ParticleSim, Script, SimParams,
@@ -616,14 +616,14 @@ impl FireScene {
             }),
             scroll: a.scroll.clone(),
         };
-        let metric = (0..m)
-            .map(|_| {
-                let f = probe.next_frame()?;
-                Ok(ignis_core::loopq::metric_frame_rgba(&f.image, [0.0; 3]))
-            })
-            .collect::<Result<Vec<_>>>()?;
-        crate::looping::even_step_times(&metric, looping.frames as u32)
-            .map_err(|e| VolumeError::bad("loop", e))
+        let bad = |e: String| VolumeError::bad("loop", e);
+        let mut d = PreviewDistances::builder(m, looping.frames as u32).map_err(bad)?;
+        for _ in 0..m {
+            let f = probe.next_frame()?;
+            d.push(ignis_core::loopq::metric_frame_rgba(&f.image, [0.0; 3]))
+                .map_err(bad)?;
+        }
+        Ok(d.finish().map_err(bad)?.even_step_times())
     }
 
     // (Long: data, one match arm per preset.)
