@@ -34,13 +34,14 @@ fn run(scene: &FireScene, frames: u32, looping: bool) -> (f64, f64) {
     )
 }
 
-/// CPU seconds to build the looping animator alone (its simulation run-ahead).
+/// CPU seconds to build the looping animator alone (its simulation run-ahead and the
+/// preview that times its frames).
 fn setup_cost(scene: &FireScene, frames: u32) -> f64 {
     let c0 = cpu_seconds().unwrap_or(0.0);
-    for _ in 0..20 {
+    for _ in 0..3 {
         scene.looping_animator(frames).expect("valid");
     }
-    (cpu_seconds().unwrap_or(0.0) - c0) / 20.0
+    (cpu_seconds().unwrap_or(0.0) - c0) / 3.0
 }
 
 fn median(mut v: Vec<f64>) -> f64 {

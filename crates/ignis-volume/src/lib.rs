@@ -8,7 +8,8 @@
 //! ([`render()`]) marches view-aligned slices through the cells, inverts each cell's
 //! trilinear map to texture coordinates and applies the noise mapping ([`mapping`],
 //! eq. 9–14); [`render::finish`] runs the `ignis-core` bloom. [`FireScene`] ties it all
-//! together (fire files, presets) and [`Animator`] produces frames.
+//! together (fire files, presets) and [`Animator`] produces frames; a seamless loop's
+//! motion and the constant-speed timing of its frames are in [`looping`].
 //!
 //! **Invariants:** this crate reads no image or video files (profile images come in as
 //! [`ignis_core::RgbaFrame`]; `ignis-cli` loads and writes them via `ignis-media`); all
@@ -18,6 +19,7 @@
 
 pub mod error;
 pub mod lattice;
+pub mod looping;
 pub mod mapping;
 pub mod motion;
 pub mod noise;
@@ -28,6 +30,7 @@ pub mod spline;
 
 pub use error::{Result, VolumeError};
 pub use lattice::{Cell, Lattice, Puff};
+pub use looping::LoopTiming;
 pub use mapping::NoiseParams;
 pub use motion::{Collision, Keyframe, Obstacle, ParticleSim, Script, SimParams};
 pub use noise::NoiseKind;

@@ -36,6 +36,8 @@
 
 use crate::error::{Result, VolumeError};
 use crate::lattice::{Lattice, Puff};
+pub use crate::looping::loop_blend_frames;
+use crate::looping::{LoopScript, LoopTiming, Looping, PreviewDistances, SimTrack};
 use crate::mapping::NoiseParams;
 use crate::motion::{
     deflect_points, Collision, Keyframe, Obstacle, ParticleSim, Script, SimParams,
@@ -505,7 +507,19 @@ impl FireScene {
     }
 
     /// A checked animator for a seamless loop of `frames` frames: frame `frames` (which
-    /// is never rendered) would equal frame 0, so the frames play as a loop with no jump.
+    /// is never rendered) would equal frame 0, so the frames play as a loop with no jump,
+    /// and every step, the seam included, covers about the same distance
+    /// ([`FireScene::looping_animator_with`] with [`LoopTiming::DEFAULT`]).
+    ///
+    /// Fails for fewer than 2 frames.
+    pub fn looping_animator(&self, frames: u32) -> Result<Animator<'_>> {
+        self.looping_animator_with(frames, LoopTiming::DEFAULT)
+    }
+
+    /// [`FireScene::looping_animator`] with the frames timed by `timing`
+    /// ([`crate::looping`]): the animation is a periodic function of loop time, and
+    /// its frames are rendered at the loop times where a preview says consecutive frames
+    /// differ equally ([`crate::looping::even_step_times`]).
     ///
     /// - The noise is periodic with the loop ([`crate::mapping::PeriodicLoop`], else
     ///   [`crate::mapping::LoopMix`]).
@@ -514,10 +528,13 @@ impl FireScene {
     ///   whole fraction of the loop, and its keys are joined by a periodic cubic spline.
     /// - A simulation's tail is blended into its head in control-point space: the loop's
     ///   first [`loop_blend_frames`] frames move from the simulation's state one loop later
-    ///   to its own, so frame `frames − 1` is followed by the simulation's own successor.
+    ///   to its own, so frame `frames − 1` is followed by the simulation's own successor;
+    ///   between whole frames its control points are interpolated linearly.
     ///
+    /// The preview is rendered here, from the whole loop, so every chunk of a render
+    /// (an animator [`Animator::skip`]ping to its first frame) times its frames the same.
     /// Fails for fewer than 2 frames.
-    pub fn looping_animator(&self, frames: u32) -> Result<Animator<'_>> {
+    pub fn looping_animator_with(&self, frames: u32, timing: LoopTiming) -> Result<Animator<'_>> {
         if frames < 2 {
             return Err(VolumeError::bad(
                 "loop",
@@ -527,39 +544,86 @@ impl FireScene {
             ));
         }
         let mut a = self.animator()?;
-        let n = frames as u64;
+        let n = frames as usize;
         let blend = loop_blend_frames(frames) as usize;
         let dt = 1.0 / self.fps;
         let loop_len = frames as f32 * dt;
         let mut scripts = Vec::with_capacity(self.fires.len());
-        let mut heads = Vec::with_capacity(self.fires.len());
+        let mut sims = Vec::with_capacity(self.fires.len());
         for (i, f) in self.fires.iter().enumerate() {
             let mut script = None;
-            let mut head = Vec::new();
+            let mut track = None;
             match &f.motion {
                 Motion::Static(_) => {}
                 Motion::Script(sc) => script = Some(LoopScript::new(sc, loop_len)),
                 Motion::Simulation(_) => {
-                    // the states one loop later: frames n .. n + blend of the simulation
+                    // the simulation's states at frames 0 .. n + blend (one loop and its head)
                     let mut sim = a.sims[i].clone().expect("a simulation per simulated fire");
-                    for k in 1..n + blend as u64 {
-                        sim.advance(dt, &self.obstacles, i);
-                        if k >= n {
-                            head.push(sim.control_points());
-                        }
+                    let mut states = vec![sim.control_points()];
+                    let mut hits = vec![Vec::new()];
+                    for _ in 1..n + blend {
+                        hits.push(sim.advance(dt, &self.obstacles, i));
+                        states.push(sim.control_points());
                     }
+                    track = Some(SimTrack::new(states, hits, n, blend));
                 }
             }
             scripts.push(script);
-            heads.push(head);
+            sims.push(track);
         }
-        a.looping = Some(Looping {
-            frames: n,
-            blend,
+        let mut looping = Looping {
+            frames: frames as u64,
+            times: (0..n).map(|k| k as f64).collect(),
             scripts,
-            heads,
-        });
+            sims,
+        };
+        if timing.retimes() {
+            looping.times = self.constant_speed_times(&a, &looping, timing)?;
+        }
+        a.looping = Some(looping);
         Ok(a)
+    }
+
+    /// The loop times at which the frames of `looping` cover equal distances: measured on
+    /// a preview `timing.preview_width` pixels wide (at most the metric frames' width) at
+    /// `timing.samples_per_frame` uniform loop times per frame ([`crate::looping`]).
+    fn constant_speed_times(
+        &self,
+        a: &Animator<'_>,
+        looping: &Looping,
+        timing: LoopTiming,
+    ) -> Result<Vec<f64>> {
+        let w = timing
+            .preview_width
+            .min(ignis_core::loopq::metric_size(self.size).width)
+            .max(1);
+        let h = (f64::from(w) * f64::from(self.size.height) / f64::from(self.size.width))
+            .round()
+            .max(1.0) as u32;
+        let small = self
+            .clone()
+            .with_size(Size::new(w, h).map_err(|e| VolumeError::bad("size", e.to_string()))?);
+        let k = timing.samples_per_frame as usize;
+        let m = looping.frames as usize * k;
+        let mut probe = Animator {
+            scene: &small,
+            sims: Vec::new(),
+            frame: 0,
+            count_coverage: false,
+            looping: Some(Looping {
+                times: (0..m).map(|j| j as f64 / k as f64).collect(),
+                ..looping.clone()
+            }),
+            scroll: a.scroll.clone(),
+        };
+        let bad = |e: String| VolumeError::bad("loop", e);
+        let mut d = PreviewDistances::builder(m, looping.frames as u32).map_err(bad)?;
+        for _ in 0..m {
+            let f = probe.next_frame()?;
+            d.push(ignis_core::loopq::metric_frame_rgba(&f.image, [0.0; 3]))
+                .map_err(bad)?;
+        }
+        Ok(d.finish().map_err(bad)?.even_step_times())
     }
 
     // (Long: data, one match arm per preset.)
@@ -768,6 +832,17 @@ impl FireScene {
 /// Camera distance of [`FireScene::table1`] (chosen so ≈ 90,000 pixels are covered).
 pub const TABLE1_DISTANCE: f32 = 5.4;
 
+/// Fixed control points as a one-key script (whose contacts the script computes).
+fn static_points(p: &[[f32; 4]]) -> Script {
+    Script {
+        keyframes: vec![Keyframe {
+            time: 0.0,
+            points: p.to_vec(),
+        }],
+        looped: false,
+    }
+}
+
 /// One rendered frame.
 #[derive(Clone, Debug)]
 pub struct Frame {
@@ -807,75 +882,97 @@ impl Animator<'_> {
 
     /// Skips `n` frames without rendering them: only the motion (scripts, simulations,
     /// collisions) is stepped, so the next frame is exactly the one a full run would
-    /// render there. This is how a render-farm chunk starts in the middle.
+    /// render there. This is how a render-farm chunk starts in the middle. (A looping
+    /// animator's motion is a function of loop time, computed when it was made: skipping
+    /// costs nothing.)
     pub fn skip(&mut self, n: u64) {
+        if self.looping.is_some() {
+            self.frame += n;
+            return;
+        }
         for _ in 0..n {
             self.step();
         }
     }
 
+    /// The scene time (seconds) the next frame is rendered at: its frame time, or for a
+    /// loop its loop time ([`crate::looping`]).
+    fn time(&self) -> f32 {
+        match &self.looping {
+            Some(l) => l.time(self.frame) as f32 / self.scene.fps,
+            None => self.frame as f32 / self.scene.fps,
+        }
+    }
+
     /// Advances the motion one frame; returns control points and contacts.
     pub fn step(&mut self) -> (Vec<Vec<[f32; 4]>>, Vec<Collision>) {
+        let out = match &self.looping {
+            Some(l) => self.loop_pose(l),
+            None => self.plain_step(),
+        };
+        self.frame += 1;
+        out
+    }
+
+    /// A plain animation's motion at the next frame (simulations advanced one step).
+    fn plain_step(&mut self) -> (Vec<Vec<[f32; 4]>>, Vec<Collision>) {
         let s = self.scene;
         let dt = 1.0 / s.fps;
         let t = self.frame as f32 * dt;
         let mut pts = Vec::with_capacity(s.fires.len());
         let mut hits = Vec::new();
         for (i, f) in s.fires.iter().enumerate() {
-            match &f.motion {
-                Motion::Static(p) => {
-                    let sc = Script {
-                        keyframes: vec![Keyframe {
-                            time: 0.0,
-                            points: p.clone(),
-                        }],
-                        looped: false,
-                    };
-                    let (p, h) = sc.at_with_collisions(t, dt, &s.obstacles, i);
-                    pts.push(p);
-                    hits.extend(h);
-                }
-                Motion::Script(sc) => {
-                    let ls = self.looping.as_ref().and_then(|l| l.scripts[i].as_ref());
-                    let (p, h) = match ls {
-                        Some(ls) => {
-                            // loop time from the frame number, so it is exact at every loop
-                            let n = self.looping.as_ref().map_or(1, |l| l.frames);
-                            let tl = (self.frame % n) as f32 * dt;
-                            let mut p = ls.at(tl);
-                            let mut h = Vec::new();
-                            deflect_points(&mut p, dt, &s.obstacles, i, &mut h);
-                            (p, h)
-                        }
-                        None => sc.at_with_collisions(t, dt, &s.obstacles, i),
-                    };
-                    pts.push(p);
-                    hits.extend(h);
-                }
+            let (p, h) = match &f.motion {
+                Motion::Static(p) => static_points(p).at_with_collisions(t, dt, &s.obstacles, i),
+                Motion::Script(sc) => sc.at_with_collisions(t, dt, &s.obstacles, i),
                 Motion::Simulation(_) => {
                     let sim = self.sims[i]
                         .as_mut()
                         .expect("a simulation per simulated fire");
-                    if self.frame > 0 {
-                        hits.extend(sim.advance(dt, &s.obstacles, i));
-                    }
-                    let mut cp = sim.control_points();
-                    if let Some(l) = &self.looping {
-                        let k = self.frame as usize;
-                        if let Some(head) = l.heads[i].get(k).filter(|_| k < l.blend) {
-                            // smoothstep from the state one loop later to this one
-                            let x = k as f32 / l.blend as f32;
-                            let w = x * x * (3.0 - 2.0 * x);
-                            for (c, h) in cp.iter_mut().zip(head) {
-                                *c = [0, 1, 2, 3].map(|a| h[a] + w * (c[a] - h[a]));
-                            }
-                        }
-                    }
-                    pts.push(cp);
+                    let h = if self.frame > 0 {
+                        sim.advance(dt, &s.obstacles, i)
+                    } else {
+                        Vec::new()
+                    };
+                    (sim.control_points(), h)
                 }
-            }
+            };
+            pts.push(p);
+            hits.extend(h);
         }
-        self.frame += 1;
+        (pts, hits)
+    }
+
+    /// A loop's motion at the next frame's loop time; a simulation reports the contacts
+    /// of its whole-frame steps since the previous frame's time.
+    fn loop_pose(&self, l: &Looping) -> (Vec<Vec<[f32; 4]>>, Vec<Collision>) {
+        let s = self.scene;
+        let dt = 1.0 / s.fps;
+        let tau = l.time(self.frame);
+        let t = tau as f32 * dt;
+        let mut pts = Vec::with_capacity(s.fires.len());
+        let mut hits = Vec::new();
+        for (i, f) in s.fires.iter().enumerate() {
+            let p = match (&f.motion, &l.scripts[i], &l.sims[i]) {
+                (Motion::Static(p), _, _) => {
+                    let (p, h) = static_points(p).at_with_collisions(t, dt, &s.obstacles, i);
+                    hits.extend(h);
+                    p
+                }
+                (_, Some(ls), _) => {
+                    let mut p = ls.at(t);
+                    deflect_points(&mut p, dt, &s.obstacles, i, &mut hits);
+                    p
+                }
+                (_, _, Some(track)) => {
+                    let lo = l.previous_time(self.frame);
+                    hits.extend(track.hits_between(lo, tau).cloned());
+                    track.at(tau)
+                }
+                _ => unreachable!("a looping script or simulation per moving fire"),
+            };
+            pts.push(p);
+        }
         (pts, hits)
     }
 
@@ -914,7 +1011,7 @@ impl Animator<'_> {
 
     /// Phase (radians) of the puffing cycle at the current frame: `2π f t` with `f` the
     /// puffing frequency, rounded for a loop to a whole number of cycles per loop (at least
-    /// one) and computed from the frame's place in the loop, so it repeats exactly.
+    /// one) and computed from the frame's loop time, so it repeats exactly.
     fn puff_phase(&self) -> f32 {
         let s = self.scene;
         let f = ignis_core::realism::puffing_frequency(f64::from(s.diameter));
@@ -922,7 +1019,7 @@ impl Animator<'_> {
         match &self.looping {
             Some(l) => {
                 let cycles = (f * l.frames as f64 / f64::from(s.fps)).round().max(1.0);
-                (tau * cycles * (self.frame % l.frames) as f64 / l.frames as f64) as f32
+                (tau * cycles * l.time(self.frame) / l.frames as f64) as f32
             }
             None => (tau * (f * self.frame as f64 / f64::from(s.fps)).fract()) as f32,
         }
@@ -931,7 +1028,7 @@ impl Animator<'_> {
     /// Renders the next frame.
     pub fn next_frame(&mut self) -> Result<Frame> {
         let s = self.scene;
-        let t = self.frame as f32 / s.fps;
+        let t = self.time();
         let puffs: Vec<Option<Puff>> = (0..s.fires.len()).map(|i| self.puff_wave(i)).collect();
         let (pts, collisions) = self.step();
         let lattices = pts
@@ -971,100 +1068,6 @@ impl Animator<'_> {
             control_points: pts,
         })
     }
-}
-
-/// How many frames at the start of an `frames`-frame loop blend a simulation's state one
-/// loop later into its own (a third of the loop, at least 1).
-pub fn loop_blend_frames(frames: u32) -> u32 {
-    (frames / 3).max(1)
-}
-
-/// A script made periodic with a loop: its keys closed (back to the first pose), played a
-/// whole number of times per loop, and interpolated with a periodic cubic Hermite spline
-/// (Catmull–Rom tangents) so the motion never stops at a key — smoothstep, which a
-/// one-shot script uses, halts at every key and makes the loop's frame-to-frame steps
-/// uneven.
-#[derive(Clone, Debug)]
-struct LoopScript {
-    /// Key times and poses; the last pose is the first, one period later.
-    keys: Vec<Keyframe>,
-    /// Script seconds per loop second.
-    rate: f32,
-}
-
-impl LoopScript {
-    fn new(sc: &Script, loop_len: f32) -> LoopScript {
-        let mut keys = sc.keyframes.clone();
-        let (t0, t1) = (keys[0].time, keys[keys.len() - 1].time);
-        if keys.len() > 1 && keys[0].points != keys[keys.len() - 1].points {
-            // close the keys: back to the first pose after the mean gap
-            let gap = (t1 - t0) / (keys.len() - 1) as f32;
-            let back = Keyframe {
-                time: t1 + gap,
-                points: keys[0].points.clone(),
-            };
-            keys.push(back);
-        }
-        let period = keys[keys.len() - 1].time - t0;
-        let rate = if keys.len() > 1 && period > 0.0 {
-            let repeats = (loop_len / period).round().max(1.0);
-            repeats * period / loop_len
-        } else {
-            0.0
-        };
-        LoopScript { keys, rate }
-    }
-
-    /// Control points at loop time `t` seconds.
-    fn at(&self, t: f32) -> Vec<[f32; 4]> {
-        let k = &self.keys;
-        let m = k.len() - 1;
-        if m == 0 || self.rate == 0.0 {
-            return k[0].points.clone();
-        }
-        let (t0, period) = (k[0].time, k[m].time - k[0].time);
-        let ts = t0 + (t * self.rate).rem_euclid(period);
-        let i = k.partition_point(|f| f.time <= ts).clamp(1, m) - 1;
-        // key `j` of the periodic sequence (any integer), with its time
-        let key = |j: isize| -> (f32, &Vec<[f32; 4]>) {
-            let w = j.rem_euclid(m as isize) as usize;
-            let laps = j.div_euclid(m as isize) as f32;
-            (k[w].time + laps * period, &k[w].points)
-        };
-        let i = i as isize;
-        let (ta, pa) = key(i);
-        let (tb, pb) = key(i + 1);
-        let (tp, pp) = key(i - 1);
-        let (tn, pn) = key(i + 2);
-        let h = tb - ta;
-        let s = ((ts - ta) / h).clamp(0.0, 1.0);
-        let (s2, s3) = (s * s, s * s * s);
-        let h00 = 2.0 * s3 - 3.0 * s2 + 1.0;
-        let h10 = s3 - 2.0 * s2 + s;
-        let h01 = -2.0 * s3 + 3.0 * s2;
-        let h11 = s3 - s2;
-        (0..pa.len())
-            .map(|c| {
-                [0, 1, 2, 3].map(|a| {
-                    let ma = (pb[c][a] - pp[c][a]) / (tb - tp);
-                    let mb = (pn[c][a] - pa[c][a]) / (tn - ta);
-                    h00 * pa[c][a] + h10 * h * ma + h01 * pb[c][a] + h11 * h * mb
-                })
-            })
-            .collect()
-    }
-}
-
-/// A looping animator's state ([`FireScene::looping_animator`]).
-#[derive(Clone, Debug)]
-struct Looping {
-    frames: u64,
-    blend: usize,
-    /// Per fire: its script made periodic (scripted fires only).
-    scripts: Vec<Option<LoopScript>>,
-    /// Per fire: a simulation's control points one loop later, for the loop's first
-    /// `blend` frames (simulated fires only).
-    heads: Vec<Vec<Vec<[f32; 4]>>>,
 }
 
 #[cfg(test)]

@@ -53,7 +53,8 @@ fn torch_frame() {
     check("volume-torch-48-f5-finished.f32", &f.image);
 }
 
-/// Frame 7 of an 18-frame campfire loop (several fires, the noise periodic in time).
+/// Frame 7 of an 18-frame campfire loop (several fires, the noise periodic in time, the
+/// frames re-timed at constant speed: the golden was remade when that came in).
 #[test]
 fn campfire_loop_frame() {
     let scene = small(Preset::Campfire);
