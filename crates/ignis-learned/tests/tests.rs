@@ -308,7 +308,7 @@ mod flame {
         let (_, t) = trained(60, 8);
         let n = 24u32;
         let c = Controls::default();
-        for (seed, side) in [(3, 48), (4, 64), (5, 40)] {
+        for (seed, side) in [(3, 48), (4, 64), (5, 40), (1, 128), (6, 80), (7, 32)] {
             let size = Size::new(side, side).unwrap();
             let mut s = Synthesiser::looping(&t.model, c.clone(), seed, n).unwrap();
             let frames = s.frames(size, n as usize + 1).unwrap();

@@ -8,12 +8,19 @@
 //! as likely as any other to be one of the large ones. Played as a loop, the fast parts
 //! read as jumps.
 //!
-//! So the loop is re-timed: a cheap preview renders `PREVIEW_PER_FRAME` states per output
-//! frame around the cycle, small and grey, sRGB-encoded as the loop measure sees written
-//! frames ([`ignis_core::loopq`]); their cumulative RMS step is the loop's path length,
-//! and frame `k` of `N` shows the state where the path reaches `k / N` of its length
-//! ([`ignis_core::loopq::arc_times`]). Every step, the wrap included, then covers the same
-//! distance. The frames still show only states of the process, in the same order; only
+//! So the loop is re-timed. A cheap preview renders `PREVIEW_PER_FRAME` states per output
+//! frame around the cycle, small, grey and sRGB-encoded as the loop measure sees written
+//! frames ([`ignis_core::loopq`]). Joined by straight segments (pixel blends, standing in
+//! for the state blends rendered between them) they form a closed path. A walk from frame
+//! 0 places each next frame where the RMS distance from the previous one first reaches a
+//! step length `L`; the smallest `L` that fits the loop's frames is found by bisection, so
+//! every step is `L` and the wrap what is left, at most `L`, which a few equalising
+//! sweeps share among the frames around the seam. Where the walk cannot apply (a still
+//! loop) the frames are spaced evenly along the path ([`ignis_core::loopq::arc_times`]).
+//! Last, the frames are rendered at the measure's own size
+//! ([`ignis_core::loopq::metric_size`]) and any step still over `EVEN_OUT` × the median
+//! is evened out with its neighbour on those renders — the small preview misses detail
+//! the measure sees. The frames show only states of the process, in the same order; only
 //! their spacing in time changes.
 //!
 //! The timing depends on the output size (the preview has its aspect), the model, the
@@ -21,19 +28,15 @@
 //! the full render's frames.
 
 use super::Synthesiser;
-use crate::model::FlameModel;
-use crate::shape::{render_into, Placement, ShapeParams};
-use ignis_core::loopq::{arc_times, area_resize};
+use ignis_core::loopq::{arc_times, metric_size};
 use ignis_core::palette::linear_to_srgb;
 use ignis_core::{GrayFrame, Size};
 
 /// Preview states per output frame: the walk places frames between them on pixel blends
 /// of neighbouring previews, which stand in for the state blends rendered there only when
-/// the previews are this close (4 per frame left steps up to 1.43× the median on a model
-/// of `candle.mp4`, 8 keep them within 1.16×).
+/// the previews are close (figures in `benches/README.md`).
 const PREVIEW_PER_FRAME: usize = 8;
-/// Width of the preview frames in pixels (at most the output's width; height to its
-/// aspect).
+/// Width of the walk's previews in pixels (at most the output's; height to its aspect).
 const PREVIEW_WIDTH: u32 = 32;
 
 impl Synthesiser<'_> {
@@ -62,41 +65,16 @@ impl Synthesiser<'_> {
         }
     }
 
-    /// Renders `raw` as [`Synthesiser::render_raw`] does, from the preview's small
-    /// eigenflames.
-    fn render_preview(&mut self, pv: &mut Preview, at: f64, out: &mut GrayFrame) {
-        self.apply_controls(at);
-        let place = self.place_from(pv.placement, out.size());
-        let (shape, w) = self.model.split(&self.shown);
-        pv.normalised.copy_from_slice(&pv.mean);
-        for (b, &wi) in pv.basis.iter().zip(&w) {
-            for (o, &v) in pv.normalised.iter_mut().zip(b) {
-                *o += wi * v;
-            }
-        }
-        render_into(
-            &pv.normalised,
-            &shape,
-            &place,
-            &pv.params,
-            &mut self.scratch,
-            out,
-        );
-        self.expose(out);
-    }
-
     /// The process time of each of the loop's frames at constant measured speed.
     fn loop_times_for(&mut self, size: Size) -> Vec<f64> {
         let n = self.loop_frames as usize;
         let steps = self.looped.as_ref().map_or(0, |s| s.len()) as f64;
         let m = PREVIEW_PER_FRAME * n;
-        let psize = preview_size(size);
-        let mut frame = GrayFrame::new(psize);
-        let mut pv = Preview::of(self.model, psize);
+        let mut frame = GrayFrame::new(preview_size(size));
         let grid: Vec<Vec<f32>> = (0..m)
             .map(|j| {
                 self.set_loop_state(j as f64 * steps / m as f64);
-                self.render_preview(&mut pv, j as f64 / PREVIEW_PER_FRAME as f64, &mut frame);
+                self.render_raw(j as f64 / PREVIEW_PER_FRAME as f64, &mut frame);
                 encode(&frame)
             })
             .collect();
@@ -104,16 +82,89 @@ impl Synthesiser<'_> {
         for j in 0..m {
             arc.push(arc[j] + dist(&grid[j], &grid[(j + 1) % m]));
         }
-        let pos = equal_steps(&grid, &arc, n).unwrap_or_else(|| {
+        let mut pos = equal_steps(&grid, &arc, n).unwrap_or_else(|| {
             // a still loop, or one the walk cannot split: constant speed along the path
             arc_times(&arc, (0..n).map(|k| k as f64 / n as f64))
                 .into_iter()
                 .map(|u| u * m as f64)
                 .collect()
         });
+        self.even_out(&mut pos, m, &mut GrayFrame::new(metric_size(size)));
         pos.into_iter().map(|x| x * steps / m as f64).collect()
     }
+
+    /// The preview frame at grid position `pos` of a grid of `m` points, rendered from the
+    /// state there (not a pixel blend).
+    fn preview_at(&mut self, pos: f64, m: usize, frame: &mut GrayFrame) -> Vec<f32> {
+        let steps = self.looped.as_ref().map_or(0, |s| s.len()) as f64;
+        let k = m as f64 / f64::from(self.loop_frames);
+        self.set_loop_state(pos * steps / m as f64);
+        self.render_raw(pos / k, frame);
+        encode(frame)
+    }
+
+    /// Checks the walk's frames on previews rendered from their states: each step longer
+    /// than `EVEN_OUT` × the median moves its frame other than frame 0 to where its two
+    /// steps are equal (a bisection on rendered previews), a few passes over the loop.
+    fn even_out(&mut self, pos: &mut [f64], m: usize, frame: &mut GrayFrame) {
+        let n = pos.len();
+        let mut img: Vec<Vec<f32>> = pos.iter().map(|&p| self.preview_at(p, m, frame)).collect();
+        let step = |img: &[Vec<f32>], k: usize| dist(&img[k], &img[(k + 1) % n]);
+        let mut steps: Vec<f64> = (0..n).map(|k| step(&img, k)).collect();
+        let med = ignis_core::loopq::median(&mut steps.clone());
+        for _ in 0..EVEN_OUT_PASSES {
+            for k in 0..n {
+                if steps[k] <= EVEN_OUT * med {
+                    continue;
+                }
+                // move the end of step k that is not frame 0, towards its shorter step
+                let j = if (k + 1) % n != 0 && steps[(k + 1) % n] < steps[(k + n - 1) % n] {
+                    (k + 1) % n
+                } else if k != 0 {
+                    k
+                } else {
+                    1
+                };
+                let (a, b) = (pos[j - 1], pos.get(j + 1).copied().unwrap_or(m as f64));
+                let (ia, ib) = (img[j - 1].clone(), img[(j + 1) % n].clone());
+                let (mut lo, mut hi) = (a, b);
+                let mut best = img[j].clone();
+                for _ in 0..EVEN_OUT_BISECTIONS {
+                    let x = 0.5 * (lo + hi);
+                    let ix = self.preview_at(x, m, frame);
+                    if dist(&ia, &ix) < dist(&ix, &ib) {
+                        lo = x;
+                    } else {
+                        hi = x;
+                    }
+                    best = ix;
+                }
+                pos[j] = 0.5 * (lo + hi);
+                img[j] = best;
+                steps[j - 1] = step(&img, j - 1);
+                steps[j] = step(&img, j);
+            }
+        }
+    }
 }
+
+/// The walk's preview size for output frames of `size`: [`PREVIEW_WIDTH`] wide (or the
+/// output's width when narrower), height to the output's aspect, at least 2.
+fn preview_size(size: Size) -> Size {
+    let w = PREVIEW_WIDTH.min(size.width).max(1);
+    let h = (f64::from(w) * f64::from(size.height) / f64::from(size.width)).round() as u32;
+    Size {
+        width: w,
+        height: h.max(2),
+    }
+}
+
+/// Steps longer than this many times the median are evened out with their neighbour.
+const EVEN_OUT: f64 = 1.1;
+/// Passes of [`Synthesiser::even_out`] over the loop.
+const EVEN_OUT_PASSES: usize = 2;
+/// Rendered previews per evened-out frame.
+const EVEN_OUT_BISECTIONS: usize = 8;
 
 /// `n` positions on the closed preview path (in grid steps from grid point 0, the first
 /// 0) whose consecutive preview frames are equally far apart: the smallest step length
@@ -346,60 +397,5 @@ fn walk(grid: &[Vec<f32>], arc: &[f64], chord: f64, n: usize) -> Option<Vec<f64>
             return None;
         }
         out.push(pos);
-    }
-}
-
-/// The model's mean flame and eigenflames area-averaged down to [`PREVIEW_NORM`]² (the
-/// reconstruction is linear, so this is the small image of the full reconstruction).
-struct Preview {
-    params: ShapeParams,
-    mean: Vec<f32>,
-    basis: Vec<Vec<f32>>,
-    normalised: Vec<f32>,
-    /// The model's placement for the preview's size.
-    placement: Placement,
-}
-
-impl Preview {
-    fn of(model: &FlameModel, size: Size) -> Preview {
-        let ns = model.shape.norm_size;
-        let ps = PREVIEW_NORM.min(ns);
-        let sq = |s: u32| Size {
-            width: s,
-            height: s,
-        };
-        let (full, small) = (sq(ns), sq(ps));
-        let shrink = |v: Vec<f32>| -> Vec<f32> {
-            let f = GrayFrame::from_vec(full, v).expect("norm_size² values");
-            area_resize(&f, small).data().to_vec()
-        };
-        let pca = &model.pca;
-        let basis = (0..pca.n_components())
-            .map(|e| shrink((0..pca.n_pixels()).map(|i| pca.components[(i, e)]).collect()))
-            .collect();
-        Preview {
-            params: ShapeParams {
-                norm_size: ps,
-                ..model.shape.clone()
-            },
-            mean: shrink(pca.mean.clone()),
-            basis,
-            normalised: vec![0.0; (ps * ps) as usize],
-            placement: model.placement_for(size),
-        }
-    }
-}
-
-/// Side of the preview's normalised images.
-const PREVIEW_NORM: u32 = 16;
-
-/// The preview's size for output frames of `size`: [`PREVIEW_WIDTH`] wide (or the
-/// output's width when narrower), height to the output's aspect, at least 2.
-fn preview_size(size: Size) -> Size {
-    let w = PREVIEW_WIDTH.min(size.width).max(1);
-    let h = (f64::from(w) * f64::from(size.height) / f64::from(size.width)).round() as u32;
-    Size {
-        width: w,
-        height: h.max(2),
     }
 }
