@@ -180,6 +180,8 @@ pub struct Synthesiser<'m> {
     looped: Option<Vec<Vec<f64>>>,
     /// A loop's period in output frames.
     loop_frames: u32,
+    /// The mean flame's extent below its centroid, in `σ_v` ([`Synthesiser::place`]).
+    below: f64,
     /// The process time (in steps, `0..states`) of each of a loop's frames, re-timed to
     /// constant speed for one output size ([`looptime`]).
     loop_times: Option<(Size, Vec<f64>)>,
@@ -230,6 +232,7 @@ impl<'m> Synthesiser<'m> {
             looped: None,
             loop_frames: 0,
             loop_times: None,
+            below: model.mean_extent().0,
             rate,
         })
     }
@@ -398,19 +401,22 @@ impl<'m> Synthesiser<'m> {
         self.expose(out);
     }
 
-    /// Where `raw` is drawn in a frame of `size`: the model's placement, with the centroid
-    /// moved up by the extra height a lengthened or scaled flame has below it, so its base
-    /// stays where it was.
+    /// Where the current flame (`shown`) is drawn in a frame of `size`: with its base
+    /// where the model's mean flame has its base ([`FlameModel::placement_for`]), so a
+    /// taller state, or a lengthened or scaled one, grows up from the fuel rather than
+    /// about its centroid. The state holds no position, only the height `σ_v` about the
+    /// centroid; a real flame's base stays on its wick or log while the tip moves, so
+    /// anchoring the centroid instead would bob the whole flame up and down (its base off
+    /// the fuel, or through the frame's bottom edge) as `σ_v` varies. The base lies
+    /// `below` `σ_v` under the centroid along the flame's axis (the mean flame's extent,
+    /// [`FlameModel::mean_extent`]).
     fn place(&self, size: Size) -> Placement {
-        self.place_from(self.model.placement_for(size), size)
-    }
-
-    /// [`Synthesiser::place`] from the model's placement for `size`.
-    fn place_from(&self, mut place: Placement, size: Size) -> Placement {
-        let base_drop = self.model.shape.below * 0.5;
-        let grow = self.controls.height * self.controls.scale - 1.0;
-        let h0 = self.raw[self.model.shape.n_path + self.model.shape.n_width] * size.height as f64;
-        place.cy -= grow * base_drop * h0;
+        let mut place = self.model.placement_for(size);
+        let i = self.model.shape.n_path + self.model.shape.n_width;
+        let h = size.height as f64;
+        let d = self.below * (self.shown[i] - self.model.state_mean[i]) * h;
+        place.cx += d * place.tilt.sin();
+        place.cy -= d * place.tilt.cos();
         place
     }
 

@@ -128,7 +128,7 @@ impl Synthesiser<'_> {
                 let (a, b) = (pos[j - 1], pos.get(j + 1).copied().unwrap_or(m as f64));
                 let (ia, ib) = (img[j - 1].clone(), img[(j + 1) % n].clone());
                 let (mut lo, mut hi) = (a, b);
-                let mut best = img[j].clone();
+                let (mut best, mut at) = (img[j].clone(), pos[j]);
                 for _ in 0..EVEN_OUT_BISECTIONS {
                     let x = 0.5 * (lo + hi);
                     let ix = self.preview_at(x, m, frame);
@@ -137,12 +137,22 @@ impl Synthesiser<'_> {
                     } else {
                         hi = x;
                     }
-                    best = ix;
+                    (best, at) = (ix, x);
                 }
-                pos[j] = 0.5 * (lo + hi);
-                img[j] = best;
-                steps[j - 1] = step(&img, j - 1);
-                steps[j] = step(&img, j);
+                let before = (
+                    steps[j - 1].max(steps[j]),
+                    pos[j],
+                    std::mem::replace(&mut img[j], best),
+                );
+                pos[j] = at;
+                let (s0, s1) = (step(&img, j - 1), step(&img, j));
+                if s0.max(s1) < before.0 {
+                    (steps[j - 1], steps[j]) = (s0, s1);
+                } else {
+                    // no better: keep the frame where it was
+                    pos[j] = before.1;
+                    img[j] = before.2;
+                }
             }
         }
     }
@@ -162,7 +172,7 @@ fn preview_size(size: Size) -> Size {
 /// Steps longer than this many times the median are evened out with their neighbour.
 const EVEN_OUT: f64 = 1.1;
 /// Passes of [`Synthesiser::even_out`] over the loop.
-const EVEN_OUT_PASSES: usize = 2;
+const EVEN_OUT_PASSES: usize = 4;
 /// Rendered previews per evened-out frame.
 const EVEN_OUT_BISECTIONS: usize = 8;
 
