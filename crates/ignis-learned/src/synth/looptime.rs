@@ -170,11 +170,11 @@ fn preview_size(size: Size) -> Size {
 }
 
 /// Steps longer than this many times the median are evened out with their neighbour.
-const EVEN_OUT: f64 = 1.1;
+const EVEN_OUT: f64 = 1.15;
 /// Passes of [`Synthesiser::even_out`] over the loop.
-const EVEN_OUT_PASSES: usize = 4;
+const EVEN_OUT_PASSES: usize = 3;
 /// Rendered previews per evened-out frame.
-const EVEN_OUT_BISECTIONS: usize = 8;
+const EVEN_OUT_BISECTIONS: usize = 6;
 
 /// `n` positions on the closed preview path (in grid steps from grid point 0, the first
 /// 0) whose consecutive preview frames are equally far apart: the smallest step length
