@@ -70,7 +70,13 @@ impl Synthesiser<'_> {
         let n = self.loop_frames as usize;
         let steps = self.looped.as_ref().map_or(0, |s| s.len()) as f64;
         let m = PREVIEW_PER_FRAME * n;
-        let mut frame = GrayFrame::new(preview_size(size));
+        let (small, metric) = (preview_size(size), metric_size(size));
+        let per_frame = PREVIEW_PER_FRAME * small.pixels() + metric.pixels();
+        if n.saturating_mul(per_frame) > MAX_PREVIEW_VALUES {
+            // too long a loop to preview within the memory bound: even times
+            return (0..n).map(|k| k as f64 * steps / n as f64).collect();
+        }
+        let mut frame = GrayFrame::new(small);
         let grid: Vec<Vec<f32>> = (0..m)
             .map(|j| {
                 self.set_loop_state(j as f64 * steps / m as f64);
@@ -89,7 +95,7 @@ impl Synthesiser<'_> {
                 .map(|u| u * m as f64)
                 .collect()
         });
-        self.even_out(&mut pos, m, &mut GrayFrame::new(metric_size(size)));
+        self.even_out(&mut pos, m, &mut GrayFrame::new(metric));
         pos.into_iter().map(|x| x * steps / m as f64).collect()
     }
 
@@ -168,6 +174,11 @@ fn preview_size(size: Size) -> Size {
         height: h.max(2),
     }
 }
+
+/// The most preview values a loop's timing holds at once (the walk's previews and the
+/// even-out's metric-size renders): 128 M (512 MB), a 3,000-frame loop at 256² takes 74 M.
+/// Longer loops keep even times.
+const MAX_PREVIEW_VALUES: usize = 128 << 20;
 
 /// Steps longer than this many times the median are evened out with their neighbour.
 const EVEN_OUT: f64 = 1.15;
