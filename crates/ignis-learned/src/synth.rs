@@ -253,8 +253,10 @@ impl<'m> Synthesiser<'m> {
 
     /// As [`Synthesiser::looping`], for output at `output_fps` (see
     /// [`Synthesiser::new_at`]): the loop holds the whole number of process steps nearest
-    /// to `frames` output frames' time, and output frame `t` shows the loop's state at
-    /// `t · steps / frames`, interpolated cyclically, so the period is exactly `frames`.
+    /// to `frames` output frames' time, and output frame `t` shows the loop's state at a
+    /// time re-timed to constant measured speed for the output size (`synth/looptime.rs`:
+    /// every step, the wrap included, about as long as the others), interpolated
+    /// cyclically, so the period is exactly `frames`.
     pub fn looping_at(
         model: &'m FlameModel,
         controls: Controls,
