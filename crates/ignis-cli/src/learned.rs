@@ -544,16 +544,19 @@ pub fn demo(ctx: &mut crate::demo::Demo) -> Result<()> {
             argv.extend(["--range".into(), r.to_string()]);
         }
         if name == "candle" {
-            // candle.mp4 shows the flame in a glass holder over glowing wax, with the
-            // flame reflected in the glass and the glass's lit rim crossing its lower part:
-            // crop to the flame above the rim (the rim would join the flame as a wide bar),
-            // drop the wax glow with a black level, and keep the frames the component test
-            // calls "several flames" (the reflection, which training then blacks out), or
-            // too few consecutive frames remain.
+            // candle.mp4 (480²) shows the flame in a glass holder over glowing wax, with
+            // its reflection in the glass above it (rows ~218–262) and the glass's lit rim
+            // crossing below it as a wide bright bar (rows ~330–336). The crop keeps the
+            // whole visible flame (rows ~270–330, its base is lost in the wax glow below)
+            // and stops above the rim; an earlier crop ended at row 316 and cut the flame
+            // in half, so the model learned a round stub sitting on the crop's edge. The
+            // black level drops the wax glow; the reflection stays in the crop and is
+            // blacked out as a second flame (--keep-multiple keeps those frames, or too
+            // few consecutive frames remain).
             argv.extend(
                 [
                     "--crop",
-                    "140,150,160,166",
+                    "190,200,100,130",
                     "--black-level",
                     "0.7",
                     "--keep-multiple",

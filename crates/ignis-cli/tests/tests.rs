@@ -1309,7 +1309,7 @@ mod learned {
             "--range",
             "0..90",
             "--crop",
-            "140,150,160,166",
+            "190,200,100,130",
             "--black-level",
             "0.7",
             "--keep-multiple",

@@ -178,7 +178,16 @@ pub struct Synthesiser<'m> {
     /// A looping synthesiser's states, played in order and over again
     /// ([`Synthesiser::looping`]).
     looped: Option<Vec<Vec<f64>>>,
+    /// A loop's period in output frames.
+    loop_frames: u32,
+    /// The mean flame's extent below its centroid, in `σ_v` ([`Synthesiser::place`]).
+    below: f64,
+    /// The process time (in steps, `0..states`) of each of a loop's frames, re-timed to
+    /// constant speed for one output size ([`looptime`]).
+    loop_times: Option<(Size, Vec<f64>)>,
 }
+
+mod looptime;
 
 /// The most state values a loop may hold (frames × state dimension): 64 M (512 MB).
 const MAX_LOOP_VALUES: usize = 64 << 20;
@@ -221,6 +230,9 @@ impl<'m> Synthesiser<'m> {
             t: 0,
             exposure: exposure(model),
             looped: None,
+            loop_frames: 0,
+            loop_times: None,
+            below: model.mean_extent().0,
             rate,
         })
     }
@@ -241,8 +253,10 @@ impl<'m> Synthesiser<'m> {
 
     /// As [`Synthesiser::looping`], for output at `output_fps` (see
     /// [`Synthesiser::new_at`]): the loop holds the whole number of process steps nearest
-    /// to `frames` output frames' time, and output frame `t` shows the loop's state at
-    /// `t · steps / frames`, interpolated cyclically, so the period is exactly `frames`.
+    /// to `frames` output frames' time, and output frame `t` shows the loop's state at a
+    /// time re-timed to constant measured speed for the output size (`synth/looptime.rs`:
+    /// every step, the wrap included, about as long as the others), interpolated
+    /// cyclically, so the period is exactly `frames`.
     pub fn looping_at(
         model: &'m FlameModel,
         controls: Controls,
@@ -271,6 +285,7 @@ impl<'m> Synthesiser<'m> {
         let states = model.arp.simulate_loop(&start, steps, seed)?;
         s.rate = steps as f64 / frames as f64;
         s.looped = Some(states);
+        s.loop_frames = frames;
         Ok(s)
     }
 
@@ -314,7 +329,12 @@ impl<'m> Synthesiser<'m> {
 
     /// Sets `raw` to the state at the next output frame's time: process step
     /// `i = ⌊frame · rate⌋` and, between steps, the linear blend towards step `i + 1`.
-    fn frame_state(&mut self) {
+    /// A loop's frames are instead at their re-timed times ([`looptime`]) for `size`.
+    fn frame_state(&mut self, size: Size) {
+        if self.looped.is_some() {
+            self.loop_frame_state(size);
+            return;
+        }
         let tau = self.frame as f64 * self.rate;
         let i = tau.floor() as u64;
         let frac = tau - i as f64;
@@ -334,10 +354,16 @@ impl<'m> Synthesiser<'m> {
 
     /// The current output frame's state with the controls applied (what is rendered).
     pub fn controlled_state(&mut self) -> &[f64] {
+        self.apply_controls(self.frame as f64);
+        &self.shown
+    }
+
+    /// Sets `shown` to `raw` with the controls applied, the wind taken at output frame `at`.
+    fn apply_controls(&mut self, at: f64) {
         let s = &self.model.shape;
         let (np, nw) = (s.n_path, s.n_width);
         self.shown.copy_from_slice(&self.raw);
-        let wind = self.controls.wind.at(self.frame as f64);
+        let wind = self.controls.wind.at(at);
         for i in 0..np {
             let t = (i as f64 + 0.5) / np as f64;
             self.shown[i] += wind * t * t / self.controls.height;
@@ -348,20 +374,19 @@ impl<'m> Synthesiser<'m> {
         }
         let h = &mut self.shown[np + nw];
         *h = (*h * self.controls.height * self.controls.scale).max(1e-4);
-        &self.shown
     }
 
     /// Samples the next state and renders it into `out` at the model's mean placement.
     pub fn next_frame_into(&mut self, out: &mut GrayFrame) {
-        self.frame_state();
-        self.controlled_state();
-        let mut place = self.model.placement_for(out.size());
-        // Scaling and lengthening keep the flame's base where it was: move the centroid
-        // up by the extra height below it.
-        let base_drop = self.model.shape.below * 0.5;
-        let grow = self.controls.height * self.controls.scale - 1.0;
-        let h0 = self.raw[self.model.shape.n_path + self.model.shape.n_width] * out.height() as f64;
-        place.cy -= grow * base_drop * h0;
+        self.frame_state(out.size());
+        self.render_raw(self.frame as f64, out);
+        self.frame += 1;
+    }
+
+    /// Renders `raw` with the controls (wind at output frame `at`) into `out`.
+    fn render_raw(&mut self, at: f64, out: &mut GrayFrame) {
+        self.apply_controls(at);
+        let place = self.place(out.size());
         let (shape, w) = self.model.split(&self.shown);
         self.normalised.resize(self.model.pca.n_pixels(), 0.0);
         self.model
@@ -375,11 +400,34 @@ impl<'m> Synthesiser<'m> {
             &mut self.scratch,
             out,
         );
+        self.expose(out);
+    }
+
+    /// Where the current flame (`shown`) is drawn in a frame of `size`: with its base
+    /// where the model's mean flame has its base ([`FlameModel::placement_for`]), so a
+    /// taller state, or a lengthened or scaled one, grows up from the fuel rather than
+    /// about its centroid. The state holds no position, only the height `σ_v` about the
+    /// centroid; a real flame's base stays on its wick or log while the tip moves, so
+    /// anchoring the centroid instead would bob the whole flame up and down (its base off
+    /// the fuel, or through the frame's bottom edge) as `σ_v` varies. The base lies
+    /// `below` `σ_v` under the centroid along the flame's axis (the mean flame's extent,
+    /// [`FlameModel::mean_extent`]).
+    fn place(&self, size: Size) -> Placement {
+        let mut place = self.model.placement_for(size);
+        let i = self.model.shape.n_path + self.model.shape.n_width;
+        let h = size.height as f64;
+        let d = self.below * (self.shown[i] - self.model.state_mean[i]) * h;
+        place.cx += d * place.tilt.sin();
+        place.cy -= d * place.tilt.cos();
+        place
+    }
+
+    /// Applies the model's [`exposure`] to a rendered frame.
+    fn expose(&self, out: &mut GrayFrame) {
         if self.exposure != 1.0 {
             let e = self.exposure;
             out.data_mut().iter_mut().for_each(|v| *v *= e);
         }
-        self.frame += 1;
     }
 
     /// Renders `frames` frames of `size` (a convenience over [`Self::next_frame_into`]).

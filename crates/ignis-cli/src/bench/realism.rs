@@ -269,7 +269,7 @@ fn learned_row(
         "--range",
         "0..300",
         "--crop",
-        "140,150,160,166",
+        "190,200,100,130",
         "--black-level",
         "0.7",
         "--keep-multiple",

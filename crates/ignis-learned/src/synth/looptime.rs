@@ -1,0 +1,422 @@
+//! Constant-speed timing of a loop's frames.
+//!
+//! A loop's states are a bridge sample of the learned process ([`crate::Arp::simulate_loop`])
+//! and every output frame shows the state at a continuous process time, interpolated
+//! between the two steps around it. Sampled at evenly spaced times, the frames inherit
+//! the process's own uneven speed: measured on a model of `candle.mp4`, steps between
+//! consecutive frames spread up to 2.2× the median step, and the step across the seam is
+//! as likely as any other to be one of the large ones. Played as a loop, the fast parts
+//! read as jumps.
+//!
+//! So the loop is re-timed. A cheap preview renders `PREVIEW_PER_FRAME` states per output
+//! frame around the cycle, small, grey and sRGB-encoded as the loop measure sees written
+//! frames ([`ignis_core::loopq`]). Joined by straight segments (pixel blends, standing in
+//! for the state blends rendered between them) they form a closed path. A walk from frame
+//! 0 places each next frame where the RMS distance from the previous one first reaches a
+//! step length `L`; the smallest `L` that fits the loop's frames is found by bisection, so
+//! every step is `L` and the wrap what is left, at most `L`, which a few equalising
+//! sweeps share among the frames around the seam. Where the walk cannot apply (a still
+//! loop) the frames are spaced evenly along the path ([`ignis_core::loopq::arc_times`]).
+//! Last, the frames are rendered at the measure's own size
+//! ([`ignis_core::loopq::metric_size`]) and any step still over `EVEN_OUT` × the median
+//! is evened out with its neighbour on those renders — the small preview misses detail
+//! the measure sees. The frames show only states of the process, in the same order; only
+//! their spacing in time changes.
+//!
+//! The timing depends on the output size (the preview has its aspect), the model, the
+//! controls and the seed, never on which frames are rendered, so a chunk of a loop equals
+//! the full render's frames.
+
+use super::Synthesiser;
+use ignis_core::loopq::{arc_times, metric_size};
+use ignis_core::palette::linear_to_srgb;
+use ignis_core::{GrayFrame, Size};
+
+/// Preview states per output frame: the walk places frames between them on pixel blends
+/// of neighbouring previews, which stand in for the state blends rendered there only when
+/// the previews are close (figures in `benches/README.md`).
+const PREVIEW_PER_FRAME: usize = 8;
+/// Width of the walk's previews in pixels (at most the output's; height to its aspect).
+const PREVIEW_WIDTH: u32 = 32;
+
+impl Synthesiser<'_> {
+    /// Sets `raw` to a loop's state for the next output frame, re-timing the loop for
+    /// `size` first when it has not been timed for that size.
+    pub(super) fn loop_frame_state(&mut self, size: Size) {
+        if self.loop_times.as_ref().map(|(s, _)| *s) != Some(size) {
+            let times = self.loop_times_for(size);
+            self.loop_times = Some((size, times));
+        }
+        let times = &self.loop_times.as_ref().expect("just set").1;
+        let tau = times[(self.frame % u64::from(self.loop_frames)) as usize];
+        self.set_loop_state(tau);
+    }
+
+    /// Sets `raw` to the loop's state at process time `tau` (cyclic), linear between steps.
+    fn set_loop_state(&mut self, tau: f64) {
+        let states = self.looped.as_ref().expect("a looping synthesiser");
+        let len = states.len();
+        let i = tau.floor();
+        let frac = tau - i;
+        let i = (i as usize) % len;
+        let (a, b) = (&states[i], &states[(i + 1) % len]);
+        for ((r, &a), &b) in self.raw.iter_mut().zip(a).zip(b) {
+            *r = a + frac * (b - a);
+        }
+    }
+
+    /// The process time of each of the loop's frames at constant measured speed.
+    fn loop_times_for(&mut self, size: Size) -> Vec<f64> {
+        let n = self.loop_frames as usize;
+        let steps = self.looped.as_ref().map_or(0, |s| s.len()) as f64;
+        let m = PREVIEW_PER_FRAME * n;
+        let (small, metric) = (preview_size(size), metric_size(size));
+        let per_frame = PREVIEW_PER_FRAME * small.pixels() + metric.pixels();
+        if n.saturating_mul(per_frame) > MAX_PREVIEW_VALUES {
+            // too long a loop to preview within the memory bound: even times
+            return (0..n).map(|k| k as f64 * steps / n as f64).collect();
+        }
+        let mut frame = GrayFrame::new(small);
+        let grid: Vec<Vec<f32>> = (0..m)
+            .map(|j| {
+                self.set_loop_state(j as f64 * steps / m as f64);
+                self.render_raw(j as f64 / PREVIEW_PER_FRAME as f64, &mut frame);
+                encode(&frame)
+            })
+            .collect();
+        let mut arc = vec![0.0];
+        for j in 0..m {
+            arc.push(arc[j] + dist(&grid[j], &grid[(j + 1) % m]));
+        }
+        let mut pos = equal_steps(&grid, &arc, n).unwrap_or_else(|| {
+            // a still loop, or one the walk cannot split: constant speed along the path
+            arc_times(&arc, (0..n).map(|k| k as f64 / n as f64))
+                .into_iter()
+                .map(|u| u * m as f64)
+                .collect()
+        });
+        self.even_out(&mut pos, m, &mut GrayFrame::new(metric));
+        pos.into_iter().map(|x| x * steps / m as f64).collect()
+    }
+
+    /// The preview frame at grid position `pos` of a grid of `m` points, rendered from the
+    /// state there (not a pixel blend).
+    fn preview_at(&mut self, pos: f64, m: usize, frame: &mut GrayFrame) -> Vec<f32> {
+        let steps = self.looped.as_ref().map_or(0, |s| s.len()) as f64;
+        let k = m as f64 / f64::from(self.loop_frames);
+        self.set_loop_state(pos * steps / m as f64);
+        self.render_raw(pos / k, frame);
+        encode(frame)
+    }
+
+    /// Checks the walk's frames on previews rendered from their states: each step longer
+    /// than `EVEN_OUT` × the median moves its frame other than frame 0 to where its two
+    /// steps are equal (a bisection on rendered previews), a few passes over the loop.
+    fn even_out(&mut self, pos: &mut [f64], m: usize, frame: &mut GrayFrame) {
+        let n = pos.len();
+        let mut img: Vec<Vec<f32>> = pos.iter().map(|&p| self.preview_at(p, m, frame)).collect();
+        let step = |img: &[Vec<f32>], k: usize| dist(&img[k], &img[(k + 1) % n]);
+        let mut steps: Vec<f64> = (0..n).map(|k| step(&img, k)).collect();
+        let med = ignis_core::loopq::median(&mut steps.clone());
+        for _ in 0..EVEN_OUT_PASSES {
+            for k in 0..n {
+                if steps[k] <= EVEN_OUT * med {
+                    continue;
+                }
+                // move the end of step k that is not frame 0, towards its shorter step
+                let j = if (k + 1) % n != 0 && steps[(k + 1) % n] < steps[(k + n - 1) % n] {
+                    (k + 1) % n
+                } else if k != 0 {
+                    k
+                } else {
+                    1
+                };
+                let (a, b) = (pos[j - 1], pos.get(j + 1).copied().unwrap_or(m as f64));
+                let (ia, ib) = (img[j - 1].clone(), img[(j + 1) % n].clone());
+                let (mut lo, mut hi) = (a, b);
+                let (mut best, mut at) = (img[j].clone(), pos[j]);
+                for _ in 0..EVEN_OUT_BISECTIONS {
+                    let x = 0.5 * (lo + hi);
+                    let ix = self.preview_at(x, m, frame);
+                    if dist(&ia, &ix) < dist(&ix, &ib) {
+                        lo = x;
+                    } else {
+                        hi = x;
+                    }
+                    (best, at) = (ix, x);
+                }
+                let before = (
+                    steps[j - 1].max(steps[j]),
+                    pos[j],
+                    std::mem::replace(&mut img[j], best),
+                );
+                pos[j] = at;
+                let (s0, s1) = (step(&img, j - 1), step(&img, j));
+                if s0.max(s1) < before.0 {
+                    (steps[j - 1], steps[j]) = (s0, s1);
+                } else {
+                    // no better: keep the frame where it was
+                    pos[j] = before.1;
+                    img[j] = before.2;
+                }
+            }
+        }
+    }
+}
+
+/// The walk's preview size for output frames of `size`: [`PREVIEW_WIDTH`] wide (or the
+/// output's width when narrower), height to the output's aspect, at least 2.
+fn preview_size(size: Size) -> Size {
+    let w = PREVIEW_WIDTH.min(size.width).max(1);
+    let h = (f64::from(w) * f64::from(size.height) / f64::from(size.width)).round() as u32;
+    Size {
+        width: w,
+        height: h.max(2),
+    }
+}
+
+/// The most preview values a loop's timing holds at once (the walk's previews and the
+/// even-out's metric-size renders): 128 M (512 MB), a 3,000-frame loop at 256² takes 74 M.
+/// Longer loops keep even times.
+const MAX_PREVIEW_VALUES: usize = 128 << 20;
+
+/// Steps longer than this many times the median are evened out with their neighbour.
+const EVEN_OUT: f64 = 1.15;
+/// Passes of [`Synthesiser::even_out`] over the loop.
+const EVEN_OUT_PASSES: usize = 3;
+/// Rendered previews per evened-out frame.
+const EVEN_OUT_BISECTIONS: usize = 6;
+
+/// `n` positions on the closed preview path (in grid steps from grid point 0, the first
+/// 0) whose consecutive preview frames are equally far apart: the smallest step length
+/// whose [`walk`] fits `n` frames or fewer, found by bisection, the few frames short of `n`
+/// [`fill`]ed in and the seam [`relax`]ed. `None` for a path of zero length or when the
+/// walk falls more than [`MAX_FILL`] frames short.
+fn equal_steps(grid: &[Vec<f32>], arc: &[f64], n: usize) -> Option<Vec<f64>> {
+    let total = arc[arc.len() - 1];
+    if !(total > 1e-9) || n < 2 {
+        return None;
+    }
+    // A step of length L spans at least L of the path, so L = total / (n − 1) fits n
+    // frames or fewer; shrink it until more than n fit, then bisect.
+    let mut hi = total / (n - 1) as f64;
+    let mut best = walk(grid, arc, hi, n)?;
+    let mut lo = SHRINK * hi;
+    for _ in 0..40 {
+        match walk(grid, arc, lo, n) {
+            Some(p) => {
+                best = p;
+                hi = lo;
+                lo *= SHRINK;
+            }
+            None => break,
+        }
+    }
+    for _ in 0..BISECTIONS {
+        let mid = 0.5 * (lo + hi);
+        match walk(grid, arc, mid, n) {
+            Some(p) => {
+                best = p;
+                hi = mid;
+            }
+            None => lo = mid,
+        }
+    }
+    if best.len() + MAX_FILL < n {
+        return None;
+    }
+    fill(grid, &mut best, n);
+    relax(grid, &mut best);
+    Some(best)
+}
+
+/// The preview image at grid position `pos` (a pixel blend of the grid points around it).
+fn image_at(grid: &[Vec<f32>], pos: f64) -> Vec<f32> {
+    let m = grid.len();
+    let i = pos.floor();
+    let f = (pos - i) as f32;
+    let (a, b) = (&grid[(i as usize) % m], &grid[(i as usize + 1) % m]);
+    a.iter().zip(b).map(|(&x, &y)| x + f * (y - x)).collect()
+}
+
+/// Spreads the slack of the wrap step (the walk's remainder, shorter than its other steps)
+/// over the frames around the seam: each of them in turn moves to where its two steps are
+/// equal (Gauss–Seidel sweeps), so the seam is not a held frame. Frame 0 stays.
+fn relax(grid: &[Vec<f32>], pos: &mut [f64]) {
+    let n = pos.len();
+    let m = grid.len() as f64;
+    let w = (n / 4).min(SEAM_WINDOW);
+    let window: Vec<usize> = ((n - w)..n).chain(1..=w.min(n - 1)).collect();
+    for _ in 0..SEAM_SWEEPS {
+        for &k in &window {
+            let a = pos[k - 1];
+            let b = if k + 1 < n { pos[k + 1] } else { m };
+            let (ia, ib) = (image_at(grid, a), image_at(grid, b));
+            let (mut lo, mut hi) = (a, b);
+            for _ in 0..16 {
+                let x = 0.5 * (lo + hi);
+                let ix = image_at(grid, x);
+                if dist(&ia, &ix) < dist(&ix, &ib) {
+                    lo = x;
+                } else {
+                    hi = x;
+                }
+            }
+            pos[k] = 0.5 * (lo + hi);
+        }
+    }
+}
+
+/// Bisections of the walk's step length (to 2⁻¹⁴ of its bracket; the seam's relaxation
+/// spreads what is left over).
+const BISECTIONS: usize = 14;
+/// Factor by which the walk's step length is lowered until more than `n` frames fit.
+const SHRINK: f64 = 0.75;
+/// Frames on each side of the seam that share the wrap step's slack.
+const SEAM_WINDOW: usize = 8;
+/// Equalising sweeps over them.
+const SEAM_SWEEPS: usize = 16;
+
+/// Adds frames to a walk that placed fewer than `n` (its chord length fits `n + 1` but not
+/// `n`): each goes halfway along the largest remaining step, so no step grows.
+fn fill(grid: &[Vec<f32>], pos: &mut Vec<f64>, n: usize) {
+    let m = grid.len() as f64;
+    let step = |pos: &[f64], k: usize| {
+        let end = pos.get(k + 1).copied().unwrap_or(m);
+        dist(&image_at(grid, pos[k]), &image_at(grid, end))
+    };
+    let mut steps: Vec<f64> = (0..pos.len()).map(|k| step(pos, k)).collect();
+    while pos.len() < n {
+        let k = (0..steps.len())
+            .max_by(|&a, &b| steps[a].total_cmp(&steps[b]))
+            .unwrap_or(0);
+        let end = pos.get(k + 1).copied().unwrap_or(m);
+        pos.insert(k + 1, 0.5 * (pos[k] + end));
+        steps[k] = step(pos, k);
+        steps.insert(k + 1, step(pos, k + 1));
+    }
+}
+
+/// The most frames [`fill`] adds to a walk (the bisection ends with the walk at most a
+/// frame or two short of `n`).
+const MAX_FILL: usize = 8;
+
+/// A preview frame as the loop measure sees a written one: clamped to `0..=1` and
+/// sRGB-encoded (through a table of [`SRGB_STEPS`] + 1 points, linear between them).
+fn encode(frame: &GrayFrame) -> Vec<f32> {
+    static LUT: std::sync::OnceLock<Vec<f32>> = std::sync::OnceLock::new();
+    let lut = LUT.get_or_init(|| {
+        (0..=SRGB_STEPS)
+            .map(|i| linear_to_srgb(i as f32 / SRGB_STEPS as f32))
+            .collect()
+    });
+    frame
+        .data()
+        .iter()
+        .map(|&v| {
+            let x = v.clamp(0.0, 1.0) * SRGB_STEPS as f32;
+            let i = (x as usize).min(SRGB_STEPS - 1);
+            lut[i] + (lut[i + 1] - lut[i]) * (x - i as f32)
+        })
+        .collect()
+}
+
+/// Intervals of the sRGB table.
+const SRGB_STEPS: usize = 1024;
+
+/// Sum of squared differences of two preview frames (eight f32 lanes, summed in f64).
+fn sq_dist(a: &[f32], b: &[f32]) -> f64 {
+    let mut lanes = [0f32; 8];
+    let (ca, cb) = (a.chunks_exact(8), b.chunks_exact(8));
+    let tail: f64 = ca
+        .remainder()
+        .iter()
+        .zip(cb.remainder())
+        .map(|(&x, &y)| f64::from((x - y) * (x - y)))
+        .sum();
+    for (x, y) in ca.zip(cb) {
+        for l in 0..8 {
+            let d = x[l] - y[l];
+            lanes[l] += d * d;
+        }
+    }
+    lanes.iter().map(|&v| f64::from(v)).sum::<f64>() + tail
+}
+
+/// RMS difference of two preview frames.
+fn dist(a: &[f32], b: &[f32]) -> f64 {
+    let s: f64 = a
+        .iter()
+        .zip(b)
+        .map(|(&x, &y)| {
+            let d = f64::from(x - y);
+            d * d
+        })
+        .sum();
+    (s / a.len().max(1) as f64).sqrt()
+}
+
+/// Walks the closed polyline through `grid` (preview frames at evenly spaced times, the
+/// last joined back to the first) from grid point 0, placing each next frame where the
+/// straight-line (RMS) distance from the previous one first reaches `chord`; positions
+/// are in grid steps, between grid points on the segment (a pixel blend, the preview's
+/// model of the state blend rendered there). `None` when more than `n` frames fit.
+fn walk(grid: &[Vec<f32>], arc: &[f64], chord: f64, n: usize) -> Option<Vec<f64>> {
+    let m = grid.len();
+    let l2 = chord * chord * grid[0].len() as f64;
+    let mut cur: Vec<f32> = grid[0].clone();
+    let mut pos = 0.0f64;
+    let mut out = vec![0.0];
+    let mut j = 1;
+    let sq = sq_dist;
+    let len = grid[0].len() as f64;
+    loop {
+        // grid points less than `chord` along the path from cur are nearer than it
+        let i = (pos.floor() as usize).min(m - 1);
+        let at = arc[i] + (pos - i as f64) * (arc[i + 1] - arc[i]);
+        j = j.max(arc.partition_point(|&v| v - at < chord));
+        while j <= m {
+            let d2 = sq(&grid[j % m], &cur);
+            if d2 >= l2 {
+                break;
+            }
+            // points within chord − d of grid point j along the path are nearer than chord
+            let slack = chord - (d2 / len).sqrt();
+            let from = arc[j];
+            j = (j + 1).max(arc.partition_point(|&v| v - from < slack));
+        }
+        if j > m {
+            return Some(out);
+        }
+        // the segment into grid point j starts at cur when cur lies on it
+        let from_cur = pos > (j - 1) as f64;
+        let p0: &[f32] = if from_cur { &cur } else { &grid[j - 1] };
+        let p0_pos = if from_cur { pos } else { (j - 1) as f64 };
+        let g = &grid[j % m];
+        // |p0 + s (g − p0) − cur|² = l2
+        let (mut a, mut b, mut c) = (0.0, 0.0, -l2);
+        for ((&x0, &x1), &q) in p0.iter().zip(g.iter()).zip(cur.iter()) {
+            let d0 = f64::from(x0 - q);
+            let e = f64::from(x1 - x0);
+            a += e * e;
+            b += d0 * e;
+            c += d0 * d0;
+        }
+        let s = if a > 0.0 {
+            ((-b + (b * b - a * c).max(0.0).sqrt()) / a).clamp(0.0, 1.0)
+        } else {
+            1.0
+        };
+        let next: Vec<f32> = p0
+            .iter()
+            .zip(g.iter())
+            .map(|(&x0, &x1)| x0 + s as f32 * (x1 - x0))
+            .collect();
+        pos = p0_pos + s * (j as f64 - p0_pos);
+        cur = next;
+        if out.len() == n {
+            return None;
+        }
+        out.push(pos);
+    }
+}
