@@ -56,6 +56,11 @@ pub struct Args {
     /// Eigenfires kept in the cached database.
     #[arg(long, default_value_t = 40)]
     pub keep: usize,
+    /// Output frame size WIDTHxHEIGHT (default: the footage's own; for a .png flipbook
+    /// whose full-size cells do not fit the sheet limit, the largest size with the
+    /// footage's aspect that fits). Example: --size 960x540
+    #[arg(long, value_parser = crate::eigen::animate::parse_size)]
+    pub size: Option<Size>,
     #[command(flatten)]
     pub out: crate::output::OutputArgs,
 }
@@ -481,13 +486,20 @@ pub fn top_candidates(ev: &[Evaluated], top: usize) -> Vec<Evaluated> {
     out
 }
 
+/// Frames [`render`] writes for `best`.
+pub fn planned_frames(best: &Evaluated) -> usize {
+    loops::plan_with(&best.candidate, best.closing, &best.skips).len()
+}
+
 /// Renders `best` from the source `path` (window index 0 = source frame `first`) at the
-/// source's resolution, passing each output frame to `sink` in order. Decodes only
-/// source frames `start..end + m`; keeps the m head frames in memory.
+/// source's resolution or, given `scale`, with every source frame resized to it as it is
+/// decoded (before the closing's blend or morph), passing each output frame to `sink` in
+/// order. Decodes only source frames `start..end + m`; keeps the m head frames in memory.
 pub fn render(
     path: &Path,
     first: usize,
     best: &Evaluated,
+    scale: Option<Size>,
     sink: &mut dyn FnMut(&RgbaFrame) -> Result<()>,
 ) -> Result<()> {
     let c = best.candidate;
@@ -499,6 +511,7 @@ pub fn render(
             (first + c.start) as u64,
             Some((first + end) as u64),
         )),
+        scale,
         ..Default::default()
     };
     let mut reader =
@@ -618,10 +631,26 @@ pub struct LoopAsk {
     pub top: usize,
 }
 
-/// Searches, renders and writes a loop of window `first..` of `path` to `out`.
+/// Searches, renders and writes a loop of window `first..` of `path` to `out`, at the
+/// source's size ([`make_loop_sized`] with no `--size`).
 pub fn make_loop(
     src: &LoopFootage,
     ask: &LoopAsk,
+    out: &crate::output::OutputArgs,
+    g: &Global,
+) -> Result<Done> {
+    make_loop_sized(src, ask, None, out, g)
+}
+
+/// [`make_loop`] rendering the frames at `size` (the user's `--size`) or, without it, at
+/// the source's size, scaled down for a flipbook whose full-size cells do not fit the
+/// sheet limit ([`crate::output::OutputArgs::fit_flipbook`]). The frames are resized as
+/// they are decoded, before any blend or morph, and the size is settled (or refused)
+/// before anything is rendered.
+pub fn make_loop_sized(
+    src: &LoopFootage,
+    ask: &LoopAsk,
+    size: Option<Size>,
     out: &crate::output::OutputArgs,
     g: &Global,
 ) -> Result<Done> {
@@ -648,10 +677,19 @@ pub fn make_loop(
     let mut opts = out.write_options();
     opts.fps = fps;
     opts.loop_ = true;
+    if let Some(s) = size {
+        Size::new(s.width, s.height).context("--size")?;
+    }
+    let n = planned_frames(&chosen.best);
+    let fitted = out.fit_flipbook(n, size.unwrap_or(info.size), size.is_some(), &mut opts)?;
+    if let Some(note) = fitted.note() {
+        g.say(note);
+    }
+    let scale = (fitted.size != info.size).then_some(fitted.size);
     let t = Instant::now();
-    let mut w = out.create_with(info.size, &opts)?;
-    let pb = g.progress(chosen.best.candidate.len() as u64, "rendering");
-    render(path, first, &chosen.best, &mut |f| {
+    let mut w = out.create_with(fitted.size, &opts)?;
+    let pb = g.progress(n as u64, "rendering");
+    render(path, first, &chosen.best, scale, &mut |f| {
         pb.inc(1);
         out.push(&mut w, f)
     })?;
@@ -666,7 +704,7 @@ pub fn make_loop(
         chosen,
         measured,
         frames,
-        size: info.size,
+        size: fitted.size,
         render_s,
     })
 }
@@ -730,9 +768,10 @@ pub fn run(a: &Args, g: &Global) -> Result<()> {
         method,
         top: a.top,
     };
-    let d = make_loop(
+    let d = make_loop_sized(
         &LoopFootage::cached(&a.input, window.start, &c),
         &ask,
+        a.size,
         &a.out,
         g,
     )?;
@@ -813,7 +852,7 @@ pub fn eigen_length_loop(a: &crate::eigen::LoopArgs, g: &Global) -> Result<()> {
         method,
         top: a.top,
     };
-    let d = make_loop(&src, &ask, &a.out, g)?;
+    let d = make_loop_sized(&src, &ask, a.footage.size, &a.out, g)?;
     report(&d, window.start, g);
     Ok(())
 }
