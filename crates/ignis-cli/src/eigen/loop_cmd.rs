@@ -514,40 +514,53 @@ pub fn render(
         scale,
         ..Default::default()
     };
-    let mut reader =
+    let reader =
         ignis_media::open(path, &opts).with_context(|| format!("reading {}", path.display()))?;
-    // Window frame the reader gives next (left-out frames are read past).
-    let mut at = c.start;
-    let mut next = |want: usize| -> Result<RgbaFrame> {
-        loop {
-            let f = reader.next().transpose()?.with_context(|| {
-                format!("{} ended before frame {}", path.display(), first + want)
-            })?;
-            at += 1;
-            if at > want {
-                return Ok(f);
+    // Decoding (and resizing) runs on its own thread, a few frames ahead of the blends and
+    // the writer; dropping the receiver (an error here) stops it.
+    std::thread::scope(|scope| {
+        let (tx, rx) = std::sync::mpsc::sync_channel::<ignis_media::Result<RgbaFrame>>(3);
+        scope.spawn(move || {
+            for f in reader {
+                let failed = f.is_err();
+                if tx.send(f).is_err() || failed {
+                    break;
+                }
+            }
+        });
+        // Window frame the reader gives next (left-out frames are read past).
+        let mut at = c.start;
+        let mut next = |want: usize| -> Result<RgbaFrame> {
+            loop {
+                let f = rx.recv().ok().transpose()?.with_context(|| {
+                    format!("{} ended before frame {}", path.display(), first + want)
+                })?;
+                at += 1;
+                if at > want {
+                    return Ok(f);
+                }
+            }
+        };
+        let mut head: Vec<RgbaFrame> = Vec::with_capacity(m);
+        for i in c.start..c.start + m {
+            head.push(next(i)?);
+        }
+        for p in &plan {
+            match *p {
+                Planned::Src(i) => sink(&next(i)?)?,
+                Planned::Mix { from, to, w } => {
+                    let a = next(from)?;
+                    let b = &head[to - c.start];
+                    let f = match best.closing {
+                        Closing::Morph(_) => morph_rgba(&a, b, w)?,
+                        _ => blend_rgba(&a, b, w),
+                    };
+                    sink(&f)?;
+                }
             }
         }
-    };
-    let mut head: Vec<RgbaFrame> = Vec::with_capacity(m);
-    for i in c.start..c.start + m {
-        head.push(next(i)?);
-    }
-    for p in &plan {
-        match *p {
-            Planned::Src(i) => sink(&next(i)?)?,
-            Planned::Mix { from, to, w } => {
-                let a = next(from)?;
-                let b = &head[to - c.start];
-                let f = match best.closing {
-                    Closing::Morph(_) => morph_rgba(&a, b, w)?,
-                    _ => blend_rgba(&a, b, w),
-                };
-                sink(&f)?;
-            }
-        }
-    }
-    Ok(())
+        Ok(())
+    })
 }
 
 /// `(1 - w)·a + w·b` per channel (linear light).

@@ -672,19 +672,29 @@ fn commit(files: Vec<AtomicFile>) -> Result<Vec<PathBuf>> {
 }
 
 /// A sheet filled with `background` with every frame's pixels (`pixels(frame)`, `w × h`
-/// row-major) placed in its cell.
-fn sheet_of<S, T: Copy>(
+/// row-major) placed in its cell; each row of cells is filled in parallel (the same at
+/// any thread count).
+fn sheet_of<S: Sync, T: Copy + Send + Sync>(
     l: &Layout,
     frames: &[S],
     background: T,
     w: usize,
     h: usize,
-    pixels: impl Fn(&S) -> Vec<T>,
+    pixels: impl Fn(&S) -> Vec<T> + Sync,
 ) -> Vec<T> {
+    use rayon::prelude::*;
     let mut sheet = vec![background; l.sheet_width as usize * l.sheet_height as usize];
-    for (i, f) in frames.iter().enumerate() {
-        place(&mut sheet, l, i, &pixels(f), w, h);
-    }
+    let c = l.columns as usize;
+    let band = l.cell_height as usize * l.sheet_width as usize;
+    sheet
+        .par_chunks_mut(band)
+        .enumerate()
+        .for_each(|(r, cells)| {
+            for (k, f) in frames.iter().enumerate().skip(r * c).take(c) {
+                // Index within the band: the cell's column, row 0.
+                place(cells, l, k % c, &pixels(f), w, h);
+            }
+        });
     sheet
 }
 
@@ -742,8 +752,8 @@ impl Sink for FlipbookSink {
         let v = self.opts.variants as usize;
         let per_in = n as usize / v;
         let per = m as usize / v;
-        let frames: Vec<RgbaFrame> = if m == n {
-            self.frames.clone()
+        let frames: std::borrow::Cow<[RgbaFrame]> = if m == n {
+            std::borrow::Cow::Borrowed(&self.frames)
         } else {
             self.frames
                 .chunks(per_in)
@@ -797,10 +807,10 @@ impl Sink for FlipbookSink {
                 .map(|c| [c[0], c[1], c[2], c[3]])
                 .collect()
         });
-        let flat: Vec<u8> = colour.iter().flatten().copied().collect();
         files.push(encode_temp(&self.path, |wr| {
-            encode_png(wr, sheet_size, &flat).map_err(|e| e.to_string())
+            encode_png(wr, sheet_size, colour.as_flattened()).map_err(|e| e.to_string())
         })?);
+        drop(colour);
 
         // Motion vectors.
         let mut mv_meta = None;
