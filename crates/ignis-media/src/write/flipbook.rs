@@ -1183,4 +1183,57 @@ mod tests {
         let v: Vec<f32> = r.iter().map(|x| x.get(0, 0)[0]).collect();
         assert_eq!(v, [0.0, 0.5, 1.0, 1.5, 2.0, 2.5, 3.0]);
     }
+
+    /// Frames that fit keep their size; frames that do not get the largest size with the
+    /// same aspect that fits (one pixel more on the long side does not), with padding,
+    /// power-of-two sheets and a fixed column count; a limit too small is refused.
+    #[test]
+    fn fit_frame_is_the_largest_that_fits() {
+        let hd = Size::new(1920, 1080).unwrap();
+        let (s, why) = fit_frame(20, hd, &FlipbookOptions::default()).unwrap();
+        assert_eq!((s, why), (hd, None));
+        let cases = [
+            FlipbookOptions::default(),
+            FlipbookOptions {
+                max_size: Some(8192),
+                padding: 3,
+                ..Default::default()
+            },
+            FlipbookOptions {
+                max_size: Some(4096),
+                pot: true,
+                engine: Engine::Unreal,
+                ..Default::default()
+            },
+            FlipbookOptions {
+                max_size: Some(8192),
+                columns: Some(4),
+                ..Default::default()
+            },
+        ];
+        for opts in cases {
+            let (s, why) = fit_frame(97, hd, &opts).unwrap();
+            let why = why.expect("97 full-HD cells fit no sheet");
+            assert_eq!((why.width, why.height), (1920, 1080));
+            assert!(
+                (s.width as f64 / s.height as f64 - 16.0 / 9.0).abs() < 0.01,
+                "{s}"
+            );
+            let (l, m) = plan_layout(97, s, &opts).unwrap();
+            assert_eq!(m, 97);
+            let (max, px) = sheet_limit(&opts);
+            assert!(l.sheet_width <= max && l.sheet_height <= max);
+            assert!(l.sheet_width as u64 * l.sheet_height as u64 <= px);
+            let bigger = scaled_to(hd, s.width + 1);
+            assert!(plan_layout(97, bigger, &opts).is_err(), "{bigger} fits too");
+        }
+        let tiny = FlipbookOptions {
+            max_size: Some(100),
+            ..Default::default()
+        };
+        match fit_frame(97, hd, &tiny) {
+            Err(MediaError::LimitExceeded(m)) => assert!(m.contains("raise --max-size"), "{m}"),
+            other => panic!("{other:?}"),
+        }
+    }
 }
