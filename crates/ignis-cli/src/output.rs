@@ -57,8 +57,11 @@ pub struct OutputArgs {
     /// Flipbook: also write `x.exr`, the colour sheet in linear f32 (HDR, premultiplied).
     #[arg(long)]
     pub hdr: bool,
-    /// Flipbook: largest sheet side in pixels, e.g. 4096; the grid is chosen to fit, or the
-    /// command fails before writing anything.
+    /// Flipbook: largest sheet side in pixels (default 16384, the largest texture desktop
+    /// GPUs and the engines' importers take; a sheet also holds at most 64 Mi pixels), e.g.
+    /// 8192, or 4096 for mobile GPUs. The grid is chosen to fit; `ignis loop` scales its cells down
+    /// (aspect kept, JSON `scaled_from`) when full-size cells do not fit and no --size is
+    /// given; otherwise the command fails before writing anything.
     #[arg(long, value_name = "PIXELS")]
     pub max_size: Option<u32>,
     /// Flipbook: power-of-two sheet sides (power-of-two grids; extra pixels become padding).
@@ -123,6 +126,7 @@ impl OutputArgs {
                 motion: self.motion_vectors.then(flow_source),
                 heat: self.emission,
                 hdr: self.hdr,
+                scaled_from: None,
             },
             background: [0.0; 3],
             first_frame: 0,
@@ -179,6 +183,83 @@ impl OutputArgs {
         }
         ignis_media::create(&self.output, size, opts)
             .with_context(|| format!("creating {}", self.output.display()))
+    }
+}
+
+/// A flipbook's frame size, chosen before rendering by [`OutputArgs::fit_flipbook`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Fitted {
+    /// The size to render the frames at.
+    pub size: Size,
+    /// Set when `size` is the source size scaled down to fit the sheet limit.
+    pub scaled_from: Option<ignis_media::ScaledFrom>,
+}
+
+impl Fitted {
+    /// The line a command prints when the cells were scaled (`None` otherwise).
+    pub fn note(&self) -> Option<String> {
+        let s = self.scaled_from?;
+        Some(format!(
+            "cells {}, scaled from {}x{} to fit the {}x{} sheet limit (at most {} Mi pixels); \
+             choose the cell size with --size or the limit with --max-size, or write a frame \
+             sequence (-o dir/%04d.png) for full resolution",
+            self.size,
+            s.width,
+            s.height,
+            s.max_size,
+            s.max_size,
+            s.max_pixels >> 20
+        ))
+    }
+}
+
+impl OutputArgs {
+    /// For a command that renders `n` frames at a size of its choosing (`size`, the
+    /// source's own unless `explicit`, the user's `--size`): the size to render at.
+    ///
+    /// A flipbook whose full-size cells do not fit the sheet limit (`--max-size`, default
+    /// 16384 per side, and 64 Mi pixels) gets the largest cells with the same aspect that
+    /// fit ([`ignis_media::fit_frame`]), recorded in `opts` so the JSON's `scaled_from`
+    /// says so; an explicit size that does not fit is refused before anything is rendered,
+    /// as is a limit too small for any useful cell. Other formats: `size` unchanged.
+    pub fn fit_flipbook(
+        &self,
+        n: usize,
+        size: Size,
+        explicit: bool,
+        opts: &mut WriteOptions,
+    ) -> Result<Fitted> {
+        let format = match opts.format {
+            Some(f) => f,
+            None => Format::from_path(&self.output)?,
+        };
+        if format != Format::Flipbook {
+            return Ok(Fitted {
+                size,
+                scaled_from: None,
+            });
+        }
+        let n = u32::try_from(n).unwrap_or(u32::MAX);
+        let fb = &opts.flipbook;
+        if explicit {
+            ignis_media::write::plan_layout(n, size, fb).map_err(|e| {
+                anyhow::anyhow!(
+                    "--size {size}: {e}; a smaller --size, or no --size (the cells are then \
+                     scaled to fit), or a frame sequence (-o dir/%04d.png)"
+                )
+            })?;
+            return Ok(Fitted {
+                size,
+                scaled_from: None,
+            });
+        }
+        let (fit, scaled_from) = ignis_media::fit_frame(n, size, fb)
+            .with_context(|| format!("sizing the flipbook {}", self.output.display()))?;
+        opts.flipbook.scaled_from = scaled_from;
+        Ok(Fitted {
+            size: fit,
+            scaled_from,
+        })
     }
 }
 

@@ -1532,3 +1532,107 @@ mod classic_loops {
         }
     }
 }
+
+/// Issue 15: `ignis loop` to a flipbook whose full-size cells do not fit the sheet limit
+/// renders the frames at the largest cell size that fits (aspect kept) and says so; an
+/// explicit size that cannot fit is refused before anything is written.
+mod flipbook_fit {
+    use super::*;
+
+    /// A small synthetic clip (H.264 through the pure-cargo path, no ffmpeg needed): 60
+    /// frames of 64×48.
+    fn clip(dir: &Path) -> String {
+        let p = dir.join("clip.mp4");
+        let o = classic("64x48", "60", &["--seed", "3"], &p);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        p.to_str().unwrap().to_string()
+    }
+
+    fn png_size(p: &Path) -> (u32, u32) {
+        let s = ignis_media::probe(p).unwrap().size;
+        (s.width, s.height)
+    }
+
+    #[test]
+    fn loop_flipbook_cells_fit_the_sheet_limit() {
+        let t = tempfile::tempdir().unwrap();
+        let clip = clip(t.path());
+        let cache = t.path().join("cache");
+        let c = cache.to_str().unwrap();
+        let out = t.path().join("out");
+        std::fs::create_dir(&out).unwrap();
+        let run = |extra: &[&str], name: &str| {
+            let o = out.join(name);
+            let mut a = vec!["loop", &clip, "--length", "20", "--cache", c];
+            a.extend_from_slice(extra);
+            a.extend(["-o", o.to_str().unwrap()]);
+            (ignis(&a), o)
+        };
+        // 64×48 cells of ~20 frames do not fit 200×200 (12 cells do): scaled to fit.
+        let (r, png) = run(
+            &["--max-size", "200", "--engine", "unity", "--motion-vectors"],
+            "fit.png",
+        );
+        assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+        let said = String::from_utf8_lossy(&r.stdout).into_owned();
+        let m = read_json(&png.with_extension("json"));
+        let (fw, fh) = (
+            m["frame_width"].as_u64().unwrap(),
+            m["frame_height"].as_u64().unwrap(),
+        );
+        let n = m["frame_count"].as_u64().unwrap();
+        assert!(n > 12, "{n} frames would have fitted unscaled");
+        assert!(fw < 64 && fh < 48, "cells {fw}x{fh} not scaled");
+        assert!(
+            (fw as f64 / fh as f64 - 64.0 / 48.0).abs() < 0.1,
+            "aspect {fw}x{fh}"
+        );
+        assert_eq!(m["scaled_from"]["width"], 64);
+        assert_eq!(m["scaled_from"]["height"], 48);
+        assert_eq!(m["scaled_from"]["max_size"], 200);
+        assert!(
+            said.contains(&format!("cells {fw}x{fh}, scaled from 64x48")),
+            "{said}"
+        );
+        let (cols, rows) = (m["columns"].as_u64().unwrap(), m["rows"].as_u64().unwrap());
+        let (cw, ch) = (
+            m["cell_width"].as_u64().unwrap(),
+            m["cell_height"].as_u64().unwrap(),
+        );
+        assert!(
+            cols * rows >= n && cw >= fw + 4 && ch >= fh + 4,
+            "unity padding"
+        );
+        let (sw, sh) = png_size(&png);
+        assert_eq!((sw as u64, sh as u64), (cols * cw, rows * ch));
+        assert!(sw <= 200 && sh <= 200, "sheet {sw}x{sh}");
+        // The motion-vector sheet has the colour sheet's layout.
+        assert_eq!(png_size(&out.join("fit.mv.png")), (sw, sh));
+        // Frames that fit are written at the source size, with no `scaled_from`.
+        let (r, png) = run(&[], "full.png");
+        assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+        let m = read_json(&png.with_extension("json"));
+        assert_eq!(
+            (m["frame_width"].as_u64(), m["frame_height"].as_u64()),
+            (Some(64), Some(48))
+        );
+        assert!(m.get("scaled_from").is_none());
+        // An explicit --size that does not fit, or a limit too small for any useful cell,
+        // is refused and writes nothing.
+        let before = files_in(&out);
+        let (r, _) = run(&["--max-size", "200", "--size", "64x48"], "no1.png");
+        assert_fails(&r, "--size 64x48");
+        let (r, _) = run(&["--max-size", "40"], "no2.png");
+        assert_fails(&r, "raise --max-size");
+        assert_eq!(files_in(&out), before);
+        // An explicit --size that fits is used as given.
+        let (r, png) = run(&["--max-size", "200", "--size", "32x24"], "small.png");
+        assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+        let m = read_json(&png.with_extension("json"));
+        assert_eq!(
+            (m["frame_width"].as_u64(), m["frame_height"].as_u64()),
+            (Some(32), Some(24))
+        );
+        assert!(m.get("scaled_from").is_none());
+    }
+}

@@ -30,10 +30,62 @@ fn srgb8_thresholds() -> &'static [f32; 256] {
     })
 }
 
+/// Bins of the coarse table of [`encode_srgb8`].
+const SRGB8_BINS: usize = 4096;
+
+/// The sRGB code of `i / SRGB8_BINS` for every bin start (the number of thresholds at or
+/// below it, minus one).
+fn srgb8_coarse() -> &'static [u8; SRGB8_BINS] {
+    static C: OnceLock<[u8; SRGB8_BINS]> = OnceLock::new();
+    C.get_or_init(|| std::array::from_fn(|i| encode_srgb8_search(i as f32 / SRGB8_BINS as f32)))
+}
+
 /// Linear light → nearest 8-bit sRGB code (clamped), identical to
-/// `round(linear_to_srgb(v) * 255)` up to float ties.
-#[inline]
-pub(crate) fn encode_srgb8(v: f32) -> u8 {
+/// `round(linear_to_srgb(v) * 255)` up to float ties ([`Srgb8Encoder::encode`]; loops
+/// fetch the tables once with [`Srgb8Encoder::new`]).
+#[cfg(test)]
+fn encode_srgb8(v: f32) -> u8 {
+    Srgb8Encoder::new().encode(v)
+}
+
+/// The tables of [`encode_srgb8`], fetched once for a loop over many values.
+#[derive(Clone, Copy)]
+pub(crate) struct Srgb8Encoder {
+    coarse: &'static [u8; SRGB8_BINS],
+    thresholds: &'static [f32; 256],
+}
+
+impl Srgb8Encoder {
+    pub(crate) fn new() -> Srgb8Encoder {
+        Srgb8Encoder {
+            coarse: srgb8_coarse(),
+            thresholds: srgb8_thresholds(),
+        }
+    }
+
+    /// The code at the start of `v`'s bin in a 4096-entry table, then the thresholds
+    /// above it (at most one or two steps: the steepest part of the curve, near 0, rises
+    /// 0.8 codes per bin).
+    #[inline]
+    pub(crate) fn encode(&self, v: f32) -> u8 {
+        // NaN and v ≤ 0 → 0; v ≥ 1 → 255 (the last threshold is below 1).
+        if !(v > 0.0) {
+            return 0;
+        }
+        if v >= 1.0 {
+            return 255;
+        }
+        let t = self.thresholds;
+        let mut k = self.coarse[((v * SRGB8_BINS as f32) as usize).min(SRGB8_BINS - 1)] as usize;
+        while k < 255 && t[k + 1] <= v {
+            k += 1;
+        }
+        k as u8
+    }
+}
+
+/// [`encode_srgb8`] by binary search over the 256 thresholds (builds the coarse table).
+fn encode_srgb8_search(v: f32) -> u8 {
     let t = srgb8_thresholds();
     // Branch-light binary search over 256 thresholds: number of thresholds <= v, minus one.
     let mut lo = 0usize;
@@ -60,10 +112,11 @@ pub(crate) fn encode_alpha8(a: f32) -> u8 {
 /// A linear straight-alpha frame → 8-bit sRGB RGBA bytes (straight alpha).
 pub(crate) fn to_srgba8(frame: &RgbaFrame) -> Vec<u8> {
     let mut out = vec![0u8; frame.data().len() * 4];
+    let e = Srgb8Encoder::new();
     for (o, p) in out.chunks_exact_mut(4).zip(frame.data()) {
-        o[0] = encode_srgb8(p[0]);
-        o[1] = encode_srgb8(p[1]);
-        o[2] = encode_srgb8(p[2]);
+        o[0] = e.encode(p[0]);
+        o[1] = e.encode(p[1]);
+        o[2] = e.encode(p[2]);
         o[3] = encode_alpha8(p[3]);
     }
     out
@@ -72,10 +125,11 @@ pub(crate) fn to_srgba8(frame: &RgbaFrame) -> Vec<u8> {
 /// A linear frame composited over an opaque `bg` → 8-bit sRGB RGB bytes.
 pub(crate) fn to_srgb8_over(frame: &RgbaFrame, bg: [f32; 3]) -> Vec<u8> {
     let mut out = vec![0u8; frame.data().len() * 3];
+    let e = Srgb8Encoder::new();
     for (o, p) in out.chunks_exact_mut(3).zip(frame.data()) {
         let a = p[3].clamp(0.0, 1.0);
         for c in 0..3 {
-            o[c] = encode_srgb8(p[c] * a + bg[c] * (1.0 - a));
+            o[c] = e.encode(p[c] * a + bg[c] * (1.0 - a));
         }
     }
     out
@@ -188,27 +242,82 @@ pub(crate) fn crop(frame: &RgbaFrame, rect: &Rect) -> RgbaFrame {
     RgbaFrame::from_vec(size, data).expect("crop size")
 }
 
+/// One output sample's source taps: first source index and normalised weights.
+struct Taps {
+    first: usize,
+    weights: Vec<f32>,
+}
+
+/// Triangle-filter taps from `n` source samples to `m` (the filter widened by the ratio
+/// when shrinking; taps past the edges are dropped and the rest renormalised, as the
+/// `image` crate's `Triangle` resize does).
+fn triangle_taps(n: usize, m: usize) -> Vec<Taps> {
+    let ratio = n as f64 / m as f64;
+    let support = ratio.max(1.0);
+    (0..m)
+        .map(|i| {
+            let c = (i as f64 + 0.5) * ratio - 0.5;
+            let lo = ((c - support).floor() as i64 + 1).max(0) as usize;
+            let hi = (((c + support).ceil() as i64).max(0) as usize).min(n - 1);
+            let mut w: Vec<f32> = (lo..=hi)
+                .map(|j| (1.0 - (j as f64 - c).abs() / support).max(0.0) as f32)
+                .collect();
+            // The tap nearest `c` is within the support, so the sum is > 0.
+            let sum: f32 = w.iter().sum();
+            w.iter_mut().for_each(|v| *v /= sum);
+            Taps {
+                first: lo,
+                weights: w,
+            }
+        })
+        .collect()
+}
+
 /// Resizes with a triangle (bilinear, widened when shrinking) filter. Colour is
 /// premultiplied for the filter so that transparent pixels do not bleed their colour.
+/// Separable: columns first (whole rows at a time, so it vectorises), then rows on the
+/// fewer (when shrinking) output rows; rows in parallel, the same at any thread count.
 pub(crate) fn resize(frame: &RgbaFrame, to: Size) -> RgbaFrame {
+    use rayon::prelude::*;
     if frame.size() == to {
         return frame.clone();
     }
-    let mut pre = frame.clone();
-    premultiply(&mut pre);
-    let flat: Vec<f32> = pre.data().iter().flatten().copied().collect();
-    let buf =
-        image::Rgba32FImage::from_raw(frame.width(), frame.height(), flat).expect("buffer size");
-    let out = image::imageops::resize(
-        &buf,
-        to.width,
-        to.height,
-        image::imageops::FilterType::Triangle,
+    let (sw, sh) = (frame.width() as usize, frame.height() as usize);
+    let (tw, th) = (to.width as usize, to.height as usize);
+    let (hx, vy) = (triangle_taps(sw, tw), triangle_taps(sh, th));
+    let mut data = vec![[0f32; 4]; th * tw];
+    data.par_chunks_mut(tw).zip(&vy).for_each_init(
+        || vec![[0f32; 4]; sw],
+        |mid, (out, t)| {
+            // Vertical: this output row at the source width, premultiplied.
+            mid.iter_mut().for_each(|m| *m = [0.0; 4]);
+            for (k, &w) in t.weights.iter().enumerate() {
+                for (m, p) in mid.iter_mut().zip(frame.row((t.first + k) as u32)) {
+                    let a = p[3] * w;
+                    m[0] += p[0] * a;
+                    m[1] += p[1] * a;
+                    m[2] += p[2] * a;
+                    m[3] += a;
+                }
+            }
+            // Horizontal, then back to straight alpha.
+            for (o, t) in out.iter_mut().zip(&hx) {
+                let mut acc = [0f32; 4];
+                for (m, &w) in mid[t.first..].iter().zip(&t.weights) {
+                    for c in 0..4 {
+                        acc[c] += m[c] * w;
+                    }
+                }
+                let a = acc[3];
+                *o = if a > 0.0 {
+                    [acc[0] / a, acc[1] / a, acc[2] / a, a]
+                } else {
+                    [0.0; 4]
+                };
+            }
+        },
     );
-    let data = out.pixels().map(|p| p.0).collect();
-    let mut f = RgbaFrame::from_vec(to, data).expect("resize size");
-    unpremultiply(&mut f);
-    f
+    RgbaFrame::from_vec(to, data).expect("resize size")
 }
 
 /// Debug helper kept for tests: the slow reference encoder.
@@ -226,6 +335,25 @@ mod tests {
         let lut = srgb8_lut();
         for k in 0..=255u8 {
             assert_eq!(encode_srgb8(lut[k as usize]), k);
+        }
+    }
+
+    /// The table-and-step encoder equals the binary search everywhere, thresholds and
+    /// their neighbours included.
+    #[test]
+    fn encode_table_matches_search() {
+        let t = srgb8_thresholds();
+        let mut vals: Vec<f32> = (0..=200_000).map(|i| i as f32 / 190_000.0 - 0.01).collect();
+        for &x in &t[1..] {
+            vals.extend([
+                x,
+                f32::from_bits(x.to_bits() - 1),
+                f32::from_bits(x.to_bits() + 1),
+            ]);
+        }
+        vals.extend([f32::NAN, f32::INFINITY, f32::NEG_INFINITY, 1.0, 0.0, -0.0]);
+        for v in vals {
+            assert_eq!(encode_srgb8(v), encode_srgb8_search(v), "{v}");
         }
     }
 
@@ -295,6 +423,46 @@ mod tests {
         assert_eq!(r.size(), Size::new(3, 5).unwrap());
         for p in r.data() {
             assert!((p[0] - 0.25).abs() < 1e-5 && (p[3] - 0.5).abs() < 1e-5);
+        }
+    }
+
+    /// The separable resize equals the `image` crate's Triangle resize of the
+    /// premultiplied frame (what it replaced) when shrinking and enlarging.
+    #[test]
+    fn resize_matches_image_triangle() {
+        let size = Size::new(37, 23).unwrap();
+        let data = (0..size.pixels())
+            .map(|i| {
+                let h = (i as u32).wrapping_mul(2_654_435_761);
+                let v = |k: u32| ((h >> k) & 255) as f32 / 255.0;
+                [v(0), v(8), v(16), v(24) * (i % 3) as f32 / 2.0]
+            })
+            .collect();
+        let f = RgbaFrame::from_vec(size, data).unwrap();
+        for to in [Size::new(11, 7).unwrap(), Size::new(50, 40).unwrap()] {
+            let mut pre = f.clone();
+            premultiply(&mut pre);
+            let flat: Vec<f32> = pre.data().iter().flatten().copied().collect();
+            let buf = image::Rgba32FImage::from_raw(37, 23, flat).unwrap();
+            let want = image::imageops::resize(
+                &buf,
+                to.width,
+                to.height,
+                image::imageops::FilterType::Triangle,
+            );
+            let got = resize(&f, to);
+            for (g, w) in got.data().iter().zip(want.pixels()) {
+                let w = w.0;
+                assert!(
+                    (g[3] - w[3]).abs() < 1e-4,
+                    "{to}: alpha {} vs {}",
+                    g[3],
+                    w[3]
+                );
+                for c in 0..3 {
+                    assert!((g[c] * g[3] - w[c]).abs() < 1e-4, "{to}: {g:?} vs {w:?}");
+                }
+            }
         }
     }
 }

@@ -27,8 +27,8 @@ pub use read::{
     SourceInfo, DEFAULT_SEQUENCE_FPS,
 };
 pub use write::{
-    create, read_flipbook, read_flipbook_meta, write_png, AlphaMode, Engine, Flipbook,
-    FlipbookMeta, FlipbookOptions, Format, FrameWriter, MotionSource, WriteOptions,
+    create, fit_frame, read_flipbook, read_flipbook_meta, write_png, AlphaMode, Engine, Flipbook,
+    FlipbookMeta, FlipbookOptions, Format, FrameWriter, MotionSource, ScaledFrom, WriteOptions,
 };
 
 /// Whether the system `ffmpeg` and `ffprobe` are usable (and `IGNIS_NO_FFMPEG` is not set).

@@ -56,6 +56,11 @@ pub struct Args {
     /// Eigenfires kept in the cached database.
     #[arg(long, default_value_t = 40)]
     pub keep: usize,
+    /// Output frame size WIDTHxHEIGHT (default: the footage's own; for a .png flipbook
+    /// whose full-size cells do not fit the sheet limit, the largest size with the
+    /// footage's aspect that fits). Example: --size 960x540
+    #[arg(long, value_parser = crate::eigen::animate::parse_size)]
+    pub size: Option<Size>,
     #[command(flatten)]
     pub out: crate::output::OutputArgs,
 }
@@ -481,13 +486,20 @@ pub fn top_candidates(ev: &[Evaluated], top: usize) -> Vec<Evaluated> {
     out
 }
 
+/// Frames [`render`] writes for `best`.
+pub fn planned_frames(best: &Evaluated) -> usize {
+    loops::plan_with(&best.candidate, best.closing, &best.skips).len()
+}
+
 /// Renders `best` from the source `path` (window index 0 = source frame `first`) at the
-/// source's resolution, passing each output frame to `sink` in order. Decodes only
-/// source frames `start..end + m`; keeps the m head frames in memory.
+/// source's resolution or, given `scale`, with every source frame resized to it as it is
+/// decoded (before the closing's blend or morph), passing each output frame to `sink` in
+/// order. Decodes only source frames `start..end + m`; keeps the m head frames in memory.
 pub fn render(
     path: &Path,
     first: usize,
     best: &Evaluated,
+    scale: Option<Size>,
     sink: &mut dyn FnMut(&RgbaFrame) -> Result<()>,
 ) -> Result<()> {
     let c = best.candidate;
@@ -499,42 +511,56 @@ pub fn render(
             (first + c.start) as u64,
             Some((first + end) as u64),
         )),
+        scale,
         ..Default::default()
     };
-    let mut reader =
+    let reader =
         ignis_media::open(path, &opts).with_context(|| format!("reading {}", path.display()))?;
-    // Window frame the reader gives next (left-out frames are read past).
-    let mut at = c.start;
-    let mut next = |want: usize| -> Result<RgbaFrame> {
-        loop {
-            let f = reader.next().transpose()?.with_context(|| {
-                format!("{} ended before frame {}", path.display(), first + want)
-            })?;
-            at += 1;
-            if at > want {
-                return Ok(f);
+    // Decoding (and resizing) runs on its own thread, a few frames ahead of the blends and
+    // the writer; dropping the receiver (an error here) stops it.
+    std::thread::scope(|scope| {
+        let (tx, rx) = std::sync::mpsc::sync_channel::<ignis_media::Result<RgbaFrame>>(3);
+        scope.spawn(move || {
+            for f in reader {
+                let failed = f.is_err();
+                if tx.send(f).is_err() || failed {
+                    break;
+                }
+            }
+        });
+        // Window frame the reader gives next (left-out frames are read past).
+        let mut at = c.start;
+        let mut next = |want: usize| -> Result<RgbaFrame> {
+            loop {
+                let f = rx.recv().ok().transpose()?.with_context(|| {
+                    format!("{} ended before frame {}", path.display(), first + want)
+                })?;
+                at += 1;
+                if at > want {
+                    return Ok(f);
+                }
+            }
+        };
+        let mut head: Vec<RgbaFrame> = Vec::with_capacity(m);
+        for i in c.start..c.start + m {
+            head.push(next(i)?);
+        }
+        for p in &plan {
+            match *p {
+                Planned::Src(i) => sink(&next(i)?)?,
+                Planned::Mix { from, to, w } => {
+                    let a = next(from)?;
+                    let b = &head[to - c.start];
+                    let f = match best.closing {
+                        Closing::Morph(_) => morph_rgba(&a, b, w)?,
+                        _ => blend_rgba(&a, b, w),
+                    };
+                    sink(&f)?;
+                }
             }
         }
-    };
-    let mut head: Vec<RgbaFrame> = Vec::with_capacity(m);
-    for i in c.start..c.start + m {
-        head.push(next(i)?);
-    }
-    for p in &plan {
-        match *p {
-            Planned::Src(i) => sink(&next(i)?)?,
-            Planned::Mix { from, to, w } => {
-                let a = next(from)?;
-                let b = &head[to - c.start];
-                let f = match best.closing {
-                    Closing::Morph(_) => morph_rgba(&a, b, w)?,
-                    _ => blend_rgba(&a, b, w),
-                };
-                sink(&f)?;
-            }
-        }
-    }
-    Ok(())
+        Ok(())
+    })
 }
 
 /// `(1 - w)·a + w·b` per channel (linear light).
@@ -618,10 +644,26 @@ pub struct LoopAsk {
     pub top: usize,
 }
 
-/// Searches, renders and writes a loop of window `first..` of `path` to `out`.
+/// Searches, renders and writes a loop of window `first..` of `path` to `out`, at the
+/// source's size ([`make_loop_sized`] with no `--size`).
 pub fn make_loop(
     src: &LoopFootage,
     ask: &LoopAsk,
+    out: &crate::output::OutputArgs,
+    g: &Global,
+) -> Result<Done> {
+    make_loop_sized(src, ask, None, out, g)
+}
+
+/// [`make_loop`] rendering the frames at `size` (the user's `--size`) or, without it, at
+/// the source's size, scaled down for a flipbook whose full-size cells do not fit the
+/// sheet limit ([`crate::output::OutputArgs::fit_flipbook`]). The frames are resized as
+/// they are decoded, before any blend or morph, and the size is settled (or refused)
+/// before anything is rendered.
+pub fn make_loop_sized(
+    src: &LoopFootage,
+    ask: &LoopAsk,
+    size: Option<Size>,
     out: &crate::output::OutputArgs,
     g: &Global,
 ) -> Result<Done> {
@@ -648,10 +690,19 @@ pub fn make_loop(
     let mut opts = out.write_options();
     opts.fps = fps;
     opts.loop_ = true;
+    if let Some(s) = size {
+        Size::new(s.width, s.height).context("--size")?;
+    }
+    let n = planned_frames(&chosen.best);
+    let fitted = out.fit_flipbook(n, size.unwrap_or(info.size), size.is_some(), &mut opts)?;
+    if let Some(note) = fitted.note() {
+        g.say(note);
+    }
+    let scale = (fitted.size != info.size).then_some(fitted.size);
     let t = Instant::now();
-    let mut w = out.create_with(info.size, &opts)?;
-    let pb = g.progress(chosen.best.candidate.len() as u64, "rendering");
-    render(path, first, &chosen.best, &mut |f| {
+    let mut w = out.create_with(fitted.size, &opts)?;
+    let pb = g.progress(n as u64, "rendering");
+    render(path, first, &chosen.best, scale, &mut |f| {
         pb.inc(1);
         out.push(&mut w, f)
     })?;
@@ -666,7 +717,7 @@ pub fn make_loop(
         chosen,
         measured,
         frames,
-        size: info.size,
+        size: fitted.size,
         render_s,
     })
 }
@@ -730,9 +781,10 @@ pub fn run(a: &Args, g: &Global) -> Result<()> {
         method,
         top: a.top,
     };
-    let d = make_loop(
+    let d = make_loop_sized(
         &LoopFootage::cached(&a.input, window.start, &c),
         &ask,
+        a.size,
         &a.out,
         g,
     )?;
@@ -813,7 +865,7 @@ pub fn eigen_length_loop(a: &crate::eigen::LoopArgs, g: &Global) -> Result<()> {
         method,
         top: a.top,
     };
-    let d = make_loop(&src, &ask, &a.out, g)?;
+    let d = make_loop_sized(&src, &ask, a.footage.size, &a.out, g)?;
     report(&d, window.start, g);
     Ok(())
 }
@@ -917,15 +969,23 @@ mod tests {
             };
             let src = LoopFootage::cached(&path, window.start, &c);
             let d = make_loop(&src, &ask, &out_args(out.clone()), &quiet).unwrap();
-            assert_eq!(
-                d.size,
-                ignis_media::probe(&path).unwrap().size,
-                "{name}: source size"
-            );
-            // The flipbook's JSON records what was measured.
+            // The flipbook's JSON records what was measured, and the source size when the
+            // sheet could not hold full-size cells.
             let meta: serde_json::Value =
                 serde_json::from_slice(&std::fs::read(out.with_extension("json")).unwrap())
                     .unwrap();
+            let source = ignis_media::probe(&path).unwrap().size;
+            if d.size != source {
+                assert_eq!(
+                    (
+                        meta["scaled_from"]["width"].as_u64(),
+                        meta["scaled_from"]["height"].as_u64()
+                    ),
+                    (Some(source.width as u64), Some(source.height as u64)),
+                    "{name}: {} written, source {source}, not recorded as scaled",
+                    d.size
+                );
+            }
             let seam = meta["loop_quality"]["seam"].as_f64().unwrap();
             assert!((seam - d.measured.seam).abs() < 1e-9);
             eprintln!(

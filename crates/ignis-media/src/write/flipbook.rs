@@ -76,6 +76,9 @@ pub struct FlipbookOptions {
     pub heat: bool,
     /// Write an HDR colour sheet (`x.exr`, linear f32 premultiplied; default false).
     pub hdr: bool,
+    /// The frames were rendered smaller than the source to fit the sheet limit
+    /// ([`fit_frame`]); recorded in the JSON's `scaled_from` (default none).
+    pub scaled_from: Option<ScaledFrom>,
 }
 
 impl Default for FlipbookOptions {
@@ -93,8 +96,22 @@ impl Default for FlipbookOptions {
             motion: None,
             heat: false,
             hdr: false,
+            scaled_from: None,
         }
     }
+}
+
+/// Why a flipbook's cells are smaller than the source frames: the size the frames were
+/// scaled down from (aspect kept) so that the grid fits the sheet limit.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct ScaledFrom {
+    /// The source frame size.
+    pub width: u32,
+    pub height: u32,
+    /// The sheet limit the cells were fitted to: the largest side (`--max-size`, default
+    /// [`MAX_SIDE`]) and the largest pixel count ([`MAX_PIXELS`]).
+    pub max_size: u32,
+    pub max_pixels: u64,
 }
 
 /// The motion-vector sheet's description in the JSON.
@@ -185,6 +202,11 @@ pub struct FlipbookMeta {
     pub hdr_image: Option<String>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub retimed: Option<Retime>,
+    /// Present when the frames were rendered smaller than the source to fit the sheet
+    /// limit: the source size and the limit (the cell size is `frame_width` ×
+    /// `frame_height`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scaled_from: Option<ScaledFrom>,
     /// Seam and ghost of the sheet's frames played as a loop, measured on the frames
     /// written ([`ignis_core::loopq`]); present when `loop` is true.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -366,6 +388,91 @@ pub fn plan_layout(n: u32, frame: Size, opts: &FlipbookOptions) -> Result<(Layou
         n
     };
     Ok((layout, m))
+}
+
+/// Shortest side, in pixels, a frame scaled to fit the sheet may have: below it a cell no
+/// longer shows the fire's structure, so [`fit_frame`] refuses instead of writing it.
+pub const MIN_FIT_SIDE: u32 = 16;
+
+/// The sheet limit of `opts`: the largest side (`max_size`, at most [`MAX_SIDE`]) and the
+/// largest pixel count ([`MAX_PIXELS`]).
+pub fn sheet_limit(opts: &FlipbookOptions) -> (u32, u64) {
+    (opts.max_size.unwrap_or(MAX_SIDE).min(MAX_SIDE), MAX_PIXELS)
+}
+
+/// `frame` scaled so its longer side is `long` pixels, aspect kept (the other side
+/// rounded, at least 1).
+fn scaled_to(frame: Size, long: u32) -> Size {
+    let (big, small) = (frame.width.max(frame.height), frame.width.min(frame.height));
+    let other = ((small as u64 * long as u64 + big as u64 / 2) / big as u64).max(1) as u32;
+    let (w, h) = if frame.width >= frame.height {
+        (long, other)
+    } else {
+        (other, long)
+    };
+    Size::new(w, h).expect("no larger than a valid size")
+}
+
+/// The frame size at which `n` frames fit one sheet with `opts` (grid, padding, engine
+/// preset, `pot`, `max_size`): `frame` itself when its cells fit, otherwise the largest
+/// size with the same aspect (the longer side found by bisection; fitting is monotone in
+/// the size) and the [`ScaledFrom`] to record. Refused (`LimitExceeded`, naming the fixes)
+/// when even cells whose shorter side is [`MIN_FIT_SIDE`] pixels do not fit.
+pub fn fit_frame(
+    n: u32,
+    frame: Size,
+    opts: &FlipbookOptions,
+) -> Result<(Size, Option<ScaledFrom>)> {
+    let fits = |s: Size| match plan_layout(n, s, opts) {
+        Ok(_) => Ok(true),
+        Err(MediaError::LimitExceeded(_)) => Ok(false),
+        Err(e) => Err(e),
+    };
+    if fits(frame)? {
+        return Ok((frame, None));
+    }
+    let (max, max_pixels) = sheet_limit(opts);
+    let long = frame.width.max(frame.height);
+    // Invariant: `lo` fits (or is 0), `hi` does not.
+    let (mut lo, mut hi) = (0u32, long);
+    while hi - lo > 1 {
+        let mid = lo + (hi - lo) / 2;
+        if fits(scaled_to(frame, mid))? {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    let best = (lo > 0).then(|| scaled_to(frame, lo));
+    match best {
+        Some(s) if s.width.min(s.height) >= MIN_FIT_SIDE.min(frame.width.min(frame.height)) => {
+            Ok((
+                s,
+                Some(ScaledFrom {
+                    width: frame.width,
+                    height: frame.height,
+                    max_size: max,
+                    max_pixels,
+                }),
+            ))
+        }
+        _ => Err(MediaError::LimitExceeded(format!(
+            "{n} frames of {}x{} do not fit a {max}x{max} sheet{} even as cells whose shorter \
+             side is {MIN_FIT_SIDE} pixels{}; raise --max-size, use fewer frames (or fewer \
+             --columns/--rows, less --padding), or write a frame sequence (`-o dir/%04d.png`)",
+            frame.width,
+            frame.height,
+            if opts.pot {
+                " with power-of-two sides"
+            } else {
+                ""
+            },
+            match best {
+                Some(s) => format!(" (they would be {}x{})", s.width, s.height),
+                None => String::new(),
+            }
+        ))),
+    }
 }
 
 /// Resamples one loop (or one-shot animation) of `frames` to `m` frames by cross-fading
@@ -565,19 +672,29 @@ fn commit(files: Vec<AtomicFile>) -> Result<Vec<PathBuf>> {
 }
 
 /// A sheet filled with `background` with every frame's pixels (`pixels(frame)`, `w × h`
-/// row-major) placed in its cell.
-fn sheet_of<S, T: Copy>(
+/// row-major) placed in its cell; each row of cells is filled in parallel (the same at
+/// any thread count).
+fn sheet_of<S: Sync, T: Copy + Send + Sync>(
     l: &Layout,
     frames: &[S],
     background: T,
     w: usize,
     h: usize,
-    pixels: impl Fn(&S) -> Vec<T>,
+    pixels: impl Fn(&S) -> Vec<T> + Sync,
 ) -> Vec<T> {
+    use rayon::prelude::*;
     let mut sheet = vec![background; l.sheet_width as usize * l.sheet_height as usize];
-    for (i, f) in frames.iter().enumerate() {
-        place(&mut sheet, l, i, &pixels(f), w, h);
-    }
+    let c = l.columns as usize;
+    let band = l.cell_height as usize * l.sheet_width as usize;
+    sheet
+        .par_chunks_mut(band)
+        .enumerate()
+        .for_each(|(r, cells)| {
+            for (k, f) in frames.iter().enumerate().skip(r * c).take(c) {
+                // Index within the band: the cell's column, row 0.
+                place(cells, l, k % c, &pixels(f), w, h);
+            }
+        });
     sheet
 }
 
@@ -635,8 +752,8 @@ impl Sink for FlipbookSink {
         let v = self.opts.variants as usize;
         let per_in = n as usize / v;
         let per = m as usize / v;
-        let frames: Vec<RgbaFrame> = if m == n {
-            self.frames.clone()
+        let frames: std::borrow::Cow<[RgbaFrame]> = if m == n {
+            std::borrow::Cow::Borrowed(&self.frames)
         } else {
             self.frames
                 .chunks(per_in)
@@ -690,10 +807,10 @@ impl Sink for FlipbookSink {
                 .map(|c| [c[0], c[1], c[2], c[3]])
                 .collect()
         });
-        let flat: Vec<u8> = colour.iter().flatten().copied().collect();
         files.push(encode_temp(&self.path, |wr| {
-            encode_png(wr, sheet_size, &flat).map_err(|e| e.to_string())
+            encode_png(wr, sheet_size, colour.as_flattened()).map_err(|e| e.to_string())
         })?);
+        drop(colour);
 
         // Motion vectors.
         let mut mv_meta = None;
@@ -843,6 +960,7 @@ impl Sink for FlipbookSink {
             heat: heat_meta,
             hdr_image,
             retimed,
+            scaled_from: self.opts.scaled_from,
             // Measured on the pushed frames; a retimed or multi-variant sheet plays other
             // frames, so the figure would not describe it.
             loop_quality: if m == n && v == 1 {
@@ -1064,5 +1182,58 @@ mod tests {
         let r = retime(&f, 7, false);
         let v: Vec<f32> = r.iter().map(|x| x.get(0, 0)[0]).collect();
         assert_eq!(v, [0.0, 0.5, 1.0, 1.5, 2.0, 2.5, 3.0]);
+    }
+
+    /// Frames that fit keep their size; frames that do not get the largest size with the
+    /// same aspect that fits (one pixel more on the long side does not), with padding,
+    /// power-of-two sheets and a fixed column count; a limit too small is refused.
+    #[test]
+    fn fit_frame_is_the_largest_that_fits() {
+        let hd = Size::new(1920, 1080).unwrap();
+        let (s, why) = fit_frame(20, hd, &FlipbookOptions::default()).unwrap();
+        assert_eq!((s, why), (hd, None));
+        let cases = [
+            FlipbookOptions::default(),
+            FlipbookOptions {
+                max_size: Some(8192),
+                padding: 3,
+                ..Default::default()
+            },
+            FlipbookOptions {
+                max_size: Some(4096),
+                pot: true,
+                engine: Engine::Unreal,
+                ..Default::default()
+            },
+            FlipbookOptions {
+                max_size: Some(8192),
+                columns: Some(4),
+                ..Default::default()
+            },
+        ];
+        for opts in cases {
+            let (s, why) = fit_frame(97, hd, &opts).unwrap();
+            let why = why.expect("97 full-HD cells fit no sheet");
+            assert_eq!((why.width, why.height), (1920, 1080));
+            assert!(
+                (s.width as f64 / s.height as f64 - 16.0 / 9.0).abs() < 0.01,
+                "{s}"
+            );
+            let (l, m) = plan_layout(97, s, &opts).unwrap();
+            assert_eq!(m, 97);
+            let (max, px) = sheet_limit(&opts);
+            assert!(l.sheet_width <= max && l.sheet_height <= max);
+            assert!(l.sheet_width as u64 * l.sheet_height as u64 <= px);
+            let bigger = scaled_to(hd, s.width + 1);
+            assert!(plan_layout(97, bigger, &opts).is_err(), "{bigger} fits too");
+        }
+        let tiny = FlipbookOptions {
+            max_size: Some(100),
+            ..Default::default()
+        };
+        match fit_frame(97, hd, &tiny) {
+            Err(MediaError::LimitExceeded(m)) => assert!(m.contains("raise --max-size"), "{m}"),
+            other => panic!("{other:?}"),
+        }
     }
 }
