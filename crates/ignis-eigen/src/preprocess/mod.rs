@@ -575,14 +575,22 @@ mod tests {
                 image::Luma([if rnd() % density == 0 { 200 } else { 0 }])
             });
             let corner = GrayImage::from_fn(w, h, |x, y| {
-                image::Luma([if (x, y) == (w - 1, 0) || (x, y) == (0, h - 1) { 9 } else { 0 }])
+                image::Luma([if (x, y) == (w - 1, 0) || (x, y) == (0, h - 1) {
+                    9
+                } else {
+                    0
+                }])
             });
             let empty = GrayImage::new(w, h);
             for m in [&img, &corner, &empty] {
                 for r in [1u8, 2, 3, 7, 19, 40] {
                     assert_eq!(
                         dilate_l2(m, r),
-                        imageproc::morphology::dilate(m, imageproc::distance_transform::Norm::L2, r),
+                        imageproc::morphology::dilate(
+                            m,
+                            imageproc::distance_transform::Norm::L2,
+                            r
+                        ),
                         "{w}x{h} r {r}"
                     );
                 }
