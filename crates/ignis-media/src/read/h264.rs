@@ -334,10 +334,8 @@ impl Job {
                 DecodeOptions::new().flush_after_decode(Flush::NoFlush),
             ) {
                 Ok(Some(yuv)) => {
-                    if want {
-                        if !send(Ok((picture - 1, picture_of(&yuv, self.linear)))) {
-                            return;
-                        }
+                    if want && !send(Ok((picture - 1, picture_of(&yuv, self.linear)))) {
+                        return;
                     }
                     picture += 1;
                 }
@@ -355,10 +353,10 @@ impl Job {
         match self.decoder.flush_remaining() {
             Ok(rest) => {
                 for yuv in rest {
-                    if picture >= self.target {
-                        if !send(Ok((picture - 1, picture_of(&yuv, self.linear)))) {
-                            return;
-                        }
+                    if picture >= self.target
+                        && !send(Ok((picture - 1, picture_of(&yuv, self.linear))))
+                    {
+                        return;
                     }
                     picture += 1;
                 }
