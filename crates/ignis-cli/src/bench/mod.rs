@@ -41,8 +41,9 @@ pub struct BenchArgs {
     /// Fewer repetitions (a smoke test; figures are noisier).
     #[arg(long)]
     pub quick: bool,
-    /// eigen-animate: keep the trained benchmark database in this directory and reuse it
-    /// on later runs (training 2,197 frames takes about half a minute).
+    /// eigen-animate / eigen-footage: keep the trained benchmark database (and for
+    /// eigen-footage its clip) in this directory and reuse it on later runs (training
+    /// 2,197 frames takes about half a minute).
     #[arg(long, value_name = "DIR")]
     pub keep_db: Option<PathBuf>,
 }
@@ -57,14 +58,14 @@ pub fn run(a: &BenchArgs, g: &Global) -> Result<()> {
             let mut v = ignis_eigen::bench::animate_figures(a.quick, a.keep_db.as_deref())?;
             sp.finish_and_clear();
             let sp = g.spinner("footage case: writing, training and rendering a clip");
-            let f = crate::eigen::animate::bench_footage(a.quick)?;
+            let f = crate::eigen::animate::bench_footage(a.quick, None)?;
             sp.finish_and_clear();
             v["footage"] = f;
             v
         }
         "eigen-footage" => {
             let sp = g.spinner("writing, training and rendering a clip");
-            let f = crate::eigen::animate::bench_footage(a.quick)?;
+            let f = crate::eigen::animate::bench_footage(a.quick, a.keep_db.as_deref())?;
             sp.finish_and_clear();
             serde_json::json!({"bench": "eigen-footage", "quick": a.quick, "footage": f})
         }

@@ -786,9 +786,9 @@ pub fn default_look() -> ignis_eigen::scenario::Look {
 /// clip (Ignis's synthetic campfire written as MP4, trained with the default settings)
 /// rendered with original colouring, bloom and the alpha matte, reading the source video
 /// (decode included; encoding the output is not: frames are dropped). `quick`: 480x270,
-/// 30 frames.
-pub fn bench_footage(quick: bool) -> Result<serde_json::Value> {
-    use ignis_eigen::train::{ClipInput, ClipSpec, NoProgress, TrainParams};
+/// 30 frames. `keep`: a directory where the clip and its database are kept and reused
+/// by later runs (`train_s` is then 0).
+pub fn bench_footage(quick: bool, keep: Option<&std::path::Path>) -> Result<serde_json::Value> {
     use std::time::Instant;
     let (size, frames, loop_len) = if quick {
         (
@@ -809,37 +809,19 @@ pub fn bench_footage(quick: bool) -> Result<serde_json::Value> {
             120,
         )
     };
-    let dir = std::env::temp_dir().join(format!("ignis-bench-footage-{}", std::process::id()));
+    let dir = match keep {
+        Some(k) => k.join(if quick { "footage-quick" } else { "footage" }),
+        None => std::env::temp_dir().join(format!("ignis-bench-footage-{}", std::process::id())),
+    };
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
     let run = || -> Result<serde_json::Value> {
         let clip = dir.join("fire.mp4");
-        let sp = ignis_eigen::synthetic::SyntheticParams {
-            size,
-            frames,
-            style: ignis_eigen::synthetic::FlameStyle::Campfire,
-            seed: 5,
-        };
-        let mut w = ignis_media::create(&clip, size, &ignis_media::WriteOptions::default())?;
-        for t in 0..frames {
-            w.push(&ignis_eigen::synthetic::synthetic_frame(&sp, t)?)?;
-        }
-        w.finish()?;
-        let t_train = Instant::now();
-        let mut spec = ClipSpec::new("fire");
-        spec.path = Some(clip.clone());
-        let input = ClipInput::new(spec, ignis_eigen::MediaFootage::open(&clip)?);
         let dbp = dir.join("fire.db");
-        let tp = TrainParams {
-            pack_size: 64,
-            ..Default::default()
-        };
-        ignis_eigen::train(
-            std::slice::from_ref(&input),
-            &ignis_eigen::PreprocessParams::default(),
-            &tp,
-            &dbp,
-            &mut NoProgress,
-        )?;
+        let reuse = keep.is_some() && clip.is_file() && dbp.join("manifest.json").is_file();
+        let t_train = Instant::now();
+        if !reuse {
+            train_footage_case(&clip, &dbp, size, frames)?;
+        }
         let train_s = t_train.elapsed().as_secs_f64();
         let db = EigenfireDb::open(&dbp)?;
         let (mut plan, _) = render::loop_plan(
@@ -882,6 +864,45 @@ pub fn bench_footage(quick: bool) -> Result<serde_json::Value> {
         }))
     };
     let r = run();
-    let _ = std::fs::remove_dir_all(&dir);
+    if keep.is_none() {
+        let _ = std::fs::remove_dir_all(&dir);
+    }
     r
+}
+
+/// [`bench_footage`]'s clip (Ignis's synthetic campfire, `frames` frames of `size`,
+/// written as MP4 to `clip`) and its database at `dbp` (default settings).
+fn train_footage_case(
+    clip: &std::path::Path,
+    dbp: &std::path::Path,
+    size: Size,
+    frames: usize,
+) -> Result<()> {
+    use ignis_eigen::train::{ClipInput, ClipSpec, NoProgress, TrainParams};
+    let sp = ignis_eigen::synthetic::SyntheticParams {
+        size,
+        frames,
+        style: ignis_eigen::synthetic::FlameStyle::Campfire,
+        seed: 5,
+    };
+    let mut w = ignis_media::create(clip, size, &ignis_media::WriteOptions::default())?;
+    for t in 0..frames {
+        w.push(&ignis_eigen::synthetic::synthetic_frame(&sp, t)?)?;
+    }
+    w.finish()?;
+    let mut spec = ClipSpec::new("fire");
+    spec.path = Some(clip.to_path_buf());
+    let input = ClipInput::new(spec, ignis_eigen::MediaFootage::open(clip)?);
+    let tp = TrainParams {
+        pack_size: 64,
+        ..Default::default()
+    };
+    ignis_eigen::train(
+        std::slice::from_ref(&input),
+        &ignis_eigen::PreprocessParams::default(),
+        &tp,
+        dbp,
+        &mut NoProgress,
+    )?;
+    Ok(())
 }

@@ -30,6 +30,7 @@
 
 use crate::error::{EigenError, Result};
 use crate::pose::{ClipPose, PoseParams};
+use ignis_core::colour::{synthetic_colour, Tint};
 use ignis_core::frame::LUMA;
 use ignis_core::post::gaussian_blur;
 use ignis_core::{CoreError, GrayFrame, RgbaFrame, Size};
@@ -207,11 +208,42 @@ pub fn original_colouring(
     custom: Option<(&GrayFrame, MaskMode)>,
     p: &OriginalColour,
 ) -> Result<RgbaFrame> {
+    let dest = destination.map_or(Destination::Empty, Destination::Image);
+    original_colouring_to(source, original, dest, smoke, custom, p)
+}
+
+/// Algorithm 2's destination image for [`original_colouring_to`].
+#[derive(Clone, Copy)]
+pub enum Destination<'a> {
+    /// The thesis's empty (all-zero) image.
+    Empty,
+    /// A colour image (e.g. a tinted bloom).
+    Image(&'a RgbaFrame),
+    /// `ignis_core::colour::synthetic_colour(bloom, &Tint::Solid(tint))`, made band by
+    /// band as the colouring goes (the same values, without a whole frame of them).
+    SolidTint(&'a GrayFrame, [f32; 3]),
+}
+
+/// Rows per band of [`Destination::SolidTint`].
+const TINT_BAND: usize = 16;
+
+/// [`original_colouring`] with any [`Destination`]; the result is the same as with the
+/// destination image made first.
+pub fn original_colouring_to(
+    source: &GrayFrame,
+    original: &RgbaFrame,
+    destination: Destination<'_>,
+    smoke: Option<&RgbaFrame>,
+    custom: Option<(&GrayFrame, MaskMode)>,
+    p: &OriginalColour,
+) -> Result<RgbaFrame> {
     p.validate()?;
     let size = source.size();
     check_size("the original frame", original.size(), size)?;
-    if let Some(d) = destination {
-        check_size("the destination (bloom) image", d.size(), size)?;
+    match destination {
+        Destination::Empty => {}
+        Destination::Image(d) => check_size("the destination (bloom) image", d.size(), size)?,
+        Destination::SolidTint(b, _) => check_size("the bloom image", b.size(), size)?,
     }
     if let Some((m, _)) = custom {
         check_size("the custom mask", m.size(), size)?;
@@ -237,35 +269,76 @@ pub fn original_colouring(
         None => (source, None),
     };
     let w = size.width as usize;
-    let inv_t = 1.0 / p.threshold;
     let mut out = vec![[0.0f32; 4]; size.pixels()];
-    out.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
-        let span = y * w..(y + 1) * w;
-        let mask = &mask.data()[span.clone()];
-        let orig = &original.data()[span.clone()];
-        let dest = destination.map(|d| &d.data()[span.clone()]);
-        let smoke = smoke.map(|s| &s.data()[span.clone()]);
-        let extra = extra.map(|m| &m.data()[span]);
-        for (i, o) in row.iter_mut().enumerate() {
-            let mut s = if mask[i] > p.threshold {
-                1.0
-            } else {
-                mask[i].max(0.0) * inv_t
+    let band = w.max(1) * TINT_BAND;
+    let bands: Vec<Result<()>> = out
+        .par_chunks_mut(band)
+        .enumerate()
+        .map(|(b, rows)| {
+            let span = b * band..b * band + rows.len();
+            let tinted = match destination {
+                Destination::SolidTint(bloom, tint) => {
+                    let g = GrayFrame::from_vec(
+                        Size {
+                            width: w as u32,
+                            height: (rows.len() / w.max(1)) as u32,
+                        },
+                        bloom.data()[span.clone()].to_vec(),
+                    )?;
+                    Some(synthetic_colour(&g, &Tint::Solid(tint))?)
+                }
+                _ => None,
             };
-            if let Some(e) = extra {
-                s = s.max(e[i].clamp(0.0, 1.0));
-            }
-            if s >= 1.0 {
-                *o = orig[i];
-                continue;
-            }
-            let sd = 1.0 - s;
-            let d = dest.map_or([0.0; 4], |d| d[i]);
-            let k = smoke.map_or([0.0; 4], |k| k[i]);
-            *o = std::array::from_fn(|c| (s * orig[i][c] + sd * d[c] + k[c] * sd).clamp(0.0, 1.0));
-        }
-    });
+            let dest = match (destination, &tinted) {
+                (_, Some(t)) => Some(t.data()),
+                (Destination::Image(d), None) => Some(&d.data()[span.clone()]),
+                _ => None,
+            };
+            colour_pixels(
+                &mask.data()[span.clone()],
+                &original.data()[span.clone()],
+                dest,
+                smoke.map(|s| &s.data()[span.clone()]),
+                extra.map(|m| &m.data()[span.clone()]),
+                p.threshold,
+                rows,
+            );
+            Ok(())
+        })
+        .collect();
+    bands.into_iter().collect::<Result<Vec<()>>>()?;
     Ok(RgbaFrame::from_vec(size, out)?)
+}
+
+/// Algorithm 2 on a run of pixels (see [`original_colouring`]).
+fn colour_pixels(
+    mask: &[f32],
+    orig: &[[f32; 4]],
+    dest: Option<&[[f32; 4]]>,
+    smoke: Option<&[[f32; 4]]>,
+    extra: Option<&[f32]>,
+    threshold: f32,
+    out: &mut [[f32; 4]],
+) {
+    let inv_t = 1.0 / threshold;
+    for (i, o) in out.iter_mut().enumerate() {
+        let mut s = if mask[i] > threshold {
+            1.0
+        } else {
+            mask[i].max(0.0) * inv_t
+        };
+        if let Some(e) = extra {
+            s = s.max(e[i].clamp(0.0, 1.0));
+        }
+        if s >= 1.0 {
+            *o = orig[i];
+            continue;
+        }
+        let sd = 1.0 - s;
+        let d = dest.map_or([0.0; 4], |d| d[i]);
+        let k = smoke.map_or([0.0; 4], |k| k[i]);
+        *o = std::array::from_fn(|c| (s * orig[i][c] + sd * d[c] + k[c] * sd).clamp(0.0, 1.0));
+    }
 }
 
 /// Settings of [`synthetic_smoke`] (§6.3).
@@ -546,6 +619,52 @@ mod tests {
         // 0.5 > threshold: the mask is thresholded like the grey image
         assert_eq!(replace.data()[2], o);
         assert!(close(replace.data()[3], d));
+    }
+
+    /// The tint made band by band inside the colouring gives the same bytes as the tinted
+    /// bloom image made first, on frames taller than a band and not a multiple of it,
+    /// with and without smoke and a custom mask.
+    #[test]
+    fn solid_tint_destination_equals_the_tinted_image() {
+        let sz = size(37, 2 * TINT_BAND as u32 + 5);
+        let wave =
+            |x: u32, y: u32, k: f32| ((x as f32 * 0.37 + y as f32 * 0.11 + k).sin() + 1.0) * 0.5;
+        let src = GrayFrame::from_fn(sz, |x, y| wave(x, y, 0.0) * 3.0 * T);
+        let bloom = GrayFrame::from_fn(sz, |x, y| wave(x, y, 1.0) * 1.2);
+        let orig = RgbaFrame::from_vec(
+            sz,
+            (0..sz.pixels())
+                .map(|i| [0.3 + (i % 7) as f32 * 0.1, 0.2, (i % 3) as f32 * 0.3, 0.9])
+                .collect(),
+        )
+        .unwrap();
+        let smoke = RgbaFrame::from_vec(sz, vec![[0.05, 0.04, 0.03, 0.02]; sz.pixels()]).unwrap();
+        let mask = GrayFrame::from_fn(sz, |x, y| wave(x, y, 2.0));
+        let tint = [1.0, 0.42, 0.08];
+        let image = synthetic_colour(&bloom, &Tint::Solid(tint)).unwrap();
+        for with_smoke in [false, true] {
+            for custom in [None, Some((&mask, MaskMode::Add))] {
+                let p = OriginalColour {
+                    threshold: T,
+                    smoke: with_smoke,
+                };
+                let k = with_smoke.then_some(&smoke);
+                let a = original_colouring(&src, &orig, Some(&image), k, custom, &p).unwrap();
+                let b = original_colouring_to(
+                    &src,
+                    &orig,
+                    Destination::SolidTint(&bloom, tint),
+                    k,
+                    custom,
+                    &p,
+                )
+                .unwrap();
+                let bits = |f: &RgbaFrame| -> Vec<u32> {
+                    f.data().iter().flatten().map(|v| v.to_bits()).collect()
+                };
+                assert_eq!(bits(&a), bits(&b), "smoke {with_smoke}");
+            }
+        }
     }
 
     #[test]

@@ -6,16 +6,20 @@
 //! [`crate::colour`] and `ignis_core::post`; this module fetches the layers (original
 //! footage warped onto the pre-processed frames, smoke, masks) and runs the pipeline.
 
+use std::borrow::Cow;
 use std::collections::HashMap;
 use std::path::PathBuf;
+use std::sync::Arc;
 
-use ignis_core::colour::synthetic_colour;
-use ignis_core::post::{alpha_matte, bloom};
+use ignis_core::colour::{synthetic_colour, Tint};
+use ignis_core::post::bloom;
 use ignis_core::{GrayFrame, RgbaFrame, Size};
 use rayon::prelude::*;
 
 use crate::animate::has_stored_frames;
-use crate::colour::{original_colouring, synthetic_smoke, warp_rgba, OriginalColour};
+use crate::colour::{
+    original_colouring_to, synthetic_smoke, warp_rgba, Destination, OriginalColour,
+};
 use crate::db::{ClipEntry, EigenfireDb};
 use crate::error::{EigenError, Result};
 use crate::scenario::{ColourMode, Look, Plan, PlanFrame};
@@ -244,7 +248,8 @@ fn colour_row(db: &EigenfireDb, f: &PlanFrame, e: usize) -> usize {
 /// Layers per database row, in the output view.
 #[derive(Default)]
 struct Layers {
-    original: HashMap<usize, RgbaFrame>,
+    /// Shared with the decoded frame when the warp is the identity (no copy).
+    original: HashMap<usize, Arc<RgbaFrame>>,
     smoke: HashMap<usize, RgbaFrame>,
     mask: HashMap<usize, GrayFrame>,
     /// The pre-processed frame made from the source footage (§7.1.2) and its matte.
@@ -254,7 +259,7 @@ struct Layers {
 /// The layers of one database row (see [`Layers`]).
 #[derive(Default)]
 struct FrameLayers {
-    original: Option<RgbaFrame>,
+    original: Option<Arc<RgbaFrame>>,
     smoke: Option<RgbaFrame>,
     grey: Option<(GrayFrame, GrayFrame)>,
 }
@@ -358,14 +363,15 @@ fn load_layers(
             continue;
         }
         let shift = |r: usize| shift_only(clip, db.angle(r), &pose_p, geo);
-        let warp_c = |f: &RgbaFrame, r: usize| match shift(r) {
-            Some(d) => shift_rgba(f.clone(), geo.out, d),
-            None => view_rgba(
+        let warp_c = |f: &Arc<RgbaFrame>, r: usize| match shift(r) {
+            Some(d) if d == (0, 0) && f.size() == geo.out => Arc::clone(f),
+            Some(d) => Arc::new(shift_rgba(RgbaFrame::clone(f), geo.out, d)),
+            None => Arc::new(view_rgba(
                 warp_rgba(f, &clip.pose, db.angle(r), &pose_p),
                 geo.frame,
                 geo.view,
                 geo.out,
-            ),
+            )),
         };
         let warp_g = |g: GrayFrame, r: usize| match shift(r) {
             Some(d) => shift_gray(g, geo.out, d),
@@ -403,10 +409,10 @@ fn load_layers(
         if !need.is_empty() {
             let path = look.originals.get(&clip.name).map(PathBuf::as_path);
             let got = sources.open(clip, path)?.frames_at(&need)?;
-            let by_frame: HashMap<usize, RgbaFrame> = need
+            let by_frame: HashMap<usize, Arc<RgbaFrame>> = need
                 .iter()
                 .zip(got)
-                .filter_map(|(&f, g)| g.map(|g| (f, g)))
+                .filter_map(|(&f, g)| g.map(|g| (f, Arc::new(g))))
                 .collect();
             let shown = || path.map_or(clip.source.clone(), |p| p.display().to_string());
             let work: Vec<(usize, usize)> = mine
@@ -670,14 +676,14 @@ pub(crate) fn render_frames(
             .collect::<Result<Vec<_>>>()?
             .into_iter()
             .flatten();
-        let mut greys: Vec<(GrayFrame, Option<&GrayFrame>)> = Vec::with_capacity(frames.len());
+        let mut greys: Vec<(Cow<GrayFrame>, Option<&GrayFrame>)> = Vec::with_capacity(frames.len());
         for (j, f) in frames.iter().enumerate() {
             if let Some(r) = from_source(f) {
                 let (g, m) = &layers.grey[&r];
-                greys.push((g.clone(), Some(m)));
+                greys.push((Cow::Borrowed(g), Some(m)));
             } else if let Some((clip, fr)) = stored_frame(f) {
                 let g = db.preprocessed_frame(&clip, fr)?;
-                greys.push((view_gray(&g, frame, view, out), None));
+                greys.push((Cow::Owned(view_gray(&g, frame, view, out)), None));
             } else {
                 let r = recon.next().expect("one reconstruction per slow frame");
                 let mut g = view_gray(&r, frame, view, out);
@@ -689,7 +695,7 @@ pub(crate) fn render_frames(
                 if let Some((real, _)) = layers.grey.get(&near) {
                     add_detail(&mut g, real, db.train_size(), geo);
                 }
-                greys.push((g, None));
+                greys.push((Cow::Owned(g), None));
             }
         }
         let batch: Vec<Result<RgbaFrame>> = greys
@@ -701,7 +707,7 @@ pub(crate) fn render_frames(
                 } else {
                     None
                 };
-                finish_frame(g, m, row, look, &layers)
+                finish_frame(&g, m, row, look, &layers)
             })
             .collect();
         for f in batch {
@@ -715,17 +721,17 @@ pub(crate) fn render_frames(
 /// row whose layers colour it (original colouring), `matte` the pre-processing matte of a
 /// frame made from the footage.
 fn finish_frame(
-    grey: GrayFrame,
+    grey: &GrayFrame,
     matte: Option<&GrayFrame>,
     row: Option<usize>,
     look: &Look,
     layers: &Layers,
 ) -> Result<RgbaFrame> {
     let bloomed = match &look.bloom {
-        Some(b) => Some(bloom(&grey, b)?),
+        Some(b) => Some(bloom(grey, b)?),
         None => None,
     };
-    let lit = bloomed.as_ref().unwrap_or(&grey);
+    let lit = bloomed.as_ref().unwrap_or(grey);
     let mut out = match (&look.mode, row) {
         (ColourMode::Grey, _) => lit.to_rgba(),
         (ColourMode::Palette(p), _) => p.apply(lit),
@@ -737,43 +743,90 @@ fn finish_frame(
             ))
         }
         (ColourMode::Original, Some(r)) => {
-            let dest = match &bloomed {
-                Some(b) => Some(synthetic_colour(b, &look.tint)?),
-                None => None,
+            // The tinted bloom is the destination; a solid tint is made band by band
+            // inside the colouring (the same values, no frame of them held).
+            let image = match (&bloomed, &look.tint) {
+                (Some(b), tint) if !matches!(tint, Tint::Solid(_)) => {
+                    Some(synthetic_colour(b, tint)?)
+                }
+                _ => None,
+            };
+            let dest = match (&bloomed, &look.tint, &image) {
+                (_, _, Some(i)) => Destination::Image(i),
+                (Some(b), Tint::Solid(c), None) => Destination::SolidTint(b, *c),
+                _ => Destination::Empty,
             };
             let smoke = layers.smoke.get(&r);
             let params = OriginalColour {
                 threshold: look.threshold,
                 smoke: smoke.is_some(),
             };
-            original_colouring(
-                &grey,
+            original_colouring_to(
+                grey,
                 &layers.original[&r],
-                dest.as_ref(),
+                dest,
                 smoke,
                 layers.mask.get(&r).map(|m| (m, look.mask_mode)),
                 &params,
             )?
         }
     };
-    if look.matte {
-        let a = alpha_matte(&grey, lit)?;
-        match matte {
-            Some(m) => {
-                for ((px, &av), &mv) in out.data_mut().iter_mut().zip(a.data()).zip(m.data()) {
-                    px[3] = av.max(mv.min(px[3]));
-                }
-            }
-            None => {
-                for (px, &av) in out.data_mut().iter_mut().zip(a.data()) {
-                    px[3] = av;
-                }
-            }
-        }
-    } else {
-        out.data_mut().iter_mut().for_each(|px| px[3] = 1.0);
-    }
+    apply_matte(&mut out, grey, lit, matte, look.matte)?;
     Ok(out)
+}
+
+/// The alpha of a finished frame: `ignis_core::post::alpha_matte(grey, lit)`, where the
+/// frame was made from the footage at least the colouring's alpha limited to the
+/// pre-processing `matte`; opaque when `on` is false. Rows in parallel, no frame-sized
+/// temporary.
+fn apply_matte(
+    out: &mut RgbaFrame,
+    grey: &GrayFrame,
+    lit: &GrayFrame,
+    matte: Option<&GrayFrame>,
+    on: bool,
+) -> Result<()> {
+    if !on {
+        out.data_mut().par_iter_mut().for_each(|px| px[3] = 1.0);
+        return Ok(());
+    }
+    if grey.size() != lit.size()
+        || out.size() != grey.size()
+        || matte.is_some_and(|m| m.size() != grey.size())
+    {
+        return Err(EigenError::bad(
+            "matte",
+            format!(
+                "the grey frame ({}), its bloom ({}), the coloured frame ({}) and the matte differ in size",
+                grey.size(),
+                lit.size(),
+                out.size()
+            ),
+        ));
+    }
+    let w = grey.width().max(1) as usize;
+    let (g, l) = (grey.data(), lit.data());
+    out.data_mut()
+        .par_chunks_mut(w)
+        .enumerate()
+        .for_each(|(y, row)| {
+            let span = y * w..y * w + row.len();
+            let (g, l) = (&g[span.clone()], &l[span.clone()]);
+            match matte {
+                Some(m) => {
+                    let m = &m.data()[span];
+                    for (((px, &a), &b), &mv) in row.iter_mut().zip(g).zip(l).zip(m) {
+                        px[3] = (a + b).clamp(0.0, 1.0).max(mv.min(px[3]));
+                    }
+                }
+                None => {
+                    for ((px, &a), &b) in row.iter_mut().zip(g).zip(l) {
+                        px[3] = (a + b).clamp(0.0, 1.0);
+                    }
+                }
+            }
+        });
+    Ok(())
 }
 
 /// Detail transfer for a reconstructed frame: adds the fine detail of `real` (a
@@ -843,6 +896,47 @@ pub fn loop_plan(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `apply_matte` is `ignis_core::post::alpha_matte`, limited by the footage matte as
+    /// `max(alpha, min(matte, colour alpha))`, bit for bit; opaque when off; sizes checked.
+    #[test]
+    fn apply_matte_is_the_alpha_matte_rule() {
+        let sz = Size {
+            width: 13,
+            height: 7,
+        };
+        let f =
+            |k: f32| GrayFrame::from_fn(sz, move |x, y| ((x * 7 + y * 3) as f32 * k).sin().abs());
+        let (grey, lit, matte) = (f(0.3), f(0.7), f(1.1));
+        let col = RgbaFrame::from_vec(
+            sz,
+            (0..sz.pixels())
+                .map(|i| [0.1, 0.2, 0.3, (i % 5) as f32 * 0.2])
+                .collect(),
+        )
+        .unwrap();
+        let a = ignis_core::post::alpha_matte(&grey, &lit).unwrap();
+        for m in [None, Some(&matte)] {
+            let mut out = col.clone();
+            apply_matte(&mut out, &grey, &lit, m, true).unwrap();
+            for (i, px) in out.data().iter().enumerate() {
+                let want = match m {
+                    Some(m) => a.data()[i].max(m.data()[i].min(col.data()[i][3])),
+                    None => a.data()[i],
+                };
+                assert_eq!(px[3].to_bits(), want.to_bits());
+                assert_eq!(px[..3], col.data()[i][..3]);
+            }
+        }
+        let mut out = col.clone();
+        apply_matte(&mut out, &grey, &lit, None, false).unwrap();
+        assert!(out.data().iter().all(|p| p[3] == 1.0));
+        let small = GrayFrame::new(Size {
+            width: 3,
+            height: 2,
+        });
+        assert!(apply_matte(&mut col.clone(), &grey, &lit, Some(&small), true).is_err());
+    }
 
     /// `shift_pixels` is the per-pixel rule of `shift_only`: output (u, v) = source
     /// (u − dx, v − dy), zero outside; for shifts in every direction, in and out of range.

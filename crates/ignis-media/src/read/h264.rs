@@ -179,8 +179,15 @@ fn avcc_to_annexb(
 /// 480x480): enough slack that a busy scheduler does not stall the pipeline.
 const QUEUE: usize = 8;
 
-/// A decoded picture as 8-bit RGBA, tagged with its index in the stream.
-type Msg = Result<(u64, Vec<u8>, Size)>;
+/// A decoded picture, tagged with its index in the stream: 8-bit sRGB RGBA, or already
+/// converted to linear light on the decoding thread (so the conversion overlaps the
+/// reader's work instead of following it).
+type Msg = Result<(u64, Picture)>;
+
+enum Picture {
+    Srgba8(Vec<u8>, Size),
+    Linear(RgbaFrame),
+}
 
 /// Streams frames from a Baseline MP4, starting at any frame (decoding from the preceding
 /// sync sample).
@@ -191,6 +198,17 @@ pub(crate) struct Openh264Source {
 
 impl Openh264Source {
     pub(crate) fn start(info: &SourceInfo, probe: Mp4Probe, start: u64) -> Result<Openh264Source> {
+        Self::start_as(info, probe, start, true)
+    }
+
+    /// [`Openh264Source::start`]; `linear`: convert each picture to linear light on the
+    /// decoding thread (else pictures stay 8-bit: the raw throughput helper).
+    fn start_as(
+        info: &SourceInfo,
+        probe: Mp4Probe,
+        start: u64,
+        linear: bool,
+    ) -> Result<Openh264Source> {
         let path = info.path.clone();
         let reader = read_header(&path, probe.len)?;
         let track = reader.tracks().get(&probe.track_id).expect("probed track");
@@ -243,6 +261,7 @@ impl Openh264Source {
             target,
             count,
             decoder,
+            linear,
         };
         std::thread::Builder::new()
             .name("ignis-h264".into())
@@ -267,6 +286,8 @@ struct Job {
     target: u64,
     count: u64,
     decoder: H264Decoder,
+    /// Send linear-light frames ([`Picture::Linear`]).
+    linear: bool,
 }
 
 impl Job {
@@ -313,11 +334,8 @@ impl Job {
                 DecodeOptions::new().flush_after_decode(Flush::NoFlush),
             ) {
                 Ok(Some(yuv)) => {
-                    if want {
-                        let (rgba, size) = rgba8_of(&yuv);
-                        if !send(Ok((picture - 1, rgba, size))) {
-                            return;
-                        }
+                    if want && !send(Ok((picture - 1, picture_of(&yuv, self.linear)))) {
+                        return;
                     }
                     picture += 1;
                 }
@@ -335,11 +353,10 @@ impl Job {
         match self.decoder.flush_remaining() {
             Ok(rest) => {
                 for yuv in rest {
-                    if picture >= self.target {
-                        let (rgba, size) = rgba8_of(&yuv);
-                        if !send(Ok((picture - 1, rgba, size))) {
-                            return;
-                        }
+                    if picture >= self.target
+                        && !send(Ok((picture - 1, picture_of(&yuv, self.linear))))
+                    {
+                        return;
                     }
                     picture += 1;
                 }
@@ -355,11 +372,25 @@ impl Job {
     }
 }
 
+/// What is sent for a decoded picture (see [`Job::linear`]).
+fn picture_of(yuv: &openh264::decoder::DecodedYUV<'_>, linear: bool) -> Picture {
+    let (rgba, size) = rgba8_of(yuv);
+    if linear && size.width > 0 && size.height > 0 {
+        Picture::Linear(convert::from_srgba8(size, &rgba))
+    } else {
+        Picture::Srgba8(rgba, size)
+    }
+}
+
 impl FrameSource for Openh264Source {
     fn next_frame(&mut self) -> Option<Result<RgbaFrame>> {
-        let (_, bytes, size) = match self.rx.recv().ok()? {
+        let (_, pic) = match self.rx.recv().ok()? {
             Ok(m) => m,
             Err(e) => return Some(Err(e)),
+        };
+        let size = match &pic {
+            Picture::Srgba8(_, s) => *s,
+            Picture::Linear(f) => f.size(),
         };
         if size != self.expected {
             // Let the reader report the mismatch with its path and index.
@@ -367,7 +398,10 @@ impl FrameSource for Openh264Source {
                 Size::new(size.width.max(1), size.height.max(1)).ok()?,
             )));
         }
-        Some(Ok(convert::from_srgba8(size, &bytes)))
+        Some(Ok(match pic {
+            Picture::Linear(f) => f,
+            Picture::Srgba8(bytes, size) => convert::from_srgba8(size, &bytes),
+        }))
     }
 }
 
@@ -381,7 +415,7 @@ pub fn decode_rgba8_count(path: &Path) -> Result<u64> {
     let Probed::Mp4(info, probe) = probe_mp4(path, len, false)? else {
         return Err(MediaError::bad("path", "not a Baseline MP4"));
     };
-    let source = Openh264Source::start(&info, probe, 0)?;
+    let source = Openh264Source::start_as(&info, probe, 0, false)?;
     let mut n = 0;
     for m in source.rx.iter() {
         m?;
