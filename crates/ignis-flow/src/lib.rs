@@ -6,7 +6,8 @@
 //!   and returned at the first frame's size with the vectors scaled; [`flow_reduced`] /
 //!   [`flow_pair_reduced`] return the working-size field (cheaper; every function here
 //!   accepts fields of any size).
-//! - [`warp_gray`] / [`warp_rgba`]: `out(x) = src(x + t·F(x))`.
+//! - [`warp_gray`] / [`warp_rgba`]: `out(x) = src(x + t·F(x))`; [`WarpRows`] gives rows of
+//!   the colour warp premultiplied, for callers that fuse it into their own row pass.
 //! - [`morph_gray`] / [`morph_rgba`]: the in-between frame along both flows;
 //!   [`morph_gray_with`] / [`morph_rgba_with`] add optional occlusion-aware weights from
 //!   forward–backward consistency ([`MorphParams`]).
@@ -43,7 +44,7 @@ pub use ignis_core::{GrayFrame, RgbaFrame, Size};
 pub use vectors::{motion_vector_pair, VectorParams};
 pub use warp::{
     luma, morph_gray, morph_gray_with, morph_rgba, morph_rgba_with, warp_gray, warp_rgba,
-    MorphParams,
+    MorphParams, WarpRows,
 };
 
 use image::Img;
