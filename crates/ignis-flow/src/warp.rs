@@ -18,12 +18,14 @@ const LUMA: [f32; 3] = [0.2126, 0.7152, 0.0722];
 /// The input for [`crate::flow`] from a colour frame: linear Rec. 709 luminance times alpha
 /// (what is visible over black), so transparent pixels carry no texture.
 pub fn luma(frame: &RgbaFrame) -> GrayFrame {
-    let data = frame
-        .data()
-        .par_iter()
-        .map(|p| (LUMA[0] * p[0] + LUMA[1] * p[1] + LUMA[2] * p[2]) * p[3])
-        .collect();
+    let data = frame.data().par_iter().map(luma_of).collect();
     GrayFrame::from_vec(frame.size(), data).expect("same size as a valid frame")
+}
+
+/// [`luma`] of one pixel.
+#[inline(always)]
+pub(crate) fn luma_of(p: &[f32; 4]) -> f32 {
+    (LUMA[0] * p[0] + LUMA[1] * p[1] + LUMA[2] * p[2]) * p[3]
 }
 
 /// `out(x) = src(x + t·F(x))`, bilinear, edge-clamped; `F` is resampled to `src`'s size if

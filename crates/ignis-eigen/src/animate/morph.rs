@@ -34,7 +34,7 @@ use crate::scenario::{Look, MorphRun, Plan, MORPH_STEP};
 pub use crate::footage::FootageOpener;
 
 mod detail;
-pub use detail::Stages;
+pub use detail::{InbetweenScratch, Stages};
 
 /// Real frames rendered on each side of a morph run to measure the footage's median step.
 pub const NEIGHBOURS: usize = 8;
@@ -312,13 +312,26 @@ pub fn inbetween_rgba(
     bw: &ignis_flow::FlowField,
     t: f32,
 ) -> RgbaFrame {
-    detail::inbetween_rgba(a, b, fw, bw, t, None)
+    inbetween_rgba_with(&mut InbetweenScratch::default(), a, b, fw, bw, t)
+}
+
+/// [`inbetween_rgba`] reusing `scratch`'s buffers (for the in-betweens of one join).
+pub fn inbetween_rgba_with(
+    scratch: &mut InbetweenScratch,
+    a: &RgbaFrame,
+    b: &RgbaFrame,
+    fw: &ignis_flow::FlowField,
+    bw: &ignis_flow::FlowField,
+    t: f32,
+) -> RgbaFrame {
+    detail::inbetween_rgba(a, b, fw, bw, t, scratch, None)
         .unwrap_or_else(|| inbetween_rgba_unfused(a, b, fw, bw, t))
 }
 
-/// [`inbetween_rgba`] with the wall time of each pass of the fused path (all zero when the
-/// frames take the unfused path), for benchmarks.
+/// [`inbetween_rgba_with`] with the wall time of each pass of the fused path (names empty
+/// and times zero when the frames take the unfused path), for benchmarks.
 pub fn inbetween_rgba_stages(
+    scratch: &mut InbetweenScratch,
     a: &RgbaFrame,
     b: &RgbaFrame,
     fw: &ignis_flow::FlowField,
@@ -326,7 +339,7 @@ pub fn inbetween_rgba_stages(
     t: f32,
 ) -> (RgbaFrame, Stages) {
     let mut st = [("", std::time::Duration::ZERO); 4];
-    let f = detail::inbetween_rgba(a, b, fw, bw, t, Some(&mut st))
+    let f = detail::inbetween_rgba(a, b, fw, bw, t, scratch, Some(&mut st))
         .unwrap_or_else(|| inbetween_rgba_unfused(a, b, fw, bw, t));
     (f, st)
 }
@@ -588,8 +601,7 @@ fn end_flows(
         ..Default::default()
     };
     let flow_err = |e: ignis_flow::FlowError| EigenError::bad("morph", e.to_string());
-    let (la, lb) = rayon::join(|| ignis_flow::luma(fa), || ignis_flow::luma(fb));
-    ignis_flow::flow_pair_reduced(&la, &lb, &p).map_err(flow_err)
+    ignis_flow::flow_pair_reduced_rgba(fa, fb, &p).map_err(flow_err)
 }
 
 /// How a run's in-betweens were chosen.
@@ -807,8 +819,9 @@ fn morph_run(
         (ch.times, ch.worst, ch.bound_hit, ch.median, ch.measurable);
     let count = times.len();
     let mut chain = vec![ma.clone()];
+    let mut scratch = InbetweenScratch::default();
     for &t in &times {
-        let f = inbetween_rgba(&fa, &fb, &fw, &bw, t);
+        let f = inbetween_rgba_with(&mut scratch, &fa, &fb, &fw, &bw, t);
         chain.push(metric(&f));
         out.emit(f)?;
     }
@@ -954,9 +967,10 @@ mod tests {
         );
         let (fw, bw) = end_flows(&a, &b).unwrap();
         cases.push((a, b, fw, bw));
+        let mut scratch = InbetweenScratch::default();
         for (a, b, fw, bw) in &cases {
             for t in [0.2f32, 0.5, 0.9] {
-                let (fast, st) = inbetween_rgba_stages(a, b, fw, bw, t);
+                let (fast, st) = inbetween_rgba_stages(&mut scratch, a, b, fw, bw, t);
                 assert!(st.iter().all(|s| !s.0.is_empty()), "fused path taken");
                 let slow = inbetween_rgba_unfused(a, b, fw, bw, t);
                 let pm = |p: &[f32; 4]| [p[0] * p[3], p[1] * p[3], p[2] * p[3], p[3]];
@@ -993,7 +1007,7 @@ mod tests {
         let size = Size::new(200, 120).unwrap();
         let (a, b) = (noisy_rgba(size, 1), noisy_rgba(size, 2));
         let z = ignis_flow::FlowField::zero(size);
-        let (f, st) = inbetween_rgba_stages(&a, &b, &z, &z, 0.5);
+        let (f, st) = inbetween_rgba_stages(&mut InbetweenScratch::default(), &a, &b, &z, &z, 0.5);
         assert!(st.iter().all(|s| s.0.is_empty()));
         assert_eq!(f, inbetween_rgba_unfused(&a, &b, &z, &z, 0.5));
     }

@@ -29,6 +29,14 @@ use super::{box_mean, detail_radius};
 /// Pixels summed in f32 before each f64 accumulation of the energies.
 const RUN: usize = 32;
 
+/// Buffers of the two warped frames (32 bytes per pixel), kept between the in-betweens of a
+/// join so each one does not allocate (and page-fault) them afresh.
+#[derive(Debug, Default)]
+pub struct InbetweenScratch {
+    pa: Vec<[f32; 4]>,
+    pb: Vec<[f32; 4]>,
+}
+
 /// Wall time of each pass of one in-between: warps + block means, box means of the small
 /// frames, energies, blend.
 pub type Stages = [(&'static str, Duration); 4];
@@ -41,6 +49,7 @@ pub(super) fn inbetween_rgba(
     fw: &FlowField,
     bw: &FlowField,
     t: f32,
+    scratch: &mut InbetweenScratch,
     mut stages: Option<&mut Stages>,
 ) -> Option<RgbaFrame> {
     let size = a.size();
@@ -62,8 +71,10 @@ pub(super) fn inbetween_rgba(
     let mut since = Duration::ZERO;
     // Pass 1: both warps (premultiplied) and their block means, per band of k rows.
     let (wa, wb) = (WarpRows::new(a, fw, -t), WarpRows::new(b, bw, -(1.0 - t)));
-    let mut pa = vec![[0.0f32; 4]; w * h];
-    let mut pb = vec![[0.0f32; 4]; w * h];
+    let (pa, pb) = (&mut scratch.pa, &mut scratch.pb);
+    // Every element is written by pass 1 before it is read.
+    pa.resize(w * h, [0.0; 4]);
+    pb.resize(w * h, [0.0; 4]);
     let sw = small.width as usize;
     let mut ba = vec![[0.0f32; 4]; small.pixels()];
     let mut bb = vec![[0.0f32; 4]; small.pixels()];
@@ -85,12 +96,12 @@ pub(super) fn inbetween_rgba(
     lap(1, "box means (small)", &mut since);
     // Pass 2: the detail energies of a, b and their plain blend.
     let s = 1.0 - t;
-    let scratch = || (vec![[0.0f32; 4]; w], vec![[0.0f32; 4]; w]);
+    let scratch = || (vec![[0.0f32; 4]; w], vec![[0.0f32; 4]; w], Vec::new());
     let parts: Vec<[f64; 3]> = (0..h)
         .into_par_iter()
-        .map_init(scratch, |(ra, rb), y| {
-            ma.row(y, ra);
-            mb.row(y, rb);
+        .map_init(scratch, |(ra, rb, v), y| {
+            ma.row(y, v, ra);
+            mb.row(y, v, rb);
             let span = y * w..(y + 1) * w;
             energies(&pa[span.clone()], &pb[span], ra, rb, s, t)
         })
@@ -110,9 +121,9 @@ pub(super) fn inbetween_rgba(
     let mut out = vec![[0.0f32; 4]; w * h];
     out.par_chunks_mut(w)
         .enumerate()
-        .for_each_init(scratch, |(ra, rb), (y, o)| {
-            ma.row(y, ra);
-            mb.row(y, rb);
+        .for_each_init(scratch, |(ra, rb, v), (y, o)| {
+            ma.row(y, v, ra);
+            mb.row(y, v, rb);
             let span = y * w..(y + 1) * w;
             blend_row(o, (&pa[span.clone()], &pb[span]), (ra, rb), s, t, gain);
         });
@@ -163,19 +174,24 @@ impl MeanRows {
         MeanRows { sm, sw, sh, k, xs }
     }
 
-    fn row(&self, y: usize, out: &mut [[f32; 4]]) {
+    /// Row `y`: the two block rows blended vertically (into `v`, one entry per block), then
+    /// horizontally per pixel.
+    fn row(&self, y: usize, v: &mut Vec<[f32; 4]>, out: &mut [[f32; 4]]) {
         let (y0, y1, fy) = coord(y, self.sh, self.k);
         let sw = self.sw;
         let (r0, r1) = (
             &self.sm[y0 * sw..(y0 + 1) * sw],
             &self.sm[y1 * sw..(y1 + 1) * sw],
         );
+        v.clear();
+        v.extend(
+            r0.iter()
+                .zip(r1)
+                .map(|(p, q)| std::array::from_fn(|c| p[c] + fy * (q[c] - p[c]))),
+        );
         for (o, &(x0, x1, fx)) in out.iter_mut().zip(&self.xs) {
-            *o = std::array::from_fn(|c| {
-                let top = r0[x0][c] + fx * (r0[x1][c] - r0[x0][c]);
-                let bot = r1[x0][c] + fx * (r1[x1][c] - r1[x0][c]);
-                top + fy * (bot - top)
-            });
+            let (p, q) = (v[x0], v[x1]);
+            *o = std::array::from_fn(|c| p[c] + fx * (q[c] - p[c]));
         }
     }
 }
