@@ -32,15 +32,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         ..Default::default()
     };
     let flows = |a: &RgbaFrame, b: &RgbaFrame| ignis_flow::flow_pair_reduced_rgba(a, b, &fp);
-    // The joins keep the warped frames' buffers for all in-betweens of a run; so does this.
-    let scratch = std::cell::RefCell::new(morph::InbetweenScratch::default());
     // Stages of one pair (after a warm-up pair).
     for _ in 0..2 {
         let t = Instant::now();
         let (fw, bw) = flows(&a, &b)?;
         let t2 = t.elapsed();
-        let (m, stages) =
-            morph::inbetween_rgba_stages(&mut scratch.borrow_mut(), &a, &b, &fw, &bw, 0.5);
+        let (m, stages) = morph::inbetween_rgba_stages(&a, &b, &fw, &bw, 0.5);
         std::hint::black_box(m);
         let passes: Vec<String> = stages.iter().map(|(n, d)| format!("{n} {d:.1?}")).collect();
         eprintln!(
@@ -49,8 +46,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             passes.join(", ")
         );
     }
-    let detail: &Morph<'_> =
-        &|a, b, fw, bw| morph::inbetween_rgba_with(&mut scratch.borrow_mut(), a, b, fw, bw, 0.5);
+    let detail: &Morph<'_> = &|a, b, fw, bw| morph::inbetween_rgba(a, b, fw, bw, 0.5);
     let plain: &Morph<'_> = &|a, b, fw, bw| {
         ignis_flow::morph_rgba(a, b, fw, bw, 0.5).expect("frames of one size, t in 0..=1")
     };

@@ -45,7 +45,7 @@ pub use ignis_core::{GrayFrame, RgbaFrame, Size};
 pub use vectors::{motion_vector_pair, VectorParams};
 pub use warp::{
     luma, morph_gray, morph_gray_with, morph_rgba, morph_rgba_with, warp_gray, warp_rgba,
-    MorphParams, WarpRows,
+    MorphParams, WarpRows, WarpScratch,
 };
 
 use image::Img;

@@ -91,10 +91,20 @@ impl<'a> WarpRows<'a> {
         }
     }
 
+    /// Scratch for [`WarpRows::rows_with`] (one per thread, reused across calls).
+    pub fn scratch(&self) -> WarpScratch {
+        WarpScratch(RowScratch::new(self.size.width as usize))
+    }
+
     /// Writes rows `y0..` of the warped frame, premultiplied, into `out` (as many rows as
     /// `out` holds whole rows of the frame's width; a partial last row is left as it is).
     /// Panics when the rows run past the frame's height.
     pub fn rows(&self, y0: usize, out: &mut [[f32; 4]]) {
+        self.rows_with(&mut self.scratch(), y0, out)
+    }
+
+    /// [`WarpRows::rows`] with scratch from [`WarpRows::scratch`] of a frame as wide.
+    pub fn rows_with(&self, scratch: &mut WarpScratch, y0: usize, out: &mut [[f32; 4]]) {
         let w = self.size.width as usize;
         if w == 0 {
             return;
@@ -106,7 +116,7 @@ impl<'a> WarpRows<'a> {
             }
             return;
         };
-        let mut s = RowScratch::new(w);
+        let s = &mut scratch.0;
         for (j, row) in out.chunks_exact_mut(w).enumerate() {
             s.warp_taps(map, y0 + j, self.t, self.size);
             for (i, o) in row.iter_mut().enumerate() {
@@ -117,6 +127,9 @@ impl<'a> WarpRows<'a> {
         }
     }
 }
+
+/// Per-thread scratch of [`WarpRows::rows_with`].
+pub struct WarpScratch(RowScratch);
 
 /// A frame's pixels with its size, so inner loops index a slice directly.
 #[derive(Clone, Copy)]

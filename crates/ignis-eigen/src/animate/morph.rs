@@ -34,7 +34,7 @@ use crate::scenario::{Look, MorphRun, Plan, MORPH_STEP};
 pub use crate::footage::FootageOpener;
 
 mod detail;
-pub use detail::{InbetweenScratch, Stages};
+pub use detail::Stages;
 
 /// Real frames rendered on each side of a morph run to measure the footage's median step.
 pub const NEIGHBOURS: usize = 8;
@@ -303,8 +303,8 @@ pub fn detail_blend_rgba(a: &RgbaFrame, b: &RgbaFrame, t: f32) -> RgbaFrame {
 
 /// The in-between `t` of the way from `a` to `b`: both warped toward it along the flow
 /// (`fw` = a→b, `bw` = b→a), then [`detail_blend_rgba`] — for frames whose local mean is
-/// taken from block means (longer side ≥ 512) in three fused row passes (`detail.rs`,
-/// within 1e-4 of the unfused computation).
+/// taken from block means (longer side ≥ 512) in two fused row passes with no full-size
+/// intermediate (`detail.rs`; within 1e-4 of the unfused computation).
 pub fn inbetween_rgba(
     a: &RgbaFrame,
     b: &RgbaFrame,
@@ -312,34 +312,21 @@ pub fn inbetween_rgba(
     bw: &ignis_flow::FlowField,
     t: f32,
 ) -> RgbaFrame {
-    inbetween_rgba_with(&mut InbetweenScratch::default(), a, b, fw, bw, t)
-}
-
-/// [`inbetween_rgba`] reusing `scratch`'s buffers (for the in-betweens of one join).
-pub fn inbetween_rgba_with(
-    scratch: &mut InbetweenScratch,
-    a: &RgbaFrame,
-    b: &RgbaFrame,
-    fw: &ignis_flow::FlowField,
-    bw: &ignis_flow::FlowField,
-    t: f32,
-) -> RgbaFrame {
-    detail::inbetween_rgba(a, b, fw, bw, t, scratch, None)
+    detail::inbetween_rgba(a, b, fw, bw, t, None)
         .unwrap_or_else(|| inbetween_rgba_unfused(a, b, fw, bw, t))
 }
 
-/// [`inbetween_rgba_with`] with the wall time of each pass of the fused path (names empty
-/// and times zero when the frames take the unfused path), for benchmarks.
+/// [`inbetween_rgba`] with the wall time of each pass of the fused path (names empty and
+/// times zero when the frames take the unfused path), for benchmarks.
 pub fn inbetween_rgba_stages(
-    scratch: &mut InbetweenScratch,
     a: &RgbaFrame,
     b: &RgbaFrame,
     fw: &ignis_flow::FlowField,
     bw: &ignis_flow::FlowField,
     t: f32,
 ) -> (RgbaFrame, Stages) {
-    let mut st = [("", std::time::Duration::ZERO); 4];
-    let f = detail::inbetween_rgba(a, b, fw, bw, t, scratch, Some(&mut st))
+    let mut st = [("", std::time::Duration::ZERO); 3];
+    let f = detail::inbetween_rgba(a, b, fw, bw, t, Some(&mut st))
         .unwrap_or_else(|| inbetween_rgba_unfused(a, b, fw, bw, t));
     (f, st)
 }
@@ -819,9 +806,8 @@ fn morph_run(
         (ch.times, ch.worst, ch.bound_hit, ch.median, ch.measurable);
     let count = times.len();
     let mut chain = vec![ma.clone()];
-    let mut scratch = InbetweenScratch::default();
     for &t in &times {
-        let f = inbetween_rgba_with(&mut scratch, &fa, &fb, &fw, &bw, t);
+        let f = inbetween_rgba(&fa, &fb, &fw, &bw, t);
         chain.push(metric(&f));
         out.emit(f)?;
     }
@@ -948,12 +934,17 @@ mod tests {
                     .collect();
                 ignis_flow::FlowField::from_vec(fs, v).unwrap()
             };
-            cases.push((
-                noisy_rgba(size, 7),
-                noisy_rgba(size, 8),
-                field(0.0),
-                field(1.0),
-            ));
+            let a = noisy_rgba(size, 7);
+            // A correlated partner (gain well inside its bounds) and an unrelated one.
+            let near = a
+                .data()
+                .iter()
+                .zip(noisy_rgba(size, 9).data())
+                .map(|(p, q)| std::array::from_fn(|c| 0.85 * p[c] + 0.15 * q[c]))
+                .collect();
+            let near = RgbaFrame::from_vec(size, near).unwrap();
+            cases.push((a.clone(), near, field(0.0), field(0.05)));
+            cases.push((a, noisy_rgba(size, 8), field(0.0), field(1.0)));
         }
         let p = SyntheticParams {
             size: Size::new(768, 432).unwrap(),
@@ -967,10 +958,9 @@ mod tests {
         );
         let (fw, bw) = end_flows(&a, &b).unwrap();
         cases.push((a, b, fw, bw));
-        let mut scratch = InbetweenScratch::default();
         for (a, b, fw, bw) in &cases {
             for t in [0.2f32, 0.5, 0.9] {
-                let (fast, st) = inbetween_rgba_stages(&mut scratch, a, b, fw, bw, t);
+                let (fast, st) = inbetween_rgba_stages(a, b, fw, bw, t);
                 assert!(st.iter().all(|s| !s.0.is_empty()), "fused path taken");
                 let slow = inbetween_rgba_unfused(a, b, fw, bw, t);
                 let pm = |p: &[f32; 4]| [p[0] * p[3], p[1] * p[3], p[2] * p[3], p[3]];
@@ -990,7 +980,7 @@ mod tests {
                 );
             }
         }
-        let (a, b, fw, bw) = &cases[1];
+        let (a, b, fw, bw) = &cases[2];
         let on = |n: usize| {
             rayon::ThreadPoolBuilder::new()
                 .num_threads(n)
@@ -1007,7 +997,7 @@ mod tests {
         let size = Size::new(200, 120).unwrap();
         let (a, b) = (noisy_rgba(size, 1), noisy_rgba(size, 2));
         let z = ignis_flow::FlowField::zero(size);
-        let (f, st) = inbetween_rgba_stages(&mut InbetweenScratch::default(), &a, &b, &z, &z, 0.5);
+        let (f, st) = inbetween_rgba_stages(&a, &b, &z, &z, 0.5);
         assert!(st.iter().all(|s| s.0.is_empty()));
         assert_eq!(f, inbetween_rgba_unfused(&a, &b, &z, &z, 0.5));
     }
