@@ -297,11 +297,11 @@ fn band_sums(
             for (q, e) in st.qq.iter_mut().zip(&e) {
                 *q += e.iter().map(|&v| f64::from(v)).sum::<f64>();
             }
-            for jj in 0..3 {
+            for ((ra, rb), &wj) in st.aa.iter_mut().zip(st.ab.iter_mut()).zip(&wy) {
                 for i in 0..3 {
                     for c in 0..4 {
-                        st.aa[jj][i][c] += wy[jj] * ha[i][c];
-                        st.ab[jj][i][c] += wy[jj] * hb[i][c];
+                        ra[i][c] += wj * ha[i][c];
+                        rb[i][c] += wj * hb[i][c];
                     }
                 }
             }
