@@ -73,6 +73,32 @@ pub(crate) fn area_resize(src: &[f32], sw: usize, sh: usize, w: usize, h: usize)
     if w == sw && h == sh {
         return Img::new(w, h, src.to_vec());
     }
+    resize_with(sw, sh, w, h, |y, wt, out| {
+        for (o, &v) in out.iter_mut().zip(&src[y * sw..(y + 1) * sw]) {
+            *o += v * wt;
+        }
+    })
+}
+
+/// [`area_resize`] of the luminance of a colour frame ([`crate::luma`]) without building
+/// the full-size grey frame: the same values, bit for bit, as resizing `luma(frame)`.
+pub(crate) fn area_resize_luma(src: &[[f32; 4]], sw: usize, sh: usize, w: usize, h: usize) -> Img {
+    resize_with(sw, sh, w, h, |y, wt, out| {
+        for (o, p) in out.iter_mut().zip(&src[y * sw..(y + 1) * sw]) {
+            *o += crate::warp::luma_of(p) * wt;
+        }
+    })
+}
+
+/// The area resize of an `sw × sh` source to `w × h`, where `add_row(y, wt, out)` adds
+/// `wt ×` source row `y` to `out`.
+fn resize_with(
+    sw: usize,
+    sh: usize,
+    w: usize,
+    h: usize,
+    add_row: impl Fn(usize, f32, &mut [f32]) + Sync,
+) -> Img {
     let xw = area_weights(sw, w);
     let yw = area_weights(sh, h);
     // Vertical pass first: h rows of sw, each a weighted sum of whole source rows
@@ -82,10 +108,7 @@ pub(crate) fn area_resize(src: &[f32], sw: usize, sh: usize, w: usize, h: usize)
     tmp.par_chunks_mut(sw).enumerate().for_each(|(y, out)| {
         let (start, ws) = &yw[y];
         for (k, &wt) in ws.iter().enumerate() {
-            let r = &src[(start + k) * sw..(start + k + 1) * sw];
-            for (o, &v) in out.iter_mut().zip(r) {
-                *o += v * wt;
-            }
+            add_row(start + k, wt, out);
         }
     });
     // Horizontal pass.

@@ -6,11 +6,13 @@
 //!   and returned at the first frame's size with the vectors scaled; [`flow_reduced`] /
 //!   [`flow_pair_reduced`] return the working-size field (cheaper; every function here
 //!   accepts fields of any size).
-//! - [`warp_gray`] / [`warp_rgba`]: `out(x) = src(x + t·F(x))`.
+//! - [`warp_gray`] / [`warp_rgba`]: `out(x) = src(x + t·F(x))`; [`WarpRows`] gives rows of
+//!   the colour warp premultiplied, for callers that fuse it into their own row pass.
 //! - [`morph_gray`] / [`morph_rgba`]: the in-between frame along both flows;
 //!   [`morph_gray_with`] / [`morph_rgba_with`] add optional occlusion-aware weights from
 //!   forward–backward consistency ([`MorphParams`]).
-//! - [`luma`]: the grey input for flow from a colour frame.
+//! - [`luma`]: the grey input for flow from a colour frame; [`flow_pair_reduced_rgba`] takes
+//!   it inside the resize to the working size.
 //! - [`motion_vector_pair`]: both flows of a pair kept only where they are reliable
 //!   (forward–backward consistent, and explaining the change between the frames), the
 //!   input of flipbook motion-vector sheets.
@@ -43,7 +45,7 @@ pub use ignis_core::{GrayFrame, RgbaFrame, Size};
 pub use vectors::{motion_vector_pair, VectorParams};
 pub use warp::{
     luma, morph_gray, morph_gray_with, morph_rgba, morph_rgba_with, warp_gray, warp_rgba,
-    MorphParams,
+    MorphParams, WarpRows, WarpScratch,
 };
 
 use image::Img;
@@ -143,23 +145,7 @@ impl FlowParams {
 /// Checks the pair and returns both frames at the working size, normalised and
 /// perceptually compressed to 0..255, or `None` when the pair holds no texture at all.
 fn prepare(a: &GrayFrame, b: &GrayFrame, p: &FlowParams) -> Result<(Size, Option<(Img, Img)>)> {
-    p.validate()?;
-    if a.size() != b.size() {
-        return Err(FlowError::SizeMismatch(format!(
-            "flow between a {} and a {} frame; resize one so both have the same size",
-            a.size(),
-            b.size()
-        )));
-    }
-    if a.size().pixels() == 0 {
-        return Err(FlowError::bad(
-            "frame size",
-            format!(
-                "{} has a zero side; frames need at least 1x1 pixels",
-                a.size()
-            ),
-        ));
-    }
+    check_pair(a.size(), b.size(), p)?;
     let ws = p.working_size(a.size());
     let (w, h) = (a.width() as usize, a.height() as usize);
     let (nw, nh) = (ws.width as usize, ws.height as usize);
@@ -167,25 +153,78 @@ fn prepare(a: &GrayFrame, b: &GrayFrame, p: &FlowParams) -> Result<(Size, Option
         || image::area_resize(a.data(), w, h, nw, nh),
         || image::area_resize(b.data(), w, h, nw, nh),
     );
-    // A non-finite pixel leaves a non-finite average (every covered pixel has a positive
-    // weight), so the small images are checked and the full frame searched only then.
-    for (name, small, f) in [("first", &ia, a), ("second", &ib, b)] {
+    let frames = [a, b];
+    finish_prepare(ws, w, (ia, ib), |k| {
+        frames[k].data().iter().position(|v| !v.is_finite())
+    })
+}
+
+/// [`prepare`] of the luminance of two colour frames ([`luma`]), without the full-size grey
+/// frames: the same images, bit for bit.
+fn prepare_rgba(
+    a: &RgbaFrame,
+    b: &RgbaFrame,
+    p: &FlowParams,
+) -> Result<(Size, Option<(Img, Img)>)> {
+    check_pair(a.size(), b.size(), p)?;
+    let ws = p.working_size(a.size());
+    let (w, h) = (a.width() as usize, a.height() as usize);
+    let (nw, nh) = (ws.width as usize, ws.height as usize);
+    let (ia, ib) = rayon::join(
+        || image::area_resize_luma(a.data(), w, h, nw, nh),
+        || image::area_resize_luma(b.data(), w, h, nw, nh),
+    );
+    let frames = [a, b];
+    finish_prepare(ws, w, (ia, ib), |k| {
+        frames[k]
+            .data()
+            .iter()
+            .position(|v| !warp::luma_of(v).is_finite())
+    })
+}
+
+/// Checks the parameters and that the frames have one, non-empty size.
+fn check_pair(a: Size, b: Size, p: &FlowParams) -> Result<()> {
+    p.validate()?;
+    if a != b {
+        return Err(FlowError::SizeMismatch(format!(
+            "flow between a {a} and a {b} frame; resize one so both have the same size"
+        )));
+    }
+    if a.pixels() == 0 {
+        return Err(FlowError::bad(
+            "frame size",
+            format!("{a} has a zero side; frames need at least 1x1 pixels"),
+        ));
+    }
+    Ok(())
+}
+
+/// Checks the working-size images for non-finite values (a non-finite pixel leaves a
+/// non-finite average, as every covered pixel has a positive weight, so the full frames
+/// are searched only then: `bad(k)` finds frame `k`'s first non-finite pixel) and
+/// normalises them.
+fn finish_prepare(
+    ws: Size,
+    w: usize,
+    (ia, ib): (Img, Img),
+    bad: impl Fn(usize) -> Option<usize>,
+) -> Result<(Size, Option<(Img, Img)>)> {
+    for (k, (name, small)) in [("first", &ia), ("second", &ib)].into_iter().enumerate() {
         if small.data.iter().any(|v| !v.is_finite()) {
-            return Err(FlowError::BadInput(
-                match f.data().iter().position(|v| !v.is_finite()) {
-                    Some(i) => format!(
-                        "the {name} frame has a NaN or infinite pixel at ({}, {}); clamp or \
-                         replace non-finite values before computing flow",
-                        i % w,
-                        i / w
-                    ),
-                    None => format!(
-                        "the {name} frame's values overflow when averaged (magnitudes near \
-                         {:e}); scale the frame to a sane range first",
-                        f32::MAX
-                    ),
-                },
-            ));
+            return Err(FlowError::BadInput(match bad(k) {
+                Some(i) => format!(
+                    "the {name} frame has a NaN or infinite pixel at ({}, {}); clamp or \
+                     replace non-finite values before computing flow",
+                    i % w,
+                    i / w
+                ),
+                None => format!(
+                    "the {name} frame's values overflow when averaged (magnitudes near \
+                     {:e}); scale the frame to a sane range first",
+                    f32::MAX
+                ),
+            }));
         }
     }
     let hi = ia
@@ -245,6 +284,21 @@ pub fn flow_pair_reduced(
     p: &FlowParams,
 ) -> Result<(FlowField, FlowField)> {
     let (ws, imgs) = prepare(a, b, p)?;
+    Ok(match imgs {
+        Some((ia, ib)) => rayon::join(|| dis_field(&ia, &ib, ws, p), || dis_field(&ib, &ia, ws, p)),
+        None => (FlowField::zero(ws), FlowField::zero(ws)),
+    })
+}
+
+/// [`flow_pair_reduced`] of two colour frames' luminance ([`luma`]): the same fields, bit
+/// for bit, without building the full-size grey frames (the luminance is taken inside the
+/// resize to the working size).
+pub fn flow_pair_reduced_rgba(
+    a: &RgbaFrame,
+    b: &RgbaFrame,
+    p: &FlowParams,
+) -> Result<(FlowField, FlowField)> {
+    let (ws, imgs) = prepare_rgba(a, b, p)?;
     Ok(match imgs {
         Some((ia, ib)) => rayon::join(|| dis_field(&ia, &ib, ws, p), || dis_field(&ib, &ia, ws, p)),
         None => (FlowField::zero(ws), FlowField::zero(ws)),
@@ -316,6 +370,43 @@ mod tests {
             let e = p.validate().unwrap_err();
             assert!(matches!(e, FlowError::BadParameter { .. }), "{e}");
         }
+    }
+
+    #[test]
+    fn rgba_flow_is_the_flow_of_the_luma() {
+        let s = Size::new(700, 300).unwrap();
+        let frame = |k: f32| {
+            let d = (0..s.pixels())
+                .map(|i| {
+                    let (x, y) = ((i % 700) as f32, (i / 700) as f32);
+                    let v = ((x * 0.05 + k).sin() * (y * 0.07 - k).cos()).abs();
+                    [v, 0.5 * v, 0.2, (i % 7) as f32 / 6.0]
+                })
+                .collect();
+            RgbaFrame::from_vec(s, d).unwrap()
+        };
+        let (a, b) = (frame(0.0), frame(0.4));
+        let p = FlowParams::default();
+        let want = flow_pair_reduced(&luma(&a), &luma(&b), &p).unwrap();
+        assert_eq!(flow_pair_reduced_rgba(&a, &b, &p).unwrap(), want);
+        // Small frames (no resize) too, and the same errors.
+        let small = FlowParams {
+            max_side: 1000,
+            ..p.clone()
+        };
+        let want = flow_pair_reduced(&luma(&a), &luma(&b), &small).unwrap();
+        assert_eq!(flow_pair_reduced_rgba(&a, &b, &small).unwrap(), want);
+        let mut nan = a.clone();
+        nan.set(5, 9, [0.0, f32::NAN, 0.0, 1.0]);
+        let e = flow_pair_reduced_rgba(&a, &nan, &p)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("(5, 9)") && e.contains("second"), "{e}");
+        let other = RgbaFrame::new(Size::new(8, 16).unwrap());
+        assert!(matches!(
+            flow_pair_reduced_rgba(&a, &other, &p),
+            Err(FlowError::SizeMismatch(_))
+        ));
     }
 
     #[test]

@@ -18,12 +18,14 @@ const LUMA: [f32; 3] = [0.2126, 0.7152, 0.0722];
 /// The input for [`crate::flow`] from a colour frame: linear Rec. 709 luminance times alpha
 /// (what is visible over black), so transparent pixels carry no texture.
 pub fn luma(frame: &RgbaFrame) -> GrayFrame {
-    let data = frame
-        .data()
-        .par_iter()
-        .map(|p| (LUMA[0] * p[0] + LUMA[1] * p[1] + LUMA[2] * p[2]) * p[3])
-        .collect();
+    let data = frame.data().par_iter().map(luma_of).collect();
     GrayFrame::from_vec(frame.size(), data).expect("same size as a valid frame")
+}
+
+/// [`luma`] of one pixel.
+#[inline(always)]
+pub(crate) fn luma_of(p: &[f32; 4]) -> f32 {
+    (LUMA[0] * p[0] + LUMA[1] * p[1] + LUMA[2] * p[2]) * p[3]
 }
 
 /// `out(x) = src(x + t·F(x))`, bilinear, edge-clamped; `F` is resampled to `src`'s size if
@@ -63,6 +65,71 @@ pub fn warp_rgba(src: &RgbaFrame, f: &FlowField, t: f32) -> RgbaFrame {
     });
     RgbaFrame::from_vec(size, out).expect("sized from src")
 }
+
+/// Rows of [`warp_rgba`]'s output kept **premultiplied** (not unpremultiplied), for a caller
+/// that fuses the warp into its own row pass (the joins' detail-preserving in-between blends
+/// premultiplied values, so it needs neither the straight-alpha frame nor a full-frame
+/// intermediate per warp). Same sampling as [`warp_rgba`]: bilinear, edge-clamped, the
+/// field resampled to the frame's size.
+pub struct WarpRows<'a> {
+    src: &'a [[f32; 4]],
+    size: Size,
+    map: Option<FieldMap<'a>>,
+    t: f32,
+}
+
+impl<'a> WarpRows<'a> {
+    /// The warp `out(x) = src(x + t·F(x))`; an empty field is the identity.
+    pub fn new(src: &'a RgbaFrame, f: &'a FlowField, t: f32) -> WarpRows<'a> {
+        let size = src.size();
+        let map = (size.pixels() > 0 && !f.data().is_empty()).then(|| FieldMap::new(f, size));
+        WarpRows {
+            src: src.data(),
+            size,
+            map,
+            t,
+        }
+    }
+
+    /// Scratch for [`WarpRows::rows_with`] (one per thread, reused across calls).
+    pub fn scratch(&self) -> WarpScratch {
+        WarpScratch(RowScratch::new(self.size.width as usize))
+    }
+
+    /// Writes rows `y0..` of the warped frame, premultiplied, into `out` (as many rows as
+    /// `out` holds whole rows of the frame's width; a partial last row is left as it is).
+    /// Panics when the rows run past the frame's height.
+    pub fn rows(&self, y0: usize, out: &mut [[f32; 4]]) {
+        self.rows_with(&mut self.scratch(), y0, out)
+    }
+
+    /// [`WarpRows::rows`] with scratch from [`WarpRows::scratch`] of a frame as wide.
+    pub fn rows_with(&self, scratch: &mut WarpScratch, y0: usize, out: &mut [[f32; 4]]) {
+        let w = self.size.width as usize;
+        if w == 0 {
+            return;
+        }
+        let Some(map) = &self.map else {
+            let src = &self.src[y0 * w..];
+            for (o, p) in out.iter_mut().zip(src) {
+                *o = [p[0] * p[3], p[1] * p[3], p[2] * p[3], p[3]];
+            }
+            return;
+        };
+        let s = &mut scratch.0;
+        for (j, row) in out.chunks_exact_mut(w).enumerate() {
+            s.warp_taps(map, y0 + j, self.t, self.size);
+            for (i, o) in row.iter_mut().enumerate() {
+                let mut acc = [0.0f32; 4];
+                s.ka.add_pm(self.src, i, 1.0, &mut acc);
+                *o = acc;
+            }
+        }
+    }
+}
+
+/// Per-thread scratch of [`WarpRows::rows_with`].
+pub struct WarpScratch(RowScratch);
 
 /// A frame's pixels with its size, so inner loops index a slice directly.
 #[derive(Clone, Copy)]
@@ -560,6 +627,54 @@ mod tests {
         // A half-size field scales its vectors.
         let half = FlowField::from_vec(Size::new(4, 3).unwrap(), vec![[0.5, 1.0]; 12]).unwrap();
         assert_eq!(warp_gray(&g, &half, 1.0).get(2, 1), g.get(3, 3));
+    }
+
+    #[test]
+    fn warp_rows_are_the_premultiplied_warp() {
+        let s = Size::new(9, 7).unwrap();
+        let src = RgbaFrame::from_vec(
+            s,
+            (0..63)
+                .map(|i| {
+                    let v = i as f32;
+                    [
+                        v * 0.1,
+                        (v * 0.37).sin().abs(),
+                        1.0 / (1.0 + v),
+                        (i % 5) as f32 / 4.0,
+                    ]
+                })
+                .collect(),
+        )
+        .unwrap();
+        // A half-size field with varied vectors, and the empty field (identity).
+        let fs = Size::new(5, 4).unwrap();
+        let f = FlowField::from_vec(
+            fs,
+            (0..20)
+                .map(|i| [(i % 3) as f32 - 1.2, (i % 4) as f32 * 0.7 - 1.0])
+                .collect(),
+        )
+        .unwrap();
+        let empty = FlowField::zero(Size {
+            width: 0,
+            height: 0,
+        });
+        for (field, t) in [(&f, 0.6f32), (&f, -0.3), (&empty, 0.5)] {
+            let want = warp_rgba(&src, field, t);
+            let rows = WarpRows::new(&src, field, t);
+            let mut got = vec![[0.0f32; 4]; 63];
+            // In two bands, as a caller's band loop would.
+            let (top, bottom) = got.split_at_mut(3 * 9);
+            rows.rows(0, top);
+            rows.rows(3, bottom);
+            for (g, p) in got.iter().zip(want.data()) {
+                let pm = [p[0] * p[3], p[1] * p[3], p[2] * p[3], p[3]];
+                for c in 0..4 {
+                    assert!((g[c] - pm[c]).abs() < 1e-5, "{g:?} vs {pm:?}");
+                }
+            }
+        }
     }
 
     #[test]
