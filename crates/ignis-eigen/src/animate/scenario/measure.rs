@@ -2,7 +2,7 @@
 //! distances, which overstate how far apart two clips look and cannot see a soft frame. So
 //! before rendering, every candidate of an `auto` join — the real-frame paths (End Growing,
 //! Direct Bridging over the whole database) and the motion-compensated morph — is rendered
-//! with up to [`NEIGHBOURS`] real frames on each side (a morph with its in-betweens chosen
+//! with up to [`SIDE`] real frames on each side (the ghost's ±15 neighbourhood) (a morph with its in-betweens chosen
 //! as the full render chooses them, [`morph::render_metric`]) and measured on the metric
 //! frames the written output is judged on (grey, 128 px, `ignis_core::loopq`): the worst
 //! step from the last frame before the join to the first after it, over the median step of
@@ -16,13 +16,17 @@ use std::ops::Range;
 use ignis_core::{loopq, GrayFrame};
 
 use super::{Look, MorphRun, Plan, PlanFrame, Scenario};
-use crate::animate::morph::{self, NEIGHBOURS};
+use crate::animate::morph;
 use crate::db::EigenfireDb;
 use crate::error::Result;
 use crate::footage::FootageOpener;
 use crate::loops::GHOST_WEIGHT;
 use crate::render::RenderOptions;
 use crate::transition::Join;
+
+/// Real frames rendered on each side of a join to measure it: the ghost's radius, so the
+/// join's frames are judged against the neighbourhood the written output's ghost uses.
+pub const SIDE: usize = loopq::GHOST_RADIUS;
 
 /// A candidate join as measured on its rendered frames.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -97,12 +101,12 @@ fn measure_join(
             .enumerate()
             .any(|(j, s)| j != i && s.contains(&k))
     };
-    let mut before: Vec<usize> = (1..=NEIGHBOURS)
+    let mut before: Vec<usize> = (1..=SIDE)
         .map_while(|o| span.start.checked_sub(o).filter(|&k| !other(k)))
         .collect();
     before.reverse();
     let mut after = Vec::new();
-    for o in 0..NEIGHBOURS {
+    for o in 0..SIDE {
         let mut k = span.end + o;
         if k >= n {
             if !cand.loops {
