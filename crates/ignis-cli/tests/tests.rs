@@ -1429,13 +1429,20 @@ mod transitions {
                 ("campfire", 0, 60),
                 ("campfire", 100, 160),
             ),
-            // `auto` between two clips: no real-frame path is within the seam bound, so
-            // it takes the morph (the in-betweens again chosen from the rendered frames).
+            // `auto` between two clips and between two distant ranges of one clip: every
+            // candidate (End Growing, Direct Bridging, the morph) rendered and measured,
+            // the best worst step and ghost kept.
             (
                 "clips-auto",
                 "auto",
                 ("candle", 10, 90),
                 ("campfire", 60, 140),
+            ),
+            (
+                "ranges-auto",
+                "auto",
+                ("campfire", 0, 60),
+                ("campfire", 100, 160),
             ),
         ];
         for (name, method, (ca, a0, a1), (cb, b0, b1)) in cases {
@@ -1452,14 +1459,31 @@ mod transitions {
             .unwrap();
             let dir = t.path().join(name);
             let pat = dir.join("%04d.png");
-            ignis_ok(&[
+            let o = ignis_ok(&[
                 "eigen",
                 "animate",
-                "-q",
                 scenario.to_str().unwrap(),
                 "-o",
                 pat.to_str().unwrap(),
             ]);
+            let text = format!(
+                "{}{}",
+                String::from_utf8_lossy(&o.stdout),
+                String::from_utf8_lossy(&o.stderr)
+            );
+            let why = text
+                .lines()
+                .find(|l| l.starts_with("join 1:"))
+                .unwrap_or_default();
+            eprintln!("{name}: {why}");
+            if method == "auto" {
+                // Decided on the rendered frames, unless only the morph was possible.
+                assert!(
+                    why.contains("measured on the rendered frames")
+                        || why.contains("no real-frame path"),
+                    "{name}: {why}"
+                );
+            }
             let f = metric_frames(&dir);
             let (la, lb) = (a1 - a0, b1 - b0);
             assert!(

@@ -428,6 +428,16 @@ pub fn animate_cmd(a: &AnimateArgs, g: &Global) -> Result<Plan> {
         )
     })?;
     let plan = sc.plan(&db, &mut crate::global::StageBars::new(g))?;
+    let mut look = sc.look.clone();
+    a.footage.adjust_look(&mut look, g);
+    // `auto` joins are decided on their rendered frames (a dry run shows the planner's).
+    let plan = if a.dry_run || plan.joins.iter().all(|j| j.alternatives.is_empty()) {
+        plan
+    } else {
+        let mut sources = a.footage.sources(&db)?;
+        sc.measure_joins(&db, plan, &look, &a.footage.options()?, &mut sources)
+            .with_context(|| format!("measuring the auto joins of {}", a.scenario.display()))?
+    };
     let opts = a.out.write_options();
     let out_loops = opts.loop_
         && matches!(
@@ -442,8 +452,6 @@ pub fn animate_cmd(a: &AnimateArgs, g: &Global) -> Result<Plan> {
             .transpose()?;
         return Ok(plan);
     }
-    let mut look = sc.look.clone();
-    a.footage.adjust_look(&mut look, g);
     // The morph joins' in-between counts come from the rendered frames: chosen first, so
     // the frame count (what `--chunk` ranges over, the progress bar) is the one written.
     let plan = if plan.morphs.iter().any(|r| r.times.is_none() && !r.fixed) {

@@ -26,9 +26,9 @@
 //! `end + t` going into frame `start + t` with weight `(t + 1) / (m + 1)` on the latter
 //! (the crossfade of loop_metrics.py, rotated to start after the head it replaces). Played
 //! repeatedly, the last transition frame is followed by `start + m`. It needs frames up to
-//! `end + m - 1`. A few single soft frames of the body may be left out ([`Skips`]) when
-//! the measured score says the loop is better without them: the footage's own blurred
-//! frames would otherwise be the loop's ghost.
+//! `end + m - 1`. Soft frames of the body (alone or two in a row) may be left out
+//! ([`Skips`]) when the measured score says the loop is better without them: the footage's
+//! own blurred frames would otherwise be the loop's ghost.
 //!
 //! This crate knows no flow or codec: the morph comes in through [`PairMorph`] (the CLI
 //! implements it with `ignis_flow`); [`Crossfade`] is the plain blend.
@@ -45,16 +45,18 @@ pub const FILTER: [f64; 4] = [1.0, 3.0, 3.0, 1.0];
 pub const TRANSITION_LENGTHS: [usize; 10] = [0, 2, 3, 4, 6, 8, 10, 12, 16, 20];
 /// Weight of the ghost shortfall in [`score`].
 pub const GHOST_WEIGHT: f64 = 3.0;
-/// Most footage frames a closed loop may leave out ([`Skips`]); also at most one in
-/// [`SKIP_EVERY`] of its frames.
-pub const MAX_SKIPS: usize = 4;
-/// See [`MAX_SKIPS`].
-pub const SKIP_EVERY: usize = 24;
+/// Most footage frames a closed loop may leave out ([`Skips`]): the capacity of the
+/// fixed-size set. The real bounds are the footage's (see [`Skips`]).
+pub const MAX_SKIPS: usize = 16;
 
-/// Body frames a closed loop leaves out (window indices, ascending): single soft footage
-/// frames — motion blur, a compression glitch — that would be the loop's ghost. Playing
-/// `i - 1` then `i + 1` is a Video Textures transition to the frame after the next
-/// (Schödl 2000 §3), kept only when the measured seam and ghost score better with it.
+/// Body frames a closed loop leaves out (window indices, ascending): soft footage frames —
+/// motion blur, a duplicated blurred frame, a compression glitch — that would be the loop's
+/// ghost, alone or two in a row. Playing `i - 1` then `i + 1` (or `i + 2`) is a Video
+/// Textures transition to a later frame (Schödl 2000 §3). Allowed only where the step
+/// across the left-out frames is no larger than the largest step the footage itself takes
+/// inside the loop (so the loop never moves faster than its own footage does), with a kept
+/// frame between two left-out runs, the loop never shorter than the search's shortest
+/// loop; and kept only when the measured [`score`] is better with it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub struct Skips {
     n: u8,
@@ -489,6 +491,9 @@ pub struct MetricWindow<'a> {
     steps: Vec<f64>,
     sharp: Vec<f64>,
     softness: Vec<f64>,
+    /// The softest tenth's bound: frames with `softness` below it may be left out
+    /// ([`Skips`]); at most 1.
+    soft_cut: f64,
 }
 
 impl<'a> MetricWindow<'a> {
@@ -504,17 +509,21 @@ impl<'a> MetricWindow<'a> {
         let sharp: Vec<f64> = frames.par_iter().map(loopq::sharpness).collect();
         let n = sharp.len();
         let r = loopq::GHOST_RADIUS;
-        let softness = (0..n)
+        let softness: Vec<f64> = (0..n)
             .map(|t| {
                 let (a, b) = (t.saturating_sub(r), (t + r + 1).min(n));
                 sharp[t] / loopq::median(&mut sharp[a..b].to_vec()).max(1e-9)
             })
             .collect();
+        let mut sorted = softness.clone();
+        sorted.sort_by(f64::total_cmp);
+        let soft_cut = sorted[(n - 1) / 10].min(1.0);
         Ok(MetricWindow {
             frames,
             steps,
             sharp,
             softness,
+            soft_cut,
         })
     }
     pub fn len(&self) -> usize {
@@ -645,9 +654,12 @@ fn evaluate_one(
     out
 }
 
-/// Seam and ghost of `c` closed with `closing` whose transition frames are `mids`, then
-/// with soft body frames left out one at a time (see [`Skips`]) while that lowers the
-/// [`score`] and the loop keeps at least `min_len` frames.
+/// Seam and ghost of `c` closed with `closing` whose transition frames are `mids`, and its
+/// best version with soft body frames left out ([`Skips`]): the soft runs ([`soft_runs`])
+/// are left out cumulatively, softest first, and every prefix is measured; the best
+/// [`score`] wins. Measuring every prefix (not stopping at the first that does not help)
+/// gets past ties: two equally soft frames only raise the ghost once both are gone. The
+/// loop keeps at least `min_len` frames.
 fn measure(
     win: &MetricWindow,
     c: &Candidate,
@@ -655,36 +667,99 @@ fn measure(
     mids: &[GrayFrame],
     min_len: usize,
 ) -> Evaluated {
-    let mut best = measure_with(win, c, closing, mids, Skips::default());
-    let m = mids.len();
-    let body = c.start + m..c.end;
-    let allowed = MAX_SKIPS
-        .min(c.len() / SKIP_EVERY)
-        .min(c.len().saturating_sub(min_len));
-    while best.skips.len() < allowed {
-        // The softest frame, when it is a body frame whose neighbours are both kept
-        // body frames (never two in a row, never the frames next to the closing).
-        let kept: Vec<usize> = body.clone().filter(|&i| !best.skips.contains(i)).collect();
-        let at = best.quality.ghost_at;
-        if at == 0 || at + 1 >= kept.len() {
-            break;
+    let fixed = Fixed::new(win, c, mids);
+    let mut across = std::collections::HashMap::new();
+    let mut best = measure_fixed(win, c, closing, &fixed, Skips::default(), &mut across);
+    let body = c.start + mids.len()..c.end;
+    let room = MAX_SKIPS.min(c.len().saturating_sub(min_len));
+    if room == 0 || body.len() < 4 {
+        return best;
+    }
+    // The largest step the footage itself takes inside the loop.
+    let natural = win.steps[body.start..body.end - 1]
+        .iter()
+        .copied()
+        .fold(0.0, f64::max);
+    let mut skips = Skips::default();
+    for run in soft_runs(win, body) {
+        let near = |i: usize| skips.contains(i) || skips.contains(i + 1) || skips.contains(i - 1);
+        if skips.len() + run.len() > room || run.clone().any(near) {
+            continue;
         }
-        let i = kept[at];
-        if kept[at - 1] + 1 != i || kept[at + 1] != i + 1 {
-            break;
+        let step = *across
+            .entry((run.start - 1, run.end))
+            .or_insert_with(|| loopq::rms_diff(&win.frames[run.start - 1], &win.frames[run.end]));
+        if step > natural {
+            continue;
         }
-        let tried = measure_with(win, c, closing, mids, best.skips.with(i));
+        skips = run.fold(skips, |s, i| s.with(i));
+        let tried = measure_fixed(win, c, closing, &fixed, skips, &mut across);
         if tried.score < best.score {
             best = tried;
-        } else {
-            break;
         }
     }
     best
 }
 
+/// The runs of one or two soft frames inside `body`, with a body frame on each side,
+/// softest first (a pair by its sharper frame; ties by position, then the single first).
+/// Soft: among the softest tenth of the window's frames by sharpness over the median of
+/// their ±15 footage neighbours ([`MetricWindow::soft_cut`]) — the footage's own outliers,
+/// so a sharp loop is not thinned out for a metric's sake.
+fn soft_runs(win: &MetricWindow, body: std::ops::Range<usize>) -> Vec<std::ops::Range<usize>> {
+    let soft = |i: usize| win.softness[i] < win.soft_cut;
+    let mut runs: Vec<(f64, std::ops::Range<usize>)> = Vec::new();
+    for i in body.start + 1..body.end - 1 {
+        if !soft(i) {
+            continue;
+        }
+        runs.push((win.softness[i], i..i + 1));
+        if i + 2 < body.end && soft(i + 1) {
+            runs.push((win.softness[i].max(win.softness[i + 1]), i..i + 2));
+        }
+    }
+    runs.sort_by(|a, b| {
+        a.0.total_cmp(&b.0)
+            .then(a.1.start.cmp(&b.1.start))
+            .then(a.1.len().cmp(&b.1.len()))
+    });
+    runs.into_iter().map(|(_, r)| r).collect()
+}
+
+/// What [`measure_fixed`] needs that does not change with the left-out frames: the steps
+/// into, through and out of the transition, and the transition frames' sharpness.
+struct Fixed {
+    m: usize,
+    /// Last body frame → first mid, mids, last mid → first body frame (a cut: the jump).
+    trans: Vec<f64>,
+    mid_sharp: Vec<f64>,
+}
+
+impl Fixed {
+    fn new(win: &MetricWindow, c: &Candidate, mids: &[GrayFrame]) -> Fixed {
+        let m = mids.len();
+        let (first, last) = (c.start + m, c.end - 1);
+        let mut trans = Vec::with_capacity(m + 1);
+        if m == 0 {
+            trans.push(loopq::rms_diff(&win.frames[last], &win.frames[first]));
+        } else {
+            trans.push(loopq::rms_diff(&win.frames[last], &mids[0]));
+            for t in 1..m {
+                trans.push(loopq::rms_diff(&mids[t - 1], &mids[t]));
+            }
+            trans.push(loopq::rms_diff(&mids[m - 1], &win.frames[first]));
+        }
+        Fixed {
+            m,
+            trans,
+            mid_sharp: mids.iter().map(loopq::sharpness).collect(),
+        }
+    }
+}
+
 /// Seam and ghost of `c` closed with `closing` (transition frames `mids`), body frames
 /// `skips` left out.
+#[cfg(test)]
 fn measure_with(
     win: &MetricWindow,
     c: &Candidate,
@@ -692,32 +767,35 @@ fn measure_with(
     mids: &[GrayFrame],
     skips: Skips,
 ) -> Evaluated {
-    let m = mids.len();
-    let body: Vec<usize> = (c.start + m..c.end)
+    let fixed = Fixed::new(win, c, mids);
+    measure_fixed(win, c, closing, &fixed, skips, &mut Default::default())
+}
+
+/// [`measure_with`] from the [`Fixed`] parts; `across` caches the steps across left-out
+/// frames. The body's first and last frames are never left out.
+fn measure_fixed(
+    win: &MetricWindow,
+    c: &Candidate,
+    closing: Closing,
+    fixed: &Fixed,
+    skips: Skips,
+    across: &mut std::collections::HashMap<(usize, usize), f64>,
+) -> Evaluated {
+    let body: Vec<usize> = (c.start + fixed.m..c.end)
         .filter(|&i| !skips.contains(i))
         .collect();
-    let step = |a: usize, b: usize| {
+    let mut step = |a: usize, b: usize| {
         if b == a + 1 {
             win.steps[a]
         } else {
-            loopq::rms_diff(&win.frames[a], &win.frames[b])
+            *across
+                .entry((a, b))
+                .or_insert_with(|| loopq::rms_diff(&win.frames[a], &win.frames[b]))
         }
     };
-    let (first, last) = (body[0], body[body.len() - 1]);
-    // Steps: body (natural, or across a left-out frame), last body → first mid, mids,
-    // last mid → first body (wrap).
+    // Steps: body (natural, or across left-out frames), then the transition's.
     let mut steps: Vec<f64> = body.windows(2).map(|w| step(w[0], w[1])).collect();
-    let mut trans = Vec::with_capacity(m + 1);
-    if m == 0 {
-        trans.push(loopq::rms_diff(&win.frames[last], &win.frames[first]));
-    } else {
-        trans.push(loopq::rms_diff(&win.frames[last], &mids[0]));
-        for t in 1..m {
-            trans.push(loopq::rms_diff(&mids[t - 1], &mids[t]));
-        }
-        trans.push(loopq::rms_diff(&mids[m - 1], &win.frames[first]));
-    }
-    steps.extend_from_slice(&trans);
+    steps.extend_from_slice(&fixed.trans);
     let med = loopq::median(&mut steps.clone());
     let (seam_at, max) =
         steps.iter().enumerate().fold(
@@ -725,7 +803,7 @@ fn measure_with(
             |b, (i, &v)| if v > b.1 { (i, v) } else { b },
         );
     let mut sharp: Vec<f64> = body.iter().map(|&i| win.sharp[i]).collect();
-    sharp.extend(mids.iter().map(loopq::sharpness));
+    sharp.extend_from_slice(&fixed.mid_sharp);
     let (ghost, ghost_at) = loopq::ghost(&sharp);
     // As loopq: a still loop is perfectly smooth, a step out of stillness infinitely rough.
     let ratio = |v: f64| {
@@ -749,7 +827,7 @@ fn measure_with(
         closing,
         skips,
         quality,
-        transition_step: ratio(trans.iter().copied().fold(0.0, f64::max)),
+        transition_step: ratio(fixed.trans.iter().copied().fold(0.0, f64::max)),
         score: score(&quality),
     }
 }

@@ -676,6 +676,12 @@ pub fn resolve(
         opts,
         geo,
     };
+    resolve_ctx(&c, sources)
+}
+
+/// [`resolve`] of `c.plan`, rendered at `c.geo`.
+fn resolve_ctx(c: &Ctx, sources: &mut dyn FootageOpener) -> Result<Plan> {
+    let plan = c.plan;
     let n = plan.frames.len();
     let runs = checked_runs(plan)?;
     let in_run = |i: usize| runs.iter().any(|r| i >= r.start && i < r.start + r.len);
@@ -689,7 +695,7 @@ pub fn resolve(
             r.times.clone()
         } else {
             let next = runs.get(k + 1).map_or(n, |q| q.start);
-            Some(resolve_run(&c, r, next, &in_run, sources)?)
+            Some(resolve_run(c, r, next, &in_run, sources)?)
         };
         let len = times.as_ref().map_or(r.len, Vec::len);
         frames.extend(std::iter::repeat_n(plan.frames[r.start].clone(), len));
@@ -707,6 +713,47 @@ pub fn resolve(
         morphs,
         ..plan.clone()
     })
+}
+
+/// The metric frames `sub` renders to (as an opaque writer over black shows them; its
+/// morph runs resolved as a full render resolves them, [`resolve`]) at the geometry of
+/// `full`, the plan it is cut from; and `sub`'s morph runs as resolved. What
+/// [`crate::scenario::Scenario::measure_joins`] measures a candidate join on.
+pub fn render_metric(
+    db: &EigenfireDb,
+    full: &Plan,
+    sub: &Plan,
+    look: &Look,
+    opts: &RenderOptions,
+    sources: &mut dyn FootageOpener,
+) -> Result<(Vec<GrayFrame>, Vec<MorphRun>)> {
+    let geo = crate::render::geometry(db, full, opts)?;
+    let c = Ctx {
+        db,
+        plan: sub,
+        look,
+        opts,
+        geo,
+    };
+    let resolved = resolve_ctx(&c, sources)?;
+    let c = Ctx {
+        db,
+        plan: &resolved,
+        look,
+        opts,
+        geo,
+    };
+    let mut out = Vec::with_capacity(resolved.frames.len());
+    render_with_morphs(
+        &c,
+        sources,
+        &mut |f| {
+            out.push(metric(&f));
+            Ok(())
+        },
+        &mut |_| {},
+    )?;
+    Ok((out, resolved.morphs))
 }
 
 /// [`choose_run`] for one automatic run of [`resolve`], from the frames the full render

@@ -43,8 +43,13 @@
 //! `method = "morph"` joins the last frame of one motion to the first of the next with
 //! motion-compensated in-betweens (`ignis_flow`: DIS flow both ways at a reduced size,
 //! warp and blend) of the two rendered frames. `auto` keeps a real-frame path (End
-//! Growing, Direct Bridging) when its seam ratio is within [`AUTO_MORPH_ABOVE`], and
-//! otherwise uses the morph, saying why.
+//! Growing, Direct Bridging) when its weight-space seam ratio is within
+//! [`AUTO_MORPH_ABOVE`], and otherwise plans the morph — provisionally: before rendering,
+//! [`Scenario::measure_joins`] renders every candidate (the real-frame paths and the morph,
+//! its in-betweens chosen as the render will) with the real frames around it, measures
+//! each one's worst step and ghost on the metric frames (grey, 128 px, `ignis_core::loopq`)
+//! and keeps the lowest worst step + [`crate::loops::GHOST_WEIGHT`] × ghost shortfall
+//! (ties: the real-frame path), saying why with every candidate's figures.
 //! The look (`[colour]`, `[bloom]`, `[smoke]`, `[originals]`, `[masks]`) is described in
 //! [`Look`].
 //!
@@ -77,6 +82,7 @@ use crate::error::{EigenError, Result};
 use crate::transition::{self, FrameRef, Join, RecognitionParams, Transition, WeightSpace};
 
 mod look;
+mod measure;
 mod plan;
 mod spec;
 
@@ -389,6 +395,11 @@ pub struct PlannedJoin {
     pub join: Join,
     /// Seam ratio of a plain cut at the same place.
     pub plain_cut: f64,
+    /// For `auto`: the other joins it could take (End Growing, Direct Bridging, the
+    /// morph), until [`Scenario::measure_joins`] renders each, measures its worst step and
+    /// ghost on the metric frames and keeps the best. Empty once decided (or when there is
+    /// no choice).
+    pub alternatives: Vec<Join>,
 }
 
 /// One output frame of a plan.

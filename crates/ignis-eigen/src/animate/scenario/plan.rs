@@ -15,10 +15,12 @@ use super::{
 use crate::animate;
 use crate::db::{ClipEntry, EigenfireDb};
 use crate::error::Result;
-use crate::transition::{self, FrameRef, Join, RecognitionParams, TransitionError, WeightSpace};
+use crate::transition::{
+    self, FrameRef, Join, RecognitionParams, Transition, TransitionError, WeightSpace,
+};
 
 /// A motion resolved against the database.
-struct MotionPlan {
+pub(super) struct MotionPlan {
     /// Its database rows.
     rows: Range<usize>,
     /// Its §5.2 edits `(Eigenfire index, weight)`, indices within the usable Eigenfires.
@@ -29,11 +31,8 @@ impl Scenario {
     /// Checks the scenario against `db` and computes every join: the frame list to render.
     /// Reports one progress stage, "finding transitions", of one step per join.
     pub fn plan(&self, db: &EigenfireDb, progress: &mut dyn Progress) -> Result<Plan> {
-        let usable = db.usable_components().max(1);
         let e_detect = self.e_detect.unwrap_or(db.manifest().e_detect);
-        let e_render_req = self.e_render.unwrap_or(db.manifest().e_render);
-        let motions = self.resolve_motions(db, usable)?;
-        let space = WeightSpace::from_db(db)?;
+        let (motions, space) = self.resolved(db)?;
         let n_joins = self.joins.len();
         progress.stage("finding transitions", n_joins as u64);
         let mut joins = Vec::with_capacity(n_joins);
@@ -42,14 +41,29 @@ impl Scenario {
             progress.inc(1);
         }
         progress.finish_stage();
-        let (frames, morphs) = self.frame_list(&motions, &joins)?;
+        Ok(self.assemble(db, &space, &motions, joins)?.0)
+    }
+
+    /// The plan of `joins` (the frame list, measured in weight space) and where each join's
+    /// frames sit in it.
+    pub(super) fn assemble(
+        &self,
+        db: &EigenfireDb,
+        space: &WeightSpace,
+        motions: &BTreeMap<&str, MotionPlan>,
+        joins: Vec<PlannedJoin>,
+    ) -> Result<(Plan, Vec<Range<usize>>)> {
+        let usable = db.usable_components().max(1);
+        let e_detect = self.e_detect.unwrap_or(db.manifest().e_detect);
+        let e_render_req = self.e_render.unwrap_or(db.manifest().e_render);
+        let (frames, morphs, spans) = self.frame_list(motions, &joins)?;
         let e = RecognitionParams {
             e_detect,
             ..Default::default()
         }
-        .e_detect(&space);
-        let (wrap_seam, worst_step) = smoothness(&space, &frames, e);
-        Ok(Plan {
+        .e_detect(space);
+        let (wrap_seam, worst_step) = smoothness(space, &frames, e);
+        let plan = Plan {
             frames,
             morphs,
             joins,
@@ -59,7 +73,18 @@ impl Scenario {
             e_render_requested: e_render_req,
             e_detect: e,
             loops: self.loops,
-        })
+        };
+        Ok((plan, spans))
+    }
+
+    /// Every motion resolved against `db`, and its weight space.
+    #[allow(clippy::type_complexity)]
+    pub(super) fn resolved<'d>(
+        &self,
+        db: &'d EigenfireDb,
+    ) -> Result<(BTreeMap<&str, MotionPlan>, WeightSpace<'d>)> {
+        let usable = db.usable_components().max(1);
+        Ok((self.resolve_motions(db, usable)?, WeightSpace::from_db(db)?))
     }
 
     /// Every motion's database rows and weight edits.
@@ -175,7 +200,7 @@ impl Scenario {
             motions[b.as_str()].rows.clone(),
         );
         let e = rec.e_detect(space);
-        let join = choose_join(space, &ra, &rb, spec, &rec, e).map_err(|e| {
+        let (join, alternatives) = choose_join(space, &ra, &rb, spec, &rec, e).map_err(|e| {
             let why = match &e {
                 TransitionError::NoPath { .. } => {
                     format!("{e}; try a larger `steps`, another method, or method = \"auto\"")
@@ -190,19 +215,23 @@ impl Scenario {
             to: b.clone(),
             join,
             plain_cut: plain,
+            alternatives,
         })
     }
 
     /// The frame list: each motion's body (less the frames its joins replace), then the
-    /// join to the next motion, its frames' edits ramping from one motion's to the next's.
+    /// join to the next motion, its frames' edits ramping from one motion's to the next's;
+    /// with the morph runs and each join's frames (a range of the list).
+    #[allow(clippy::type_complexity)]
     fn frame_list(
         &self,
         motions: &BTreeMap<&str, MotionPlan>,
         joins: &[PlannedJoin],
-    ) -> Result<(Vec<PlanFrame>, Vec<MorphRun>)> {
+    ) -> Result<(Vec<PlanFrame>, Vec<MorphRun>, Vec<Range<usize>>)> {
         let seq = &self.sequence.value;
         let mut frames = Vec::new();
         let mut morphs = Vec::new();
+        let mut spans = Vec::with_capacity(joins.len());
         for (i, name) in seq.iter().enumerate() {
             let m = &motions[name.value.as_str()];
             let trim_head = if i > 0 {
@@ -225,6 +254,7 @@ impl Scenario {
             if let Some(j) = joins.get(i) {
                 let next = &motions[seq[(i + 1) % seq.len()].value.as_str()];
                 let n = j.join.frames.len();
+                spans.push(frames.len()..frames.len() + n);
                 if j.join.method == "morph" && n > 0 {
                     morphs.push(MorphRun {
                         start: frames.len(),
@@ -260,13 +290,14 @@ impl Scenario {
                 "a morph join has no real frame to start or end from; use longer ranges",
             ));
         }
-        Ok((frames, morphs))
+        Ok((frames, morphs, spans))
     }
 }
 
-/// The join from the end of `ra` to the start of `rb` by `spec`'s method. `auto` keeps a
-/// real-frame path when its seam ratio is within [`AUTO_MORPH_ABOVE`] (or the morph is no
-/// better), else the morph, saying why; `method = "morph"` always morphs.
+/// The join from the end of `ra` to the start of `rb` by `spec`'s method, and for `auto`
+/// the other candidates [`Scenario::measure_joins`] measures. `auto` plans a real-frame
+/// path when its weight-space seam ratio is within [`AUTO_MORPH_ABOVE`] (or the morph is
+/// no better), else the morph, saying why; `method = "morph"` always morphs.
 fn choose_join(
     space: &WeightSpace,
     ra: &Range<usize>,
@@ -274,7 +305,7 @@ fn choose_join(
     spec: &JoinSpec,
     rec: &RecognitionParams,
     e: usize,
-) -> Result<Join, TransitionError> {
+) -> Result<(Join, Vec<Join>), TransitionError> {
     let morph = |reason: &str| {
         morph_join(
             space,
@@ -285,14 +316,13 @@ fn choose_join(
             reason,
         )
     };
+    let run = |t: &Transition| transition::transition(space, ra.clone(), rb.clone(), t, rec);
     match &spec.morph {
-        Some(m) if m.forced => return Ok(morph("method = \"morph\"")),
-        None => {
-            return transition::transition(space, ra.clone(), rb.clone(), &spec.transition, rec)
-        }
+        Some(m) if m.forced => return Ok((morph("method = \"morph\""), Vec::new())),
+        None => return Ok((run(&spec.transition)?, Vec::new())),
         Some(_) => {}
     }
-    match transition::transition(space, ra.clone(), rb.clone(), &spec.transition, rec) {
+    let chosen = match run(&spec.transition) {
         Ok(j) if j.seam_ratio > AUTO_MORPH_ABOVE => {
             let mj = morph("");
             // An automatic morph's count is chosen again on the rendered frames, so that
@@ -315,18 +345,29 @@ fn choose_join(
                     "auto: {} gave seam ratio {:.2} (> {AUTO_MORPH_ABOVE}), the morph {:.2}{held}; {}",
                     j.method, j.seam_ratio, morph_seam, mj.why
                 );
-                Ok(Join { why, ..mj })
+                Join { why, ..mj }
             } else {
-                Ok(j)
+                j
             }
         }
         Err(TransitionError::NoPath { .. }) => {
             let mj = morph("");
             let why = format!("auto: no real-frame path; {}", mj.why);
-            Ok(Join { why, ..mj })
+            Join { why, ..mj }
         }
-        r => r,
-    }
+        r => r?,
+    };
+    // The real-frame paths (§5.1.2) and the morph, measured on the rendered frames later.
+    let mut alternatives: Vec<Join> = [
+        Transition::EndGrowing { max_steps: 40 },
+        Transition::DirectBridging { steps: None },
+    ]
+    .iter()
+    .filter_map(|t| run(t).ok())
+    .collect();
+    alternatives.push(morph(""));
+    alternatives.retain(|a| a.method != chosen.method);
+    Ok((chosen, alternatives))
 }
 
 /// Seam ratios of the wrap (last frame → first) and of the largest step between
