@@ -3,7 +3,7 @@
 //! frames; looping: settled, re-timed, replayed), in CPU time of every thread, summed over
 //! many alternating runs: the least and the median run of each (steadier than the wall
 //! clock on a shared machine).
-//! `cargo run --release -p ignis-classic --example loop_cost -- [RUNS]`
+//! `cargo run --release -p ignis-classic --example classic_loop_cost -- [RUNS]`
 use ignis_classic::{ClassicFire, ClassicParams};
 use ignis_core::{Palette, Size};
 

@@ -1,7 +1,7 @@
 //! Loop smoothness of the classic fire as `ignis classic --loop` writes it: the largest
 //! step and the wrap step of the grey 128-px metric frames (`ignis_core::loopq`) over the
 //! median step, with and without even re-timing, and the CPU time the re-timing took.
-//! `cargo run --release -p ignis-classic --example loop_steps -- SEED N [CELL PUFF FPS WxH]`
+//! `cargo run --release -p ignis-classic --example classic_loop_steps -- SEED N [CELL PUFF FPS WxH]`
 use ignis_classic::{ClassicFire, ClassicParams};
 use ignis_core::{loopq, Palette};
 
