@@ -86,6 +86,12 @@ pub fn figures(g: &Global, quick: bool) -> Result<serde_json::Value> {
         }));
     }
     let g4 = goal.unwrap_or(0.0);
+    // The looping goal: every case's overhead within 10%, the 512² 64-frame loop ≤ 3 s.
+    let loop_met = !quick
+        && loops.iter().all(|l| {
+            l["overhead"].as_f64().is_some_and(|o| o <= 0.1)
+                && (l["size"] != "512x512" || l["looping_s"].as_f64().is_some_and(|s| s <= 3.0))
+        });
     Ok(serde_json::json!({
         "scene": "Fuller et al. Table 1: unit-radius fire, slice spacing 0.2, 400x400, ~90,000 covered pixels",
         "threads": rayon::current_num_threads(),
@@ -95,5 +101,6 @@ pub fn figures(g: &Global, quick: bool) -> Result<serde_json::Value> {
         "goal_loop": "looping overhead <= 0.1; torch 512x512 x64 looping <= 3 s on 2 cores (frames only, no writing)",
         "goal": "perlin4 x3 lattice 35 >= 30 fps",
         "goal_met": g4 >= 30.0,
+        "goal_loop_met": loop_met,
     }))
 }
