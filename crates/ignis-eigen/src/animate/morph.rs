@@ -224,6 +224,21 @@ fn sum_rows(n: usize, w: usize, f: impl Fn(std::ops::Range<usize>) -> [f64; 3] +
         .fold([0.0; 3], |s, p| [s[0] + p[0], s[1] + p[1], s[2] + p[2]])
 }
 
+/// The one gain of a detail-preserving in-between at `t` from the detail energies
+/// `[Σ(a − ma)², Σ(b − mb)², Σ(s(a − ma) + t(b − mb))²]` (`s = 1 − t`): the blended
+/// detail scaled to the interpolated energy `s·ea + t·eb`, never below 1 nor above the
+/// uncorrelated bound `1/√(s² + t²)`.
+fn detail_gain([ea, eb, em]: [f64; 3], t: f32) -> f32 {
+    let s = 1.0 - t;
+    let want = f64::from(s) * ea + f64::from(t) * eb;
+    let bound = 1.0 / f64::from(s * s + t * t).sqrt();
+    if em > 0.0 {
+        (want / em).sqrt().clamp(1.0, bound) as f32
+    } else {
+        1.0
+    }
+}
+
 /// The detail-preserving blend of `a` and `b` (`t` of the way to `b`) on `C`-channel
 /// pixels; see the module doc. Each blended pixel (not clamped) goes through `finish`.
 fn detail_blend<const C: usize>(
@@ -251,13 +266,7 @@ fn detail_blend<const C: usize>(
         }
         e
     });
-    let want = f64::from(s) * ea + f64::from(t) * eb;
-    let bound = 1.0 / f64::from(s * s + t * t).sqrt();
-    let gain = if em > 0.0 {
-        (want / em).sqrt().clamp(1.0, bound) as f32
-    } else {
-        1.0
-    };
+    let gain = detail_gain([ea, eb, em], t);
     (0..a.len())
         .into_par_iter()
         .map(|i| {

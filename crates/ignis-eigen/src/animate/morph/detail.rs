@@ -199,13 +199,7 @@ pub(super) fn inbetween_rgba(
     );
     let [ea, eb, cross] = energies(&grid, (&ca, &cb), (&ma, &mb), &sums);
     let em = f64::from(s * s) * ea + f64::from(t * t) * eb + 2.0 * f64::from(s * t) * cross;
-    let want = f64::from(s) * ea + f64::from(t) * eb;
-    let bound = 1.0 / f64::from(s * s + t * t).sqrt();
-    let gain = if em > 0.0 {
-        (want / em).sqrt().clamp(1.0, bound) as f32
-    } else {
-        1.0
-    };
+    let gain = super::detail_gain([ea, eb, em], t);
     lap(1, "box means, energies");
     let mixed: Vec<[f32; 4]> = ma
         .iter()
