@@ -321,8 +321,7 @@ pub fn inbetween_rgba(
     bw: &ignis_flow::FlowField,
     t: f32,
 ) -> RgbaFrame {
-    detail::inbetween_rgba(a, b, fw, bw, t, None)
-        .unwrap_or_else(|| inbetween_rgba_unfused(a, b, fw, bw, t))
+    inbetween_rgba_timed(a, b, fw, bw, t, None)
 }
 
 /// [`inbetween_rgba`] with the wall time of each pass of the fused path (names empty and
@@ -335,9 +334,22 @@ pub fn inbetween_rgba_stages(
     t: f32,
 ) -> (RgbaFrame, Stages) {
     let mut st = [("", std::time::Duration::ZERO); 3];
-    let f = detail::inbetween_rgba(a, b, fw, bw, t, Some(&mut st))
-        .unwrap_or_else(|| inbetween_rgba_unfused(a, b, fw, bw, t));
+    let f = inbetween_rgba_timed(a, b, fw, bw, t, Some(&mut st));
     (f, st)
+}
+
+/// The fused path when the frames allow it (timing its passes into `stages`), else the
+/// unfused one.
+fn inbetween_rgba_timed(
+    a: &RgbaFrame,
+    b: &RgbaFrame,
+    fw: &ignis_flow::FlowField,
+    bw: &ignis_flow::FlowField,
+    t: f32,
+    stages: Option<&mut Stages>,
+) -> RgbaFrame {
+    detail::inbetween_rgba(a, b, fw, bw, t, stages)
+        .unwrap_or_else(|| inbetween_rgba_unfused(a, b, fw, bw, t))
 }
 
 /// [`inbetween_rgba`] as two warps and [`detail_blend_rgba`]: the path of small frames, and
