@@ -235,12 +235,19 @@ impl RowTaps {
         let (sx, sy) = (self.sx[i] as usize, self.sy[i] as usize);
         let (wx, wy) = (self.wx[i], self.wy[i]);
         let (ux, uy) = (1.0 - wx, 1.0 - wy);
-        let taps = [
-            (d[b], ux * uy),
-            (d[b + sx], wx * uy),
-            (d[b + sy], ux * wy),
-            (d[b + sy + sx], wx * wy),
-        ];
+        // One bounds check for the four taps: `fill` clamps the position into the frame, so
+        // `b + sy + sx` (the largest) is within it when `d` is the frame the taps were made
+        // for; the check keeps a mismatched `d` a panic, not undefined behaviour.
+        assert!(b + sy + sx < d.len(), "taps outside the frame");
+        // SAFETY: `b ≤ b + sx`, `b + sy ≤ b + sy + sx < d.len()` (checked above).
+        let taps = unsafe {
+            [
+                (*d.get_unchecked(b), ux * uy),
+                (*d.get_unchecked(b + sx), wx * uy),
+                (*d.get_unchecked(b + sy), ux * wy),
+                (*d.get_unchecked(b + sy + sx), wx * wy),
+            ]
+        };
         for (p, k) in taps {
             // `[r, g, b, 1] · a` in one 4-lane product (the compiler vectorises it).
             let a = p[3] * k * scale;
