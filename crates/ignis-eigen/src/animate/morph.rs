@@ -233,7 +233,7 @@ pub(crate) fn gain_rows(size: Size) -> (usize, usize) {
 /// Whether block `(bx, by)` is among those the gain is estimated from ([`gain_rows`]).
 #[inline(always)]
 pub(crate) fn gain_block(bx: usize, by: usize, stride: usize) -> bool {
-    (bx + by) % stride == 0
+    (bx + by).is_multiple_of(stride)
 }
 
 /// Σ over rows of `f(row)` (three sums at once): rows in parallel, added in row order, so

@@ -507,7 +507,14 @@ mod tests {
                 block_means(&pb[rows.clone()], w, k, &mut cb[band.clone()]);
                 let (sa, sb) = (&ca[band.clone()], &cb[band]);
                 let mut st = vec![BlockSums::default(); sw];
-                band_sums(&grid, by, 1, (&pa[rows.clone()], &pb[rows]), (sa, sb), &mut st);
+                band_sums(
+                    &grid,
+                    by,
+                    1,
+                    (&pa[rows.clone()], &pb[rows]),
+                    (sa, sb),
+                    &mut st,
+                );
                 sums.push(st);
             }
             let radius = 2;
