@@ -1660,3 +1660,53 @@ mod flipbook_fit {
         assert!(m.get("scaled_from").is_none());
     }
 }
+
+/// `ignis loop` reads image sequences (a printf pattern or a directory) as well as videos,
+/// and its cache is keyed by the frames' content: an edited frame builds a new entry.
+mod loop_sequence {
+    use super::*;
+
+    #[test]
+    fn loop_of_a_png_sequence_caches_by_content() {
+        let t = tempfile::tempdir().unwrap();
+        let frames = t.path().join("frames");
+        std::fs::create_dir(&frames).unwrap();
+        let pattern = frames.join("%04d.png");
+        let o = classic("48x40", "40", &["--seed", "5", "--no-loop"], &pattern);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let cache = t.path().join("cache");
+        let c = cache.to_str().unwrap();
+        let run = |src: &Path, name: &str| {
+            let out = t.path().join(name);
+            let a = [
+                "loop",
+                src.to_str().unwrap(),
+                "--length",
+                "16",
+                "--cache",
+                c,
+                "-o",
+                out.to_str().unwrap(),
+            ];
+            let r = ignis(&a);
+            assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+            (String::from_utf8_lossy(&r.stdout).into_owned(), out)
+        };
+        let (said, out) = run(&pattern, "a.png");
+        assert!(said.contains("cached the clip's database"), "{said}");
+        let m = read_json(&out.with_extension("json"));
+        assert_eq!(m["frame_width"], 48);
+        assert!(m["frame_count"].as_u64().unwrap() >= 8, "{m}");
+        // The same frames again, by pattern or by directory: the entry is reused.
+        let (said, _) = run(&pattern, "b.png");
+        assert!(!said.contains("cached the clip's database"), "{said}");
+        let (said, _) = run(&frames, "c.png");
+        assert!(!said.contains("cached the clip's database"), "{said}");
+        // One frame edited (replaced by another): a new entry is built.
+        let names = files_in(&frames);
+        std::fs::copy(frames.join(&names[0]), frames.join(&names[5])).unwrap();
+        let (said, _) = run(&pattern, "d.png");
+        assert!(said.contains("cached the clip's database"), "{said}");
+        assert_eq!(files_in(&cache).len(), 2, "two entries");
+    }
+}

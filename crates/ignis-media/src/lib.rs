@@ -23,8 +23,8 @@ pub mod write;
 pub use error::{MediaError, Result};
 pub use ignis_core::{RgbaFrame, Size};
 pub use read::{
-    open, probe, read_image, Decoder, FrameRange, FrameReader, RangeUnit, ReadOptions, Rect,
-    SourceInfo, DEFAULT_SEQUENCE_FPS,
+    open, probe, read_image, source_files, Decoder, FrameRange, FrameReader, RangeUnit,
+    ReadOptions, Rect, SourceInfo, DEFAULT_SEQUENCE_FPS,
 };
 pub use write::{
     create, fit_frame, read_flipbook, read_flipbook_meta, write_png, AlphaMode, Engine, Flipbook,

@@ -142,18 +142,39 @@ pub fn default_cache_dir() -> Result<PathBuf> {
     bail!("no cache directory: set XDG_CACHE_HOME or HOME, or give --cache DIR")
 }
 
-/// SHA-256 of a file's content, hex.
-pub fn file_sha256(path: &Path) -> Result<String> {
-    let mut f = std::fs::File::open(path).with_context(|| format!("reading {}", path.display()))?;
+/// SHA-256 of a source, hex: of a file's content, or of an image sequence's (a directory
+/// or `frames/%04d.png`) frame files in playing order, each as its name, its length and its
+/// content, so renaming, reordering or editing any frame changes it.
+pub fn source_sha256(path: &Path) -> Result<String> {
+    let files =
+        ignis_media::source_files(path).with_context(|| format!("reading {}", path.display()))?;
     let mut h = Sha256::new();
+    let sequence = files.len() != 1 || files[0] != path;
     let mut buf = vec![0u8; 1 << 20];
-    loop {
-        let n = std::io::Read::read(&mut f, &mut buf)
-            .with_context(|| format!("reading {}", path.display()))?;
-        if n == 0 {
-            break;
+    for file in &files {
+        let mut f =
+            std::fs::File::open(file).with_context(|| format!("reading {}", file.display()))?;
+        let mut len = 0u64;
+        if sequence {
+            let name = file
+                .file_name()
+                .map(|n| n.to_string_lossy())
+                .unwrap_or_default();
+            h.update((name.len() as u64).to_le_bytes());
+            h.update(name.as_bytes());
         }
-        h.update(&buf[..n]);
+        loop {
+            let n = std::io::Read::read(&mut f, &mut buf)
+                .with_context(|| format!("reading {}", file.display()))?;
+            if n == 0 {
+                break;
+            }
+            h.update(&buf[..n]);
+            len += n as u64;
+        }
+        if sequence {
+            h.update(len.to_le_bytes());
+        }
     }
     Ok(hex(&h.finalize()))
 }
@@ -200,7 +221,7 @@ pub fn cached(
     g: &Global,
 ) -> Result<Cached> {
     let sp = g.spinner("hashing the footage");
-    let sha = file_sha256(path)?;
+    let sha = source_sha256(path)?;
     sp.finish_and_clear();
     let settings = CacheSettings {
         version: CACHE_VERSION,
@@ -1039,7 +1060,7 @@ mod tests {
             start: 0,
             end: 30,
         };
-        match open_entry(&dir, &file_sha256(&path).unwrap(), &settings) {
+        match open_entry(&dir, &source_sha256(&path).unwrap(), &settings) {
             Ok(_) => panic!("a damaged metric.f32 was accepted"),
             Err(e) => assert!(e.to_string().contains("checksum"), "{e}"),
         }
@@ -1049,7 +1070,7 @@ mod tests {
         // A damaged database pack or entry.json is caught too (not rebuilt here: training
         // is the slow part).
         drop(rebuilt);
-        let sha = file_sha256(&path).unwrap();
+        let sha = source_sha256(&path).unwrap();
         let pack = std::fs::read_dir(dir.join("fire.db/packs"))
             .unwrap()
             .next()

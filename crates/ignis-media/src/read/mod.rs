@@ -227,6 +227,17 @@ pub fn probe(path: &Path) -> Result<SourceInfo> {
     Ok(probe_inner(path, ffmpeg_available())?.info().clone())
 }
 
+/// The files `path` reads: a sequence's frames in playing order (a directory or a printf
+/// pattern, as [`open`] finds them), else the path itself — for fingerprinting a source.
+pub fn source_files(path: &Path) -> Result<Vec<PathBuf>> {
+    if is_pattern(path) || path.is_dir() {
+        if let Probed::Sequence(_, files) = probe_inner(path, false)? {
+            return Ok(files);
+        }
+    }
+    Ok(vec![path.to_path_buf()])
+}
+
 fn is_pattern(path: &Path) -> bool {
     path.file_name()
         .and_then(|n| n.to_str())
