@@ -1,0 +1,210 @@
+//! The periodic orbit of a looping fire, solved row by row from the source up.
+//!
+//! Why: a looping fire is driven by a source line and sparklies that repeat every `N`
+//! frames, and its loop is the buffer's periodic orbit under that drive. Simulating the
+//! whole buffer from a cold start until it repeats is slow: averaging keeps a uniform
+//! difference, which only the black sky, the dead edges, the source row and rounding
+//! remove, so a 320×200 per-pixel fire needs 240–480 frames, its rows settling from the
+//! source up at about one row per 8 frames. But no row reads the row above it: row `y`'s
+//! next values are its own and row `y + 1`'s old values, averaged and faded. Once row
+//! `y + 1`'s orbit is known, row `y` alone is a one-row recurrence under a periodic drive,
+//! and it forgets its start within a few dozen steps (a row's own pixels carry three
+//! quarters of the average, so a difference shrinks by about a third a step; the last
+//! differences of 1 are removed by rounding). Solving the rows one at a time from the
+//! source up, each for one period plus its short transient, gives a periodic orbit of the
+//! whole fire for about one period plus a few dozen frames of burning.
+//!
+//! What comes out is a true orbit of the simulation (burning from its state at any phase
+//! gives the next), the same bytes for the same inputs. It need not be the orbit a cold
+//! fire would reach: the integer recurrence has neighbouring fixed points (a difference of
+//! 1 can persist), and each row starts from the values of the row below it instead of
+//! from a cold start; both look the same.
+//!
+
+use crate::{sparkled, Kernel, Rng, Sparkle, SPARK_STREAM};
+
+/// The rows of a loop's states: for each phase `k` (the state after a frame number `≡ k`
+/// modulo the period), the rows solved so far, from the bottom row up (the solve adds a
+/// row above at a time), or only two (the row being solved and the one below it, which
+/// drives it) when the whole loop is too large to keep.
+pub(crate) struct Orbit {
+    period: usize,
+    w: usize,
+    h: usize,
+    keep_all: bool,
+    phases: Vec<Vec<u8>>,
+}
+
+impl Orbit {
+    /// An orbit of `period` phases of `w`×`h` buffers, keeping every row or two, with the
+    /// rows from `y` down to the bottom present and zero.
+    pub fn new(period: usize, w: usize, h: usize, keep_all: bool, y: usize) -> Orbit {
+        let mut o = Orbit {
+            period,
+            w,
+            h,
+            keep_all,
+            phases: vec![Vec::new(); period],
+        };
+        let rows = if keep_all { h - y } else { 2 };
+        for p in &mut o.phases {
+            p.resize(rows * w, 0);
+        }
+        o
+    }
+
+    /// Makes room for row `y` (zero), the row above the topmost so far.
+    pub fn add_row(&mut self, y: usize) {
+        if self.keep_all {
+            let len = (self.h - y) * self.w;
+            for p in &mut self.phases {
+                p.resize(len, 0);
+            }
+        }
+    }
+
+    fn offset(&self, y: usize) -> usize {
+        let r = if self.keep_all { self.h - 1 - y } else { y % 2 };
+        r * self.w
+    }
+
+    pub fn row(&self, k: usize, y: usize) -> &[u8] {
+        let o = self.offset(y);
+        &self.phases[k][o..o + self.w]
+    }
+
+    pub fn row_mut(&mut self, k: usize, y: usize) -> &mut [u8] {
+        let o = self.offset(y);
+        &mut self.phases[k][o..o + self.w]
+    }
+
+    /// Whether row `y` is non-zero, at each phase.
+    pub fn lit(&self, y: usize) -> Vec<bool> {
+        (0..self.period)
+            .map(|k| self.row(k, y).iter().fold(0, |a, &v| a | v) != 0)
+            .collect()
+    }
+
+    /// The kept loop (every row kept): each phase's buffer as its topmost non-zero row
+    /// `tops[k]` and the rows from there down.
+    pub fn into_kept(self, tops: &[usize]) -> Vec<crate::Kept> {
+        debug_assert!(self.keep_all);
+        (0..self.period)
+            .map(|k| {
+                let top = tops[k];
+                let mut rows = Vec::with_capacity((self.h - top) * self.w);
+                for y in top..self.h {
+                    rows.extend_from_slice(self.row(k, y));
+                }
+                (top, rows)
+            })
+            .collect()
+    }
+}
+
+/// What drives a row besides the row below: the kernel and its constants and where each
+/// phase's sparkle falls in each row.
+pub(crate) struct Drive {
+    w: usize,
+    h: usize,
+    e: usize,
+    fade: u8,
+    kernel: Kernel,
+    heat: u8,
+    sparkle: Option<Sparkle>,
+    /// The sparkle's column in row `y` during the frame of phase `k`: `[k·h + y]`, drawn
+    /// from the same stream as [`crate::ClassicFire`]'s looping steps.
+    spark_x: Vec<u32>,
+}
+
+impl Drive {
+    pub fn new(p: &crate::ClassicParams, w: usize, h: usize, period: usize) -> Drive {
+        let e = p.edge as usize;
+        let mut spark_x = Vec::new();
+        if p.sparkle.is_some() {
+            spark_x = vec![0; period * h];
+            for k in 0..period {
+                let mut rng = Rng::derive(p.seed, SPARK_STREAM + k as u64);
+                for y in e..h - e {
+                    spark_x[k * h + y] = (e + rng.below((w - 2 * e) as u32) as usize) as u32;
+                }
+            }
+        }
+        Drive {
+            w,
+            h,
+            e,
+            fade: p.fade,
+            kernel: p.kernel,
+            heat: p.heat,
+            sparkle: p.sparkle,
+            spark_x,
+        }
+    }
+
+    /// The sparkle's column in row `y` at phase `k` (`usize::MAX`: none).
+    fn spark(&self, k: usize, y: usize) -> usize {
+        match self.sparkle {
+            Some(_) => self.spark_x[k * self.h + y] as usize,
+            None => usize::MAX,
+        }
+    }
+}
+
+/// Solves row `y` given row `y + 1`'s orbit: starts from row `y + 1`'s phase-0 values and
+/// steps the row until it equals itself a period before, writing each step into its phase.
+/// `Ok(steps)` once periodic (every phase of the row then holds the orbit), `Err(steps)`
+/// if not within `cap` steps (the phases hold the last period's values).
+pub(crate) fn solve_row(
+    orbit: &mut Orbit,
+    y: usize,
+    d: &Drive,
+    cap: usize,
+    new: &mut Vec<u8>,
+) -> Result<usize, usize> {
+    let (n, w) = (orbit.period, d.w);
+    new.clear();
+    new.resize(w, 0);
+    new.copy_from_slice(orbit.row(0, y + 1));
+    orbit.row_mut(0, y).copy_from_slice(new);
+    for t in 0..cap {
+        let k = t % n;
+        step_row(orbit.row(k, y), orbit.row(k, y + 1), new, d, d.spark(k, y));
+        let tau = t + 1;
+        let slot = orbit.row_mut(tau % n, y);
+        if tau >= n && slot == &new[..] {
+            // equal to itself a period before: periodic from then on, and the phases
+            // hold the last period
+            return Ok(tau);
+        }
+        slot.copy_from_slice(new);
+    }
+    Err(cap)
+}
+
+/// One step of one row: `old` the row's state, `below` the old row below it, `new` (its
+/// edges zero) receives the row after the step and the sparkle at column `spark`.
+fn step_row(old: &[u8], below: &[u8], new: &mut [u8], d: &Drive, spark: usize) {
+    let (w, e) = (d.w, d.e);
+    match d.kernel {
+        Kernel::Article => {
+            // the article's loop: `(left + self + right + below) / 4 − fade`, clamped at 0,
+            // left to right with `left` this step's value (the edge's 0 first)
+            let n = w - 2 * e;
+            let (me, right, under) = (&old[e..e + n], &old[e + 1..e + 1 + n], &below[e..e + n]);
+            let out = &mut new[e..e + n];
+            let f4 = 4 * d.fade as i32;
+            let mut left = 0i32;
+            for i in 0..n {
+                let s = left + me[i] as i32 + right[i] as i32 + under[i] as i32 - f4;
+                left = (s >> 2).max(0);
+                out[i] = left as u8;
+            }
+        }
+        Kernel::Buffered => crate::burn_row_buffered(new, old, below, e, d.fade),
+    }
+    // the sparkle comes after the whole step, so no pixel's `left` saw it
+    if let (Some(sp), Some(p)) = (d.sparkle, new.get_mut(spark)) {
+        *p = sparkled(*p, sp, d.heat);
+    }
+}
