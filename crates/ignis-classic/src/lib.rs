@@ -497,14 +497,14 @@ impl ClassicFire {
         let mut tops: Vec<usize> = lit.iter().map(|&l| if l { ys } else { h }).collect();
         let cap = usize::try_from(max_frames.max(1)).unwrap_or(usize::MAX);
         let (mut periodic, mut steps, mut rows) = (true, 0u64, 0u64);
-        let mut work = Vec::new();
+        let (mut mid, mut new) = (Vec::new(), Vec::new());
         for y in (e..ys).rev() {
             // a row under a row dark at every phase stays dark, and so do all above it
             if !lit.contains(&true) {
                 break;
             }
             orbit.add_row(y);
-            let s = orbit::solve_row(&mut orbit, y, &drive, cap, &mut work);
+            let s = orbit::solve_row(&mut orbit, y, &drive, cap, (&mut mid, &mut new));
             periodic &= s.is_ok();
             steps += s.unwrap_or_else(|s| s) as u64;
             rows += 1;

@@ -23,59 +23,53 @@
 
 use crate::{sparkled, Kernel, Rng, Sparkle, SPARK_STREAM};
 
-/// The rows of a loop's states: for each phase `k` (the state after a frame number `≡ k`
-/// modulo the period), the rows solved so far, from the bottom row up (the solve adds a
-/// row above at a time), or only two (the row being solved and the one below it, which
-/// drives it) when the whole loop is too large to keep.
+/// The rows of a loop's states: for each row solved so far, from the bottom row up (the
+/// solve adds a row above at a time), its value at each phase `k` (the state after a frame
+/// number `≡ k` modulo the period), a row's phases side by side; or only the last two
+/// rows (the row being solved and the one below it, which drives it) when the whole loop
+/// is too large to keep.
 pub(crate) struct Orbit {
     period: usize,
     w: usize,
     h: usize,
     keep_all: bool,
-    phases: Vec<Vec<u8>>,
+    data: Vec<u8>,
 }
 
 impl Orbit {
     /// An orbit of `period` phases of `w`×`h` buffers, keeping every row or two, with the
     /// rows from `y` down to the bottom present and zero.
     pub fn new(period: usize, w: usize, h: usize, keep_all: bool, y: usize) -> Orbit {
-        let mut o = Orbit {
+        let rows = if keep_all { h - y } else { 2 };
+        Orbit {
             period,
             w,
             h,
             keep_all,
-            phases: vec![Vec::new(); period],
-        };
-        let rows = if keep_all { h - y } else { 2 };
-        for p in &mut o.phases {
-            p.resize(rows * w, 0);
+            data: vec![0; rows * period * w],
         }
-        o
     }
 
     /// Makes room for row `y` (zero), the row above the topmost so far.
     pub fn add_row(&mut self, y: usize) {
         if self.keep_all {
-            let len = (self.h - y) * self.w;
-            for p in &mut self.phases {
-                p.resize(len, 0);
-            }
+            self.data.resize((self.h - y) * self.period * self.w, 0);
         }
     }
 
-    fn offset(&self, y: usize) -> usize {
+    fn offset(&self, k: usize, y: usize) -> usize {
         let r = if self.keep_all { self.h - 1 - y } else { y % 2 };
-        r * self.w
+        (r * self.period + k) * self.w
     }
 
     pub fn row(&self, k: usize, y: usize) -> &[u8] {
-        let o = self.offset(y);
-        &self.phases[k][o..o + self.w]
+        let o = self.offset(k, y);
+        &self.data[o..o + self.w]
     }
 
     pub fn row_mut(&mut self, k: usize, y: usize) -> &mut [u8] {
-        let o = self.offset(y);
-        &mut self.phases[k][o..o + self.w]
+        let o = self.offset(k, y);
+        &mut self.data[o..o + self.w]
     }
 
     /// Whether row `y` is non-zero, at each phase.
@@ -154,57 +148,102 @@ impl Drive {
 /// Solves row `y` given row `y + 1`'s orbit: starts from row `y + 1`'s phase-0 values and
 /// steps the row until it equals itself a period before, writing each step into its phase.
 /// `Ok(steps)` once periodic (every phase of the row then holds the orbit), `Err(steps)`
-/// if not within `cap` steps (the phases hold the last period's values).
+/// if not within about `cap` steps (the phases hold the last period's values).
 pub(crate) fn solve_row(
     orbit: &mut Orbit,
     y: usize,
     d: &Drive,
     cap: usize,
-    new: &mut Vec<u8>,
+    (mid, new): (&mut Vec<u8>, &mut Vec<u8>),
 ) -> Result<usize, usize> {
     let (n, w) = (orbit.period, d.w);
-    new.clear();
-    new.resize(w, 0);
-    new.copy_from_slice(orbit.row(0, y + 1));
-    orbit.row_mut(0, y).copy_from_slice(new);
-    for t in 0..cap {
-        let k = t % n;
-        step_row(orbit.row(k, y), orbit.row(k, y + 1), new, d, d.spark(k, y));
-        let tau = t + 1;
-        let slot = orbit.row_mut(tau % n, y);
-        if tau >= n && slot == &new[..] {
-            // equal to itself a period before: periodic from then on, and the phases
-            // hold the last period
-            return Ok(tau);
-        }
-        slot.copy_from_slice(new);
+    for v in [&mut *mid, &mut *new] {
+        v.clear();
+        v.resize(w, 0);
     }
-    Err(cap)
+    let start = orbit.row(0, y + 1).to_vec();
+    orbit.row_mut(0, y).copy_from_slice(&start);
+    // two steps at a time (see `two_steps`)
+    for t in (0..cap).step_by(2) {
+        let (k0, k1) = (t % n, (t + 1) % n);
+        let below = [orbit.row(k0, y + 1), orbit.row(k1, y + 1)];
+        let spark = [d.spark(k0, y), d.spark(k1, y)];
+        two_steps(orbit.row(k0, y), below, (mid, new), d, spark);
+        for (tau, row) in [(t + 1, &mid[..]), (t + 2, &new[..])] {
+            let slot = orbit.row_mut(tau % n, y);
+            if tau >= n && slot == row {
+                // equal to itself a period before: periodic from then on, and the
+                // phases hold the last period
+                return Ok(tau);
+            }
+            slot.copy_from_slice(row);
+        }
+    }
+    Err(cap.next_multiple_of(2))
 }
 
-/// One step of one row: `old` the row's state, `below` the old row below it, `new` (its
-/// edges zero) receives the row after the step and the sparkle at column `spark`.
-fn step_row(old: &[u8], below: &[u8], new: &mut [u8], d: &Drive, spark: usize) {
+/// Two steps of one row: `old` the row's state, `below[i]` the old row below it at step
+/// `i`, `spark[i]` the column of step `i`'s sparkle; `mid` and `new` (edges zero) receive
+/// the row after each step. With the article's kernel a row is a serial chain (each pixel
+/// reads its new left neighbour), but the second step at pixel `x` only needs the first up
+/// to `x + 1`, so the two run together one pixel apart and their chains overlap in the CPU.
+fn two_steps(
+    old: &[u8],
+    below: [&[u8]; 2],
+    (mid, new): (&mut [u8], &mut [u8]),
+    d: &Drive,
+    spark: [usize; 2],
+) {
     let (w, e) = (d.w, d.e);
-    match d.kernel {
-        Kernel::Article => {
-            // the article's loop: `(left + self + right + below) / 4 − fade`, clamped at 0,
-            // left to right with `left` this step's value (the edge's 0 first)
+    match (d.kernel, d.sparkle) {
+        (Kernel::Article, sparkle) => {
             let n = w - 2 * e;
-            let (me, right, under) = (&old[e..e + n], &old[e + 1..e + 1 + n], &below[e..e + n]);
-            let out = &mut new[e..e + n];
+            let (me, right) = (&old[e..e + n], &old[e + 1..e + 1 + n]);
+            let (u0, u1) = (&below[0][e..e + n], &below[1][e..e + n]);
+            // the first step's row with its right edge (0), which the second reads
+            let m = &mut mid[e..e + n + 1];
+            let o = &mut new[e..e + n];
             let f4 = 4 * d.fade as i32;
-            let mut left = 0i32;
-            for i in 0..n {
-                let s = left + me[i] as i32 + right[i] as i32 + under[i] as i32 - f4;
-                left = (s >> 2).max(0);
-                out[i] = left as u8;
+            let sp = sparkle.unwrap_or(Sparkle {
+                threshold: 0,
+                boost: 0,
+            });
+            let s0 = spark[0].wrapping_sub(e);
+            // `(left + self + right + below) / 4 − fade` clamped at 0, left to right, each
+            // step's `left` its own new value (the edge's 0 first), before any sparkle
+            let (mut l0, mut l1) = (0i32, 0i32);
+            let mut first = |i: usize, m: &mut [u8]| {
+                let s = l0 + me[i] as i32 + right[i] as i32 + u0[i] as i32 - f4;
+                l0 = (s >> 2).max(0);
+                // the second step reads the first's sparkle
+                m[i] = if i == s0 {
+                    sparkled(l0 as u8, sp, d.heat)
+                } else {
+                    l0 as u8
+                };
+            };
+            first(0, m);
+            for i in 1..n {
+                first(i, m);
+                let j = i - 1;
+                let s = l1 + m[j] as i32 + m[j + 1] as i32 + u1[j] as i32 - f4;
+                l1 = (s >> 2).max(0);
+                o[j] = l1 as u8;
             }
+            let j = n - 1;
+            let s = l1 + m[j] as i32 + m[j + 1] as i32 + u1[j] as i32 - f4;
+            o[j] = (s >> 2).max(0) as u8;
         }
-        Kernel::Buffered => crate::burn_row_buffered(new, old, below, e, d.fade),
+        (Kernel::Buffered, sparkle) => {
+            crate::burn_row_buffered(mid, old, below[0], e, d.fade);
+            if let (Some(sp), Some(p)) = (sparkle, mid.get_mut(spark[0])) {
+                *p = sparkled(*p, sp, d.heat);
+            }
+            crate::burn_row_buffered(new, mid, below[1], e, d.fade);
+        }
     }
-    // the sparkle comes after the whole step, so no pixel's `left` saw it
-    if let (Some(sp), Some(p)) = (d.sparkle, new.get_mut(spark)) {
+    // the second step's sparkle comes after its whole step, so no pixel's `left` saw it
+    if let (Some(sp), Some(p)) = (d.sparkle, new.get_mut(spark[1])) {
         *p = sparkled(*p, sp, d.heat);
     }
 }
