@@ -25,18 +25,18 @@
 //! driven by its source line (every frame averages each pixel with its neighbours and
 //! fades it, so the buffer forgets its past and becomes a function of the recent source
 //! lines). So the loop is made by driving it with a source line and sparklies that repeat
-//! every `N` frames, and stepping until the buffer itself repeats exactly
-//! ([`ClassicFire::settle_loop`]). The settle keeps the last `N` frames (from the topmost
-//! burning row down), catches the first frame equal to the one `N` before, and from then on
-//! replays the kept loop instead of burning; loops over 128 MiB settle whole periods at a
-//! time and are stepped. This is chosen over finding and closing the best loop
-//! point of an unlooped run because it is exact (frame `N` equals frame 0 byte for byte)
-//! and leaves every frame a true frame of the article's simulation: no cut and no blend.
-//! The random source becomes a random walk bridged back to its start over the loop and
-//! folded into `0..=heat` (folding is what the clamped walk's reflection at the ends
-//! does); the Perlin source walks a noise lattice periodic in time. Since no row reads the
-//! row above it, the rows settle from the source up, and the settle copies the rows
-//! already found periodic instead of burning them.
+//! every `N` frames and putting the buffer on its periodic orbit under that drive
+//! ([`ClassicFire::settle_loop`]). Since no row reads the row above it, the orbit is solved
+//! row by row from the source up (module `orbit`): once a row's orbit is known, the row
+//! above it alone is stepped until it equals itself a period before, about `N` + 25 steps
+//! of one row, where a cold whole buffer takes 240–480 frames to repeat. The `N` states
+//! are kept and replayed (loops over 128 MiB keep two rows while solving and are burnt
+//! from their phase-0 state: the same bytes). This is chosen over finding and closing the
+//! best loop point of an unlooped run because it is exact (frame `N` equals frame 0 byte
+//! for byte) and leaves every frame a true frame of the article's simulation: no cut and
+//! no blend. The random source becomes a random walk bridged back to its start over the
+//! loop and folded into `0..=heat` (folding is what the clamped walk's reflection at the
+//! ends does); the Perlin source walks a noise lattice periodic in time.
 //!
 //! Even steps ([`ClassicFire::even_loop_steps`], module `even`): the preset's puffing and
 //! its source's slow heat drift make an exact loop's steps vary by ±30 % (it seems to
@@ -1375,8 +1375,15 @@ mod tests {
             },
         ] {
             for (n, min) in [(5u32, 0u64), (17, 60), (40, 10)] {
+                // the double-buffered kernel's rows are solved by their own step
+                let kernel = if n == 17 {
+                    Kernel::Buffered
+                } else {
+                    Kernel::Article
+                };
                 let p = ClassicParams {
                     source,
+                    kernel,
                     ..params(44, 40)
                 };
                 let mut replayed = ClassicFire::new_looping(p.clone(), n).unwrap();
@@ -1466,7 +1473,7 @@ mod tests {
                     puff: 0.8,
                     ..params(144, 108)
                 };
-                let mut f = ClassicFire::new_looping(p, n).unwrap();
+                let mut f = ClassicFire::new_looping(p.clone(), n).unwrap();
                 assert!(f.settle_loop(60, 8000).is_some(), "{source:?} N={n}");
                 let first = f.frame_bytes();
                 assert_eq!(first.len(), 144 * 108);
@@ -1475,6 +1482,14 @@ mod tests {
                     f.step_par();
                 }
                 assert_eq!(f.frame_bytes(), first, "{source:?} N={n}");
+                // burnt, not replayed, the solved state comes back after a period too
+                let mut burnt = ClassicFire::new_looping(p, n).unwrap();
+                assert!(burnt.solve_loop(n as u64, 60, 8000, false).is_some());
+                assert_eq!(burnt.frame_bytes(), first, "{source:?} N={n} phase 0");
+                for _ in 0..n {
+                    burnt.step_par();
+                }
+                assert_eq!(burnt.frame_bytes(), first, "{source:?} N={n} burnt");
             }
         }
     }

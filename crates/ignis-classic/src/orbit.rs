@@ -20,6 +20,9 @@
 //! 1 can persist), and each row starts from the values of the row below it instead of
 //! from a cold start; both look the same.
 //!
+//! Speed: the article's row is a serial chain (each pixel reads its new left neighbour),
+//! so a row runs two steps at a time, one pixel apart, their chains overlapping in the
+//! CPU; a row's phases sit side by side in one store, beside the row below's.
 
 use crate::{sparkled, Kernel, Rng, Sparkle, SPARK_STREAM};
 
