@@ -1259,6 +1259,13 @@ mod tests {
                 let mut f = ClassicFire::new_looping(p, n).unwrap();
                 let settled = f.settle_loop(60, 4000);
                 assert!(settled.is_some(), "{source:?} N={n} never repeats");
+                // each row is periodic within a period and a few dozen steps (a cold
+                // buffer needs many periods)
+                let steps = f.loop_solve_steps().unwrap();
+                assert!(
+                    steps >= n as f64 && steps <= n as f64 + 64.0,
+                    "{source:?} N={n}: {steps} steps a row"
+                );
                 let first = f.buffer().to_vec();
                 assert!(first.iter().any(|&v| v > 0), "burning");
                 let mut seen_change = false;
