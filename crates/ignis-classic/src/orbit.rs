@@ -203,8 +203,7 @@ fn two_steps(
             let n = w - 2 * e;
             let (me, right) = (&old[e..e + n], &old[e + 1..e + 1 + n]);
             let (u0, u1) = (&below[0][e..e + n], &below[1][e..e + n]);
-            // the first step's row with its right edge (0), which the second reads
-            let m = &mut mid[e..e + n + 1];
+            let m = &mut mid[e..e + n];
             let o = &mut new[e..e + n];
             let f4 = 4 * d.fade as i32;
             let sp = sparkle.unwrap_or(Sparkle {
@@ -214,28 +213,35 @@ fn two_steps(
             let s0 = spark[0].wrapping_sub(e);
             // `(left + self + right + below) / 4 − fade` clamped at 0, left to right, each
             // step's `left` its own new value (the edge's 0 first), before any sparkle
-            let (mut l0, mut l1) = (0i32, 0i32);
-            let mut first = |i: usize, m: &mut [u8]| {
-                let s = l0 + me[i] as i32 + right[i] as i32 + u0[i] as i32 - f4;
-                l0 = (s >> 2).max(0);
-                // the second step reads the first's sparkle
-                m[i] = if i == s0 {
-                    sparkled(l0 as u8, sp, d.heat)
-                } else {
-                    l0 as u8
-                };
+            let px = |left: i32, a: u8, b: u8, c: u8| {
+                ((left + a as i32 + b as i32 + c as i32 - f4) >> 2).max(0)
             };
-            first(0, m);
-            for i in 1..n {
-                first(i, m);
-                let j = i - 1;
-                let s = l1 + m[j] as i32 + m[j + 1] as i32 + u1[j] as i32 - f4;
-                l1 = (s >> 2).max(0);
-                o[j] = l1 as u8;
+            let spk = |i: usize, v: i32| {
+                if i == s0 {
+                    sparkled(v as u8, sp, d.heat)
+                } else {
+                    v as u8
+                }
+            };
+            // the first step's pixel `i` and the second's `i − 1`, which reads the first's
+            // pixels `i − 1` and `i` (kept in registers as `mp` and `mi`)
+            let mut l0 = px(0, me[0], right[0], u0[0]);
+            let mut mp = spk(0, l0);
+            m[0] = mp;
+            let mut l1 = 0i32;
+            let ones = me[1..].iter().zip(&right[1..]).zip(&u0[1..]);
+            let twos = u1[..n - 1].iter().zip(o[..n - 1].iter_mut());
+            let mids = m[1..n].iter_mut();
+            for (i, (((a, b), c), (mo, (u, oo)))) in (1..).zip(ones.zip(mids.zip(twos))) {
+                l0 = px(l0, *a, *b, *c);
+                let mi = spk(i, l0);
+                *mo = mi;
+                l1 = px(l1, mp, mi, *u);
+                *oo = l1 as u8;
+                mp = mi;
             }
-            let j = n - 1;
-            let s = l1 + m[j] as i32 + m[j + 1] as i32 + u1[j] as i32 - f4;
-            o[j] = (s >> 2).max(0) as u8;
+            // the second step's last pixel reads the first's right edge, 0
+            o[n - 1] = px(l1, mp, 0, u1[n - 1]) as u8;
         }
         (Kernel::Buffered, sparkle) => {
             crate::burn_row_buffered(mid, old, below[0], e, d.fade);
