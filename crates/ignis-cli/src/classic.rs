@@ -142,13 +142,14 @@ pub fn run(args: &Args, g: &Global) -> Result<Vec<PathBuf>> {
     }
     .context("classic fire settings")?;
     let palette = args.palette.load()?;
-    // warm up; a loop is stepped on (whole loops at a time) until the buffer repeats
+    // warm up; a loop is put on its periodic orbit (solved row by row, each row stepped
+    // at most `cap` times until it repeats)
     let cap = (16 * args.frames as u64)
         .max(40 * args.size.height as u64)
         .max(4000);
     if fire.settle_loop(args.warmup as u64, cap).is_none() {
         g.say(format!(
-            "note: the fire did not settle into an exact {}-frame loop within {cap} frames; \
+            "note: the fire did not settle into an exact {}-frame loop within {cap} steps a row; \
              it loops with a seam (see the flipbook's loop_quality)",
             args.frames
         ));

@@ -72,24 +72,24 @@ pub fn figures(quick: bool) -> Result<serde_json::Value> {
     Ok(serde_json::Value::Object(out))
 }
 
-/// Runs of each loop case (the fastest counts).
-const REPEATS: usize = 15;
+/// Runs of each loop case, alternating (the fastest counts).
+const REPEATS: usize = 21;
 
 /// The cost of an `n`-frame seamless loop of `params` against the plain animation, each as
-/// `ignis classic` renders it (warm-up 60 frames; the loop settled until its buffer repeats
-/// and re-timed to even steps).
+/// `ignis classic` renders it (warm-up 60 frames; the loop solved and re-timed to even
+/// steps), both drawing the same number of frames through the palette.
 fn loop_case(params: ClassicParams, n: u32) -> Result<serde_json::Value> {
     let palette = ignis_core::Palette::preset("classic")?;
     let cap = (16 * n as u64)
         .max(40 * params.size.height as u64)
         .max(4000);
-    // the best of several alternating runs: on a loaded machine a single run of a few
-    // milliseconds measures the other processes
-    let mut times = [f64::INFINITY; 2];
-    // and the CPU time of all runs of each (every thread of the process): steadier than
-    // the wall clock when other processes share the cores
-    let mut cpu = [0u64; 2];
-    let mut settled = 0;
+    // alternating runs, so both cases see the same load; on a loaded machine a run of a
+    // few milliseconds also measures the other processes, which only ever add time: the
+    // least run of each counts, wall clock and CPU time (every thread of the process,
+    // rayon's included), with the median CPU time beside it
+    let mut wall: [Vec<f64>; 2] = [Vec::new(), Vec::new()];
+    let mut cpu: [Vec<f64>; 2] = [Vec::new(), Vec::new()];
+    let (mut settled, mut solve_steps) = (0, None);
     for (i, looping) in [false, true]
         .into_iter()
         .cycle()
@@ -98,7 +98,7 @@ fn loop_case(params: ClassicParams, n: u32) -> Result<serde_json::Value> {
     {
         let i = i % 2;
         let t = Instant::now();
-        let c = process_cpu_ns();
+        let c = super::flow::process_cpu_ms();
         let mut fire = if looping {
             ClassicFire::new_looping(params.clone(), n)?
         } else {
@@ -107,46 +107,50 @@ fn loop_case(params: ClassicParams, n: u32) -> Result<serde_json::Value> {
         settled = fire.settle_loop(60, cap).unwrap_or(cap);
         if looping {
             fire.even_loop_steps(&palette, [0.0; 3]);
+            solve_steps = fire.loop_solve_steps();
         }
         for _ in 0..n {
             fire.step_par();
             std::hint::black_box(fire.rgba(&palette));
         }
-        times[i] = times[i].min(t.elapsed().as_secs_f64());
-        if let (Some(a), Some(b)) = (c, process_cpu_ns()) {
-            cpu[i] += b.saturating_sub(a);
+        wall[i].push(t.elapsed().as_secs_f64());
+        if let (Some(a), Some(b)) = (c, super::flow::process_cpu_ms()) {
+            cpu[i].push((b - a) / 1e3);
         }
     }
-    let cpu_ms = |c: u64| (c as f64 / REPEATS as f64 / 1e5).round() / 10.0;
-    Ok(serde_json::json!({
+    let least = |v: &[f64]| v.iter().copied().fold(f64::INFINITY, f64::min);
+    let (plain, looping) = (least(&wall[0]), least(&wall[1]));
+    let ms = |s: f64| (s * 1e4).round() / 1e1;
+    let ratio = |a: f64, b: f64| ((a / b - 1.0) * 1000.0).round() / 1000.0;
+    let mut out = serde_json::json!({
         "case": format!(
             "{} (cells of {} px, puff {}), {n} frames through the palette",
             params.size, params.cell, params.puff
         ),
-        "plain_ms": (times[0] * 1e4).round() / 10.0,
-        "looping_ms": (times[1] * 1e4).round() / 10.0,
+        "plain_ms": ms(plain),
+        "looping_ms": ms(looping),
         "settle_frames": settled,
-        "timing": format!("best of {REPEATS} alternating runs each, wall clock"),
-        "overhead": ((times[1] / times[0] - 1.0) * 1000.0).round() / 1000.0,
-        "plain_cpu_ms": cpu_ms(cpu[0]),
-        "looping_cpu_ms": cpu_ms(cpu[1]),
-        "cpu_overhead": if cpu[0] > 0 {
-            ((cpu[1] as f64 / cpu[0] as f64 - 1.0) * 1000.0).round() / 1000.0
-        } else {
-            f64::NAN
-        },
-        "cpu_timing": "CPU time of every thread, mean of the same runs (Linux; 0 elsewhere)",
+        "solve_steps_per_row": solve_steps.map(|s| (s * 10.0).round() / 10.0),
+        "timing": format!("least of {REPEATS} alternating runs each, wall clock"),
+        "overhead": ratio(looping, plain),
         "goal_overhead": 0.1,
-    }))
-}
-
-/// CPU time so far of every thread of this process, ns (the first field of each thread's
-/// `/proc/self/task/*/schedstat`); `None` where that is not available.
-fn process_cpu_ns() -> Option<u64> {
-    let mut total = 0u64;
-    for task in std::fs::read_dir("/proc/self/task").ok()? {
-        let stat = std::fs::read_to_string(task.ok()?.path().join("schedstat")).ok()?;
-        total += stat.split_whitespace().next()?.parse::<u64>().ok()?;
+    });
+    if cpu.iter().all(|c| c.len() == REPEATS) {
+        let [mut p, mut l] = cpu;
+        let median = |v: &mut Vec<f64>| {
+            v.sort_by(f64::total_cmp);
+            v[v.len() / 2]
+        };
+        let (pm, lm) = (median(&mut p), median(&mut l));
+        let (pl, ll) = (least(&p), least(&l));
+        out["plain_cpu_ms"] = ms(pl).into();
+        out["looping_cpu_ms"] = ms(ll).into();
+        out["cpu_overhead"] = ratio(ll, pl).into();
+        out["plain_cpu_median_ms"] = ms(pm).into();
+        out["looping_cpu_median_ms"] = ms(lm).into();
+        out["cpu_median_overhead"] = ratio(lm, pm).into();
+        out["cpu_timing"] =
+            "CPU time of the process (every thread, CLOCK_PROCESS_CPUTIME_ID) per run: least and median of the same runs".into();
     }
-    Some(total)
+    Ok(out)
 }
