@@ -8,27 +8,22 @@
 //! as likely as any other to be one of the large ones. Played as a loop, the fast parts
 //! read as jumps.
 //!
-//! So the loop is re-timed, without rendering the loop twice. The frames' RMS distances
-//! (grey, sRGB-encoded, at the measure's size [`ignis_core::loopq::metric_size`], as the
-//! loop measure sees written frames, [`ignis_core::loopq`]) are predicted from the states:
-//! near a state the metric frame is linear in the state, `img(a) − img(b) ≈ J (a − b)`,
-//! so a step's squared length is `(a − b)ᵀ G (a − b)` with `G = JᵀJ / pixels`. One `G`
-//! per loop, averaged over a few of its states ([`Synthesiser::step_metric`], `d + 1`
-//! renders per state for a `d`-dimensional state), maps every state `s` to `R s` with
-//! `RᵀR = G`, where plain RMS distances predict the frames'. The loop's states, joined by
-//! straight segments (the state blends rendered between them, exactly), form a closed
-//! path there. A walk from frame 0 places each next frame where the distance from the
-//! previous one first reaches a step length `L`; the smallest `L` that fits the loop's
-//! frames is found by bisection, so every step is `L` and the wrap what is left, at most
-//! `L`, which a few equalising sweeps share among the frames around the seam. Where the
-//! walk cannot apply (a still loop) the frames are spaced evenly along the path
-//! ([`ignis_core::loopq::arc_times`]). The prediction varies with the state and the step's
-//! direction (figures in `benches/README.md`), so last the frames are rendered at the
-//! measure's size and any step still over `EVEN_OUT` × the median is evened out with its
-//! neighbour on those renders. The frames show only states of the process, in the same
-//! order; only their spacing in time changes.
+//! So the loop is re-timed. A cheap preview renders `PREVIEW_PER_FRAME` states per output
+//! frame around the cycle, small, grey and sRGB-encoded as the loop measure sees written
+//! frames ([`ignis_core::loopq`]). Joined by straight segments (pixel blends, standing in
+//! for the state blends rendered between them) they form a closed path. A walk from frame
+//! 0 places each next frame where the RMS distance from the previous one first reaches a
+//! step length `L`; the smallest `L` that fits the loop's frames is found by bisection, so
+//! every step is `L` and the wrap what is left, at most `L`, which a few equalising
+//! sweeps share among the frames around the seam. Where the walk cannot apply (a still
+//! loop) the frames are spaced evenly along the path ([`ignis_core::loopq::arc_times`]).
+//! Last, the frames are rendered at the measure's own size
+//! ([`ignis_core::loopq::metric_size`]) and any step still over `EVEN_OUT` × the median
+//! is evened out with its neighbour on those renders — the small preview misses detail
+//! the measure sees. The frames show only states of the process, in the same order; only
+//! their spacing in time changes.
 //!
-//! The timing depends on the output size (the metric has its aspect), the model, the
+//! The timing depends on the output size (the preview has its aspect), the model, the
 //! controls and the seed, never on which frames are rendered, so a chunk of a loop equals
 //! the full render's frames.
 
@@ -36,6 +31,13 @@ use super::Synthesiser;
 use ignis_core::loopq::{arc_times, metric_size};
 use ignis_core::palette::linear_to_srgb;
 use ignis_core::{GrayFrame, Size};
+
+/// Preview states per output frame: the walk places frames between them on pixel blends
+/// of neighbouring previews, which stand in for the state blends rendered there only when
+/// the previews are close (figures in `benches/README.md`).
+const PREVIEW_PER_FRAME: usize = 8;
+/// Width of the walk's previews in pixels (at most the output's; height to its aspect).
+const PREVIEW_WIDTH: u32 = 32;
 
 impl Synthesiser<'_> {
     /// Sets `raw` to a loop's state for the next output frame, re-timing the loop for
@@ -63,17 +65,25 @@ impl Synthesiser<'_> {
         }
     }
 
-    /// The process time of each of the loop's frames at constant measured speed: the
-    /// equal-chord walk ([`equal_steps`]) along the loop's states, mapped by
-    /// [`Synthesiser::step_metric`] so that distances between states predict the RMS
-    /// distances of their metric frames.
+    /// The process time of each of the loop's frames at constant measured speed.
     fn loop_times_for(&mut self, size: Size) -> Vec<f64> {
         let n = self.loop_frames as usize;
-        let states = self.looped.clone().unwrap_or_default();
-        let m = states.len();
-        let metric = metric_size(size);
-        let root = self.step_metric(&states, metric);
-        let grid: Vec<Vec<f32>> = states.iter().map(|s| apply(&root, s)).collect();
+        let steps = self.looped.as_ref().map_or(0, |s| s.len()) as f64;
+        let m = PREVIEW_PER_FRAME * n;
+        let (small, metric) = (preview_size(size), metric_size(size));
+        let per_frame = PREVIEW_PER_FRAME * small.pixels() + metric.pixels();
+        if n.saturating_mul(per_frame) > MAX_PREVIEW_VALUES {
+            // too long a loop to preview within the memory bound: even times
+            return (0..n).map(|k| k as f64 * steps / n as f64).collect();
+        }
+        let mut frame = GrayFrame::new(small);
+        let grid: Vec<Vec<f32>> = (0..m)
+            .map(|j| {
+                self.set_loop_state(j as f64 * steps / m as f64);
+                self.render_raw(j as f64 / PREVIEW_PER_FRAME as f64, &mut frame);
+                encode(&frame)
+            })
+            .collect();
         let mut arc = vec![0.0];
         for j in 0..m {
             arc.push(arc[j] + dist(&grid[j], &grid[(j + 1) % m]));
@@ -85,15 +95,12 @@ impl Synthesiser<'_> {
                 .map(|u| u * m as f64)
                 .collect()
         });
-        // the even-out holds a metric frame per output frame: only within the memory bound
-        if n.saturating_mul(metric.pixels()) <= MAX_EVEN_OUT_VALUES {
-            self.even_out(&mut pos, m, &mut GrayFrame::new(metric));
-        }
-        pos
+        self.even_out(&mut pos, m, &mut GrayFrame::new(metric));
+        pos.into_iter().map(|x| x * steps / m as f64).collect()
     }
 
-    /// The encoded frame at position `pos` of a path of `m` points around the loop (here
-    /// its process steps), rendered from the state there.
+    /// The preview frame at grid position `pos` of a grid of `m` points, rendered from the
+    /// state there (not a pixel blend).
     fn preview_at(&mut self, pos: f64, m: usize, frame: &mut GrayFrame) -> Vec<f32> {
         let steps = self.looped.as_ref().map_or(0, |s| s.len()) as f64;
         let k = m as f64 / f64::from(self.loop_frames);
@@ -102,47 +109,15 @@ impl Synthesiser<'_> {
         encode(frame)
     }
 
-    /// Checks the walk's frames on metric frames rendered from their states: each step
-    /// longer than `EVEN_OUT` × the median moves its frame other than frame 0 to where its
-    /// two steps are equal (a bisection on rendered frames), a few passes over the loop.
+    /// Checks the walk's frames on previews rendered from their states: each step longer
+    /// than `EVEN_OUT` × the median moves its frame other than frame 0 to where its two
+    /// steps are equal (a bisection on rendered previews), a few passes over the loop.
     fn even_out(&mut self, pos: &mut [f64], m: usize, frame: &mut GrayFrame) {
         let n = pos.len();
         let mut img: Vec<Vec<f32>> = pos.iter().map(|&p| self.preview_at(p, m, frame)).collect();
         let step = |img: &[Vec<f32>], k: usize| dist(&img[k], &img[(k + 1) % n]);
         let mut steps: Vec<f64> = (0..n).map(|k| step(&img, k)).collect();
-        let mut med = ignis_core::loopq::median(&mut steps.clone());
-        for _ in 0..RETIMES {
-            if steps.iter().all(|&x| x <= EVEN_OUT * med) {
-                break;
-            }
-            // constant speed along the measured steps (each spread evenly over its
-            // interval), kept when its largest step is smaller
-            let mut arc = vec![0.0];
-            for k in 0..n {
-                arc.push(arc[k] + steps[k]);
-            }
-            let knots: Vec<f64> = pos.iter().copied().chain([m as f64]).collect();
-            let moved: Vec<f64> = arc_times(&arc, (0..n).map(|k| k as f64 / n as f64))
-                .into_iter()
-                .map(|u| {
-                    let x = u * n as f64;
-                    let i = (x.floor() as usize).min(n - 1);
-                    knots[i] + (x - i as f64) * (knots[i + 1] - knots[i])
-                })
-                .collect();
-            let img2: Vec<Vec<f32>> = moved
-                .iter()
-                .map(|&p| self.preview_at(p, m, frame))
-                .collect();
-            let steps2: Vec<f64> = (0..n).map(|k| step(&img2, k)).collect();
-            let med2 = ignis_core::loopq::median(&mut steps2.clone());
-            let worst = |s: &[f64], med: f64| s.iter().fold(0.0, |a: f64, &b| a.max(b)) / med;
-            if worst(&steps2, med2) >= worst(&steps, med) {
-                break;
-            }
-            (img, steps, med) = (img2, steps2, med2);
-            pos.copy_from_slice(&moved);
-        }
+        let med = ignis_core::loopq::median(&mut steps.clone());
         for _ in 0..EVEN_OUT_PASSES {
             for k in 0..n {
                 if steps[k] <= EVEN_OUT * med {
@@ -187,129 +162,33 @@ impl Synthesiser<'_> {
             }
         }
     }
+}
 
-    /// A square root `R` (upper triangular, row-major `d × d`) of the loop's step metric
-    /// `G = RᵀR`: the mean over [`ANCHORS`] states of the loop of `JᵀJ / P`, `J` the
-    /// Jacobian of the metric frame (`P` pixels of `size`, encoded as the measure sees
-    /// them) with respect to the state, by forward differences of one typical loop step
-    /// per coordinate. For two nearby states `a`, `b`, `|R (a − b)|` then predicts the RMS
-    /// distance of their metric frames; the rendered image is linear in the eigenflame
-    /// weights and smooth in the shape, so one metric per loop serves all its steps.
-    fn step_metric(&mut self, states: &[Vec<f64>], size: Size) -> Vec<f64> {
-        let (m, d) = (states.len(), states.first().map_or(0, Vec::len));
-        // one typical step of each coordinate along the loop (RMS of its differences)
-        let h: Vec<f64> = (0..d)
-            .map(|i| {
-                let s2: f64 = (0..m)
-                    .map(|j| (states[(j + 1) % m][i] - states[j][i]).powi(2))
-                    .sum();
-                (s2 / m.max(1) as f64).sqrt().max(1e-9)
-            })
-            .collect();
-        let na = ANCHORS.min(m);
-        let anchors: Vec<usize> = (0..na).map(|a| a * m / na).collect();
-        let mut g = self.gram(states, &anchors, &h, size);
-        cholesky_upper(&mut g, d);
-        g
-    }
-
-    /// The mean over the `anchors` (indices into the loop's `states`) of `JᵀJ / P`
-    /// (row-major `d × d`), `J` the forward-difference Jacobian of the encoded metric frame
-    /// of `size` (`P` pixels) with steps `h` per coordinate.
-    fn gram(&mut self, states: &[Vec<f64>], anchors: &[usize], h: &[f64], size: Size) -> Vec<f64> {
-        let (m, d) = (states.len(), states.first().map_or(0, Vec::len));
-        let mut g = vec![0.0f64; d * d];
-        let mut frame = GrayFrame::new(size);
-        let per_frame = f64::from(self.loop_frames) / m as f64;
-        for &j in anchors {
-            let at = j as f64 * per_frame;
-            self.raw.clone_from(&states[j]);
-            self.render_raw(at, &mut frame);
-            let base = encode(&frame);
-            let cols: Vec<Vec<f64>> = (0..d)
-                .map(|i| {
-                    self.raw.clone_from(&states[j]);
-                    self.raw[i] += h[i];
-                    self.render_raw(at, &mut frame);
-                    let img = encode(&frame);
-                    img.iter()
-                        .zip(&base)
-                        .map(|(&x, &b)| f64::from(x - b) / h[i])
-                        .collect()
-                })
-                .collect();
-            let p = base.len().max(1) as f64 * anchors.len() as f64;
-            for r in 0..d {
-                for c in r..d {
-                    let v: f64 = cols[r].iter().zip(&cols[c]).map(|(x, y)| x * y).sum();
-                    g[r * d + c] += v / p;
-                }
-            }
-        }
-        for r in 0..d {
-            for c in 0..r {
-                g[r * d + c] = g[c * d + r];
-            }
-        }
-        g
+/// The walk's preview size for output frames of `size`: [`PREVIEW_WIDTH`] wide (or the
+/// output's width when narrower), height to the output's aspect, at least 2.
+fn preview_size(size: Size) -> Size {
+    let w = PREVIEW_WIDTH.min(size.width).max(1);
+    let h = (f64::from(w) * f64::from(size.height) / f64::from(size.width)).round() as u32;
+    Size {
+        width: w,
+        height: h.max(2),
     }
 }
 
-/// The most metric-frame values [`Synthesiser::even_out`] holds at once: 128 M (512 MB);
-/// a 3,000-frame loop at 256² takes 49 M. Longer loops keep the walk's timing.
-const MAX_EVEN_OUT_VALUES: usize = 128 << 20;
+/// The most preview values a loop's timing holds at once (the walk's previews and the
+/// even-out's metric-size renders): 128 M (512 MB), a 3,000-frame loop at 256² takes 74 M.
+/// Longer loops keep even times.
+const MAX_PREVIEW_VALUES: usize = 128 << 20;
 
 /// Steps longer than this many times the median are evened out with their neighbour.
 const EVEN_OUT: f64 = 1.15;
-/// Re-timings of [`Synthesiser::even_out`] on measured steps, at most.
-const RETIMES: usize = 3;
 /// Passes of [`Synthesiser::even_out`] over the loop.
 const EVEN_OUT_PASSES: usize = 3;
-/// Rendered frames per evened-out frame.
+/// Rendered previews per evened-out frame.
 const EVEN_OUT_BISECTIONS: usize = 6;
 
-/// States of the loop whose Jacobians the step metric averages.
-const ANCHORS: usize = 6;
-
-/// Replaces the symmetric positive semi-definite `d × d` matrix `g` (row-major) by an
-/// upper-triangular `R` with `RᵀR = g + εI`, `ε` a millionth of the mean diagonal (so a
-/// coordinate the frames do not see still has a tiny length).
-fn cholesky_upper(g: &mut [f64], d: usize) {
-    let tr = (0..d).map(|i| g[i * d + i]).sum::<f64>() / d.max(1) as f64;
-    let eps = (tr * 1e-6).max(1e-300);
-    for i in 0..d {
-        g[i * d + i] += eps;
-    }
-    // g = LLᵀ, computed in the lower triangle, then transposed into R = Lᵀ
-    for j in 0..d {
-        let s: f64 = (0..j).map(|k| g[j * d + k] * g[j * d + k]).sum();
-        let diag = (g[j * d + j] - s).max(eps).sqrt();
-        g[j * d + j] = diag;
-        for i in j + 1..d {
-            let s: f64 = (0..j).map(|k| g[i * d + k] * g[j * d + k]).sum();
-            g[i * d + j] = (g[i * d + j] - s) / diag;
-        }
-    }
-    for i in 0..d {
-        for j in 0..d {
-            if j < i {
-                g[j * d + i] = g[i * d + j];
-                g[i * d + j] = 0.0;
-            }
-        }
-    }
-}
-
-/// `R x` for the upper-triangular `R` of [`cholesky_upper`], as `f32`.
-fn apply(r: &[f64], x: &[f64]) -> Vec<f32> {
-    let d = x.len();
-    (0..d)
-        .map(|i| (i..d).map(|j| r[i * d + j] * x[j]).sum::<f64>() as f32)
-        .collect()
-}
-
-/// `n` positions on the closed path through `grid` (the loop's mapped states; positions
-/// in grid steps from grid point 0, the first 0) that are equally far apart: the smallest step length
+/// `n` positions on the closed preview path (in grid steps from grid point 0, the first
+/// 0) whose consecutive preview frames are equally far apart: the smallest step length
 /// whose [`walk`] fits `n` frames or fewer, found by bisection, the few frames short of `n`
 /// [`fill`]ed in and the seam [`relax`]ed. `None` for a path of zero length or when the
 /// walk falls more than [`MAX_FILL`] frames short.
@@ -351,7 +230,7 @@ fn equal_steps(grid: &[Vec<f32>], arc: &[f64], n: usize) -> Option<Vec<f64>> {
     Some(best)
 }
 
-/// The path point at grid position `pos` (the blend of the grid points around it).
+/// The preview image at grid position `pos` (a pixel blend of the grid points around it).
 fn image_at(grid: &[Vec<f32>], pos: f64) -> Vec<f32> {
     let m = grid.len();
     let i = pos.floor();
@@ -422,7 +301,7 @@ fn fill(grid: &[Vec<f32>], pos: &mut Vec<f64>, n: usize) {
 /// frame or two short of `n`).
 const MAX_FILL: usize = 8;
 
-/// A rendered frame as the loop measure sees a written one: clamped to `0..=1` and
+/// A preview frame as the loop measure sees a written one: clamped to `0..=1` and
 /// sRGB-encoded (through a table of [`SRGB_STEPS`] + 1 points, linear between them).
 fn encode(frame: &GrayFrame) -> Vec<f32> {
     static LUT: std::sync::OnceLock<Vec<f32>> = std::sync::OnceLock::new();
@@ -445,7 +324,7 @@ fn encode(frame: &GrayFrame) -> Vec<f32> {
 /// Intervals of the sRGB table.
 const SRGB_STEPS: usize = 1024;
 
-/// Sum of squared differences of two path points (eight f32 lanes, summed in f64).
+/// Sum of squared differences of two preview frames (eight f32 lanes, summed in f64).
 fn sq_dist(a: &[f32], b: &[f32]) -> f64 {
     let mut lanes = [0f32; 8];
     let (ca, cb) = (a.chunks_exact(8), b.chunks_exact(8));
@@ -464,7 +343,7 @@ fn sq_dist(a: &[f32], b: &[f32]) -> f64 {
     lanes.iter().map(|&v| f64::from(v)).sum::<f64>() + tail
 }
 
-/// RMS difference of two path points (mapped states or encoded frames).
+/// RMS difference of two preview frames.
 fn dist(a: &[f32], b: &[f32]) -> f64 {
     let s: f64 = a
         .iter()
@@ -477,11 +356,11 @@ fn dist(a: &[f32], b: &[f32]) -> f64 {
     (s / a.len().max(1) as f64).sqrt()
 }
 
-/// Walks the closed polyline through `grid` (the loop's mapped states, the
+/// Walks the closed polyline through `grid` (preview frames at evenly spaced times, the
 /// last joined back to the first) from grid point 0, placing each next frame where the
 /// straight-line (RMS) distance from the previous one first reaches `chord`; positions
-/// are in grid steps, between grid points on the segment (the state blend rendered
-/// there). `None` when more than `n` frames fit.
+/// are in grid steps, between grid points on the segment (a pixel blend, the preview's
+/// model of the state blend rendered there). `None` when more than `n` frames fit.
 fn walk(grid: &[Vec<f32>], arc: &[f64], chord: f64, n: usize) -> Option<Vec<f64>> {
     let m = grid.len();
     let l2 = chord * chord * grid[0].len() as f64;
