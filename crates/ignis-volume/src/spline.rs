@@ -114,7 +114,13 @@ impl BSpline {
 
     /// `C(t)` (eq. 6): position and radius.
     pub fn eval(&self, t: f32) -> [f32; 4] {
-        let b = self.basis(t as f64);
+        self.eval_with_basis(&self.basis(t as f64))
+    }
+
+    /// `C(t)` from the basis at `t` ([`BSpline::basis`], `n` values): the same value as
+    /// [`BSpline::eval`] at that `t`, for callers that evaluate many curves of the same
+    /// knots at the same parameters (the lattice's arc-length table).
+    pub fn eval_with_basis(&self, b: &[f64]) -> [f32; 4] {
         let mut out = [0.0f64; 4];
         for (w, p) in b.iter().zip(&self.points) {
             for c in 0..4 {
