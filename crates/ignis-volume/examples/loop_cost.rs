@@ -1,10 +1,12 @@
 //! Looping against plain rendering, in process CPU time as well as wall time (wall time
 //! swings by ±30 % on a shared machine): `cargo run --release -p ignis-volume --example
-//! loop_cost [repeats]`. Renders each case's frames plain and looping, alternately, and
-//! prints the medians. Figures go in `benches/README.md`.
+//! loop_cost [repeats]`. Renders each case's frames plain, looping, and looping at uniform
+//! loop times (no preview: [`LoopTiming::UNIFORM`]), in turn, and prints the medians, so
+//! the overhead splits into the looping frames' own and the preview's. Figures go in
+//! `benches/README.md`.
 
 use ignis_core::Size;
-use ignis_volume::{FireScene, Preset};
+use ignis_volume::{FireScene, LoopTiming, Preset};
 use std::time::Instant;
 
 /// User + system CPU seconds of this process so far (Linux `/proc/self/stat`; `None`
@@ -18,12 +20,12 @@ fn cpu_seconds() -> Option<f64> {
     Some(ticks / 100.0)
 }
 
-fn run(scene: &FireScene, frames: u32, looping: bool) -> (f64, f64) {
+/// CPU and wall seconds of `frames` frames: plain (`timing` `None`) or looping.
+fn run(scene: &FireScene, frames: u32, timing: Option<LoopTiming>) -> (f64, f64) {
     let (c0, t0) = (cpu_seconds().unwrap_or(0.0), Instant::now());
-    let mut a = if looping {
-        scene.looping_animator(frames).expect("valid")
-    } else {
-        scene.animator().expect("valid")
+    let mut a = match timing {
+        Some(t) => scene.looping_animator_with(frames, t).expect("valid"),
+        None => scene.animator().expect("valid"),
     };
     for _ in 0..frames {
         a.next_frame().expect("renders");
@@ -60,21 +62,24 @@ fn main() {
         (Preset::Torch, 512, 64),
     ] {
         let scene = FireScene::preset(p).with_size(Size::new(side, side).expect("valid"));
-        let mut res = [[Vec::new(), Vec::new()], [Vec::new(), Vec::new()]];
+        let timings = [None, Some(LoopTiming::DEFAULT), Some(LoopTiming::UNIFORM)];
+        let mut res = [(); 3].map(|_| [Vec::new(), Vec::new()]);
         for _ in 0..repeats {
-            for (i, looping) in [false, true].into_iter().enumerate() {
-                let (cpu, wall) = run(&scene, frames, looping);
+            for (i, t) in timings.into_iter().enumerate() {
+                let (cpu, wall) = run(&scene, frames, t);
                 res[i][0].push(cpu);
                 res[i][1].push(wall);
             }
         }
-        let [[pc, pw], [lc, lw]] = res.map(|r| r.map(median));
+        let [[pc, pw], [lc, lw], [uc, _]] = res.map(|r| r.map(median));
         let setup = setup_cost(&scene, frames);
         println!(
             "{} {side}² ×{frames}: plain CPU {pc:.2} s (wall {pw:.2}), looping CPU {lc:.2} s \
-             (wall {lw:.2}); CPU overhead {:+.1} % (of which {setup:.3} s setting up the loop)",
+             (wall {lw:.2}); CPU overhead {:+.1} % (of which {setup:.3} s setting up the loop); \
+             uniform-time looping CPU {uc:.2} s ({:+.1} %)",
             p.name(),
-            100.0 * (lc / pc - 1.0)
+            100.0 * (lc / pc - 1.0),
+            100.0 * (uc / pc - 1.0)
         );
     }
 }

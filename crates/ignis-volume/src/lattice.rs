@@ -993,6 +993,45 @@ impl Puff {
     }
 }
 
+/// Most basis values [`arc_basis`] keeps per table (64 K: 512 KB).
+const ARC_BASIS_MAX: usize = 1 << 16;
+
+/// An arc-length basis table ([`arc_basis`]) and its key: (points, degree, samples).
+type ArcBasis = ((usize, usize, usize), std::rc::Rc<[f64]>);
+
+thread_local! {
+    /// [`arc_basis`]'s tables, most recent first.
+    static ARC_BASIS: std::cell::RefCell<Vec<ArcBasis>> =
+        const { std::cell::RefCell::new(Vec::new()) };
+}
+
+/// The basis of `curve` at the `dense + 1` parameters `k / dense` of the arc-length table
+/// ([`Lattice::build_puffed`]), `n` values per parameter: the same for every curve of the
+/// same number of points and degree (the knots depend on nothing else), so an animation
+/// computes it once per thread rather than once per fire and frame (it was most of a
+/// lattice build). `None` past [`ARC_BASIS_MAX`] values (the caller evaluates directly).
+fn arc_basis(curve: &BSpline, dense: usize) -> Option<std::rc::Rc<[f64]>> {
+    let n = curve.points().len();
+    if (dense + 1).saturating_mul(n) > ARC_BASIS_MAX {
+        return None;
+    }
+    let key = (n, curve.degree(), dense);
+    ARC_BASIS.with(|c| {
+        let mut c = c.borrow_mut();
+        if let Some(i) = c.iter().position(|(k, _)| *k == key) {
+            let hit = c.remove(i);
+            c.insert(0, hit);
+        } else {
+            let table: std::rc::Rc<[f64]> = (0..=dense)
+                .flat_map(|k| curve.basis((k as f32 / dense as f32) as f64))
+                .collect();
+            c.insert(0, (key, table));
+            c.truncate(8);
+        }
+        Some(c[0].1.clone())
+    })
+}
+
 impl Lattice {
     /// Builds the lattice of §3.1 around `curve` with `resolution` levels.
     pub fn build(curve: &BSpline, resolution: usize) -> Result<Lattice> {
@@ -1013,11 +1052,17 @@ impl Lattice {
         let dense = (resolution * 16).max(256);
         let mut ts = Vec::with_capacity(dense + 1);
         let mut lens = Vec::with_capacity(dense + 1);
-        let mut last = curve.eval(0.0);
+        let table = arc_basis(curve, dense);
+        let n = curve.points().len();
+        let at = |k: usize, t: f32| match &table {
+            Some(b) => curve.eval_with_basis(&b[k * n..(k + 1) * n]),
+            None => curve.eval(t),
+        };
+        let mut last = at(0, 0.0);
         let mut acc = 0.0f64;
         for k in 0..=dense {
             let t = k as f32 / dense as f32;
-            let p = curve.eval(t);
+            let p = at(k, t);
             acc += norm(sub([p[0], p[1], p[2]], [last[0], last[1], last[2]])) as f64;
             last = p;
             ts.push(t);
@@ -1208,6 +1253,38 @@ mod tests {
             3,
         )
         .unwrap()
+    }
+
+    /// The arc-length table's cached basis gives every curve of the same points and
+    /// degree exactly what evaluating it directly gives, and a table too large to keep is
+    /// not kept.
+    #[test]
+    fn cached_arc_basis_evaluates_as_the_curve() {
+        let other = BSpline::new(
+            bent()
+                .points()
+                .iter()
+                .map(|p| [p[0] * 1.7 - 0.2, p[1] + 0.3, p[2] * 0.8, p[3] * 0.5])
+                .collect(),
+            3,
+        )
+        .unwrap();
+        for curve in [bent(), other] {
+            for dense in [256, 560, 1024] {
+                let table = arc_basis(&curve, dense).unwrap();
+                let n = curve.points().len();
+                for k in 0..=dense {
+                    let t = k as f32 / dense as f32;
+                    let got = curve.eval_with_basis(&table[k * n..(k + 1) * n]);
+                    assert_eq!(
+                        got.map(f32::to_bits),
+                        curve.eval(t).map(f32::to_bits),
+                        "t {t}"
+                    );
+                }
+            }
+        }
+        assert!(arc_basis(&bent(), ARC_BASIS_MAX).is_none());
     }
 
     #[test]

@@ -114,7 +114,13 @@ impl BSpline {
 
     /// `C(t)` (eq. 6): position and radius.
     pub fn eval(&self, t: f32) -> [f32; 4] {
-        let b = self.basis(t as f64);
+        self.eval_with_basis(&self.basis(t as f64))
+    }
+
+    /// `C(t)` from the basis at `t` ([`BSpline::basis`], `n` values): the same value as
+    /// [`BSpline::eval`] at that `t`, for callers that evaluate many curves of the same
+    /// knots at the same parameters (the lattice's arc-length table).
+    pub fn eval_with_basis(&self, b: &[f64]) -> [f32; 4] {
         let mut out = [0.0f64; 4];
         for (w, p) in b.iter().zip(&self.points) {
             for c in 0..4 {
@@ -144,7 +150,60 @@ impl BSpline {
     }
 }
 
+/// The `n` basis functions of degree `p` at `t` (Cox–de Boor). Only the `p + 1` functions
+/// over the span holding `t` can be non-zero, so only they are computed (the curve's
+/// evaluation is on every lattice build's path, a few hundred times per frame); the rest
+/// stay `+0.0`, which is what the full recursion ([`basis_of_all`]) gives them too, so the
+/// result is the same bit for bit (tested).
 fn basis_of(knots: &[f64], n: usize, p: usize, t: f64) -> Vec<f64> {
+    let m = knots.len() - 1; // number of spans
+    let t = t.clamp(0.0, 1.0);
+    // the span holding t; at t = 1 the last non-empty one (as the full recursion closes it)
+    let span = if t >= 1.0 {
+        (0..m).rev().find(|&i| knots[i] < knots[i + 1])
+    } else {
+        (0..m).find(|&i| knots[i] <= t && t < knots[i + 1])
+    };
+    let Some(span) = span else {
+        // no span holds t (NaN): the full recursion, whatever it makes of it
+        return basis_of_all(knots, n, p, t);
+    };
+    let mut nb = vec![0.0f64; m];
+    nb[span] = 1.0;
+    for q in 1..=p {
+        if m <= q {
+            break;
+        }
+        for i in span.saturating_sub(q)..=span.min(m - q - 1) {
+            nb[i] = cox_de_boor(knots, &nb, q, i, t);
+        }
+    }
+    nb.truncate(n.max(1));
+    nb.resize(n, 0.0);
+    nb
+}
+
+/// Basis function `i` of degree `q` at `t` from `nb`, those of degree `q − 1`.
+#[inline(always)]
+fn cox_de_boor(knots: &[f64], nb: &[f64], q: usize, i: usize, t: f64) -> f64 {
+    let d1 = knots[i + q] - knots[i];
+    let d2 = knots[i + q + 1] - knots[i + 1];
+    let a = if d1 > 0.0 {
+        (t - knots[i]) / d1 * nb[i]
+    } else {
+        0.0
+    };
+    let b = if d2 > 0.0 {
+        (knots[i + q + 1] - t) / d2 * nb[i + 1]
+    } else {
+        0.0
+    };
+    a + b
+}
+
+/// [`basis_of`] by the full recursion over every span (the form of eq. 4; the reference
+/// for [`basis_of`], and its answer when no span holds `t`).
+fn basis_of_all(knots: &[f64], n: usize, p: usize, t: f64) -> Vec<f64> {
     let m = knots.len() - 1; // number of spans
     let t = t.clamp(0.0, 1.0);
     let mut nb: Vec<f64> = (0..m)
@@ -164,19 +223,7 @@ fn basis_of(knots: &[f64], n: usize, p: usize, t: f64) -> Vec<f64> {
     }
     for q in 1..=p {
         for i in 0..m - q {
-            let d1 = knots[i + q] - knots[i];
-            let d2 = knots[i + q + 1] - knots[i + 1];
-            let a = if d1 > 0.0 {
-                (t - knots[i]) / d1 * nb[i]
-            } else {
-                0.0
-            };
-            let b = if d2 > 0.0 {
-                (knots[i + q + 1] - t) / d2 * nb[i + 1]
-            } else {
-                0.0
-            };
-            nb[i] = a + b;
+            nb[i] = cox_de_boor(knots, &nb, q, i, t);
         }
     }
     nb.truncate(n.max(1));
@@ -208,6 +255,33 @@ mod tests {
             open_uniform_knots(5, 3),
             vec![0.0, 0.0, 0.0, 0.0, 0.5, 1.0, 1.0, 1.0, 1.0]
         );
+    }
+
+    /// The basis over the span alone equals the full recursion bit for bit: every degree,
+    /// short and long curves, at and between the knots, at the ends, and one degree lower
+    /// on the same knots ([`BSpline::derivative`]).
+    #[test]
+    fn span_basis_equals_the_full_recursion() {
+        for p in 1..=7 {
+            for n in [p + 1, p + 2, 5, 9, 40] {
+                if n < p + 1 {
+                    continue;
+                }
+                let knots = open_uniform_knots(n, p);
+                let mut ts: Vec<f64> = (0..=997).map(|k| k as f64 / 997.0).collect();
+                ts.extend(knots.iter().flat_map(|&k| [k, k.next_up(), k.next_down()]));
+                ts.extend([-0.5, 1.5, f64::NAN]);
+                for t in ts {
+                    // degree p, and p − 1 on the same knots (as the derivative uses them)
+                    for q in [p, p - 1] {
+                        let fast = basis_of(&knots, n, q, t);
+                        let full = basis_of_all(&knots, n, q, t);
+                        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                        assert_eq!(bits(&fast), bits(&full), "p {p}, q {q}, n {n}, t {t}");
+                    }
+                }
+            }
+        }
     }
 
     #[test]

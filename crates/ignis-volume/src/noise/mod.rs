@@ -669,6 +669,17 @@ pub(crate) fn wrap_coordinate(x: f32, period: f32) -> f32 {
     }
 }
 
+/// [`wrap_coordinate`] on every lane, with [`ffloor_lane`] so that it vectorises (the
+/// scalar `ffloor`'s saturating cast is lowered lane by lane, and this wrap runs twice per
+/// octave for every sample of a looping render): the same values for `|x / period| < 2³¹`.
+#[inline(always)]
+pub(crate) fn wrap_lanes(x: &mut Lanes, period: f32) {
+    for v in x.iter_mut() {
+        let r = *v - period * ffloor_lane(*v / period);
+        *v = if r >= period || r < 0.0 { 0.0 } else { r };
+    }
+}
+
 /// [`perlin4`] on the periodic lattice `wrap` (the point's `z`, `w` already wrapped by
 /// [`wrap_coordinate`]); equal to [`perlin4`] away from the last cells.
 #[inline]
@@ -1273,6 +1284,34 @@ mod tests {
 
     /// The bounds are the rounded-up square roots of the proof, and the lemma `q ≤ ¼` of
     /// [`PERLIN4_BOUND`] holds on a fine grid.
+    /// The vectorised wrap gives the scalar one's values bit for bit: on both sides of
+    /// every period boundary (one ulp either way), for negative and large coordinates.
+    #[test]
+    fn wrap_lanes_equals_wrap_coordinate() {
+        let mut rng = ignis_core::rng::Rng::new(7);
+        for period in [1.0f32, 2.0, 3.0, 7.0, 12.0, 255.0, 256.0] {
+            let mut xs: Vec<f32> = (0..4000)
+                .map(|i| {
+                    let range = [2.0, 300.0, 1e5, 1e8][i % 4];
+                    rng.uniform(-range, range) as f32
+                })
+                .collect();
+            for k in -40i32..40 {
+                let b = k as f32 * period;
+                xs.extend([b, b.next_up(), b.next_down(), -0.0]);
+            }
+            for chunk in xs.chunks_exact(LANES) {
+                let mut lanes: Lanes = chunk.try_into().unwrap();
+                wrap_lanes(&mut lanes, period);
+                for (got, &x) in lanes.iter().zip(chunk) {
+                    let want = wrap_coordinate(x, period);
+                    assert_eq!(got.to_bits(), want.to_bits(), "x {x}, period {period}");
+                    assert!((0.0..period).contains(got), "x {x}, period {period}: {got}");
+                }
+            }
+        }
+    }
+
     #[test]
     fn proven_bound_constants() {
         assert!(PERLIN4_BOUND as f64 >= 3f64.sqrt() && (PERLIN4_BOUND as f64) < 3f64.sqrt() + 1e-6);

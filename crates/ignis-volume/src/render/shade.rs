@@ -10,7 +10,7 @@ use super::FireInstance;
 use crate::mapping::{
     kernel, noise_position, noise_scale, profile_uv, radial_u, scroll_time, TIME_SHEAR,
 };
-use crate::noise::{octave_wrap, wrap_coordinate, NoiseCache, NoiseKind, LANES};
+use crate::noise::{octave_wrap, wrap_lanes, NoiseCache, NoiseKind, LANES};
 
 /// A sample whose noise is still being summed.
 #[derive(Clone, Copy, Debug)]
@@ -249,7 +249,7 @@ fn add_octave(
     if let Some(w) = cache.wrap {
         // a periodic lattice: `z`, `w` into its period, as `turbulence_periodic` does
         for (a, p) in [(2, w.period[0]), (3, w.period[1])] {
-            q[a] = q[a].map(|v| wrap_coordinate(v, p as f32));
+            wrap_lanes(&mut q[a], p as f32);
         }
     }
     let val = lanes_noise(kind, &q, cache, avx2);
