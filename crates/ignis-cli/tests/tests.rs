@@ -1724,7 +1724,12 @@ mod variants {
     fn check_rows(out: &Path, max_wrap: f64) -> Vec<ignis_media::RgbaFrame> {
         let fb = ignis_media::read_flipbook(&out.with_extension("json")).unwrap();
         assert_eq!(
-            (fb.meta.rows, fb.meta.variants, fb.frames.len(), fb.meta.loop_),
+            (
+                fb.meta.rows,
+                fb.meta.variants,
+                fb.frames.len(),
+                fb.meta.loop_
+            ),
             (3, 3, 3 * ROW, true)
         );
         let metric: Vec<_> = fb
@@ -1732,14 +1737,21 @@ mod variants {
             .iter()
             .map(|f| loopq::metric_frame_rgba(f, [0.0; 3]))
             .collect();
-        let json_q = fb.meta.variant_loop_quality.expect("each row's loop quality");
+        let json_q = fb
+            .meta
+            .variant_loop_quality
+            .expect("each row's loop quality");
         assert_eq!(json_q.len(), 3);
         let mut medians = Vec::new();
         for (r, row) in metric.chunks(ROW).enumerate() {
             let s = loopq::steps(row, true).unwrap();
             let med = loopq::median(&mut s.clone());
             let wrap = s[ROW - 1] / med;
-            println!("{}: row {r} wrap {wrap:.3}, JSON {:?}", out.display(), json_q[r]);
+            println!(
+                "{}: row {r} wrap {wrap:.3}, JSON {:?}",
+                out.display(),
+                json_q[r]
+            );
             assert!(med > 0.0, "row {r} does not move");
             assert!(wrap <= max_wrap, "row {r}: wrap {wrap:.3} > {max_wrap}");
             assert!(json_q[r].seam.is_finite() && json_q[r].seam <= max_wrap);
@@ -1774,7 +1786,10 @@ mod variants {
     fn refuses_bad_variants(run: &dyn Fn(&[&str], &Path) -> Output, dir: &Path) {
         let png = dir.join("bad.png");
         assert_fails(&run(&["--variants", "2", "--no-loop"], &png), "--no-loop");
-        assert_fails(&run(&["--variants", "2", "--chunk", "0..4"], &png), "--chunk");
+        assert_fails(
+            &run(&["--variants", "2", "--chunk", "0..4"], &png),
+            "--chunk",
+        );
         let mp4 = dir.join("bad.mp4");
         assert_fails(&run(&["--variants", "2"], &mp4), "flipbooks");
         assert_fails(&run(&["--variants", "0"], &png), "variants");
