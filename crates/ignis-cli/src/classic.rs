@@ -15,6 +15,7 @@ ignis classic --source perlin --palette blue-gas -o sheet.png          # flipboo
 ignis classic --frames 48 -o frames/%04d.exr                           # linear EXR sequence\n  \
 ignis classic --frames 120 --loop -o loop.mp4                          # a seamless loop as MP4\n  \
 ignis classic --frames 1000 --chunk 0..100 -o frames/%04d.png          # job 1 of 10 on a farm\n  \
+ignis classic --size 128x128 --frames 32 --variants 4 -o rows.png      # 4 different loops, one per row\n  \
 ignis classic --cell 1 --puff 0 -o article.mp4                         # the 1999 article's fire exactly\n\n\
 Realism: by default the fire is a 1 m fire bed simulated on 6-px cells that puffs at 1.5/√D Hz\n\
 (--diameter D); `ignis bench realism` measures it against that law and campfire footage.\n\n\
@@ -135,44 +136,79 @@ impl Args {
 /// Runs `ignis classic`; returns the files written.
 pub fn run(args: &Args, g: &Global) -> Result<Vec<PathBuf>> {
     let plan = args.frames_args.plan(args.frames, &args.out)?;
-    let mut fire = if plan.looping {
-        ClassicFire::new_looping(args.params(), args.frames)
-    } else {
-        ClassicFire::new(args.params())
-    }
-    .context("classic fire settings")?;
+    // --variants N: N loops with seeds seed, seed + 1, …, one per row of the sheet; the
+    // first fire is made before the writer so bad settings are reported first.
+    let variants = args.out.variants();
+    let mut first = Some(new_fire(args, args.seed, plan.looping)?);
     let palette = args.palette.load()?;
-    // warm up; a loop is put on its periodic orbit (solved row by row, each row stepped
-    // at most `cap` times until it repeats)
+    let mut opts = args.out.write_options();
+    opts.loop_ = plan.mark_loop;
+    opts.first_frame = plan.range.start as u64;
+    opts.flipbook.variants = variants;
+    // Refuses --variants for other formats; nothing is written until `finish`.
+    let mut writer = args.out.create_with(args.size, &opts)?;
+    anyhow::ensure!(
+        variants <= 1 || (plan.looping && plan.range == (0..args.frames)),
+        "--variants {variants} lays {variants} whole loops as the rows of a flipbook; \
+         drop --no-loop and --chunk"
+    );
+    let pb = g.progress(plan.range.len() as u64 * variants as u64, "classic");
+    for v in 0..variants {
+        let seed = args.seed.wrapping_add(v as u64);
+        let mut fire = match first.take() {
+            Some(f) => f,
+            None => new_fire(args, seed, plan.looping)?,
+        };
+        settle(&mut fire, args, seed, variants, g);
+        // the found loop re-timed so every step (the wrap included) is as large as the
+        // others, measured as the writer's loop metric sees the frames
+        fire.even_loop_steps(&palette, opts.background);
+        // a chunk steps (without drawing) to its first frame
+        for _ in 0..plan.range.start {
+            fire.step_par();
+        }
+        for _ in plan.range.clone() {
+            fire.step_par();
+            args.out.push(&mut writer, &fire.rgba(&palette))?;
+            pb.inc(1);
+        }
+    }
+    pb.finish_and_clear();
+    args.out.finish(writer, g)
+}
+
+/// The fire of these settings with `seed` (looping: repeating every `--frames` frames).
+fn new_fire(args: &Args, seed: u64, looping: bool) -> Result<ClassicFire> {
+    let params = ClassicParams {
+        seed,
+        ..args.params()
+    };
+    if looping {
+        ClassicFire::new_looping(params, args.frames)
+    } else {
+        ClassicFire::new(params)
+    }
+    .context("classic fire settings")
+}
+
+/// Warms the fire up; a loop is put on its periodic orbit (solved row by row, each row
+/// stepped at most `cap` times until it repeats), with a note when it does not settle.
+fn settle(fire: &mut ClassicFire, args: &Args, seed: u64, variants: u32, g: &Global) {
     let cap = (16 * args.frames as u64)
         .max(40 * args.size.height as u64)
         .max(4000);
     if fire.settle_loop(args.warmup as u64, cap).is_none() {
+        let which = if variants > 1 {
+            format!(" (variant with seed {seed})")
+        } else {
+            String::new()
+        };
         g.say(format!(
-            "note: the fire did not settle into an exact {}-frame loop within {cap} steps a row; \
-             it loops with a seam (see the flipbook's loop_quality)",
+            "note: the fire{which} did not settle into an exact {}-frame loop within {cap} steps \
+             a row; it loops with a seam (see the flipbook's loop_quality)",
             args.frames
         ));
     }
-    let mut opts = args.out.write_options();
-    // the found loop re-timed so every step (the wrap included) is as large as the others,
-    // measured as the writer's loop metric sees the frames
-    fire.even_loop_steps(&palette, opts.background);
-    // a chunk steps (without drawing) to its first frame
-    for _ in 0..plan.range.start {
-        fire.step_par();
-    }
-    opts.loop_ = plan.mark_loop;
-    opts.first_frame = plan.range.start as u64;
-    let mut writer = args.out.create_with(args.size, &opts)?;
-    let pb = g.progress(plan.range.len() as u64, "classic");
-    for _ in plan.range.clone() {
-        fire.step_par();
-        args.out.push(&mut writer, &fire.rgba(&palette))?;
-        pb.inc(1);
-    }
-    pb.finish_and_clear();
-    args.out.finish(writer, g)
 }
 
 /// The demo section: the classic fire in every output format.

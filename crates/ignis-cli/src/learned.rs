@@ -28,6 +28,7 @@ ignis learned train candle.mp4 --particles 300 --order 3 --seed 2 -o candle.flam
         after_help = "Examples:\n  ignis learned synth candle.flame --frames 3000 --wind 0.3 --height 1.2 --seed 1 -o flame.mp4\n  \
 ignis learned synth candle.flame --wind 0:0,150:1.5,300:-1 --palette blue-gas -o gusty.gif\n  \
 ignis learned synth candle.flame --frames 64 --size 128x128 -o sheet.png     # looping flipbook + sheet.json\n  \
+ignis learned synth candle.flame --frames 32 --variants 4 -o rows.png       # 4 different loops, one per row\n  \
 ignis learned synth candle.flame --frames 1000 --chunk 100..200 -o out/%04d.png  # one farm job\n\n\
 Loops (the default for GIFs and flipbooks) are a sample of the learned process conditioned on returning to its\n\
 start state (an exact Kalman bridge), so the step across the seam is one of the process's own.\n\
@@ -310,28 +311,47 @@ pub fn synth(a: &SynthArgs, g: &Global) -> Result<Vec<PathBuf>> {
     let plan = a.frames_args.plan(a.frames, &a.out)?;
     let palette = a.palette.load()?;
     let fps = Some(a.out.fps);
-    let mut synth = if plan.looping {
-        Synthesiser::looping_at(&model, controls, a.seed, a.frames, fps)?
-    } else {
-        Synthesiser::new_at(&model, controls, a.seed, fps)?
+    let make = |seed: u64| {
+        if plan.looping {
+            Synthesiser::looping_at(&model, controls.clone(), seed, a.frames, fps)
+        } else {
+            Synthesiser::new_at(&model, controls.clone(), seed, fps)
+        }
     };
-    // a chunk steps only the (cheap) process to its first frame
-    synth.skip(plan.range.start as u64);
+    // --variants N: N loops with seeds seed, seed + 1, …, one per row of the sheet; the
+    // first is made before the writer so bad settings are reported first.
+    let variants = a.out.variants();
+    let mut first = Some(make(a.seed)?);
     let mut opts = a.out.write_options();
     opts.loop_ = plan.mark_loop;
     opts.first_frame = plan.range.start as u64;
+    opts.flipbook.variants = variants;
+    // Refuses --variants for other formats; nothing is written until `finish`.
     let mut writer = a.out.create_with(a.size, &opts)?;
+    anyhow::ensure!(
+        variants <= 1 || (plan.looping && plan.range == (0..a.frames)),
+        "--variants {variants} lays {variants} whole loops as the rows of a flipbook; \
+         drop --no-loop and --chunk"
+    );
     let mut frame = GrayFrame::new(a.size);
-    let bar = g.progress(plan.range.len() as u64, "synthesising");
-    for _ in plan.range.clone() {
-        synth.next_frame_into(&mut frame);
-        if a.gain != 1.0 {
-            frame.data_mut().iter_mut().for_each(|v| *v *= a.gain);
+    let bar = g.progress(plan.range.len() as u64 * variants as u64, "synthesising");
+    for v in 0..variants {
+        let mut synth = match first.take() {
+            Some(s) => s,
+            None => make(a.seed.wrapping_add(v as u64))?,
+        };
+        // a chunk steps only the (cheap) process to its first frame
+        synth.skip(plan.range.start as u64);
+        for _ in plan.range.clone() {
+            synth.next_frame_into(&mut frame);
+            if a.gain != 1.0 {
+                frame.data_mut().iter_mut().for_each(|v| *v *= a.gain);
+            }
+            writer
+                .push(&palette.apply(&frame))
+                .with_context(|| format!("writing {}", a.out.output.display()))?;
+            bar.inc(1);
         }
-        writer
-            .push(&palette.apply(&frame))
-            .with_context(|| format!("writing {}", a.out.output.display()))?;
-        bar.inc(1);
     }
     bar.finish_and_clear();
     let files = writer
@@ -339,7 +359,7 @@ pub fn synth(a: &SynthArgs, g: &Global) -> Result<Vec<PathBuf>> {
         .with_context(|| format!("writing {}", a.out.output.display()))?;
     g.say(format!(
         "wrote {} frames to {}",
-        plan.range.len(),
+        plan.range.len() * variants as usize,
         a.out.output.display()
     ));
     Ok(files)

@@ -72,8 +72,9 @@ pub struct OutputArgs {
     #[arg(long)]
     pub fit_frames: bool,
     /// Flipbook: N statistically different loops of the effect as the N rows of one sheet
-    /// (Unity's Single Row mode, a row picked at random per particle): `ignis volume render`
-    /// renders `--frames` frames per row, each a seamless loop with seed `--seed + row`;
+    /// (Unity's Single Row mode, a row picked at random per particle): `ignis volume render`,
+    /// `ignis classic` and `ignis learned synth` render `--frames` frames per row, each a
+    /// seamless loop with seed `--seed + row`;
     /// motion vectors wrap within each row. Commands that render one animation refuse N > 1.
     /// Example: `ignis volume render --preset torch --frames 32 --variants 4 -o torch.png`.
     #[arg(long, default_value_t = 1, value_name = "N")]
@@ -168,8 +169,8 @@ impl OutputArgs {
         if self.variants > 1 && opts.flipbook.variants != self.variants {
             anyhow::bail!(
                 "--variants {}: this command renders one animation, and splitting it into rows \
-                 would not give {} different loops; use `ignis volume render … --variants {}`, \
-                 or drop --variants",
+                 would not give {} different loops; use `ignis volume render`, `ignis classic` \
+                 or `ignis learned synth` with --variants {}, or drop --variants",
                 self.variants,
                 self.variants,
                 self.variants

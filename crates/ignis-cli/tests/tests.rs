@@ -1093,11 +1093,8 @@ mod export {
         assert_fails(
             &ignis(&[
                 "-q",
-                "classic",
-                "--size",
-                "48x32",
-                "--frames",
-                "8",
+                "convert",
+                out.to_str().unwrap(),
                 "--variants",
                 "2",
                 "-o",
@@ -1708,5 +1705,165 @@ mod loop_sequence {
         let (said, _) = run(&pattern, "d.png");
         assert!(said.contains("cached the clip's database"), "{said}");
         assert_eq!(files_in(&cache).len(), 2, "two entries");
+    }
+}
+
+/// Issue 17: `--variants N` for `ignis classic` and `ignis learned synth`: N loops with
+/// seeds seed … seed+N−1 as the rows of one flipbook, each row seamless, measured on the
+/// cells read back from the sheet.
+mod variants {
+    use super::*;
+    use ignis_core::loopq;
+
+    const ROW: usize = 12;
+
+    /// Reads the 3-row sheet `out`, checks its layout, that every row is a seamless loop
+    /// (its wrap step no larger than `max_wrap` × the row's median step, measured with
+    /// `loopq` on the cells and matching the JSON's per-row quality) and that the rows
+    /// differ from one another; returns the frames.
+    fn check_rows(out: &Path, max_wrap: f64) -> Vec<ignis_media::RgbaFrame> {
+        let fb = ignis_media::read_flipbook(&out.with_extension("json")).unwrap();
+        assert_eq!(
+            (
+                fb.meta.rows,
+                fb.meta.variants,
+                fb.frames.len(),
+                fb.meta.loop_
+            ),
+            (3, 3, 3 * ROW, true)
+        );
+        let metric: Vec<_> = fb
+            .frames
+            .iter()
+            .map(|f| loopq::metric_frame_rgba(f, [0.0; 3]))
+            .collect();
+        let json_q = fb
+            .meta
+            .variant_loop_quality
+            .expect("each row's loop quality");
+        assert_eq!(json_q.len(), 3);
+        let mut medians = Vec::new();
+        for (r, row) in metric.chunks(ROW).enumerate() {
+            let s = loopq::steps(row, true).unwrap();
+            let med = loopq::median(&mut s.clone());
+            let wrap = s[ROW - 1] / med;
+            println!(
+                "{}: row {r} wrap {wrap:.3}, JSON {:?}",
+                out.display(),
+                json_q[r]
+            );
+            assert!(med > 0.0, "row {r} does not move");
+            assert!(wrap <= max_wrap, "row {r}: wrap {wrap:.3} > {max_wrap}");
+            assert!(json_q[r].seam.is_finite() && json_q[r].seam <= max_wrap);
+            medians.push(med);
+        }
+        // Different loops: a row's frames are further from the other rows' frames than
+        // from the row's own next frame.
+        for (a, b) in [(0, 1), (0, 2), (1, 2)] {
+            let across = (0..ROW)
+                .map(|k| loopq::rms_diff(&metric[a * ROW + k], &metric[b * ROW + k]))
+                .sum::<f64>()
+                / ROW as f64;
+            assert!(
+                across > 0.5 * medians[a].max(medians[b]),
+                "rows {a} and {b}: {across} vs steps {medians:?}"
+            );
+        }
+        fb.frames
+    }
+
+    /// Row `r` of a variants sheet is the single loop rendered with seed `seed + r`.
+    fn row_is_single_loop(frames: &[ignis_media::RgbaFrame], r: usize, single: &Path) {
+        let fb = ignis_media::read_flipbook(&single.with_extension("json")).unwrap();
+        assert_eq!(fb.frames.len(), ROW);
+        for (k, f) in fb.frames.iter().enumerate() {
+            assert!(f.data() == frames[r * ROW + k].data(), "row {r} frame {k}");
+        }
+    }
+
+    /// `--variants 2` with `--no-loop`, `--chunk` or a non-flipbook output fails with a
+    /// clear error and writes nothing.
+    fn refuses_bad_variants(run: &dyn Fn(&[&str], &Path) -> Output, dir: &Path) {
+        let png = dir.join("bad.png");
+        assert_fails(&run(&["--variants", "2", "--no-loop"], &png), "--no-loop");
+        assert_fails(
+            &run(&["--variants", "2", "--chunk", "0..4"], &png),
+            "--chunk",
+        );
+        let mp4 = dir.join("bad.mp4");
+        assert_fails(&run(&["--variants", "2"], &mp4), "flipbooks");
+        assert_fails(&run(&["--variants", "0"], &png), "variants");
+        let left: Vec<_> = files_in(dir)
+            .into_iter()
+            .filter(|f| f.starts_with("bad"))
+            .collect();
+        assert!(left.is_empty(), "{left:?}");
+    }
+
+    #[test]
+    fn classic_variants_are_different_seamless_rows() {
+        let dir = tempfile::tempdir().unwrap();
+        let run = |extra: &[&str], out: &Path| {
+            let mut a = vec!["--seed", "5"];
+            a.extend_from_slice(extra);
+            classic("64x48", &ROW.to_string(), &a, out)
+        };
+        let out = dir.path().join("rows.png");
+        let o = run(&["--variants", "3"], &out);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        // classic loops are re-timed to even steps (issue 14: wrap within ~15%)
+        let frames = check_rows(&out, 1.2);
+        let single = dir.path().join("seed7.png");
+        let o = classic("64x48", &ROW.to_string(), &["--seed", "7"], &single);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        row_is_single_loop(&frames, 2, &single);
+        refuses_bad_variants(&run, dir.path());
+    }
+
+    #[test]
+    fn learned_variants_are_different_seamless_rows() {
+        let dir = tempfile::tempdir().unwrap();
+        // A small model trained on Ignis' own synthetic flame clip (no footage needed).
+        let size = ignis_core::Size::new(64, 64).unwrap();
+        let clip = dir.path().join("clip").join("%04d.png");
+        let clip_s = clip.to_str().unwrap();
+        let mut w = ignis_media::create(&clip, size, &Default::default()).unwrap();
+        for f in ignis_learned::synthetic::flame_clip(size, 100, 1) {
+            w.push(&f.to_rgba()).unwrap();
+        }
+        w.finish().unwrap();
+        let model = dir.path().join("m.flame");
+        let model_s = model.to_str().unwrap();
+        ignis_ok(&[
+            "-q",
+            "learned",
+            "train",
+            clip_s,
+            "-o",
+            model_s,
+            "--particles",
+            "30",
+            "--max-iterations",
+            "3",
+        ]);
+        let frames_s = ROW.to_string();
+        let run = |extra: &[&str], out: &Path| {
+            let mut a = vec![
+                "-q", "learned", "synth", model_s, "--frames", &frames_s, "--size", "48x48",
+            ];
+            a.extend_from_slice(extra);
+            a.extend(["-o", out.to_str().unwrap()]);
+            ignis(&a)
+        };
+        let out = dir.path().join("rows.png");
+        let o = run(&["--seed", "5", "--variants", "3"], &out);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        // the seam is one of the process's own steps (a Kalman bridge), not a cut
+        let frames = check_rows(&out, 2.5);
+        let single = dir.path().join("seed6.png");
+        let o = run(&["--seed", "6"], &single);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        row_is_single_loop(&frames, 1, &single);
+        refuses_bad_variants(&run, dir.path());
     }
 }
