@@ -214,11 +214,18 @@ mod tests {
             let size = Size::new(n as u32, 1).unwrap();
             let rgba = RgbaFrame::from_vec(
                 size,
-                vals.iter().enumerate().map(|(i, &v)| [v, v * (1.0 - (i % 3) as f32 * 0.1), v, 1.0]).collect(),
+                vals.iter()
+                    .enumerate()
+                    .map(|(i, &v)| [v, v * (1.0 - (i % 3) as f32 * 0.1), v, 1.0])
+                    .collect(),
             )
             .unwrap();
-            let mask = GrayImage::from_fn(n as u32, 1, |x, _| image::Luma([if x % 7 == 0 { 255 } else { 0 }]));
-            let matte = GrayFrame::from_vec(size, (0..n).map(|i| [0.0, 1.0, 0.5, 0.25][i % 4]).collect()).unwrap();
+            let mask = GrayImage::from_fn(n as u32, 1, |x, _| {
+                image::Luma([if x % 7 == 0 { 255 } else { 0 }])
+            });
+            let matte =
+                GrayFrame::from_vec(size, (0..n).map(|i| [0.0, 1.0, 0.5, 0.25][i % 4]).collect())
+                    .unwrap();
             let mut want = hermite_darken(&rgba.luminance(), Some(&mask), &p);
             let same = |got: &GrayFrame, want: &GrayFrame| {
                 for (i, (a, b)) in got.data().iter().zip(want.data()).enumerate() {

@@ -447,7 +447,10 @@ fn runs(flags: &[bool]) -> Vec<(usize, usize)> {
             None => break,
             Some(a) => {
                 let a = x + a;
-                let b = flags[a..].iter().position(|&f| !f).map_or(flags.len(), |e| a + e);
+                let b = flags[a..]
+                    .iter()
+                    .position(|&f| !f)
+                    .map_or(flags.len(), |e| a + e);
                 out.push((a, b));
                 x = b;
             }
@@ -652,14 +655,18 @@ mod tests {
                 let d = (x as i32 - 40).pow(2) + (y as i32 - 30).pow(2);
                 image::Luma([if d <= 400 { 255 } else { 0 }])
             }),
-            GrayImage::from_fn(w, h, |x, y| image::Luma([((x / 23 + y / 17) * 60 % 256) as u8])),
+            GrayImage::from_fn(w, h, |x, y| {
+                image::Luma([((x / 23 + y / 17) * 60 % 256) as u8])
+            }),
             GrayImage::from_pixel(w, h, image::Luma([200])),
             GrayImage::from_fn(w, h, |x, y| {
-                image::Luma([if (x, y) == (0, 5) || (x, y) == (89, 69) || (x, y) == (45, 0) {
-                    255
-                } else {
-                    7
-                }])
+                image::Luma([
+                    if (x, y) == (0, 5) || (x, y) == (89, 69) || (x, y) == (45, 0) {
+                        255
+                    } else {
+                        7
+                    },
+                ])
             }),
             GrayImage::from_fn(3, 50, |_, y| image::Luma([if y > 25 { 255 } else { 0 }])),
         ];
