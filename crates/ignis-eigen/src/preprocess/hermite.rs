@@ -122,6 +122,50 @@ pub fn hermite_darken_rgba(
     GrayFrame::from_vec(frame.size(), data).expect("same size")
 }
 
+/// [`hermite_darken_rgba`] with `matte`, computed only inside `area` = `(x0, y0, x1, y1)`
+/// (end-exclusive), the box outside which `matte` is 0; pixels outside are 0 without
+/// being read (the rule's `v × 0` differs from +0 only for a negative or non-finite `v`,
+/// which linear-light footage does not hold).
+pub fn hermite_darken_rgba_in(
+    frame: &RgbaFrame,
+    mask: &GrayImage,
+    matte: &GrayFrame,
+    area: (u32, u32, u32, u32),
+    p: &HermiteParams,
+) -> GrayFrame {
+    let size = frame.size();
+    let mut out = GrayFrame::new(size);
+    let w = size.width as usize;
+    let (x0, y0) = (area.0 as usize, area.1 as usize);
+    let (x1, y1) = (
+        (area.2 as usize).min(w),
+        (area.3 as usize).min(size.height as usize),
+    );
+    if matte.size() != size || x0 >= x1 || y0 >= y1 {
+        return hermite_darken_rgba(frame, mask, Some(matte), p);
+    }
+    let f = Darken::new(p);
+    let m = mask.as_raw();
+    let protected = |i: usize| p.protect_interior && m.get(i).is_some_and(|&b| b > 0);
+    for y in y0..y1 {
+        let at = y * w;
+        let row = &frame.data()[at + x0..at + x1];
+        let t = &matte.data()[at + x0..at + x1];
+        let o = &mut out.data_mut()[at + x0..at + x1];
+        for (j, ((o, px), &t)) in o.iter_mut().zip(row).zip(t).enumerate() {
+            let v = LUMA[0] * px[0] + LUMA[1] * px[1] + LUMA[2] * px[2];
+            *o = if t == 0.0 {
+                v * 0.0
+            } else if protected(at + x0 + j) {
+                v * t
+            } else {
+                f.apply(v) * t
+            };
+        }
+    }
+    out
+}
+
 /// The darkening of one unprotected pixel, `v × h₀₁((sRGB(v) − i_min)/(i_max − i_min))`,
 /// without the sRGB encoding (a `powf`) where its result is known: `h` is exactly 0 where
 /// `sRGB(v) ≤ i_min` and exactly 1 where `sRGB(v) ≥ i_max`, so below `lo` (0.1 % under
@@ -240,6 +284,43 @@ mod tests {
                 *g *= m;
             }
             same(&hermite_darken_rgba(&rgba, &mask, Some(&matte), &p), &want);
+            // Inside a box with the matte 0 outside it: the same where the values are
+            // finite and non-negative (everywhere outside the box here).
+            let boxed = GrayFrame::from_vec(
+                size,
+                (0..n)
+                    .map(|i| {
+                        if (100..n - 50).contains(&i) {
+                            matte.data()[i]
+                        } else {
+                            0.0
+                        }
+                    })
+                    .collect(),
+            )
+            .unwrap();
+            let inside = |i: usize| (100..n - 50).contains(&i);
+            let rgba = RgbaFrame::from_vec(
+                size,
+                rgba.data()
+                    .iter()
+                    .enumerate()
+                    .map(|(i, &px)| {
+                        if inside(i) || (px[0].is_finite() && px[0].is_sign_positive()) {
+                            px
+                        } else {
+                            [0.5; 4]
+                        }
+                    })
+                    .collect(),
+            )
+            .unwrap();
+            let mut want = hermite_darken(&rgba.luminance(), Some(&mask), &p);
+            for (g, &m) in want.data_mut().iter_mut().zip(boxed.data()) {
+                *g *= m;
+            }
+            let got = hermite_darken_rgba_in(&rgba, &mask, &boxed, (100, 0, n as u32 - 50, 1), &p);
+            same(&got, &want);
         }
     }
 }

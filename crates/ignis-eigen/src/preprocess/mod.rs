@@ -15,7 +15,7 @@ pub mod pose;
 
 use crate::contour::{contour_tree, draw_contours, fill_contours, remove_holes, ContourParams};
 use crate::error::{EigenError, Result};
-use crate::hermite::{hermite_darken_rgba, HermiteParams};
+use crate::hermite::{hermite_darken_rgba, hermite_darken_rgba_in, HermiteParams};
 use crate::mask::{flame_mask, hsv_mask, mask_area, mask_edges, MaskParams};
 use crate::pose::{lean_angle, mask_extent, resize, warp, ClipPose, MaskExtent, PoseParams};
 use ignis_core::{GrayFrame, RgbaFrame, Size};
@@ -260,9 +260,13 @@ pub fn source_grey_with_mask(
     pose: &ClipPose,
     p: &PreprocessParams,
 ) -> SourceGrey {
-    let matte = feather(mask, frame.width().max(frame.height()));
-    let isolate = pose.isolate.then_some(&matte);
-    let grey = hermite_darken_rgba(frame, mask, isolate, &p.hermite);
+    let (matte, area) = feather_in(mask, frame.width().max(frame.height()));
+    let grey = match (pose.isolate, area) {
+        (true, Some(b)) => hermite_darken_rgba_in(frame, mask, &matte, b, &p.hermite),
+        // Nothing to keep: every pixel is multiplied by a matte of 0.
+        (true, None) => GrayFrame::new(frame.size()),
+        (false, _) => hermite_darken_rgba(frame, mask, None, &p.hermite),
+    };
     SourceGrey {
         grey,
         matte,
@@ -279,6 +283,12 @@ pub fn source_grey_with_mask(
 /// (everything farther is 0 either way), so a small flame in a large frame costs little;
 /// the result is the same as over the whole frame.
 pub fn feather(mask: &GrayImage, longer: u32) -> GrayFrame {
+    feather_in(mask, longer).0
+}
+
+/// [`feather`], and the box `(x0, y0, x1, y1)` (end-exclusive) outside which it is 0;
+/// `None` for an empty mask (all 0).
+fn feather_in(mask: &GrayImage, longer: u32) -> (GrayFrame, Option<(u32, u32, u32, u32)>) {
     let r = ((longer as f32 * 0.01).round() as u8).clamp(2, 40);
     let size = Size {
         width: mask.width(),
@@ -286,7 +296,7 @@ pub fn feather(mask: &GrayImage, longer: u32) -> GrayFrame {
     };
     let mut out = GrayFrame::new(size);
     let Some(e) = mask_bounds(mask) else {
-        return out;
+        return (out, None);
     };
     // Dilation reach r, blur reach ceil(2σ) = r (σ = r/2), twice, and a little slack.
     let m = 3 * r as u32 + 2;
@@ -310,7 +320,7 @@ pub fn feather(mask: &GrayImage, longer: u32) -> GrayFrame {
             *o = if mv > 0 { 1.0 } else { v as f32 / 255.0 };
         }
     }
-    out
+    (out, Some((x0, y0, x1, y1)))
 }
 
 /// `imageproc::filter::gaussian_blur_f32` on a grey image, bit for bit (the same kernel,
