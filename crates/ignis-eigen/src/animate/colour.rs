@@ -36,6 +36,7 @@ use ignis_core::post::gaussian_blur;
 use ignis_core::{CoreError, GrayFrame, RgbaFrame, Size};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
+use std::mem::MaybeUninit;
 
 /// The thesis's threshold of 30 (of 255, sRGB-coded grey) as linear luminance:
 /// `srgb_to_linear(30/255)` = 0.01298.
@@ -237,6 +238,24 @@ pub fn original_colouring_to(
     custom: Option<(&GrayFrame, MaskMode)>,
     p: &OriginalColour,
 ) -> Result<RgbaFrame> {
+    original_colouring_then(source, original, destination, smoke, custom, p, &|_, _| {})
+}
+
+/// A pass over a band of finished rows: `(index of its first pixel, the band's pixels)`.
+pub type BandPass<'a> = dyn Fn(usize, &mut [[f32; 4]]) + Sync + 'a;
+
+/// [`original_colouring_to`], with `then` run on each band of rows as soon as it is
+/// coloured (while it is still in the cache), e.g. the alpha matte: one pass over the
+/// frame instead of two. The output buffer is written once, never zeroed first.
+pub fn original_colouring_then(
+    source: &GrayFrame,
+    original: &RgbaFrame,
+    destination: Destination<'_>,
+    smoke: Option<&RgbaFrame>,
+    custom: Option<(&GrayFrame, MaskMode)>,
+    p: &OriginalColour,
+    then: &BandPass<'_>,
+) -> Result<RgbaFrame> {
     p.validate()?;
     let size = source.size();
     check_size("the original frame", original.size(), size)?;
@@ -269,9 +288,10 @@ pub fn original_colouring_to(
         None => (source, None),
     };
     let w = size.width as usize;
-    let mut out = vec![[0.0f32; 4]; size.pixels()];
+    let n = size.pixels();
+    let mut out: Vec<[f32; 4]> = Vec::with_capacity(n);
     let band = w.max(1) * TINT_BAND;
-    let bands: Vec<Result<()>> = out
+    let bands: Vec<Result<()>> = out.spare_capacity_mut()[..n]
         .par_chunks_mut(band)
         .enumerate()
         .map(|(b, rows)| {
@@ -303,10 +323,17 @@ pub fn original_colouring_to(
                 p.threshold,
                 rows,
             );
+            // SAFETY: `colour_pixels` wrote every pixel of `rows`, and `[f32; 4]` has no
+            // invalid bit patterns or drop glue.
+            let rows = unsafe { &mut *(rows as *mut [MaybeUninit<[f32; 4]>] as *mut [[f32; 4]]) };
+            then(span.start, rows);
             Ok(())
         })
         .collect();
     bands.into_iter().collect::<Result<Vec<()>>>()?;
+    // SAFETY: every band of the first `n` elements was written (an error returned above,
+    // leaving the vector empty).
+    unsafe { out.set_len(n) };
     Ok(RgbaFrame::from_vec(size, out)?)
 }
 
@@ -318,7 +345,7 @@ fn colour_pixels(
     smoke: Option<&[[f32; 4]]>,
     extra: Option<&[f32]>,
     threshold: f32,
-    out: &mut [[f32; 4]],
+    out: &mut [MaybeUninit<[f32; 4]>],
 ) {
     let inv_t = 1.0 / threshold;
     for (i, o) in out.iter_mut().enumerate() {
@@ -331,13 +358,15 @@ fn colour_pixels(
             s = s.max(e[i].clamp(0.0, 1.0));
         }
         if s >= 1.0 {
-            *o = orig[i];
+            o.write(orig[i]);
             continue;
         }
         let sd = 1.0 - s;
         let d = dest.map_or([0.0; 4], |d| d[i]);
         let k = smoke.map_or([0.0; 4], |k| k[i]);
-        *o = std::array::from_fn(|c| (s * orig[i][c] + sd * d[c] + k[c] * sd).clamp(0.0, 1.0));
+        o.write(std::array::from_fn(|c| {
+            (s * orig[i][c] + sd * d[c] + k[c] * sd).clamp(0.0, 1.0)
+        }));
     }
 }
 

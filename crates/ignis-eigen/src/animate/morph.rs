@@ -560,7 +560,23 @@ impl Ctx<'_> {
         sources: &mut dyn FootageOpener,
     ) -> Result<Vec<RgbaFrame>> {
         let mut got = Vec::with_capacity(range.len());
+        self.render_each(range, sources, &mut |_, f| {
+            got.push(f);
+            Ok(())
+        })?;
+        Ok(got)
+    }
+
+    /// Renders `range` frame by frame into `each(plan index, frame)`: no more than a batch
+    /// of full-size frames held at once, whatever the range's length.
+    fn render_each(
+        &self,
+        range: std::ops::Range<usize>,
+        sources: &mut dyn FootageOpener,
+        each: &mut dyn FnMut(usize, RgbaFrame) -> Result<()>,
+    ) -> Result<()> {
         let c = self;
+        let mut i = range.start;
         render_frames(
             c.db,
             c.plan,
@@ -570,11 +586,10 @@ impl Ctx<'_> {
             c.geo,
             sources,
             &mut |f| {
-                got.push(f);
-                Ok(())
+                i += 1;
+                each(i - 1, f)
             },
-        )?;
-        Ok(got)
+        )
     }
 }
 
@@ -617,15 +632,11 @@ pub(crate) fn render_with_morphs(
     let mut outcomes = Vec::with_capacity(runs.len());
     let mut at = 0;
     for (k, r) in runs.iter().enumerate() {
-        for (j, f) in c.render(at..r.start, sources)?.into_iter().enumerate() {
-            out.real(at + j, f)?;
-        }
+        c.render_each(at..r.start, sources, &mut |i, f| out.real(i, f))?;
         let next = runs.get(k + 1).map_or(n, |q| q.start);
         at = morph_run(c, r, next, sources, &mut out, &mut outcomes)?;
     }
-    for (j, f) in c.render(at..n, sources)?.into_iter().enumerate() {
-        out.real(at + j, f)?;
-    }
+    c.render_each(at..n, sources, &mut |i, f| out.real(i, f))?;
     Ok(outcomes)
 }
 

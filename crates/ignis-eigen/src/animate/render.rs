@@ -18,7 +18,7 @@ use rayon::prelude::*;
 
 use crate::animate::has_stored_frames;
 use crate::colour::{
-    original_colouring_to, synthetic_smoke, warp_rgba, Destination, OriginalColour,
+    original_colouring_then, synthetic_smoke, warp_rgba, Destination, OriginalColour,
 };
 use crate::db::{ClipEntry, EigenfireDb};
 use crate::error::{EigenError, Result};
@@ -761,18 +761,82 @@ fn finish_frame(
                 threshold: look.threshold,
                 smoke: smoke.is_some(),
             };
-            original_colouring_to(
+            // The alpha matte is applied to each band as it is coloured.
+            if look.matte {
+                check_matte(grey, lit, grey.size(), matte)?;
+            }
+            let w = grey.width().max(1) as usize;
+            return original_colouring_then(
                 grey,
                 &layers.original[&r],
                 dest,
                 smoke,
                 layers.mask.get(&r).map(|m| (m, look.mask_mode)),
                 &params,
-            )?
+                &|start, band| {
+                    for (j, row) in band.chunks_mut(w).enumerate() {
+                        matte_row(row, start + j * w, grey, lit, matte, look.matte);
+                    }
+                },
+            );
         }
     };
     apply_matte(&mut out, grey, lit, matte, look.matte)?;
     Ok(out)
+}
+
+/// The sizes [`apply_matte`] needs: the grey frame, its bloom, the coloured frame
+/// (`out`) and the matte alike.
+fn check_matte(
+    grey: &GrayFrame,
+    lit: &GrayFrame,
+    out: Size,
+    matte: Option<&GrayFrame>,
+) -> Result<()> {
+    if grey.size() != lit.size()
+        || out != grey.size()
+        || matte.is_some_and(|m| m.size() != grey.size())
+    {
+        return Err(EigenError::bad(
+            "matte",
+            format!(
+                "the grey frame ({}), its bloom ({}), the coloured frame ({out}) and the matte differ in size",
+                grey.size(),
+                lit.size(),
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// [`apply_matte`]'s rule on one row of pixels starting at pixel index `at`.
+fn matte_row(
+    row: &mut [[f32; 4]],
+    at: usize,
+    grey: &GrayFrame,
+    lit: &GrayFrame,
+    matte: Option<&GrayFrame>,
+    on: bool,
+) {
+    if !on {
+        row.iter_mut().for_each(|px| px[3] = 1.0);
+        return;
+    }
+    let span = at..at + row.len();
+    let (g, l) = (&grey.data()[span.clone()], &lit.data()[span.clone()]);
+    match matte {
+        Some(m) => {
+            let m = &m.data()[span];
+            for (((px, &a), &b), &mv) in row.iter_mut().zip(g).zip(l).zip(m) {
+                px[3] = (a + b).clamp(0.0, 1.0).max(mv.min(px[3]));
+            }
+        }
+        None => {
+            for ((px, &a), &b) in row.iter_mut().zip(g).zip(l) {
+                px[3] = (a + b).clamp(0.0, 1.0);
+            }
+        }
+    }
 }
 
 /// The alpha of a finished frame: `ignis_core::post::alpha_matte(grey, lit)`, where the
@@ -786,46 +850,14 @@ fn apply_matte(
     matte: Option<&GrayFrame>,
     on: bool,
 ) -> Result<()> {
-    if !on {
-        out.data_mut().par_iter_mut().for_each(|px| px[3] = 1.0);
-        return Ok(());
+    if on {
+        check_matte(grey, lit, out.size(), matte)?;
     }
-    if grey.size() != lit.size()
-        || out.size() != grey.size()
-        || matte.is_some_and(|m| m.size() != grey.size())
-    {
-        return Err(EigenError::bad(
-            "matte",
-            format!(
-                "the grey frame ({}), its bloom ({}), the coloured frame ({}) and the matte differ in size",
-                grey.size(),
-                lit.size(),
-                out.size()
-            ),
-        ));
-    }
-    let w = grey.width().max(1) as usize;
-    let (g, l) = (grey.data(), lit.data());
+    let w = out.width().max(1) as usize;
     out.data_mut()
         .par_chunks_mut(w)
         .enumerate()
-        .for_each(|(y, row)| {
-            let span = y * w..y * w + row.len();
-            let (g, l) = (&g[span.clone()], &l[span.clone()]);
-            match matte {
-                Some(m) => {
-                    let m = &m.data()[span];
-                    for (((px, &a), &b), &mv) in row.iter_mut().zip(g).zip(l).zip(m) {
-                        px[3] = (a + b).clamp(0.0, 1.0).max(mv.min(px[3]));
-                    }
-                }
-                None => {
-                    for ((px, &a), &b) in row.iter_mut().zip(g).zip(l) {
-                        px[3] = (a + b).clamp(0.0, 1.0);
-                    }
-                }
-            }
-        });
+        .for_each(|(y, row)| matte_row(row, y * w, grey, lit, matte, on));
     Ok(())
 }
 
@@ -936,6 +968,53 @@ mod tests {
             height: 2,
         });
         assert!(apply_matte(&mut col.clone(), &grey, &lit, Some(&small), true).is_err());
+    }
+
+    /// The matte applied band by band inside the colouring (what `finish_frame` does for
+    /// original colouring) equals colouring the whole frame, then `apply_matte`, bit for
+    /// bit: several bands of rows, solid-tinted bloom, with and without the footage matte.
+    #[test]
+    fn matte_in_the_colouring_bands_equals_the_matte_after() {
+        let sz = Size {
+            width: 13,
+            height: 41,
+        };
+        let f =
+            |k: f32| GrayFrame::from_fn(sz, move |x, y| ((x * 7 + y * 3) as f32 * k).sin().abs());
+        let (grey, lit, matte) = (f(0.013), f(0.7), f(1.1));
+        let orig = RgbaFrame::from_vec(
+            sz,
+            (0..sz.pixels())
+                .map(|i| [0.1, (i % 3) as f32 * 0.4, 0.3, (i % 5) as f32 * 0.2])
+                .collect(),
+        )
+        .unwrap();
+        let p = OriginalColour::default();
+        let dest = || Destination::SolidTint(&lit, [1.0, 0.5, 0.2]);
+        let w = sz.width as usize;
+        for m in [None, Some(&matte)] {
+            for on in [true, false] {
+                let mut want =
+                    crate::colour::original_colouring_to(&grey, &orig, dest(), None, None, &p)
+                        .unwrap();
+                apply_matte(&mut want, &grey, &lit, m, on).unwrap();
+                let got =
+                    original_colouring_then(&grey, &orig, dest(), None, None, &p, &|at, band| {
+                        for (j, row) in band.chunks_mut(w).enumerate() {
+                            matte_row(row, at + j * w, &grey, &lit, m, on);
+                        }
+                    })
+                    .unwrap();
+                let bits = |f: &RgbaFrame| {
+                    f.data()
+                        .iter()
+                        .flatten()
+                        .map(|v| v.to_bits())
+                        .collect::<Vec<_>>()
+                };
+                assert_eq!(bits(&got), bits(&want));
+            }
+        }
     }
 
     /// `shift_pixels` is the per-pixel rule of `shift_only`: output (u, v) = source

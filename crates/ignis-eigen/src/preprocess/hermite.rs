@@ -13,8 +13,9 @@
 //! the frame itself stays linear light.
 
 use crate::error::{EigenError, Result};
-use ignis_core::palette::linear_to_srgb;
-use ignis_core::GrayFrame;
+use ignis_core::frame::LUMA;
+use ignis_core::palette::{linear_to_srgb, srgb_to_linear};
+use ignis_core::{GrayFrame, RgbaFrame};
 use image::GrayImage;
 use serde::{Deserialize, Serialize};
 
@@ -67,20 +68,139 @@ pub fn hermite_h01(s: f32) -> f32 {
 /// `mask` may be `None` (nothing protected).
 pub fn hermite_darken(gray: &GrayFrame, mask: Option<&GrayImage>, p: &HermiteParams) -> GrayFrame {
     let mut out = gray.clone();
-    let span = p.i_max - p.i_min;
     let protect = if p.protect_interior {
         mask.map(|m| m.as_raw().as_slice())
     } else {
         None
     };
+    let f = Darken::new(p);
     for (i, v) in out.data_mut().iter_mut().enumerate() {
         if protect.is_some_and(|m| m.get(i).is_some_and(|&b| b > 0)) {
             continue;
         }
-        let s = (linear_to_srgb(*v) - p.i_min) / span;
-        *v *= hermite_h01(s);
+        *v = f.apply(*v);
     }
     out
+}
+
+/// [`hermite_darken`] of `frame`'s luminance, each pixel then multiplied by `matte` (the
+/// flame isolation of [`crate::preprocess::source_grey_with_mask`]) — the same values bit
+/// for bit, in one pass: no luminance frame, and no sRGB encoding where the matte is 0 (the
+/// product is then `v × 0`) or where the value is clearly below `i_min` or above `i_max`
+/// (see [`Darken`]).
+pub fn hermite_darken_rgba(
+    frame: &RgbaFrame,
+    mask: &GrayImage,
+    matte: Option<&GrayFrame>,
+    p: &HermiteParams,
+) -> GrayFrame {
+    let f = Darken::new(p);
+    let n = frame.data().len();
+    let m = mask.as_raw();
+    let protected = |i: usize| p.protect_interior && m.get(i).is_some_and(|&b| b > 0);
+    let t = matte.map(|t| t.data()).filter(|t| t.len() == n);
+    let data = frame
+        .data()
+        .iter()
+        .enumerate()
+        .map(|(i, px)| {
+            let v = LUMA[0] * px[0] + LUMA[1] * px[1] + LUMA[2] * px[2];
+            let Some(t) = t else {
+                return if protected(i) { v } else { f.apply(v) };
+            };
+            let w = t[i];
+            if w == 0.0 {
+                // v × h × 0 has v's sign (h ≥ +0) and is NaN where v is not finite.
+                v * 0.0
+            } else if protected(i) {
+                v * w
+            } else {
+                f.apply(v) * w
+            }
+        })
+        .collect();
+    GrayFrame::from_vec(frame.size(), data).expect("same size")
+}
+
+/// [`hermite_darken_rgba`] with `matte`, computed only inside `area` = `(x0, y0, x1, y1)`
+/// (end-exclusive), the box outside which `matte` is 0; pixels outside are 0 without
+/// being read (the rule's `v × 0` differs from +0 only for a negative or non-finite `v`,
+/// which linear-light footage does not hold).
+pub fn hermite_darken_rgba_in(
+    frame: &RgbaFrame,
+    mask: &GrayImage,
+    matte: &GrayFrame,
+    area: (u32, u32, u32, u32),
+    p: &HermiteParams,
+) -> GrayFrame {
+    let size = frame.size();
+    let mut out = GrayFrame::new(size);
+    let w = size.width as usize;
+    let (x0, y0) = (area.0 as usize, area.1 as usize);
+    let (x1, y1) = (
+        (area.2 as usize).min(w),
+        (area.3 as usize).min(size.height as usize),
+    );
+    if matte.size() != size || x0 >= x1 || y0 >= y1 {
+        return hermite_darken_rgba(frame, mask, Some(matte), p);
+    }
+    let f = Darken::new(p);
+    let m = mask.as_raw();
+    let protected = |i: usize| p.protect_interior && m.get(i).is_some_and(|&b| b > 0);
+    for y in y0..y1 {
+        let at = y * w;
+        let row = &frame.data()[at + x0..at + x1];
+        let t = &matte.data()[at + x0..at + x1];
+        let o = &mut out.data_mut()[at + x0..at + x1];
+        for (j, ((o, px), &t)) in o.iter_mut().zip(row).zip(t).enumerate() {
+            let v = LUMA[0] * px[0] + LUMA[1] * px[1] + LUMA[2] * px[2];
+            *o = if t == 0.0 {
+                v * 0.0
+            } else if protected(at + x0 + j) {
+                v * t
+            } else {
+                f.apply(v) * t
+            };
+        }
+    }
+    out
+}
+
+/// The darkening of one unprotected pixel, `v × h₀₁((sRGB(v) − i_min)/(i_max − i_min))`,
+/// without the sRGB encoding (a `powf`) where its result is known: `h` is exactly 0 where
+/// `sRGB(v) ≤ i_min` and exactly 1 where `sRGB(v) ≥ i_max`, so below `lo` (0.1 % under
+/// `i_min` in linear light, far more than the encoding's rounding) the result is `v × 0`
+/// and above `hi` (0.1 % over `i_max`) it is `v`. Bit for bit the rule's value.
+struct Darken {
+    i_min: f32,
+    span: f32,
+    lo: f32,
+    hi: f32,
+}
+
+impl Darken {
+    fn new(p: &HermiteParams) -> Self {
+        Darken {
+            i_min: p.i_min,
+            span: p.i_max - p.i_min,
+            lo: srgb_to_linear(p.i_min) * 0.999,
+            hi: if p.i_max < 1.0 {
+                srgb_to_linear(p.i_max) * 1.001
+            } else {
+                f32::INFINITY
+            },
+        }
+    }
+    #[inline]
+    fn apply(&self, v: f32) -> f32 {
+        if v <= self.lo {
+            v * 0.0
+        } else if v >= self.hi {
+            v
+        } else {
+            v * hermite_h01((linear_to_srgb(v) - self.i_min) / self.span)
+        }
+    }
 }
 
 #[cfg(test)]
@@ -106,5 +226,101 @@ mod tests {
         assert!(o.data()[2] > 0.0 && o.data()[2] < vals[2]);
         assert_eq!(o.data()[3], vals[3]); // protected
         assert_eq!(hermite_h01(0.5), 0.5);
+    }
+
+    /// The fused pass equals the luminance, `hermite_darken` and the matte product bit for
+    /// bit, on values dense around the shortcuts' bounds and on odd ones.
+    #[test]
+    fn fused_darkening_equals_the_rule() {
+        for p in [
+            HermiteParams::default(),
+            HermiteParams {
+                i_min: 0.0,
+                i_max: 1.0,
+                protect_interior: true,
+            },
+            HermiteParams {
+                i_min: 0.3,
+                i_max: 0.31,
+                protect_interior: false,
+            },
+        ] {
+            let mut vals = vec![0.0f32, -0.0, -0.5, 1.0, 2.0, f32::INFINITY, f32::NAN];
+            for edge in [p.i_min, p.i_max] {
+                let l = srgb_to_linear(edge);
+                for k in -400..=400 {
+                    vals.push(l * (1.0 + k as f32 * 1e-5));
+                    vals.push(l + k as f32 * f32::EPSILON * l);
+                }
+            }
+            vals.extend((0..=1000).map(|i| i as f32 / 1000.0));
+            let n = vals.len();
+            let size = Size::new(n as u32, 1).unwrap();
+            let rgba = RgbaFrame::from_vec(
+                size,
+                vals.iter()
+                    .enumerate()
+                    .map(|(i, &v)| [v, v * (1.0 - (i % 3) as f32 * 0.1), v, 1.0])
+                    .collect(),
+            )
+            .unwrap();
+            let mask = GrayImage::from_fn(n as u32, 1, |x, _| {
+                image::Luma([if x % 7 == 0 { 255 } else { 0 }])
+            });
+            let matte =
+                GrayFrame::from_vec(size, (0..n).map(|i| [0.0, 1.0, 0.5, 0.25][i % 4]).collect())
+                    .unwrap();
+            let mut want = hermite_darken(&rgba.luminance(), Some(&mask), &p);
+            let same = |got: &GrayFrame, want: &GrayFrame| {
+                for (i, (a, b)) in got.data().iter().zip(want.data()).enumerate() {
+                    assert!(
+                        a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan()),
+                        "pixel {i}: {a} vs {b}"
+                    );
+                }
+            };
+            same(&hermite_darken_rgba(&rgba, &mask, None, &p), &want);
+            for (g, &m) in want.data_mut().iter_mut().zip(matte.data()) {
+                *g *= m;
+            }
+            same(&hermite_darken_rgba(&rgba, &mask, Some(&matte), &p), &want);
+            // Inside a box with the matte 0 outside it: the same where the values are
+            // finite and non-negative (everywhere outside the box here).
+            let boxed = GrayFrame::from_vec(
+                size,
+                (0..n)
+                    .map(|i| {
+                        if (100..n - 50).contains(&i) {
+                            matte.data()[i]
+                        } else {
+                            0.0
+                        }
+                    })
+                    .collect(),
+            )
+            .unwrap();
+            let inside = |i: usize| (100..n - 50).contains(&i);
+            let rgba = RgbaFrame::from_vec(
+                size,
+                rgba.data()
+                    .iter()
+                    .enumerate()
+                    .map(|(i, &px)| {
+                        if inside(i) || (px[0].is_finite() && px[0].is_sign_positive()) {
+                            px
+                        } else {
+                            [0.5; 4]
+                        }
+                    })
+                    .collect(),
+            )
+            .unwrap();
+            let mut want = hermite_darken(&rgba.luminance(), Some(&mask), &p);
+            for (g, &m) in want.data_mut().iter_mut().zip(boxed.data()) {
+                *g *= m;
+            }
+            let got = hermite_darken_rgba_in(&rgba, &mask, &boxed, (100, 0, n as u32 - 50, 1), &p);
+            same(&got, &want);
+        }
     }
 }

@@ -15,7 +15,7 @@ pub mod pose;
 
 use crate::contour::{contour_tree, draw_contours, fill_contours, remove_holes, ContourParams};
 use crate::error::{EigenError, Result};
-use crate::hermite::{hermite_darken, HermiteParams};
+use crate::hermite::{hermite_darken_rgba, hermite_darken_rgba_in, HermiteParams};
 use crate::mask::{flame_mask, hsv_mask, mask_area, mask_edges, MaskParams};
 use crate::pose::{lean_angle, mask_extent, resize, warp, ClipPose, MaskExtent, PoseParams};
 use ignis_core::{GrayFrame, RgbaFrame, Size};
@@ -260,13 +260,13 @@ pub fn source_grey_with_mask(
     pose: &ClipPose,
     p: &PreprocessParams,
 ) -> SourceGrey {
-    let mut grey = hermite_darken(&frame.luminance(), Some(mask), &p.hermite);
-    let matte = feather(mask, frame.width().max(frame.height()));
-    if pose.isolate {
-        for (g, &m) in grey.data_mut().iter_mut().zip(matte.data()) {
-            *g *= m;
-        }
-    }
+    let (matte, area) = feather_in(mask, frame.width().max(frame.height()));
+    let grey = match (pose.isolate, area) {
+        (true, Some(b)) => hermite_darken_rgba_in(frame, mask, &matte, b, &p.hermite),
+        // Nothing to keep: every pixel is multiplied by a matte of 0.
+        (true, None) => GrayFrame::new(frame.size()),
+        (false, _) => hermite_darken_rgba(frame, mask, None, &p.hermite),
+    };
     SourceGrey {
         grey,
         matte,
@@ -283,6 +283,12 @@ pub fn source_grey_with_mask(
 /// (everything farther is 0 either way), so a small flame in a large frame costs little;
 /// the result is the same as over the whole frame.
 pub fn feather(mask: &GrayImage, longer: u32) -> GrayFrame {
+    feather_in(mask, longer).0
+}
+
+/// [`feather`], and the box `(x0, y0, x1, y1)` (end-exclusive) outside which it is 0;
+/// `None` for an empty mask (all 0).
+fn feather_in(mask: &GrayImage, longer: u32) -> (GrayFrame, Option<(u32, u32, u32, u32)>) {
     let r = ((longer as f32 * 0.01).round() as u8).clamp(2, 40);
     let size = Size {
         width: mask.width(),
@@ -290,7 +296,7 @@ pub fn feather(mask: &GrayImage, longer: u32) -> GrayFrame {
     };
     let mut out = GrayFrame::new(size);
     let Some(e) = mask_bounds(mask) else {
-        return out;
+        return (out, None);
     };
     // Dilation reach r, blur reach ceil(2σ) = r (σ = r/2), twice, and a little slack.
     let m = 3 * r as u32 + 2;
@@ -314,13 +320,106 @@ pub fn feather(mask: &GrayImage, longer: u32) -> GrayFrame {
             *o = if mv > 0 { 1.0 } else { v as f32 / 255.0 };
         }
     }
-    out
+    (out, Some((x0, y0, x1, y1)))
 }
 
 /// `imageproc::filter::gaussian_blur_f32` on a grey image, bit for bit (the same kernel,
 /// the same order of sums, clamp-to-edge, truncation to 8 bits after each pass), with
-/// whole rows summed at once so the compiler vectorises it.
+/// whole runs of pixels summed at once so the compiler vectorises it.
+///
+/// Where a pixel's whole window holds one value `q` (inside or outside a mask, the bulk
+/// of a feather's box) its sum is the same sequence of operations for every such pixel,
+/// so it is read from a table of the 256 possible results ([`flat_sums`]); only pixels
+/// whose window holds a change of value are summed. Exact for any image.
 fn gaussian_blur_u8(img: &GrayImage, sigma: f32) -> GrayImage {
+    let kernel = gaussian_kernel_u8(sigma);
+    let kr = kernel.len() / 2;
+    let (w, h) = (img.width() as usize, img.height() as usize);
+    if w == 0 || h == 0 {
+        return img.clone();
+    }
+    let table = flat_sums(&kernel);
+    // Horizontal: each row padded by its edge values; x needs summing when a change of
+    // value between t−1 and t lies in its window (t ∈ [x−kr+1, x+kr]).
+    let mut tmp = vec![0u8; w * h];
+    let mut pad = vec![0.0f32; w + 2 * kr];
+    let mut acc = vec![0.0f32; w];
+    let mut busy = vec![false; w];
+    for (src, dst) in img.as_raw().chunks_exact(w).zip(tmp.chunks_exact_mut(w)) {
+        busy.fill(false);
+        for t in 1..w {
+            if src[t] != src[t - 1] {
+                busy[t.saturating_sub(kr)..(t + kr).min(w)].fill(true);
+            }
+        }
+        for (d, &v) in dst.iter_mut().zip(src) {
+            *d = table[v as usize];
+        }
+        for (a, b) in runs(&busy) {
+            for (j, p) in pad[a..b + 2 * kr].iter_mut().enumerate() {
+                *p = src[(a + j).saturating_sub(kr).min(w - 1)] as f32;
+            }
+            let acc = &mut acc[a..b];
+            acc.fill(0.0);
+            for (i, &k) in kernel.iter().enumerate() {
+                for (s, &p) in acc.iter_mut().zip(&pad[a + i..b + i]) {
+                    *s += p * k;
+                }
+            }
+            for (d, &s) in dst[a..b].iter_mut().zip(acc.iter()) {
+                *d = s as u8;
+            }
+        }
+    }
+    // Vertical: rows clamped to the image; x needs summing when some pair of rows
+    // (s, s+1) with s ∈ [y−kr, y+kr−1] differs there (a sliding count of such pairs).
+    let row = |y: usize| &tmp[y * w..y * w + w];
+    let mut changes = vec![0u16; w];
+    let pair = |s: usize, cnt: &mut [u16], add: bool| {
+        if s + 1 < h {
+            for ((c, &a), &b) in cnt.iter_mut().zip(row(s)).zip(row(s + 1)) {
+                let d = (a != b) as u16;
+                *c = if add { *c + d } else { *c - d };
+            }
+        }
+    };
+    for s in 0..kr.min(h) {
+        pair(s, &mut changes, true);
+    }
+    let mut out = GrayImage::new(w as u32, h as u32);
+    for (y, dst) in out.chunks_exact_mut(w).enumerate() {
+        // The window of pairs [y−kr, y+kr−1]: add y+kr−1, drop y−kr−1.
+        if y > 0 {
+            pair(y + kr - 1, &mut changes, true);
+            if y > kr {
+                pair(y - kr - 1, &mut changes, false);
+            }
+        }
+        for (d, &v) in dst.iter_mut().zip(row(y)) {
+            *d = table[v as usize];
+        }
+        for (b, &c) in busy.iter_mut().zip(&changes) {
+            *b = c > 0;
+        }
+        for (a, b) in runs(&busy) {
+            let acc = &mut acc[a..b];
+            acc.fill(0.0);
+            for (i, &k) in kernel.iter().enumerate() {
+                let sy = (y + i).saturating_sub(kr).min(h - 1);
+                for (s, &p) in acc.iter_mut().zip(&row(sy)[a..b]) {
+                    *s += p as f32 * k;
+                }
+            }
+            for (d, &s) in dst[a..b].iter_mut().zip(acc.iter()) {
+                *d = s as u8;
+            }
+        }
+    }
+    out
+}
+
+/// imageproc's Gaussian kernel for `sigma`: radius ⌈2σ⌉, normalised to sum 1.
+fn gaussian_kernel_u8(sigma: f32) -> Vec<f32> {
     let pdf = |x: f32| {
         (sigma * (2.0 * std::f32::consts::PI).sqrt()).recip()
             * (-x.powi(2) / (2.0 * sigma.powi(2))).exp()
@@ -334,40 +433,37 @@ fn gaussian_blur_u8(img: &GrayImage, sigma: f32) -> GrayImage {
     }
     let sum: f32 = kernel.iter().sum();
     kernel.iter_mut().for_each(|x| *x /= sum);
-    let (w, h) = (img.width() as usize, img.height() as usize);
-    if w == 0 || h == 0 {
-        return img.clone();
-    }
-    // Horizontal: each row padded by its edge values.
-    let mut tmp = vec![0u8; w * h];
-    let mut pad = vec![0.0f32; w + 2 * kr];
-    let mut acc = vec![0.0f32; w];
-    for (src, dst) in img.as_raw().chunks_exact(w).zip(tmp.chunks_exact_mut(w)) {
-        for (j, p) in pad.iter_mut().enumerate() {
-            *p = src[j.saturating_sub(kr).min(w - 1)] as f32;
+    kernel
+}
+
+/// For each value `q`, the 8-bit result of summing `q × k` over `kernel` in order from
+/// 0.0 — what [`gaussian_blur_u8`] computes for a window of `q`s.
+fn flat_sums(kernel: &[f32]) -> [u8; 256] {
+    std::array::from_fn(|q| {
+        let mut a = 0.0f32;
+        for &k in kernel {
+            a += q as f32 * k;
         }
-        acc.fill(0.0);
-        for (i, &k) in kernel.iter().enumerate() {
-            for (a, &p) in acc.iter_mut().zip(&pad[i..i + w]) {
-                *a += p * k;
+        a as u8
+    })
+}
+
+/// The maximal runs `(start, end)` of `true` in `flags`.
+fn runs(flags: &[bool]) -> Vec<(usize, usize)> {
+    let mut out = Vec::new();
+    let mut x = 0;
+    while x < flags.len() {
+        match flags[x..].iter().position(|&f| f) {
+            None => break,
+            Some(a) => {
+                let a = x + a;
+                let b = flags[a..]
+                    .iter()
+                    .position(|&f| !f)
+                    .map_or(flags.len(), |e| a + e);
+                out.push((a, b));
+                x = b;
             }
-        }
-        for (d, &a) in dst.iter_mut().zip(&acc) {
-            *d = a as u8;
-        }
-    }
-    // Vertical: rows clamped to the image.
-    let mut out = GrayImage::new(w as u32, h as u32);
-    for (y, dst) in out.chunks_exact_mut(w).enumerate() {
-        acc.fill(0.0);
-        for (i, &k) in kernel.iter().enumerate() {
-            let sy = (y + i).saturating_sub(kr).min(h - 1);
-            for (a, &p) in acc.iter_mut().zip(&tmp[sy * w..sy * w + w]) {
-                *a += p as f32 * k;
-            }
-        }
-        for (d, &a) in dst.iter_mut().zip(&acc) {
-            *d = a as u8;
         }
     }
     out
@@ -554,6 +650,45 @@ mod tests {
                     gaussian_blur_u8(&img, s),
                     imageproc::filter::gaussian_blur_f32(&img, s),
                     "{w}x{h} sigma {s}"
+                );
+            }
+        }
+    }
+
+    /// The same on images made of flat regions (where the blur reads its table): blobs of
+    /// 255 on 0, steps of several values, a constant image, lone pixels near edges.
+    #[test]
+    fn gaussian_blur_u8_on_flat_regions_equals_imageproc() {
+        let (w, h) = (90u32, 70u32);
+        let shapes: Vec<GrayImage> = vec![
+            GrayImage::from_fn(w, h, |x, y| {
+                let d = (x as i32 - 40).pow(2) + (y as i32 - 30).pow(2);
+                image::Luma([if d <= 400 { 255 } else { 0 }])
+            }),
+            GrayImage::from_fn(w, h, |x, y| {
+                image::Luma([((x / 23 + y / 17) * 60 % 256) as u8])
+            }),
+            GrayImage::from_pixel(w, h, image::Luma([200])),
+            GrayImage::from_fn(w, h, |x, y| {
+                image::Luma([
+                    if (x, y) == (0, 5) || (x, y) == (89, 69) || (x, y) == (45, 0) {
+                        255
+                    } else {
+                        7
+                    },
+                ])
+            }),
+            GrayImage::from_fn(3, 50, |_, y| image::Luma([if y > 25 { 255 } else { 0 }])),
+        ];
+        for img in &shapes {
+            for r in [2u8, 3, 5, 19, 40] {
+                let s = r as f32 * 0.5;
+                assert_eq!(
+                    gaussian_blur_u8(img, s),
+                    imageproc::filter::gaussian_blur_f32(img, s),
+                    "{}x{} sigma {s}",
+                    img.width(),
+                    img.height()
                 );
             }
         }
