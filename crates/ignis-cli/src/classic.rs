@@ -138,20 +138,13 @@ pub fn run(args: &Args, g: &Global) -> Result<Vec<PathBuf>> {
     let plan = args.frames_args.plan(args.frames, &args.out)?;
     // --variants N: N loops with seeds seed, seed + 1, …, one per row of the sheet; the
     // first fire is made before the writer so bad settings are reported first.
-    let variants = args.out.variants();
     let mut first = Some(new_fire(args, args.seed, plan.looping)?);
     let palette = args.palette.load()?;
     let mut opts = args.out.write_options();
     opts.loop_ = plan.mark_loop;
     opts.first_frame = plan.range.start as u64;
-    opts.flipbook.variants = variants;
-    // Refuses --variants for other formats; nothing is written until `finish`.
-    let mut writer = args.out.create_with(args.size, &opts)?;
-    anyhow::ensure!(
-        variants <= 1 || (plan.looping && plan.range == (0..args.frames)),
-        "--variants {variants} lays {variants} whole loops as the rows of a flipbook; \
-         drop --no-loop and --chunk"
-    );
+    let whole_loop = plan.looping && plan.range == (0..args.frames);
+    let (mut writer, variants) = args.out.create_variants(args.size, &mut opts, whole_loop)?;
     let pb = g.progress(plan.range.len() as u64 * variants as u64, "classic");
     for v in 0..variants {
         let seed = args.seed.wrapping_add(v as u64);

@@ -320,19 +320,12 @@ pub fn synth(a: &SynthArgs, g: &Global) -> Result<Vec<PathBuf>> {
     };
     // --variants N: N loops with seeds seed, seed + 1, …, one per row of the sheet; the
     // first is made before the writer so bad settings are reported first.
-    let variants = a.out.variants();
     let mut first = Some(make(a.seed)?);
     let mut opts = a.out.write_options();
     opts.loop_ = plan.mark_loop;
     opts.first_frame = plan.range.start as u64;
-    opts.flipbook.variants = variants;
-    // Refuses --variants for other formats; nothing is written until `finish`.
-    let mut writer = a.out.create_with(a.size, &opts)?;
-    anyhow::ensure!(
-        variants <= 1 || (plan.looping && plan.range == (0..a.frames)),
-        "--variants {variants} lays {variants} whole loops as the rows of a flipbook; \
-         drop --no-loop and --chunk"
-    );
+    let whole_loop = plan.looping && plan.range == (0..a.frames);
+    let (mut writer, variants) = a.out.create_variants(a.size, &mut opts, whole_loop)?;
     let mut frame = GrayFrame::new(a.size);
     let bar = g.progress(plan.range.len() as u64 * variants as u64, "synthesising");
     for v in 0..variants {

@@ -150,6 +150,29 @@ impl OutputArgs {
         self.create_with(size, &self.write_options())
     }
 
+    /// The writer of a generator's render with `--variants N` (N whole loops with seeds
+    /// seed, seed + 1, …, laid as the rows of one flipbook; N = 1 is one animation): sets
+    /// `opts.flipbook.variants` and refuses variants of anything but one whole loop
+    /// (`--no-loop`, `--chunk`) or of formats that are not flipbooks, before anything is
+    /// written. Returns the writer and N.
+    pub fn create_variants(
+        &self,
+        size: Size,
+        opts: &mut WriteOptions,
+        whole_loop: bool,
+    ) -> Result<(FrameWriter, u32)> {
+        let variants = self.variants();
+        opts.flipbook.variants = variants;
+        // Refuses --variants for other formats; nothing is written until `finish`.
+        let writer = self.create_with(size, opts)?;
+        anyhow::ensure!(
+            variants <= 1 || whole_loop,
+            "--variants {variants} lays {variants} whole loops as the rows of a flipbook; \
+             drop --no-loop and --chunk"
+        );
+        Ok((writer, variants))
+    }
+
     /// [`OutputArgs::create`] with options the command adjusted (loop marking, a chunk's
     /// first frame number, the footage's fps); flipbook-only flags are still refused for
     /// other formats.

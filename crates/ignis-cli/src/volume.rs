@@ -166,15 +166,8 @@ pub fn render(a: &RenderArgs, g: &Global) -> Result<Vec<PathBuf>> {
     opts.loop_ = plan.mark_loop;
     opts.first_frame = plan.range.start as u64;
     // --variants N: N loops with seeds seed, seed + 1, …, one per row of the sheet.
-    let variants = a.out.variants();
-    opts.flipbook.variants = variants;
-    // Refuses --variants for other formats; nothing is written until `finish`.
-    let mut writer = a.out.create_with(scene.size, &opts)?;
-    anyhow::ensure!(
-        variants <= 1 || (plan.looping && plan.range == (0..a.frames)),
-        "--variants {variants} lays {variants} whole loops as the rows of a flipbook; \
-         drop --no-loop and --chunk"
-    );
+    let whole_loop = plan.looping && plan.range == (0..a.frames);
+    let (mut writer, variants) = a.out.create_variants(scene.size, &mut opts, whole_loop)?;
     let mut hits = String::new();
     let scenes: Vec<_> = (0..variants)
         .map(|v| {
