@@ -22,7 +22,6 @@
 
 use crate::Kept;
 use ignis_core::loopq::{arc_times, median};
-use rayon::prelude::*;
 
 /// Width of the proxy frames, pixels (the metric frame's is 128; narrower frames keep
 /// their width): a third of the metric's pixels, plenty for whole-frame RMS steps.
@@ -59,8 +58,9 @@ const NEAR: usize = 3;
 impl Proxy {
     fn new(states: Vec<Vec<f32>>) -> Proxy {
         let n = states.len();
+        // One thread: the proxies are a few thousand values each, so waking the thread pool
+        // (whose idle workers then spin) costs more CPU time than the work.
         let near = (0..n)
-            .into_par_iter()
             .map(|i| {
                 std::array::from_fn(|d| match d {
                     0 => 0.0,
@@ -218,7 +218,8 @@ pub(crate) fn even_slots(
         x: crate::taps(pw, w),
         y: crate::taps(ph, shown),
     };
-    let states = ring.par_iter().map(|k| sample(k, &taps, luma));
+    // One thread, as `Proxy::new`: each state is sampled at the proxy's few thousand cells.
+    let states = ring.iter().map(|k| sample(k, &taps, luma));
     let proxy = Proxy::new(states.collect());
     let mut slots: Vec<Slot> = (0..n).map(|at| Slot { at, f: 0 }).collect();
     let mut best: Option<(f64, Vec<Slot>)> = None;
