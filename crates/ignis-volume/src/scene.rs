@@ -605,23 +605,34 @@ impl FireScene {
             .with_size(Size::new(w, h).map_err(|e| VolumeError::bad("size", e.to_string()))?);
         let k = timing.samples_per_frame as usize;
         let m = looping.frames as usize * k;
-        let mut probe = Animator {
-            scene: &small,
-            sims: Vec::new(),
-            frame: 0,
-            count_coverage: false,
-            looping: Some(Looping {
-                times: (0..m).map(|j| j as f64 / k as f64).collect(),
-                ..looping.clone()
-            }),
-            scroll: a.scroll.clone(),
+        let probe_looping = Looping {
+            times: (0..m).map(|j| j as f64 / k as f64).collect(),
+            ..looping.clone()
         };
+        // A loop's frames are functions of their loop time alone, so the preview's small
+        // frames render side by side, one per thread, rather than one at a time split into
+        // tiles (a 64-px frame is too little work to share: the pool's threads spent more
+        // time waking and spinning than sampling). The same frames, in order.
+        use rayon::prelude::*;
+        let metric: Vec<ignis_core::GrayFrame> = (0..m)
+            .into_par_iter()
+            .map(|j| {
+                let mut probe = Animator {
+                    scene: &small,
+                    sims: Vec::new(),
+                    frame: j as u64,
+                    count_coverage: false,
+                    looping: Some(probe_looping.clone()),
+                    scroll: a.scroll.clone(),
+                };
+                let f = probe.next_frame()?;
+                Ok(ignis_core::loopq::metric_frame_rgba(&f.image, [0.0; 3]))
+            })
+            .collect::<Result<_>>()?;
         let bad = |e: String| VolumeError::bad("loop", e);
         let mut d = PreviewDistances::builder(m, looping.frames as u32).map_err(bad)?;
-        for _ in 0..m {
-            let f = probe.next_frame()?;
-            d.push(ignis_core::loopq::metric_frame_rgba(&f.image, [0.0; 3]))
-                .map_err(bad)?;
+        for f in metric {
+            d.push(f).map_err(bad)?;
         }
         Ok(d.finish().map_err(bad)?.even_step_times())
     }
