@@ -1706,6 +1706,47 @@ mod loop_sequence {
         assert!(said.contains("cached the clip's database"), "{said}");
         assert_eq!(files_in(&cache).len(), 2, "two entries");
     }
+
+    /// A database trained on an image sequence notices when a frame changes: a clear error
+    /// naming the clip, and reconstructed frames still with `--from-database`.
+    #[test]
+    fn database_of_a_sequence_notices_an_edited_frame() {
+        let t = tempfile::tempdir().unwrap();
+        let frames = t.path().join("frames");
+        std::fs::create_dir(&frames).unwrap();
+        let pattern = frames.join("%04d.png");
+        let o = classic("48x40", "24", &["--seed", "7", "--no-loop"], &pattern);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let db = t.path().join("fire.db");
+        let (db, pat) = (db.to_str().unwrap(), pattern.to_str().unwrap());
+        ignis_ok(&["eigen", "train", pat, "-q", "-o", db]);
+        let info = ignis(&["eigen", "info", db, "--json"]);
+        assert!(
+            info.status.success(),
+            "{}",
+            String::from_utf8_lossy(&info.stderr)
+        );
+        let info: serde_json::Value = serde_json::from_slice(&info.stdout).unwrap();
+        let clip = info["clips"][0]["name"].as_str().unwrap().to_string();
+        let out = t.path().join("loop.png");
+        let lp = |extra: &[&str]| {
+            let mut a = vec!["eigen", "loop", db, "--clip", &clip, "--range", "1..11"];
+            a.extend_from_slice(extra);
+            a.extend_from_slice(&["-q", "-o", out.to_str().unwrap()]);
+            ignis(&a)
+        };
+        let o = lp(&[]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        std::fs::remove_file(&out).unwrap();
+        let names = files_in(&frames);
+        std::fs::copy(frames.join(&names[0]), frames.join(&names[3])).unwrap();
+        let o = lp(&[]);
+        assert_fails(&o, "changed since training");
+        assert_fails(&o, &clip);
+        assert!(!out.exists(), "nothing written");
+        let o = lp(&["--from-database"]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    }
 }
 
 /// Issue 17: `--variants N` for `ignis classic` and `ignis learned synth`: N loops with

@@ -17,10 +17,12 @@
 
 mod convert;
 pub mod error;
+mod fingerprint;
 pub mod read;
 pub mod write;
 
 pub use error::{MediaError, Result};
+pub use fingerprint::source_fingerprint;
 pub use ignis_core::{RgbaFrame, Size};
 pub use read::{
     open, probe, read_image, source_files, Decoder, FrameRange, FrameReader, RangeUnit,

@@ -282,7 +282,10 @@ impl MediaSources {
             return Ok(());
         }
         let relinked = self.relink.contains_key(&clip.name);
-        if !p.is_file() {
+        // A file, or an image sequence with frames (a directory or `frames/%04d.png`).
+        let sequence =
+            || ignis_media::source_files(p).is_ok_and(|f| f.len() != 1 || f[0].as_path() != p);
+        if !p.is_file() && !sequence() {
             return Err(EigenError::clip(
                 &clip.name,
                 format!(

@@ -142,41 +142,12 @@ pub fn default_cache_dir() -> Result<PathBuf> {
     bail!("no cache directory: set XDG_CACHE_HOME or HOME, or give --cache DIR")
 }
 
-/// SHA-256 of a source, hex: of a file's content, or of an image sequence's (a directory
-/// or `frames/%04d.png`) frame files in playing order, each as its name, its length and its
-/// content, so renaming, reordering or editing any frame changes it.
+/// SHA-256 of a source, hex (`ignis_media::source_fingerprint`: a file's content, or an
+/// image sequence's frames in order).
 pub fn source_sha256(path: &Path) -> Result<String> {
-    let files =
-        ignis_media::source_files(path).with_context(|| format!("reading {}", path.display()))?;
-    let mut h = Sha256::new();
-    let sequence = files.len() != 1 || files[0] != path;
-    let mut buf = vec![0u8; 1 << 20];
-    for file in &files {
-        let mut f =
-            std::fs::File::open(file).with_context(|| format!("reading {}", file.display()))?;
-        let mut len = 0u64;
-        if sequence {
-            let name = file
-                .file_name()
-                .map(|n| n.to_string_lossy())
-                .unwrap_or_default();
-            h.update((name.len() as u64).to_le_bytes());
-            h.update(name.as_bytes());
-        }
-        loop {
-            let n = std::io::Read::read(&mut f, &mut buf)
-                .with_context(|| format!("reading {}", file.display()))?;
-            if n == 0 {
-                break;
-            }
-            h.update(&buf[..n]);
-            len += n as u64;
-        }
-        if sequence {
-            h.update(len.to_le_bytes());
-        }
-    }
-    Ok(hex(&h.finalize()))
+    let (_, sha) = ignis_media::source_fingerprint(path)
+        .with_context(|| format!("reading {}", path.display()))?;
+    Ok(sha)
 }
 
 fn hex(b: &[u8]) -> String {

@@ -137,18 +137,35 @@ pub struct SourceCheck {
     pub frame_count: Option<usize>,
 }
 
-/// The fingerprint of `source` when it is a file (`None` otherwise).
+/// The fingerprint of `source` when it is a file or an image sequence (`None` otherwise).
 pub fn source_check(source: &str, frame_count: Option<usize>) -> Result<Option<SourceCheck>> {
-    let p = Path::new(source);
-    if !p.is_file() {
+    let Some((bytes, sha256)) = source_fingerprint(Path::new(source))? else {
         return Ok(None);
-    }
-    let (bytes, sha256) = file_fingerprint(p)?;
+    };
     Ok(Some(SourceCheck {
         bytes,
         sha256,
         frame_count,
     }))
+}
+
+/// Size and SHA-256 of a source: a file ([`file_fingerprint`]) or, with the `media`
+/// feature, an image sequence (a directory or `frames/%04d.png`: its frame files in order,
+/// `ignis_media::source_fingerprint`); `None` when `p` is neither (a synthetic clip's name,
+/// a sequence with no frames left).
+fn source_fingerprint(p: &Path) -> Result<Option<(u64, String)>> {
+    if p.is_file() {
+        return file_fingerprint(p).map(Some);
+    }
+    #[cfg(feature = "media")]
+    if let Ok(files) = ignis_media::source_files(p) {
+        if files.len() != 1 || files[0] != p {
+            return ignis_media::source_fingerprint(p)
+                .map(Some)
+                .map_err(|e| EigenError::io(p, std::io::Error::other(e.to_string())));
+        }
+    }
+    Ok(None)
 }
 
 /// Size and SHA-256 of a file, read in 1 MiB blocks.
@@ -173,7 +190,7 @@ impl SourceCheck {
     /// Compares `path` (now) with the fingerprint; an error names the clip, what changed
     /// and the ways out.
     pub fn verify(&self, clip: &str, path: &Path, frame_count: Option<usize>) -> Result<()> {
-        if !path.is_file() {
+        let Some((bytes, sha)) = source_fingerprint(path)? else {
             return Err(EigenError::clip(
                 clip,
                 format!(
@@ -181,8 +198,7 @@ impl SourceCheck {
                     path.display()
                 ),
             ));
-        }
-        let (bytes, sha) = file_fingerprint(path)?;
+        };
         let frames_differ = matches!((self.frame_count, frame_count), (Some(a), Some(b)) if a != b);
         if bytes != self.bytes || sha != self.sha256 || frames_differ {
             return Err(EigenError::clip(
