@@ -113,25 +113,9 @@ impl Proxy {
     }
 }
 
-/// Mean squared difference of two proxy frames (eight running sums, so the loop
-/// vectorises; always summed in the same order, so the same bytes everywhere).
+/// Mean squared difference of two proxy frames.
 fn dist2(a: &[f32], b: &[f32]) -> f64 {
-    let mut acc = [0.0f32; 8];
-    let (ca, cb) = (a.chunks_exact(8), b.chunks_exact(8));
-    let tail: f32 = ca
-        .remainder()
-        .iter()
-        .zip(cb.remainder())
-        .map(|(&x, &y)| (x - y) * (x - y))
-        .sum();
-    for (x, y) in ca.zip(cb) {
-        for i in 0..8 {
-            let d = x[i] - y[i];
-            acc[i] += d * d;
-        }
-    }
-    let s: f64 = acc.iter().map(|&v| f64::from(v)).sum::<f64>() + f64::from(tail);
-    s / a.len().max(1) as f64
+    ignis_core::loopq::sum_sq_diff(a, b) / a.len().max(1) as f64
 }
 
 /// Bilinear taps from the shown cells to the proxy frame, as the frame's own

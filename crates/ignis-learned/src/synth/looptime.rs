@@ -324,25 +324,6 @@ fn encode(frame: &GrayFrame) -> Vec<f32> {
 /// Intervals of the sRGB table.
 const SRGB_STEPS: usize = 1024;
 
-/// Sum of squared differences of two preview frames (eight f32 lanes, summed in f64).
-fn sq_dist(a: &[f32], b: &[f32]) -> f64 {
-    let mut lanes = [0f32; 8];
-    let (ca, cb) = (a.chunks_exact(8), b.chunks_exact(8));
-    let tail: f64 = ca
-        .remainder()
-        .iter()
-        .zip(cb.remainder())
-        .map(|(&x, &y)| f64::from((x - y) * (x - y)))
-        .sum();
-    for (x, y) in ca.zip(cb) {
-        for l in 0..8 {
-            let d = x[l] - y[l];
-            lanes[l] += d * d;
-        }
-    }
-    lanes.iter().map(|&v| f64::from(v)).sum::<f64>() + tail
-}
-
 /// RMS difference of two preview frames.
 fn dist(a: &[f32], b: &[f32]) -> f64 {
     let s: f64 = a
@@ -368,7 +349,7 @@ fn walk(grid: &[Vec<f32>], arc: &[f64], chord: f64, n: usize) -> Option<Vec<f64>
     let mut pos = 0.0f64;
     let mut out = vec![0.0];
     let mut j = 1;
-    let sq = sq_dist;
+    let sq = ignis_core::loopq::sum_sq_diff;
     let len = grid[0].len() as f64;
     loop {
         // grid points less than `chord` along the path from cur are nearer than it
