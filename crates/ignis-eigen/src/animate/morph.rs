@@ -285,7 +285,7 @@ fn detail_blend<const C: usize>(
         let by = rg.start / w / band;
         let mut e = [0.0f64; 3];
         for i in rg {
-            if !gain_block(i % w / band, by, stride) {
+            if stride > 1 && !gain_block(i % w / band, by, stride) {
                 continue;
             }
             for c in 0..C {

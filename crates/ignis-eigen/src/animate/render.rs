@@ -773,11 +773,7 @@ fn finish_frame(
                 smoke,
                 layers.mask.get(&r).map(|m| (m, look.mask_mode)),
                 &params,
-                &|start, band| {
-                    for (j, row) in band.chunks_mut(w).enumerate() {
-                        matte_row(row, start + j * w, grey, lit, matte, look.matte);
-                    }
-                },
+                &|start, band| matte_band(band, start, w, grey, lit, matte, look.matte),
             );
         }
     };
@@ -836,6 +832,21 @@ fn matte_row(
                 px[3] = (a + b).clamp(0.0, 1.0);
             }
         }
+    }
+}
+
+/// [`matte_row`] on each row (`w` pixels) of a band of rows starting at pixel index `at`.
+fn matte_band(
+    band: &mut [[f32; 4]],
+    at: usize,
+    w: usize,
+    grey: &GrayFrame,
+    lit: &GrayFrame,
+    matte: Option<&GrayFrame>,
+    on: bool,
+) {
+    for (j, row) in band.chunks_mut(w).enumerate() {
+        matte_row(row, at + j * w, grey, lit, matte, on);
     }
 }
 
@@ -1000,9 +1011,7 @@ mod tests {
                 apply_matte(&mut want, &grey, &lit, m, on).unwrap();
                 let got =
                     original_colouring_then(&grey, &orig, dest(), None, None, &p, &|at, band| {
-                        for (j, row) in band.chunks_mut(w).enumerate() {
-                            matte_row(row, at + j * w, &grey, &lit, m, on);
-                        }
+                        matte_band(band, at, w, &grey, &lit, m, on)
                     })
                     .unwrap();
                 let bits = |f: &RgbaFrame| {

@@ -103,19 +103,15 @@ pub fn hermite_darken_rgba(
         .data()
         .iter()
         .enumerate()
-        .map(|(i, px)| {
-            let v = LUMA[0] * px[0] + LUMA[1] * px[1] + LUMA[2] * px[2];
-            let Some(t) = t else {
-                return if protected(i) { v } else { f.apply(v) };
-            };
-            let w = t[i];
-            if w == 0.0 {
-                // v × h × 0 has v's sign (h ≥ +0) and is NaN where v is not finite.
-                v * 0.0
-            } else if protected(i) {
-                v * w
-            } else {
-                f.apply(v) * w
+        .map(|(i, px)| match t {
+            Some(t) => darken_matted(&f, px, t[i], protected(i)),
+            None => {
+                let v = luma(px);
+                if protected(i) {
+                    v
+                } else {
+                    f.apply(v)
+                }
             }
         })
         .collect();
@@ -153,17 +149,31 @@ pub fn hermite_darken_rgba_in(
         let t = &matte.data()[at + x0..at + x1];
         let o = &mut out.data_mut()[at + x0..at + x1];
         for (j, ((o, px), &t)) in o.iter_mut().zip(row).zip(t).enumerate() {
-            let v = LUMA[0] * px[0] + LUMA[1] * px[1] + LUMA[2] * px[2];
-            *o = if t == 0.0 {
-                v * 0.0
-            } else if protected(at + x0 + j) {
-                v * t
-            } else {
-                f.apply(v) * t
-            };
+            *o = darken_matted(&f, px, t, protected(at + x0 + j));
         }
     }
     out
+}
+
+/// Linear Rec. 709 luminance of a pixel (as `RgbaFrame::luminance`).
+#[inline]
+fn luma(px: &[f32; 4]) -> f32 {
+    LUMA[0] * px[0] + LUMA[1] * px[1] + LUMA[2] * px[2]
+}
+
+/// One pixel of the fused pass: its luminance, darkened unless `protected`, times the
+/// matte value `t`; where `t` is 0 no darkening is computed (`v × h × 0` has `v`'s sign,
+/// as `h ≥ +0`, and is NaN where `v` is not finite, as `v × 0`).
+#[inline]
+fn darken_matted(f: &Darken, px: &[f32; 4], t: f32, protected: bool) -> f32 {
+    let v = luma(px);
+    if t == 0.0 {
+        v * 0.0
+    } else if protected {
+        v * t
+    } else {
+        f.apply(v) * t
+    }
 }
 
 /// The darkening of one unprotected pixel, `v × h₀₁((sRGB(v) − i_min)/(i_max − i_min))`,

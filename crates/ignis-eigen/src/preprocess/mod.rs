@@ -448,25 +448,18 @@ fn flat_sums(kernel: &[f32]) -> [u8; 256] {
     })
 }
 
-/// The maximal runs `(start, end)` of `true` in `flags`.
-fn runs(flags: &[bool]) -> Vec<(usize, usize)> {
-    let mut out = Vec::new();
+/// The maximal runs `(start, end)` of `true` in `flags` (no allocation: called per row).
+fn runs(flags: &[bool]) -> impl Iterator<Item = (usize, usize)> + '_ {
     let mut x = 0;
-    while x < flags.len() {
-        match flags[x..].iter().position(|&f| f) {
-            None => break,
-            Some(a) => {
-                let a = x + a;
-                let b = flags[a..]
-                    .iter()
-                    .position(|&f| !f)
-                    .map_or(flags.len(), |e| a + e);
-                out.push((a, b));
-                x = b;
-            }
-        }
-    }
-    out
+    std::iter::from_fn(move || {
+        let a = x + flags.get(x..)?.iter().position(|&f| f)?;
+        let b = flags[a..]
+            .iter()
+            .position(|&f| !f)
+            .map_or(flags.len(), |e| a + e);
+        x = b;
+        Some((a, b))
+    })
 }
 
 /// `imageproc::morphology::dilate(img, Norm::L2, r)`, exactly: 255 where a non-zero pixel
