@@ -413,10 +413,44 @@ fn scaled_to(frame: Size, long: u32) -> Size {
     Size::new(w, h).expect("no larger than a valid size")
 }
 
+/// The largest size no larger than `frame` scaled to `long` whose cell pitch (the frame
+/// plus `pad` on both sides) is a multiple of 4 on both axes, so block-compressed
+/// textures (BC/DXT, ASTC 4×4, ETC) never code two cells in one 4×4 block and nothing
+/// bleeds across cells. Of the longer sides `long`, `long − 1`, … `long − 15`, each with
+/// both sides rounded down to whole blocks, the first within 0.25 % of `frame`'s aspect
+/// wins, else the closest, so the aspect moves by well under 1 % for cells of a few
+/// hundred pixels.
+/// Sides of 4 pixels or less stay as they are.
+fn block_aligned(frame: Size, long: u32, pad: u32) -> Size {
+    let align = |v: u32| {
+        let down = (v + 2 * pad) % 4;
+        if v > 4 && down < v {
+            v - down
+        } else {
+            v
+        }
+    };
+    let aspect = frame.width as f64 / frame.height as f64;
+    let mut best: Option<(f64, Size)> = None;
+    for l in (long.saturating_sub(15).max(1)..=long).rev() {
+        let s = scaled_to(frame, l);
+        let a = Size::new(align(s.width), align(s.height)).expect("no larger than a valid size");
+        let err = ((a.width as f64 / a.height as f64) / aspect - 1.0).abs();
+        if err <= 0.0025 {
+            return a;
+        }
+        if best.is_none_or(|(e, _)| err < e - 1e-12) {
+            best = Some((err, a));
+        }
+    }
+    best.map_or(scaled_to(frame, long), |(_, a)| a)
+}
+
 /// The frame size at which `n` frames fit one sheet with `opts` (grid, padding, engine
 /// preset, `pot`, `max_size`): `frame` itself when its cells fit, otherwise the largest
 /// size with the same aspect (the longer side found by bisection; fitting is monotone in
-/// the size) and the [`ScaledFrom`] to record. Refused (`LimitExceeded`, naming the fixes)
+/// the size), shrunk by up to 3 pixels per side to whole 4×4 compression blocks
+/// per cell ([`block_aligned`]), and the [`ScaledFrom`] to record. Refused (`LimitExceeded`, naming the fixes)
 /// when even cells whose shorter side is [`MIN_FIT_SIDE`] pixels do not fit.
 pub fn fit_frame(
     n: u32,
@@ -443,7 +477,8 @@ pub fn fit_frame(
             hi = mid;
         }
     }
-    let best = (lo > 0).then(|| scaled_to(frame, lo));
+    let pad = opts.padding.max(opts.engine.conventions().min_padding);
+    let best = (lo > 0).then(|| block_aligned(frame, lo, pad));
     match best {
         Some(s) if s.width.min(s.height) >= MIN_FIT_SIDE.min(frame.width.min(frame.height)) => {
             Ok((
@@ -1224,7 +1259,19 @@ mod tests {
             let (max, px) = sheet_limit(&opts);
             assert!(l.sheet_width <= max && l.sheet_height <= max);
             assert!(l.sheet_width as u64 * l.sheet_height as u64 <= px);
-            let bigger = scaled_to(hd, s.width + 1);
+            let pad = opts.padding.max(opts.engine.conventions().min_padding);
+            assert_eq!(
+                (s.width + 2 * pad) % 4,
+                0,
+                "{s}: cell pitch not whole blocks"
+            );
+            assert_eq!(
+                (s.height + 2 * pad) % 4,
+                0,
+                "{s}: cell pitch not whole blocks"
+            );
+            // Largest but for the block alignment (at most 15 + 3 pixels on the long side).
+            let bigger = scaled_to(hd, s.width + 19);
             assert!(plan_layout(97, bigger, &opts).is_err(), "{bigger} fits too");
         }
         let tiny = FlipbookOptions {
