@@ -589,6 +589,25 @@ mod volume {
             assert!(r["fps"].as_f64().unwrap() > 0.0, "{r}");
         }
         assert!(v["goal_met"].is_boolean());
+        // the loop cases: least wall times of alternating runs, the loop's setup within
+        // the looping run, CPU times where the platform reports them
+        let loops = v["loop"].as_array().unwrap();
+        assert_eq!(loops.len(), 3);
+        for l in loops {
+            let (p, lw) = (
+                l["plain_s"].as_f64().unwrap(),
+                l["looping_s"].as_f64().unwrap(),
+            );
+            assert!(p > 0.0 && lw > 0.0, "{l}");
+            let setup = l["looping_setup_s"].as_f64().unwrap();
+            assert!((0.0..=lw).contains(&setup), "{l}");
+            assert!(l["overhead"].is_number(), "{l}");
+            if cfg!(all(target_os = "linux", target_env = "gnu")) {
+                assert!(l["looping_cpu_s"].as_f64().unwrap() > 0.0, "{l}");
+                assert!(l["cpu_overhead"].is_number(), "{l}");
+            }
+        }
+        assert_eq!(v["goal_loop_met"], false, "quick runs never claim the goal");
     }
 }
 
