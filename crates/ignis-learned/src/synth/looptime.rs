@@ -196,8 +196,9 @@ impl Synthesiser<'_> {
     }
 
     /// Checks the walk's frames on previews rendered from their states: each step longer
-    /// than `EVEN_OUT` × the median moves its frame other than frame 0 to where its two
-    /// steps are equal (a bisection on rendered previews), a few passes over the loop.
+    /// than `EVEN_OUT` × the median moves its frame other than frame 0 towards where its
+    /// two steps are equal ([`Synthesiser::balance`], on rendered previews), a few passes
+    /// over the loop.
     fn even_out(&mut self, pos: &mut [f64], m: usize, canvas: Canvas) {
         let n = pos.len();
         let frame = &mut canvas.frame();
@@ -222,20 +223,11 @@ impl Synthesiser<'_> {
                 } else {
                     1
                 };
-                let (a, b) = (pos[j - 1], pos.get(j + 1).copied().unwrap_or(m as f64));
-                let (ia, ib) = (img[j - 1].clone(), img[(j + 1) % n].clone());
-                let (mut lo, mut hi) = (a, b);
-                let (mut best, mut at) = (img[j].clone(), pos[j]);
-                for _ in 0..EVEN_OUT_BISECTIONS {
-                    let x = 0.5 * (lo + hi);
-                    let ix = self.preview_at(x, m, canvas, frame);
-                    if dist(&ia, &ix) < dist(&ix, &ib) {
-                        lo = x;
-                    } else {
-                        hi = x;
-                    }
-                    (best, at) = (ix, x);
-                }
+                let ends = [pos[j - 1], pos.get(j + 1).copied().unwrap_or(m as f64)];
+                let now = (pos[j], steps[j - 1] - steps[j], steps[j - 1].max(steps[j]));
+                let (ia, ib) = (&img[j - 1], &img[(j + 1) % n]);
+                let (best, at) = self.balance([ia, ib], ends, now, m, canvas, frame);
+                let Some(best) = best else { continue };
                 let before = (
                     steps[j - 1].max(steps[j]),
                     pos[j],
@@ -252,6 +244,69 @@ impl Synthesiser<'_> {
                 }
             }
         }
+    }
+
+    /// A frame between grid positions `ends` whose longer step, from `ends_img[0]` or to
+    /// `ends_img[1]`, is shorter than the current frame's, and its position: the try with
+    /// the shortest longer step of at most [`EVEN_OUT_RENDERS`] rendered tries at the root
+    /// of `g(x) = d(a, x) − d(x, b)` (which runs from `−d(a, b)` at one end to `d(a, b)` at
+    /// the other), sought from the frame's current position `now` (`(x, g(x), max step)`,
+    /// known without a render) by regula falsi (Illinois), a bisection after a try that
+    /// did not halve the bracket (the path's distances need not grow evenly), until the
+    /// steps agree to [`EVEN_OUT_TOLERANCE`]. `None` when no try beats the current frame.
+    fn balance(
+        &mut self,
+        ends_img: [&Vec<f32>; 2],
+        ends: [f64; 2],
+        now: (f64, f64, f64),
+        m: usize,
+        canvas: &Canvas,
+        frame: &mut GrayFrame,
+    ) -> (Option<Vec<f32>>, f64) {
+        let span = dist(ends_img[0], ends_img[1]);
+        let (mut lo, mut hi) = ((ends[0], -span), (ends[1], span));
+        if now.1 < 0.0 {
+            lo = (now.0, now.1);
+        } else {
+            hi = (now.0, now.1);
+        }
+        let (mut best, mut at, mut best_max) = (None, now.0, now.2);
+        let mut kept = 0i32; // which end the last tries kept: −1 lo, +1 hi
+        let mut halved = true; // whether the last try halved the bracket
+        for _ in 0..EVEN_OUT_RENDERS {
+            let w = hi.0 - lo.0;
+            let f = if halved && hi.1 > lo.1 {
+                (-lo.1 / (hi.1 - lo.1)).clamp(0.1, 0.9)
+            } else {
+                0.5
+            };
+            let x = lo.0 + w * f;
+            let ix = self.preview_at(x, m, canvas, frame);
+            let (s0, s1) = (dist(ends_img[0], &ix), dist(&ix, ends_img[1]));
+            let g = s0 - s1;
+            if s0.max(s1) < best_max {
+                (best_max, at) = (s0.max(s1), x);
+                best = Some(ix);
+            }
+            if g.abs() <= EVEN_OUT_TOLERANCE * span {
+                break;
+            }
+            halved = if g < 0.0 { f >= 0.5 } else { f <= 0.5 };
+            if g < 0.0 {
+                lo = (x, g);
+                if kept == -1 {
+                    hi.1 *= 0.5;
+                }
+                kept = -1;
+            } else {
+                hi = (x, g);
+                if kept == 1 {
+                    lo.1 *= 0.5;
+                }
+                kept = 1;
+            }
+        }
+        (best, at)
     }
 }
 
@@ -325,8 +380,11 @@ const MAX_PREVIEW_VALUES: usize = 128 << 20;
 const EVEN_OUT: f64 = 1.15;
 /// Passes of [`Synthesiser::even_out`] over the loop.
 const EVEN_OUT_PASSES: usize = 3;
-/// Rendered previews per evened-out frame.
-const EVEN_OUT_BISECTIONS: usize = 6;
+/// Renders per evened-out frame ([`Synthesiser::balance`]).
+const EVEN_OUT_RENDERS: usize = 6;
+/// [`Synthesiser::balance`] stops when the two steps differ by less than this fraction of
+/// their sum.
+const EVEN_OUT_TOLERANCE: f64 = 0.02;
 
 /// `n` positions on the closed preview path (in grid steps from grid point 0, the first
 /// 0) whose consecutive preview frames are equally far apart: the smallest step length
