@@ -513,7 +513,10 @@ fn encode(frame: &GrayFrame) -> Vec<f32> {
         .data()
         .iter()
         .map(|&v| {
-            let x = v.clamp(0.0, 1.0) * SRGB_STEPS as f32;
+            if v <= 0.0 {
+                return 0.0;
+            }
+            let x = v.min(1.0) * SRGB_STEPS as f32;
             let i = (x as usize).min(SRGB_STEPS - 1);
             lut[i] + (lut[i + 1] - lut[i]) * (x - i as f32)
         })
