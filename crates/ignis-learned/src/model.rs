@@ -302,9 +302,14 @@ impl FlameModel {
     /// flame's extent along its axis ([`FlameModel::mean_extent`]) is kept inside the
     /// frame with a margin of 4% of the frame height (centred when it is taller).
     pub fn placement_for(&self, size: Size) -> Placement {
+        self.placement_within(size, self.mean_extent())
+    }
+
+    /// [`FlameModel::placement_for`] with the mean flame's extent given (`(below, above)`,
+    /// as [`FlameModel::mean_extent`] measures it), for callers that place many frames.
+    pub(crate) fn placement_within(&self, size: Size, (below, above): (f64, f64)) -> Placement {
         let h = size.height as f64;
         let sv = self.state_mean[self.shape.n_path + self.shape.n_width] * h;
-        let (below, above) = self.mean_extent();
         let margin = 0.04 * h;
         let (lo, hi) = (margin + above * sv, h - margin - below * sv);
         let cy = self.placement.cy * h;

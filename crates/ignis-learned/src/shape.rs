@@ -536,6 +536,22 @@ pub fn render_into(
     scratch: &mut RenderScratch,
     out: &mut GrayFrame,
 ) {
+    let h = out.height() as f64;
+    render_scaled_into(normalised, shape, place, p, scratch, h, out);
+}
+
+/// As [`render_into`], into a window of a larger frame: `place` is in the window's pixels
+/// and `frame_height` is the whole frame's height, which sets the flame's scale
+/// (`σ_v = shape.height · frame_height`).
+pub(crate) fn render_scaled_into(
+    normalised: &[f32],
+    shape: &Shape,
+    place: &Placement,
+    p: &ShapeParams,
+    scratch: &mut RenderScratch,
+    frame_height: f64,
+    out: &mut GrayFrame,
+) {
     let ns = p.norm_size as usize;
     debug_assert_eq!(normalised.len(), ns * ns);
     let (path_r, width_r) = row_profiles(shape, p);
@@ -545,7 +561,7 @@ pub fn render_into(
     scratch
         .width_inv
         .extend(width_r.iter().map(|&w| (1.0 / w) as f32));
-    let sv = (shape.height * out.height() as f64).max(1e-3);
+    let sv = (shape.height * frame_height).max(1e-3);
     let (upx, upy) = (place.tilt.sin(), -place.tilt.cos());
     let (rx, ry) = (place.tilt.cos(), place.tilt.sin());
     // Row coordinate rr = (above − v) · ns / (above + below) − 0.5; column
@@ -603,6 +619,52 @@ pub fn render_into(
     }
 }
 
+/// A box in the flame's canonical coordinates, `[u_lo, u_hi, v_lo, v_hi]` (`σ_v` units,
+/// `u` across the main axis, `v` up it), outside which [`render_into`] lights no pixel of
+/// `shape` when only the normalised image's rows `lit[0]..=lit[1]` and columns
+/// `lit[2]..=lit[3]` hold light: `v` over those rows (a row beyond each, where the
+/// bilinear lookup still reaches them), `u` over every row's path ± the columns' reach at
+/// the widest row's width (the renderer interpolates between rows, within their extremes).
+pub(crate) fn canonical_box(shape: &Shape, p: &ShapeParams, lit: [usize; 4]) -> [f64; 4] {
+    let ns = p.norm_size as f64;
+    let (path, width) = row_profiles(shape, p);
+    let kr = ns / (p.above + p.below);
+    let kc = ns / (2.0 * p.half_width);
+    let c_off = p.half_width * kc - 0.5;
+    let [r0, r1, c0, c1] = lit.map(|v| v as f64);
+    let (a, b) = ((c0 - 1.0 - c_off) / kc, (c1 + 1.0 - c_off) / kc);
+    let wmax = width.iter().copied().fold(0.0, f64::max);
+    let pmin = path.iter().copied().fold(f64::INFINITY, f64::min);
+    let pmax = path.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    [
+        pmin + a * wmax,
+        pmax + b * wmax,
+        p.above - (r1 + 1.5) / kr,
+        p.above - (r0 - 0.5) / kr,
+    ]
+}
+
+/// The pixel box `[x_lo, x_hi, y_lo, y_hi]` (pixel indices, inclusive, unclamped) covering
+/// a [`canonical_box`] drawn at `place` with `σ_v = sv` pixels.
+pub(crate) fn pixel_box(b: [f64; 4], place: &Placement, sv: f64) -> [f64; 4] {
+    let (upx, upy) = (place.tilt.sin(), -place.tilt.cos());
+    let (rx, ry) = (place.tilt.cos(), place.tilt.sin());
+    let mut out = [
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+    ];
+    for u in [b[0], b[1]] {
+        for v in [b[2], b[3]] {
+            let x = place.cx + sv * (u * rx + v * upx) - 0.5;
+            let y = place.cy + sv * (u * ry + v * upy) - 0.5;
+            out = [out[0].min(x), out[1].max(x), out[2].min(y), out[3].max(y)];
+        }
+    }
+    out
+}
+
 /// Output size check shared by the renderers.
 pub(crate) fn check_size(size: Size) -> Result<()> {
     Size::new(size.width, size.height)?;
@@ -634,6 +696,71 @@ mod tests {
         );
         let psnr = crate::psnr(&clip[0], &out);
         assert!(psnr > 30.0, "PSNR {psnr}");
+    }
+
+    /// The timing of loops renders windows only (`synth/looptime.rs`): every pixel a flame
+    /// lights lies in its [`pixel_box`], and a window rendered with the whole frame's scale
+    /// holds the whole frame's pixels.
+    #[test]
+    fn flames_stay_in_their_box_and_windows_match_the_frame() {
+        let clip = crate::synthetic::flame_clip(Size::new(96, 80).unwrap(), 3, 7);
+        let p = ShapeParams::default();
+        let ns = p.norm_size as usize;
+        for (k, frame) in clip.iter().enumerate() {
+            let mut n = normalise(frame, &p).unwrap();
+            // light only in rows 10..=40 and columns 20..=50 of the normalised image
+            let lit = [10, 40, 20, 50];
+            for (i, v) in n.image.iter_mut().enumerate() {
+                let (r, c) = (i / ns, i % ns);
+                if !(lit[0]..=lit[1]).contains(&r) || !(lit[2]..=lit[3]).contains(&c) {
+                    *v = 0.0;
+                }
+            }
+            let place = Placement {
+                cx: n.pose.cx,
+                cy: n.pose.cy,
+                tilt: n.pose.tilt + 0.3 * k as f64,
+            };
+            let mut full = GrayFrame::new(frame.size());
+            let scratch = &mut RenderScratch::default();
+            render_into(&n.image, &n.shape, &place, &p, scratch, &mut full);
+            let sv = n.shape.height * full.height() as f64;
+            let b = pixel_box(canonical_box(&n.shape, &p, lit), &place, sv);
+            let mut lit_pixels = 0;
+            for (y, row) in full.rows().enumerate() {
+                for (x, &v) in row.iter().enumerate() {
+                    if v > 0.0 {
+                        lit_pixels += 1;
+                        let (x, y) = (x as f64, y as f64);
+                        assert!(
+                            x >= b[0] && x <= b[1] && y >= b[2] && y <= b[3],
+                            "{k}: ({x}, {y}) outside {b:?}"
+                        );
+                    }
+                }
+            }
+            assert!(lit_pixels > 20, "{k}: {lit_pixels}");
+            let (x0, y0) = (b[0].floor().max(0.0) as u32, b[2].floor().max(0.0) as u32);
+            let mut window = GrayFrame::new(Size::new(30, 25).unwrap());
+            let shifted = Placement {
+                cx: place.cx - x0 as f64,
+                cy: place.cy - y0 as f64,
+                ..place
+            };
+            let h = full.height() as f64;
+            render_scaled_into(&n.image, &n.shape, &shifted, &p, scratch, h, &mut window);
+            for (y, row) in window.rows().enumerate() {
+                for (x, &v) in row.iter().enumerate() {
+                    let (fx, fy) = (x as u32 + x0, y as u32 + y0);
+                    let want = if fx < full.width() && fy < full.height() {
+                        full.get(fx, fy)
+                    } else {
+                        0.0
+                    };
+                    assert!((v - want).abs() < 1e-4, "{k}: ({fx}, {fy}) {v} vs {want}");
+                }
+            }
+        }
     }
 
     #[test]

@@ -16,7 +16,7 @@
 
 use crate::error::{LearnedError, Result};
 use crate::model::FlameModel;
-use crate::shape::{render_into, Placement, RenderScratch};
+use crate::shape::{canonical_box, pixel_box, render_scaled_into, Placement, RenderScratch};
 use ignis_core::{GrayFrame, Rng, Size};
 use serde::{Deserialize, Serialize};
 
@@ -180,8 +180,9 @@ pub struct Synthesiser<'m> {
     looped: Option<Vec<Vec<f64>>>,
     /// A loop's period in output frames.
     loop_frames: u32,
-    /// The mean flame's extent below its centroid, in `σ_v` ([`Synthesiser::place`]).
-    below: f64,
+    /// The mean flame's extent below and above its centroid, in `σ_v`
+    /// ([`FlameModel::mean_extent`], [`Synthesiser::place`]).
+    extent: (f64, f64),
     /// The process time (in steps, `0..states`) of each of a loop's frames, re-timed to
     /// constant speed for one output size ([`looptime`]).
     loop_times: Option<(Size, Vec<f64>)>,
@@ -232,7 +233,7 @@ impl<'m> Synthesiser<'m> {
             looped: None,
             loop_frames: 0,
             loop_times: None,
-            below: model.mean_extent().0,
+            extent: model.mean_extent(),
             rate,
         })
     }
@@ -385,22 +386,50 @@ impl<'m> Synthesiser<'m> {
 
     /// Renders `raw` with the controls (wind at output frame `at`) into `out`.
     fn render_raw(&mut self, at: f64, out: &mut GrayFrame) {
+        self.render_window(at, out.size(), (0, 0), out);
+    }
+
+    /// Renders `raw` as [`Self::render_raw`] into a frame of `size`, of which `out` holds
+    /// the window whose top-left pixel is `origin` (pixels outside it are not drawn).
+    fn render_window(&mut self, at: f64, size: Size, origin: (u32, u32), out: &mut GrayFrame) {
         self.apply_controls(at);
-        let place = self.place(out.size());
+        let mut place = self.place(size);
+        place.cx -= f64::from(origin.0);
+        place.cy -= f64::from(origin.1);
         let (shape, w) = self.model.split(&self.shown);
         self.normalised.resize(self.model.pca.n_pixels(), 0.0);
         self.model
             .pca
             .reconstruct_into(&w, w.len(), &mut self.normalised);
-        render_into(
+        render_scaled_into(
             &self.normalised,
             &shape,
             &place,
             &self.model.shape,
             &mut self.scratch,
+            f64::from(size.height),
             out,
         );
         self.expose(out);
+    }
+
+    /// The pixel box (`[x_lo, x_hi, y_lo, y_hi]`, see [`pixel_box`]) outside which the
+    /// flame of `raw`, with the controls at output frame `at`, lights no pixel of a frame of
+    /// each of `sizes`, when only the normalised image's rows and columns `lit` hold light
+    /// (see [`canonical_box`]).
+    fn raw_boxes<const N: usize>(
+        &mut self,
+        at: f64,
+        lit: [usize; 4],
+        sizes: [Size; N],
+    ) -> [[f64; 4]; N] {
+        self.apply_controls(at);
+        let (shape, _) = self.model.split(&self.shown);
+        let b = canonical_box(&shape, &self.model.shape, lit);
+        sizes.map(|size| {
+            let sv = (shape.height * f64::from(size.height)).max(1e-3);
+            pixel_box(b, &self.place(size), sv)
+        })
     }
 
     /// Where the current flame (`shown`) is drawn in a frame of `size`: with its base
@@ -413,10 +442,10 @@ impl<'m> Synthesiser<'m> {
     /// `below` `σ_v` under the centroid along the flame's axis (the mean flame's extent,
     /// [`FlameModel::mean_extent`]).
     fn place(&self, size: Size) -> Placement {
-        let mut place = self.model.placement_for(size);
+        let mut place = self.model.placement_within(size, self.extent);
         let i = self.model.shape.n_path + self.model.shape.n_width;
         let h = size.height as f64;
-        let d = self.below * (self.shown[i] - self.model.state_mean[i]) * h;
+        let d = self.extent.0 * (self.shown[i] - self.model.state_mean[i]) * h;
         place.cx += d * place.tilt.sin();
         place.cy -= d * place.tilt.cos();
         place

@@ -23,6 +23,10 @@
 //! the measure sees. The frames show only states of the process, in the same order; only
 //! their spacing in time changes.
 //!
+//! Every preview and metric-size render covers only the window of its frame that some
+//! state of the loop can light ([`Synthesiser::loop_canvases`]): the rest is dark in every
+//! frame and adds nothing to any step.
+//!
 //! The timing depends on the output size (the preview has its aspect), the model, the
 //! controls and the seed, never on which frames are rendered, so a chunk of a loop equals
 //! the full render's frames.
@@ -76,11 +80,17 @@ impl Synthesiser<'_> {
             // too long a loop to preview within the memory bound: even times
             return (0..n).map(|k| k as f64 * steps / n as f64).collect();
         }
-        let mut frame = GrayFrame::new(small);
+        let [small, metric] = self.loop_canvases([small, metric]);
+        let mut frame = small.frame();
         let grid: Vec<Vec<f32>> = (0..m)
             .map(|j| {
                 self.set_loop_state(j as f64 * steps / m as f64);
-                self.render_raw(j as f64 / PREVIEW_PER_FRAME as f64, &mut frame);
+                self.render_window(
+                    j as f64 / PREVIEW_PER_FRAME as f64,
+                    small.size,
+                    small.origin,
+                    &mut frame,
+                );
                 encode(&frame)
             })
             .collect();
@@ -95,26 +105,108 @@ impl Synthesiser<'_> {
                 .map(|u| u * m as f64)
                 .collect()
         });
-        self.even_out(&mut pos, m, &mut GrayFrame::new(metric));
+        self.even_out(&mut pos, m, metric);
         pos.into_iter().map(|x| x * steps / m as f64).collect()
     }
 
     /// The preview frame at grid position `pos` of a grid of `m` points, rendered from the
     /// state there (not a pixel blend).
-    fn preview_at(&mut self, pos: f64, m: usize, frame: &mut GrayFrame) -> Vec<f32> {
+    fn preview_at(
+        &mut self,
+        pos: f64,
+        m: usize,
+        canvas: &Canvas,
+        frame: &mut GrayFrame,
+    ) -> Vec<f32> {
         let steps = self.looped.as_ref().map_or(0, |s| s.len()) as f64;
         let k = m as f64 / f64::from(self.loop_frames);
         self.set_loop_state(pos * steps / m as f64);
-        self.render_raw(pos / k, frame);
+        self.render_window(pos / k, canvas.size, canvas.origin, frame);
         encode(frame)
     }
 
+    /// The rows and columns of the normalised image (`[r0, r1, c0, c1]`, inclusive) that
+    /// hold visible light in some state of the loop: where the mean eigenflame plus every
+    /// eigenflame at the largest weight the loop gives it, `Σ |w_i|max |E_i|`, exposed,
+    /// reaches [`VISIBLE`]. The whole image when none does.
+    fn loop_lit(&self) -> [usize; 4] {
+        let pca = &self.model.pca;
+        let ns = self.model.shape.norm_size as usize;
+        let e = pca.components.ncols();
+        let first = self.model.shape.n_shape();
+        let mut wmax = vec![0.0f32; e];
+        for s in self.looped.iter().flatten() {
+            for (m, &w) in wmax.iter_mut().zip(&s[first..]) {
+                *m = m.max(w.abs() as f32);
+            }
+        }
+        let mut lit = [usize::MAX, 0, usize::MAX, 0];
+        for (i, &mean) in pca.mean.iter().enumerate() {
+            let reach: f32 = (0..e).map(|k| wmax[k] * pca.components[(i, k)].abs()).sum();
+            if (mean + reach) * self.exposure >= VISIBLE {
+                let (r, c) = (i / ns, i % ns);
+                lit = [lit[0].min(r), lit[1].max(r), lit[2].min(c), lit[3].max(c)];
+            }
+        }
+        if lit[0] > lit[1] {
+            return [0, ns - 1, 0, ns - 1];
+        }
+        lit
+    }
+
+    /// The windows of frames of each of `sizes` outside which no state of the loop lights a
+    /// pixel (with a pixel's margin): every state's [`Self::raw_boxes`] at the output frame
+    /// it is shown near, united. Frames in between show blends of neighbouring states,
+    /// whose boxes lie within the two states' up to a second-order term the margin covers.
+    /// The loop measure's steps are RMS differences over whole frames; pixels that are dark
+    /// in every frame add nothing to them, so the timing renders, encodes and compares the
+    /// windows only (a flame often lights a small part of its frame). RMS over a window is
+    /// the whole frame's times a constant, and the timing compares steps only with each
+    /// other.
+    fn loop_canvases<const N: usize>(&mut self, sizes: [Size; N]) -> [Canvas; N] {
+        let len = self.looped.as_ref().map_or(0, |s| s.len());
+        let per_step = f64::from(self.loop_frames) / len.max(1) as f64;
+        let lit = self.loop_lit();
+        let mut union = [[
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+        ]; N];
+        for i in 0..len {
+            self.set_loop_state(i as f64);
+            for (u, b) in union
+                .iter_mut()
+                .zip(self.raw_boxes(i as f64 * per_step, lit, sizes))
+            {
+                *u = [
+                    u[0].min(b[0]),
+                    u[1].max(b[1]),
+                    u[2].min(b[2]),
+                    u[3].max(b[3]),
+                ];
+            }
+        }
+        let mut k = 0;
+        sizes.map(|size| {
+            let u = union[k];
+            k += 1;
+            Canvas::covering(size, u)
+        })
+    }
+
     /// Checks the walk's frames on previews rendered from their states: each step longer
-    /// than `EVEN_OUT` × the median moves its frame other than frame 0 to where its two
-    /// steps are equal (a bisection on rendered previews), a few passes over the loop.
-    fn even_out(&mut self, pos: &mut [f64], m: usize, frame: &mut GrayFrame) {
+    /// than `EVEN_OUT` × the median moves its frame other than frame 0 towards where its
+    /// two steps are equal ([`Synthesiser::balance`], on rendered previews), a few passes
+    /// over the loop.
+    fn even_out(&mut self, pos: &mut [f64], m: usize, canvas: Canvas) {
         let n = pos.len();
-        let mut img: Vec<Vec<f32>> = pos.iter().map(|&p| self.preview_at(p, m, frame)).collect();
+        let frame = &mut canvas.frame();
+        let canvas = &canvas;
+        let mut img: Vec<Vec<f32>> = pos
+            .iter()
+            .map(|&p| self.preview_at(p, m, canvas, frame))
+            .collect();
         let step = |img: &[Vec<f32>], k: usize| dist(&img[k], &img[(k + 1) % n]);
         let mut steps: Vec<f64> = (0..n).map(|k| step(&img, k)).collect();
         let med = ignis_core::loopq::median(&mut steps.clone());
@@ -131,20 +223,11 @@ impl Synthesiser<'_> {
                 } else {
                     1
                 };
-                let (a, b) = (pos[j - 1], pos.get(j + 1).copied().unwrap_or(m as f64));
-                let (ia, ib) = (img[j - 1].clone(), img[(j + 1) % n].clone());
-                let (mut lo, mut hi) = (a, b);
-                let (mut best, mut at) = (img[j].clone(), pos[j]);
-                for _ in 0..EVEN_OUT_BISECTIONS {
-                    let x = 0.5 * (lo + hi);
-                    let ix = self.preview_at(x, m, frame);
-                    if dist(&ia, &ix) < dist(&ix, &ib) {
-                        lo = x;
-                    } else {
-                        hi = x;
-                    }
-                    (best, at) = (ix, x);
-                }
+                let ends = [pos[j - 1], pos.get(j + 1).copied().unwrap_or(m as f64)];
+                let now = (pos[j], steps[j - 1] - steps[j], steps[j - 1].max(steps[j]));
+                let (ia, ib) = (&img[j - 1], &img[(j + 1) % n]);
+                let (best, at) = self.balance([ia, ib], ends, now, m, canvas, frame);
+                let Some(best) = best else { continue };
                 let before = (
                     steps[j - 1].max(steps[j]),
                     pos[j],
@@ -161,6 +244,119 @@ impl Synthesiser<'_> {
                 }
             }
         }
+    }
+
+    /// A frame between grid positions `ends` whose longer step, from `ends_img[0]` or to
+    /// `ends_img[1]`, is shorter than the current frame's, and its position: the try with
+    /// the shortest longer step of at most [`EVEN_OUT_RENDERS`] rendered tries at the root
+    /// of `g(x) = d(a, x) − d(x, b)` (which runs from `−d(a, b)` at one end to `d(a, b)` at
+    /// the other), sought from the frame's current position `now` (`(x, g(x), max step)`,
+    /// known without a render) by regula falsi (Illinois), a bisection after a try that
+    /// did not halve the bracket (the path's distances need not grow evenly), until the
+    /// steps agree to [`EVEN_OUT_TOLERANCE`]. `None` when no try beats the current frame.
+    fn balance(
+        &mut self,
+        ends_img: [&Vec<f32>; 2],
+        ends: [f64; 2],
+        now: (f64, f64, f64),
+        m: usize,
+        canvas: &Canvas,
+        frame: &mut GrayFrame,
+    ) -> (Option<Vec<f32>>, f64) {
+        let span = dist(ends_img[0], ends_img[1]);
+        let (mut lo, mut hi) = ((ends[0], -span), (ends[1], span));
+        if now.1 < 0.0 {
+            lo = (now.0, now.1);
+        } else {
+            hi = (now.0, now.1);
+        }
+        let (mut best, mut at, mut best_max) = (None, now.0, now.2);
+        let mut kept = 0i32; // which end the last tries kept: −1 lo, +1 hi
+        let mut halved = true; // whether the last try halved the bracket
+        for _ in 0..EVEN_OUT_RENDERS {
+            let w = hi.0 - lo.0;
+            let f = if halved && hi.1 > lo.1 {
+                (-lo.1 / (hi.1 - lo.1)).clamp(0.1, 0.9)
+            } else {
+                0.5
+            };
+            let x = lo.0 + w * f;
+            let ix = self.preview_at(x, m, canvas, frame);
+            let (s0, s1) = (dist(ends_img[0], &ix), dist(&ix, ends_img[1]));
+            let g = s0 - s1;
+            if s0.max(s1) < best_max {
+                (best_max, at) = (s0.max(s1), x);
+                best = Some(ix);
+            }
+            if g.abs() <= EVEN_OUT_TOLERANCE * span {
+                break;
+            }
+            halved = if g < 0.0 { f >= 0.5 } else { f <= 0.5 };
+            if g < 0.0 {
+                lo = (x, g);
+                if kept == -1 {
+                    hi.1 *= 0.5;
+                }
+                kept = -1;
+            } else {
+                hi = (x, g);
+                if kept == 1 {
+                    lo.1 *= 0.5;
+                }
+                kept = 1;
+            }
+        }
+        (best, at)
+    }
+}
+
+/// The least linear value the timing counts as light: below half a step of 8-bit sRGB
+/// (`0.5 / 255` encoded), so a written frame shows it as black.
+const VISIBLE: f32 = 1.5e-4;
+
+/// A window of a frame of `size`: `w × h` pixels from `origin` (top left).
+#[derive(Clone, Copy, Debug)]
+struct Canvas {
+    size: Size,
+    origin: (u32, u32),
+    w: u32,
+    h: u32,
+}
+
+impl Canvas {
+    /// The window of a frame of `size` covering the pixel box `b` (see
+    /// [`crate::shape::pixel_box`]) with a pixel's margin, within the frame (the whole
+    /// frame for a box that is not finite, at least one pixel).
+    fn covering(size: Size, b: [f64; 4]) -> Canvas {
+        if !b.iter().all(|v| v.is_finite()) {
+            return Canvas {
+                size,
+                origin: (0, 0),
+                w: size.width,
+                h: size.height,
+            };
+        }
+        let span = |lo: f64, hi: f64, n: u32| {
+            let a = (lo.floor() - 1.0).clamp(0.0, f64::from(n - 1)) as u32;
+            let b = (hi.floor() + 2.0).clamp(f64::from(a + 1), f64::from(n)) as u32;
+            (a, b - a)
+        };
+        let (x0, w) = span(b[0], b[1], size.width);
+        let (y0, h) = span(b[2], b[3], size.height);
+        Canvas {
+            size,
+            origin: (x0, y0),
+            w,
+            h,
+        }
+    }
+
+    /// A frame of the window's size.
+    fn frame(&self) -> GrayFrame {
+        GrayFrame::new(Size {
+            width: self.w,
+            height: self.h,
+        })
     }
 }
 
@@ -184,8 +380,11 @@ const MAX_PREVIEW_VALUES: usize = 128 << 20;
 const EVEN_OUT: f64 = 1.15;
 /// Passes of [`Synthesiser::even_out`] over the loop.
 const EVEN_OUT_PASSES: usize = 3;
-/// Rendered previews per evened-out frame.
-const EVEN_OUT_BISECTIONS: usize = 6;
+/// Renders per evened-out frame ([`Synthesiser::balance`]).
+const EVEN_OUT_RENDERS: usize = 6;
+/// [`Synthesiser::balance`] stops when the two steps differ by less than this fraction of
+/// their sum.
+const EVEN_OUT_TOLERANCE: f64 = 0.02;
 
 /// `n` positions on the closed preview path (in grid steps from grid point 0, the first
 /// 0) whose consecutive preview frames are equally far apart: the smallest step length
@@ -314,7 +513,10 @@ fn encode(frame: &GrayFrame) -> Vec<f32> {
         .data()
         .iter()
         .map(|&v| {
-            let x = v.clamp(0.0, 1.0) * SRGB_STEPS as f32;
+            if v <= 0.0 {
+                return 0.0;
+            }
+            let x = v.min(1.0) * SRGB_STEPS as f32;
             let i = (x as usize).min(SRGB_STEPS - 1);
             lut[i] + (lut[i + 1] - lut[i]) * (x - i as f32)
         })
@@ -326,15 +528,7 @@ const SRGB_STEPS: usize = 1024;
 
 /// RMS difference of two preview frames.
 fn dist(a: &[f32], b: &[f32]) -> f64 {
-    let s: f64 = a
-        .iter()
-        .zip(b)
-        .map(|(&x, &y)| {
-            let d = f64::from(x - y);
-            d * d
-        })
-        .sum();
-    (s / a.len().max(1) as f64).sqrt()
+    (ignis_core::loopq::sum_sq_diff(a, b) / a.len().max(1) as f64).sqrt()
 }
 
 /// Walks the closed polyline through `grid` (preview frames at evenly spaced times, the
