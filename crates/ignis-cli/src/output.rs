@@ -177,6 +177,16 @@ impl OutputArgs {
     /// first frame number, the footage's fps); flipbook-only flags are still refused for
     /// other formats.
     pub fn create_with(&self, size: Size, opts: &WriteOptions) -> Result<FrameWriter> {
+        self.check_with(opts)?;
+        ignis_media::create(&self.output, size, opts)
+            .with_context(|| format!("creating {}", self.output.display()))
+    }
+
+    /// Everything [`OutputArgs::create_with`] would refuse, checked without writing: the
+    /// flags against the format, and the path ([`ignis_media::check_output`]: format, frame
+    /// rate, a directory that cannot be made or written). Commands that train or search
+    /// before they render call it first, so a bad `-o` fails in a moment, not after minutes.
+    pub fn check_with(&self, opts: &WriteOptions) -> Result<()> {
         let flipbook_only = self.motion_vectors
             || self.emission
             || self.hdr
@@ -205,8 +215,9 @@ impl OutputArgs {
                  --variants apply to flipbooks; write to a .png file (e.g. -o fire.png)"
             );
         }
-        ignis_media::create(&self.output, size, opts)
-            .with_context(|| format!("creating {}", self.output.display()))
+        ignis_media::check_output(&self.output, opts)
+            .with_context(|| format!("creating {}", self.output.display()))?;
+        Ok(())
     }
 }
 
