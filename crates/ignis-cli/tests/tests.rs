@@ -1977,3 +1977,23 @@ mod loop_output_checks {
         assert!(!cache.exists() && !out.exists());
     }
 }
+
+/// `ignis loop --fps` is refused, not silently ignored: the loop is the footage's frames at
+/// the footage's rate.
+#[test]
+fn loop_refuses_fps() {
+    let t = tempfile::tempdir().unwrap();
+    let out = t.path().join("loop.png");
+    let r = ignis(&[
+        "loop",
+        "missing.mp4",
+        "--length",
+        "16",
+        "--fps",
+        "12",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert_fails(&r, "--fps: `ignis loop` writes the footage's own frames");
+    assert!(files_in(t.path()).is_empty());
+}
