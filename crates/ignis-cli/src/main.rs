@@ -139,9 +139,29 @@ fn keep_freed_memory() {
 #[cfg(not(all(target_os = "linux", target_env = "gnu")))]
 fn keep_freed_memory() {}
 
+/// Flags a subcommand takes through the shared output options but cannot honour, refused
+/// when given on the command line rather than silently ignored: `ignis loop` writes the
+/// footage's own frames, so it plays them at the footage's own frame rate.
+fn refused_flags(m: &clap::ArgMatches) -> Option<String> {
+    let (name, sub) = m.subcommand()?;
+    let given = |id: &str| sub.value_source(id) == Some(clap::parser::ValueSource::CommandLine);
+    (name == "loop" && given("fps")).then(|| {
+        "--fps: `ignis loop` writes the footage's own frames at the footage's own frame rate \
+         (another rate would play the flame faster or slower); drop --fps, and to store \
+         another playback rate convert the result: `ignis convert loop.mp4 --fps 30 -o \
+         loop30.mp4`"
+            .to_string()
+    })
+}
+
 fn main() -> ExitCode {
     keep_freed_memory();
-    let cli = Cli::parse();
+    let matches = <Cli as clap::CommandFactory>::command().get_matches();
+    let cli = Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
+    if let Some(why) = refused_flags(&matches) {
+        eprintln!("error: {why}");
+        return ExitCode::FAILURE;
+    }
     match run(cli) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {

@@ -177,6 +177,16 @@ impl OutputArgs {
     /// first frame number, the footage's fps); flipbook-only flags are still refused for
     /// other formats.
     pub fn create_with(&self, size: Size, opts: &WriteOptions) -> Result<FrameWriter> {
+        self.check_with(opts)?;
+        ignis_media::create(&self.output, size, opts)
+            .with_context(|| format!("creating {}", self.output.display()))
+    }
+
+    /// Everything [`OutputArgs::create_with`] would refuse, checked without writing: the
+    /// flags against the format, and the path ([`ignis_media::check_output`]: format, frame
+    /// rate, a directory that cannot be made or written). Commands that train or search
+    /// before they render call it first, so a bad `-o` fails in a moment, not after minutes.
+    pub fn check_with(&self, opts: &WriteOptions) -> Result<()> {
         let flipbook_only = self.motion_vectors
             || self.emission
             || self.hdr
@@ -205,8 +215,9 @@ impl OutputArgs {
                  --variants apply to flipbooks; write to a .png file (e.g. -o fire.png)"
             );
         }
-        ignis_media::create(&self.output, size, opts)
-            .with_context(|| format!("creating {}", self.output.display()))
+        ignis_media::check_output(&self.output, opts)
+            .with_context(|| format!("creating {}", self.output.display()))?;
+        Ok(())
     }
 }
 
@@ -300,8 +311,10 @@ impl OutputArgs {
         let files = writer
             .finish()
             .with_context(|| format!("finishing {}", self.output.display()))?;
+        for line in wrote_lines(&files) {
+            g.say(line);
+        }
         for f in &files {
-            g.say(format!("wrote {}", f.display()));
             if f.extension().is_some_and(|e| e == "json") {
                 if let Ok(m) = ignis_media::read_flipbook_meta(f) {
                     if let Some(r) = &m.retimed {
@@ -315,6 +328,26 @@ impl OutputArgs {
         }
         Ok(files)
     }
+}
+
+/// The `wrote …` lines for the files of one output: one per file, except a frame sequence
+/// (more than three files of one kind in one directory), which gets one line with its count,
+/// first and last file rather than a line per frame.
+fn wrote_lines(files: &[PathBuf]) -> Vec<String> {
+    let same =
+        |f: &PathBuf| f.parent() == files[0].parent() && f.extension() == files[0].extension();
+    if files.len() > 3 && files.iter().all(same) {
+        return vec![format!(
+            "wrote {} frames: {} … {}",
+            files.len(),
+            files[0].display(),
+            files[files.len() - 1].display()
+        )];
+    }
+    files
+        .iter()
+        .map(|f| format!("wrote {}", f.display()))
+        .collect()
 }
 
 /// Motion vectors from the workspace's dense optical flow (DIS on the frames' luma), kept
@@ -423,4 +456,27 @@ fn move_into(from: &std::path::Path, to: &std::path::Path) -> Result<()> {
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_sequence_is_one_wrote_line_other_outputs_one_per_file() {
+        let seq: Vec<PathBuf> = (0..38)
+            .map(|i| PathBuf::from(format!("o/{i:04}.png")))
+            .collect();
+        assert_eq!(
+            wrote_lines(&seq),
+            vec!["wrote 38 frames: o/0000.png … o/0037.png".to_string()]
+        );
+        let book = vec![PathBuf::from("o/fire.png"), PathBuf::from("o/fire.json")];
+        assert_eq!(
+            wrote_lines(&book),
+            vec!["wrote o/fire.png", "wrote o/fire.json"]
+        );
+        let short: Vec<PathBuf> = (0..3).map(|i| PathBuf::from(format!("{i}.exr"))).collect();
+        assert_eq!(wrote_lines(&short).len(), 3);
+    }
 }

@@ -1927,3 +1927,73 @@ mod variants {
         refuses_bad_variants(&run, dir.path());
     }
 }
+
+/// `ignis loop` checks `-o` before it trains the clip's cache database or decodes the
+/// footage: a bad output fails at once, leaving no cache entry; a `--length` that does not
+/// fit names the longest one that does.
+mod loop_output_checks {
+    use super::*;
+
+    #[test]
+    fn bad_outputs_fail_before_the_cache_is_built() {
+        let t = tempfile::tempdir().unwrap();
+        let frames = t.path().join("frames");
+        std::fs::create_dir(&frames).unwrap();
+        let pattern = frames.join("%04d.png");
+        let o = classic("48x40", "40", &["--seed", "3", "--no-loop"], &pattern);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let file = t.path().join("plain.txt");
+        std::fs::write(&file, b"not a directory").unwrap();
+        let cache = t.path().join("cache");
+        let run = |out: &Path, extra: &[&str]| {
+            let mut a = vec!["loop", pattern.to_str().unwrap(), "--length", "16"];
+            a.extend_from_slice(extra);
+            a.extend([
+                "--cache",
+                cache.to_str().unwrap(),
+                "-o",
+                out.to_str().unwrap(),
+            ]);
+            ignis(&a)
+        };
+        assert_fails(&run(&file.join("loop.png"), &[]), "not a directory");
+        assert_fails(&run(&file.join("seq/%04d.png"), &[]), "not a directory");
+        assert_fails(&run(&t.path().join("loop.xyz"), &[]), "output format");
+        assert_fails(
+            &run(&t.path().join("loop.mp4"), &["--engine", "unity"]),
+            "apply to flipbooks",
+        );
+        assert!(!cache.exists(), "no cache entry was built for a bad -o");
+        // A length longer than the 40 frames: the longest that fits is named.
+        let mut a = vec!["loop", pattern.to_str().unwrap(), "--length", "100"];
+        let out = t.path().join("loop.png");
+        a.extend([
+            "--cache",
+            cache.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+        ]);
+        assert_fails(&ignis(&a), "the longest that fits is --length 40");
+        assert!(!cache.exists() && !out.exists());
+    }
+}
+
+/// `ignis loop --fps` is refused, not silently ignored: the loop is the footage's frames at
+/// the footage's rate.
+#[test]
+fn loop_refuses_fps() {
+    let t = tempfile::tempdir().unwrap();
+    let out = t.path().join("loop.png");
+    let r = ignis(&[
+        "loop",
+        "missing.mp4",
+        "--length",
+        "16",
+        "--fps",
+        "12",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert_fails(&r, "--fps: `ignis loop` writes the footage's own frames");
+    assert!(files_in(t.path()).is_empty());
+}

@@ -29,8 +29,9 @@ pub use read::{
     ReadOptions, Rect, SourceInfo, DEFAULT_SEQUENCE_FPS,
 };
 pub use write::{
-    create, fit_frame, read_flipbook, read_flipbook_meta, write_png, AlphaMode, Engine, Flipbook,
-    FlipbookMeta, FlipbookOptions, Format, FrameWriter, MotionSource, ScaledFrom, WriteOptions,
+    check_output, create, fit_frame, read_flipbook, read_flipbook_meta, write_png, AlphaMode,
+    Engine, Flipbook, FlipbookMeta, FlipbookOptions, Format, FrameWriter, MotionSource, ScaledFrom,
+    WriteOptions,
 };
 
 /// Whether the system `ffmpeg` and `ffprobe` are usable (and `IGNIS_NO_FFMPEG` is not set).

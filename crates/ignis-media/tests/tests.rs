@@ -1654,3 +1654,63 @@ mod shaders {
         check_hlsl(&src, "main");
     }
 }
+
+/// A destination that cannot be written is refused when the writer is created (not after
+/// the render, as a flipbook's files are only made by `finish`), and
+/// [`check_output`] finds it without creating anything.
+mod output_checks {
+    use super::*;
+
+    #[test]
+    fn unwritable_destinations_are_refused_up_front() {
+        let t = tempfile::tempdir().unwrap();
+        let file = t.path().join("plain.txt");
+        std::fs::write(&file, b"not a directory").unwrap();
+        let size = Size::new(8, 8).unwrap();
+        let opts = WriteOptions::default();
+        for name in [
+            "x.png",
+            "sub/x.png",
+            "x.mp4",
+            "x.gif",
+            "seq/%04d.png",
+            "seq/",
+        ] {
+            let path = file.join(name);
+            let e = check_output(&path, &opts).expect_err(name).to_string();
+            assert!(e.contains("not a directory"), "{name}: {e}");
+            let e = create(&path, size, &opts).err().expect(name).to_string();
+            assert!(e.contains("not a directory"), "{name}: {e}");
+        }
+        #[cfg(target_os = "linux")]
+        {
+            let e = create(Path::new("/proc/ignis-no-such/x.png"), size, &opts)
+                .err()
+                .expect("/proc is not writable");
+            assert!(e.to_string().contains("cannot write in /proc"), "{e}");
+        }
+        assert_eq!(dir_entries(t.path()), vec!["plain.txt".to_string()]);
+    }
+
+    #[test]
+    fn checking_creates_nothing_and_names_the_format() {
+        let t = tempfile::tempdir().unwrap();
+        let opts = WriteOptions::default();
+        let f = check_output(&t.path().join("a/b/x.png"), &opts).unwrap();
+        assert_eq!(f, Format::Flipbook);
+        let f = check_output(&t.path().join("a/frames/%04d.exr"), &opts).unwrap();
+        assert_eq!(f, Format::ExrSequence);
+        assert!(check_output(&t.path().join("x.xyz"), &opts).is_err());
+        assert!(check_output(&t.path().join("f/%d%d.png"), &opts).is_err());
+        let bad_fps = WriteOptions {
+            fps: 0.0,
+            ..WriteOptions::default()
+        };
+        assert!(check_output(&t.path().join("x.mp4"), &bad_fps).is_err());
+        assert!(
+            dir_entries(t.path()).is_empty(),
+            "{:?}",
+            dir_entries(t.path())
+        );
+    }
+}

@@ -28,7 +28,7 @@ const CACHE_VERSION: u32 = 1;
 
 #[derive(clap::Args, Debug)]
 #[command(
-    after_help = "Examples:\n  ignis loop campfire.mp4 --length 4s -o loop.png\n  ignis loop candle.mp4 --length 120 -o loop.mp4\n  ignis loop fire.mov --length 2s --range 100..400 --method morph -o frames/%04d.png\n  ignis loop fire.mp4 --length 3s --cache /tmp/ignis-cache -o loop.gif\n  ignis loop plates/%04d.exr --length 96 -o loop.png    (an image sequence: a frame count, as it has no frame rate)\n\nThe first run on a clip trains an Eigenfire database on it (about 0.1 s per frame) and keeps it in the cache\n($XDG_CACHE_HOME/ignis or ~/.cache/ignis, or --cache); later runs reuse it. The output has the footage's own\nsize, colours and frame rate (--fps is ignored); a .png flipbook's JSON records the measured loop_quality."
+    after_help = "Examples:\n  ignis loop campfire.mp4 --length 4s -o loop.png\n  ignis loop candle.mp4 --length 120 -o loop.mp4\n  ignis loop fire.mov --length 2s --range 100..400 --method morph -o frames/%04d.png\n  ignis loop fire.mp4 --length 3s --cache /tmp/ignis-cache -o loop.gif\n  ignis loop plates/%04d.exr --length 96 -o loop.png    (an image sequence: a frame count, as it has no frame rate)\n\nThe first run on a clip trains an Eigenfire database on it (about 0.1 s per frame) and keeps it in the cache ($XDG_CACHE_HOME/ignis or ~/.cache/ignis, or --cache); later runs reuse it. The output has the footage's own size, colours and frame rate (--fps is ignored); a .png flipbook's JSON records the measured loop_quality."
 )]
 pub struct Args {
     /// The footage (any video or frame sequence `ignis info` reads).
@@ -746,13 +746,15 @@ pub fn run(a: &Args, g: &Global) -> Result<()> {
     let need = loops::min_window(&SearchParams::new(length, 1));
     if length > window.len() || window.len() < need {
         bail!(
-            "--length {} ({length} frames) does not fit in {} frames {}..{}: a loop of about {length} frames needs at least {need}; ask for a shorter --length or a longer --range",
+            "--length {} ({length} frames) does not fit in {} frames {}..{}: a loop of about {length} frames needs at least {need}; {}",
             a.length,
             if a.range.is_some() { "the window's" } else { "the clip's" },
             window.start,
-            window.end
+            window.end,
+            longest_hint(window.len(), fps, if a.range.is_some() { "a longer --range" } else { "a longer clip" })
         );
     }
+    check_output_early(&a.out, fps)?;
     let cache_dir = match &a.cache {
         Some(d) => d.clone(),
         None => default_cache_dir()?,
@@ -822,13 +824,15 @@ pub fn eigen_length_loop(a: &crate::eigen::LoopArgs, g: &Global) -> Result<()> {
     let need = loops::min_window(&SearchParams::new(length, 1));
     if length > window.len() || window.len() < need {
         bail!(
-            "--length {} ({length} frames) does not fit in the {} frames {}..{}: a loop of about {length} frames needs at least {need}; ask for a shorter --length or a wider window",
+            "--length {} ({length} frames) does not fit in the {} frames {}..{}: a loop of about {length} frames needs at least {need}; {}",
             a.length.as_deref().unwrap_or_default(),
             window.len(),
             window.start,
-            window.end
+            window.end,
+            longest_hint(window.len(), c.fps, "a wider window")
         );
     }
+    check_output_early(&a.out, c.fps)?;
     let source = find_source(&c.source, &a.db)?;
     // Metric frames of the window, as the writer will measure them.
     let metric = metric_frames(&source, &window, g)
@@ -860,6 +864,36 @@ pub fn eigen_length_loop(a: &crate::eigen::LoopArgs, g: &Global) -> Result<()> {
     let d = make_loop_sized(&src, &ask, a.footage.size, &a.out, g)?;
     report(&d, window.start, g);
     Ok(())
+}
+
+/// The longest `--length` (frames) whose search fits in a window of `n` frames, if any.
+fn longest_length(n: usize) -> Option<usize> {
+    (2..=n)
+        .rev()
+        .find(|&l| loops::min_window(&SearchParams::new(l, 1)) <= n)
+}
+
+/// What to do when a `--length` does not fit a window of `n` frames at `fps`: the longest
+/// that does (in frames, and seconds when the fps is known), or `wider` alone.
+fn longest_hint(n: usize, fps: f64, wider: &str) -> String {
+    match longest_length(n) {
+        Some(l) if fps.is_finite() && fps > 0.0 => format!(
+            "the longest that fits is --length {l} ({:.2} s at {fps} fps); ask for that or less, or use {wider}",
+            l as f64 / fps
+        ),
+        Some(l) => format!("the longest that fits is --length {l}; ask for that or less, or use {wider}"),
+        None => format!("{n} frames are too few for any loop; use {wider}"),
+    }
+}
+
+/// Refuses a bad `-o` (unknown format, flags the format does not take, a directory that
+/// cannot be made or written) before the cache is built or the footage decoded, with the
+/// options the render will use.
+fn check_output_early(out: &crate::output::OutputArgs, fps: f64) -> Result<()> {
+    let mut opts = out.write_options();
+    opts.fps = fps;
+    opts.loop_ = true;
+    out.check_with(&opts)
 }
 
 /// The clip's source file: as recorded, or relative to the database's directory.

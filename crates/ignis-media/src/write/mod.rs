@@ -170,34 +170,7 @@ pub struct FrameWriter {
 /// Creates a writer for frames of `size` at `path`.
 pub fn create(path: &Path, size: Size, opts: &WriteOptions) -> Result<FrameWriter> {
     let size = Size::new(size.width, size.height)?;
-    if !(opts.fps.is_finite() && opts.fps > 0.0) {
-        return Err(MediaError::bad(
-            "fps",
-            format!("{} must be a finite number > 0, e.g. 30", opts.fps),
-        ));
-    }
-    if opts.fps < MIN_FPS || opts.fps > MAX_FPS {
-        return Err(MediaError::bad(
-            "fps",
-            format!(
-                "{} is outside {MIN_FPS}..={MAX_FPS} frames per second (MP4 stores 1/1000-frame \
-                 time steps); use e.g. 30",
-                opts.fps
-            ),
-        ));
-    }
-    let format = match opts.format {
-        Some(f) => f,
-        None => Format::from_path(path)?,
-    };
-    match format {
-        Format::Mp4 | Format::Gif => check_regular_target(path)?,
-        Format::Flipbook => {
-            check_regular_target(path)?;
-            check_regular_target(&path.with_extension("json"))?;
-        }
-        Format::PngSequence | Format::ExrSequence => {}
-    }
+    let format = check_output(path, opts)?;
     let mut output_size = size;
     let sink: Box<dyn Sink> = match format {
         Format::PngSequence | Format::ExrSequence => Box::new(sequence_out::SequenceSink::new(
@@ -224,6 +197,114 @@ pub fn create(path: &Path, size: Size, opts: &WriteOptions) -> Result<FrameWrite
         background: opts.background,
         metric: Vec::new(),
     })
+}
+
+/// Checks, creating nothing, what [`create`] or [`FrameWriter::finish`] would refuse about
+/// writing to `path` with `opts`: the frame rate, the format, a sequence pattern, a target
+/// that exists and is not a regular file (a sequence's: not a directory), and a destination
+/// directory that cannot be made or written in. Returns the format.
+///
+/// [`create`] runs it, so a flipbook (whose files are only made by `finish`) fails at once
+/// rather than after the render; a command that works for minutes before creating its
+/// writer (training, a search) should run it first too.
+pub fn check_output(path: &Path, opts: &WriteOptions) -> Result<Format> {
+    if !(opts.fps.is_finite() && opts.fps > 0.0) {
+        return Err(MediaError::bad(
+            "fps",
+            format!("{} must be a finite number > 0, e.g. 30", opts.fps),
+        ));
+    }
+    if opts.fps < MIN_FPS || opts.fps > MAX_FPS {
+        return Err(MediaError::bad(
+            "fps",
+            format!(
+                "{} is outside {MIN_FPS}..={MAX_FPS} frames per second (MP4 stores 1/1000-frame \
+                 time steps); use e.g. 30",
+                opts.fps
+            ),
+        ));
+    }
+    let format = match opts.format {
+        Some(f) => f,
+        None => Format::from_path(path)?,
+    };
+    let dir = match format {
+        Format::Mp4 | Format::Gif => {
+            check_regular_target(path)?;
+            parent_dir(path)
+        }
+        Format::Flipbook => {
+            check_regular_target(path)?;
+            check_regular_target(&path.with_extension("json"))?;
+            parent_dir(path)
+        }
+        Format::PngSequence | Format::ExrSequence => {
+            let (final_dir, _) = sequence_out::destination(path, format == Format::ExrSequence)?;
+            parent_dir(&final_dir)
+        }
+    };
+    check_writable_dir(&dir)?;
+    Ok(format)
+}
+
+/// Refuses a destination directory `dir` that cannot be made or written in: its nearest
+/// existing ancestor must be a directory in which a file can be created (probed with a
+/// temporary name of this process, removed at once; a killed run's probe is cleaned like
+/// any other temporary, [`ignis_core::tempfiles`]).
+fn check_writable_dir(dir: &Path) -> Result<()> {
+    let mut at = dir;
+    let existing = loop {
+        match std::fs::metadata(at) {
+            Ok(m) if m.is_dir() => break at,
+            Ok(_) => {
+                let what = if at == dir {
+                    String::new()
+                } else {
+                    format!(", so {} cannot be made", dir.display())
+                };
+                return Err(MediaError::bad(
+                    "output",
+                    format!(
+                        "{} is not a directory{what}; choose an output path inside a directory",
+                        at.display()
+                    ),
+                ));
+            }
+            // Missing, or below a file (`ENOTDIR`): the ancestor decides.
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    std::io::ErrorKind::NotFound | std::io::ErrorKind::NotADirectory
+                ) =>
+            {
+                match at.parent() {
+                    Some(p) if !p.as_os_str().is_empty() => at = p,
+                    _ => break Path::new("."),
+                }
+            }
+            Err(e) => return Err(MediaError::io(at, e)),
+        }
+    };
+    let probe = existing.join(ignis_core::tempfiles::temp_name("output", "probe"));
+    match std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(&probe)
+    {
+        Ok(_) => {
+            let _ = std::fs::remove_file(&probe);
+            Ok(())
+        }
+        // Another writer of this process probing the same directory: it is writable.
+        Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => Ok(()),
+        Err(e) => Err(MediaError::bad(
+            "output",
+            format!(
+                "cannot write in {} ({e}); choose an output path in a directory you can write to",
+                existing.display()
+            ),
+        )),
+    }
 }
 
 impl FrameWriter {

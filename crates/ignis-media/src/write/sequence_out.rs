@@ -28,43 +28,51 @@ pub(crate) struct SequenceSink {
     first: u64,
 }
 
+/// The directory a sequence at `path` (a directory, or a pattern `dir/%04d.png`) fills and
+/// its file-name pattern; refuses a bad pattern or a destination that is not a directory.
+/// Creates nothing.
+pub(crate) fn destination(path: &Path, exr: bool) -> Result<(PathBuf, Pattern)> {
+    let ext = if exr { "exr" } else { "png" };
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let (final_dir, pattern) = if name.contains('%') {
+        let p = Pattern::parse(&name).ok_or_else(|| {
+            MediaError::bad(
+                "path",
+                format!("`{name}` is not a pattern like %04d.{ext} (one `%Nd`, N at most 20)"),
+            )
+        })?;
+        (parent_dir(path), p)
+    } else {
+        (
+            path.to_path_buf(),
+            Pattern {
+                prefix: String::new(),
+                width: 4,
+                suffix: format!(".{ext}"),
+            },
+        )
+    };
+    if let Ok(m) = std::fs::metadata(&final_dir) {
+        if !m.is_dir() {
+            return Err(MediaError::bad(
+                "output",
+                format!(
+                    "{} exists and is not a directory; a frame sequence needs a directory \
+                         (choose another output path)",
+                    final_dir.display()
+                ),
+            ));
+        }
+    }
+    Ok((final_dir, pattern))
+}
+
 impl SequenceSink {
     pub(crate) fn new(path: &Path, exr: bool, first: u64) -> Result<SequenceSink> {
-        let ext = if exr { "exr" } else { "png" };
-        let name = path
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default();
-        let (final_dir, pattern) = if name.contains('%') {
-            let p = Pattern::parse(&name).ok_or_else(|| {
-                MediaError::bad(
-                    "path",
-                    format!("`{name}` is not a pattern like %04d.{ext} (one `%Nd`, N at most 20)"),
-                )
-            })?;
-            (parent_dir(path), p)
-        } else {
-            (
-                path.to_path_buf(),
-                Pattern {
-                    prefix: String::new(),
-                    width: 4,
-                    suffix: format!(".{ext}"),
-                },
-            )
-        };
-        if let Ok(m) = std::fs::metadata(&final_dir) {
-            if !m.is_dir() {
-                return Err(MediaError::bad(
-                    "output",
-                    format!(
-                        "{} exists and is not a directory; a frame sequence needs a directory \
-                         (choose another output path)",
-                        final_dir.display()
-                    ),
-                ));
-            }
-        }
+        let (final_dir, pattern) = destination(path, exr)?;
         // Frames always go into a fresh hidden directory beside the destination
         // (`.<dir>.ignis-tmp-<pid>.<n>.dir`, removed by a later run if this one is killed).
         let temp_dir = Some(
