@@ -25,7 +25,7 @@ pub use error::{MediaError, Result};
 pub use fingerprint::source_fingerprint;
 pub use ignis_core::{RgbaFrame, Size};
 pub use read::{
-    open, probe, read_image, source_files, Decoder, FrameRange, FrameReader, RangeUnit,
+    open, open_keeping_8bit, probe, read_image, source_files, DecodedFrame, Decoder, FrameRange, FrameReader, RangeUnit,
     ReadOptions, Rect, SourceInfo, DEFAULT_SEQUENCE_FPS,
 };
 pub use write::{

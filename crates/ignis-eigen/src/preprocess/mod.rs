@@ -275,6 +275,37 @@ pub fn source_grey_with_mask(
     }
 }
 
+/// [`source_grey_with_mask`] of a rendering's source frame: an 8-bit frame
+/// ([`crate::footage::SourceFrame::Srgb8`]) is read as it is where the isolation keeps
+/// pixels (bit for bit the result on the frame in linear light), else converted.
+pub fn source_grey_with_mask_src(
+    frame: &crate::footage::SourceFrame,
+    mask: &GrayImage,
+    pose: &ClipPose,
+    p: &PreprocessParams,
+) -> SourceGrey {
+    use crate::footage::SourceFrame;
+    let SourceFrame::Srgb8 { size, bytes } = frame else {
+        return source_grey_with_mask(&frame.to_linear(), mask, pose, p);
+    };
+    if !pose.isolate {
+        return source_grey_with_mask(&frame.to_linear(), mask, pose, p);
+    }
+    let (matte, area) = feather_in(mask, size.width.max(size.height));
+    let grey = match area {
+        Some(b) => {
+            crate::hermite::hermite_darken_srgb8_in(*size, bytes, mask, &matte, b, &p.hermite)
+        }
+        None => GrayFrame::new(*size),
+    };
+    SourceGrey {
+        grey,
+        matte,
+        angle: 0.0,
+        mask_pixels: mask_area(mask),
+    }
+}
+
 /// A soft matte from a binary mask: 1 inside the mask, and outside it the mask dilated by
 /// and blurred over about 1 % of the frame's longer side (at least 2 px), so the flame's
 /// glow fades out instead of being cut.
