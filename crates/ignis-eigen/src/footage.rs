@@ -43,7 +43,10 @@ pub type Frames<'a> = Box<dyn Iterator<Item = Result<RgbaFrame>> + 'a>;
 pub enum SourceFrame {
     Linear(RgbaFrame),
     /// `size.pixels() * 4` bytes, rows top to bottom.
-    Srgb8 { size: Size, bytes: Vec<u8> },
+    Srgb8 {
+        size: Size,
+        bytes: Vec<u8>,
+    },
 }
 
 /// The linear value of each 8-bit sRGB code (`ignis_core::palette::srgb_to_linear` of
@@ -591,13 +594,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("clip.mp4");
         let size = Size::new(32, 48).unwrap();
-        let syn = SyntheticFootage::new(
-            SyntheticParams {
-                size,
-                ..params(6)
-            },
-            30.0,
-        );
+        let syn = SyntheticFootage::new(SyntheticParams { size, ..params(6) }, 30.0);
         let mut w = ignis_media::create(&path, size, &Default::default()).unwrap();
         for f in syn.frames(0).unwrap() {
             w.push(&f.unwrap()).unwrap();

@@ -29,8 +29,8 @@
 //!   destination whose alpha is `ignis_core::post::alpha_matte`, it fades into the glow.
 
 use crate::error::{EigenError, Result};
-use crate::pose::{ClipPose, PoseParams};
 use crate::footage::SourceFrame;
+use crate::pose::{ClipPose, PoseParams};
 use ignis_core::colour::SolidTintRamp;
 use ignis_core::frame::LUMA;
 use ignis_core::post::gaussian_blur;
@@ -797,9 +797,7 @@ mod tests {
             |x: u32, y: u32, k: f32| ((x as f32 * 0.37 + y as f32 * 0.11 + k).sin() + 1.0) * 0.5;
         let src = GrayFrame::from_fn(sz, |x, y| wave(x, y, 0.0) * 3.0 * T);
         let bloom = GrayFrame::from_fn(sz, |x, y| wave(x, y, 1.0) * 1.2);
-        let bytes: Vec<u8> = (0..sz.pixels() * 4)
-            .map(|i| (i * 37 % 256) as u8)
-            .collect();
+        let bytes: Vec<u8> = (0..sz.pixels() * 4).map(|i| (i * 37 % 256) as u8).collect();
         let src8 = SourceFrame::srgb8(sz, bytes).unwrap();
         let lin = src8.to_linear().into_owned();
         let smoke = RgbaFrame::from_vec(sz, vec![[0.05, 0.04, 0.03, 0.02]; sz.pixels()]).unwrap();
@@ -810,8 +808,9 @@ mod tests {
             Destination::Image(&image),
             Destination::SolidTint(&bloom, [1.0, 0.42, 0.08]),
         ];
-        let bits =
-            |f: &RgbaFrame| -> Vec<u32> { f.data().iter().flatten().map(|v| v.to_bits()).collect() };
+        let bits = |f: &RgbaFrame| -> Vec<u32> {
+            f.data().iter().flatten().map(|v| v.to_bits()).collect()
+        };
         for dest in dests {
             for with_smoke in [false, true] {
                 for custom in [None, Some((&mask, MaskMode::Add))] {

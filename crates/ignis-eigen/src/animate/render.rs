@@ -25,10 +25,10 @@ use crate::error::{EigenError, Result};
 use crate::scenario::{ColourMode, Look, Plan, PlanFrame};
 use crate::transition::FrameRef;
 
+use crate::footage::SourceFrame;
 /// Where rendering reads footage: [`crate::footage::SyntheticSources`] for Ignis's own
 /// clips, the CLI's opener over `ignis-media` for real footage.
 pub use crate::footage::{FootageOpener, SyntheticSources};
-use crate::footage::SourceFrame;
 
 /// Resizes every channel of `src` to `size` (area average when shrinking, as
 /// [`crate::pose::resize`]); returns `src` itself when it already has that size.
@@ -468,11 +468,7 @@ fn load_layers(
                                     cur, &m, &clip.pose, pre,
                                 )
                             }
-                            _ => crate::preprocess::source_grey(
-                                &cur.to_linear(),
-                                &clip.pose,
-                                pre,
-                            ),
+                            _ => crate::preprocess::source_grey(&cur.to_linear(), &clip.pose, pre),
                         };
                         fl.grey = Some((warp_g(sg.grey, r), warp_g(sg.matte, r)));
                     }

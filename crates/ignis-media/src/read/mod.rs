@@ -211,7 +211,10 @@ pub(crate) trait FrameSource: Send {
 pub enum DecodedFrame {
     Linear(RgbaFrame),
     /// `size.pixels() * 4` bytes, rows top to bottom.
-    Srgba8 { size: Size, bytes: Vec<u8> },
+    Srgba8 {
+        size: Size,
+        bytes: Vec<u8>,
+    },
 }
 
 impl DecodedFrame {
@@ -362,9 +365,7 @@ pub(crate) fn open_inner(
         out_size = Size::new(s.width, s.height)?;
     }
     let source: Box<dyn FrameSource> = match probed {
-        Probed::Mp4(info, p) => {
-            Box::new(h264::Openh264Source::start(&info, p, start, !keep_8bit)?)
-        },
+        Probed::Mp4(info, p) => Box::new(h264::Openh264Source::start(&info, p, start, !keep_8bit)?),
         Probed::Ffmpeg(info) => Box::new(ffmpeg::FfmpegSource::start(&info, start, end)?),
         Probed::Sequence(_, files) => Box::new(sequence::SequenceSource::new(files, start)),
         Probed::Image(info) => Box::new(sequence::SequenceSource::new(
@@ -553,9 +554,14 @@ mod tests {
             println!("skipped: ../shared/data not present");
             return;
         }
-        let e = open_inner(&data.join("campfire.mp4"), &ReadOptions::default(), false, false)
-            .err()
-            .unwrap();
+        let e = open_inner(
+            &data.join("campfire.mp4"),
+            &ReadOptions::default(),
+            false,
+            false,
+        )
+        .err()
+        .unwrap();
         let msg = e.to_string();
         assert!(matches!(e, MediaError::Unsupported { .. }), "{msg}");
         assert!(
