@@ -7,7 +7,10 @@
 //! clips), [`FrameList`] (frames already in memory) and, with the `media` feature,
 //! [`MediaFootage`] over `ignis-media` (videos, image sequences). Rendering asks a
 //! [`FootageOpener`] for the footage of a database clip (or of another file, such as a
-//! custom mask); [`SyntheticSources`] opens synthetic clips only.
+//! custom mask); [`SyntheticSources`] opens synthetic clips only. Rendering reads through
+//! [`Footage::source_frames_at`]: 8-bit footage may stay 8-bit ([`SourceFrame::Srgb8`],
+//! a quarter of the memory and no conversion pass; read through [`srgb8_table`], the
+//! same values as the linear frame).
 
 use std::borrow::Cow;
 use std::path::Path;
