@@ -123,6 +123,22 @@ impl LightnessRamp {
     }
 }
 
+/// The colour [`synthetic_colour`] gives one grey value under a solid tint, for callers
+/// that colour pixel by pixel inside their own pass (the same values bit for bit).
+#[derive(Clone, Copy, Debug)]
+pub struct SolidTintRamp(LightnessRamp);
+
+impl SolidTintRamp {
+    pub fn new(tint: [f32; 3]) -> Self {
+        SolidTintRamp(LightnessRamp::new(tint))
+    }
+    /// `synthetic_colour`'s pixel for grey value `l` under `Tint::Solid(tint)`.
+    #[inline]
+    pub fn at(&self, l: f32) -> [f32; 4] {
+        self.0.at(l)
+    }
+}
+
 /// Colours `gray` by HLS transfer (§6.1.2 steps 1–4). Alpha is 1 everywhere; use
 /// [`crate::post::alpha_matte`] for a matte. Rows are coloured in parallel.
 pub fn synthetic_colour(gray: &GrayFrame, tint: &Tint) -> Result<RgbaFrame> {

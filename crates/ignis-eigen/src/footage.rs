@@ -7,10 +7,16 @@
 //! clips), [`FrameList`] (frames already in memory) and, with the `media` feature,
 //! [`MediaFootage`] over `ignis-media` (videos, image sequences). Rendering asks a
 //! [`FootageOpener`] for the footage of a database clip (or of another file, such as a
-//! custom mask); [`SyntheticSources`] opens synthetic clips only.
+//! custom mask); [`SyntheticSources`] opens synthetic clips only. Rendering reads through
+//! [`Footage::source_frames_at`]: 8-bit footage may stay 8-bit ([`SourceFrame::Srgb8`],
+//! a quarter of the memory and no conversion pass; read through [`srgb8_table`], the
+//! same values as the linear frame).
 
+use std::borrow::Cow;
 use std::path::Path;
+use std::sync::OnceLock;
 
+use ignis_core::palette::srgb_to_linear;
 use ignis_core::{RgbaFrame, Size};
 
 use crate::db::ClipEntry;
@@ -31,6 +37,72 @@ pub struct FootageInfo {
 
 /// A stream of decoded frames (linear RGBA).
 pub type Frames<'a> = Box<dyn Iterator<Item = Result<RgbaFrame>> + 'a>;
+
+/// A source frame for rendering: linear light, or the 8-bit sRGB RGBA bytes an 8-bit
+/// decoder made (straight alpha, stored linearly), read through [`srgb8_table`] where
+/// used — 4 bytes a pixel instead of 16, and no conversion pass. Both give the same
+/// linear values (`ignis-media`'s 8-bit decoding rule).
+#[derive(Clone, Debug, PartialEq)]
+pub enum SourceFrame {
+    Linear(RgbaFrame),
+    /// `size.pixels() * 4` bytes, rows top to bottom.
+    Srgb8 {
+        size: Size,
+        bytes: Vec<u8>,
+    },
+}
+
+/// The linear value of each 8-bit sRGB code (`ignis_core::palette::srgb_to_linear` of
+/// `code / 255`, as `ignis-media` decodes 8-bit footage).
+pub fn srgb8_table() -> &'static [f32; 256] {
+    static T: OnceLock<[f32; 256]> = OnceLock::new();
+    T.get_or_init(|| std::array::from_fn(|i| srgb_to_linear(i as f32 / 255.0)))
+}
+
+/// Linear RGBA of 8-bit sRGB RGBA bytes `p` (alpha `p[3] / 255`).
+#[inline]
+pub fn srgb8_pixel(t: &[f32; 256], p: &[u8]) -> [f32; 4] {
+    [
+        t[p[0] as usize],
+        t[p[1] as usize],
+        t[p[2] as usize],
+        p[3] as f32 / 255.0,
+    ]
+}
+
+impl SourceFrame {
+    /// Checks that 8-bit bytes hold `size` pixels.
+    pub fn srgb8(size: Size, bytes: Vec<u8>) -> Result<SourceFrame> {
+        if bytes.len() != size.pixels() * 4 {
+            return Err(EigenError::bad(
+                "frame",
+                format!(
+                    "{} bytes do not hold a {size} RGBA frame ({} bytes)",
+                    bytes.len(),
+                    size.pixels() * 4
+                ),
+            ));
+        }
+        Ok(SourceFrame::Srgb8 { size, bytes })
+    }
+    pub fn size(&self) -> Size {
+        match self {
+            SourceFrame::Linear(f) => f.size(),
+            SourceFrame::Srgb8 { size, .. } => *size,
+        }
+    }
+    /// The frame in linear light (borrowed when it is already).
+    pub fn to_linear(&self) -> Cow<'_, RgbaFrame> {
+        match self {
+            SourceFrame::Linear(f) => Cow::Borrowed(f),
+            SourceFrame::Srgb8 { size, bytes } => {
+                let t = srgb8_table();
+                let data = bytes.chunks_exact(4).map(|p| srgb8_pixel(t, p)).collect();
+                Cow::Owned(RgbaFrame::from_vec(*size, data).expect("checked length"))
+            }
+        }
+    }
+}
 
 /// A clip's frames. Errors are [`EigenError::Decode`] naming the source and frame.
 pub trait Footage {
@@ -64,6 +136,16 @@ pub trait Footage {
         }
         Ok(out)
     }
+
+    /// [`Footage::frames_at`] for rendering: 8-bit footage may come as its sRGB bytes
+    /// ([`SourceFrame::Srgb8`]); the default wraps the linear frames.
+    fn source_frames_at(&self, indices: &[usize]) -> Result<Vec<Option<SourceFrame>>> {
+        Ok(self
+            .frames_at(indices)?
+            .into_iter()
+            .map(|f| f.map(SourceFrame::Linear))
+            .collect())
+    }
 }
 
 impl<T: Footage + ?Sized> Footage for &T {
@@ -76,6 +158,9 @@ impl<T: Footage + ?Sized> Footage for &T {
     fn frames_at(&self, indices: &[usize]) -> Result<Vec<Option<RgbaFrame>>> {
         (**self).frames_at(indices)
     }
+    fn source_frames_at(&self, indices: &[usize]) -> Result<Vec<Option<SourceFrame>>> {
+        (**self).source_frames_at(indices)
+    }
 }
 
 impl<T: Footage + ?Sized> Footage for Box<T> {
@@ -87,6 +172,9 @@ impl<T: Footage + ?Sized> Footage for Box<T> {
     }
     fn frames_at(&self, indices: &[usize]) -> Result<Vec<Option<RgbaFrame>>> {
         (**self).frames_at(indices)
+    }
+    fn source_frames_at(&self, indices: &[usize]) -> Result<Vec<Option<SourceFrame>>> {
+        (**self).source_frames_at(indices)
     }
 }
 
@@ -242,10 +330,11 @@ mod media {
         cursor: Cursor,
     }
 
-    /// An open reader and the index of the frame it yields next. A clone starts without
+    /// An open reader, the index of the frame it yields next and whether it keeps 8-bit
+    /// frames ([`ignis_media::open_keeping_8bit`]). A clone starts without
     /// one (readers are not shared).
     #[derive(Default)]
-    struct Cursor(std::sync::Mutex<Option<(usize, ignis_media::FrameReader)>>);
+    struct Cursor(std::sync::Mutex<Option<(usize, bool, ignis_media::FrameReader)>>);
 
     impl Clone for Cursor {
         fn clone(&self) -> Cursor {
@@ -305,7 +394,12 @@ mod media {
             &self.path
         }
 
-        fn read(&self, start: usize, end: Option<usize>) -> Result<ignis_media::FrameReader> {
+        fn read(
+            &self,
+            start: usize,
+            end: Option<usize>,
+            keep_8bit: bool,
+        ) -> Result<ignis_media::FrameReader> {
             let opts = ignis_media::ReadOptions {
                 range: Some(ignis_media::FrameRange::frames(
                     start as u64,
@@ -314,7 +408,12 @@ mod media {
                 scale: self.scale,
                 ..Default::default()
             };
-            ignis_media::open(&self.path, &opts).map_err(|e| self.fail(None, e))
+            let open = if keep_8bit {
+                ignis_media::open_keeping_8bit
+            } else {
+                ignis_media::open
+            };
+            open(&self.path, &opts).map_err(|e| self.fail(None, e))
         }
 
         fn fail(&self, frame: Option<usize>, e: ignis_media::MediaError) -> EigenError {
@@ -331,7 +430,7 @@ mod media {
             &self.info
         }
         fn frames(&self, start: usize) -> Result<Frames<'_>> {
-            let r = self.read(start, None)?;
+            let r = self.read(start, None, false)?;
             Ok(Box::new(r.enumerate().map(move |(i, f)| {
                 f.map_err(|e| self.fail(Some(start + i), e))
             })))
@@ -341,6 +440,28 @@ mod media {
         /// (else it opens one there); the reader is kept for the next call. Frames past
         /// the end of the source are `None`.
         fn frames_at(&self, indices: &[usize]) -> Result<Vec<Option<RgbaFrame>>> {
+            self.read_at(indices, false, |f| f.into_linear())
+        }
+        /// [`MediaFootage::frames_at`] with 8-bit decoders' frames kept as their bytes.
+        fn source_frames_at(&self, indices: &[usize]) -> Result<Vec<Option<SourceFrame>>> {
+            self.read_at(indices, true, |f| match f {
+                ignis_media::DecodedFrame::Linear(f) => SourceFrame::Linear(f),
+                ignis_media::DecodedFrame::Srgba8 { size, bytes } => {
+                    SourceFrame::Srgb8 { size, bytes }
+                }
+            })
+        }
+    }
+
+    impl MediaFootage {
+        /// The frames `indices` (see [`Footage::frames_at`]) read by a reader opened with
+        /// `keep_8bit` ([`ignis_media::open_keeping_8bit`]), each made into a `T` by `take`.
+        fn read_at<T: Clone>(
+            &self,
+            indices: &[usize],
+            keep_8bit: bool,
+            take: impl Fn(ignis_media::DecodedFrame) -> T,
+        ) -> Result<Vec<Option<T>>> {
             let (Some(&lo), Some(&hi)) = (indices.first(), indices.last()) else {
                 return Ok(Vec::new());
             };
@@ -350,14 +471,16 @@ mod media {
             }
             let mut guard = self.cursor.0.lock().unwrap_or_else(|e| e.into_inner());
             let (mut n, mut reader) = match guard.take() {
-                Some((at, r)) if at <= lo && lo - at <= MAX_SKIP => (at, r),
-                _ => (lo, self.read(lo, None)?),
+                Some((at, k, r)) if k == keep_8bit && at <= lo && lo - at <= MAX_SKIP => (at, r),
+                _ => (lo, self.read(lo, None, keep_8bit)?),
             };
             let mut out = vec![None; indices.len()];
             let mut want = indices.iter().enumerate().peekable();
             while want.peek().is_some() {
-                let Some(f) = reader.next() else { break };
-                let f = f.map_err(|e| self.fail(Some(n), e))?;
+                let Some(f) = reader.next_decoded() else {
+                    break;
+                };
+                let f = take(f.map_err(|e| self.fail(Some(n), e))?);
                 n += 1;
                 let mut hits = Vec::new();
                 while let Some((j, _)) = want.next_if(|(_, &w)| w == n - 1) {
@@ -371,7 +494,7 @@ mod media {
                     out[last] = Some(f);
                 }
             }
-            *guard = Some((n, reader));
+            *guard = Some((n, keep_8bit, reader));
             Ok(out)
         }
     }
@@ -456,10 +579,40 @@ mod tests {
                 assert_eq!(g.as_ref(), Some(&seq[i]), "frame {i} after earlier reads");
             }
         }
+        // The sequence's frames come linear through `source_frames_at` too.
+        let src = m.source_frames_at(&[0, 3]).unwrap();
+        assert_eq!(src[1].as_ref().unwrap().to_linear().as_ref(), &seq[3]);
         let e = MediaFootage::open(&dir.path().join("missing.mp4")).unwrap_err();
         assert!(matches!(e, EigenError::Decode { frame: None, .. }), "{e}");
         assert!(e.to_string().contains("missing.mp4"), "{e}");
         let e = e.in_clip("fire");
         assert!(e.to_string().starts_with("clip `fire`"), "{e}");
+    }
+
+    /// An MP4 (OpenH264) read for rendering comes as its 8-bit bytes, and they read as
+    /// exactly the linear frames `frames_at` gives, interleaving the two kinds of call.
+    #[cfg(feature = "media")]
+    #[test]
+    fn media_footage_8bit_frames_are_the_linear_frames() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("clip.mp4");
+        let size = Size::new(32, 48).unwrap();
+        let syn = SyntheticFootage::new(SyntheticParams { size, ..params(6) }, 30.0);
+        let mut w = ignis_media::create(&path, size, &Default::default()).unwrap();
+        for f in syn.frames(0).unwrap() {
+            w.push(&f.unwrap()).unwrap();
+        }
+        w.finish().unwrap();
+        let m = MediaFootage::open(&path).unwrap();
+        for want in [&[0usize, 2][..], &[3, 5], &[1, 1, 4]] {
+            let lin = m.frames_at(want).unwrap();
+            let src = m.source_frames_at(want).unwrap();
+            for (l, s) in lin.iter().zip(&src) {
+                let s = s.as_ref().unwrap();
+                assert!(matches!(s, SourceFrame::Srgb8 { .. }), "converted");
+                assert_eq!(s.to_linear().as_ref(), l.as_ref().unwrap());
+            }
+        }
+        assert_eq!(m.source_frames_at(&[6]).unwrap(), vec![None]);
     }
 }

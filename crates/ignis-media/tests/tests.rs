@@ -151,6 +151,60 @@ mod footage {
         assert_eq!(r.count(), 3);
     }
 
+    /// `open_keeping_8bit` + `next_decoded`: the OpenH264 path hands over its 8-bit sRGB
+    /// bytes, which convert to exactly the frames `open`'s iterator yields; with a crop
+    /// the frame comes linear (cropped), equal to `open` with the same crop.
+    #[test]
+    fn candle_kept_8bit_converts_to_the_linear_frames() {
+        let Some(path) = data("candle.mp4") else {
+            return;
+        };
+        let range = || Some(FrameRange::frames(3, Some(7)));
+        let opts = ReadOptions {
+            range: range(),
+            ..Default::default()
+        };
+        let linear: Vec<RgbaFrame> = open(&path, &opts)
+            .unwrap()
+            .collect::<Result<_, _>>()
+            .unwrap();
+        let mut r = open_keeping_8bit(&path, &opts).unwrap();
+        let mut n = 0;
+        while let Some(f) = r.next_decoded() {
+            let f = f.unwrap();
+            let DecodedFrame::Srgba8 { size, bytes } = &f else {
+                panic!("frame {n} was converted");
+            };
+            assert_eq!((*size, bytes.len()), (linear[n].size(), size.pixels() * 4));
+            assert_eq!(f.into_linear(), linear[n]);
+            n += 1;
+        }
+        assert_eq!(n, 4);
+        let crop = Some(Rect {
+            x: 10,
+            y: 20,
+            width: 30,
+            height: 40,
+        });
+        let opts = ReadOptions {
+            range: range(),
+            crop,
+            ..Default::default()
+        };
+        let want: Vec<RgbaFrame> = open(&path, &opts)
+            .unwrap()
+            .collect::<Result<_, _>>()
+            .unwrap();
+        let mut r = open_keeping_8bit(&path, &opts).unwrap();
+        for w in &want {
+            match r.next_decoded().unwrap().unwrap() {
+                DecodedFrame::Linear(f) => assert_eq!(&f, w),
+                DecodedFrame::Srgba8 { .. } => panic!("a cropped frame stayed 8-bit"),
+            }
+        }
+        assert!(r.next_decoded().is_none());
+    }
+
     #[test]
     fn candle_crop_and_scale() {
         let Some(path) = data("candle.mp4") else {

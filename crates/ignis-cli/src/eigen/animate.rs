@@ -714,21 +714,11 @@ pub fn demo(ctx: &mut crate::demo::Demo, dbp: &Path) -> Result<()> {
     if let Some(cf) = &campfire {
         argv.push(cf.to_string_lossy().into_owned());
     }
-    // Stored pre-processed frames (§7.1.2) at a modest size keep the output sharp and the
-    // demo folder small (~60 MB).
-    argv.extend(
-        [
-            "--stride",
-            "2",
-            "--train-size",
-            "48x80",
-            "--frame-size",
-            "120x196",
-            "--store-frames",
-            "-o",
-        ]
-        .map(String::from),
-    );
+    // The default framing: the clips at their own resolution in a common frame that holds
+    // them all (candle 480x480 and campfire 960x540: 960x540), so the scenario is written
+    // at that size, database frames read from the source videos (§7.1.2, no stored
+    // frames). Every second frame keeps the training short.
+    argv.extend(["--stride", "2", "-o"].map(String::from));
     argv.push(real.to_string_lossy().into_owned());
     let a = crate::parse_sub::<crate::eigen::TrainArgs>(
         &argv.iter().map(String::as_str).collect::<Vec<_>>(),

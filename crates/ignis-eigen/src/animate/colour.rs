@@ -29,8 +29,9 @@
 //!   destination whose alpha is `ignis_core::post::alpha_matte`, it fades into the glow.
 
 use crate::error::{EigenError, Result};
+use crate::footage::SourceFrame;
 use crate::pose::{ClipPose, PoseParams};
-use ignis_core::colour::{synthetic_colour, Tint};
+use ignis_core::colour::SolidTintRamp;
 use ignis_core::frame::LUMA;
 use ignis_core::post::gaussian_blur;
 use ignis_core::{CoreError, GrayFrame, RgbaFrame, Size};
@@ -256,9 +257,74 @@ pub fn original_colouring_then(
     p: &OriginalColour,
     then: &BandPass<'_>,
 ) -> Result<RgbaFrame> {
+    let layers = Layers {
+        original: Orig::Linear(original.data()),
+        destination,
+        smoke,
+        custom,
+    };
+    colour_then(source, original.size(), layers, p, then)
+}
+
+/// [`original_colouring_then`] with the original as a rendering's source frame: 8-bit
+/// footage ([`SourceFrame::Srgb8`]) is read as it is, through
+/// [`crate::footage::srgb8_table`] — the same result as on the frame in linear light,
+/// bit for bit, without converting it.
+pub fn original_colouring_src_then(
+    source: &GrayFrame,
+    original: &SourceFrame,
+    destination: Destination<'_>,
+    smoke: Option<&RgbaFrame>,
+    custom: Option<(&GrayFrame, MaskMode)>,
+    p: &OriginalColour,
+    then: &BandPass<'_>,
+) -> Result<RgbaFrame> {
+    let orig = match original {
+        SourceFrame::Linear(f) => Orig::Linear(f.data()),
+        SourceFrame::Srgb8 { bytes, .. } => Orig::Srgb8(bytes),
+    };
+    let layers = Layers {
+        original: orig,
+        destination,
+        smoke,
+        custom,
+    };
+    colour_then(source, original.size(), layers, p, then)
+}
+
+/// The original frame's pixels: linear, or 8-bit sRGB RGBA bytes.
+#[derive(Clone, Copy)]
+enum Orig<'a> {
+    Linear(&'a [[f32; 4]]),
+    Srgb8(&'a [u8]),
+}
+
+/// Algorithm 2's layers besides the mask.
+struct Layers<'a> {
+    original: Orig<'a>,
+    destination: Destination<'a>,
+    smoke: Option<&'a RgbaFrame>,
+    custom: Option<(&'a GrayFrame, MaskMode)>,
+}
+
+/// The checks and the banded pass of [`original_colouring_then`] (`orig_size`: the
+/// original's size).
+fn colour_then(
+    source: &GrayFrame,
+    orig_size: Size,
+    layers: Layers<'_>,
+    p: &OriginalColour,
+    then: &BandPass<'_>,
+) -> Result<RgbaFrame> {
+    let Layers {
+        original,
+        destination,
+        smoke,
+        custom,
+    } = layers;
     p.validate()?;
     let size = source.size();
-    check_size("the original frame", original.size(), size)?;
+    check_size("the original frame", orig_size, size)?;
     match destination {
         Destination::Empty => {}
         Destination::Image(d) => check_size("the destination (bloom) image", d.size(), size)?,
@@ -291,63 +357,82 @@ pub fn original_colouring_then(
     let n = size.pixels();
     let mut out: Vec<[f32; 4]> = Vec::with_capacity(n);
     let band = w.max(1) * TINT_BAND;
-    let bands: Vec<Result<()>> = out.spare_capacity_mut()[..n]
+    out.spare_capacity_mut()[..n]
         .par_chunks_mut(band)
         .enumerate()
-        .map(|(b, rows)| {
+        .for_each(|(b, rows)| {
             let span = b * band..b * band + rows.len();
-            let tinted = match destination {
+            let dest = match destination {
+                Destination::Empty => Dest::Empty,
+                Destination::Image(d) => Dest::Image(&d.data()[span.clone()]),
                 Destination::SolidTint(bloom, tint) => {
-                    let g = GrayFrame::from_vec(
-                        Size {
-                            width: w as u32,
-                            height: (rows.len() / w.max(1)) as u32,
-                        },
-                        bloom.data()[span.clone()].to_vec(),
-                    )?;
-                    Some(synthetic_colour(&g, &Tint::Solid(tint))?)
+                    Dest::Solid(&bloom.data()[span.clone()], SolidTintRamp::new(tint))
                 }
-                _ => None,
             };
-            let dest = match (destination, &tinted) {
-                (_, Some(t)) => Some(t.data()),
-                (Destination::Image(d), None) => Some(&d.data()[span.clone()]),
-                _ => None,
-            };
-            colour_pixels(
-                &mask.data()[span.clone()],
-                &original.data()[span.clone()],
+            let px = Pixels {
+                mask: &mask.data()[span.clone()],
                 dest,
-                smoke.map(|s| &s.data()[span.clone()]),
-                extra.map(|m| &m.data()[span.clone()]),
-                p.threshold,
-                rows,
-            );
+                smoke: smoke.map(|s| &s.data()[span.clone()]),
+                extra: extra.map(|m| &m.data()[span.clone()]),
+            };
+            match original {
+                Orig::Linear(o) => {
+                    let o = &o[span.clone()];
+                    colour_pixels(&px, |i| o[i], p.threshold, rows)
+                }
+                Orig::Srgb8(o) => {
+                    let o = &o[span.start * 4..span.end * 4];
+                    let t = crate::footage::srgb8_table();
+                    colour_pixels(
+                        &px,
+                        |i| crate::footage::srgb8_pixel(t, &o[i * 4..i * 4 + 4]),
+                        p.threshold,
+                        rows,
+                    )
+                }
+            }
             // SAFETY: `colour_pixels` wrote every pixel of `rows`, and `[f32; 4]` has no
             // invalid bit patterns or drop glue.
             let rows = unsafe { &mut *(rows as *mut [MaybeUninit<[f32; 4]>] as *mut [[f32; 4]]) };
             then(span.start, rows);
-            Ok(())
-        })
-        .collect();
-    bands.into_iter().collect::<Result<Vec<()>>>()?;
-    // SAFETY: every band of the first `n` elements was written (an error returned above,
-    // leaving the vector empty).
+        });
+    // SAFETY: every band of the first `n` elements was written above.
     unsafe { out.set_len(n) };
     Ok(RgbaFrame::from_vec(size, out)?)
 }
 
-/// Algorithm 2 on a run of pixels (see [`original_colouring`]).
+/// A band's destination: none, an image, or a bloom coloured by a solid tint pixel by
+/// pixel (`synthetic_colour`'s values).
+enum Dest<'a> {
+    Empty,
+    Image(&'a [[f32; 4]]),
+    Solid(&'a [f32], SolidTintRamp),
+}
+
+/// A band's layers for [`colour_pixels`].
+struct Pixels<'a> {
+    mask: &'a [f32],
+    dest: Dest<'a>,
+    smoke: Option<&'a [[f32; 4]]>,
+    extra: Option<&'a [f32]>,
+}
+
+/// Algorithm 2 on a run of pixels (see [`original_colouring`]); `orig(i)` is the
+/// original's pixel `i` in linear light.
+#[inline]
 fn colour_pixels(
-    mask: &[f32],
-    orig: &[[f32; 4]],
-    dest: Option<&[[f32; 4]]>,
-    smoke: Option<&[[f32; 4]]>,
-    extra: Option<&[f32]>,
+    px: &Pixels<'_>,
+    orig: impl Fn(usize) -> [f32; 4],
     threshold: f32,
     out: &mut [MaybeUninit<[f32; 4]>],
 ) {
     let inv_t = 1.0 / threshold;
+    let Pixels {
+        mask,
+        dest,
+        smoke,
+        extra,
+    } = px;
     for (i, o) in out.iter_mut().enumerate() {
         let mut s = if mask[i] > threshold {
             1.0
@@ -357,15 +442,20 @@ fn colour_pixels(
         if let Some(e) = extra {
             s = s.max(e[i].clamp(0.0, 1.0));
         }
+        let og = orig(i);
         if s >= 1.0 {
-            o.write(orig[i]);
+            o.write(og);
             continue;
         }
         let sd = 1.0 - s;
-        let d = dest.map_or([0.0; 4], |d| d[i]);
+        let d = match dest {
+            Dest::Empty => [0.0; 4],
+            Dest::Image(d) => d[i],
+            Dest::Solid(b, ramp) => ramp.at(b[i]),
+        };
         let k = smoke.map_or([0.0; 4], |k| k[i]);
         o.write(std::array::from_fn(|c| {
-            (s * orig[i][c] + sd * d[c] + k[c] * sd).clamp(0.0, 1.0)
+            (s * og[c] + sd * d[c] + k[c] * sd).clamp(0.0, 1.0)
         }));
     }
 }
@@ -475,6 +565,7 @@ pub fn synthetic_smoke(
 mod tests {
     use super::*;
     use crate::pose::warp;
+    use ignis_core::colour::{synthetic_colour, Tint};
 
     fn size(w: u32, h: u32) -> Size {
         Size::new(w, h).unwrap()
@@ -694,6 +785,53 @@ mod tests {
                 assert_eq!(bits(&a), bits(&b), "smoke {with_smoke}");
             }
         }
+    }
+
+    /// An 8-bit original (a rendering's source frame kept as sRGB bytes) colours to the
+    /// same bytes as the frame converted to linear light, with every kind of destination,
+    /// smoke and a custom mask; its size is checked like a linear one's.
+    #[test]
+    fn srgb8_original_equals_the_linear_original() {
+        let sz = size(29, TINT_BAND as u32 + 9);
+        let wave =
+            |x: u32, y: u32, k: f32| ((x as f32 * 0.37 + y as f32 * 0.11 + k).sin() + 1.0) * 0.5;
+        let src = GrayFrame::from_fn(sz, |x, y| wave(x, y, 0.0) * 3.0 * T);
+        let bloom = GrayFrame::from_fn(sz, |x, y| wave(x, y, 1.0) * 1.2);
+        let bytes: Vec<u8> = (0..sz.pixels() * 4).map(|i| (i * 37 % 256) as u8).collect();
+        let src8 = SourceFrame::srgb8(sz, bytes).unwrap();
+        let lin = src8.to_linear().into_owned();
+        let smoke = RgbaFrame::from_vec(sz, vec![[0.05, 0.04, 0.03, 0.02]; sz.pixels()]).unwrap();
+        let mask = GrayFrame::from_fn(sz, |x, y| wave(x, y, 2.0));
+        let image = synthetic_colour(&bloom, &Tint::Solid([0.9, 0.3, 0.1])).unwrap();
+        let dests = [
+            Destination::Empty,
+            Destination::Image(&image),
+            Destination::SolidTint(&bloom, [1.0, 0.42, 0.08]),
+        ];
+        let bits = |f: &RgbaFrame| -> Vec<u32> {
+            f.data().iter().flatten().map(|v| v.to_bits()).collect()
+        };
+        for dest in dests {
+            for with_smoke in [false, true] {
+                for custom in [None, Some((&mask, MaskMode::Add))] {
+                    let p = OriginalColour {
+                        threshold: T,
+                        smoke: with_smoke,
+                    };
+                    let k = with_smoke.then_some(&smoke);
+                    let none = |_: usize, _: &mut [[f32; 4]]| {};
+                    let a = original_colouring_then(&src, &lin, dest, k, custom, &p, &none);
+                    let b = original_colouring_src_then(&src, &src8, dest, k, custom, &p, &none);
+                    assert_eq!(bits(&a.unwrap()), bits(&b.unwrap()));
+                }
+            }
+        }
+        let small = SourceFrame::srgb8(size(2, 2), vec![0; 16]).unwrap();
+        let none = |_: usize, _: &mut [[f32; 4]]| {};
+        let p = OriginalColour::default();
+        let e = original_colouring_src_then(&src, &small, dests[0], None, None, &p, &none);
+        assert!(e.unwrap_err().to_string().contains("2x2"));
+        assert!(SourceFrame::srgb8(size(2, 2), vec![0; 15]).is_err());
     }
 
     #[test]

@@ -18,13 +18,14 @@ use rayon::prelude::*;
 
 use crate::animate::has_stored_frames;
 use crate::colour::{
-    original_colouring_then, synthetic_smoke, warp_rgba, Destination, OriginalColour,
+    original_colouring_src_then, synthetic_smoke, warp_rgba, Destination, OriginalColour,
 };
 use crate::db::{ClipEntry, EigenfireDb};
 use crate::error::{EigenError, Result};
 use crate::scenario::{ColourMode, Look, Plan, PlanFrame};
 use crate::transition::FrameRef;
 
+use crate::footage::SourceFrame;
 /// Where rendering reads footage: [`crate::footage::SyntheticSources`] for Ignis's own
 /// clips, the CLI's opener over `ignis-media` for real footage.
 pub use crate::footage::{FootageOpener, SyntheticSources};
@@ -248,8 +249,9 @@ fn colour_row(db: &EigenfireDb, f: &PlanFrame, e: usize) -> usize {
 /// Layers per database row, in the output view.
 #[derive(Default)]
 struct Layers {
-    /// Shared with the decoded frame when the warp is the identity (no copy).
-    original: HashMap<usize, Arc<RgbaFrame>>,
+    /// Shared with the decoded frame when the warp is the identity (no copy; 8-bit
+    /// footage stays 8-bit).
+    original: HashMap<usize, Arc<SourceFrame>>,
     smoke: HashMap<usize, RgbaFrame>,
     mask: HashMap<usize, GrayFrame>,
     /// The pre-processed frame made from the source footage (§7.1.2) and its matte.
@@ -259,7 +261,7 @@ struct Layers {
 /// The layers of one database row (see [`Layers`]).
 #[derive(Default)]
 struct FrameLayers {
-    original: Option<Arc<RgbaFrame>>,
+    original: Option<Arc<SourceFrame>>,
     smoke: Option<RgbaFrame>,
     grey: Option<(GrayFrame, GrayFrame)>,
 }
@@ -363,15 +365,19 @@ fn load_layers(
             continue;
         }
         let shift = |r: usize| shift_only(clip, db.angle(r), &pose_p, geo);
-        let warp_c = |f: &Arc<RgbaFrame>, r: usize| match shift(r) {
+        let warp_c = |f: &Arc<SourceFrame>, r: usize| match shift(r) {
             Some(d) if d == (0, 0) && f.size() == geo.out => Arc::clone(f),
-            Some(d) => Arc::new(shift_rgba(RgbaFrame::clone(f), geo.out, d)),
-            None => Arc::new(view_rgba(
-                warp_rgba(f, &clip.pose, db.angle(r), &pose_p),
+            Some(d) => Arc::new(SourceFrame::Linear(shift_rgba(
+                f.to_linear().into_owned(),
+                geo.out,
+                d,
+            ))),
+            None => Arc::new(SourceFrame::Linear(view_rgba(
+                warp_rgba(&f.to_linear(), &clip.pose, db.angle(r), &pose_p),
                 geo.frame,
                 geo.view,
                 geo.out,
-            )),
+            ))),
         };
         let warp_g = |g: GrayFrame, r: usize| match shift(r) {
             Some(d) => shift_gray(g, geo.out, d),
@@ -408,8 +414,8 @@ fn load_layers(
         need.dedup();
         if !need.is_empty() {
             let path = look.originals.get(&clip.name).map(PathBuf::as_path);
-            let got = sources.open(clip, path)?.frames_at(&need)?;
-            let by_frame: HashMap<usize, Arc<RgbaFrame>> = need
+            let got = sources.open(clip, path)?.source_frames_at(&need)?;
+            let by_frame: HashMap<usize, Arc<SourceFrame>> = need
                 .iter()
                 .zip(got)
                 .filter_map(|(&f, g)| g.map(|g| (f, Arc::new(g))))
@@ -454,10 +460,15 @@ fn load_layers(
                             Some(_) => None,
                         };
                         let sg = match stored {
-                            Some(m) if (m.width(), m.height()) == (cur.width(), cur.height()) => {
-                                crate::preprocess::source_grey_with_mask(cur, &m, &clip.pose, pre)
+                            Some(m)
+                                if (m.width(), m.height())
+                                    == (cur.size().width, cur.size().height) =>
+                            {
+                                crate::preprocess::source_grey_with_mask_src(
+                                    cur, &m, &clip.pose, pre,
+                                )
                             }
-                            _ => crate::preprocess::source_grey(cur, &clip.pose, pre),
+                            _ => crate::preprocess::source_grey(&cur.to_linear(), &clip.pose, pre),
                         };
                         fl.grey = Some((warp_g(sg.grey, r), warp_g(sg.matte, r)));
                     }
@@ -465,7 +476,12 @@ fn load_layers(
                         let cur_w = warp_c(cur, r);
                         if let Some(sp) = &look.smoke {
                             if let Some(next) = by_frame.get(&neighbour(f)) {
-                                fl.smoke = Some(synthetic_smoke(&cur_w, &warp_c(next, r), sp)?);
+                                let next_w = warp_c(next, r);
+                                fl.smoke = Some(synthetic_smoke(
+                                    &cur_w.to_linear(),
+                                    &next_w.to_linear(),
+                                    sp,
+                                )?);
                             }
                         }
                         fl.original = Some(cur_w);
@@ -766,7 +782,7 @@ fn finish_frame(
                 check_matte(grey, lit, grey.size(), matte)?;
             }
             let w = grey.width().max(1) as usize;
-            return original_colouring_then(
+            return original_colouring_src_then(
                 grey,
                 &layers.original[&r],
                 dest,
@@ -939,6 +955,7 @@ pub fn loop_plan(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::colour::original_colouring_then;
 
     /// `apply_matte` is `ignis_core::post::alpha_matte`, limited by the footage matte as
     /// `max(alpha, min(matte, colour alpha))`, bit for bit; opaque when off; sizes checked.

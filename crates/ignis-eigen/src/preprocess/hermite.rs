@@ -155,6 +155,48 @@ pub fn hermite_darken_rgba_in(
     out
 }
 
+/// [`hermite_darken_rgba_in`] of an 8-bit sRGB RGBA frame (`bytes`, `size`), read
+/// through [`crate::footage::srgb8_table`]: bit for bit the result on the frame converted
+/// to linear light first, without that conversion (renders of 8-bit footage).
+pub fn hermite_darken_srgb8_in(
+    size: ignis_core::Size,
+    bytes: &[u8],
+    mask: &GrayImage,
+    matte: &GrayFrame,
+    area: (u32, u32, u32, u32),
+    p: &HermiteParams,
+) -> GrayFrame {
+    let w = size.width as usize;
+    let (x0, y0) = (area.0 as usize, area.1 as usize);
+    let (x1, y1) = (
+        (area.2 as usize).min(w),
+        (area.3 as usize).min(size.height as usize),
+    );
+    if matte.size() != size || x0 >= x1 || y0 >= y1 || bytes.len() != size.pixels() * 4 {
+        let lin = crate::footage::SourceFrame::Srgb8 {
+            size,
+            bytes: bytes.to_vec(),
+        };
+        return hermite_darken_rgba(&lin.to_linear(), mask, Some(matte), p);
+    }
+    let mut out = GrayFrame::new(size);
+    let f = Darken::new(p);
+    let t8 = crate::footage::srgb8_table();
+    let m = mask.as_raw();
+    let protected = |i: usize| p.protect_interior && m.get(i).is_some_and(|&b| b > 0);
+    for y in y0..y1 {
+        let at = y * w;
+        let row = &bytes[(at + x0) * 4..(at + x1) * 4];
+        let t = &matte.data()[at + x0..at + x1];
+        let o = &mut out.data_mut()[at + x0..at + x1];
+        for (j, ((o, px), &t)) in o.iter_mut().zip(row.chunks_exact(4)).zip(t).enumerate() {
+            let px = crate::footage::srgb8_pixel(t8, px);
+            *o = darken_matted(&f, &px, t, protected(at + x0 + j));
+        }
+    }
+    out
+}
+
 /// Linear Rec. 709 luminance of a pixel (as `RgbaFrame::luminance`).
 #[inline]
 fn luma(px: &[f32; 4]) -> f32 {

@@ -197,8 +197,16 @@ pub(crate) struct Openh264Source {
 }
 
 impl Openh264Source {
-    pub(crate) fn start(info: &SourceInfo, probe: Mp4Probe, start: u64) -> Result<Openh264Source> {
-        Self::start_as(info, probe, start, true)
+    /// `linear`: convert each picture to linear light on the decoding thread (else
+    /// pictures stay 8-bit until [`FrameSource::next_frame`] or are handed over as they
+    /// are by [`FrameSource::next_decoded`]).
+    pub(crate) fn start(
+        info: &SourceInfo,
+        probe: Mp4Probe,
+        start: u64,
+        linear: bool,
+    ) -> Result<Openh264Source> {
+        Self::start_as(info, probe, start, linear)
     }
 
     /// [`Openh264Source::start`]; `linear`: convert each picture to linear light on the
@@ -384,6 +392,12 @@ fn picture_of(yuv: &openh264::decoder::DecodedYUV<'_>, linear: bool) -> Picture 
 
 impl FrameSource for Openh264Source {
     fn next_frame(&mut self) -> Option<Result<RgbaFrame>> {
+        self.next_decoded()
+            .map(|r| r.map(crate::read::DecodedFrame::into_linear))
+    }
+
+    fn next_decoded(&mut self) -> Option<Result<crate::read::DecodedFrame>> {
+        use crate::read::DecodedFrame;
         let (_, pic) = match self.rx.recv().ok()? {
             Ok(m) => m,
             Err(e) => return Some(Err(e)),
@@ -394,13 +408,13 @@ impl FrameSource for Openh264Source {
         };
         if size != self.expected {
             // Let the reader report the mismatch with its path and index.
-            return Some(Ok(RgbaFrame::new(
+            return Some(Ok(DecodedFrame::Linear(RgbaFrame::new(
                 Size::new(size.width.max(1), size.height.max(1)).ok()?,
-            )));
+            ))));
         }
         Some(Ok(match pic {
-            Picture::Linear(f) => f,
-            Picture::Srgba8(bytes, size) => convert::from_srgba8(size, &bytes),
+            Picture::Linear(f) => DecodedFrame::Linear(f),
+            Picture::Srgba8(bytes, size) => DecodedFrame::Srgba8 { size, bytes },
         }))
     }
 }

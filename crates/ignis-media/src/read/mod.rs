@@ -198,6 +198,39 @@ pub struct SourceInfo {
 /// A decoder positioned at some frame, yielding native-size frames in order.
 pub(crate) trait FrameSource: Send {
     fn next_frame(&mut self) -> Option<Result<RgbaFrame>>;
+    /// [`FrameSource::next_frame`], as the decoder made it: 8-bit decoders opened with
+    /// [`open_keeping_8bit`] keep their sRGB bytes.
+    fn next_decoded(&mut self) -> Option<Result<DecodedFrame>> {
+        self.next_frame().map(|r| r.map(DecodedFrame::Linear))
+    }
+}
+
+/// A decoded frame: linear light, or the 8-bit sRGB RGBA bytes (straight, linear alpha)
+/// an 8-bit decoder made, not yet converted (see [`open_keeping_8bit`]).
+#[derive(Clone, Debug, PartialEq)]
+pub enum DecodedFrame {
+    Linear(RgbaFrame),
+    /// `size.pixels() * 4` bytes, rows top to bottom.
+    Srgba8 {
+        size: Size,
+        bytes: Vec<u8>,
+    },
+}
+
+impl DecodedFrame {
+    pub fn size(&self) -> Size {
+        match self {
+            DecodedFrame::Linear(f) => f.size(),
+            DecodedFrame::Srgba8 { size, .. } => *size,
+        }
+    }
+    /// The linear-light frame (the same values [`FrameReader`]'s iterator yields).
+    pub fn into_linear(self) -> RgbaFrame {
+        match self {
+            DecodedFrame::Linear(f) => f,
+            DecodedFrame::Srgba8 { size, bytes } => convert::from_srgba8(size, &bytes),
+        }
+    }
 }
 
 /// The result of probing: the info plus what the opener needs.
@@ -301,13 +334,22 @@ fn read_up_to(r: &mut impl Read, buf: &mut [u8]) -> std::io::Result<usize> {
 
 /// Opens `path` for streaming with `opts` (range, crop, scale).
 pub fn open(path: &Path, opts: &ReadOptions) -> Result<FrameReader> {
-    open_inner(path, opts, ffmpeg_available())
+    open_inner(path, opts, ffmpeg_available(), false)
+}
+
+/// [`open`], for a reader read with [`FrameReader::next_decoded`]: an 8-bit decoder (the
+/// OpenH264 path) hands over its sRGB bytes uncropped and unscaled instead of converting
+/// them to linear light on its thread (a renderer working from 8-bit values saves the
+/// conversion and a frame 4× the size). The iterator still yields linear frames.
+pub fn open_keeping_8bit(path: &Path, opts: &ReadOptions) -> Result<FrameReader> {
+    open_inner(path, opts, ffmpeg_available(), true)
 }
 
 pub(crate) fn open_inner(
     path: &Path,
     opts: &ReadOptions,
     have_ffmpeg: bool,
+    keep_8bit: bool,
 ) -> Result<FrameReader> {
     let probed = probe_inner(path, have_ffmpeg)?;
     let source_info = probed.info().clone();
@@ -323,7 +365,7 @@ pub(crate) fn open_inner(
         out_size = Size::new(s.width, s.height)?;
     }
     let source: Box<dyn FrameSource> = match probed {
-        Probed::Mp4(info, p) => Box::new(h264::Openh264Source::start(&info, p, start)?),
+        Probed::Mp4(info, p) => Box::new(h264::Openh264Source::start(&info, p, start, !keep_8bit)?),
         Probed::Ffmpeg(info) => Box::new(ffmpeg::FfmpegSource::start(&info, start, end)?),
         Probed::Sequence(_, files) => Box::new(sequence::SequenceSource::new(files, start)),
         Probed::Image(info) => Box::new(sequence::SequenceSource::new(
@@ -380,14 +422,15 @@ impl FrameReader {
     }
 }
 
-impl Iterator for FrameReader {
-    type Item = Result<RgbaFrame>;
-
-    fn next(&mut self) -> Option<Self::Item> {
+impl FrameReader {
+    /// The next frame as the decoder made it ([`DecodedFrame::Srgba8`] from an 8-bit
+    /// decoder opened with [`open_keeping_8bit`] when no crop or scale is asked; linear
+    /// otherwise). The same checks and errors as the iterator.
+    pub fn next_decoded(&mut self) -> Option<Result<DecodedFrame>> {
         if self.done || self.end.is_some_and(|e| self.index >= e) {
             return None;
         }
-        let frame = match self.source.next_frame() {
+        let frame = match self.source.next_decoded() {
             Some(Ok(f)) => f,
             Some(Err(e)) => {
                 self.done = true;
@@ -422,6 +465,10 @@ impl Iterator for FrameReader {
             )));
         }
         self.index += 1;
+        if self.crop.is_none() && self.scale.is_none() {
+            return Some(Ok(frame));
+        }
+        let frame = frame.into_linear();
         let frame = match &self.crop {
             Some(r) => convert::crop(&frame, r),
             None => frame,
@@ -430,7 +477,16 @@ impl Iterator for FrameReader {
             Some(s) => convert::resize(&frame, s),
             None => frame,
         };
-        Some(Ok(frame))
+        Some(Ok(DecodedFrame::Linear(frame)))
+    }
+}
+
+impl Iterator for FrameReader {
+    type Item = Result<RgbaFrame>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        self.next_decoded()
+            .map(|r| r.map(DecodedFrame::into_linear))
     }
 
     fn size_hint(&self) -> (usize, Option<usize>) {
@@ -498,9 +554,14 @@ mod tests {
             println!("skipped: ../shared/data not present");
             return;
         }
-        let e = open_inner(&data.join("campfire.mp4"), &ReadOptions::default(), false)
-            .err()
-            .unwrap();
+        let e = open_inner(
+            &data.join("campfire.mp4"),
+            &ReadOptions::default(),
+            false,
+            false,
+        )
+        .err()
+        .unwrap();
         let msg = e.to_string();
         assert!(matches!(e, MediaError::Unsupported { .. }), "{msg}");
         assert!(
