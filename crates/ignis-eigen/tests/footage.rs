@@ -325,7 +325,8 @@ fn clips_of_different_sizes_render_at_their_own_size_or_a_common_one() {
 
 /// The candle mask bounds of issue 14 on `candle.mp4`: on each checked frame where the
 /// flame's bright core (linear grey ≥ 0.8) exists, the default mask covers ≥ 95 % of the
-/// core and its area is at most 3× the core dilated by 10 px. Checks every 8th frame of
+/// core and its area is at most 3× the core dilated by 10 px; and the mask outside the
+/// dilated core (lit wax, not flame) stays small. Checks every 8th frame of
 /// the whole clip (IGNIS_MASK_STRIDE / IGNIS_MASK_END change that; `IGNIS_MASK_STRIDE=1`
 /// checks every frame, about a minute and a half on 2 cores).
 #[test]
@@ -371,6 +372,7 @@ fn candle_mask_covers_the_flame_not_the_jar() {
         "candle.mp4 has lit surroundings (static fraction {st:.2})"
     );
     let (mut checked, mut worst_ratio, mut worst_cover) = (0, 0.0f64, 1.0f64);
+    let (mut worst_away, mut sum_away, mut far) = (0.0f64, 0.0f64, 0usize);
     for (i, f) in frames.iter().enumerate() {
         let lum = f.luminance();
         let core = image::GrayImage::from_fn(f.width(), f.height(), |x, y| {
@@ -391,13 +393,33 @@ fn candle_mask_covers_the_flame_not_the_jar() {
             .count();
         let ratio = area as f64 / dil_px as f64;
         let cover = covered as f64 / core_px as f64;
-        eprintln!("frame {}: mask {area} px, core {core_px} px (dilated {dil_px}): ratio {ratio:.2}, core covered {:.1}%", i * stride, cover * 100.0);
+        // Mask outside the dilated core: lit surroundings (the wax glowing through the
+        // jar), not the flame.
+        let outside = m
+            .pixels()
+            .zip(dil.pixels())
+            .filter(|(m, d)| m[0] > 0 && d[0] == 0)
+            .count();
+        let away = outside as f64 / dil_px as f64;
+        eprintln!("frame {}: mask {area} px, core {core_px} px (dilated {dil_px}): ratio {ratio:.2}, core covered {:.1}%, outside the dilated core {away:.2}", i * stride, cover * 100.0);
+        worst_away = worst_away.max(away);
+        sum_away += away;
+        far += (away > 0.25) as usize;
         worst_ratio = worst_ratio.max(ratio);
         worst_cover = worst_cover.min(cover);
         checked += 1;
     }
-    eprintln!("{checked} frames: worst area ratio {worst_ratio:.2} (goal <= 3), worst core cover {:.1}% (goal >= 95%)", worst_cover * 100.0);
+    let mean_away = sum_away / checked.max(1) as f64;
+    eprintln!("{checked} frames: worst area ratio {worst_ratio:.2} (goal <= 3), worst core cover {:.1}% (goal >= 95%); mask outside the dilated core: mean {mean_away:.2} (goal <= 0.15), worst {worst_away:.2}, {far} frames above 0.25 (goal <= 10%)", worst_cover * 100.0);
     assert!(checked > 0);
+    // The stronger bound (lit surroundings): the mask outside the dilated core — the wax
+    // glowing through the jar — is at most a quarter of the dilated core on 9 frames in
+    // 10 and 0.15 of it on average. Frames where the wax itself reaches the core's level
+    // (grey >= 0.8) are the rest: the cover bound counts that wax as core.
+    assert!(
+        mean_away <= 0.15 && far * 10 <= checked,
+        "mask outside the dilated core: mean {mean_away:.2}, {far} of {checked} frames above 0.25"
+    );
     assert!(
         worst_ratio <= 3.0,
         "mask area {worst_ratio:.2}x the dilated core"
