@@ -113,6 +113,13 @@ pub struct MaskParams {
     /// flame's outer edge may be and still be chosen over the edge of its white-hot core.
     /// Default 0.1.
     pub isolate_edge_tolerance: f32,
+    /// With isolation, also drop lit islands ([`drop_lit_islands`]): parts of the
+    /// isolated region away from the flame whose edge is soft — a surface the flame lights
+    /// (candle.mp4's wax glowing through the jar), not a separate tongue. Default `false`:
+    /// on some frames of candle.mp4 that wax glows as bright as the flame's core (linear
+    /// grey ≥ 0.8), which issue 14's cover bound counts as flame, and sparing it only on
+    /// those frames would make it blink in and out of the animation.
+    pub isolate_lit_islands: bool,
 }
 
 /// When [`isolate_flame`] runs.
@@ -162,6 +169,7 @@ impl Default for MaskParams {
             isolate_floor: 0.3,
             isolate_saturation: 0.5,
             isolate_edge_tolerance: 0.1,
+            isolate_lit_islands: false,
         }
     }
 }
@@ -323,6 +331,7 @@ pub fn flame_mask(frame: &RgbaFrame, p: &MaskParams, isolate: bool) -> GrayImage
             frame.height(),
             p.isolate_floor,
             p.isolate_edge_tolerance,
+            p.isolate_lit_islands,
         );
         // Kept: the isolated flame, and saturated (emissive) pixels connected to it — a
         // flame's own light is saturated (orange, red, its blue root), what it lights is
@@ -489,11 +498,19 @@ const MERGE_GROWTH: f64 = 1.5;
 /// flame's outer edge) is chosen — but never below halfway from the median lit pixel
 /// (≥ `floor`) to the peak: a flame is brighter than most of what it lights. Returns
 /// the mask of the pixels at least as bright as `τ` (255 inside), connected or not — a
-/// second tongue not connected to the seeds is kept — except the parts that are only a
-/// lit surface with a soft edge ([`drop_lit_islands`]).
+/// reflection or a second tongue not connected to the seeds is kept — less, with
+/// `lit_islands`, the parts that are only a lit surface with a soft edge
+/// ([`drop_lit_islands`]).
 /// Deterministic; O(pixels). The thresholds adapt to each frame: nothing is tuned to a
 /// clip.
-pub fn isolate_flame(luma: &[u8], w: u32, h: u32, floor: f32, tolerance: f32) -> GrayImage {
+pub fn isolate_flame(
+    luma: &[u8],
+    w: u32,
+    h: u32,
+    floor: f32,
+    tolerance: f32,
+    lit_islands: bool,
+) -> GrayImage {
     let mut out = GrayImage::new(w, h);
     if let Some(lv) = isolate_levels(luma, w, h, floor, tolerance) {
         for (o, &v) in out.as_mut().iter_mut().zip(luma) {
@@ -501,17 +518,18 @@ pub fn isolate_flame(luma: &[u8], w: u32, h: u32, floor: f32, tolerance: f32) ->
                 *o = 255;
             }
         }
-        let floor = (floor * 255.0).round() as usize;
-        drop_lit_islands(&mut out, luma, lv.vmax.saturating_sub(8).max(floor));
+        if lit_islands {
+            let floor = (floor * 255.0).round() as usize;
+            drop_lit_islands(&mut out, luma, lv.vmax.saturating_sub(8).max(floor));
+        }
     }
     out
 }
 
 /// Removes from `keep` every 8-connected part that holds no seed (no pixel at least
-/// `seed` bright in `luma`), no pixel of a bright core (linear grey ≥ [`BRIGHT_CORE`])
-/// and whose edge is less than a third as sharp as the seeded parts' edge: the mean
-/// luminance step from its pixels to their 4-neighbours outside `keep`, against the same
-/// mean over the parts that hold a seed.
+/// `seed` bright in `luma`) and whose edge is less than a third as sharp as the seeded
+/// parts' edge: the mean luminance step from its pixels to their 4-neighbours outside
+/// `keep`, against the same mean over the parts that hold a seed.
 ///
 /// Why: a flame — every separate tongue of a campfire or a wall of fire — ends at a sharp
 /// edge (the same cue [`isolate_levels`] picks the threshold by); a surface it lights
@@ -519,12 +537,10 @@ pub fn isolate_flame(luma: &[u8], w: u32, h: u32, floor: f32, tolerance: f32) ->
 /// candle glowing through its jar) it forms an island with a soft edge. Measured: the lit
 /// wax of candle.mp4 steps 0.15–0.26 of the flame's edge, the separate tongues of
 /// campfire.mp4 0.43–0.98 (one small dim island 0.31). Relative to each frame's own flame:
-/// nothing is tuned to a clip. Parts reaching the bright-core level are kept whatever
-/// their edge: issue 14 measures a mask by its cover of every such pixel (on some frames
-/// of candle.mp4 the glowing wax itself reaches it). Deterministic; O(pixels).
+/// nothing is tuned to a clip. The decision does not look at brightness beyond the seeds,
+/// so a lit surface is dropped on every frame alike (no blinking). Deterministic;
+/// O(pixels).
 pub fn drop_lit_islands(keep: &mut GrayImage, luma: &[u8], seed: usize) {
-    // The first 8-bit code wholly at or above the core's level (code 231 holds 0.8).
-    let core = srgb_encode8(BRIGHT_CORE) as usize + 1;
     let w = keep.width() as usize;
     let n = keep.as_raw().len();
     if luma.len() != n || w == 0 {
@@ -581,7 +597,7 @@ pub fn drop_lit_islands(keep: &mut GrayImage, luma: &[u8], seed: usize) {
     let drop: Vec<bool> = parts
         .iter()
         .map(|&(peak, sum, count)| {
-            peak < seed.min(core) && count > 0 && sum / (count as f64) < flame_edge / LIT_EDGE_RATIO
+            peak < seed && count > 0 && sum / (count as f64) < flame_edge / LIT_EDGE_RATIO
         })
         .collect();
     for (o, &l) in keep.as_mut().iter_mut().zip(&label) {
@@ -590,9 +606,6 @@ pub fn drop_lit_islands(keep: &mut GrayImage, luma: &[u8], seed: usize) {
         }
     }
 }
-
-/// Linear grey of a flame's bright core (issue 14's measure: grey ≥ 0.8).
-pub const BRIGHT_CORE: f32 = 0.8;
 
 /// How many times sharper a flame's edge is than the soft edge of a lit island that
 /// [`drop_lit_islands`] removes.
@@ -1014,10 +1027,13 @@ mod tests {
             "the island passes the threshold {}",
             lv.chosen
         );
-        let m = isolate_flame(&luma, w as u32, h as u32, 0.3, 0.1);
+        let m = isolate_flame(&luma, w as u32, h as u32, 0.3, 0.1, true);
         let at = |x: u32, y: u32| m.get_pixel(x, y)[0] > 0;
         assert!(at(30, 40) && at(75, 40), "both tongues are kept");
         assert!(!at(105, 62), "the lit island is dropped");
+        // Without `lit_islands` (the default) it is kept.
+        let m = isolate_flame(&luma, w as u32, h as u32, 0.3, 0.1, false);
+        assert!(m.get_pixel(105, 62)[0] > 0);
     }
 
     /// Issue 14: on a synthetic campfire (several tongues), isolation keeps every
@@ -1031,7 +1047,10 @@ mod tests {
             style: FlameStyle::Campfire,
             seed: 5,
         };
-        let p = MaskParams::default();
+        let p = MaskParams {
+            isolate_lit_islands: true,
+            ..Default::default()
+        };
         let mut tongues = 0;
         for t in 0..8 {
             let f = synthetic_frame(&sp, t).unwrap();
