@@ -325,7 +325,8 @@ fn clips_of_different_sizes_render_at_their_own_size_or_a_common_one() {
 
 /// The candle mask bounds of issue 14 on `candle.mp4`: on each checked frame where the
 /// flame's bright core (linear grey ≥ 0.8) exists, the default mask covers ≥ 95 % of the
-/// core and its area is at most 3× the core dilated by 10 px. Checks every 8th frame of
+/// core and its area is at most 3× the core dilated by 10 px; with `isolate_lit_islands`
+/// the mask outside the dilated core (lit wax, not flame) stays small. Checks every 8th frame of
 /// the whole clip (IGNIS_MASK_STRIDE / IGNIS_MASK_END change that; `IGNIS_MASK_STRIDE=1`
 /// checks every frame, about a minute and a half on 2 cores).
 #[test]
@@ -370,7 +371,60 @@ fn candle_mask_covers_the_flame_not_the_jar() {
         st > STATIC_LIT,
         "candle.mp4 has lit surroundings (static fraction {st:.2})"
     );
-    let (mut checked, mut worst_ratio, mut worst_cover) = (0, 0.0f64, 1.0f64);
+    let d = candle_mask_stats(&frames, &p, stride);
+    eprintln!("default: {checked} frames: worst area ratio {:.2} (goal <= 3), worst core cover {:.1}% (goal >= 95%); mask outside the dilated core: mean {:.2}, {} frames above 0.25", d.worst_ratio, d.worst_cover * 100.0, d.mean_away, d.far, checked = d.checked);
+    assert!(d.checked > 0);
+    assert!(
+        d.worst_ratio <= 3.0,
+        "mask area {:.2}x the dilated core",
+        d.worst_ratio
+    );
+    assert!(
+        d.worst_cover >= 0.95,
+        "core covered {:.1}%",
+        d.worst_cover * 100.0
+    );
+    // With `isolate_lit_islands` the wax glowing through the jar is dropped: the mask
+    // outside the dilated core is at most a quarter of the dilated core on 9 frames in
+    // 10 and 0.15 of it on average (with the default, about half the frames exceed a
+    // quarter: the wax is kept). Not asserted: the core cover, which counts the wax as
+    // flame on the frames where it glows at grey >= 0.8.
+    p.mask.isolate_lit_islands = true;
+    let l = candle_mask_stats(&frames, &p, stride);
+    eprintln!("isolate_lit_islands: worst area ratio {:.2}, worst core cover {:.1}%; mask outside the dilated core: mean {:.2} (goal <= 0.15), worst {:.2}, {} of {} frames above 0.25 (goal <= 10%)", l.worst_ratio, l.worst_cover * 100.0, l.mean_away, l.worst_away, l.far, l.checked);
+    assert!(
+        l.mean_away <= 0.15 && l.far * 10 <= l.checked,
+        "mask outside the dilated core: mean {:.2}, {} of {} frames above 0.25",
+        l.mean_away,
+        l.far,
+        l.checked
+    );
+}
+
+/// What [`candle_mask_covers_the_flame_not_the_jar`] measures over its frames.
+struct MaskStats {
+    checked: usize,
+    worst_ratio: f64,
+    worst_cover: f64,
+    /// Mask pixels outside the dilated core over the dilated core's pixels.
+    mean_away: f64,
+    worst_away: f64,
+    /// Frames where that exceeds 0.25.
+    far: usize,
+}
+
+/// The issue-14 measures of the isolated mask on every frame where the bright core
+/// (linear grey >= 0.8) exists, and the mask outside the core dilated by 10 px (lit
+/// surroundings, not flame).
+fn candle_mask_stats(frames: &[RgbaFrame], p: &PreprocessParams, stride: usize) -> MaskStats {
+    let mut s = MaskStats {
+        checked: 0,
+        worst_ratio: 0.0,
+        worst_cover: 1.0,
+        mean_away: 0.0,
+        worst_away: 0.0,
+        far: 0,
+    };
     for (i, f) in frames.iter().enumerate() {
         let lum = f.luminance();
         let core = image::GrayImage::from_fn(f.width(), f.height(), |x, y| {
@@ -382,31 +436,31 @@ fn candle_mask_covers_the_flame_not_the_jar() {
         }
         let dil = imageproc::morphology::dilate(&core, imageproc::distance_transform::Norm::L2, 10);
         let dil_px = dil.pixels().filter(|p| p[0] > 0).count();
-        let m = frame_mask(f, &p, true).mask;
+        let m = frame_mask(f, p, true).mask;
         let area = m.pixels().filter(|p| p[0] > 0).count();
         let covered = core
             .pixels()
             .zip(m.pixels())
             .filter(|(c, m)| c[0] > 0 && m[0] > 0)
             .count();
+        let outside = m
+            .pixels()
+            .zip(dil.pixels())
+            .filter(|(m, d)| m[0] > 0 && d[0] == 0)
+            .count();
         let ratio = area as f64 / dil_px as f64;
         let cover = covered as f64 / core_px as f64;
-        eprintln!("frame {}: mask {area} px, core {core_px} px (dilated {dil_px}): ratio {ratio:.2}, core covered {:.1}%", i * stride, cover * 100.0);
-        worst_ratio = worst_ratio.max(ratio);
-        worst_cover = worst_cover.min(cover);
-        checked += 1;
+        let away = outside as f64 / dil_px as f64;
+        eprintln!("frame {}: mask {area} px, core {core_px} px (dilated {dil_px}): ratio {ratio:.2}, core covered {:.1}%, outside the dilated core {away:.2}", i * stride, cover * 100.0);
+        s.worst_ratio = s.worst_ratio.max(ratio);
+        s.worst_cover = s.worst_cover.min(cover);
+        s.worst_away = s.worst_away.max(away);
+        s.mean_away += away;
+        s.far += (away > 0.25) as usize;
+        s.checked += 1;
     }
-    eprintln!("{checked} frames: worst area ratio {worst_ratio:.2} (goal <= 3), worst core cover {:.1}% (goal >= 95%)", worst_cover * 100.0);
-    assert!(checked > 0);
-    assert!(
-        worst_ratio <= 3.0,
-        "mask area {worst_ratio:.2}x the dilated core"
-    );
-    assert!(
-        worst_cover >= 0.95,
-        "core covered {:.1}%",
-        worst_cover * 100.0
-    );
+    s.mean_away /= s.checked.max(1) as f64;
+    s
 }
 
 /// Issue 15 §2: a scenario joining `candle.mp4` to `campfire.mp4` with the

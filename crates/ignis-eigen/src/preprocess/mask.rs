@@ -113,6 +113,13 @@ pub struct MaskParams {
     /// flame's outer edge may be and still be chosen over the edge of its white-hot core.
     /// Default 0.1.
     pub isolate_edge_tolerance: f32,
+    /// With isolation, also drop lit islands ([`drop_lit_islands`]): parts of the
+    /// isolated region away from the flame whose edge is soft — a surface the flame lights
+    /// (candle.mp4's wax glowing through the jar), not a separate tongue. Default `false`:
+    /// on some frames of candle.mp4 that wax glows as bright as the flame's core (linear
+    /// grey ≥ 0.8), which issue 14's cover bound counts as flame, and sparing it only on
+    /// those frames would make it blink in and out of the animation.
+    pub isolate_lit_islands: bool,
 }
 
 /// When [`isolate_flame`] runs.
@@ -162,6 +169,7 @@ impl Default for MaskParams {
             isolate_floor: 0.3,
             isolate_saturation: 0.5,
             isolate_edge_tolerance: 0.1,
+            isolate_lit_islands: false,
         }
     }
 }
@@ -323,6 +331,7 @@ pub fn flame_mask(frame: &RgbaFrame, p: &MaskParams, isolate: bool) -> GrayImage
             frame.height(),
             p.isolate_floor,
             p.isolate_edge_tolerance,
+            p.isolate_lit_islands,
         );
         // Kept: the isolated flame, and saturated (emissive) pixels connected to it — a
         // flame's own light is saturated (orange, red, its blue root), what it lights is
@@ -488,11 +497,20 @@ const MERGE_GROWTH: f64 = 1.5;
 /// measured, and the lowest `τ` whose step is within `tolerance` of the strongest (the
 /// flame's outer edge) is chosen — but never below halfway from the median lit pixel
 /// (≥ `floor`) to the peak: a flame is brighter than most of what it lights. Returns
-/// the mask of every pixel at least as bright as `τ` (255 inside), so a reflection or a
-/// second tongue not connected to the seeds is kept too.
+/// the mask of the pixels at least as bright as `τ` (255 inside), connected or not — a
+/// reflection or a second tongue not connected to the seeds is kept — less, with
+/// `lit_islands`, the parts that are only a lit surface with a soft edge
+/// ([`drop_lit_islands`]).
 /// Deterministic; O(pixels). The thresholds adapt to each frame: nothing is tuned to a
 /// clip.
-pub fn isolate_flame(luma: &[u8], w: u32, h: u32, floor: f32, tolerance: f32) -> GrayImage {
+pub fn isolate_flame(
+    luma: &[u8],
+    w: u32,
+    h: u32,
+    floor: f32,
+    tolerance: f32,
+    lit_islands: bool,
+) -> GrayImage {
     let mut out = GrayImage::new(w, h);
     if let Some(lv) = isolate_levels(luma, w, h, floor, tolerance) {
         for (o, &v) in out.as_mut().iter_mut().zip(luma) {
@@ -500,9 +518,98 @@ pub fn isolate_flame(luma: &[u8], w: u32, h: u32, floor: f32, tolerance: f32) ->
                 *o = 255;
             }
         }
+        if lit_islands {
+            let floor = (floor * 255.0).round() as usize;
+            drop_lit_islands(&mut out, luma, lv.vmax.saturating_sub(8).max(floor));
+        }
     }
     out
 }
+
+/// Removes from `keep` every 8-connected part that holds no seed (no pixel at least
+/// `seed` bright in `luma`) and whose edge is less than a third as sharp as the seeded
+/// parts' edge: the mean luminance step from its pixels to their 4-neighbours outside
+/// `keep`, against the same mean over the parts that hold a seed.
+///
+/// Why: a flame — every separate tongue of a campfire or a wall of fire — ends at a sharp
+/// edge (the same cue [`isolate_levels`] picks the threshold by); a surface it lights
+/// fades smoothly, so where such a surface is brighter than the threshold (the wax of a
+/// candle glowing through its jar) it forms an island with a soft edge. Measured: the lit
+/// wax of candle.mp4 steps 0.15–0.26 of the flame's edge, the separate tongues of
+/// campfire.mp4 0.43–0.98 (one small dim island 0.31). Relative to each frame's own flame:
+/// nothing is tuned to a clip. The decision does not look at brightness beyond the seeds,
+/// so a lit surface is dropped on every frame alike (no blinking). Deterministic;
+/// O(pixels).
+pub fn drop_lit_islands(keep: &mut GrayImage, luma: &[u8], seed: usize) {
+    let w = keep.width() as usize;
+    let n = keep.as_raw().len();
+    if luma.len() != n || w == 0 {
+        return;
+    }
+    let h = n / w;
+    // Label the parts (8-connected), each with (peak, step sum, step count).
+    let mut label = vec![u32::MAX; n];
+    let mut parts: Vec<(usize, f64, u64)> = Vec::new();
+    let mut stack = Vec::new();
+    let inside = |k: &GrayImage, j: usize| k.as_raw()[j] > 0;
+    for start in 0..n {
+        if label[start] != u32::MAX || !inside(keep, start) {
+            continue;
+        }
+        let id = parts.len() as u32;
+        let (mut peak, mut sum, mut count) = (0usize, 0f64, 0u64);
+        label[start] = id;
+        stack.push(start);
+        while let Some(i) = stack.pop() {
+            peak = peak.max(luma[i] as usize);
+            let (x, y) = (i % w, i / w);
+            for (ok, j) in [
+                (x > 0, i.wrapping_sub(1)),
+                (x + 1 < w, i + 1),
+                (y > 0, i.wrapping_sub(w)),
+                (y + 1 < h, i + w),
+            ] {
+                if ok && !inside(keep, j) {
+                    sum += (luma[i] as f64 - luma[j] as f64).abs();
+                    count += 1;
+                }
+            }
+            for yy in y.saturating_sub(1)..(y + 2).min(h) {
+                for xx in x.saturating_sub(1)..(x + 2).min(w) {
+                    let j = yy * w + xx;
+                    if label[j] == u32::MAX && inside(keep, j) {
+                        label[j] = id;
+                        stack.push(j);
+                    }
+                }
+            }
+        }
+        parts.push((peak, sum, count));
+    }
+    let (fs, fc) = parts
+        .iter()
+        .filter(|p| p.0 >= seed)
+        .fold((0f64, 0u64), |a, p| (a.0 + p.1, a.1 + p.2));
+    if fc == 0 {
+        return;
+    }
+    let flame_edge = fs / fc as f64;
+    let drop: Vec<bool> = parts
+        .iter()
+        .map(|&(peak, sum, count)| {
+            peak < seed && count > 0 && sum / (count as f64) < flame_edge / LIT_EDGE_RATIO
+        })
+        .collect();
+    for (o, &l) in keep.as_mut().iter_mut().zip(&label) {
+        if l != u32::MAX && drop[l as usize] {
+            *o = 0;
+        }
+    }
+}
+
+/// How many times sharper a flame's edge is than the soft edge of a lit island that
+/// [`drop_lit_islands`] removes.
+const LIT_EDGE_RATIO: f64 = 3.0;
 
 /// What [`isolate_flame`] measured on a frame, per luminance level `τ` (8-bit).
 #[derive(Clone, Debug)]
@@ -564,7 +671,7 @@ pub fn isolate_levels(
         .max((median_lit + vmax).div_ceil(2))
         .min(top.max(floor));
     // Everything at least that bright, connected to the seeds or not (a flame's
-    // reflection, a second tongue): the lit surroundings are dimmer than the merge level.
+    // reflection, a second tongue), less the lit islands `isolate_flame` drops.
     Some(IsolateLevels {
         vmax,
         area: area.to_vec(),
@@ -882,6 +989,105 @@ mod tests {
         assert!(mask_area(&m) < 600, "{} px", mask_area(&m));
         // Without isolation the plate is kept.
         assert!(flame_mask(&f, &p, false).get_pixel(20, 60)[0] > 0);
+    }
+
+    /// Issue 14: two separate tongues (the second dimmer) are both kept; a lit patch as
+    /// bright as the threshold but with a soft edge (the candle's wax glowing through its
+    /// jar) is dropped.
+    #[test]
+    fn isolation_keeps_separate_tongues_drops_a_lit_island() {
+        let (w, h) = (120usize, 80usize);
+        let dist = |x: usize, y: usize, cx: f32, cy: f32| {
+            ((x as f32 - cx).powi(2) + (y as f32 - cy).powi(2)).sqrt()
+        };
+        let luma: Vec<u8> = (0..w * h)
+            .map(|i| {
+                let (x, y) = (i % w, i / w);
+                let (a, b, c) = (
+                    dist(x, y, 30.0, 40.0),
+                    dist(x, y, 75.0, 40.0),
+                    dist(x, y, 105.0, 62.0),
+                );
+                if a < 10.0 {
+                    (255.0 - 4.0 * a) as u8 // the main tongue
+                } else if b < 8.0 {
+                    (240.0 - 4.0 * b) as u8 // a separate, dimmer tongue
+                } else if c < 12.5 {
+                    (215.0 - 10.0 * c) as u8 // a lit island fading smoothly into the surface
+                } else if (5..115).contains(&x) && (10..75).contains(&y) {
+                    90 // the lit surface
+                } else {
+                    0
+                }
+            })
+            .collect();
+        let lv = isolate_levels(&luma, w as u32, h as u32, 0.3, 0.1).unwrap();
+        assert!(
+            lv.chosen <= 200,
+            "the island passes the threshold {}",
+            lv.chosen
+        );
+        let m = isolate_flame(&luma, w as u32, h as u32, 0.3, 0.1, true);
+        let at = |x: u32, y: u32| m.get_pixel(x, y)[0] > 0;
+        assert!(at(30, 40) && at(75, 40), "both tongues are kept");
+        assert!(!at(105, 62), "the lit island is dropped");
+        // Without `lit_islands` (the default) it is kept.
+        let m = isolate_flame(&luma, w as u32, h as u32, 0.3, 0.1, false);
+        assert!(m.get_pixel(105, 62)[0] > 0);
+    }
+
+    /// Issue 14: on a synthetic campfire (several tongues), isolation keeps every
+    /// separate part of the plain mask that reaches the frame's peak brightness.
+    #[test]
+    fn isolation_keeps_every_tongue_of_a_synthetic_campfire() {
+        use crate::synthetic::{synthetic_frame, FlameStyle, SyntheticParams};
+        let sp = SyntheticParams {
+            size: ignis_core::Size::new(320, 180).unwrap(),
+            frames: 8,
+            style: FlameStyle::Campfire,
+            seed: 5,
+        };
+        let p = MaskParams {
+            isolate_lit_islands: true,
+            ..Default::default()
+        };
+        let mut tongues = 0;
+        for t in 0..8 {
+            let f = synthetic_frame(&sp, t).unwrap();
+            let l = luma8(&f);
+            let vmax = *l.iter().max().unwrap();
+            let plain = flame_mask(&f, &p, false);
+            let iso = flame_mask(&f, &p, true);
+            let mut whole = plain.clone();
+            // Each part of the plain mask holding a pixel within 8 levels of the peak.
+            let n = whole.as_raw().len();
+            for start in 0..n {
+                if whole.as_raw()[start] == 0 {
+                    continue;
+                }
+                let part = grow_into(
+                    &mut whole.as_raw().iter().map(|&v| v > 0).collect::<Vec<_>>(),
+                    vec![start],
+                    320,
+                );
+                let idx: Vec<usize> = (0..n).filter(|&i| part.as_raw()[i] > 0).collect();
+                for &i in &idx {
+                    whole.as_mut()[i] = 0;
+                }
+                if idx.iter().any(|&i| l[i] + 8 >= vmax) {
+                    tongues += 1;
+                    assert!(
+                        idx.iter().any(|&i| iso.as_raw()[i] > 0),
+                        "frame {t}: a tongue of {} px was dropped",
+                        idx.len()
+                    );
+                }
+            }
+        }
+        assert!(
+            tongues > 8,
+            "the synthetic campfire has separate tongues ({tongues})"
+        );
     }
 
     #[test]
