@@ -410,6 +410,55 @@ mod probing {
             );
         }
     }
+
+    /// A phone's portrait clip: stored 64x48 with a quarter-turn display rotation. It is
+    /// read upright (48x64, through ffmpeg, whose frames match the same picture encoded
+    /// upright), never sideways through the built-in decoder.
+    #[test]
+    fn rotated_clips_are_read_upright() {
+        if !have_ffmpeg() {
+            return;
+        }
+        let dir = tempfile::tempdir().unwrap();
+        let x264 = [
+            "-pix_fmt",
+            "yuv420p",
+            "-c:v",
+            "libx264",
+            "-profile:v",
+            "baseline",
+        ];
+        let upright = [&["-vf", "transpose=cclock"][..], &x264[..]].concat();
+        let (Some(stored), Some(upright)) = (
+            make(dir.path(), "stored.mp4", &x264),
+            make(dir.path(), "upright.mp4", &upright),
+        ) else {
+            return;
+        };
+        // The rotation goes in as the stream copy's display matrix (ffmpeg ≥ 5).
+        let turned = dir.path().join("turned.mp4");
+        let ok = std::process::Command::new("ffmpeg")
+            .args(["-nostdin", "-y", "-v", "error", "-i"])
+            .arg(&stored)
+            .args(["-c", "copy", "-metadata:s:v:0", "rotate=90"])
+            .arg(&turned)
+            .status()
+            .is_ok_and(|s| s.success());
+        if !ok {
+            println!("skipped: this ffmpeg cannot set a display rotation");
+            return;
+        }
+        let info = probe(&turned).unwrap();
+        assert_eq!(info.size, Size::new(48, 64).unwrap(), "{info:?}");
+        assert_eq!(info.decoder, Decoder::Ffmpeg);
+        let (a, b) = (read_all(&turned), read_all(&upright));
+        assert_eq!(a.len(), 12);
+        assert_eq!(a[0].size(), Size::new(48, 64).unwrap());
+        for (k, (x, y)) in a.iter().zip(&b).enumerate() {
+            let e = mae_srgb8(x, y);
+            assert!(e < 8.0, "frame {k}: {e} levels from the upright picture");
+        }
+    }
 }
 
 mod roundtrip {

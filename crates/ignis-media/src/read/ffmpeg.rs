@@ -52,6 +52,37 @@ struct ProbeStream {
     avg_frame_rate: Option<String>,
     r_frame_rate: Option<String>,
     nb_frames: Option<String>,
+    #[serde(default)]
+    side_data_list: Vec<SideData>,
+    #[serde(default)]
+    tags: StreamTags,
+}
+
+/// A stream's display-matrix side data (phones record portrait video this way).
+#[derive(serde::Deserialize)]
+struct SideData {
+    rotation: Option<f64>,
+}
+
+/// Older muxers give the rotation as a `rotate` tag instead.
+#[derive(serde::Deserialize, Default)]
+struct StreamTags {
+    rotate: Option<String>,
+}
+
+impl ProbeStream {
+    /// Whether the picture is shown turned by a quarter turn (±90°, 270°): ffmpeg then
+    /// decodes it upright (its default autorotation), so width and height swap.
+    fn quarter_turn(&self) -> bool {
+        let side = self.side_data_list.iter().filter_map(|d| d.rotation);
+        let tag = self
+            .tags
+            .rotate
+            .as_deref()
+            .and_then(|r| r.trim().parse().ok());
+        side.chain(tag)
+            .any(|r: f64| r.is_finite() && (r.round() as i64).rem_euclid(180) == 90)
+    }
 }
 
 fn parse_rate(r: Option<&str>) -> Option<f64> {
@@ -83,7 +114,10 @@ pub(crate) fn probe(path: &Path, _hint: Option<&str>) -> Result<SourceInfo> {
     let url = file_url(path)?;
     let out = Command::new(ffmpeg_sidecar::ffprobe::ffprobe_path())
         .args(["-v", "error", "-select_streams", "v:0", "-show_entries"])
-        .arg("stream=codec_name,profile,width,height,avg_frame_rate,r_frame_rate,nb_frames")
+        .arg(
+            "stream=codec_name,profile,width,height,avg_frame_rate,r_frame_rate,nb_frames\
+             :stream_side_data=rotation:stream_tags=rotate",
+        )
         .args(["-of", "json"])
         .args(PROTOCOL_WHITELIST)
         .arg("-i")
@@ -116,6 +150,8 @@ pub(crate) fn probe(path: &Path, _hint: Option<&str>) -> Result<SourceInfo> {
             "ffprobe reports no frame size",
         ));
     };
+    // A portrait phone clip is stored landscape with a rotation; its frames decode upright.
+    let (w, h) = if s.quarter_turn() { (h, w) } else { (w, h) };
     let size =
         Size::new(w, h).map_err(|e| MediaError::decode(path, None, format!("frame size: {e}")))?;
     let fps = parse_rate(s.avg_frame_rate.as_deref())

@@ -103,6 +103,23 @@ pub(crate) fn probe_mp4(path: &Path, len: u64, have_ffmpeg: bool) -> Result<Prob
         None if stsd.vp09.is_some() => ("vp9".to_string(), false),
         None => ("an unknown video codec".to_string(), false),
     };
+    // A display rotation (a phone's portrait clip is stored landscape with a turned
+    // display matrix): the built-in decoder gives the stored picture, sideways; ffmpeg
+    // turns it upright.
+    let m = &track.trak.tkhd.matrix;
+    let turned = m.b != 0 || m.c != 0 || m.a < 0 || m.d < 0;
+    if turned {
+        if have_ffmpeg {
+            return ffmpeg::probe(path, None).map(Probed::Ffmpeg);
+        }
+        return Err(MediaError::unsupported(
+            path,
+            "video with a display rotation (e.g. a phone's portrait clip)",
+            "the built-in decoder would give it sideways; install ffmpeg (e.g. `apt install \
+             ffmpeg`), which turns it upright, or re-encode it upright elsewhere: ffmpeg -i \
+             INPUT -c:v libx264 upright.mp4",
+        ));
+    }
     if !baseline || track.trak.mdia.minf.stbl.stsd.avc1.is_none() {
         if have_ffmpeg {
             return ffmpeg::probe(path, None).map(Probed::Ffmpeg);
