@@ -1501,6 +1501,29 @@ mod transitions {
                 );
             }
             let f = metric_frames(&dir);
+            if name == "clips-auto" {
+                // A dry run decides the joins as the render does: the frame count it
+                // prints (what `--chunk` ranges over) is the count written.
+                let o = ignis_ok(&[
+                    "eigen",
+                    "animate",
+                    scenario.to_str().unwrap(),
+                    "--dry-run",
+                    "-o",
+                    t.path().join("dry.mp4").to_str().unwrap(),
+                ]);
+                let text = String::from_utf8_lossy(&o.stdout).into_owned()
+                    + &String::from_utf8_lossy(&o.stderr);
+                let count = text
+                    .lines()
+                    .find_map(|l| {
+                        l.split_once(" frames, E = ")
+                            .map(|(n, _)| n.trim().to_owned())
+                    })
+                    .unwrap_or_default();
+                assert_eq!(count, f.len().to_string(), "dry run said: {text}");
+                assert!(!t.path().join("dry.mp4").exists(), "a dry run wrote");
+            }
             let (la, lb) = (a1 - a0, b1 - b0);
             assert!(
                 f.len() > la + lb,

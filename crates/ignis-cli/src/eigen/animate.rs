@@ -17,7 +17,8 @@ use std::path::{Path, PathBuf};
 pub struct AnimateArgs {
     /// Scenario file (TOML); `ignis eigen scenario fire.db` prints a commented one.
     pub scenario: PathBuf,
-    /// Only find the transitions and print the table; write nothing.
+    /// Only find the transitions (auto and morph joins decided as for the render) and print
+    /// the table with the frame count the render writes; write nothing.
     #[arg(long)]
     pub dry_run: bool,
     /// Write only frames A..B (A included, B excluded) of the scenario's N-frame render,
@@ -433,8 +434,10 @@ pub fn animate_cmd(a: &AnimateArgs, g: &Global) -> Result<Plan> {
     let plan = sc.plan(&db, &mut crate::global::StageBars::new(g))?;
     let mut look = sc.look.clone();
     a.footage.adjust_look(&mut look, g);
-    // `auto` joins are decided on their rendered frames (a dry run shows the planner's).
-    let plan = if a.dry_run || plan.joins.iter().all(|j| j.alternatives.is_empty()) {
+    // `auto` joins are decided on their rendered frames, and the morph joins' in-between
+    // counts too — also for a dry run, so the frame count it prints (what `--chunk` ranges
+    // over, the progress bar) is the one written.
+    let plan = if plan.joins.iter().all(|j| j.alternatives.is_empty()) {
         plan
     } else {
         let mut sources = a.footage.sources(&db)?;
@@ -448,15 +451,6 @@ pub fn animate_cmd(a: &AnimateArgs, g: &Global) -> Result<Plan> {
                 .or_else(|| ignis_media::Format::from_path(&a.out.output).ok()),
             Some(ignis_media::Format::Gif | ignis_media::Format::Flipbook)
         );
-    print_table(g, &plan, &sc, out_loops);
-    if a.dry_run {
-        a.chunk
-            .map(|c| check_chunk(c, plan.frames.len()))
-            .transpose()?;
-        return Ok(plan);
-    }
-    // The morph joins' in-between counts come from the rendered frames: chosen first, so
-    // the frame count (what `--chunk` ranges over, the progress bar) is the one written.
     let plan = if plan.morphs.iter().any(|r| r.times.is_none() && !r.fixed) {
         let mut sources = a.footage.sources(&db)?;
         ignis_eigen::animate::morph::resolve(&db, &plan, &look, &a.footage.options()?, &mut sources)
@@ -464,6 +458,13 @@ pub fn animate_cmd(a: &AnimateArgs, g: &Global) -> Result<Plan> {
     } else {
         plan
     };
+    print_table(g, &plan, &sc, out_loops);
+    if a.dry_run {
+        a.chunk
+            .map(|c| check_chunk(c, plan.frames.len()))
+            .transpose()?;
+        return Ok(plan);
+    }
     let chunk = a
         .chunk
         .map(|c| check_chunk(c, plan.frames.len()))
