@@ -318,19 +318,24 @@ pub fn feather(mask: &GrayImage, longer: u32) -> GrayFrame {
     feather_in(mask, longer).0
 }
 
-/// [`feather`], and the box `(x0, y0, x1, y1)` (end-exclusive) outside which it is 0;
-/// `None` for an empty mask (all 0).
-fn feather_in(mask: &GrayImage, longer: u32) -> (GrayFrame, Option<(u32, u32, u32, u32)>) {
-    let r = ((longer as f32 * 0.01).round() as u8).clamp(2, 40);
-    let size = Size {
+/// The feather's dilation reach for frames whose longer side is `longer` pixels: 1 %,
+/// 2 to 40 px.
+fn feather_reach(longer: u32) -> u8 {
+    ((longer as f32 * 0.01).round() as u8).clamp(2, 40)
+}
+
+fn mask_size(mask: &GrayImage) -> Size {
+    Size {
         width: mask.width(),
         height: mask.height(),
-    };
-    let mut out = GrayFrame::new(size);
-    let Some(e) = mask_bounds(mask) else {
-        return (out, None);
-    };
-    // Dilation reach r, blur reach ceil(2σ) = r (σ = r/2), twice, and a little slack.
+    }
+}
+
+/// The part of `mask` the feather of reach `r` can change, and its box `(x0, y0, x1, y1)`
+/// (end-exclusive): the mask's bounds widened by the dilation's reach `r`, the blur's
+/// reach ⌈2σ⌉ = r (σ = r/2) twice, and a little slack. `None` for an empty mask.
+fn feather_crop(mask: &GrayImage, r: u8) -> Option<(GrayImage, (u32, u32, u32, u32))> {
+    let e = mask_bounds(mask)?;
     let m = 3 * r as u32 + 2;
     let (x0, y0) = (e.0.saturating_sub(m), e.1.saturating_sub(m));
     let (x1, y1) = (
@@ -338,8 +343,20 @@ fn feather_in(mask: &GrayImage, longer: u32) -> (GrayFrame, Option<(u32, u32, u3
         (e.3 + m + 1).min(mask.height()),
     );
     let crop = image::imageops::crop_imm(mask, x0, y0, x1 - x0, y1 - y0).to_image();
+    Some((crop, (x0, y0, x1, y1)))
+}
+
+/// [`feather`], and the box `(x0, y0, x1, y1)` (end-exclusive) outside which it is 0;
+/// `None` for an empty mask (all 0).
+fn feather_in(mask: &GrayImage, longer: u32) -> (GrayFrame, Option<(u32, u32, u32, u32)>) {
+    let r = feather_reach(longer);
+    let mut out = GrayFrame::new(mask_size(mask));
+    let Some((crop, (x0, y0, x1, y1))) = feather_crop(mask, r) else {
+        return (out, None);
+    };
     let d = dilate_l2(&crop, r);
     let b = gaussian_blur_u8(&d, r as f32 * 0.5);
+    let size = out.size();
     let (cw, w) = ((x1 - x0) as usize, size.width as usize);
     for (cy, (brow, mrow)) in b
         .as_raw()
@@ -364,25 +381,15 @@ fn feather_in(mask: &GrayImage, longer: u32) -> (GrayFrame, Option<(u32, u32, u3
 /// reach is under 8 px (longer side under 750 px) get [`feather_in`] itself (cheap
 /// there, and the half-resolution blur's kernel would be too coarse).
 pub fn feather_half_in(mask: &GrayImage, longer: u32) -> (GrayFrame, Option<(u32, u32, u32, u32)>) {
-    let r = ((longer as f32 * 0.01).round() as u8).clamp(2, 40);
+    let r = feather_reach(longer);
     if r < 8 {
         return feather_in(mask, longer);
     }
-    let size = Size {
-        width: mask.width(),
-        height: mask.height(),
-    };
-    let mut out = GrayFrame::new(size);
-    let Some(e) = mask_bounds(mask) else {
+    let mut out = GrayFrame::new(mask_size(mask));
+    let Some((crop, (x0, y0, x1, y1))) = feather_crop(mask, r) else {
         return (out, None);
     };
-    let m = 3 * r as u32 + 2;
-    let (x0, y0) = (e.0.saturating_sub(m), e.1.saturating_sub(m));
-    let (x1, y1) = (
-        (e.2 + m + 1).min(mask.width()),
-        (e.3 + m + 1).min(mask.height()),
-    );
-    let crop = image::imageops::crop_imm(mask, x0, y0, x1 - x0, y1 - y0).to_image();
+    let size = out.size();
     let d = dilate_l2(&crop, r);
     let (cw, ch) = ((x1 - x0) as usize, (y1 - y0) as usize);
     let (hw, hh) = (cw.div_ceil(2), ch.div_ceil(2));
@@ -666,7 +673,7 @@ fn mask_bounds(mask: &GrayImage) -> Option<(u32, u32, u32, u32)> {
 /// bounding-box version is tested against.
 #[cfg(test)]
 fn feather_whole(mask: &GrayImage, longer: u32) -> GrayFrame {
-    let r = ((longer as f32 * 0.01).round() as u8).clamp(2, 40);
+    let r = feather_reach(longer);
     let d = imageproc::morphology::dilate(mask, imageproc::distance_transform::Norm::L2, r);
     let b = imageproc::filter::gaussian_blur_f32(&d, r as f32 * 0.5);
     let size = Size {
