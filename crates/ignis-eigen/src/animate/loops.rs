@@ -117,11 +117,12 @@ impl SearchParams {
             candidates: 160,
         }
     }
-    /// Shortest and longest loop allowed.
+    /// Shortest and longest loop allowed: whole frames inside the tolerance (48 ± 20 % is
+    /// 39..=57, never 38, which is 20.8 % short).
     pub fn bounds(&self) -> (usize, usize) {
         let l = self.length as f64;
-        let lo = ((l * (1.0 - self.tolerance)).round() as usize).max(2);
-        let hi = ((l * (1.0 + self.tolerance)).round() as usize).max(lo);
+        let lo = ((l * (1.0 - self.tolerance) - 1e-9).ceil() as usize).max(2);
+        let hi = ((l * (1.0 + self.tolerance) + 1e-9).floor() as usize).max(lo);
         (lo, hi)
     }
 }
@@ -917,6 +918,22 @@ pub fn parse_length(s: &str, fps: f64) -> Result<usize> {
 mod tests {
     use super::*;
     use ignis_core::{Rng, Size};
+
+    /// The bounds are whole frames inside ±tolerance: a 2-s loop at 24 fps (48 frames)
+    /// may be 39..=57 frames, not 38 (20.8 % short); exact multiples stay in.
+    #[test]
+    fn length_bounds_stay_inside_the_tolerance() {
+        assert_eq!(SearchParams::new(48, 8).bounds(), (39, 57));
+        assert_eq!(SearchParams::new(60, 8).bounds(), (48, 72));
+        assert_eq!(SearchParams::new(120, 8).bounds(), (96, 144));
+        for len in 3..400 {
+            let (lo, hi) = SearchParams::new(len, 8).bounds();
+            let l = len as f64;
+            assert!(lo as f64 >= 0.8 * l - 1e-9 || lo == 2, "{len}: {lo}");
+            assert!(hi as f64 <= 1.2 * l + 1e-9 || hi == lo, "{len}: {hi}");
+            assert!(lo <= len && len <= hi, "{len}: {lo}..={hi}");
+        }
+    }
 
     /// Weights of a noisy periodic motion with period `p`: the search must find loops of a
     /// whole number of periods.
