@@ -736,6 +736,24 @@ pub fn report(d: &Done, first: usize, g: &Global) {
         d.chosen.evaluate_s,
         d.render_s
     ));
+    if let Some(w) = seam_warning(d.measured.seam) {
+        g.say(w);
+    }
+}
+
+/// Seam (wrap step ÷ the footage's median step) from which a loop's jump is as large as a
+/// plain cut between different flames (typically 3 or more): worth a warning.
+const VISIBLE_SEAM: f64 = 3.0;
+
+/// The warning for a loop whose measured seam is a visible jump, if it is one.
+fn seam_warning(seam: f64) -> Option<String> {
+    (seam >= VISIBLE_SEAM).then(|| {
+        format!(
+            "warning: the seam is {seam:.2}× the footage's median step, as large as a cut between \
+             different flames and will show every cycle; try a longer clip or --range, another \
+             --length, or --method auto"
+        )
+    })
 }
 
 /// `ignis loop`.
@@ -937,6 +955,15 @@ fn metric_frames(path: &Path, window: &Range<usize>, g: &Global) -> Result<Vec<G
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_visible_seam_is_warned_about() {
+        assert!(seam_warning(1.2).is_none());
+        assert!(seam_warning(2.99).is_none());
+        let w = seam_warning(3.34).unwrap();
+        assert!(w.starts_with("warning: the seam is 3.34×"), "{w}");
+        assert!(w.contains("--length"), "{w}");
+    }
     use crate::bench::loops::{video_texture, xfade, K};
 
     fn clip(name: &str) -> Option<PathBuf> {
