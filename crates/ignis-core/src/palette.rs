@@ -25,6 +25,13 @@ pub fn srgb_to_linear(c: f32) -> f32 {
     }
 }
 
+/// [`srgb_to_linear`] of every 8-bit code (`k / 255`): the one decoding table for 8-bit
+/// sRGB footage, built once.
+pub fn srgb8_to_linear_table() -> &'static [f32; 256] {
+    static T: std::sync::OnceLock<[f32; 256]> = std::sync::OnceLock::new();
+    T.get_or_init(|| std::array::from_fn(|k| srgb_to_linear(k as f32 / 255.0)))
+}
+
 /// Linear light → sRGB-encoded value in `0..=1` (clamped).
 pub fn linear_to_srgb(c: f32) -> f32 {
     let c = c.clamp(0.0, 1.0);

@@ -14,9 +14,7 @@
 
 use std::borrow::Cow;
 use std::path::Path;
-use std::sync::OnceLock;
 
-use ignis_core::palette::srgb_to_linear;
 use ignis_core::{RgbaFrame, Size};
 
 use crate::db::ClipEntry;
@@ -55,8 +53,7 @@ pub enum SourceFrame {
 /// The linear value of each 8-bit sRGB code (`ignis_core::palette::srgb_to_linear` of
 /// `code / 255`, as `ignis-media` decodes 8-bit footage).
 pub fn srgb8_table() -> &'static [f32; 256] {
-    static T: OnceLock<[f32; 256]> = OnceLock::new();
-    T.get_or_init(|| std::array::from_fn(|i| srgb_to_linear(i as f32 / 255.0)))
+    ignis_core::palette::srgb8_to_linear_table()
 }
 
 /// Linear RGBA of 8-bit sRGB RGBA bytes `p` (alpha `p[3] / 255`).

@@ -11,8 +11,7 @@ use crate::read::Rect;
 
 /// 8-bit sRGB code → linear light.
 pub(crate) fn srgb8_lut() -> &'static [f32; 256] {
-    static LUT: OnceLock<[f32; 256]> = OnceLock::new();
-    LUT.get_or_init(|| std::array::from_fn(|i| srgb_to_linear(i as f32 / 255.0)))
+    ignis_core::palette::srgb8_to_linear_table()
 }
 
 /// Linear value at which the nearest 8-bit sRGB code changes from `k - 1` to `k`

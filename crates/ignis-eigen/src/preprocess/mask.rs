@@ -422,7 +422,7 @@ struct SrgbTables {
 fn srgb_tables() -> &'static SrgbTables {
     static T: std::sync::OnceLock<SrgbTables> = std::sync::OnceLock::new();
     T.get_or_init(|| {
-        let lin = std::array::from_fn(|k| srgb_to_linear(k as f32 / 255.0));
+        let lin = *ignis_core::palette::srgb8_to_linear_table();
         SrgbTables {
             lin,
             enc: lin.map(linear_to_srgb),
