@@ -28,7 +28,7 @@ const CACHE_VERSION: u32 = 1;
 
 #[derive(clap::Args, Debug)]
 #[command(
-    after_help = "Examples:\n  ignis loop campfire.mp4 --length 4s -o loop.png\n  ignis loop candle.mp4 --length 120 -o loop.mp4\n  ignis loop fire.mov --length 2s --range 100..400 --method morph -o frames/%04d.png\n  ignis loop fire.mp4 --length 3s --cache /tmp/ignis-cache -o loop.gif\n  ignis loop plates/%04d.exr --length 96 -o loop.png    (an image sequence: a frame count, as it has no frame rate)\n\nThe first run on a clip trains an Eigenfire database on it (about 0.1 s per frame) and keeps it in the cache ($XDG_CACHE_HOME/ignis or ~/.cache/ignis, or --cache); later runs reuse it. The output has the footage's own size, colours and frame rate (--fps is ignored); a .png flipbook's JSON records the measured loop_quality."
+    after_help = "Examples:\n  ignis loop campfire.mp4 --length 4s -o loop.png\n  ignis loop candle.mp4 --length 120 -o loop.mp4\n  ignis loop fire.mov --length 2s --range 100..400 --method morph -o frames/%04d.png\n  ignis loop fire.mp4 --length 3s --cache /tmp/ignis-cache -o loop.gif\n  ignis loop plates/%04d.exr --length 96 -o loop.png    (an image sequence: a frame count, as it has no frame rate)\n\nThe first run on a clip trains an Eigenfire database on it (about 0.1 s per frame) and keeps it in the cache ($XDG_CACHE_HOME/ignis or ~/.cache/ignis, or --cache); later runs reuse it. The output has the footage's own size, colours and frame rate (so --fps is refused); a .png flipbook's JSON records the measured loop_quality."
 )]
 pub struct Args {
     /// The footage (any video or frame sequence `ignis info` reads).
@@ -955,6 +955,7 @@ fn metric_frames(path: &Path, window: &Range<usize>, g: &Global) -> Result<Vec<G
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::bench::loops::{video_texture, xfade, K};
 
     #[test]
     fn a_visible_seam_is_warned_about() {
@@ -964,7 +965,6 @@ mod tests {
         assert!(w.starts_with("warning: the seam is 3.34×"), "{w}");
         assert!(w.contains("--length"), "{w}");
     }
-    use crate::bench::loops::{video_texture, xfade, K};
 
     fn clip(name: &str) -> Option<PathBuf> {
         let p = Path::new(env!("CARGO_MANIFEST_DIR"))

@@ -547,44 +547,32 @@ pub fn drop_lit_islands(keep: &mut GrayImage, luma: &[u8], seed: usize) {
         return;
     }
     let h = n / w;
-    // Label the parts (8-connected), each with (peak, step sum, step count).
-    let mut label = vec![u32::MAX; n];
-    let mut parts: Vec<(usize, f64, u64)> = Vec::new();
-    let mut stack = Vec::new();
-    let inside = |k: &GrayImage, j: usize| k.as_raw()[j] > 0;
-    for start in 0..n {
-        if label[start] != u32::MAX || !inside(keep, start) {
+    // The parts (8-connected, imageproc's labelling), each with (peak, step sum, count).
+    let labels = imageproc::region_labelling::connected_components(
+        keep,
+        imageproc::region_labelling::Connectivity::Eight,
+        image::Luma([0u8]),
+    );
+    let label = labels.as_raw();
+    let mut parts = vec![(0usize, 0f64, 0u64); label.iter().max().map_or(0, |&m| m as usize)];
+    let inside = |j: usize| keep.as_raw()[j] > 0;
+    for (i, &l) in label.iter().enumerate() {
+        let Some(part) = (l as usize).checked_sub(1).map(|k| &mut parts[k]) else {
             continue;
-        }
-        let id = parts.len() as u32;
-        let (mut peak, mut sum, mut count) = (0usize, 0f64, 0u64);
-        label[start] = id;
-        stack.push(start);
-        while let Some(i) = stack.pop() {
-            peak = peak.max(luma[i] as usize);
-            let (x, y) = (i % w, i / w);
-            for (ok, j) in [
-                (x > 0, i.wrapping_sub(1)),
-                (x + 1 < w, i + 1),
-                (y > 0, i.wrapping_sub(w)),
-                (y + 1 < h, i + w),
-            ] {
-                if ok && !inside(keep, j) {
-                    sum += (luma[i] as f64 - luma[j] as f64).abs();
-                    count += 1;
-                }
-            }
-            for yy in y.saturating_sub(1)..(y + 2).min(h) {
-                for xx in x.saturating_sub(1)..(x + 2).min(w) {
-                    let j = yy * w + xx;
-                    if label[j] == u32::MAX && inside(keep, j) {
-                        label[j] = id;
-                        stack.push(j);
-                    }
-                }
+        };
+        part.0 = part.0.max(luma[i] as usize);
+        let (x, y) = (i % w, i / w);
+        for (ok, j) in [
+            (x > 0, i.wrapping_sub(1)),
+            (x + 1 < w, i + 1),
+            (y > 0, i.wrapping_sub(w)),
+            (y + 1 < h, i + w),
+        ] {
+            if ok && !inside(j) {
+                part.1 += (luma[i] as f64 - luma[j] as f64).abs();
+                part.2 += 1;
             }
         }
-        parts.push((peak, sum, count));
     }
     let (fs, fc) = parts
         .iter()
@@ -600,8 +588,8 @@ pub fn drop_lit_islands(keep: &mut GrayImage, luma: &[u8], seed: usize) {
             peak < seed && count > 0 && sum / (count as f64) < flame_edge / LIT_EDGE_RATIO
         })
         .collect();
-    for (o, &l) in keep.as_mut().iter_mut().zip(&label) {
-        if l != u32::MAX && drop[l as usize] {
+    for (o, &l) in keep.as_mut().iter_mut().zip(label) {
+        if l > 0 && drop[l as usize - 1] {
             *o = 0;
         }
     }

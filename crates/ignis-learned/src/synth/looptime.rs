@@ -187,12 +187,7 @@ impl Synthesiser<'_> {
                 ];
             }
         }
-        let mut k = 0;
-        sizes.map(|size| {
-            let u = union[k];
-            k += 1;
-            Canvas::covering(size, u)
-        })
+        std::array::from_fn(|k| Canvas::covering(sizes[k], union[k]))
     }
 
     /// Checks the walk's frames on previews rendered from their states: each step longer
