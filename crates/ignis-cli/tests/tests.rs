@@ -2031,3 +2031,85 @@ fn loop_refuses_fps() {
     assert_fails(&r, "--fps: `ignis loop` writes the footage's own frames");
     assert!(files_in(t.path()).is_empty());
 }
+
+/// `eigen loop --length` writes the pre-processing matte as alpha by default (dark
+/// surroundings keyed out, the flame kept) and the footage opaque with `--alpha opaque`.
+#[test]
+fn eigen_length_loop_writes_the_matte() {
+    let t = tempfile::tempdir().unwrap();
+    // An MP4 (no alpha of its own), so the opaque loop is opaque.
+    let pattern = t.path().join("fire.mp4");
+    let o = classic("48x40", "60", &["--seed", "3", "--no-loop"], &pattern);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let db = t.path().join("fire.db");
+    let (db, pat) = (db.to_str().unwrap(), pattern.to_str().unwrap());
+    ignis_ok(&["eigen", "train", pat, "-q", "-o", db]);
+    let info = ignis(&["eigen", "info", db, "--json"]);
+    let info: serde_json::Value = serde_json::from_slice(&info.stdout).unwrap();
+    let clip = info["clips"][0]["name"].as_str().unwrap().to_string();
+    // The alpha of the sheet's frames (the sheet's unused cells left out).
+    let alpha = |extra: &[&str], name: &str| -> Vec<f32> {
+        let out = t.path().join(name);
+        let mut a = vec!["eigen", "loop", db, "--clip", &clip, "--length", "16"];
+        a.extend_from_slice(extra);
+        a.extend_from_slice(&["-q", "-o", out.to_str().unwrap()]);
+        ignis_ok(&a);
+        let m = read_json(&out.with_extension("json"));
+        let (w, h) = (48, 40);
+        assert_eq!(
+            (m["frame_width"].as_u64(), m["frame_height"].as_u64()),
+            (Some(w), Some(h))
+        );
+        let (cols, n) = (
+            m["columns"].as_u64().unwrap(),
+            m["frame_count"].as_u64().unwrap(),
+        );
+        let sheet = ignis_media::read_image(&out).unwrap();
+        let sw = sheet.width() as u64;
+        (0..n)
+            .flat_map(|j| {
+                let (x0, y0) = ((j % cols) * w, (j / cols) * h);
+                (0..h).flat_map(move |y| (0..w).map(move |x| ((y0 + y) * sw + x0 + x) as usize))
+            })
+            .map(|i| sheet.data()[i][3])
+            .collect()
+    };
+    let matte = alpha(&[], "matte.png");
+    let keyed = matte.iter().filter(|&&a| a == 0.0).count();
+    let kept = matte.iter().filter(|&&a| a > 0.99).count();
+    assert!(
+        keyed > matte.len() / 10,
+        "{keyed} of {} pixels keyed out",
+        matte.len()
+    );
+    assert!(
+        kept > matte.len() / 20,
+        "{kept} of {} pixels kept",
+        matte.len()
+    );
+    let opaque = alpha(&["--alpha", "opaque"], "opaque.png");
+    assert!(
+        opaque.iter().all(|&a| a == 1.0),
+        "--alpha opaque has transparent pixels"
+    );
+    // A moved source: a clear error naming --relink, nothing written; found again with it.
+    let moved = t.path().join("moved.mp4");
+    std::fs::rename(&pattern, &moved).unwrap();
+    let out = t.path().join("gone.png");
+    let r = ignis(&[
+        "eigen",
+        "loop",
+        db,
+        "--clip",
+        &clip,
+        "--length",
+        "16",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert_fails(&r, "--relink");
+    assert!(!out.exists());
+    let relink = format!("{clip}={}", moved.display());
+    let again = alpha(&["--relink", &relink], "relinked.png");
+    assert_eq!(again, matte, "the relinked footage gives the same loop");
+}

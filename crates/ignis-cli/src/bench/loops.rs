@@ -191,7 +191,9 @@ pub fn bench(clips: &[PathBuf], cache: Option<&Path>, g: &Global) -> Result<Valu
                 method: Method::Auto,
                 top: 3,
             };
-            let src = loop_cmd::LoopFootage::cached(clip, window.start, &c);
+            // Opaque, as the peers see the footage (the default matte keys the flame out,
+            // which the peers' frames do not).
+            let src = loop_cmd::LoopFootage::cached(clip, window.start, &c).opaque();
             let d = match loop_cmd::make_loop(&src, &ask, &out, &quiet) {
                 Ok(d) => d,
                 Err(e) => {

@@ -278,6 +278,18 @@ pub struct MediaSources {
 }
 
 impl MediaSources {
+    /// The footage of `clip` (its `--relink` place, else the path recorded at training),
+    /// checked as a render checks it (missing, or changed since training).
+    pub fn checked_path(&mut self, clip: &ClipEntry) -> ignis_eigen::Result<PathBuf> {
+        let p = self
+            .relink
+            .get(&clip.name)
+            .cloned()
+            .unwrap_or_else(|| PathBuf::from(&clip.source));
+        self.check(clip, &p)?;
+        Ok(p)
+    }
+
     fn check(&mut self, clip: &ClipEntry, p: &Path) -> ignis_eigen::Result<()> {
         if self.checked.contains(&clip.name) {
             return Ok(());

@@ -28,7 +28,7 @@ const CACHE_VERSION: u32 = 1;
 
 #[derive(clap::Args, Debug)]
 #[command(
-    after_help = "Examples:\n  ignis loop campfire.mp4 --length 4s -o loop.png\n  ignis loop candle.mp4 --length 120 -o loop.mp4\n  ignis loop fire.mov --length 2s --range 100..400 --method morph -o frames/%04d.png\n  ignis loop fire.mp4 --length 3s --cache /tmp/ignis-cache -o loop.gif\n  ignis loop plates/%04d.exr --length 96 -o loop.png    (an image sequence: a frame count, as it has no frame rate)\n\nThe first run on a clip trains an Eigenfire database on it (about 0.1 s per frame) and keeps it in the cache ($XDG_CACHE_HOME/ignis or ~/.cache/ignis, or --cache); later runs reuse it. The output has the footage's own size, colours and frame rate (so --fps is refused); a .png flipbook's JSON records the measured loop_quality."
+    after_help = "Examples:\n  ignis loop campfire.mp4 --length 4s -o loop.png\n  ignis loop candle.mp4 --length 120 -o loop.mp4\n  ignis loop fire.mov --length 2s --range 100..400 --method morph -o frames/%04d.png\n  ignis loop fire.mp4 --length 3s --cache /tmp/ignis-cache -o loop.gif\n  ignis loop plates/%04d.exr --length 96 -o loop.png    (an image sequence: a frame count, as it has no frame rate)\n\nThe first run on a clip trains an Eigenfire database on it (about 0.1 s per frame) and keeps it in the cache ($XDG_CACHE_HOME/ignis or ~/.cache/ignis, or --cache); later runs reuse it. The output has the footage's own size, colours and frame rate (so --fps is refused), with the pre-processing mask's matte as alpha (--alpha opaque: none); a .png flipbook's JSON records the measured loop_quality."
 )]
 pub struct Args {
     /// The footage (any video or frame sequence `ignis info` reads).
@@ -61,6 +61,10 @@ pub struct Args {
     /// footage's aspect that fits). Example: --size 960x540
     #[arg(long, value_parser = crate::eigen::animate::parse_size)]
     pub size: Option<Size>,
+    /// Alpha: `matte` (the pre-processing mask of each frame, feathered: the flame keyed
+    /// out of its surroundings) or `opaque` (the footage as it is).
+    #[arg(long, default_value = "matte", value_parser = ALPHA_CHOICES)]
+    pub alpha: String,
     #[command(flatten)]
     pub out: crate::output::OutputArgs,
 }
@@ -487,11 +491,14 @@ pub fn planned_frames(best: &Evaluated) -> usize {
 /// source's resolution or, given `scale`, with every source frame resized to it as it is
 /// decoded (before the closing's blend or morph), passing each output frame to `sink` in
 /// order. Decodes only source frames `start..end + m`; keeps the m head frames in memory.
+/// With `matte`, every source frame's alpha is its pre-processing matte before it is
+/// blended or morphed.
 pub fn render(
     path: &Path,
     first: usize,
     best: &Evaluated,
     scale: Option<Size>,
+    matte: Option<&FootageMatte>,
     sink: &mut dyn FnMut(&RgbaFrame) -> Result<()>,
 ) -> Result<()> {
     let c = best.candidate;
@@ -529,6 +536,10 @@ pub fn render(
                 })?;
                 at += 1;
                 if at > want {
+                    let mut f = f;
+                    if let Some(m) = matte {
+                        m.apply(want, &mut f)?;
+                    }
                     return Ok(f);
                 }
             }
@@ -610,10 +621,13 @@ pub struct LoopFootage<'a> {
     pub e: usize,
     pub metric: &'a [GrayFrame],
     pub fps: f64,
+    /// Where the frames' alpha comes from; `None` writes the footage opaque.
+    pub matte: Option<FootageMatte<'a>>,
 }
 
 impl<'a> LoopFootage<'a> {
-    /// A cached clip's window (its database holds exactly the window's frames).
+    /// A cached clip's window (its database holds exactly the window's frames), with its
+    /// pre-processing matte as alpha.
     pub fn cached(path: &'a Path, first: usize, c: &'a Cached) -> LoopFootage<'a> {
         LoopFootage {
             path,
@@ -623,7 +637,63 @@ impl<'a> LoopFootage<'a> {
             e: c.db.manifest().e_detect.max(1),
             metric: &c.metric,
             fps: c.fps,
+            matte: Some(FootageMatte::new(&c.db, 0)),
         }
+    }
+
+    /// The same footage written opaque (`--alpha opaque`).
+    pub fn opaque(self) -> LoopFootage<'a> {
+        LoopFootage {
+            matte: None,
+            ..self
+        }
+    }
+}
+
+/// `--alpha`: the pre-processing matte (default) or opaque footage.
+pub const ALPHA_CHOICES: [&str; 2] = ["matte", "opaque"];
+
+/// The alpha of a loop's frames: each window frame's pre-processing mask (stored by
+/// training at the source size, in the source's own framing), feathered as the footage
+/// render feathers database frames (`ignis_eigen::preprocess::feather_half_in`), resized
+/// to the output. The colour stays the footage's own (straight alpha), so formats without
+/// alpha (MP4, GIF) show the flame over the background and a flipbook keys it out.
+#[derive(Clone, Copy)]
+pub struct FootageMatte<'a> {
+    db: &'a EigenfireDb,
+    /// Database row of window frame 0.
+    first_row: usize,
+}
+
+impl<'a> FootageMatte<'a> {
+    pub fn new(db: &'a EigenfireDb, first_row: usize) -> FootageMatte<'a> {
+        FootageMatte { db, first_row }
+    }
+
+    /// The matte of window frame `i` at `size`.
+    pub fn at(&self, i: usize, size: Size) -> Result<GrayFrame> {
+        let row = self.first_row + i;
+        let mask = self.db.source_mask(row)?.with_context(|| {
+            format!(
+                "the database stores no pre-processing mask for row {row} (trained by an older Ignis); retrain it, or give --alpha opaque"
+            )
+        })?;
+        let (m, _) =
+            ignis_eigen::preprocess::feather_half_in(&mask, mask.width().max(mask.height()));
+        Ok(if m.size() == size {
+            m
+        } else {
+            ignis_eigen::pose::resize(&m, size)
+        })
+    }
+
+    /// Sets `f`'s alpha to the matte of window frame `i`.
+    pub fn apply(&self, i: usize, f: &mut RgbaFrame) -> Result<()> {
+        let m = self.at(i, f.size())?;
+        for (p, &a) in f.data_mut().iter_mut().zip(m.data()) {
+            p[3] = a;
+        }
+        Ok(())
     }
 }
 
@@ -667,6 +737,7 @@ pub fn make_loop_sized(
         e,
         metric,
         fps,
+        matte,
     } = *src;
     let LoopAsk {
         length,
@@ -694,7 +765,7 @@ pub fn make_loop_sized(
     let t = Instant::now();
     let mut w = out.create_with(fitted.size, &opts)?;
     let pb = g.progress(n as u64, "rendering");
-    render(path, first, &chosen.best, scale, &mut |f| {
+    render(path, first, &chosen.best, scale, matte.as_ref(), &mut |f| {
         pb.inc(1);
         out.push(&mut w, f)
     })?;
@@ -793,13 +864,11 @@ pub fn run(a: &Args, g: &Global) -> Result<()> {
         method,
         top: a.top,
     };
-    let d = make_loop_sized(
-        &LoopFootage::cached(&a.input, window.start, &c),
-        &ask,
-        a.size,
-        &a.out,
-        g,
-    )?;
+    let mut src = LoopFootage::cached(&a.input, window.start, &c);
+    if a.alpha == "opaque" {
+        src = src.opaque();
+    }
+    let d = make_loop_sized(&src, &ask, a.size, &a.out, g)?;
     report(&d, window.start, g);
     Ok(())
 }
@@ -850,8 +919,17 @@ pub fn eigen_length_loop(a: &crate::eigen::LoopArgs, g: &Global) -> Result<()> {
             longest_hint(window.len(), c.fps, "a wider window")
         );
     }
+    if a.footage.from_database {
+        bail!("--length renders the loop from the clip's source footage; --from-database applies to --range alone");
+    }
     check_output_early(&a.out, c.fps)?;
-    let source = find_source(&c.source, &a.db)?;
+    let mut sources = a.footage.sources(&db)?;
+    if let Some(q) = beside_db(&c.source, &a.db) {
+        sources.relink.entry(a.clip.clone()).or_insert(q);
+    }
+    let source = sources
+        .checked_path(&c)
+        .context("a --length loop is rendered from the clip's source footage (give its place with --relink; reconstructed frames with --from-database need --range instead of --length)")?;
     // Metric frames of the window, as the writer will measure them.
     let metric = metric_frames(&source, &window, g)
         .with_context(|| format!("reading {}", source.display()))?;
@@ -873,6 +951,7 @@ pub fn eigen_length_loop(a: &crate::eigen::LoopArgs, g: &Global) -> Result<()> {
         e,
         metric: &metric,
         fps: c.fps,
+        matte: (a.alpha == "matte").then(|| FootageMatte::new(&db, rows.start)),
     };
     let ask = LoopAsk {
         length,
@@ -914,21 +993,15 @@ fn check_output_early(out: &crate::output::OutputArgs, fps: f64) -> Result<()> {
     out.check_with(&opts)
 }
 
-/// The clip's source file: as recorded, or relative to the database's directory.
-fn find_source(recorded: &str, db: &Path) -> Result<PathBuf> {
-    let p = PathBuf::from(recorded);
-    if p.is_file() {
-        return Ok(p);
+/// Where a clip's source recorded as a relative path that does not resolve here lies
+/// relative to the database's directory, if it is there (a `--relink` of it).
+fn beside_db(recorded: &str, db: &Path) -> Option<PathBuf> {
+    let p = Path::new(recorded);
+    if p.exists() || ignis_media::probe(p).is_ok() {
+        return None;
     }
-    if let Some(parent) = db.parent() {
-        let q = parent.join(&p);
-        if q.is_file() {
-            return Ok(q);
-        }
-    }
-    bail!(
-        "the clip's source {recorded} is not found (the loop is rendered from the source video); run from the directory training ran in"
-    )
+    let q = db.parent()?.join(p);
+    (q.exists() || ignis_media::probe(&q).is_ok()).then_some(q)
 }
 
 /// Metric frames ([`loopq::metric_frame_rgba`], as a writer measures them) of the source
@@ -1020,7 +1093,8 @@ mod tests {
                 method: Method::Auto,
                 top: 3,
             };
-            let src = LoopFootage::cached(&path, window.start, &c);
+            // Opaque, like the peers' frames.
+            let src = LoopFootage::cached(&path, window.start, &c).opaque();
             let d = make_loop(&src, &ask, &out_args(out.clone()), &quiet).unwrap();
             // The flipbook's JSON records what was measured, and the source size when the
             // sheet could not hold full-size cells.
@@ -1063,7 +1137,90 @@ mod tests {
                 d.measured.ghost,
                 xf.ghost.max(vt.ghost)
             );
+            if name == "candle.mp4" {
+                the_default_loop_carries_the_matte(&path, window.start, &c, &ask, &out, &d);
+            }
         }
+    }
+
+    /// The same loop with the default alpha (the pre-processing matte): the same frames
+    /// chosen, and each cell's alpha the feathered mask training stored for its source
+    /// frame (to one 8-bit level); the candle's jar and table (the sheet's corners) keyed
+    /// out, the flame kept; the colour of cut and crossfade frames the footage's own.
+    fn the_default_loop_carries_the_matte(
+        path: &Path,
+        first: usize,
+        c: &Cached,
+        ask: &LoopAsk,
+        opaque_out: &Path,
+        opaque: &Done,
+    ) {
+        let quiet = Global { quiet: true };
+        let out = opaque_out.with_file_name("matte.png");
+        let src = LoopFootage::cached(path, first, c);
+        let d = make_loop(&src, ask, &out_args(out.clone()), &quiet).unwrap();
+        assert_eq!(d.frames, opaque.frames);
+        assert_eq!(d.size, opaque.size);
+        let best = &d.chosen.best;
+        assert_eq!(best.candidate.start, opaque.chosen.best.candidate.start);
+        let sheet = ignis_media::read_image(&out).unwrap();
+        let plain = ignis_media::read_image(opaque_out).unwrap();
+        let (w, h) = (d.size.width as usize, d.size.height as usize);
+        let cols = sheet.width() as usize / w;
+        let matte = src.matte.unwrap();
+        let plan = loops::plan_with(&best.candidate, best.closing, &best.skips);
+        let mut checked = 0;
+        for (j, p) in plan.iter().enumerate() {
+            let (x0, y0) = ((j % cols) * w, (j / cols) * h);
+            let at = |f: &RgbaFrame, x: usize, y: usize| {
+                f.data()[(y0 + y) * f.width() as usize + x0 + x]
+            };
+            if !matches!(best.closing, Closing::Morph(_)) {
+                for (x, y) in [(w / 2, h / 2), (w / 3, 2 * h / 3), (w - 1, 0)] {
+                    let (a, b) = (at(&sheet, x, y), at(&plain, x, y));
+                    assert!(
+                        (0..3).all(|k| (a[k] - b[k]).abs() < 1e-6),
+                        "cell {j}: colour changed"
+                    );
+                }
+            }
+            for (x, y) in [(0, 0), (w - 1, 0), (0, h - 1), (w - 1, h - 1)] {
+                assert_eq!(
+                    at(&sheet, x, y)[3],
+                    0.0,
+                    "cell {j}: corner ({x}, {y}) not keyed out"
+                );
+            }
+            let Planned::Src(i) = *p else { continue };
+            let want = matte.at(i, d.size).unwrap();
+            let mut lit = 0;
+            for y in 0..h {
+                for x in 0..w {
+                    let a = at(&sheet, x, y)[3];
+                    assert!((a - want.get(x as u32, y as u32)).abs() <= 1.0 / 255.0 + 1e-6);
+                    lit += usize::from(a > 0.5);
+                }
+            }
+            // The flame (its brightest pixel) is inside the matte, and the matte is a
+            // small part of the frame.
+            let grey = |q: [f32; 4]| 0.2126 * q[0] + 0.7152 * q[1] + 0.0722 * q[2];
+            let brightest = (0..w * h)
+                .max_by(|&a, &b| {
+                    grey(at(&plain, a % w, a / w)).total_cmp(&grey(at(&plain, b % w, b / w)))
+                })
+                .unwrap();
+            assert!(
+                at(&sheet, brightest % w, brightest / w)[3] > 0.99,
+                "cell {j}: the flame is keyed out"
+            );
+            assert!(
+                lit * 5 < w * h,
+                "cell {j}: the matte covers {lit} of {} pixels",
+                w * h
+            );
+            checked += 1;
+        }
+        assert!(checked > d.frames / 2);
     }
 
     /// A damaged cache entry is detected and rebuilt; a good one is reused.

@@ -113,6 +113,10 @@ pub struct LoopArgs {
     /// right = hot) instead of the footage's own colours.
     #[arg(long)]
     pub palette: Option<crate::output::PaletteArg>,
+    /// Alpha: `matte` (from the pre-processing mask: the flame keyed out of its
+    /// surroundings) or `opaque`.
+    #[arg(long, default_value = "matte", value_parser = crate::eigen::loop_cmd::ALPHA_CHOICES)]
+    pub alpha: String,
     #[command(flatten)]
     pub footage: crate::eigen::animate::FootageArgs,
     #[command(flatten)]
@@ -630,6 +634,7 @@ fn loop_cmd(a: &LoopArgs, g: &Global) -> Result<ignis_eigen::transition::Join> {
         look.bloom = None;
     }
     a.footage.adjust_look(&mut look, g);
+    look.matte = a.alpha == "matte";
     let range = a.range.clone().context(
         "give --range START..END (loop exactly that range) or --length (search for a loop)",
     )?;
