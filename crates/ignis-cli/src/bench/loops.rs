@@ -20,7 +20,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 use ignis_core::loopq::{self, LoopQuality};
 use ignis_core::{GrayFrame, Rng};
 use ignis_eigen::loops::{self, SearchParams};
@@ -106,6 +106,57 @@ fn search_timing(n: usize) -> Result<Value> {
     )
 }
 
+/// `ignis loop`'s default output, the flame keyed out by its matte, beside the peers
+/// computed on the window's metric frames matted as the loop search sees them
+/// ([`loop_cmd::FootageMatte::matted_metric`]); not the goal (the peers of
+/// `shared/tools/loop_metrics.py` see the opaque footage), a check that the matte does not
+/// cost the loop its quality.
+fn matte_row(
+    clip: &Path,
+    first: usize,
+    c: &loop_cmd::Cached,
+    ask: &loop_cmd::LoopAsk,
+    out: &crate::output::OutputArgs,
+    a: usize,
+    length: usize,
+) -> Result<Value> {
+    let src = loop_cmd::LoopFootage::cached(clip, first, c);
+    let mm = src
+        .matte
+        .as_ref()
+        .context("a cached clip has its matte")?
+        .matted_metric(&c.metric)?;
+    let xf = loopq::loop_quality(&xfade(&mm, a, a + length + K, K))?;
+    let vt = video_texture(&mm, length, K)
+        .map(|(f, _, _)| loopq::loop_quality(&f))
+        .transpose()?;
+    let quiet = Global { quiet: true };
+    let d = match loop_cmd::make_loop(&src, ask, out, &quiet) {
+        Ok(d) => d,
+        Err(e) => return Ok(json!({"error": format!("{e:#}")})),
+    };
+    // A peer whose frames are all keyed out (a fireball clip's dark stretch) has no
+    // steps to compare: reported, left out of the comparison.
+    let live = |q: &LoopQuality| q.median_step > 0.0;
+    let empty = json!("every frame keyed out (no steps): not compared");
+    let show = |q: &LoopQuality| if live(q) { q_json(q) } else { empty.clone() };
+    let best_peer_ghost = [Some(xf), vt]
+        .into_iter()
+        .flatten()
+        .filter(live)
+        .map(|q| q.ghost)
+        .reduce(f64::max);
+    Ok(json!({
+        "closing": d.chosen.best.closing,
+        "quality": q_json(&d.measured),
+        "xfade": show(&xf),
+        "vt": vt.map(|q| show(&q)),
+        "seam_le_xfade": live(&xf).then_some(d.measured.seam <= xf.seam),
+        "ghost_ge_best_peer": best_peer_ghost.map(|g| d.measured.ghost >= g),
+        "render_and_write_s": d.render_s,
+    }))
+}
+
 /// The default clips.
 pub fn default_clips() -> Vec<PathBuf> {
     ["candle", "campfire", "fireball"]
@@ -175,15 +226,15 @@ pub fn bench(clips: &[PathBuf], cache: Option<&Path>, g: &Global) -> Result<Valu
                 .to_string();
             let cells = (length as f64 * 1.2).ceil() as u64 * info.size.pixels() as u64;
             let flipbook = cells <= 1 << 26;
-            let output = if flipbook {
-                tmp.join(format!("{stem}-{secs}s.png"))
-            } else {
-                tmp.join(format!("{stem}-{secs}s/%04d.png"))
-            };
-            let out = crate::output::OutputArgs {
+            let out_for = |tag: &str| crate::output::OutputArgs {
                 fps: c.fps,
-                ..crate::output::OutputArgs::for_path(output)
+                ..crate::output::OutputArgs::for_path(if flipbook {
+                    tmp.join(format!("{stem}-{secs}s{tag}.png"))
+                } else {
+                    tmp.join(format!("{stem}-{secs}s{tag}/%04d.png"))
+                })
             };
+            let out = out_for("");
             let quiet = Global { quiet: true };
             let t = Instant::now();
             let ask = loop_cmd::LoopAsk {
@@ -220,6 +271,8 @@ pub fn bench(clips: &[PathBuf], cache: Option<&Path>, g: &Global) -> Result<Valu
                 "seam_le_xfade": d.measured.seam <= xf.seam,
                 "ghost_ge_best_peer": d.measured.ghost >= best_peer_ghost,
             });
+            entry["ignis_matte"] =
+                matte_row(clip, window.start, &c, &ask, &out_for("-matte"), a, length)?;
             results.push(entry);
         }
     }

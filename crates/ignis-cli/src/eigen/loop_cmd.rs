@@ -259,6 +259,9 @@ fn open_entry(dir: &Path, sha: &str, settings: &CacheSettings) -> Result<Cached>
     if let Some((f, why)) = problems.first() {
         bail!("the cached database's {f} is damaged: {why}");
     }
+    if db.source_mask(0)?.is_none() {
+        bail!("the cached database has no pre-processing masks (made by an older Ignis)");
+    }
     let clip = db.clip("clip")?;
     if clip.stride != 1 || clip.frames != meta.metric_frames {
         bail!(
@@ -637,7 +640,7 @@ impl<'a> LoopFootage<'a> {
             e: c.db.manifest().e_detect.max(1),
             metric: &c.metric,
             fps: c.fps,
-            matte: Some(FootageMatte::new(&c.db, 0)),
+            matte: Some(FootageMatte::new(&c.db, 0, c.metric.len())),
         }
     }
 
@@ -654,30 +657,49 @@ impl<'a> LoopFootage<'a> {
 pub const ALPHA_CHOICES: [&str; 2] = ["matte", "opaque"];
 
 /// The alpha of a loop's frames: each window frame's pre-processing mask (stored by
-/// training at the source size, in the source's own framing), feathered as the footage
-/// render feathers database frames (`ignis_eigen::preprocess::feather_half_in`), resized
-/// to the output. The colour stays the footage's own (straight alpha), so formats without
-/// alpha (MP4, GIF) show the flame over the background and a flipbook keys it out.
+/// training at the source size, in the source's own framing), steadied over time by a
+/// majority vote with its two neighbours in the footage (a pixel is in when it is in at
+/// least two of the three masks, so a mask that collapses or flares on a single frame does
+/// not flash in the loop), feathered as the footage render feathers database frames
+/// (`ignis_eigen::preprocess::feather_half_in`) and resized to the output. The colour
+/// stays the footage's own (straight alpha), so formats without alpha (MP4, GIF) show the
+/// flame over black and a flipbook keys it out.
 #[derive(Clone, Copy)]
 pub struct FootageMatte<'a> {
     db: &'a EigenfireDb,
     /// Database row of window frame 0.
     first_row: usize,
+    /// Window frames (the vote's neighbours stay inside them).
+    frames: usize,
 }
 
 impl<'a> FootageMatte<'a> {
-    pub fn new(db: &'a EigenfireDb, first_row: usize) -> FootageMatte<'a> {
-        FootageMatte { db, first_row }
+    pub fn new(db: &'a EigenfireDb, first_row: usize, frames: usize) -> FootageMatte<'a> {
+        FootageMatte {
+            db,
+            first_row,
+            frames,
+        }
+    }
+
+    fn mask(&self, i: usize) -> Result<image::GrayImage> {
+        let row = self.first_row + i;
+        self.db.source_mask(row)?.with_context(|| {
+            format!(
+                "the database stores no pre-processing mask for row {row} (trained by an older Ignis); retrain it, or give --alpha opaque"
+            )
+        })
     }
 
     /// The matte of window frame `i` at `size`.
     pub fn at(&self, i: usize, size: Size) -> Result<GrayFrame> {
-        let row = self.first_row + i;
-        let mask = self.db.source_mask(row)?.with_context(|| {
-            format!(
-                "the database stores no pre-processing mask for row {row} (trained by an older Ignis); retrain it, or give --alpha opaque"
-            )
-        })?;
+        let last = self.frames.max(1) - 1;
+        let (a, b, c) = (
+            self.mask(i.saturating_sub(1))?,
+            self.mask(i.min(last))?,
+            self.mask((i + 1).min(last))?,
+        );
+        let mask = majority(&a, &b, &c);
         let (m, _) =
             ignis_eigen::preprocess::feather_half_in(&mask, mask.width().max(mask.height()));
         Ok(if m.size() == size {
@@ -685,6 +707,42 @@ impl<'a> FootageMatte<'a> {
         } else {
             ignis_eigen::pose::resize(&m, size)
         })
+    }
+
+    /// The window's metric frames as the matted loop will show them: each multiplied by
+    /// its frame's mask area-averaged to the metric size, the three neighbours' values
+    /// voted by their median (the full-size vote and feather, approximately: the loop is
+    /// chosen on these and measured on the frames written).
+    pub fn matted_metric(&self, metric: &[GrayFrame]) -> Result<Vec<GrayFrame>> {
+        use rayon::prelude::*;
+        let soft: Vec<GrayFrame> = (0..metric.len())
+            .into_par_iter()
+            .map(|i| {
+                let m = self.mask(i)?;
+                let size = Size::new(m.width(), m.height())?;
+                let g = GrayFrame::from_vec(
+                    size,
+                    m.iter().map(|&v| f32::from(u8::from(v > 127))).collect(),
+                )?;
+                Ok(ignis_core::loopq::area_resize(&g, metric[i].size()))
+            })
+            .collect::<Result<_>>()?;
+        let last = metric.len().saturating_sub(1);
+        Ok((0..metric.len())
+            .map(|i| {
+                let (a, b, c) = (
+                    &soft[i.saturating_sub(1)],
+                    &soft[i],
+                    &soft[(i + 1).min(last)],
+                );
+                let mut out = metric[i].clone();
+                for (j, o) in out.data_mut().iter_mut().enumerate() {
+                    let (x, y, z) = (a.data()[j], b.data()[j], c.data()[j]);
+                    *o *= x.max(y).min(x.min(y).max(z));
+                }
+                out
+            })
+            .collect())
     }
 
     /// Sets `f`'s alpha to the matte of window frame `i`.
@@ -695,6 +753,16 @@ impl<'a> FootageMatte<'a> {
         }
         Ok(())
     }
+}
+
+/// Per pixel, 255 where at least two of the three binary masks are set (0 elsewhere).
+fn majority(a: &image::GrayImage, b: &image::GrayImage, c: &image::GrayImage) -> image::GrayImage {
+    let mut out = b.clone();
+    for ((o, &x), &z) in out.iter_mut().zip(a.iter()).zip(c.iter()) {
+        let votes = u8::from(x > 127) + u8::from(*o > 127) + u8::from(z > 127);
+        *o = if votes >= 2 { 255 } else { 0 };
+    }
+    out
 }
 
 /// What loop to make: about `length` frames, closed by `method`; the best `top`
@@ -744,6 +812,14 @@ pub fn make_loop_sized(
         method,
         top,
     } = *ask;
+    let matted;
+    let metric = match &matte {
+        Some(m) => {
+            matted = m.matted_metric(metric)?;
+            &matted[..]
+        }
+        None => metric,
+    };
     let chosen = search_and_choose(first, weights, k, e, metric, length, method)?;
     g.say("best candidates (predicted on the footage's 128-px frames):");
     for (i, c) in top_candidates(&chosen.evaluated, top).iter().enumerate() {
@@ -951,7 +1027,7 @@ pub fn eigen_length_loop(a: &crate::eigen::LoopArgs, g: &Global) -> Result<()> {
         e,
         metric: &metric,
         fps: c.fps,
-        matte: (a.alpha == "matte").then(|| FootageMatte::new(&db, rows.start)),
+        matte: (a.alpha == "matte").then(|| FootageMatte::new(&db, rows.start, rows.len())),
     };
     let ask = LoopAsk {
         length,
@@ -1138,33 +1214,38 @@ mod tests {
                 xf.ghost.max(vt.ghost)
             );
             if name == "candle.mp4" {
-                the_default_loop_carries_the_matte(&path, window.start, &c, &ask, &out, &d);
+                the_default_loop_carries_the_matte(&path, window.start, &c, &ask, &out);
             }
         }
     }
 
-    /// The same loop with the default alpha (the pre-processing matte): the same frames
-    /// chosen, and each cell's alpha the feathered mask training stored for its source
-    /// frame (to one 8-bit level); the candle's jar and table (the sheet's corners) keyed
-    /// out, the flame kept; the colour of cut and crossfade frames the footage's own.
+    /// The default loop (alpha from the pre-processing matte, chosen on the matted
+    /// frames): each cell's alpha is the voted, feathered mask training stored for its
+    /// source frame (to one 8-bit level); the candle's jar and table (the sheet's corners)
+    /// are keyed out and the flame kept; the colour of source frames is the footage's own;
+    /// and the seam is no visible jump.
     fn the_default_loop_carries_the_matte(
         path: &Path,
         first: usize,
         c: &Cached,
         ask: &LoopAsk,
         opaque_out: &Path,
-        opaque: &Done,
     ) {
         let quiet = Global { quiet: true };
         let out = opaque_out.with_file_name("matte.png");
         let src = LoopFootage::cached(path, first, c);
         let d = make_loop(&src, ask, &out_args(out.clone()), &quiet).unwrap();
-        assert_eq!(d.frames, opaque.frames);
-        assert_eq!(d.size, opaque.size);
+        eprintln!(
+            "candle.mp4 matted: seam {:.3} ghost {:.3} ({})",
+            d.measured.seam, d.measured.ghost, d.chosen.best.closing
+        );
+        assert!(
+            seam_warning(d.measured.seam).is_none(),
+            "seam {}",
+            d.measured.seam
+        );
         let best = &d.chosen.best;
-        assert_eq!(best.candidate.start, opaque.chosen.best.candidate.start);
         let sheet = ignis_media::read_image(&out).unwrap();
-        let plain = ignis_media::read_image(opaque_out).unwrap();
         let (w, h) = (d.size.width as usize, d.size.height as usize);
         let cols = sheet.width() as usize / w;
         let matte = src.matte.unwrap();
@@ -1172,21 +1253,10 @@ mod tests {
         let mut checked = 0;
         for (j, p) in plan.iter().enumerate() {
             let (x0, y0) = ((j % cols) * w, (j / cols) * h);
-            let at = |f: &RgbaFrame, x: usize, y: usize| {
-                f.data()[(y0 + y) * f.width() as usize + x0 + x]
-            };
-            if !matches!(best.closing, Closing::Morph(_)) {
-                for (x, y) in [(w / 2, h / 2), (w / 3, 2 * h / 3), (w - 1, 0)] {
-                    let (a, b) = (at(&sheet, x, y), at(&plain, x, y));
-                    assert!(
-                        (0..3).all(|k| (a[k] - b[k]).abs() < 1e-6),
-                        "cell {j}: colour changed"
-                    );
-                }
-            }
+            let at = |x: usize, y: usize| sheet.data()[(y0 + y) * sheet.width() as usize + x0 + x];
             for (x, y) in [(0, 0), (w - 1, 0), (0, h - 1), (w - 1, h - 1)] {
                 assert_eq!(
-                    at(&sheet, x, y)[3],
+                    at(x, y)[3],
                     0.0,
                     "cell {j}: corner ({x}, {y}) not keyed out"
                 );
@@ -1196,21 +1266,19 @@ mod tests {
             let mut lit = 0;
             for y in 0..h {
                 for x in 0..w {
-                    let a = at(&sheet, x, y)[3];
+                    let a = at(x, y)[3];
                     assert!((a - want.get(x as u32, y as u32)).abs() <= 1.0 / 255.0 + 1e-6);
                     lit += usize::from(a > 0.5);
                 }
             }
-            // The flame (its brightest pixel) is inside the matte, and the matte is a
-            // small part of the frame.
+            // The flame (the brightest pixel) is inside the matte, which is a small part
+            // of the frame.
             let grey = |q: [f32; 4]| 0.2126 * q[0] + 0.7152 * q[1] + 0.0722 * q[2];
             let brightest = (0..w * h)
-                .max_by(|&a, &b| {
-                    grey(at(&plain, a % w, a / w)).total_cmp(&grey(at(&plain, b % w, b / w)))
-                })
+                .max_by(|&a, &b| grey(at(a % w, a / w)).total_cmp(&grey(at(b % w, b / w))))
                 .unwrap();
             assert!(
-                at(&sheet, brightest % w, brightest / w)[3] > 0.99,
+                at(brightest % w, brightest / w)[3] > 0.99,
                 "cell {j}: the flame is keyed out"
             );
             assert!(
@@ -1218,9 +1286,47 @@ mod tests {
                 "cell {j}: the matte covers {lit} of {} pixels",
                 w * h
             );
+            // The colour is the source frame's own (straight alpha), on a few cells.
+            if checked % 16 == 0 {
+                let opts = ignis_media::ReadOptions {
+                    range: Some(ignis_media::FrameRange::frames(
+                        (first + i) as u64,
+                        Some((first + i + 1) as u64),
+                    )),
+                    ..Default::default()
+                };
+                let f = ignis_media::open(path, &opts)
+                    .unwrap()
+                    .next()
+                    .unwrap()
+                    .unwrap();
+                for k in (0..w * h).step_by(997) {
+                    let (a, b) = (at(k % w, k / w), f.data()[k]);
+                    assert!(
+                        (0..3).all(|c| (a[c] - b[c]).abs() < 1e-6),
+                        "cell {j}: colour changed at {k}"
+                    );
+                }
+            }
             checked += 1;
         }
         assert!(checked > d.frames / 2);
+    }
+
+    /// The matte's vote: a mask that collapses on one frame is restored by its two
+    /// neighbours, one that flares on one frame is cut back; agreeing masks pass as they are.
+    #[test]
+    fn the_matte_votes_over_three_frames() {
+        let full =
+            image::GrayImage::from_fn(8, 6, |x, _| image::Luma([if x < 6 { 255 } else { 0 }]));
+        let collapsed = image::GrayImage::from_fn(8, 6, |x, y| {
+            image::Luma([if x < 2 && y < 2 { 255 } else { 0 }])
+        });
+        let flared = image::GrayImage::from_pixel(8, 6, image::Luma([255]));
+        assert_eq!(majority(&full, &collapsed, &full), full);
+        assert_eq!(majority(&full, &flared, &full), full);
+        assert_eq!(majority(&collapsed, &full, &collapsed), collapsed);
+        assert_eq!(majority(&full, &full, &flared), full);
     }
 
     /// A damaged cache entry is detected and rebuilt; a good one is reused.
