@@ -18,9 +18,8 @@ fn main() {
     };
     let side = arg(1, 48);
     let timing = LoopTiming {
-        step_bound: f64::from(arg(2, 115)) / 100.0,
-        wrap_bound: f64::from(arg(3, 105)) / 100.0,
-        ..LoopTiming::DEFAULT
+        preview_width: arg(2, LoopTiming::DEFAULT.preview_width),
+        samples_per_frame: arg(3, LoopTiming::DEFAULT.samples_per_frame),
     };
     println!("{side}x{side}, {timing:?}");
     for p in Preset::ALL {

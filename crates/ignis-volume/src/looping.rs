@@ -11,62 +11,49 @@
 //! loop, by chance of the seed), so one step — the seam among them — can be 1.6× the
 //! median.
 //!
-//! Since `τ` is continuous, the long steps are fixed by moving frames in loop time
-//! ([`Retimer`]), measured on the output frames themselves, with no preview: the frames
-//! are rendered at uniform loop times and their metric frames taken (`ignis_core::loopq`,
-//! the measure of written frames); a step over [`LoopTiming::step_bound`] times the
-//! median of the steps around it (the wrap over [`LoopTiming::wrap_bound`]) has the frame
-//! at one of its ends — the one whose other step is shorter — rendered again where the two
-//! steps are predicted equal (both ends when one frame cannot do it). If a step of the
-//! frames moved is still over its bound, they are placed once more from the steps measured
-//! on that render (a regula falsi step), and the best of the tries is kept. Most steps are
-//! within the bounds as rendered (their spread is 10–13 % of the median), so only a few
-//! frames are rendered twice. Frame 0 stays at `τ = 0`, the period stays `N`.
-//!
-//! Every decision reads a bounded stretch of the loop (the median over a window of steps
-//! that does not cross the wrap, a long step's neighbours, a run of moved frames between
-//! two unmoved ones), so a `--chunk` of a render, which renders its frames and that margin,
-//! times its frames exactly as the full render does.
+//! Since `τ` is continuous, the frames are instead rendered where the animation has moved
+//! equal distances: a small preview ([`LoopTiming`]: two frames per output frame, 64 px
+//! wide) is rendered at uniform loop times as metric frames
+//! (`ignis_core::loopq`), and the frames are placed so that the RMS differences between
+//! consecutive ones, read off the preview, are all equal ([`even_step_times`]). Frame 0
+//! stays at `τ = 0`, the period stays `N`, and every step, the wrap included, covers about
+//! the same distance.
+//! The times depend on the whole loop only, so every `--chunk` of a render computes the
+//! same ones.
 
 use crate::motion::{Collision, Keyframe, Script};
-use crate::error::Result;
 use ignis_core::GrayFrame;
-use std::collections::{BTreeMap, HashMap};
 
 /// How a looping animator times its frames (see the module docs).
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct LoopTiming {
-    /// A step longer than this many times the median step around it is fixed by moving
-    /// the frames at its ends in loop time; `f64::INFINITY` renders every frame at its
-    /// uniform loop time.
-    pub step_bound: f64,
-    /// The same for the wrap step (the last frame → frame 0).
-    pub wrap_bound: f64,
-    /// Half-width, in steps, of the window the median step is taken over (the whole loop
-    /// when it has at most `2 · window + 1` frames).
-    pub window: u32,
+    /// Width in pixels of the preview the steps are measured on, at most the width of the
+    /// metric frames (`ignis_core::loopq::metric_size`: 128 px, or the scene's own width
+    /// when narrower); the height keeps the scene's aspect.
+    pub preview_width: u32,
+    /// Preview frames per output frame, at uniform loop times; 0 renders the frames at
+    /// uniform loop times `0, 1, …, N − 1` without a preview.
+    pub samples_per_frame: u32,
 }
 
 impl LoopTiming {
-    /// The default: steps over 1.15× (the wrap over 1.05×) the median of the 25 steps
-    /// around them are fixed — a margin under issue 16's goal (1.2× and 1.1× the loop's
-    /// median), which the window's median may miss by a few per cent. Steps and cost are in
-    /// `benches/README.md`.
+    /// The default: a 64-px preview, 2 samples per frame. A 32-px preview misses the
+    /// detail the metric frames see and leaves steps up to 1.5× the median; one sample per
+    /// frame is too coarse to place frames between samples (up to 1.36×). Steps and cost
+    /// of each are in `benches/README.md`.
     pub const DEFAULT: LoopTiming = LoopTiming {
-        step_bound: 1.15,
-        wrap_bound: 1.05,
-        window: 12,
+        preview_width: 64,
+        samples_per_frame: 2,
     };
-    /// Frames at uniform loop times `0, 1, …, N − 1`, nothing fixed.
+    /// Frames at uniform loop times, no preview.
     pub const UNIFORM: LoopTiming = LoopTiming {
-        step_bound: f64::INFINITY,
-        wrap_bound: f64::INFINITY,
-        window: 12,
+        preview_width: 0,
+        samples_per_frame: 0,
     };
 
-    /// Whether this timing moves any frame.
+    /// Whether this timing renders a preview.
     pub fn retimes(&self) -> bool {
-        self.step_bound.is_finite() || self.wrap_bound.is_finite()
+        self.samples_per_frame > 0 && self.preview_width > 0
     }
 }
 
@@ -82,446 +69,249 @@ pub fn loop_blend_frames(frames: u32) -> u32 {
     (frames / 3).max(1)
 }
 
-/// Largest move of a frame from its uniform loop time, in frames: steps stay 0.2–1.8
-/// frames long, so a flicker is never skipped or repeated (a candle puffs every 3 frames at
-/// 30 fps).
-const MAX_SHIFT: f64 = 0.4;
-/// One frame is moved to fix a long step when the two steps it balances are predicted to
-/// average at most this share of their bounds; otherwise both frames of the step move.
-const SINGLE_MARGIN: f64 = 0.97;
-
-/// Most frames moved together to even out one burst of speed.
-const MAX_RUN: usize = 8;
-
-/// Loop starts considered: frame 0 is the uniform frame, among the first `SHIFTS`, whose
-/// step from the one before it (the wrap) is shortest.
-const SHIFTS: usize = 6;
-
-/// Renders the frame at loop time `tau` (frames) and its metric frame.
-pub(crate) type RenderAt<'r, F> = dyn FnMut(f64) -> Result<(F, GrayFrame)> + 'r;
-
-/// The re-timing of a loop's frames from the frames themselves ([`crate::looping`]):
-/// frames rendered at uniform loop times, the long steps among them found and fixed by
-/// rendering the frames at their ends again at new times. Every decision reads a bounded
-/// stretch of the loop, so a frame's time is the same whichever frame a render starts at.
-/// Generic over the rendered frame `F` (a [`crate::Frame`] in the animator).
-pub(crate) struct Retimer<F> {
-    n: usize,
-    timing: LoopTiming,
-    /// Metric frames at the uniform loop times `u` (in `0..n`), each with its rendered
-    /// frame while it may still be handed out.
-    uniform: BTreeMap<usize, (GrayFrame, Option<F>)>,
-    /// The loop's start: frame `k` is at uniform loop time `(k + shift) mod n`
-    /// ([`Retimer::shift`]).
-    shift: Option<usize>,
-    /// Step `j`: metric distance from uniform frame `j` to uniform frame `j + 1` (mod n).
-    steps: HashMap<usize, f64>,
-    /// Median step of the window starting at step `lo`.
-    medians: HashMap<usize, f64>,
-    /// Whether each frame is a seed ([`Retimer::seed`]).
-    seeds: HashMap<usize, bool>,
-    /// Runs of seeds, by first frame: the frames they move ([`Retimer::grown`]).
-    grown_runs: HashMap<usize, (usize, usize)>,
-    /// Decided runs of moved frames, by first frame.
-    runs: BTreeMap<usize, Run<F>>,
-    /// The next frame to hand out: frames before it are not kept.
-    cursor: usize,
-    /// Frames rendered a second or third time at a new loop time.
-    pub rerenders: usize,
-    /// Frames rendered at their uniform loop times.
-    pub uniform_renders: usize,
+/// Loop times (in frames, in `0..frames`) at which the `frames` steps of a loop (the
+/// wrap back to frame 0 included) are equally long, from a preview of the loop: `preview`
+/// holds metric frames at the uniform loop times `j · frames / preview.len()` (a whole
+/// number `K ≥ 1` of them per frame). Frame 0 is at time 0.
+///
+/// The distance between any two loop times is the RMS difference of the preview frames
+/// around them, interpolated ([`PreviewDistances`]). Starting from uniform times, each
+/// frame is moved, sweep after sweep, to where its steps to its two neighbours are equal
+/// ([`relax`]); frame 0 and the loop's end stay put, so the wrap is evened out with the
+/// rest. A step is measured whole, not summed from sub-steps: the RMS difference of a
+/// flame grows more slowly than its time apart (the noise decorrelates), so a sum of
+/// short steps would overrate the stretches that change fast at fine scales.
+///
+/// Errors when the preview's length is not a multiple of `frames` or its frames differ in
+/// size.
+pub fn even_step_times(preview: &[GrayFrame], frames: u32) -> Result<Vec<f64>, String> {
+    let mut d = PreviewDistances::builder(preview.len(), frames)?;
+    for f in preview {
+        d.push(f.clone())?;
+    }
+    Ok(d.finish()?.even_step_times())
 }
 
-/// Consecutive frames moved together: their loop times and, while not yet handed out,
-/// their frames (`None`: the uniform frame, or rendered again when asked).
-struct Run<F> {
-    times: Vec<f64>,
-    frames: Vec<Option<F>>,
-}
-
-impl<F> Retimer<F> {
-    pub fn new(frames: u32, timing: LoopTiming) -> Retimer<F> {
-        Retimer {
-            n: frames as usize,
-            timing,
-            uniform: BTreeMap::new(),
-            shift: None,
-            steps: HashMap::new(),
-            medians: HashMap::new(),
-            seeds: HashMap::new(),
-            grown_runs: HashMap::new(),
-            runs: BTreeMap::new(),
-            cursor: 0,
-            rerenders: 0,
-            uniform_renders: 0,
+/// Sweeps over the interior times of `t` (in samples, `per_frame` to a frame; `t[0]` and
+/// the last fixed), each moved towards where its two steps are equal (over-relaxed by
+/// [`RELAX_OVERSHOOT`]) but no step shorter than [`MIN_STEP`] or longer than
+/// [`MAX_STEP`] frames, until the longest step is within 0.5 % of the shortest, the
+/// spread stops shrinking, or 2,000 sweeps (fewer for loops over 2,000 frames: ~4 million
+/// moves in all, each ~60 cheap look-ups).
+fn relax(d: &PreviewDistances, t: &mut [f64], per_frame: f64) {
+    let n = t.len() - 1;
+    let (short, long) = (MIN_STEP * per_frame, MAX_STEP * per_frame);
+    let (mut best, mut stalled) = (f64::INFINITY, 0);
+    // a long loop's sweeps are long: at most ~4 million moves in all (each ~60 look-ups)
+    let sweeps = (4_000_000 / n.max(1)).clamp(20, 2000);
+    for _ in 0..sweeps {
+        let steps = t.windows(2).map(|w| d.between(w[0], w[1]));
+        let (lo, hi) = steps.fold((f64::MAX, 0.0f64), |(a, b), s| (a.min(s), b.max(s)));
+        // even (or a preview that never changes: nothing to even out)
+        if hi <= lo * 1.005 || hi == 0.0 {
+            break;
         }
-    }
-
-    /// Frame `k` (in `0..n`) of the loop and its loop time, rendering what its time
-    /// depends on. Frames are handed out in order; asking for an earlier frame starts a
-    /// new pass (it is rendered again).
-    pub fn take(&mut self, k: usize, r: &mut RenderAt<'_, F>) -> Result<(f64, F)> {
-        let c = self.shift(r)?;
-        self.cursor = k;
-        self.prune(k);
-        if self.is_mover(k, r)? {
-            let p = self.run_of(k, r)?;
-            let own = self.runs[&p].times[k - p];
-            let t = self.loop_time(own);
-            let run = self.runs.get_mut(&p).expect("decided");
-            if let Some(f) = run.frames[k - p].take() {
-                return Ok((t, f));
-            }
-            if own != k as f64 {
-                self.rerenders += 1;
-                return Ok((t, r(t)?.0));
-            }
-        }
-        let u = (k + c) % self.n;
-        self.metric(k, r)?;
-        match self.uniform.get_mut(&u).and_then(|e| e.1.take()) {
-            Some(f) => Ok((u as f64, f)),
-            None => {
-                self.uniform_renders += 1;
-                Ok((u as f64, r(u as f64)?.0))
-            }
-        }
-    }
-
-    /// The loop time of frame `k` if it is already known without rendering.
-    pub fn known_time(&self, k: usize) -> Option<f64> {
-        let c = self.shift?;
-        let t = match self.runs.range(..=k).next_back() {
-            Some((p, run)) if k < p + run.times.len() => run.times[k - p],
-            _ => k as f64,
-        };
-        Some(((t + c as f64) % self.n as f64).max(0.0))
-    }
-
-    /// The loop time (in `0..n`) of a time `t` counted from frame 0.
-    fn loop_time(&self, t: f64) -> f64 {
-        (t + self.shift.unwrap_or(0) as f64).rem_euclid(self.n as f64)
-    }
-
-    /// The loop's start, chosen once: of the uniform frames `0..SHIFTS`, the one whose
-    /// step from the uniform frame before it is shortest (ties: the first), so the wrap —
-    /// held to a tighter bound than the other steps — is a short step to begin with.
-    fn shift(&mut self, r: &mut RenderAt<'_, F>) -> Result<usize> {
-        if let Some(c) = self.shift {
-            return Ok(c);
-        }
-        let n = self.n;
-        let mut best = (f64::INFINITY, 0);
-        for c in 0..SHIFTS.min(n) {
-            let a = self.uniform_metric((c + n - 1) % n, r)?.clone();
-            let d = ignis_core::loopq::rms_diff(&a, self.uniform_metric(c, r)?);
-            if d < best.0 {
-                best = (d, c);
-            }
-        }
-        self.shift = Some(best.1);
-        Ok(best.1)
-    }
-
-    /// Drops what frames far behind `k` kept (frame 0's metric closes the loop: kept).
-    fn prune(&mut self, k: usize) {
-        let (n, c) = (self.n, self.shift.unwrap_or(0));
-        let reach = 2 * self.timing.window as usize + 8;
-        self.uniform.retain(|&u, e| {
-            let j = (u + n - c) % n;
-            if j < k {
-                e.1 = None;
-            }
-            j == 0 || j + reach >= k
-        });
-    }
-
-    /// The metric frame of uniform loop time `u`, rendering it if needed (its frame is
-    /// kept while it may still be handed out).
-    fn uniform_metric(&mut self, u: usize, r: &mut RenderAt<'_, F>) -> Result<&GrayFrame> {
-        if !self.uniform.contains_key(&u) {
-            let (f, m) = r(u as f64)?;
-            self.uniform_renders += 1;
-            let keep = match self.shift {
-                Some(c) => (u + self.n - c) % self.n >= self.cursor,
-                None => true,
-            };
-            self.uniform.insert(u, (m, keep.then_some(f)));
-        }
-        Ok(&self.uniform[&u].0)
-    }
-
-    /// The metric frame of frame `j` (mod n) at its uniform time.
-    fn metric(&mut self, j: usize, r: &mut RenderAt<'_, F>) -> Result<&GrayFrame> {
-        let u = (j + self.shift.unwrap_or(0)) % self.n;
-        self.uniform_metric(u, r)
-    }
-
-    /// Step `j` (in `0..n`) between uniform frames.
-    fn step(&mut self, j: usize, r: &mut RenderAt<'_, F>) -> Result<f64> {
-        if let Some(&s) = self.steps.get(&j) {
-            return Ok(s);
-        }
-        let a = self.metric(j, r)?.clone();
-        let s = ignis_core::loopq::rms_diff(&a, self.metric(j + 1, r)?);
-        self.steps.insert(j, s);
-        Ok(s)
-    }
-
-    /// The longest step `j` may be: its bound times the median step of the window of
-    /// `2 · window + 1` steps around it (moved inside the loop at its ends, not across the
-    /// wrap, so frame 0 needs no frames from the loop's end).
-    fn bound(&mut self, j: usize, r: &mut RenderAt<'_, F>) -> Result<f64> {
-        let (n, w) = (self.n, self.timing.window as usize);
-        let (lo, len) = if n <= 2 * w + 1 {
-            (0, n)
+        // where the step bounds or a dip in the distances hold it, the spread stops
+        // shrinking within ~100 sweeps; 50 more without a 0.1 % gain end the search
+        if hi / lo < best * 0.999 {
+            (best, stalled) = (hi / lo, 0);
         } else {
-            (j.saturating_sub(w).min(n - 1 - 2 * w), 2 * w + 1)
-        };
-        let med = match self.medians.get(&lo) {
-            Some(&m) => m,
-            None => {
-                let mut v = (lo..lo + len)
-                    .map(|i| self.step(i, r))
-                    .collect::<Result<Vec<_>>>()?;
-                let m = ignis_core::loopq::median(&mut v);
-                self.medians.insert(lo, m);
-                m
-            }
-        };
-        let factor = if j == n - 1 {
-            self.timing.wrap_bound
-        } else {
-            self.timing.step_bound
-        };
-        Ok(factor * med)
-    }
-
-    /// Whether step `j` is over its bound.
-    fn long(&mut self, j: usize, r: &mut RenderAt<'_, F>) -> Result<bool> {
-        Ok(self.step(j, r)? > self.bound(j, r)?)
-    }
-
-    /// Which of the frames at the ends of long step `j` move: `[frame j, frame j + 1]`.
-    /// The one whose other step is shorter, if balancing the two steps is predicted to
-    /// bring them under their bounds; else both. Frame 0 (and so frame `n`) never moves.
-    fn movers_of(&mut self, j: usize, r: &mut RenderAt<'_, F>) -> Result<[bool; 2]> {
-        let n = self.n;
-        let s = self.step(j, r)?;
-        let b = self.bound(j, r)?;
-        let mut best: Option<(f64, usize)> = None;
-        if j + 1 < n {
-            let pred = 0.5 * (s + self.step(j + 1, r)?) / b.min(self.bound(j + 1, r)?);
-            best = Some((pred, 1));
-        }
-        if j > 0 {
-            let pred = 0.5 * (s + self.step(j - 1, r)?) / b.min(self.bound(j - 1, r)?);
-            if best.is_none_or(|(q, _)| pred < q) {
-                best = Some((pred, 0));
-            }
-        }
-        Ok(match best {
-            Some((pred, which)) if pred <= SINGLE_MARGIN => {
-                let mut m = [false; 2];
-                m[which] = true;
-                m
-            }
-            _ => [j > 0, j + 1 < n],
-        })
-    }
-
-    /// Whether frame `k` is at an end of a long step and chosen to move by
-    /// [`Retimer::movers_of`].
-    fn seed(&mut self, k: usize, r: &mut RenderAt<'_, F>) -> Result<bool> {
-        if k == 0 || k >= self.n {
-            return Ok(false);
-        }
-        if let Some(&m) = self.seeds.get(&k) {
-            return Ok(m);
-        }
-        let m = (self.long(k - 1, r)? && self.movers_of(k - 1, r)?[1])
-            || (self.long(k, r)? && self.movers_of(k, r)?[0]);
-        self.seeds.insert(k, m);
-        Ok(m)
-    }
-
-    /// The frames moved for the run of seeds `p..=q`: grown, one frame at a time on the
-    /// side whose step beyond is shorter, while the steps between its unmoved ends are
-    /// predicted to average over [`SINGLE_MARGIN`] of their bounds (a burst of speed
-    /// longer than a step is evened out over the slower steps around it), up to
-    /// [`MAX_RUN`] frames.
-    fn grown(&mut self, p: usize, q: usize, r: &mut RenderAt<'_, F>) -> Result<(usize, usize)> {
-        let (mut p, mut q) = (p, q);
-        while q + 1 - p < MAX_RUN {
-            let mut sum = 0.0;
-            let mut lim = f64::INFINITY;
-            for j in p - 1..=q {
-                sum += self.step(j, r)?;
-                lim = lim.min(self.bound(j, r)?);
-            }
-            if sum / (q + 2 - p) as f64 <= SINGLE_MARGIN * lim {
+            stalled += 1;
+            if stalled == 50 {
                 break;
             }
-            let left = if p > 1 { Some(self.step(p - 2, r)?) } else { None };
-            let right = if q + 1 < self.n { Some(self.step(q + 1, r)?) } else { None };
-            match (left, right) {
-                (Some(a), Some(b)) if a < b => p -= 1,
-                (Some(_), None) => p -= 1,
-                (_, Some(_)) => q += 1,
-                (None, None) => break,
-            }
         }
-        Ok((p, q))
-    }
-
-    /// Whether frame `k` moves: it is a seed, or a run of seeds near it grows over it.
-    fn is_mover(&mut self, k: usize, r: &mut RenderAt<'_, F>) -> Result<bool> {
-        if k == 0 || k >= self.n {
-            return Ok(false);
-        }
-        if self.seed(k, r)? {
-            return Ok(true);
-        }
-        let (lo, hi) = (k.saturating_sub(MAX_RUN).max(1), (k + MAX_RUN).min(self.n - 1));
-        let mut j = lo;
-        while j <= hi {
-            if !self.seed(j, r)? {
-                j += 1;
+        for i in 1..n {
+            let (a, b) = (t[i - 1], t[i + 1]);
+            let (from, to) = ((a + short).max(b - long), (b - short).min(a + long));
+            if from >= to {
                 continue;
             }
-            let (mut p, mut q) = (j, j);
-            while p > 1 && self.seed(p - 1, r)? {
-                p -= 1;
-            }
-            while q + 1 < self.n && self.seed(q + 1, r)? {
-                q += 1;
-            }
-            let (gp, gq) = match self.grown_runs.get(&p) {
-                Some(&g) => g,
-                None => {
-                    let g = self.grown(p, q, r)?;
-                    self.grown_runs.insert(p, g);
-                    g
+            let (mut lo, mut hi) = (from, to);
+            for _ in 0..30 {
+                let mid = 0.5 * (lo + hi);
+                if d.between(a, mid) < d.between(mid, b) {
+                    lo = mid;
+                } else {
+                    hi = mid;
                 }
-            };
-            if (gp..=gq).contains(&k) {
-                return Ok(true);
             }
-            j = q + 1;
+            let x = t[i] + RELAX_OVERSHOOT * (0.5 * (lo + hi) - t[i]);
+            t[i] = x.clamp(from, to);
         }
-        Ok(false)
-    }
-
-    /// The first frame of the run of moved frames that holds mover `k`, deciding it.
-    fn run_of(&mut self, k: usize, r: &mut RenderAt<'_, F>) -> Result<usize> {
-        if let Some((&p, run)) = self.runs.range(..=k).next_back() {
-            if k < p + run.times.len() {
-                return Ok(p);
-            }
-        }
-        let (mut p, mut q) = (k, k);
-        while p > 1 && self.is_mover(p - 1, r)? {
-            p -= 1;
-        }
-        while q + 1 < self.n && self.is_mover(q + 1, r)? {
-            q += 1;
-        }
-        let run = self.decide(p, q, r)?;
-        self.runs.insert(p, run);
-        Ok(p)
     }
 }
 
-impl<F> Retimer<F> {
-    /// Times for the moved frames `p..=q` between the unmoved frames `p − 1` and `q + 1`:
-    /// placed where the steps between them are predicted equal, first from the uniform
-    /// steps (distance growing linearly inside each step), then, if a step is still over
-    /// its bound, once more from the steps measured on those renders (regula falsi, one
-    /// frame at a time in effect). The best of the uniform times and the tries is kept.
-    fn decide(&mut self, p: usize, q: usize, r: &mut RenderAt<'_, F>) -> Result<Run<F>> {
-        let (a, b) = (p - 1, q + 1);
-        let ends = [self.metric(a, r)?.clone(), self.metric(b, r)?.clone()];
-        let steps = (a..=q).map(|j| self.step(j, r)).collect::<Result<Vec<_>>>()?;
-        let bounds = (a..=q).map(|j| self.bound(j, r)).collect::<Result<Vec<_>>>()?;
-        let score = |d: &[f64]| {
-            d.iter()
-                .zip(&bounds)
-                .map(|(d, b)| d / b)
-                .fold(0.0, f64::max)
-        };
-        let uniform: Vec<f64> = (p..=q).map(|k| k as f64).collect();
-        let mut best = (score(&steps), uniform.clone(), None);
-        let mut knots: Vec<f64> = (a..=b).map(|k| k as f64).collect();
-        let mut dist = steps;
-        for _ in 0..2 {
-            let times = place(&knots, &dist, p);
-            let mut frames = Vec::with_capacity(times.len());
-            let mut metrics = vec![ends[0].clone()];
-            for (i, &t) in times.iter().enumerate() {
-                let (f, m) = r(self.loop_time(t))?;
-                self.rerenders += 1;
-                frames.push((p + i >= self.cursor).then_some(f));
-                metrics.push(m);
-            }
-            metrics.push(ends[1].clone());
-            dist = metrics
-                .windows(2)
-                .map(|w| ignis_core::loopq::rms_diff(&w[0], &w[1]))
-                .collect();
-            let sc = score(&dist);
-            if sc < best.0 {
-                best = (sc, times.clone(), Some(frames));
-            }
-            if sc <= 1.0 {
-                break;
-            }
-            knots = [a as f64]
-                .into_iter()
-                .chain(times)
-                .chain([b as f64])
-                .collect();
-        }
-        let (_, times, frames) = best;
-        let frames = frames.unwrap_or_else(|| times.iter().map(|_| None).collect());
-        Ok(Run { times, frames })
-    }
+/// Successive over-relaxation factor of [`relax`] (1 = plain Gauss–Seidel; the long,
+/// smooth unevenness along a loop then takes `O(frames²)` sweeps to spread out).
+const RELAX_OVERSHOOT: f64 = 1.6;
+/// Shortest and longest step the re-timing may make, in frames: it evens out the steps
+/// by warping time locally, never by skipping or repeating a flicker (a candle puffs
+/// every 3 frames at 30 fps, so the distance between two frames is not monotonic in their
+/// time apart beyond about a frame and a half).
+const MIN_STEP: f64 = 0.6;
+const MAX_STEP: f64 = 1.6;
+
+/// RMS differences between the frames of a cyclic preview up to `span − 1` samples apart,
+/// and the distance between any two loop times (in samples) interpolated from them.
+pub(crate) struct PreviewDistances {
+    /// `d[i][o]`: from sample `i` to sample `(i + o) mod m`, `o < span`.
+    d: Vec<Vec<f64>>,
+    span: usize,
+    /// Output frames of the loop.
+    frames: usize,
 }
 
-/// Loop times of the frames between the first and last of `knots` (in order, `knots[i]`
-/// the time of frame `first − 1 + i` so far, the ends fixed) at which the distance covered,
-/// growing linearly inside each interval by `dist[i]` over `knots[i]..knots[i + 1]`, is
-/// split equally; each within [`MAX_SHIFT`] of its uniform time.
-fn place(knots: &[f64], dist: &[f64], first: usize) -> Vec<f64> {
-    let count = knots.len() - 2;
-    let total: f64 = dist.iter().sum();
-    (0..count)
-        .map(|i| {
-            let uniform = (first + i) as f64;
-            if !(total > 0.0) {
-                return uniform;
-            }
-            let mut target = total * (i + 1) as f64 / (count + 1) as f64;
-            let mut t = knots[knots.len() - 1];
-            for (s, d) in dist.iter().enumerate() {
-                if target <= *d {
-                    t = knots[s] + (knots[s + 1] - knots[s]) * (target / d).min(1.0);
-                    break;
+/// [`PreviewDistances`] built from preview frames pushed one at a time, holding only the
+/// first and the latest `span` of them (a long loop's preview is not kept in memory).
+pub(crate) struct DistanceBuilder {
+    m: usize,
+    frames: usize,
+    span: usize,
+    first: Vec<GrayFrame>,
+    recent: std::collections::VecDeque<GrayFrame>,
+    pushed: usize,
+    d: Vec<Vec<f64>>,
+}
+
+impl DistanceBuilder {
+    /// Adds the next preview frame (in loop order).
+    pub fn push(&mut self, f: GrayFrame) -> Result<(), String> {
+        let j = self.pushed;
+        if j >= self.m {
+            return Err(format!("more than {} preview frames", self.m));
+        }
+        if let Some(g) = self.first.first().filter(|g| g.size() != f.size()) {
+            return Err(format!("preview frames of {} and {}", g.size(), f.size()));
+        }
+        // distances from the latest frames (up to span − 1 back) to this one
+        let back = self.recent.len();
+        for (o, g) in self.recent.iter().enumerate() {
+            let i = j - (back - o);
+            self.d[i][j - i] = ignis_core::loopq::rms_diff(g, &f);
+        }
+        if self.first.len() < self.span - 1 {
+            self.first.push(f.clone());
+        }
+        self.recent.push_back(f);
+        if self.recent.len() > self.span - 1 {
+            self.recent.pop_front();
+        }
+        self.pushed += 1;
+        Ok(())
+    }
+
+    /// The distances, once all `m` frames are in: the last frames' steps past the loop's
+    /// end are to its first frames.
+    pub fn finish(mut self) -> Result<PreviewDistances, String> {
+        if self.pushed != self.m {
+            return Err(format!("{} of {} preview frames", self.pushed, self.m));
+        }
+        let m = self.m;
+        let back = self.recent.len();
+        for (o, g) in self.recent.iter().enumerate() {
+            let i = m - (back - o);
+            for (q, h) in self.first.iter().enumerate() {
+                let off = m - i + q;
+                if off < self.span {
+                    self.d[i][off] = ignis_core::loopq::rms_diff(g, h);
                 }
-                target -= d;
             }
-            t.clamp(uniform - MAX_SHIFT, uniform + MAX_SHIFT)
+        }
+        Ok(PreviewDistances {
+            d: self.d,
+            span: self.span,
+            frames: self.frames,
         })
-        .collect()
+    }
 }
-/// A looping animator's motion ([`crate::FireScene::looping_animator`]).
+
+impl PreviewDistances {
+    /// A builder for the `m` preview frames (a whole number ≥ 1 per output frame) of an
+    /// `frames`-frame loop.
+    pub fn builder(m: usize, frames: u32) -> Result<DistanceBuilder, String> {
+        let n = frames as usize;
+        if n == 0 || m == 0 || !m.is_multiple_of(n) {
+            return Err(format!("a preview of {m} frames for a loop of {frames}"));
+        }
+        let per_frame = m / n;
+        let span = ((MAX_STEP * per_frame as f64).ceil() as usize + 2).min(m + 1);
+        Ok(DistanceBuilder {
+            m,
+            frames: n,
+            span,
+            first: Vec::new(),
+            recent: Default::default(),
+            pushed: 0,
+            d: vec![vec![0.0; span]; m],
+        })
+    }
+
+    /// [`even_step_times`] from these distances.
+    pub fn even_step_times(&self) -> Vec<f64> {
+        let n = self.frames;
+        let k = self.d.len() / n;
+        let mut t: Vec<f64> = (0..=n).map(|i| (i * k) as f64).collect();
+        relax(self, &mut t, k as f64);
+        t[..n]
+            .iter()
+            .map(|&t| (t / k as f64).clamp(0.0, n as f64))
+            .collect()
+    }
+
+    /// Distance from sample `i` (any integer) to `i + o`, `0 ≤ o < span`.
+    fn at(&self, i: i64, o: i64) -> f64 {
+        let m = self.d.len() as i64;
+        self.d[i.rem_euclid(m) as usize][o.clamp(0, self.span as i64 - 1) as usize]
+    }
+
+    /// Distance between loop times `a ≤ b` (samples, `b − a < span − 1`): bilinear in
+    /// the grid of sample pairs around `(a, b)`. (Two alternatives measured worse on the
+    /// presets' loops: the distance between preview frames blended to `a` and `b`, which
+    /// underrates it, blends being softer; and interpolating in the time apart from each
+    /// sample around `a`.)
+    fn between(&self, a: f64, b: f64) -> f64 {
+        let (ia, ib) = (a.floor(), b.floor());
+        let (fa, fb) = (a - ia, b - ib);
+        let (ia, ib) = (ia as i64, ib as i64);
+        let g = |x: i64, y: i64| if y <= x { 0.0 } else { self.at(x, y - x) };
+        let lo = g(ia, ib) * (1.0 - fb) + g(ia, ib + 1) * fb;
+        let hi = g(ia + 1, ib) * (1.0 - fb) + g(ia + 1, ib + 1) * fb;
+        lo * (1.0 - fa) + hi * fa
+    }
+}
+
+/// A looping animator's state ([`crate::FireScene::looping_animator`]).
 #[derive(Clone, Debug)]
 pub(crate) struct Looping {
     /// The loop's period in frames.
     pub frames: u64,
+    /// Loop time (frames, in `0..frames`) of each frame of one cycle, non-decreasing
+    /// from 0. A cycle has `frames` frames; a preview has more.
+    pub times: Vec<f64>,
     /// Per fire: its script made periodic (scripted fires only).
     pub scripts: Vec<Option<LoopScript>>,
     /// Per fire: its simulation over one loop (simulated fires only).
     pub sims: Vec<Option<SimTrack>>,
+}
+
+impl Looping {
+    /// Loop time of frame `frame` (any index: the times repeat every cycle).
+    pub fn time(&self, frame: u64) -> f64 {
+        self.times[(frame % self.times.len() as u64) as usize]
+    }
+
+    /// Loop time of the frame before `frame`, minus a period at the cycle's start (so it
+    /// is below [`Looping::time`] of `frame`).
+    pub fn previous_time(&self, frame: u64) -> f64 {
+        let c = self.times.len() as u64;
+        let k = frame % c;
+        if k == 0 {
+            self.times[c as usize - 1] - self.frames as f64
+        } else {
+            self.times[k as usize - 1]
+        }
+    }
 }
 
 /// A simulated fire over one loop: its control points at whole frames `0..frames` (the
@@ -573,12 +363,15 @@ impl SimTrack {
             .collect()
     }
 
-    /// The contacts of the simulation's step into frame `k` of the loop (the animator's
-    /// track has none into frame 0: its state follows the last frame's by the blend). A
-    /// frame moved in loop time reports its own frame's step, so each is reported once per
-    /// cycle.
-    pub fn hits_into(&self, k: usize) -> &[Collision] {
-        self.hits.get(k).map_or(&[], |h| h.as_slice())
+    /// The contacts of the steps into the whole frames `j` with `lo < j ≤ hi` (`lo` may
+    /// be negative: the cycle's first frame reports frame 0's).
+    pub fn hits_between(&self, lo: f64, hi: f64) -> impl Iterator<Item = &Collision> {
+        let n = self.hits.len();
+        let first = (lo.floor() + 1.0).max(0.0) as usize;
+        let last = (hi.floor().max(-1.0) + 1.0) as usize;
+        self.hits[first.min(n)..last.clamp(first.min(n), n)]
+            .iter()
+            .flatten()
     }
 }
 
@@ -662,111 +455,91 @@ impl LoopScript {
 mod tests {
     use super::*;
 
-    /// A 1-D pattern scrolling three turns per loop of `n` frames, at a speed with
-    /// periodic bumps (`bumps`: centre and width in frames, extra speed), as a metric frame
-    /// at loop time `tau`.
-    fn scrolling(n: f64, bumps: &[(f64, f64, f64)], tau: f64) -> GrayFrame {
-        let tau_turn = std::f64::consts::TAU / n;
-        let speed = |t: f64| {
-            1.0 + bumps
-                .iter()
-                .map(|&(c, w, a)| {
-                    let kappa = (1.0 / (tau_turn * w)).powi(2);
-                    a * (kappa * ((tau_turn * (t - c)).cos() - 1.0)).exp()
-                })
-                .sum::<f64>()
-        };
-        // the phase: the speed integrated (midpoint rule, 1/64 frame), over its loop total
-        let integral = |t: f64| {
-            let m = (t * 64.0).round().max(1.0);
-            (0..m as usize)
-                .map(|i| speed((i as f64 + 0.5) * t / m) * t / m)
-                .sum::<f64>()
-        };
-        let phase = integral(tau) / integral(n);
+    /// Frames of a 1-D pattern scrolling at a speed that varies over the loop: the times
+    /// found make every step (the wrap included) the same length, and a pattern scrolling
+    /// at constant speed keeps the uniform times.
+    #[test]
+    fn times_make_the_steps_even() {
         let size = ignis_core::Size::new(64, 1).unwrap();
-        let v = (0..64)
-            .map(|x| {
-                let a = std::f64::consts::TAU * (x as f64 / 64.0 + 3.0 * phase);
-                (0.5 + 0.4 * a.sin()) as f32
-            })
-            .collect();
-        GrayFrame::from_vec(size, v).unwrap()
-    }
-
-    /// Renders frames of [`scrolling`] (the "frame" is its loop time).
-    fn renderer(n: usize, bumps: &[(f64, f64, f64)]) -> impl FnMut(f64) -> Result<(f64, GrayFrame)> + '_ {
-        move |tau| Ok((tau, scrolling(n as f64, bumps, tau)))
-    }
-
-    /// Steps of a loop's frames ÷ their median: (wrap, largest).
-    fn figures(frames: &[GrayFrame]) -> (f64, f64) {
-        let steps = ignis_core::loopq::steps(frames, true).unwrap();
-        let med = ignis_core::loopq::median(&mut steps.clone());
-        (steps[steps.len() - 1] / med, steps.iter().cloned().fold(0.0, f64::max) / med)
-    }
-
-    /// Long steps (a burst of speed mid-loop, another at the wrap) are fixed by moving a
-    /// few frames, rendering them again; the others stay at their uniform times.
-    #[test]
-    fn long_steps_are_fixed_by_moving_a_few_frames() {
-        let n = 24;
-        let bumps = [(9.5, 0.8, 0.3), (23.6, 0.6, 0.3)];
-        let uniform: Vec<_> = (0..n).map(|k| scrolling(n as f64, &bumps, k as f64)).collect();
-        let (wrap, max) = figures(&uniform);
-        assert!(wrap > 1.1 && max > 1.2, "uniform: wrap {wrap}, max {max}");
-        let mut rt = Retimer::new(n as u32, LoopTiming::DEFAULT);
-        let mut render = renderer(n, &bumps);
-        let taken: Vec<(f64, f64)> = (0..n).map(|k| rt.take(k, &mut render).unwrap()).collect();
-        let frames: Vec<_> = taken.iter().map(|&(t, _)| scrolling(n as f64, &bumps, t)).collect();
-        let (wrap, max) = figures(&frames);
-        let st = ignis_core::loopq::steps(&uniform, true).unwrap();
-        let st2 = ignis_core::loopq::steps(&frames, true).unwrap();
-        let med = ignis_core::loopq::median(&mut st.clone());
-        eprintln!("u {:?}\nf {:?}\nt {:?}", st.iter().map(|s| format!("{:.2}", s / med)).collect::<Vec<_>>(), st2.iter().map(|s| format!("{:.2}", s / med)).collect::<Vec<_>>(), taken.iter().map(|t| format!("{:.2}", t.0)).collect::<Vec<_>>());
-        assert!(wrap <= 1.1 && max <= 1.2, "fixed: wrap {wrap}, max {max}");
-        let moved = taken.iter().enumerate().filter(|(k, (t, _))| *t != *k as f64).count();
-        assert!((1..=5).contains(&moved), "{moved} moved: {taken:?}");
-        assert!(rt.rerenders <= 2 * moved, "{} renders again", rt.rerenders);
-        assert_eq!(taken[0].0, 0.0);
-        for (k, (t, f)) in taken.iter().enumerate() {
-            assert_eq!(t, f, "frame {k}: the frame rendered at its time");
-            assert!((t - k as f64).abs() <= MAX_SHIFT, "frame {k} at {t}");
+        // phase at loop time u in 0..1: one whole turn, fast in the first half
+        let phase = |u: f64, uneven: f64| u + uneven * (std::f64::consts::TAU * u).sin() / 7.0;
+        let frame = |u: f64, uneven: f64| {
+            let p = phase(u, uneven);
+            let v = (0..64)
+                .map(|x| {
+                    let a = std::f64::consts::TAU * (x as f64 / 64.0 + p);
+                    (0.5 + 0.4 * a.sin()) as f32
+                })
+                .collect();
+            GrayFrame::from_vec(size, v).unwrap()
+        };
+        let n = 12u32;
+        for uneven in [0.0, 0.3] {
+            let k = 4;
+            let preview: Vec<_> = (0..n * k)
+                .map(|j| frame(f64::from(j) / f64::from(n * k), uneven))
+                .collect();
+            let t = even_step_times(&preview, n).unwrap();
+            assert_eq!(t[0], 0.0);
+            let frames: Vec<_> = t.iter().map(|&t| frame(t / f64::from(n), uneven)).collect();
+            let steps = ignis_core::loopq::steps(&frames, true).unwrap();
+            let med = ignis_core::loopq::median(&mut steps.clone());
+            let worst = steps
+                .iter()
+                .map(|s| (s / med - 1.0).abs())
+                .fold(0.0, f64::max);
+            assert!(worst < 0.02, "uneven {uneven}: {steps:?}");
+            if uneven == 0.0 {
+                for (i, t) in t.iter().enumerate() {
+                    assert!((t - i as f64).abs() < 0.02, "{t:?}");
+                }
+            } else {
+                // uniform times would not do: the fast half's steps are longer
+                let uniform: Vec<_> = (0..n)
+                    .map(|i| frame(f64::from(i) / f64::from(n), uneven))
+                    .collect();
+                let us = ignis_core::loopq::steps(&uniform, true).unwrap();
+                let umed = ignis_core::loopq::median(&mut us.clone());
+                assert!(
+                    us.iter().cloned().fold(0.0, f64::max) / umed > 1.2,
+                    "{us:?}"
+                );
+            }
         }
-        // asked again (a second cycle), a frame is the same
-        assert_eq!(rt.take(0, &mut render).unwrap(), taken[0]);
+        assert!(even_step_times(&[], 3).is_err());
+        assert!(even_step_times(&vec![frame(0.0, 0.0); 5], 3).is_err());
     }
 
-    /// A pattern at constant speed: nothing moves, nothing is rendered twice.
+    /// The distances built from frames pushed one at a time (holding only a few) are the
+    /// RMS differences of the cyclic preview, past its end too, for short and long loops.
     #[test]
-    fn even_steps_stay_at_uniform_times() {
-        let n = 30;
-        let mut rt = Retimer::new(n as u32, LoopTiming::DEFAULT);
-        let mut render = renderer(n, &[]);
-        for k in 0..n {
-            assert_eq!(rt.take(k, &mut render).unwrap().0, k as f64);
-        }
-        assert_eq!(rt.rerenders, 0);
-    }
-
-    /// Any range of frames, taken by a fresh re-timer that starts there (a render-farm
-    /// chunk), has the times and frames of the full pass — for loops shorter and longer
-    /// than the median's window.
-    #[test]
-    fn a_chunk_times_its_frames_as_the_full_pass() {
-        for n in [20usize, 40] {
-            let bumps = [(9.5, 0.8, 0.3), (n as f64 - 0.4, 0.6, 0.3), (31.0, 2.0, 0.2)];
-            let mut rt = Retimer::new(n as u32, LoopTiming::DEFAULT);
-            let mut render = renderer(n, &bumps);
-            let full: Vec<_> = (0..n).map(|k| rt.take(k, &mut render).unwrap()).collect();
-            assert!(full.iter().enumerate().any(|(k, f)| f.0 != k as f64));
-            for (a, b) in [(0, 7), (7, 13), (8, 11), (10, n), (n - 1, n)] {
-                let mut rt = Retimer::new(n as u32, LoopTiming::DEFAULT);
-                for k in a..b {
-                    assert_eq!(rt.take(k, &mut render).unwrap(), full[k], "n {n}, {a}..{b}, frame {k}");
+    fn streamed_distances_wrap_around_the_loop() {
+        let size = ignis_core::Size::new(3, 1).unwrap();
+        for (m, frames) in [(2usize, 1u32), (2, 2), (3, 3), (8, 4), (24, 12)] {
+            let preview: Vec<_> = (0..m)
+                .map(|j| {
+                    let v = (0..3)
+                        .map(|x| ((j * 7 + x * 3) % 11) as f32 / 10.0)
+                        .collect();
+                    GrayFrame::from_vec(size, v).unwrap()
+                })
+                .collect();
+            let mut b = PreviewDistances::builder(m, frames).unwrap();
+            for f in &preview {
+                b.push(f.clone()).unwrap();
+            }
+            assert!(b.push(preview[0].clone()).is_err());
+            let d = b.finish().unwrap();
+            for i in 0..m {
+                for o in 0..d.span {
+                    let want = ignis_core::loopq::rms_diff(&preview[i], &preview[(i + o) % m]);
+                    assert_eq!(d.d[i][o], want, "m {m}, i {i}, o {o}");
                 }
             }
         }
+        assert!(PreviewDistances::builder(5, 2).is_err());
+        let b = PreviewDistances::builder(4, 2).unwrap();
+        assert!(b.finish().is_err());
     }
 
     /// A simulation track interpolates between whole frames (the last towards frame 0)
@@ -788,9 +561,12 @@ mod tests {
         assert_eq!(tr.at(2.5)[0][0], 2.5);
         // between the last frame and frame 0 (= state 4, the successor of state 3)
         assert_eq!(tr.at(3.5)[0][0], 3.5);
-        let seen: Vec<_> = (0..4)
-            .flat_map(|k| tr.hits_into(k).iter().map(|h| h.obstacle))
-            .collect();
+        let times = [0.0, 0.7, 1.9, 3.2];
+        let mut seen = Vec::new();
+        for k in 0..4 {
+            let lo = if k == 0 { times[3] - 4.0 } else { times[k - 1] };
+            seen.extend(tr.hits_between(lo, times[k]).map(|h| h.obstacle));
+        }
         assert_eq!(seen, vec![0, 1, 2, 3]);
     }
 }

@@ -37,7 +37,7 @@
 use crate::error::{Result, VolumeError};
 use crate::lattice::{Lattice, Puff};
 pub use crate::looping::loop_blend_frames;
-use crate::looping::{LoopScript, LoopTiming, Looping, Retimer, SimTrack};
+use crate::looping::{LoopScript, LoopTiming, Looping, PreviewDistances, SimTrack};
 use crate::mapping::NoiseParams;
 use crate::motion::{
     deflect_points, Collision, Keyframe, Obstacle, ParticleSim, Script, SimParams,
@@ -500,7 +500,6 @@ impl FireScene {
             frame: 0,
             count_coverage: false,
             looping: None,
-            retimer: None,
             scroll: Vec::new(),
         };
         a.scroll = a.scroll_lengths()?;
@@ -518,9 +517,9 @@ impl FireScene {
     }
 
     /// [`FireScene::looping_animator`] with the frames timed by `timing`
-    /// ([`crate::looping`]): the animation is a periodic function of loop time; its frames
-    /// are rendered at uniform loop times, and the few at the ends of a step much longer
-    /// than the steps around it are rendered again at loop times that even it out.
+    /// ([`crate::looping`]): the animation is a periodic function of loop time, and
+    /// its frames are rendered at the loop times where a preview says consecutive frames
+    /// differ equally ([`crate::looping::even_step_times`]).
     ///
     /// - The noise is periodic with the loop ([`crate::mapping::PeriodicLoop`], else
     ///   [`crate::mapping::LoopMix`]).
@@ -532,11 +531,9 @@ impl FireScene {
     ///   to its own, so frame `frames − 1` is followed by the simulation's own successor;
     ///   between whole frames its control points are interpolated linearly.
     ///
-    /// Nothing is rendered here: [`Animator::next_frame`] renders a stretch of frames
-    /// ahead (up to `2 · timing.window + 2` at the loop's start, fewer later) to measure
-    /// the steps around each frame; every decision reads a bounded stretch of the loop, so
-    /// a chunk of a render (an animator [`Animator::skip`]ping to its first frame) times
-    /// its frames as the full render does. Fails for fewer than 2 frames.
+    /// The preview is rendered here, from the whole loop, so every chunk of a render
+    /// (an animator [`Animator::skip`]ping to its first frame) times its frames the same.
+    /// Fails for fewer than 2 frames.
     pub fn looping_animator_with(&self, frames: u32, timing: LoopTiming) -> Result<Animator<'_>> {
         if frames < 2 {
             return Err(VolumeError::bad(
@@ -574,13 +571,70 @@ impl FireScene {
             scripts.push(script);
             sims.push(track);
         }
-        a.looping = Some(Looping {
+        let mut looping = Looping {
             frames: frames as u64,
+            times: (0..n).map(|k| k as f64).collect(),
             scripts,
             sims,
-        });
-        a.retimer = timing.retimes().then(|| Retimer::new(frames, timing));
+        };
+        if timing.retimes() {
+            looping.times = self.constant_speed_times(&a, &looping, timing)?;
+        }
+        a.looping = Some(looping);
         Ok(a)
+    }
+
+    /// The loop times at which the frames of `looping` cover equal distances: measured on
+    /// a preview `timing.preview_width` pixels wide (at most the metric frames' width) at
+    /// `timing.samples_per_frame` uniform loop times per frame ([`crate::looping`]).
+    fn constant_speed_times(
+        &self,
+        a: &Animator<'_>,
+        looping: &Looping,
+        timing: LoopTiming,
+    ) -> Result<Vec<f64>> {
+        let w = timing
+            .preview_width
+            .min(ignis_core::loopq::metric_size(self.size).width)
+            .max(1);
+        let h = (f64::from(w) * f64::from(self.size.height) / f64::from(self.size.width))
+            .round()
+            .max(1.0) as u32;
+        let small = self
+            .clone()
+            .with_size(Size::new(w, h).map_err(|e| VolumeError::bad("size", e.to_string()))?);
+        let k = timing.samples_per_frame as usize;
+        let m = looping.frames as usize * k;
+        let probe_looping = Looping {
+            times: (0..m).map(|j| j as f64 / k as f64).collect(),
+            ..looping.clone()
+        };
+        // A loop's frames are functions of their loop time alone, so the preview's small
+        // frames render side by side, one per thread, rather than one at a time split into
+        // tiles (a 64-px frame is too little work to share: the pool's threads spent more
+        // time waking and spinning than sampling). The same frames, in order.
+        use rayon::prelude::*;
+        let metric: Vec<ignis_core::GrayFrame> = (0..m)
+            .into_par_iter()
+            .map(|j| {
+                let mut probe = Animator {
+                    scene: &small,
+                    sims: Vec::new(),
+                    frame: j as u64,
+                    count_coverage: false,
+                    looping: Some(probe_looping.clone()),
+                    scroll: a.scroll.clone(),
+                };
+                let f = probe.next_frame()?;
+                Ok(ignis_core::loopq::metric_frame_rgba(&f.image, [0.0; 3]))
+            })
+            .collect::<Result<_>>()?;
+        let bad = |e: String| VolumeError::bad("loop", e);
+        let mut d = PreviewDistances::builder(m, looping.frames as u32).map_err(bad)?;
+        for f in metric {
+            d.push(f).map_err(bad)?;
+        }
+        Ok(d.finish().map_err(bad)?.even_step_times())
     }
 
     // (Long: data, one match arm per preset.)
@@ -821,8 +875,6 @@ pub struct Animator<'a> {
     frame: u64,
     count_coverage: bool,
     looping: Option<Looping>,
-    /// A loop's frame times and the frames rendered ahead to find them.
-    retimer: Option<Retimer<Frame>>,
     /// Per fire: its scroll length ([`Animator::scroll_lengths`]).
     scroll: Vec<f32>,
 }
@@ -832,12 +884,6 @@ impl Animator<'_> {
     /// not change the image; see [`RenderParams::count_coverage`]). Default off.
     pub fn set_count_coverage(&mut self, on: bool) {
         self.count_coverage = on;
-    }
-
-    /// How many frames of a re-timed loop were rendered again at a new loop time so far
-    /// (each costs a frame's render; [`crate::looping`]).
-    pub fn loop_rerenders(&self) -> usize {
-        self.retimer.as_ref().map_or(0, |r| r.rerenders)
     }
 
     /// Index of the next frame.
@@ -861,30 +907,18 @@ impl Animator<'_> {
     }
 
     /// The scene time (seconds) the next frame is rendered at: its frame time, or for a
-    /// loop its loop time ([`Animator::loop_time`]).
+    /// loop its loop time ([`crate::looping`]).
     fn time(&self) -> f32 {
         match &self.looping {
-            Some(l) => self.loop_time(l) as f32 / self.scene.fps,
+            Some(l) => l.time(self.frame) as f32 / self.scene.fps,
             None => self.frame as f32 / self.scene.fps,
         }
-    }
-
-    /// The loop time (frames) of the next frame of a loop: its uniform time, or the time
-    /// it was moved to once [`Animator::next_frame`] has decided it (the motion of
-    /// [`Animator::step`] on a re-timed loop is that of the rendered frames only for frames
-    /// already rendered or rendered ahead).
-    fn loop_time(&self, l: &Looping) -> f64 {
-        let k = self.frame % l.frames;
-        self.retimer
-            .as_ref()
-            .and_then(|r| r.known_time(k as usize))
-            .unwrap_or(k as f64)
     }
 
     /// Advances the motion one frame; returns control points and contacts.
     pub fn step(&mut self) -> (Vec<Vec<[f32; 4]>>, Vec<Collision>) {
         let out = match &self.looping {
-            Some(l) => self.loop_pose(l, self.loop_time(l), (self.frame % l.frames) as usize),
+            Some(l) => self.loop_pose(l),
             None => self.plain_step(),
         };
         self.frame += 1;
@@ -920,11 +954,12 @@ impl Animator<'_> {
         (pts, hits)
     }
 
-    /// A loop's motion at loop time `tau` (frames) for frame `k` of the loop; a simulation
-    /// reports the contacts of its step into frame `k`.
-    fn loop_pose(&self, l: &Looping, tau: f64, k: usize) -> (Vec<Vec<[f32; 4]>>, Vec<Collision>) {
+    /// A loop's motion at the next frame's loop time; a simulation reports the contacts
+    /// of its whole-frame steps since the previous frame's time.
+    fn loop_pose(&self, l: &Looping) -> (Vec<Vec<[f32; 4]>>, Vec<Collision>) {
         let s = self.scene;
         let dt = 1.0 / s.fps;
+        let tau = l.time(self.frame);
         let t = tau as f32 * dt;
         let mut pts = Vec::with_capacity(s.fires.len());
         let mut hits = Vec::new();
@@ -941,7 +976,8 @@ impl Animator<'_> {
                     p
                 }
                 (_, _, Some(track)) => {
-                    hits.extend(track.hits_into(k).iter().cloned());
+                    let lo = l.previous_time(self.frame);
+                    hits.extend(track.hits_between(lo, tau).cloned());
                     track.at(tau)
                 }
                 _ => unreachable!("a looping script or simulation per moving fire"),
@@ -962,7 +998,6 @@ impl Animator<'_> {
             frame: 0,
             count_coverage: false,
             looping: None,
-            retimer: None,
             scroll: Vec::new(),
         };
         let (pts, _) = probe.step();
@@ -976,81 +1011,37 @@ impl Animator<'_> {
             .collect()
     }
 
-    /// Phase (radians) of the puffing cycle at the current frame (for a loop, at loop time
-    /// `tau`): `2π f t` with `f` the puffing frequency, rounded for a loop to a whole number
-    /// of cycles per loop (at least one) and computed from the loop time, so it repeats
-    /// exactly.
-    fn puff_phase(&self, tau: Option<f64>) -> f32 {
+    /// Fire `i`'s puffing wave at the next frame, if the scene puffs.
+    fn puff_wave(&self, i: usize) -> Option<Puff> {
+        let s = self.scene;
+        (s.puff > 0.0).then(|| Puff {
+            amplitude: s.puff,
+            phase: self.puff_phase() + s.puff_offset(i),
+        })
+    }
+
+    /// Phase (radians) of the puffing cycle at the current frame: `2π f t` with `f` the
+    /// puffing frequency, rounded for a loop to a whole number of cycles per loop (at least
+    /// one) and computed from the frame's loop time, so it repeats exactly.
+    fn puff_phase(&self) -> f32 {
         let s = self.scene;
         let f = ignis_core::realism::puffing_frequency(f64::from(s.diameter));
-        let turn = std::f64::consts::TAU;
-        match (&self.looping, tau) {
-            (Some(l), Some(tau)) => {
+        let tau = std::f64::consts::TAU;
+        match &self.looping {
+            Some(l) => {
                 let cycles = (f * l.frames as f64 / f64::from(s.fps)).round().max(1.0);
-                (turn * cycles * tau / l.frames as f64) as f32
+                (tau * cycles * l.time(self.frame) / l.frames as f64) as f32
             }
-            _ => (turn * (f * self.frame as f64 / f64::from(s.fps)).fract()) as f32,
+            None => (tau * (f * self.frame as f64 / f64::from(s.fps)).fract()) as f32,
         }
     }
 
     /// Renders the next frame.
     pub fn next_frame(&mut self) -> Result<Frame> {
-        let Some(l) = &self.looping else {
-            let t = self.time();
-            let puffs = self.puffs(None);
-            let (pts, collisions) = self.step();
-            return self.render_pose(t, &puffs, pts, collisions);
-        };
-        let k = (self.frame % l.frames) as usize;
-        let f = match self.retimer.take() {
-            Some(mut rt) => {
-                let out = rt.take(k, &mut |tau| {
-                    let f = self.render_loop_frame(tau, k)?;
-                    let m = ignis_core::loopq::metric_frame_rgba(&f.image, [0.0; 3]);
-                    Ok((f, m))
-                });
-                self.retimer = Some(rt);
-                // rendered ahead, perhaps for another frame: this frame's contacts
-                let (tau, mut f) = out?;
-                f.collisions = self.loop_pose(l, tau, k).1;
-                f
-            }
-            None => self.render_loop_frame(k as f64, k)?,
-        };
-        self.frame += 1;
-        Ok(f)
-    }
-
-    /// Frame `k` of the loop rendered at loop time `tau` (frames).
-    fn render_loop_frame(&self, tau: f64, k: usize) -> Result<Frame> {
-        let l = self.looping.as_ref().expect("a looping animator");
-        let puffs = self.puffs(Some(tau));
-        let (pts, collisions) = self.loop_pose(l, tau, k);
-        self.render_pose(tau as f32 / self.scene.fps, &puffs, pts, collisions)
-    }
-
-    /// Each fire's puffing wave at the current frame (a loop's at loop time `tau`).
-    fn puffs(&self, tau: Option<f64>) -> Vec<Option<Puff>> {
         let s = self.scene;
-        (0..s.fires.len())
-            .map(|i| {
-                (s.puff > 0.0).then(|| Puff {
-                    amplitude: s.puff,
-                    phase: self.puff_phase(tau) + s.puff_offset(i),
-                })
-            })
-            .collect()
-    }
-
-    /// Renders the fires with control points `pts` at scene time `t` (seconds).
-    fn render_pose(
-        &self,
-        t: f32,
-        puffs: &[Option<Puff>],
-        pts: Vec<Vec<[f32; 4]>>,
-        collisions: Vec<Collision>,
-    ) -> Result<Frame> {
-        let s = self.scene;
+        let t = self.time();
+        let puffs: Vec<Option<Puff>> = (0..s.fires.len()).map(|i| self.puff_wave(i)).collect();
+        let (pts, collisions) = self.step();
         let lattices = pts
             .iter()
             .zip(&s.fires)
