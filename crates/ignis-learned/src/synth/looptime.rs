@@ -219,6 +219,26 @@ impl Synthesiser<'_> {
         encode(frame)
     }
 
+    /// The loop's state at process time `tau` rendered at `canvas`'s frame size within
+    /// the state's own box (see [`Self::raw_boxes`]; `lit` from [`Self::loop_lit`]),
+    /// encoded as [`encode`] does: outside the box it lights no pixel.
+    fn patch_at(&mut self, tau: f64, lit: [usize; 4], canvas: &Canvas) -> Patch {
+        let steps = self.looped.as_ref().map_or(0, |s| s.len()) as f64;
+        self.set_loop_state(tau);
+        let at = tau * f64::from(self.loop_frames) / steps;
+        let [b] = self.raw_boxes(at, lit, [canvas.size]);
+        let window = Canvas::covering(canvas.size, b);
+        let mut frame = window.frame();
+        self.render_window(at, window.size, window.origin, &mut frame);
+        let data = encode(&frame);
+        let energy = data.iter().map(|&v| f64::from(v) * f64::from(v)).sum();
+        Patch {
+            window,
+            data,
+            energy,
+        }
+    }
+
     /// The rows and columns of the normalised image (`[r0, r1, c0, c1]`, inclusive) that
     /// hold visible light in some state of the loop: where the mean eigenflame plus every
     /// eigenflame at the largest weight the loop gives it, `Σ |w_i|max |E_i|`, exposed,
@@ -284,20 +304,18 @@ impl Synthesiser<'_> {
         std::array::from_fn(|k| Canvas::covering(sizes[k], union[k]))
     }
 
-    /// Checks the walk's frames on previews rendered from their states: each step longer
-    /// than `EVEN_OUT` × the median moves its frame other than frame 0 towards where its
-    /// two steps are equal ([`Synthesiser::balance`], on rendered previews), a few passes
-    /// over the loop.
+    /// Checks the walk's frames on renders at the measure's size: each step longer than
+    /// `EVEN_OUT` × the median moves its frame other than frame 0 towards where its two
+    /// steps are equal ([`Synthesiser::balance`]), a few passes over the loop. Each frame
+    /// is rendered only within its own state's box ([`Synthesiser::patch_at`]), a fraction
+    /// of the loop's canvas when the flame moves about its frame.
     fn even_out(&mut self, pos: &mut [f64], canvas: Canvas) {
         let n = pos.len();
         let end = self.looped.as_ref().map_or(0, |s| s.len()) as f64;
-        let frame = &mut canvas.frame();
+        let lit = self.loop_lit();
         let canvas = &canvas;
-        let mut img: Vec<Vec<f32>> = pos
-            .iter()
-            .map(|&p| self.preview_at(p, canvas, frame))
-            .collect();
-        let step = |img: &[Vec<f32>], k: usize| dist(&img[k], &img[(k + 1) % n]);
+        let mut img: Vec<Patch> = pos.iter().map(|&p| self.patch_at(p, lit, canvas)).collect();
+        let step = |img: &[Patch], k: usize| img[k].dist(&img[(k + 1) % n], canvas);
         let mut steps: Vec<f64> = (0..n).map(|k| step(&img, k)).collect();
         let med = ignis_core::loopq::median(&mut steps.clone());
         for _ in 0..EVEN_OUT_PASSES {
@@ -316,7 +334,7 @@ impl Synthesiser<'_> {
                 let ends = [pos[j - 1], pos.get(j + 1).copied().unwrap_or(end)];
                 let now = (pos[j], steps[j - 1] - steps[j], steps[j - 1].max(steps[j]));
                 let (ia, ib) = (&img[j - 1], &img[(j + 1) % n]);
-                let (best, at) = self.balance([ia, ib], ends, now, canvas, frame);
+                let (best, at) = self.balance([ia, ib], ends, now, lit, canvas);
                 let Some(best) = best else { continue };
                 let before = (
                     steps[j - 1].max(steps[j]),
@@ -346,13 +364,13 @@ impl Synthesiser<'_> {
     /// steps agree to [`EVEN_OUT_TOLERANCE`]. `None` when no try beats the current frame.
     fn balance(
         &mut self,
-        ends_img: [&Vec<f32>; 2],
+        ends_img: [&Patch; 2],
         ends: [f64; 2],
         now: (f64, f64, f64),
+        lit: [usize; 4],
         canvas: &Canvas,
-        frame: &mut GrayFrame,
-    ) -> (Option<Vec<f32>>, f64) {
-        let span = dist(ends_img[0], ends_img[1]);
+    ) -> (Option<Patch>, f64) {
+        let span = ends_img[0].dist(ends_img[1], canvas);
         let (mut lo, mut hi) = ((ends[0], -span), (ends[1], span));
         if now.1 < 0.0 {
             lo = (now.0, now.1);
@@ -370,8 +388,8 @@ impl Synthesiser<'_> {
                 0.5
             };
             let x = lo.0 + w * f;
-            let ix = self.preview_at(x, canvas, frame);
-            let (s0, s1) = (dist(ends_img[0], &ix), dist(&ix, ends_img[1]));
+            let ix = self.patch_at(x, lit, canvas);
+            let (s0, s1) = (ends_img[0].dist(&ix, canvas), ix.dist(ends_img[1], canvas));
             let g = s0 - s1;
             if s0.max(s1) < best_max {
                 (best_max, at) = (s0.max(s1), x);
@@ -446,6 +464,47 @@ impl Canvas {
             width: self.w,
             height: self.h,
         })
+    }
+}
+
+/// An encoded render within a window of its frame; the frame is dark outside it.
+struct Patch {
+    window: Canvas,
+    data: Vec<f32>,
+    /// Sum of the squared values.
+    energy: f64,
+}
+
+impl Patch {
+    /// RMS difference of the two frames over `canvas` (a window of the same frame size
+    /// holding both patches' light): the sum of squared differences where the windows
+    /// overlap, plus each patch's own light outside the overlap.
+    fn dist(&self, other: &Patch, canvas: &Canvas) -> f64 {
+        let (a, b) = (&self.window, &other.window);
+        let (x0, x1) = (
+            a.origin.0.max(b.origin.0),
+            (a.origin.0 + a.w).min(b.origin.0 + b.w),
+        );
+        let (y0, y1) = (
+            a.origin.1.max(b.origin.1),
+            (a.origin.1 + a.h).min(b.origin.1 + b.h),
+        );
+        let (mut diff, mut ea, mut eb) = (0.0, 0.0, 0.0);
+        if x0 < x1 && y0 < y1 {
+            fn row(p: &Patch, y: u32, x0: u32, x1: u32) -> &[f32] {
+                let w = &p.window;
+                let at = ((y - w.origin.1) * w.w + (x0 - w.origin.0)) as usize;
+                &p.data[at..at + (x1 - x0) as usize]
+            }
+            for y in y0..y1 {
+                let (ra, rb) = (row(self, y, x0, x1), row(other, y, x0, x1));
+                diff += ignis_core::loopq::sum_sq_diff(ra, rb);
+                ea += ra.iter().map(|&v| f64::from(v) * f64::from(v)).sum::<f64>();
+                eb += rb.iter().map(|&v| f64::from(v) * f64::from(v)).sum::<f64>();
+            }
+        }
+        let sq = diff + (self.energy - ea).max(0.0) + (other.energy - eb).max(0.0);
+        (sq / (canvas.w * canvas.h).max(1) as f64).sqrt()
     }
 }
 
@@ -682,5 +741,64 @@ fn walk(grid: &[Vec<f32>], arc: &[f64], chord: f64, n: usize) -> Option<Vec<f64>
             return None;
         }
         out.push(pos);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A patch's distance is the RMS difference of the two frames over the canvas, each
+    /// dark outside its window: overlapping, nested and disjoint windows.
+    #[test]
+    fn patch_distance_equals_the_whole_canvas_difference() {
+        let size = Size {
+            width: 20,
+            height: 16,
+        };
+        let canvas = Canvas {
+            size,
+            origin: (2, 1),
+            w: 15,
+            h: 12,
+        };
+        let patch = |x0: u32, y0: u32, w: u32, h: u32, seed: u32| {
+            let data: Vec<f32> = (0..w * h)
+                .map(|i| ((i * 7 + seed * 13) % 11) as f32 / 10.0)
+                .collect();
+            let energy = data.iter().map(|&v| f64::from(v).powi(2)).sum();
+            let window = Canvas {
+                size,
+                origin: (x0, y0),
+                w,
+                h,
+            };
+            Patch {
+                window,
+                data,
+                energy,
+            }
+        };
+        let embed = |p: &Patch| {
+            let mut full = vec![0.0f32; (canvas.w * canvas.h) as usize];
+            for y in 0..p.window.h {
+                for x in 0..p.window.w {
+                    let (cx, cy) = (p.window.origin.0 + x - 2, p.window.origin.1 + y - 1);
+                    full[(cy * canvas.w + cx) as usize] = p.data[(y * p.window.w + x) as usize];
+                }
+            }
+            full
+        };
+        let cases = [
+            (patch(3, 2, 6, 5, 1), patch(5, 4, 8, 7, 2)),
+            (patch(2, 1, 15, 12, 3), patch(6, 5, 3, 2, 4)),
+            (patch(2, 1, 4, 4, 5), patch(12, 8, 5, 5, 6)),
+        ];
+        for (a, b) in &cases {
+            let want = dist(&embed(a), &embed(b));
+            let got = a.dist(b, &canvas);
+            assert!((got - want).abs() < 1e-6 * want.max(1.0), "{got} vs {want}");
+            assert!((b.dist(a, &canvas) - got).abs() < 1e-12);
+        }
     }
 }
