@@ -48,7 +48,7 @@ const PREVIEW_MAX: usize = 1 << SPLIT_DEPTH;
 const SPLIT_DEPTH: usize = 3;
 /// An interval of the preview path is halved where the preview at its middle lies farther
 /// than this fraction of the loop's mean step from the pixel blend of its ends.
-const SPLIT_TOLERANCE: f64 = 0.1;
+const SPLIT_TOLERANCE: f64 = 0.05;
 
 /// Two previews and their process times: an interval of the preview path.
 struct Ends<'a> {
