@@ -14,21 +14,23 @@
 //! them) they form a closed path. How densely depends on the model: one preview per output
 //! frame, each interval halved (up to three times) where the preview at its middle is far
 //! from the pixel blend of its ends ([`Synthesiser::preview_grid`]), so a flame whose
-//! states change smoothly between frames gets few and one that changes abruptly up to 8. A walk from frame
-//! 0 places each next frame where the RMS distance from the previous one first reaches a
-//! step length `L`; the smallest `L` that fits the loop's frames is found by bisection, so
-//! every step is `L` and the wrap what is left, at most `L`, which a few equalising
-//! sweeps share among the frames around the seam. Where the walk cannot apply (a still
-//! loop) the frames are spaced evenly along the path ([`ignis_core::loopq::arc_times`]).
+//! states change smoothly between frames gets few and one that changes abruptly up to 8.
+//! A walk from frame 0 places each next frame where the RMS distance from the previous
+//! one first reaches a step length `L`; the smallest `L` that fits the loop's frames is
+//! found by bisection, so every step is `L` and the wrap what is left, at most `L`, which
+//! a few equalising sweeps share among the frames around the seam. Where the walk cannot
+//! apply (a still loop) the frames are spaced evenly along the path
+//! ([`ignis_core::loopq::arc_times`]).
 //! Last, the frames are rendered at the measure's own size
 //! ([`ignis_core::loopq::metric_size`]) and any step still over `EVEN_OUT` × the median
 //! is evened out with its neighbour on those renders — the small preview misses detail
 //! the measure sees. The frames show only states of the process, in the same order; only
 //! their spacing in time changes.
 //!
-//! Every preview and metric-size render covers only the window of its frame that some
-//! state of the loop can light ([`Synthesiser::loop_canvases`]): the rest is dark in every
-//! frame and adds nothing to any step.
+//! Every preview covers only the window of its frame that some state of the loop can light
+//! ([`Synthesiser::loop_canvases`]): the rest is dark in every frame and adds nothing to
+//! any step. A metric-size render covers only its own state's box within the frame
+//! ([`Synthesiser::patch_at`]), often a small part of that window.
 //!
 //! The timing depends on the output size (the preview has its aspect), the model, the
 //! controls and the seed, never on which frames are rendered, so a chunk of a loop equals
