@@ -8,24 +8,29 @@
 //! as likely as any other to be one of the large ones. Played as a loop, the fast parts
 //! read as jumps.
 //!
-//! So the loop is re-timed. A cheap preview renders `PREVIEW_PER_FRAME` states per output
-//! frame around the cycle, small, grey and sRGB-encoded as the loop measure sees written
-//! frames ([`ignis_core::loopq`]). Joined by straight segments (pixel blends, standing in
-//! for the state blends rendered between them) they form a closed path. A walk from frame
-//! 0 places each next frame where the RMS distance from the previous one first reaches a
-//! step length `L`; the smallest `L` that fits the loop's frames is found by bisection, so
-//! every step is `L` and the wrap what is left, at most `L`, which a few equalising
-//! sweeps share among the frames around the seam. Where the walk cannot apply (a still
-//! loop) the frames are spaced evenly along the path ([`ignis_core::loopq::arc_times`]).
+//! So the loop is re-timed. A cheap preview renders states around the cycle, small, grey
+//! and sRGB-encoded as the loop measure sees written frames ([`ignis_core::loopq`]). Joined
+//! by straight segments (pixel blends, standing in for the state blends rendered between
+//! them) they form a closed path. How densely depends on the model: one preview per output
+//! frame, each interval halved (up to three times) where the preview at its middle is far
+//! from the pixel blend of its ends ([`Synthesiser::preview_grid`]), so a flame whose
+//! states change smoothly between frames gets few and one that changes abruptly up to 8.
+//! A walk from frame 0 places each next frame where the RMS distance from the previous
+//! one first reaches a step length `L`; the smallest `L` that fits the loop's frames is
+//! found by bisection, so every step is `L` and the wrap what is left, at most `L`, which
+//! a few equalising sweeps share among the frames around the seam. Where the walk cannot
+//! apply (a still loop) the frames are spaced evenly along the path
+//! ([`ignis_core::loopq::arc_times`]).
 //! Last, the frames are rendered at the measure's own size
 //! ([`ignis_core::loopq::metric_size`]) and any step still over `EVEN_OUT` × the median
 //! is evened out with its neighbour on those renders — the small preview misses detail
 //! the measure sees. The frames show only states of the process, in the same order; only
 //! their spacing in time changes.
 //!
-//! Every preview and metric-size render covers only the window of its frame that some
-//! state of the loop can light ([`Synthesiser::loop_canvases`]): the rest is dark in every
-//! frame and adds nothing to any step.
+//! Every preview covers only the window of its frame that some state of the loop can light
+//! ([`Synthesiser::loop_canvases`]): the rest is dark in every frame and adds nothing to
+//! any step. A metric-size render covers only its own state's box within the frame
+//! ([`Synthesiser::patch_at`]), often a small part of that window.
 //!
 //! The timing depends on the output size (the preview has its aspect), the model, the
 //! controls and the seed, never on which frames are rendered, so a chunk of a loop equals
@@ -36,10 +41,32 @@ use ignis_core::loopq::{arc_times, metric_size};
 use ignis_core::palette::linear_to_srgb;
 use ignis_core::{GrayFrame, Size};
 
-/// Preview states per output frame: the walk places frames between them on pixel blends
-/// of neighbouring previews, which stand in for the state blends rendered there only when
-/// the previews are close (figures in `benches/README.md`).
-const PREVIEW_PER_FRAME: usize = 8;
+/// The most preview states per output frame ([`Synthesiser::preview_grid`]): the walk
+/// places frames between them on pixel blends of neighbouring previews, which stand in for
+/// the state blends rendered there only when the previews are close (figures in
+/// `benches/README.md`).
+const PREVIEW_MAX: usize = 1 << SPLIT_DEPTH;
+/// Halvings of a frame's interval in [`Synthesiser::preview_grid`].
+const SPLIT_DEPTH: usize = 3;
+/// An interval of the preview path is halved where the preview at its middle lies farther
+/// than this fraction of the loop's mean step from the pixel blend of its ends.
+const SPLIT_TOLERANCE: f64 = 0.05;
+
+/// Two previews and their process times: an interval of the preview path.
+struct Ends<'a> {
+    t: [f64; 2],
+    img: [&'a Vec<f32>; 2],
+}
+
+/// The process time at preview-path position `pos` (in previews from preview 0, between
+/// them linear), for previews at `times` around a loop of `steps` process steps.
+fn time_at(times: &[f64], steps: f64, pos: f64) -> f64 {
+    let m = times.len();
+    let i = (pos.floor().max(0.0) as usize).min(m - 1);
+    let f = pos - i as f64;
+    let next = times.get(i + 1).copied().unwrap_or(times[0] + steps);
+    times[i] + f * (next - times[i])
+}
 /// Width of the walk's previews in pixels (at most the output's; height to its aspect).
 const PREVIEW_WIDTH: u32 = 32;
 
@@ -73,56 +100,145 @@ impl Synthesiser<'_> {
     fn loop_times_for(&mut self, size: Size) -> Vec<f64> {
         let n = self.loop_frames as usize;
         let steps = self.looped.as_ref().map_or(0, |s| s.len()) as f64;
-        let m = PREVIEW_PER_FRAME * n;
         let (small, metric) = (preview_size(size), metric_size(size));
-        let per_frame = PREVIEW_PER_FRAME * small.pixels() + metric.pixels();
+        let per_frame = PREVIEW_MAX * small.pixels() + metric.pixels();
         if n.saturating_mul(per_frame) > MAX_PREVIEW_VALUES {
             // too long a loop to preview within the memory bound: even times
             return (0..n).map(|k| k as f64 * steps / n as f64).collect();
         }
         let [small, metric] = self.loop_canvases([small, metric]);
-        let mut frame = small.frame();
-        let grid: Vec<Vec<f32>> = (0..m)
-            .map(|j| {
-                self.set_loop_state(j as f64 * steps / m as f64);
-                self.render_window(
-                    j as f64 / PREVIEW_PER_FRAME as f64,
-                    small.size,
-                    small.origin,
-                    &mut frame,
-                );
-                encode(&frame)
-            })
-            .collect();
+        let (grid, times) = self.preview_grid(&small);
+        let m = grid.len();
         let mut arc = vec![0.0];
         for j in 0..m {
             arc.push(arc[j] + dist(&grid[j], &grid[(j + 1) % m]));
         }
-        let mut pos = equal_steps(&grid, &arc, n).unwrap_or_else(|| {
+        let pos = equal_steps(&grid, &arc, n).unwrap_or_else(|| {
             // a still loop, or one the walk cannot split: constant speed along the path
             arc_times(&arc, (0..n).map(|k| k as f64 / n as f64))
                 .into_iter()
                 .map(|u| u * m as f64)
                 .collect()
         });
-        self.even_out(&mut pos, m, metric);
-        pos.into_iter().map(|x| x * steps / m as f64).collect()
+        let mut tau: Vec<f64> = pos.iter().map(|&p| time_at(&times, steps, p)).collect();
+        self.even_out(&mut tau, metric);
+        tau
     }
 
-    /// The preview frame at grid position `pos` of a grid of `m` points, rendered from the
-    /// state there (not a pixel blend).
-    fn preview_at(
+    /// The walk's preview frames around the loop and their process times: one per output
+    /// frame at evenly spaced times, each interval then halved where the preview rendered
+    /// at its middle lies farther than [`SPLIT_TOLERANCE`] × the mean step from the pixel
+    /// blend of its ends (the walk's stand-in for the states between them), down to
+    /// [`PREVIEW_MAX`] per frame. Every tested middle is kept, so at least 2 per frame.
+    fn preview_grid(&mut self, canvas: &Canvas) -> (Vec<Vec<f32>>, Vec<f64>) {
+        let n = self.loop_frames as usize;
+        let steps = self.looped.as_ref().map_or(0, |s| s.len()) as f64;
+        let mut frame = canvas.frame();
+        let base: Vec<(f64, Vec<f32>)> = (0..n)
+            .map(|k| {
+                let t = k as f64 * steps / n as f64;
+                (t, self.preview_at(t, canvas, &mut frame))
+            })
+            .collect();
+        let total: f64 = (0..n).map(|k| dist(&base[k].1, &base[(k + 1) % n].1)).sum();
+        let tol = SPLIT_TOLERANCE * total / n as f64;
+        let (mut grid, mut times) = (Vec::new(), Vec::new());
+        for k in 0..n {
+            // the last interval ends at the loop's end, where frame 0's state returns
+            let (t1, b) = (base.get(k + 1).map_or(steps, |x| x.0), &base[(k + 1) % n].1);
+            let (t0, a) = (base[k].0, &base[k].1);
+            times.push(t0);
+            grid.push(a.clone());
+            let ends = Ends {
+                t: [t0, t1],
+                img: [a, b],
+            };
+            self.refine(
+                ends,
+                SPLIT_DEPTH,
+                tol,
+                canvas,
+                &mut frame,
+                &mut grid,
+                &mut times,
+            );
+        }
+        (grid, times)
+    }
+
+    /// Renders the middle of the interval `ends` and appends the previews inside it, in
+    /// order: the middle, and the halves refined further (`depth` more levels) where the
+    /// middle is farther than `tol` from the pixel blend of the ends.
+    #[allow(clippy::too_many_arguments)]
+    fn refine(
         &mut self,
-        pos: f64,
-        m: usize,
+        ends: Ends,
+        depth: usize,
+        tol: f64,
         canvas: &Canvas,
         frame: &mut GrayFrame,
-    ) -> Vec<f32> {
+        grid: &mut Vec<Vec<f32>>,
+        times: &mut Vec<f64>,
+    ) {
+        if depth == 0 {
+            return;
+        }
+        let tm = 0.5 * (ends.t[0] + ends.t[1]);
+        let c = self.preview_at(tm, canvas, frame);
+        let [a, b] = ends.img;
+        let off: f64 = a
+            .iter()
+            .zip(b)
+            .zip(&c)
+            .map(|((&a, &b), &c)| f64::from(0.5 * (a + b) - c).powi(2))
+            .sum();
+        let split = (off / c.len().max(1) as f64).sqrt() > tol;
+        if split {
+            let left = Ends {
+                t: [ends.t[0], tm],
+                img: [a, &c],
+            };
+            self.refine(left, depth - 1, tol, canvas, frame, grid, times);
+        }
+        times.push(tm);
+        grid.push(c.clone());
+        if split {
+            let right = Ends {
+                t: [tm, ends.t[1]],
+                img: [&c, b],
+            };
+            self.refine(right, depth - 1, tol, canvas, frame, grid, times);
+        }
+    }
+
+    /// The preview frame of the loop's state at process time `tau` (cyclic; rendered, not
+    /// a pixel blend), the controls taken at the output frame shown near it.
+    fn preview_at(&mut self, tau: f64, canvas: &Canvas, frame: &mut GrayFrame) -> Vec<f32> {
         let steps = self.looped.as_ref().map_or(0, |s| s.len()) as f64;
-        let k = m as f64 / f64::from(self.loop_frames);
-        self.set_loop_state(pos * steps / m as f64);
-        self.render_window(pos / k, canvas.size, canvas.origin, frame);
+        self.set_loop_state(tau);
+        let at = tau * f64::from(self.loop_frames) / steps;
+        self.render_window(at, canvas.size, canvas.origin, frame);
         encode(frame)
+    }
+
+    /// The loop's state at process time `tau` rendered at `canvas`'s frame size within
+    /// the state's own box (see [`Self::raw_boxes`]; `lit` from [`Self::loop_lit`]),
+    /// encoded as [`encode`] does: outside the box it lights no pixel.
+    fn patch_at(&mut self, tau: f64, lit: [usize; 4], canvas: &Canvas) -> Patch {
+        let steps = self.looped.as_ref().map_or(0, |s| s.len()) as f64;
+        self.set_loop_state(tau);
+        let at = tau * f64::from(self.loop_frames) / steps;
+        let [b] = self.raw_boxes(at, lit, [canvas.size]);
+        let window = Canvas::covering(canvas.size, b);
+        let mut frame = window.frame();
+        self.render_window(at, window.size, window.origin, &mut frame);
+        let data = encode(&frame);
+        let energy = data.iter().map(|&v| f64::from(v) * f64::from(v)).sum();
+        Patch {
+            window,
+            data,
+            energy,
+        }
     }
 
     /// The rows and columns of the normalised image (`[r0, r1, c0, c1]`, inclusive) that
@@ -190,19 +306,18 @@ impl Synthesiser<'_> {
         std::array::from_fn(|k| Canvas::covering(sizes[k], union[k]))
     }
 
-    /// Checks the walk's frames on previews rendered from their states: each step longer
-    /// than `EVEN_OUT` × the median moves its frame other than frame 0 towards where its
-    /// two steps are equal ([`Synthesiser::balance`], on rendered previews), a few passes
-    /// over the loop.
-    fn even_out(&mut self, pos: &mut [f64], m: usize, canvas: Canvas) {
+    /// Checks the walk's frames on renders at the measure's size: each step longer than
+    /// `EVEN_OUT` × the median moves its frame other than frame 0 towards where its two
+    /// steps are equal ([`Synthesiser::balance`]), a few passes over the loop. Each frame
+    /// is rendered only within its own state's box ([`Synthesiser::patch_at`]), a fraction
+    /// of the loop's canvas when the flame moves about its frame.
+    fn even_out(&mut self, pos: &mut [f64], canvas: Canvas) {
         let n = pos.len();
-        let frame = &mut canvas.frame();
+        let end = self.looped.as_ref().map_or(0, |s| s.len()) as f64;
+        let lit = self.loop_lit();
         let canvas = &canvas;
-        let mut img: Vec<Vec<f32>> = pos
-            .iter()
-            .map(|&p| self.preview_at(p, m, canvas, frame))
-            .collect();
-        let step = |img: &[Vec<f32>], k: usize| dist(&img[k], &img[(k + 1) % n]);
+        let mut img: Vec<Patch> = pos.iter().map(|&p| self.patch_at(p, lit, canvas)).collect();
+        let step = |img: &[Patch], k: usize| img[k].dist(&img[(k + 1) % n], canvas);
         let mut steps: Vec<f64> = (0..n).map(|k| step(&img, k)).collect();
         let med = ignis_core::loopq::median(&mut steps.clone());
         for _ in 0..EVEN_OUT_PASSES {
@@ -218,10 +333,10 @@ impl Synthesiser<'_> {
                 } else {
                     1
                 };
-                let ends = [pos[j - 1], pos.get(j + 1).copied().unwrap_or(m as f64)];
+                let ends = [pos[j - 1], pos.get(j + 1).copied().unwrap_or(end)];
                 let now = (pos[j], steps[j - 1] - steps[j], steps[j - 1].max(steps[j]));
                 let (ia, ib) = (&img[j - 1], &img[(j + 1) % n]);
-                let (best, at) = self.balance([ia, ib], ends, now, m, canvas, frame);
+                let (best, at) = self.balance([ia, ib], ends, now, lit, canvas);
                 let Some(best) = best else { continue };
                 let before = (
                     steps[j - 1].max(steps[j]),
@@ -251,14 +366,13 @@ impl Synthesiser<'_> {
     /// steps agree to [`EVEN_OUT_TOLERANCE`]. `None` when no try beats the current frame.
     fn balance(
         &mut self,
-        ends_img: [&Vec<f32>; 2],
+        ends_img: [&Patch; 2],
         ends: [f64; 2],
         now: (f64, f64, f64),
-        m: usize,
+        lit: [usize; 4],
         canvas: &Canvas,
-        frame: &mut GrayFrame,
-    ) -> (Option<Vec<f32>>, f64) {
-        let span = dist(ends_img[0], ends_img[1]);
+    ) -> (Option<Patch>, f64) {
+        let span = ends_img[0].dist(ends_img[1], canvas);
         let (mut lo, mut hi) = ((ends[0], -span), (ends[1], span));
         if now.1 < 0.0 {
             lo = (now.0, now.1);
@@ -276,8 +390,8 @@ impl Synthesiser<'_> {
                 0.5
             };
             let x = lo.0 + w * f;
-            let ix = self.preview_at(x, m, canvas, frame);
-            let (s0, s1) = (dist(ends_img[0], &ix), dist(&ix, ends_img[1]));
+            let ix = self.patch_at(x, lit, canvas);
+            let (s0, s1) = (ends_img[0].dist(&ix, canvas), ix.dist(ends_img[1], canvas));
             let g = s0 - s1;
             if s0.max(s1) < best_max {
                 (best_max, at) = (s0.max(s1), x);
@@ -352,6 +466,47 @@ impl Canvas {
             width: self.w,
             height: self.h,
         })
+    }
+}
+
+/// An encoded render within a window of its frame; the frame is dark outside it.
+struct Patch {
+    window: Canvas,
+    data: Vec<f32>,
+    /// Sum of the squared values.
+    energy: f64,
+}
+
+impl Patch {
+    /// RMS difference of the two frames over `canvas` (a window of the same frame size
+    /// holding both patches' light): the sum of squared differences where the windows
+    /// overlap, plus each patch's own light outside the overlap.
+    fn dist(&self, other: &Patch, canvas: &Canvas) -> f64 {
+        let (a, b) = (&self.window, &other.window);
+        let (x0, x1) = (
+            a.origin.0.max(b.origin.0),
+            (a.origin.0 + a.w).min(b.origin.0 + b.w),
+        );
+        let (y0, y1) = (
+            a.origin.1.max(b.origin.1),
+            (a.origin.1 + a.h).min(b.origin.1 + b.h),
+        );
+        let (mut diff, mut ea, mut eb) = (0.0, 0.0, 0.0);
+        if x0 < x1 && y0 < y1 {
+            fn row(p: &Patch, y: u32, x0: u32, x1: u32) -> &[f32] {
+                let w = &p.window;
+                let at = ((y - w.origin.1) * w.w + (x0 - w.origin.0)) as usize;
+                &p.data[at..at + (x1 - x0) as usize]
+            }
+            for y in y0..y1 {
+                let (ra, rb) = (row(self, y, x0, x1), row(other, y, x0, x1));
+                diff += ignis_core::loopq::sum_sq_diff(ra, rb);
+                ea += ra.iter().map(|&v| f64::from(v) * f64::from(v)).sum::<f64>();
+                eb += rb.iter().map(|&v| f64::from(v) * f64::from(v)).sum::<f64>();
+            }
+        }
+        let sq = diff + (self.energy - ea).max(0.0) + (other.energy - eb).max(0.0);
+        (sq / (canvas.w * canvas.h).max(1) as f64).sqrt()
     }
 }
 
@@ -588,5 +743,64 @@ fn walk(grid: &[Vec<f32>], arc: &[f64], chord: f64, n: usize) -> Option<Vec<f64>
             return None;
         }
         out.push(pos);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A patch's distance is the RMS difference of the two frames over the canvas, each
+    /// dark outside its window: overlapping, nested and disjoint windows.
+    #[test]
+    fn patch_distance_equals_the_whole_canvas_difference() {
+        let size = Size {
+            width: 20,
+            height: 16,
+        };
+        let canvas = Canvas {
+            size,
+            origin: (2, 1),
+            w: 15,
+            h: 12,
+        };
+        let patch = |x0: u32, y0: u32, w: u32, h: u32, seed: u32| {
+            let data: Vec<f32> = (0..w * h)
+                .map(|i| ((i * 7 + seed * 13) % 11) as f32 / 10.0)
+                .collect();
+            let energy = data.iter().map(|&v| f64::from(v).powi(2)).sum();
+            let window = Canvas {
+                size,
+                origin: (x0, y0),
+                w,
+                h,
+            };
+            Patch {
+                window,
+                data,
+                energy,
+            }
+        };
+        let embed = |p: &Patch| {
+            let mut full = vec![0.0f32; (canvas.w * canvas.h) as usize];
+            for y in 0..p.window.h {
+                for x in 0..p.window.w {
+                    let (cx, cy) = (p.window.origin.0 + x - 2, p.window.origin.1 + y - 1);
+                    full[(cy * canvas.w + cx) as usize] = p.data[(y * p.window.w + x) as usize];
+                }
+            }
+            full
+        };
+        let cases = [
+            (patch(3, 2, 6, 5, 1), patch(5, 4, 8, 7, 2)),
+            (patch(2, 1, 15, 12, 3), patch(6, 5, 3, 2, 4)),
+            (patch(2, 1, 4, 4, 5), patch(12, 8, 5, 5, 6)),
+        ];
+        for (a, b) in &cases {
+            let want = dist(&embed(a), &embed(b));
+            let got = a.dist(b, &canvas);
+            assert!((got - want).abs() < 1e-6 * want.max(1.0), "{got} vs {want}");
+            assert!((b.dist(a, &canvas) - got).abs() < 1e-12);
+        }
     }
 }
