@@ -181,22 +181,26 @@ pub fn hermite_darken_srgb8_in(
         };
         return hermite_darken_rgba(&lin.to_linear(), mask, Some(matte), p);
     }
-    let mut out = GrayFrame::new(size);
     let f = Darken::new(p);
     let t8 = crate::footage::srgb8_table();
     let m = mask.as_raw();
     let protected = |i: usize| p.protect_interior && m.get(i).is_some_and(|&b| b > 0);
+    // Written once, row by row (0 outside the area), never zero-filled first.
+    let mut out = Vec::with_capacity(size.pixels());
+    out.resize(y0 * w, 0.0);
     for y in y0..y1 {
         let at = y * w;
+        out.resize(at + w, 0.0);
         let row = &bytes[(at + x0) * 4..(at + x1) * 4];
         let t = &matte.data()[at + x0..at + x1];
-        let o = &mut out.data_mut()[at + x0..at + x1];
+        let o = &mut out[at + x0..at + x1];
         for (j, ((o, px), &t)) in o.iter_mut().zip(row.chunks_exact(4)).zip(t).enumerate() {
             let px = crate::footage::srgb8_pixel(t8, px);
             *o = darken_matted(&f, &px, t, protected(at + x0 + j));
         }
     }
-    out
+    out.resize(size.pixels(), 0.0);
+    GrayFrame::from_vec(size, out).expect("the frame's pixels")
 }
 
 /// Linear Rec. 709 luminance of a pixel (as `RgbaFrame::luminance`).
