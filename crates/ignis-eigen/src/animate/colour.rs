@@ -466,7 +466,7 @@ fn colour_then(
                 match original {
                     Orig::Linear(o) => {
                         let o = &o[span.clone()];
-                        colour_pixels(&px, |i| o[i], p.threshold, rows)
+                        colour_pixels(&px, |i| o[i], false, p.threshold, rows)
                     }
                     Orig::Srgb8(o) => {
                         let o = &o[span.start * 4..span.end * 4];
@@ -474,6 +474,7 @@ fn colour_then(
                         colour_pixels(
                             &px,
                             |i| crate::footage::srgb8_pixel(t, &o[i * 4..i * 4 + 4]),
+                            true,
                             p.threshold,
                             rows,
                         )
@@ -538,11 +539,15 @@ struct Pixels<'a> {
 }
 
 /// Algorithm 2 on a run of pixels (see [`original_colouring`]), then the alpha matte;
-/// `orig(i)` is the original's pixel `i` in linear light.
+/// `orig(i)` is the original's pixel `i` in linear light. With `nonneg` (every channel of
+/// every original pixel is finite and ≥ +0, as 8-bit footage's are) the original is not
+/// read where its weight `s` is ±0: `s × og` is then ±0 with the sign of `s`, which is
+/// `s × 0.0` — the same value.
 #[inline]
 fn colour_pixels(
     px: &Pixels<'_>,
     orig: impl Fn(usize) -> [f32; 4],
+    nonneg: bool,
     threshold: f32,
     out: &mut [MaybeUninit<[f32; 4]>],
 ) {
@@ -563,7 +568,11 @@ fn colour_pixels(
         if let Some(e) = extra {
             s = s.max(e[i].clamp(0.0, 1.0));
         }
-        let og = orig(i);
+        let og = if nonneg && s == 0.0 {
+            [0.0; 4]
+        } else {
+            orig(i)
+        };
         let mut v = if s >= 1.0 {
             og
         } else {
@@ -953,6 +962,102 @@ mod tests {
         let e = original_colouring_src_then(&src, &small, dests[0], None, None, &p, &none);
         assert!(e.unwrap_err().to_string().contains("2x2"));
         assert!(SourceFrame::srgb8(size(2, 2), vec![0; 15]).is_err());
+    }
+
+    /// The fused path (`original_colouring_matted`: the bloom's rows made band by band,
+    /// the alpha matte per pixel) equals Algorithm 2 on the whole bloom frame followed by
+    /// the matte rule `max(clamp(grey + bloom, 0, 1), min(limit, alpha))`, bit for bit:
+    /// 8-bit and linear originals, a grey source with +0, −0, negative and above-threshold
+    /// values (8-bit originals skip the read where the weight is 0), with and without the
+    /// limit matte, smoke and a custom mask; opaque and kept alphas.
+    #[test]
+    fn matted_colouring_equals_colouring_then_the_matte() {
+        let sz = size(37, 2 * TINT_BAND as u32 + 5);
+        let wave =
+            |x: u32, y: u32, k: f32| ((x as f32 * 0.37 + y as f32 * 0.11 + k).sin() + 1.0) * 0.5;
+        let src = GrayFrame::from_fn(sz, |x, y| match (x + 3 * y) % 7 {
+            0 => 0.0,
+            1 => -0.0,
+            2 => -0.01,
+            _ => wave(x, y, 0.0) * 3.0 * T - T,
+        });
+        let bp = ignis_core::post::BloomParams {
+            radius: 8.0,
+            ..Default::default()
+        };
+        let bloom = ignis_core::post::bloom(&src, &bp).unwrap();
+        let rows = ignis_core::post::bloom_rows(&src, &bp).unwrap();
+        let bytes: Vec<u8> = (0..sz.pixels() * 4).map(|i| (i * 37 % 256) as u8).collect();
+        let src8 = SourceFrame::srgb8(sz, bytes).unwrap();
+        let lin = SourceFrame::Linear(src8.to_linear().into_owned());
+        let smoke = RgbaFrame::from_vec(sz, vec![[0.05, 0.04, 0.03, 0.02]; sz.pixels()]).unwrap();
+        let mask = GrayFrame::from_fn(sz, |x, y| wave(x, y, 2.0));
+        let limit = GrayFrame::from_fn(sz, |x, y| wave(x, y, 4.0));
+        let tint = [1.0, 0.42, 0.08];
+        let bits = |f: &RgbaFrame| -> Vec<u32> {
+            f.data().iter().flatten().map(|v| v.to_bits()).collect()
+        };
+        let none = |_: usize, _: &mut [[f32; 4]]| {};
+        for orig in [&src8, &lin] {
+            for with_smoke in [false, true] {
+                for custom in [None, Some((&mask, MaskMode::Add))] {
+                    let p = OriginalColour {
+                        threshold: T,
+                        smoke: with_smoke,
+                    };
+                    let k = with_smoke.then_some(&smoke);
+                    let dest = Destination::SolidTint(&bloom, tint);
+                    let plain =
+                        original_colouring_src_then(&src, orig, dest, k, custom, &p, &none)
+                            .unwrap();
+                    // The 8-bit shortcut (no read where the weight is ±0) changes nothing.
+                    let from_linear =
+                        original_colouring_src_then(&src, &lin, dest, k, custom, &p, &none)
+                            .unwrap();
+                    assert_eq!(bits(&plain), bits(&from_linear));
+                    for alpha in [
+                        AlphaMatte::Keep,
+                        AlphaMatte::Opaque,
+                        AlphaMatte::Glow(None),
+                        AlphaMatte::Glow(Some(&limit)),
+                    ] {
+                        let mut want = plain.clone();
+                        for (i, px) in want.data_mut().iter_mut().enumerate() {
+                            let m = (src.data()[i] + bloom.data()[i]).clamp(0.0, 1.0);
+                            px[3] = match alpha {
+                                AlphaMatte::Keep => px[3],
+                                AlphaMatte::Opaque => 1.0,
+                                AlphaMatte::Glow(None) => m,
+                                AlphaMatte::Glow(Some(l)) => m.max(l.data()[i].min(px[3])),
+                            };
+                        }
+                        let got = original_colouring_matted(
+                            &src,
+                            orig,
+                            Destination::SolidTintRows(&rows, tint),
+                            k,
+                            custom,
+                            &p,
+                            alpha,
+                        )
+                        .unwrap();
+                        assert_eq!(bits(&got), bits(&want));
+                    }
+                }
+            }
+        }
+        // The matte from the bloom needs a bloom destination.
+        let p = OriginalColour::default();
+        let e = original_colouring_matted(
+            &src,
+            &src8,
+            Destination::Empty,
+            None,
+            None,
+            &p,
+            AlphaMatte::Glow(None),
+        );
+        assert!(e.unwrap_err().to_string().contains("bloom"));
     }
 
     #[test]
