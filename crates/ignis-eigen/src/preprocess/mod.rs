@@ -625,7 +625,7 @@ fn dilate_l2(img: &GrayImage, r: u8) -> GrayImage {
     for row in img.as_raw().chunks_exact(w) {
         first.push(spans.len());
         let mut x = 0;
-        while let Some(a) = row[x..].iter().position(|&v| v > 0) {
+        while let Some(a) = first_set(&row[x..]) {
             let a = x + a;
             let b = row[a..].iter().position(|&v| v == 0).map_or(w, |e| a + e);
             spans.push((a, b));
@@ -671,17 +671,38 @@ fn dilate_l2(img: &GrayImage, r: u8) -> GrayImage {
     GrayImage::from_raw(w as u32, h as u32, data).expect("w × h bytes")
 }
 
+/// Bytes per block of [`first_set`] / [`last_set`].
+const SCAN: usize = 32;
+
+/// Index of the first non-zero byte of `row`: whole blocks are tested with an OR of their
+/// bytes (vectorised), only the block that holds one is searched byte by byte.
+fn first_set(row: &[u8]) -> Option<usize> {
+    let blk = row
+        .chunks(SCAN)
+        .position(|c| c.iter().fold(0u8, |a, &v| a | v) != 0)?;
+    let at = blk * SCAN;
+    row[at..].iter().position(|&v| v > 0).map(|i| at + i)
+}
+
+/// Index of the last non-zero byte of `row` (as [`first_set`], from the end).
+fn last_set(row: &[u8]) -> Option<usize> {
+    let n = row.len();
+    let blk = row
+        .rchunks(SCAN)
+        .position(|c| c.iter().fold(0u8, |a, &v| a | v) != 0)?;
+    let end = n - blk * SCAN;
+    row[..end].iter().rposition(|&v| v > 0)
+}
+
 /// The inclusive bounds `(x0, y0, x1, y1)` of a mask's non-zero pixels; `None` if empty.
 fn mask_bounds(mask: &GrayImage) -> Option<(u32, u32, u32, u32)> {
     let w = mask.width() as usize;
     let mut b: Option<(u32, u32, u32, u32)> = None;
     for (y, row) in mask.as_raw().chunks_exact(w.max(1)).enumerate() {
-        let (Some(a), Some(z)) = (
-            row.iter().position(|&v| v > 0),
-            row.iter().rposition(|&v| v > 0),
-        ) else {
+        let Some(a) = first_set(row) else {
             continue;
         };
+        let z = last_set(row).expect("a set byte exists");
         let (a, z, y) = (a as u32, z as u32, y as u32);
         b = Some(match b {
             None => (a, y, z, y),
@@ -889,6 +910,23 @@ mod tests {
         });
         assert_eq!(feather_half_in(&m, 600).0, feather_in(&m, 600).0);
         assert!(feather_half_in(&GrayImage::new(500, 400), 500).1.is_none());
+    }
+
+    /// The block searches find what a byte-by-byte search finds.
+    #[test]
+    fn first_and_last_set_equal_the_plain_search() {
+        for n in [0usize, 1, 31, 32, 33, 70, 200] {
+            for set in [None, Some(0), Some(n / 2), Some(n.saturating_sub(1))] {
+                for extra in [None, Some(n / 3)] {
+                    let mut row = vec![0u8; n];
+                    for i in [set, extra].into_iter().flatten().filter(|&i| i < n) {
+                        row[i] = 7;
+                    }
+                    assert_eq!(first_set(&row), row.iter().position(|&v| v > 0), "{n}");
+                    assert_eq!(last_set(&row), row.iter().rposition(|&v| v > 0), "{n}");
+                }
+            }
+        }
     }
 
     #[test]
