@@ -567,7 +567,15 @@ pub fn bloom_rows<'a>(src: &'a GrayFrame, p: &BloomParams) -> Result<BloomRows<'
     let kind = if levels.contains(&0) {
         RowsKind::Whole(bloom_plane(src.data(), w, h, p))
     } else {
-        match coarse_chain(src.data(), w, h, p, &sigmas, &levels, &mut BlurScratch::default()) {
+        match coarse_chain(
+            src.data(),
+            w,
+            h,
+            p,
+            &sigmas,
+            &levels,
+            &mut BlurScratch::default(),
+        ) {
             Some(c) => RowsKind::Coarse(c),
             None => RowsKind::Source,
         }

@@ -32,9 +32,9 @@ use crate::error::{EigenError, Result};
 use crate::footage::SourceFrame;
 use crate::pose::{ClipPose, PoseParams};
 use ignis_core::colour::SolidTintRamp;
-use ignis_core::post::BloomRows;
 use ignis_core::frame::LUMA;
 use ignis_core::post::gaussian_blur;
+use ignis_core::post::BloomRows;
 use ignis_core::{CoreError, GrayFrame, RgbaFrame, Size};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -1007,9 +1007,8 @@ mod tests {
                     };
                     let k = with_smoke.then_some(&smoke);
                     let dest = Destination::SolidTint(&bloom, tint);
-                    let plain =
-                        original_colouring_src_then(&src, orig, dest, k, custom, &p, &none)
-                            .unwrap();
+                    let plain = original_colouring_src_then(&src, orig, dest, k, custom, &p, &none)
+                        .unwrap();
                     // The 8-bit shortcut (no read where the weight is ±0) changes nothing.
                     let from_linear =
                         original_colouring_src_then(&src, &lin, dest, k, custom, &p, &none)

@@ -18,8 +18,8 @@ use rayon::prelude::*;
 
 use crate::animate::has_stored_frames;
 use crate::colour::{
-    original_colouring_matted, original_colouring_src_then, synthetic_smoke, warp_rgba,
-    AlphaMatte, Destination, OriginalColour,
+    original_colouring_matted, original_colouring_src_then, synthetic_smoke, warp_rgba, AlphaMatte,
+    Destination, OriginalColour,
 };
 use crate::db::{ClipEntry, EigenfireDb};
 use crate::error::{EigenError, Result};
@@ -750,10 +750,8 @@ fn finish_frame(
         // The common case in one pass: the bloom's full-resolution rows, the solid tint,
         // Algorithm 2 and the alpha matte made band by band (the same values as the
         // general path below, without a bloom frame or a second pass for the matte).
+        // (The colouring checks the footage matte's size.)
         let rows = ignis_core::post::bloom_rows(grey, b)?;
-        if look.matte {
-            check_matte(grey, grey, grey.size(), matte)?;
-        }
         let alpha = if look.matte {
             AlphaMatte::Glow(matte)
         } else {

@@ -298,7 +298,9 @@ mod tests {
     #[test]
     fn srgb8_darkening_equals_the_linear_darkening() {
         let size = Size::new(23, 17).unwrap();
-        let bytes: Vec<u8> = (0..size.pixels() * 4).map(|i| (i * 53 % 256) as u8).collect();
+        let bytes: Vec<u8> = (0..size.pixels() * 4)
+            .map(|i| (i * 53 % 256) as u8)
+            .collect();
         let lin = crate::footage::SourceFrame::Srgb8 {
             size,
             bytes: bytes.clone(),
@@ -310,7 +312,9 @@ mod tests {
             1 => 1.0,
             _ => ((x * y) % 7) as f32 / 7.0,
         });
-        let mask = GrayImage::from_fn(23, 17, |x, y| image::Luma([if x < 6 && y < 9 { 255 } else { 0 }]));
+        let mask = GrayImage::from_fn(23, 17, |x, y| {
+            image::Luma([if x < 6 && y < 9 { 255 } else { 0 }])
+        });
         let area = (2, 3, 20, 15);
         for p in [
             HermiteParams::default(),

@@ -410,7 +410,10 @@ pub fn feather_half_in(mask: &GrayImage, longer: u32) -> (GrayFrame, Option<(u32
     // 2×2 block means (rounded), the last column and row clamped.
     let mut hd = Vec::with_capacity(hw * hh);
     for v in 0..hh {
-        let (ra, rb) = (&dr[2 * v * cw..][..cw], &dr[(2 * v + 1).min(ch - 1) * cw..][..cw]);
+        let (ra, rb) = (
+            &dr[2 * v * cw..][..cw],
+            &dr[(2 * v + 1).min(ch - 1) * cw..][..cw],
+        );
         hd.extend((0..hw).map(|u| {
             let (u, u1) = (2 * u, (2 * u + 1).min(cw - 1));
             let sum = ra[u] as u32 + ra[u1] as u32 + rb[u] as u32 + rb[u1] as u32;
