@@ -349,34 +349,49 @@ fn upsample2_add(
         .for_each_init(
             || vec![0.0f32; src.w],
             |line, (r, row)| {
-                let i = r + off;
-                let odd = i & 1;
-                let j = i / 2 + odd;
-                let (wa, wb) = if odd == 0 { (0.25, 0.75) } else { (0.75, 0.25) };
-                let a = &src.data[j * src.w..(j + 1) * src.w];
-                let b = &src.data[(j + 1) * src.w..(j + 2) * src.w];
-                for ((l, &av), &bv) in line.iter_mut().zip(a).zip(b) {
-                    *l = wa * av + wb * bv;
-                }
-                let l = &line[off / 2..];
-                let n2 = row.len() / 2 * 2;
-                let (head, tail) = row.split_at_mut(n2);
-                debug_assert!(l.len() >= n2 / 2 + 2);
-                for (o, t) in head.chunks_exact_mut(2).zip(l.windows(3)) {
-                    o[0] += 0.25 * t[0] + 0.75 * t[1];
-                    o[1] += 0.75 * t[1] + 0.25 * t[2];
-                }
-                if let Some(o) = tail.first_mut() {
-                    let q = n2 / 2;
-                    *o += 0.25 * l[q] + 0.75 * l[q + 1];
-                }
-                if let Some(src) = lighten {
-                    for (o, &s) in row.iter_mut().zip(&src[r * dst_w..(r + 1) * dst_w]) {
-                        *o = o.max(s);
-                    }
-                }
+                let lighten = lighten.map(|s| &s[r * dst_w..(r + 1) * dst_w]);
+                upsample_row(src, line, r, off, row, lighten)
             },
         );
+}
+
+/// Row `r` of [`upsample2_add`] (`off` = `PAD − dst_pad`): `row += ` the doubled coarse
+/// row, then `row = max(row, lighten)`; `line` (`src.w` long) is scratch.
+#[inline]
+fn upsample_row(
+    src: &Plane,
+    line: &mut [f32],
+    r: usize,
+    off: usize,
+    row: &mut [f32],
+    lighten: Option<&[f32]>,
+) {
+    let i = r + off;
+    let odd = i & 1;
+    let j = i / 2 + odd;
+    let (wa, wb) = if odd == 0 { (0.25, 0.75) } else { (0.75, 0.25) };
+    let a = &src.data[j * src.w..(j + 1) * src.w];
+    let b = &src.data[(j + 1) * src.w..(j + 2) * src.w];
+    for ((l, &av), &bv) in line.iter_mut().zip(a).zip(b) {
+        *l = wa * av + wb * bv;
+    }
+    let l = &line[off / 2..];
+    let n2 = row.len() / 2 * 2;
+    let (head, tail) = row.split_at_mut(n2);
+    debug_assert!(l.len() >= n2 / 2 + 2);
+    for (o, t) in head.chunks_exact_mut(2).zip(l.windows(3)) {
+        o[0] += 0.25 * t[0] + 0.75 * t[1];
+        o[1] += 0.75 * t[1] + 0.25 * t[2];
+    }
+    if let Some(o) = tail.first_mut() {
+        let q = n2 / 2;
+        *o += 0.25 * l[q] + 0.75 * l[q + 1];
+    }
+    if let Some(src) = lighten {
+        for (o, &s) in row.iter_mut().zip(src) {
+            *o = o.max(s);
+        }
+    }
 }
 
 /// Rows per rayon task for planes `w` wide: at least ~16 K values, so the small reduced
@@ -403,7 +418,29 @@ fn accumulate_blurs(
     out: &mut [f32],
     lighten: bool,
 ) {
-    // The σ of every pass and the reduction level each needs.
+    let (sigmas, levels) = pass_levels(p, w, h);
+    let mut scratch = BlurScratch::default();
+    let sum = coarse_chain(src, w, h, p, &sigmas, &levels, &mut scratch);
+    // Full resolution: the passes too small to reduce, exactly, then the chain.
+    for (&s, _) in sigmas.iter().zip(&levels).filter(|(_, &l)| l == 0) {
+        scratch.add_blur(src, w, h, s, p.strength, out);
+    }
+    let lighten = lighten.then_some(src);
+    match &sum {
+        Some(coarse) => upsample2_add(coarse, out, w, 0, lighten),
+        None => {
+            if let Some(src) = lighten {
+                out.par_chunks_mut(w)
+                    .zip(src.par_chunks(w))
+                    .with_min_len(min_rows(w))
+                    .for_each(|(o, s)| o.iter_mut().zip(s).for_each(|(o, &s)| *o = o.max(s)));
+            }
+        }
+    }
+}
+
+/// The σ of every pass of `p` and the reduction level each needs on a `w`×`h` frame.
+fn pass_levels(p: &BloomParams, w: usize, h: usize) -> (Vec<f32>, Vec<u32>) {
     let mut sigmas = Vec::with_capacity(p.passes as usize);
     let mut sigma = p.radius;
     for _ in 0..p.passes {
@@ -411,10 +448,27 @@ fn accumulate_blurs(
         sigma *= p.radius_falloff;
     }
     let levels: Vec<u32> = sigmas.iter().map(|&s| blur_level(s, w, h)).collect();
-    let deepest = levels.iter().copied().max().unwrap_or(0) as usize;
-    let mut tmp = Vec::new();
-    let mut blurred = Vec::new();
-    let mut blur = |input: &[f32], pw: usize, ph: usize, sigma: f32, rate: f32, acc: &mut [f32]| {
+    (sigmas, levels)
+}
+
+/// The buffers of [`BlurScratch::add_blur`], reused across passes.
+#[derive(Default)]
+struct BlurScratch {
+    tmp: Vec<f32>,
+    blurred: Vec<f32>,
+}
+
+impl BlurScratch {
+    /// `acc += rate × blur_σ(input)` (exact Gaussian, [`blur_plane`]).
+    fn add_blur(
+        &mut self,
+        input: &[f32],
+        pw: usize,
+        ph: usize,
+        sigma: f32,
+        rate: f32,
+        acc: &mut [f32],
+    ) {
         let kernel = gaussian_kernel(sigma);
         if kernel.len() == 1 {
             for (a, &v) in acc.iter_mut().zip(input) {
@@ -422,14 +476,28 @@ fn accumulate_blurs(
             }
             return;
         }
-        tmp.resize(pw * ph, 0.0);
-        blurred.resize(pw * ph, 0.0);
-        blur_plane(input, pw, ph, &kernel, &mut tmp, &mut blurred);
-        for (a, &v) in acc.iter_mut().zip(&blurred) {
+        self.tmp.resize(pw * ph, 0.0);
+        self.blurred.resize(pw * ph, 0.0);
+        blur_plane(input, pw, ph, &kernel, &mut self.tmp, &mut self.blurred);
+        for (a, &v) in acc.iter_mut().zip(&self.blurred) {
             *a += rate * v;
         }
-    };
-    // The pyramid, down to the deepest level any pass needs.
+    }
+}
+
+/// The reduced part of [`accumulate_blurs`]: the pyramid down to the deepest level a pass
+/// needs, and the chain from there up to level 1 (`strength` applied per pass); `None`
+/// when no pass is reduced.
+fn coarse_chain(
+    src: &[f32],
+    w: usize,
+    h: usize,
+    p: &BloomParams,
+    sigmas: &[f32],
+    levels: &[u32],
+    scratch: &mut BlurScratch,
+) -> Option<Plane> {
+    let deepest = levels.iter().copied().max().unwrap_or(0) as usize;
     let mut pyramid: Vec<Plane> = Vec::with_capacity(deepest);
     let mut n = (w, h);
     for level in 1..=deepest {
@@ -440,7 +508,6 @@ fn accumulate_blurs(
         n = (n.0.div_ceil(2), n.1.div_ceil(2));
         pyramid.push(next);
     }
-    // The chain from the deepest level up to level 1 (`strength` applied per pass).
     let mut sum: Option<Plane> = None;
     for level in (1..=deepest).rev() {
         let k = 1usize << level;
@@ -452,10 +519,10 @@ fn accumulate_blurs(
         }
         for (&s, _) in sigmas
             .iter()
-            .zip(&levels)
+            .zip(levels)
             .filter(|(_, &l)| l as usize == level)
         {
-            blur(
+            scratch.add_blur(
                 &plane.data,
                 nw,
                 nh,
@@ -470,19 +537,80 @@ fn accumulate_blurs(
             data: acc,
         });
     }
-    // Full resolution: the passes too small to reduce, exactly, then the chain.
-    for (&s, _) in sigmas.iter().zip(&levels).filter(|(_, &l)| l == 0) {
-        blur(src, w, h, s, p.strength, out);
+    sum
+}
+
+/// [`bloom`] made row by row: the reduced levels are computed at once ([`bloom_rows`]),
+/// the full-resolution rows — one bilinear doubling added to the source, then the
+/// lighten — only when asked for ([`BloomRows::rows_into`]), e.g. inside a colouring pass
+/// that uses each band of rows while it is in the cache, so no full-resolution bloom
+/// frame is written and read back. Bit for bit [`bloom`]'s values.
+pub struct BloomRows<'a> {
+    src: &'a GrayFrame,
+    kind: RowsKind,
+}
+
+enum RowsKind {
+    /// The level-1 sum of the chain (no full-resolution pass).
+    Coarse(Plane),
+    /// The whole bloom (a pass at full resolution: made at once).
+    Whole(Vec<f32>),
+    /// No pass at all: the bloom is the source.
+    Source,
+}
+
+/// The reduced levels of `bloom(src, p)` (see [`BloomRows`]); `p` is validated.
+pub fn bloom_rows<'a>(src: &'a GrayFrame, p: &BloomParams) -> Result<BloomRows<'a>> {
+    p.validate()?;
+    let (w, h) = (src.width() as usize, src.height() as usize);
+    let (sigmas, levels) = pass_levels(p, w, h);
+    let kind = if levels.contains(&0) {
+        RowsKind::Whole(bloom_plane(src.data(), w, h, p))
+    } else {
+        match coarse_chain(
+            src.data(),
+            w,
+            h,
+            p,
+            &sigmas,
+            &levels,
+            &mut BlurScratch::default(),
+        ) {
+            Some(c) => RowsKind::Coarse(c),
+            None => RowsKind::Source,
+        }
+    };
+    Ok(BloomRows { src, kind })
+}
+
+impl BloomRows<'_> {
+    /// The frame the bloom is of.
+    pub fn source(&self) -> &GrayFrame {
+        self.src
     }
-    let lighten = lighten.then_some(src);
-    match &sum {
-        Some(coarse) => upsample2_add(coarse, out, w, 0, lighten),
-        None => {
-            if let Some(src) = lighten {
-                out.par_chunks_mut(w)
-                    .zip(src.par_chunks(w))
-                    .with_min_len(min_rows(w))
-                    .for_each(|(o, s)| o.iter_mut().zip(s).for_each(|(o, &s)| *o = o.max(s)));
+
+    /// Writes rows `y0 ..` of the bloom into `out` (whole rows, `out.len()` a multiple of
+    /// the width; rows past the frame's end are left as they are); `line` is scratch.
+    pub fn rows_into(&self, y0: usize, out: &mut [f32], line: &mut Vec<f32>) {
+        let w = self.src.width() as usize;
+        if w == 0 {
+            return;
+        }
+        let s = self.src.data();
+        for (j, row) in out.chunks_exact_mut(w).enumerate() {
+            let y = y0 + j;
+            if y >= self.src.height() as usize {
+                break;
+            }
+            let srow = &s[y * w..(y + 1) * w];
+            match &self.kind {
+                RowsKind::Source => row.copy_from_slice(srow),
+                RowsKind::Whole(b) => row.copy_from_slice(&b[y * w..(y + 1) * w]),
+                RowsKind::Coarse(c) => {
+                    row.copy_from_slice(srow);
+                    line.resize(c.w, 0.0);
+                    upsample_row(c, line, y, PAD, row, Some(srow));
+                }
             }
         }
     }
@@ -718,6 +846,58 @@ mod tests {
             let err = max_abs_diff(&exact, &fast);
             assert!(err < 0.002 * exact.max(), "{p:?}: {err}");
         }
+    }
+
+    /// `bloom_rows` gives `bloom`'s values bit for bit, whatever the bands it is asked
+    /// for: reduced passes only, a full-resolution pass among them, no pass; odd sizes.
+    #[test]
+    fn bloom_rows_equal_the_bloom() {
+        let cases = [
+            (flame(131, 97), BloomParams::default()),
+            (
+                flame(64, 129),
+                BloomParams {
+                    radius: 14.0,
+                    ..Default::default()
+                },
+            ),
+            (
+                flame(50, 41),
+                BloomParams {
+                    radius: 4.0,
+                    ..Default::default()
+                },
+            ),
+            (
+                flame(33, 20),
+                BloomParams {
+                    passes: 0,
+                    ..Default::default()
+                },
+            ),
+        ];
+        for (f, p) in cases {
+            let want = bloom(&f, &p).unwrap();
+            let rows = bloom_rows(&f, &p).unwrap();
+            let w = f.width() as usize;
+            for band in [1, 5, 16] {
+                let mut got = vec![f32::NAN; w * f.height() as usize];
+                let mut line = Vec::new();
+                for (b, chunk) in got.chunks_mut(band * w).enumerate() {
+                    rows.rows_into(b * band, chunk, &mut line);
+                }
+                let bits = |d: &[f32]| d.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+                assert_eq!(bits(&got), bits(want.data()), "{} band {band}", f.size());
+            }
+        }
+        assert!(bloom_rows(
+            &flame(8, 8),
+            &BloomParams {
+                passes: 99,
+                ..Default::default()
+            }
+        )
+        .is_err());
     }
 
     #[test]

@@ -56,16 +56,28 @@ pub fn srgb8_table() -> &'static [f32; 256] {
     ignis_core::palette::srgb8_to_linear_table()
 }
 
-/// Linear RGBA of 8-bit sRGB RGBA bytes `p` (alpha `p[3] / 255`).
+/// Linear RGBA of 8-bit sRGB RGBA bytes `p` (alpha `p[3] / 255`, read from a table of
+/// those quotients: no division per pixel).
 #[inline]
 pub fn srgb8_pixel(t: &[f32; 256], p: &[u8]) -> [f32; 4] {
     [
         t[p[0] as usize],
         t[p[1] as usize],
         t[p[2] as usize],
-        p[3] as f32 / 255.0,
+        ALPHA8[p[3] as usize],
     ]
 }
+
+/// `a as f32 / 255.0` for every byte `a` (the same quotients, computed at compile time).
+static ALPHA8: [f32; 256] = {
+    let mut t = [0.0f32; 256];
+    let mut a = 0;
+    while a < 256 {
+        t[a] = a as f32 / 255.0;
+        a += 1;
+    }
+    t
+};
 
 impl SourceFrame {
     /// Checks that 8-bit bytes hold `size` pixels.
@@ -501,6 +513,16 @@ mod media {
 mod tests {
     use super::*;
     use crate::synthetic::FlameStyle;
+
+    /// The alpha table holds `a / 255` for every byte, bit for bit (the runtime division).
+    #[test]
+    fn alpha_table_is_the_division() {
+        let t = srgb8_table();
+        for a in 0..=255u8 {
+            let want = std::hint::black_box(a) as f32 / std::hint::black_box(255.0f32);
+            assert_eq!(srgb8_pixel(t, &[0, 0, 0, a])[3].to_bits(), want.to_bits());
+        }
+    }
 
     fn params(frames: usize) -> SyntheticParams {
         SyntheticParams {

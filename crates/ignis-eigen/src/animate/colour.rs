@@ -34,6 +34,7 @@ use crate::pose::{ClipPose, PoseParams};
 use ignis_core::colour::SolidTintRamp;
 use ignis_core::frame::LUMA;
 use ignis_core::post::gaussian_blur;
+use ignis_core::post::BloomRows;
 use ignis_core::{CoreError, GrayFrame, RgbaFrame, Size};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -224,6 +225,25 @@ pub enum Destination<'a> {
     /// `ignis_core::colour::synthetic_colour(bloom, &Tint::Solid(tint))`, made band by
     /// band as the colouring goes (the same values, without a whole frame of them).
     SolidTint(&'a GrayFrame, [f32; 3]),
+    /// [`Destination::SolidTint`] of the bloom `ignis_core::post::bloom_rows` makes band
+    /// by band (the same values, without a bloom frame either). The bloom must be of
+    /// the grey `source` frame's size.
+    SolidTintRows(&'a BloomRows<'a>, [f32; 3]),
+}
+
+/// The alpha the coloured pixels leave with (see [`original_colouring_matted`]).
+#[derive(Clone, Copy)]
+pub enum AlphaMatte<'a> {
+    /// Algorithm 2's alpha.
+    Keep,
+    /// 1 everywhere.
+    Opaque,
+    /// The alpha matte of §6.2 on the grey `source` and the destination's bloom,
+    /// `clamp(source + bloom, 0, 1)` (`ignis_core::post::alpha_matte`); with a `limit`
+    /// matte (frames made from footage: the pre-processing matte), at least
+    /// `min(limit, Algorithm 2's alpha)`. Needs a bloom destination
+    /// ([`Destination::SolidTint`] or [`Destination::SolidTintRows`]).
+    Glow(Option<&'a GrayFrame>),
 }
 
 /// Rows per band of [`Destination::SolidTint`].
@@ -262,6 +282,7 @@ pub fn original_colouring_then(
         destination,
         smoke,
         custom,
+        alpha: AlphaMatte::Keep,
     };
     colour_then(source, original.size(), layers, p, then)
 }
@@ -279,17 +300,37 @@ pub fn original_colouring_src_then(
     p: &OriginalColour,
     then: &BandPass<'_>,
 ) -> Result<RgbaFrame> {
-    let orig = match original {
-        SourceFrame::Linear(f) => Orig::Linear(f.data()),
-        SourceFrame::Srgb8 { bytes, .. } => Orig::Srgb8(bytes),
-    };
     let layers = Layers {
-        original: orig,
+        original: Orig::of(original),
         destination,
         smoke,
         custom,
+        alpha: AlphaMatte::Keep,
     };
     colour_then(source, original.size(), layers, p, then)
+}
+
+/// [`original_colouring_src_then`] with the alpha matte `alpha` applied to each pixel as
+/// it is coloured (one pass, no second read of the frame): bit for bit Algorithm 2, then
+/// the matte rule on the result.
+#[allow(clippy::too_many_arguments)]
+pub fn original_colouring_matted(
+    source: &GrayFrame,
+    original: &SourceFrame,
+    destination: Destination<'_>,
+    smoke: Option<&RgbaFrame>,
+    custom: Option<(&GrayFrame, MaskMode)>,
+    p: &OriginalColour,
+    alpha: AlphaMatte<'_>,
+) -> Result<RgbaFrame> {
+    let layers = Layers {
+        original: Orig::of(original),
+        destination,
+        smoke,
+        custom,
+        alpha,
+    };
+    colour_then(source, original.size(), layers, p, &|_, _| {})
 }
 
 /// The original frame's pixels: linear, or 8-bit sRGB RGBA bytes.
@@ -299,12 +340,22 @@ enum Orig<'a> {
     Srgb8(&'a [u8]),
 }
 
+impl<'a> Orig<'a> {
+    fn of(f: &'a SourceFrame) -> Self {
+        match f {
+            SourceFrame::Linear(f) => Orig::Linear(f.data()),
+            SourceFrame::Srgb8 { bytes, .. } => Orig::Srgb8(bytes),
+        }
+    }
+}
+
 /// Algorithm 2's layers besides the mask.
 struct Layers<'a> {
     original: Orig<'a>,
     destination: Destination<'a>,
     smoke: Option<&'a RgbaFrame>,
     custom: Option<(&'a GrayFrame, MaskMode)>,
+    alpha: AlphaMatte<'a>,
 }
 
 /// The checks and the banded pass of [`original_colouring_then`] (`orig_size`: the
@@ -321,6 +372,7 @@ fn colour_then(
         destination,
         smoke,
         custom,
+        alpha,
     } = layers;
     p.validate()?;
     let size = source.size();
@@ -329,6 +381,19 @@ fn colour_then(
         Destination::Empty => {}
         Destination::Image(d) => check_size("the destination (bloom) image", d.size(), size)?,
         Destination::SolidTint(b, _) => check_size("the bloom image", b.size(), size)?,
+        Destination::SolidTintRows(b, _) => check_size("the bloom", b.source().size(), size)?,
+    }
+    if let AlphaMatte::Glow(limit) = alpha {
+        if matches!(destination, Destination::Empty | Destination::Image(_)) {
+            return Err(EigenError::bad(
+                "matte",
+                "the alpha matte from the bloom needs the bloom as the destination \
+                 (Destination::SolidTint or SolidTintRows)",
+            ));
+        }
+        if let Some(m) = limit {
+            check_size("the footage matte", m.size(), size)?;
+        }
     }
     if let Some((m, _)) = custom {
         check_size("the custom mask", m.size(), size)?;
@@ -360,42 +425,68 @@ fn colour_then(
     out.spare_capacity_mut()[..n]
         .par_chunks_mut(band)
         .enumerate()
-        .for_each(|(b, rows)| {
-            let span = b * band..b * band + rows.len();
-            let dest = match destination {
-                Destination::Empty => Dest::Empty,
-                Destination::Image(d) => Dest::Image(&d.data()[span.clone()]),
-                Destination::SolidTint(bloom, tint) => {
-                    Dest::Solid(&bloom.data()[span.clone()], SolidTintRamp::new(tint))
+        .for_each_init(
+            || (Vec::new(), Vec::new()),
+            |(lit_rows, line), (b, rows)| {
+                let span = b * band..b * band + rows.len();
+                // The band's bloom, when the destination is one.
+                let lit: Option<&[f32]> = match destination {
+                    Destination::SolidTint(bloom, _) => Some(&bloom.data()[span.clone()]),
+                    Destination::SolidTintRows(bloom, _) => {
+                        lit_rows.resize(span.len(), 0.0);
+                        bloom.rows_into(b * TINT_BAND, lit_rows, line);
+                        Some(&lit_rows[..])
+                    }
+                    _ => None,
+                };
+                let dest = match (destination, lit) {
+                    (Destination::Image(d), _) => Dest::Image(&d.data()[span.clone()]),
+                    (Destination::SolidTint(_, tint), Some(l))
+                    | (Destination::SolidTintRows(_, tint), Some(l)) => {
+                        Dest::Solid(l, SolidTintRamp::new(tint))
+                    }
+                    _ => Dest::Empty,
+                };
+                let alpha = match (alpha, lit) {
+                    (AlphaMatte::Glow(limit), Some(l)) => AlphaBand::Glow {
+                        grey: &source.data()[span.clone()],
+                        lit: l,
+                        limit: limit.map(|m| &m.data()[span.clone()]),
+                    },
+                    (AlphaMatte::Opaque, _) => AlphaBand::Opaque,
+                    _ => AlphaBand::Keep,
+                };
+                let px = Pixels {
+                    mask: &mask.data()[span.clone()],
+                    dest,
+                    smoke: smoke.map(|s| &s.data()[span.clone()]),
+                    extra: extra.map(|m| &m.data()[span.clone()]),
+                    alpha,
+                };
+                match original {
+                    Orig::Linear(o) => {
+                        let o = &o[span.clone()];
+                        colour_pixels(&px, |i| o[i], false, p.threshold, rows)
+                    }
+                    Orig::Srgb8(o) => {
+                        let o = &o[span.start * 4..span.end * 4];
+                        let t = crate::footage::srgb8_table();
+                        colour_pixels(
+                            &px,
+                            |i| crate::footage::srgb8_pixel(t, &o[i * 4..i * 4 + 4]),
+                            true,
+                            p.threshold,
+                            rows,
+                        )
+                    }
                 }
-            };
-            let px = Pixels {
-                mask: &mask.data()[span.clone()],
-                dest,
-                smoke: smoke.map(|s| &s.data()[span.clone()]),
-                extra: extra.map(|m| &m.data()[span.clone()]),
-            };
-            match original {
-                Orig::Linear(o) => {
-                    let o = &o[span.clone()];
-                    colour_pixels(&px, |i| o[i], p.threshold, rows)
-                }
-                Orig::Srgb8(o) => {
-                    let o = &o[span.start * 4..span.end * 4];
-                    let t = crate::footage::srgb8_table();
-                    colour_pixels(
-                        &px,
-                        |i| crate::footage::srgb8_pixel(t, &o[i * 4..i * 4 + 4]),
-                        p.threshold,
-                        rows,
-                    )
-                }
-            }
-            // SAFETY: `colour_pixels` wrote every pixel of `rows`, and `[f32; 4]` has no
-            // invalid bit patterns or drop glue.
-            let rows = unsafe { &mut *(rows as *mut [MaybeUninit<[f32; 4]>] as *mut [[f32; 4]]) };
-            then(span.start, rows);
-        });
+                // SAFETY: `colour_pixels` wrote every pixel of `rows`, and `[f32; 4]` has
+                // no invalid bit patterns or drop glue.
+                let rows =
+                    unsafe { &mut *(rows as *mut [MaybeUninit<[f32; 4]>] as *mut [[f32; 4]]) };
+                then(span.start, rows);
+            },
+        );
     // SAFETY: every band of the first `n` elements was written above.
     unsafe { out.set_len(n) };
     Ok(RgbaFrame::from_vec(size, out)?)
@@ -409,20 +500,54 @@ enum Dest<'a> {
     Solid(&'a [f32], SolidTintRamp),
 }
 
+/// A band's [`AlphaMatte`].
+enum AlphaBand<'a> {
+    Keep,
+    Opaque,
+    Glow {
+        grey: &'a [f32],
+        lit: &'a [f32],
+        limit: Option<&'a [f32]>,
+    },
+}
+
+impl AlphaBand<'_> {
+    /// The alpha of pixel `i`, whose Algorithm 2 alpha is `a`.
+    #[inline(always)]
+    fn at(&self, i: usize, a: f32) -> f32 {
+        match self {
+            AlphaBand::Keep => a,
+            AlphaBand::Opaque => 1.0,
+            AlphaBand::Glow { grey, lit, limit } => {
+                let m = (grey[i] + lit[i]).clamp(0.0, 1.0);
+                match limit {
+                    Some(l) => m.max(l[i].min(a)),
+                    None => m,
+                }
+            }
+        }
+    }
+}
+
 /// A band's layers for [`colour_pixels`].
 struct Pixels<'a> {
     mask: &'a [f32],
     dest: Dest<'a>,
     smoke: Option<&'a [[f32; 4]]>,
     extra: Option<&'a [f32]>,
+    alpha: AlphaBand<'a>,
 }
 
-/// Algorithm 2 on a run of pixels (see [`original_colouring`]); `orig(i)` is the
-/// original's pixel `i` in linear light.
+/// Algorithm 2 on a run of pixels (see [`original_colouring`]), then the alpha matte;
+/// `orig(i)` is the original's pixel `i` in linear light. With `nonneg` (every channel of
+/// every original pixel is finite and ≥ +0, as 8-bit footage's are) the original is not
+/// read where its weight `s` is ±0: `s × og` is then ±0 with the sign of `s`, which is
+/// `s × 0.0` — the same value.
 #[inline]
 fn colour_pixels(
     px: &Pixels<'_>,
     orig: impl Fn(usize) -> [f32; 4],
+    nonneg: bool,
     threshold: f32,
     out: &mut [MaybeUninit<[f32; 4]>],
 ) {
@@ -432,6 +557,7 @@ fn colour_pixels(
         dest,
         smoke,
         extra,
+        alpha,
     } = px;
     for (i, o) in out.iter_mut().enumerate() {
         let mut s = if mask[i] > threshold {
@@ -442,21 +568,25 @@ fn colour_pixels(
         if let Some(e) = extra {
             s = s.max(e[i].clamp(0.0, 1.0));
         }
-        let og = orig(i);
-        if s >= 1.0 {
-            o.write(og);
-            continue;
-        }
-        let sd = 1.0 - s;
-        let d = match dest {
-            Dest::Empty => [0.0; 4],
-            Dest::Image(d) => d[i],
-            Dest::Solid(b, ramp) => ramp.at(b[i]),
+        let og = if nonneg && s == 0.0 {
+            [0.0; 4]
+        } else {
+            orig(i)
         };
-        let k = smoke.map_or([0.0; 4], |k| k[i]);
-        o.write(std::array::from_fn(|c| {
-            (s * og[c] + sd * d[c] + k[c] * sd).clamp(0.0, 1.0)
-        }));
+        let mut v = if s >= 1.0 {
+            og
+        } else {
+            let sd = 1.0 - s;
+            let d = match dest {
+                Dest::Empty => [0.0; 4],
+                Dest::Image(d) => d[i],
+                Dest::Solid(b, ramp) => ramp.at(b[i]),
+            };
+            let k = smoke.map_or([0.0; 4], |k| k[i]);
+            std::array::from_fn(|c| (s * og[c] + sd * d[c] + k[c] * sd).clamp(0.0, 1.0))
+        };
+        v[3] = alpha.at(i, v[3]);
+        o.write(v);
     }
 }
 
@@ -832,6 +962,101 @@ mod tests {
         let e = original_colouring_src_then(&src, &small, dests[0], None, None, &p, &none);
         assert!(e.unwrap_err().to_string().contains("2x2"));
         assert!(SourceFrame::srgb8(size(2, 2), vec![0; 15]).is_err());
+    }
+
+    /// The fused path (`original_colouring_matted`: the bloom's rows made band by band,
+    /// the alpha matte per pixel) equals Algorithm 2 on the whole bloom frame followed by
+    /// the matte rule `max(clamp(grey + bloom, 0, 1), min(limit, alpha))`, bit for bit:
+    /// 8-bit and linear originals, a grey source with +0, −0, negative and above-threshold
+    /// values (8-bit originals skip the read where the weight is 0), with and without the
+    /// limit matte, smoke and a custom mask; opaque and kept alphas.
+    #[test]
+    fn matted_colouring_equals_colouring_then_the_matte() {
+        let sz = size(37, 2 * TINT_BAND as u32 + 5);
+        let wave =
+            |x: u32, y: u32, k: f32| ((x as f32 * 0.37 + y as f32 * 0.11 + k).sin() + 1.0) * 0.5;
+        let src = GrayFrame::from_fn(sz, |x, y| match (x + 3 * y) % 7 {
+            0 => 0.0,
+            1 => -0.0,
+            2 => -0.01,
+            _ => wave(x, y, 0.0) * 3.0 * T - T,
+        });
+        let bp = ignis_core::post::BloomParams {
+            radius: 8.0,
+            ..Default::default()
+        };
+        let bloom = ignis_core::post::bloom(&src, &bp).unwrap();
+        let rows = ignis_core::post::bloom_rows(&src, &bp).unwrap();
+        let bytes: Vec<u8> = (0..sz.pixels() * 4).map(|i| (i * 37 % 256) as u8).collect();
+        let src8 = SourceFrame::srgb8(sz, bytes).unwrap();
+        let lin = SourceFrame::Linear(src8.to_linear().into_owned());
+        let smoke = RgbaFrame::from_vec(sz, vec![[0.05, 0.04, 0.03, 0.02]; sz.pixels()]).unwrap();
+        let mask = GrayFrame::from_fn(sz, |x, y| wave(x, y, 2.0));
+        let limit = GrayFrame::from_fn(sz, |x, y| wave(x, y, 4.0));
+        let tint = [1.0, 0.42, 0.08];
+        let bits = |f: &RgbaFrame| -> Vec<u32> {
+            f.data().iter().flatten().map(|v| v.to_bits()).collect()
+        };
+        let none = |_: usize, _: &mut [[f32; 4]]| {};
+        for orig in [&src8, &lin] {
+            for with_smoke in [false, true] {
+                for custom in [None, Some((&mask, MaskMode::Add))] {
+                    let p = OriginalColour {
+                        threshold: T,
+                        smoke: with_smoke,
+                    };
+                    let k = with_smoke.then_some(&smoke);
+                    let dest = Destination::SolidTint(&bloom, tint);
+                    let plain = original_colouring_src_then(&src, orig, dest, k, custom, &p, &none)
+                        .unwrap();
+                    // The 8-bit shortcut (no read where the weight is ±0) changes nothing.
+                    let from_linear =
+                        original_colouring_src_then(&src, &lin, dest, k, custom, &p, &none)
+                            .unwrap();
+                    assert_eq!(bits(&plain), bits(&from_linear));
+                    for alpha in [
+                        AlphaMatte::Keep,
+                        AlphaMatte::Opaque,
+                        AlphaMatte::Glow(None),
+                        AlphaMatte::Glow(Some(&limit)),
+                    ] {
+                        let mut want = plain.clone();
+                        for (i, px) in want.data_mut().iter_mut().enumerate() {
+                            let m = (src.data()[i] + bloom.data()[i]).clamp(0.0, 1.0);
+                            px[3] = match alpha {
+                                AlphaMatte::Keep => px[3],
+                                AlphaMatte::Opaque => 1.0,
+                                AlphaMatte::Glow(None) => m,
+                                AlphaMatte::Glow(Some(l)) => m.max(l.data()[i].min(px[3])),
+                            };
+                        }
+                        let got = original_colouring_matted(
+                            &src,
+                            orig,
+                            Destination::SolidTintRows(&rows, tint),
+                            k,
+                            custom,
+                            &p,
+                            alpha,
+                        )
+                        .unwrap();
+                        assert_eq!(bits(&got), bits(&want));
+                    }
+                }
+            }
+        }
+        // The matte from the bloom needs a bloom destination.
+        let p = OriginalColour::default();
+        let e = original_colouring_matted(
+            &src,
+            &src8,
+            Destination::Empty,
+            None,
+            None,
+            &p,
+            AlphaMatte::Glow(None),
+        );
+        assert!(e.unwrap_err().to_string().contains("bloom"));
     }
 
     #[test]

@@ -18,7 +18,8 @@ use rayon::prelude::*;
 
 use crate::animate::has_stored_frames;
 use crate::colour::{
-    original_colouring_src_then, synthetic_smoke, warp_rgba, Destination, OriginalColour,
+    original_colouring_matted, original_colouring_src_then, synthetic_smoke, warp_rgba, AlphaMatte,
+    Destination, OriginalColour,
 };
 use crate::db::{ClipEntry, EigenfireDb};
 use crate::error::{EigenError, Result};
@@ -743,6 +744,34 @@ fn finish_frame(
     look: &Look,
     layers: &Layers,
 ) -> Result<RgbaFrame> {
+    if let (ColourMode::Original, Some(r), Some(b), Tint::Solid(tint)) =
+        (&look.mode, row, &look.bloom, &look.tint)
+    {
+        // The common case in one pass: the bloom's full-resolution rows, the solid tint,
+        // Algorithm 2 and the alpha matte made band by band (the same values as the
+        // general path below, without a bloom frame or a second pass for the matte).
+        // (The colouring checks the footage matte's size.)
+        let rows = ignis_core::post::bloom_rows(grey, b)?;
+        let alpha = if look.matte {
+            AlphaMatte::Glow(matte)
+        } else {
+            AlphaMatte::Opaque
+        };
+        let smoke = layers.smoke.get(&r);
+        let params = OriginalColour {
+            threshold: look.threshold,
+            smoke: smoke.is_some(),
+        };
+        return original_colouring_matted(
+            grey,
+            &layers.original[&r],
+            Destination::SolidTintRows(&rows, *tint),
+            smoke,
+            layers.mask.get(&r).map(|m| (m, look.mask_mode)),
+            &params,
+            alpha,
+        );
+    }
     let bloomed = match &look.bloom {
         Some(b) => Some(bloom(grey, b)?),
         None => None,

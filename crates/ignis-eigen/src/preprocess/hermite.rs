@@ -181,22 +181,32 @@ pub fn hermite_darken_srgb8_in(
         };
         return hermite_darken_rgba(&lin.to_linear(), mask, Some(matte), p);
     }
-    let mut out = GrayFrame::new(size);
     let f = Darken::new(p);
     let t8 = crate::footage::srgb8_table();
     let m = mask.as_raw();
     let protected = |i: usize| p.protect_interior && m.get(i).is_some_and(|&b| b > 0);
+    // Written once, row by row (0 outside the area), never zero-filled first.
+    let mut out = Vec::with_capacity(size.pixels());
+    out.resize(y0 * w, 0.0);
     for y in y0..y1 {
         let at = y * w;
+        out.resize(at + w, 0.0);
         let row = &bytes[(at + x0) * 4..(at + x1) * 4];
         let t = &matte.data()[at + x0..at + x1];
-        let o = &mut out.data_mut()[at + x0..at + x1];
+        let o = &mut out[at + x0..at + x1];
         for (j, ((o, px), &t)) in o.iter_mut().zip(row.chunks_exact(4)).zip(t).enumerate() {
-            let px = crate::footage::srgb8_pixel(t8, px);
-            *o = darken_matted(&f, &px, t, protected(at + x0 + j));
+            // Where the matte is 0 the rule's `v × 0` is +0 (8-bit pixels are finite and
+            // ≥ 0), so the pixel is not read.
+            *o = if t == 0.0 {
+                0.0
+            } else {
+                let px = crate::footage::srgb8_pixel(t8, px);
+                darken_matted(&f, &px, t, protected(at + x0 + j))
+            };
         }
     }
-    out
+    out.resize(size.pixels(), 0.0);
+    GrayFrame::from_vec(size, out).expect("the frame's pixels")
 }
 
 /// Linear Rec. 709 luminance of a pixel (as `RgbaFrame::luminance`).
@@ -280,6 +290,44 @@ mod tests {
         assert!(o.data()[2] > 0.0 && o.data()[2] < vals[2]);
         assert_eq!(o.data()[3], vals[3]); // protected
         assert_eq!(hermite_h01(0.5), 0.5);
+    }
+
+    /// The 8-bit pass equals the linear one on the frame converted to linear light, bit
+    /// for bit (pixels where the matte is 0 are not read): a matte with zeros, ones and
+    /// values between, a protected region, the box inside the frame.
+    #[test]
+    fn srgb8_darkening_equals_the_linear_darkening() {
+        let size = Size::new(23, 17).unwrap();
+        let bytes: Vec<u8> = (0..size.pixels() * 4)
+            .map(|i| (i * 53 % 256) as u8)
+            .collect();
+        let lin = crate::footage::SourceFrame::Srgb8 {
+            size,
+            bytes: bytes.clone(),
+        }
+        .to_linear()
+        .into_owned();
+        let matte = GrayFrame::from_fn(size, |x, y| match (x + 2 * y) % 5 {
+            0 => 0.0,
+            1 => 1.0,
+            _ => ((x * y) % 7) as f32 / 7.0,
+        });
+        let mask = GrayImage::from_fn(23, 17, |x, y| {
+            image::Luma([if x < 6 && y < 9 { 255 } else { 0 }])
+        });
+        let area = (2, 3, 20, 15);
+        for p in [
+            HermiteParams::default(),
+            HermiteParams {
+                protect_interior: false,
+                ..Default::default()
+            },
+        ] {
+            let want = hermite_darken_rgba_in(&lin, &mask, &matte, area, &p);
+            let got = hermite_darken_srgb8_in(size, &bytes, &mask, &matte, area, &p);
+            let bits = |g: &GrayFrame| g.data().iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&got), bits(&want));
+        }
     }
 
     /// The fused pass equals the luminance, `hermite_darken` and the matte product bit for
