@@ -419,12 +419,22 @@ pub struct Chosen {
 /// Searches the n×k weights (one row per window frame; window frame 0 = source frame
 /// `first`) for loops of about `length`
 /// frames, evaluates every closing on `metric` and chooses with `method`.
+///
+/// With `lit` (one flag per window frame: does its matte show any fire), a loop is looked
+/// for only inside stretches of lit frames, so every footage frame it shows is lit (a
+/// closing may blend in frames after the stretch, always mixed with the lit head): a
+/// matted loop never shows a frame whose fire is keyed out entirely — a dark
+/// stretch of the footage is a calm, perfectly even "loop" of nothing, which the search
+/// would otherwise rank first. Errors, naming the stretches, when no lit stretch holds a
+/// loop of that length.
+#[allow(clippy::too_many_arguments)]
 pub fn search_and_choose(
     first: usize,
     weights: &[f32],
     k: usize,
     e: usize,
     metric: &[GrayFrame],
+    lit: Option<&[bool]>,
     length: usize,
     method: Method,
 ) -> Result<Chosen> {
@@ -440,13 +450,11 @@ pub fn search_and_choose(
     }
     let win = loops::MetricWindow::new(metric)?;
     let t = Instant::now();
-    let cands = loops::search(
-        weights,
-        n,
-        k,
-        &SearchParams::new(length, e),
-        Some(win.body_stats()),
-    )?;
+    let params = SearchParams::new(length, e);
+    let cands = match lit {
+        None => loops::search(weights, n, k, &params, Some(win.body_stats()))?,
+        Some(lit) => search_lit(weights, k, &win, metric, lit, &params, first)?,
+    };
     let search_s = t.elapsed().as_secs_f64();
     let t = Instant::now();
     let m = morpher();
@@ -467,6 +475,105 @@ pub fn search_and_choose(
         search_s,
         evaluate_s,
     })
+}
+
+/// Maximal runs of consecutive `true` flags (window indices).
+fn lit_runs(lit: &[bool]) -> Vec<Range<usize>> {
+    let mut runs = Vec::new();
+    let mut i = 0;
+    while i < lit.len() {
+        if lit[i] {
+            let s = i;
+            while i < lit.len() && lit[i] {
+                i += 1;
+            }
+            runs.push(s..i);
+        } else {
+            i += 1;
+        }
+    }
+    runs
+}
+
+/// The whole window's [`loops::search`] candidates that lie inside a run of lit frames
+/// (their filter taps included), then each long enough run's own search (its own body
+/// statistics: where dark candidates crowd the window's ranked list, this still finds the
+/// lit loops), in window indices; the window's search alone when every frame is lit.
+/// Errors when no run is long enough.
+fn search_lit(
+    weights: &[f32],
+    k: usize,
+    win: &loops::MetricWindow,
+    metric: &[GrayFrame],
+    lit: &[bool],
+    p: &SearchParams,
+    first: usize,
+) -> Result<Vec<Candidate>> {
+    let n = metric.len();
+    if lit.len() != n {
+        bail!("{} lit flags for {n} frames", lit.len());
+    }
+    if lit.iter().all(|&l| l) {
+        return Ok(loops::search(weights, n, k, p, Some(win.body_stats()))?);
+    }
+    let runs = lit_runs(lit);
+    let need = loops::min_window(p);
+    let inside = |c: &Candidate| runs.iter().any(|r| r.start + 2 <= c.start && c.end + 1 < r.end);
+    let mut out: Vec<Candidate> = loops::search(weights, n, k, p, Some(win.body_stats()))?
+        .into_iter()
+        .filter(inside)
+        .collect();
+    for r in runs.iter().filter(|r| r.len() >= need) {
+        let sub = loops::MetricWindow::new(&metric[r.clone()])?;
+        let x = &weights[r.start * k..r.end * k];
+        let found = loops::search(x, r.len(), k, p, Some(sub.body_stats()))?;
+        for c in found {
+            let c = Candidate {
+                start: c.start + r.start,
+                end: c.end + r.start,
+                ..c
+            };
+            if !out.iter().any(|o| (o.start, o.end) == (c.start, c.end)) {
+                out.push(c);
+            }
+        }
+    }
+    if out.is_empty() {
+        bail!("{}", keyed_out_message(&runs, n, first, p.length, need));
+    }
+    Ok(out)
+}
+
+/// Why no matted loop fits: where the fire is, and what to ask instead.
+fn keyed_out_message(
+    runs: &[Range<usize>],
+    n: usize,
+    first: usize,
+    length: usize,
+    need: usize,
+) -> String {
+    let dark = n - runs.iter().map(|r| r.len()).sum::<usize>();
+    let head = format!(
+        "the matte keys out all the fire in {dark} of the window's {n} frames (source frames {first}..{}), \
+         so a loop of about {length} frames (it needs {need} consecutive frames with fire) would show frames of nothing",
+        first + n
+    );
+    match runs.iter().max_by_key(|r| (r.len(), std::cmp::Reverse(r.start))) {
+        Some(r) => format!(
+            "{head}; the longest stretch with fire is source frames {}..{} ({} frames): {}, \
+             or give --alpha opaque to loop the footage as it is",
+            first + r.start,
+            first + r.end,
+            r.len(),
+            match longest_length(r.len()) {
+                Some(l) => format!("ask for --length {l} or less there (--range {}..{})", first + r.start, first + r.end),
+                None => "too short for any loop; choose a --range where the fire burns longer".to_string(),
+            }
+        ),
+        None => format!(
+            "{head}; no frame of it shows fire: choose a --range where the fire burns, or give --alpha opaque to loop the footage as it is"
+        ),
+    }
 }
 
 /// The best closing of each of the first `top` distinct candidates, in rank order.
@@ -812,15 +919,19 @@ pub fn make_loop_sized(
         method,
         top,
     } = *ask;
-    let matted;
-    let metric = match &matte {
+    let (matted, lit);
+    let (metric, lit) = match &matte {
         Some(m) => {
             matted = m.matted_metric(metric)?;
-            &matted[..]
+            lit = matted
+                .iter()
+                .map(|f| f.data().iter().any(|&v| v > 0.0))
+                .collect::<Vec<bool>>();
+            (&matted[..], Some(&lit[..]))
         }
-        None => metric,
+        None => (metric, None),
     };
-    let chosen = search_and_choose(first, weights, k, e, metric, length, method)?;
+    let chosen = search_and_choose(first, weights, k, e, metric, lit, length, method)?;
     g.say("best candidates (predicted on the footage's 128-px frames):");
     for (i, c) in top_candidates(&chosen.evaluated, top).iter().enumerate() {
         g.say(format!("  {}. {}", i + 1, describe(c, first)));
