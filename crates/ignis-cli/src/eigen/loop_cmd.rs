@@ -518,7 +518,10 @@ fn search_lit(
     }
     let runs = lit_runs(lit);
     let need = loops::min_window(p);
-    let inside = |c: &Candidate| runs.iter().any(|r| r.start + 2 <= c.start && c.end + 1 < r.end);
+    let inside = |c: &Candidate| {
+        runs.iter()
+            .any(|r| r.start + 2 <= c.start && c.end + 1 < r.end)
+    };
     let mut out: Vec<Candidate> = loops::search(weights, n, k, p, Some(win.body_stats()))?
         .into_iter()
         .filter(inside)
@@ -1496,5 +1499,102 @@ mod tests {
             open_entry(&dir, &sha, &settings).is_err(),
             "a damaged entry.json was accepted"
         );
+    }
+
+    /// A synthetic window: `lit` frames show a drifting bright blob (weights along a
+    /// circle, jittered), the others are black (keyed out: all-zero weights and frames).
+    fn window(lit: &[bool]) -> (Vec<f32>, Vec<GrayFrame>) {
+        let k = 3;
+        let size = Size::new(24, 16).unwrap();
+        let mut weights = vec![0.0f32; lit.len() * k];
+        let mut frames = Vec::new();
+        for (i, &l) in lit.iter().enumerate() {
+            let mut f = GrayFrame::new(size);
+            if l {
+                let a = i as f32 * 0.37;
+                let j = ((i * 7919) % 13) as f32 / 13.0 - 0.5;
+                weights[i * k..i * k + k].copy_from_slice(&[a.cos(), a.sin(), 0.3 * j]);
+                let (cx, cy) = (12.0 + 6.0 * a.cos(), 8.0 + 4.0 * a.sin());
+                for (n, v) in f.data_mut().iter_mut().enumerate() {
+                    let (x, y) = ((n % 24) as f32, (n / 24) as f32);
+                    *v = (-((x - cx).powi(2) + (y - cy).powi(2)) / 8.0).exp();
+                }
+            }
+            frames.push(f);
+        }
+        (weights, frames)
+    }
+
+    #[test]
+    fn lit_runs_are_maximal() {
+        let l = [
+            false, true, true, false, false, true, false, true, true, true,
+        ];
+        assert_eq!(lit_runs(&l), vec![1..3, 5..6, 7..10]);
+        assert_eq!(lit_runs(&[false; 4]), Vec::<Range<usize>>::new());
+        assert_eq!(lit_runs(&[true; 3]), vec![0..3]);
+    }
+
+    #[test]
+    fn a_matted_loop_is_never_a_loop_of_nothing() {
+        // 20 lit frames, then 100 keyed out: unfiltered, the search loops the dark stretch
+        // (even, calm, of nothing); with the lit flags it refuses, naming the fire's stretch.
+        let lit: Vec<bool> = (0..120).map(|i| i < 20).collect();
+        let (w, m) = window(&lit);
+        let blind = search_and_choose(100, &w, 3, 3, &m, None, 40, Method::Auto).unwrap();
+        assert!(
+            blind.best.candidate.start >= 20,
+            "{:?}",
+            blind.best.candidate
+        );
+        let err = search_and_choose(100, &w, 3, 3, &m, Some(&lit), 40, Method::Auto)
+            .err()
+            .expect("a loop of keyed-out frames was chosen");
+        let msg = format!("{err:#}");
+        for want in [
+            "keys out all the fire in 100 of the window's 120 frames",
+            "100..120 (20 frames)",
+            "--alpha opaque",
+        ] {
+            assert!(msg.contains(want), "{want:?} not in: {msg}");
+        }
+        // No fire at all.
+        let none = vec![false; 120];
+        let (w, m) = window(&none);
+        let err = search_and_choose(0, &w, 3, 3, &m, Some(&none), 40, Method::Auto)
+            .err()
+            .expect("a loop of a window without fire was chosen");
+        assert!(
+            format!("{err:#}").contains("no frame of it shows fire"),
+            "{err:#}"
+        );
+    }
+
+    #[test]
+    fn a_matted_loop_shows_only_lit_footage_frames() {
+        // Fire in frames 0..70 and 90..160 (two stretches, a dark gap between); a 40-frame
+        // loop is found inside one stretch, its taps included.
+        let lit: Vec<bool> = (0..200).map(|i| i < 70 || (90..160).contains(&i)).collect();
+        let (w, m) = window(&lit);
+        let c = search_and_choose(0, &w, 3, 3, &m, Some(&lit), 40, Method::Auto).unwrap();
+        for e in &c.evaluated {
+            let (s, t) = (e.candidate.start, e.candidate.end);
+            assert!(
+                (s - 2..=t + 1).all(|i| lit[i]),
+                "candidate {s}..{t} reads keyed-out frames"
+            );
+            for p in loops::plan_with(&e.candidate, e.closing, &e.skips) {
+                if let Planned::Src(i) = p {
+                    assert!(lit[i], "{s}..{t} ({}) shows keyed-out frame {i}", e.closing);
+                }
+            }
+        }
+        // Every frame lit: the window's own search, unchanged.
+        let all = vec![true; 200];
+        let (w, m) = window(&all);
+        let a = search_and_choose(0, &w, 3, 3, &m, Some(&all), 40, Method::Auto).unwrap();
+        let b = search_and_choose(0, &w, 3, 3, &m, None, 40, Method::Auto).unwrap();
+        assert_eq!(a.best.candidate, b.best.candidate);
+        assert_eq!(a.evaluated.len(), b.evaluated.len());
     }
 }
