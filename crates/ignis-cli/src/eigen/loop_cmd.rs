@@ -804,14 +804,11 @@ impl<'a> FootageMatte<'a> {
     /// The matte of window frame `i` at `size`.
     pub fn at(&self, i: usize, size: Size) -> Result<GrayFrame> {
         let last = self.frames.max(1) - 1;
-        let (a, b, c) = (
-            self.mask(i.saturating_sub(1))?,
-            self.mask(i.min(last))?,
-            self.mask((i + 1).min(last))?,
+        let m = voted_feather(
+            &self.mask(i.saturating_sub(1))?,
+            &self.mask(i.min(last))?,
+            &self.mask((i + 1).min(last))?,
         );
-        let mask = majority(&a, &b, &c);
-        let (m, _) =
-            ignis_eigen::preprocess::feather_half_in(&mask, mask.width().max(mask.height()));
         Ok(if m.size() == size {
             m
         } else {
@@ -820,39 +817,40 @@ impl<'a> FootageMatte<'a> {
     }
 
     /// The window's metric frames as the matted loop will show them: each multiplied by
-    /// its frame's mask area-averaged to the metric size, the three neighbours' values
-    /// voted by their median (the full-size vote and feather, approximately: the loop is
-    /// chosen on these and measured on the frames written).
+    /// its frame's matte exactly as [`FootageMatte::at`] renders it (voted, feathered at
+    /// the source size), area-averaged to the metric size — so the loop is chosen on what
+    /// it writes, the feather's band of lit surroundings included. Runs of frames are
+    /// done in parallel, each mask decoded once per run.
     pub fn matted_metric(&self, metric: &[GrayFrame]) -> Result<Vec<GrayFrame>> {
         use rayon::prelude::*;
-        let soft: Vec<GrayFrame> = (0..metric.len())
+        const RUN: usize = 16;
+        let n = metric.len();
+        if n > self.frames {
+            bail!("{n} metric frames for a matte of {} frames", self.frames);
+        }
+        let last = self.frames.max(1) - 1;
+        let runs: Vec<Range<usize>> = (0..n).step_by(RUN).map(|s| s..(s + RUN).min(n)).collect();
+        let parts: Vec<Vec<GrayFrame>> = runs
             .into_par_iter()
-            .map(|i| {
-                let m = self.mask(i)?;
-                let size = Size::new(m.width(), m.height())?;
-                let g = GrayFrame::from_vec(
-                    size,
-                    m.iter().map(|&v| f32::from(u8::from(v > 127))).collect(),
-                )?;
-                Ok(ignis_core::loopq::area_resize(&g, metric[i].size()))
+            .map(|r| {
+                let lo = r.start.saturating_sub(1);
+                let masks = (lo..=r.end.min(last))
+                    .map(|j| self.mask(j))
+                    .collect::<Result<Vec<_>>>()?;
+                let at = |j: usize| &masks[j.min(last) - lo];
+                Ok(r.map(|i| {
+                    let full = voted_feather(at(i.saturating_sub(1)), at(i), at(i + 1));
+                    let soft = ignis_core::loopq::area_resize(&full, metric[i].size());
+                    let mut out = metric[i].clone();
+                    for (o, &a) in out.data_mut().iter_mut().zip(soft.data()) {
+                        *o *= a;
+                    }
+                    out
+                })
+                .collect())
             })
             .collect::<Result<_>>()?;
-        let last = metric.len().saturating_sub(1);
-        Ok((0..metric.len())
-            .map(|i| {
-                let (a, b, c) = (
-                    &soft[i.saturating_sub(1)],
-                    &soft[i],
-                    &soft[(i + 1).min(last)],
-                );
-                let mut out = metric[i].clone();
-                for (j, o) in out.data_mut().iter_mut().enumerate() {
-                    let (x, y, z) = (a.data()[j], b.data()[j], c.data()[j]);
-                    *o *= x.max(y).min(x.min(y).max(z));
-                }
-                out
-            })
-            .collect())
+        Ok(parts.into_iter().flatten().collect())
     }
 
     /// Sets `f`'s alpha to the matte of window frame `i`.
@@ -863,6 +861,13 @@ impl<'a> FootageMatte<'a> {
         }
         Ok(())
     }
+}
+
+/// The matte of a frame from its own mask `b` and its neighbours' `a`, `c`: their
+/// [`majority`], feathered as the footage render feathers database frames.
+fn voted_feather(a: &image::GrayImage, b: &image::GrayImage, c: &image::GrayImage) -> GrayFrame {
+    let mask = majority(a, b, c);
+    ignis_eigen::preprocess::feather_half_in(&mask, mask.width().max(mask.height())).0
 }
 
 /// Per pixel, 255 where at least two of the three binary masks are set (0 elsewhere).
