@@ -1602,4 +1602,41 @@ mod tests {
         assert_eq!(a.best.candidate, b.best.candidate);
         assert_eq!(a.evaluated.len(), b.evaluated.len());
     }
+
+    #[test]
+    fn the_search_sees_the_matte_as_rendered() {
+        let Some(path) = clip("candle.mp4") else {
+            return;
+        };
+        let quiet = Global { quiet: true };
+        let cache = tempfile::tempdir().unwrap();
+        let c = cached(
+            &path,
+            0..40,
+            "16x24".parse().unwrap(),
+            8,
+            cache.path(),
+            &quiet,
+        )
+        .unwrap();
+        let matte = FootageMatte::new(&c.db, 0, c.metric.len());
+        let matted = matte.matted_metric(&c.metric).unwrap();
+        let source = ignis_media::probe(&path).unwrap().size;
+        let mut band = 0;
+        for i in [0, 1, 17, 38, 39] {
+            let full = matte.at(i, source).unwrap();
+            let soft = ignis_core::loopq::area_resize(&full, c.metric[i].size());
+            for ((&m, &g), &a) in matted[i]
+                .data()
+                .iter()
+                .zip(c.metric[i].data())
+                .zip(soft.data())
+            {
+                assert!((m - g * a).abs() <= 1e-6, "frame {i}: {m} vs {}", g * a);
+                band += usize::from(a > 0.0 && a < 1.0 && g > 0.0);
+            }
+        }
+        // The feather's soft band (lit surroundings at part alpha) is part of what is seen.
+        assert!(band > 0, "no soft matte edge in the metric frames");
+    }
 }
