@@ -679,13 +679,32 @@ pub fn render(
     })
 }
 
-/// `(1 - w)·a + w·b` per channel (linear light).
+/// `(1 - w)·a + w·b` on premultiplied values (linear light, straight alpha in and out),
+/// as the morph blends: where one frame's matte keys a pixel out, its colour there (the
+/// footage's dark surroundings) does not darken the other's flame — the crossfade composites
+/// over any background as the crossfade of the two composites. Opaque frames blend
+/// per channel, bit for bit.
 pub fn blend_rgba(a: &RgbaFrame, b: &RgbaFrame, w: f32) -> RgbaFrame {
     let data = a
         .data()
         .iter()
         .zip(b.data())
-        .map(|(p, q)| std::array::from_fn(|c| p[c] + (q[c] - p[c]) * w))
+        .map(|(p, q)| {
+            let alpha = p[3] + (q[3] - p[3]) * w;
+            if alpha <= 1e-8 {
+                // Keyed out in both: their colours as they are (what a straight-alpha
+                // sheet's filtering bleeds in), alpha 0.
+                let mut o: [f32; 4] = std::array::from_fn(|c| p[c] + (q[c] - p[c]) * w);
+                o[3] = 0.0;
+                return o;
+            }
+            let mut o: [f32; 4] = std::array::from_fn(|c| {
+                let (x, y) = (p[c] * p[3], q[c] * q[3]);
+                (x + (y - x) * w) / alpha
+            });
+            o[3] = alpha;
+            o
+        })
         .collect();
     RgbaFrame::from_vec(a.size(), data).expect("same size")
 }
@@ -1638,5 +1657,32 @@ mod tests {
         }
         // The feather's soft band (lit surroundings at part alpha) is part of what is seen.
         assert!(band > 0, "no soft matte edge in the metric frames");
+    }
+
+    #[test]
+    fn the_crossfade_blends_premultiplied() {
+        let size = Size::new(2, 1).unwrap();
+        // Pixel 0: flame in `a`, keyed-out dark surroundings in `b`; pixel 1: both opaque.
+        let a =
+            RgbaFrame::from_vec(size, vec![[1.0, 0.6, 0.2, 1.0], [0.3, 0.2, 0.1, 1.0]]).unwrap();
+        let b =
+            RgbaFrame::from_vec(size, vec![[0.05, 0.04, 0.03, 0.0], [0.7, 0.5, 0.3, 1.0]]).unwrap();
+        let f = blend_rgba(&a, &b, 0.75);
+        let p = f.data()[0];
+        // The flame's colour at a quarter of its alpha (not darkened by b's hidden colour).
+        for c in 0..3 {
+            assert!((p[c] - a.data()[0][c]).abs() < 1e-6, "{p:?}");
+        }
+        assert!((p[3] - 0.25).abs() < 1e-6);
+        // Over black it is the crossfade of the two composites.
+        assert!((p[0] * p[3] - 0.25 * 1.0).abs() < 1e-6);
+        let q = f.data()[1];
+        for c in 0..4 {
+            let want = a.data()[1][c] + (b.data()[1][c] - a.data()[1][c]) * 0.75;
+            assert_eq!(q[c], want, "opaque pixels blend per channel");
+        }
+        // Both keyed out: transparent.
+        let z = RgbaFrame::from_vec(size, vec![[0.5, 0.5, 0.5, 0.0]; 2]).unwrap();
+        assert_eq!(blend_rgba(&z, &z, 0.5).data()[0], [0.5, 0.5, 0.5, 0.0]);
     }
 }
