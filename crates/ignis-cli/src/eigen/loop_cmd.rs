@@ -1677,9 +1677,9 @@ mod tests {
         // Over black it is the crossfade of the two composites.
         assert!((p[0] * p[3] - 0.25 * 1.0).abs() < 1e-6);
         let q = f.data()[1];
-        for c in 0..4 {
+        for (c, &v) in q.iter().enumerate() {
             let want = a.data()[1][c] + (b.data()[1][c] - a.data()[1][c]) * 0.75;
-            assert_eq!(q[c], want, "opaque pixels blend per channel");
+            assert_eq!(v, want, "opaque pixels blend per channel");
         }
         // Both keyed out: transparent.
         let z = RgbaFrame::from_vec(size, vec![[0.5, 0.5, 0.5, 0.0]; 2]).unwrap();
