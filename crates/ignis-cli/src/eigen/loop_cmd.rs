@@ -4,7 +4,9 @@
 //! Steps: (1) a cache entry for the clip (an Eigenfire database trained on it at a modest
 //! size, plus the 128-px metric frames of every frame), keyed by the file's SHA-256 and the
 //! settings, verified on every use and rebuilt when corrupt; (2) the loop search in PCA
-//! weight space ([`ignis_eigen::loops::search`]); (3) every candidate closed every way
+//! weight space ([`ignis_eigen::loops::search`]) — for a matted loop only inside stretches
+//! whose matte shows fire, as a dark stretch is a perfectly even loop of nothing; (3) every
+//! candidate closed every way
 //! (cut, crossfade, motion-compensated morph) on the metric frames, the best by seam and
 //! ghost chosen ([`ignis_eigen::loops::evaluate`]); (4) the chosen loop rendered from the
 //! source video at its own resolution and colours, decoding only the frames it needs, and
