@@ -6,9 +6,9 @@
 //! settings, verified on every use and rebuilt when corrupt; (2) the loop search in PCA
 //! weight space ([`ignis_eigen::loops::search`]) — for a matted loop only inside stretches
 //! whose matte shows fire, as a dark stretch is a perfectly even loop of nothing; (3) every
-//! candidate closed every way
-//! (cut, crossfade, motion-compensated morph) on the metric frames, the best by seam and
-//! ghost chosen ([`ignis_eigen::loops::evaluate`]); (4) the chosen loop rendered from the
+//! candidate closed every way (cut, crossfade, motion-compensated morph) on the metric
+//! frames (matted as rendered), the best by seam and ghost chosen
+//! ([`ignis_eigen::loops::evaluate`]); (4) the chosen loop rendered from the
 //! source video at its own resolution and colours, decoding only the frames it needs, and
 //! measured on the frames written.
 
