@@ -2113,3 +2113,52 @@ fn eigen_length_loop_writes_the_matte() {
     let again = alpha(&["--relink", &relink], "relinked.png");
     assert_eq!(again, matte, "the relinked footage gives the same loop");
 }
+
+/// The matted loop of a dark stretch (issue 14 QA, hqa2): in fireball.mp4's frames 200..300
+/// the burst is over and the matte keys out every frame. The default matte refuses (a loop
+/// of nothing), writing nothing; `--alpha opaque` loops the footage as it is.
+mod loop_matte_dark_stretch {
+    use super::*;
+
+    #[test]
+    fn a_window_without_fire_is_refused_with_the_matte() {
+        let Some(clip) = data("fireball.mp4") else {
+            return;
+        };
+        if !has_ffmpeg() {
+            return;
+        }
+        let t = tempfile::tempdir().unwrap();
+        let cache = t.path().join("cache");
+        let run = |alpha: &str, out: &Path| {
+            ignis(&[
+                "-q",
+                "loop",
+                clip.to_str().unwrap(),
+                "--range",
+                "200..300",
+                "--length",
+                "40",
+                "--train-size",
+                "16x24",
+                "--keep",
+                "8",
+                "--alpha",
+                alpha,
+                "--cache",
+                cache.to_str().unwrap(),
+                "-o",
+                out.to_str().unwrap(),
+            ])
+        };
+        let matte = t.path().join("matte.png");
+        let r = run("matte", &matte);
+        assert_fails(&r, "would show frames of nothing");
+        assert_fails(&r, "--alpha opaque");
+        assert!(!matte.exists() && !t.path().join("matte.json").exists());
+        let opaque = t.path().join("opaque.png");
+        let r = run("opaque", &opaque);
+        assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+        assert!(opaque.exists());
+    }
+}

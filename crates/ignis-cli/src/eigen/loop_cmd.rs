@@ -4,9 +4,11 @@
 //! Steps: (1) a cache entry for the clip (an Eigenfire database trained on it at a modest
 //! size, plus the 128-px metric frames of every frame), keyed by the file's SHA-256 and the
 //! settings, verified on every use and rebuilt when corrupt; (2) the loop search in PCA
-//! weight space ([`ignis_eigen::loops::search`]); (3) every candidate closed every way
-//! (cut, crossfade, motion-compensated morph) on the metric frames, the best by seam and
-//! ghost chosen ([`ignis_eigen::loops::evaluate`]); (4) the chosen loop rendered from the
+//! weight space ([`ignis_eigen::loops::search`]) — for a matted loop only inside stretches
+//! whose matte shows fire, as a dark stretch is a perfectly even loop of nothing; (3) every
+//! candidate closed every way (cut, crossfade, motion-compensated morph) on the metric
+//! frames (matted as rendered), the best by seam and ghost chosen
+//! ([`ignis_eigen::loops::evaluate`]); (4) the chosen loop rendered from the
 //! source video at its own resolution and colours, decoding only the frames it needs, and
 //! measured on the frames written.
 
@@ -419,12 +421,22 @@ pub struct Chosen {
 /// Searches the n×k weights (one row per window frame; window frame 0 = source frame
 /// `first`) for loops of about `length`
 /// frames, evaluates every closing on `metric` and chooses with `method`.
+///
+/// With `lit` (one flag per window frame: does its matte show any fire), a loop is looked
+/// for only inside stretches of lit frames, so every footage frame it shows is lit (a
+/// closing may blend in frames after the stretch, always mixed with the lit head): a
+/// matted loop never shows a frame whose fire is keyed out entirely — a dark
+/// stretch of the footage is a calm, perfectly even "loop" of nothing, which the search
+/// would otherwise rank first. Errors, naming the stretches, when no lit stretch holds a
+/// loop of that length.
+#[allow(clippy::too_many_arguments)]
 pub fn search_and_choose(
     first: usize,
     weights: &[f32],
     k: usize,
     e: usize,
     metric: &[GrayFrame],
+    lit: Option<&[bool]>,
     length: usize,
     method: Method,
 ) -> Result<Chosen> {
@@ -440,13 +452,11 @@ pub fn search_and_choose(
     }
     let win = loops::MetricWindow::new(metric)?;
     let t = Instant::now();
-    let cands = loops::search(
-        weights,
-        n,
-        k,
-        &SearchParams::new(length, e),
-        Some(win.body_stats()),
-    )?;
+    let params = SearchParams::new(length, e);
+    let cands = match lit {
+        None => loops::search(weights, n, k, &params, Some(win.body_stats()))?,
+        Some(lit) => search_lit(weights, k, &win, metric, lit, &params, first)?,
+    };
     let search_s = t.elapsed().as_secs_f64();
     let t = Instant::now();
     let m = morpher();
@@ -467,6 +477,108 @@ pub fn search_and_choose(
         search_s,
         evaluate_s,
     })
+}
+
+/// Maximal runs of consecutive `true` flags (window indices).
+fn lit_runs(lit: &[bool]) -> Vec<Range<usize>> {
+    let mut runs = Vec::new();
+    let mut i = 0;
+    while i < lit.len() {
+        if lit[i] {
+            let s = i;
+            while i < lit.len() && lit[i] {
+                i += 1;
+            }
+            runs.push(s..i);
+        } else {
+            i += 1;
+        }
+    }
+    runs
+}
+
+/// The whole window's [`loops::search`] candidates that lie inside a run of lit frames
+/// (their filter taps included), then each long enough run's own search (its own body
+/// statistics: where dark candidates crowd the window's ranked list, this still finds the
+/// lit loops), in window indices; the window's search alone when every frame is lit.
+/// Errors when no run is long enough.
+fn search_lit(
+    weights: &[f32],
+    k: usize,
+    win: &loops::MetricWindow,
+    metric: &[GrayFrame],
+    lit: &[bool],
+    p: &SearchParams,
+    first: usize,
+) -> Result<Vec<Candidate>> {
+    let n = metric.len();
+    if lit.len() != n {
+        bail!("{} lit flags for {n} frames", lit.len());
+    }
+    if lit.iter().all(|&l| l) {
+        return Ok(loops::search(weights, n, k, p, Some(win.body_stats()))?);
+    }
+    let runs = lit_runs(lit);
+    let need = loops::min_window(p);
+    let inside = |c: &Candidate| {
+        runs.iter()
+            .any(|r| r.start + 2 <= c.start && c.end + 1 < r.end)
+    };
+    let mut out: Vec<Candidate> = loops::search(weights, n, k, p, Some(win.body_stats()))?
+        .into_iter()
+        .filter(inside)
+        .collect();
+    for r in runs.iter().filter(|r| r.len() >= need) {
+        let sub = loops::MetricWindow::new(&metric[r.clone()])?;
+        let x = &weights[r.start * k..r.end * k];
+        let found = loops::search(x, r.len(), k, p, Some(sub.body_stats()))?;
+        for c in found {
+            let c = Candidate {
+                start: c.start + r.start,
+                end: c.end + r.start,
+                ..c
+            };
+            if !out.iter().any(|o| (o.start, o.end) == (c.start, c.end)) {
+                out.push(c);
+            }
+        }
+    }
+    if out.is_empty() {
+        bail!("{}", keyed_out_message(&runs, n, first, p.length, need));
+    }
+    Ok(out)
+}
+
+/// Why no matted loop fits: where the fire is, and what to ask instead.
+fn keyed_out_message(
+    runs: &[Range<usize>],
+    n: usize,
+    first: usize,
+    length: usize,
+    need: usize,
+) -> String {
+    let dark = n - runs.iter().map(|r| r.len()).sum::<usize>();
+    let head = format!(
+        "the matte keys out all the fire in {dark} of the window's {n} frames (source frames {first}..{}), \
+         so a loop of about {length} frames (it needs {need} consecutive frames with fire) would show frames of nothing",
+        first + n
+    );
+    match runs.iter().max_by_key(|r| (r.len(), std::cmp::Reverse(r.start))) {
+        Some(r) => format!(
+            "{head}; the longest stretch with fire is source frames {}..{} ({} frames): {}, \
+             or give --alpha opaque to loop the footage as it is",
+            first + r.start,
+            first + r.end,
+            r.len(),
+            match longest_length(r.len()) {
+                Some(l) => format!("ask for --length {l} or less there (--range {}..{})", first + r.start, first + r.end),
+                None => "too short for any loop; choose a --range where the fire burns longer".to_string(),
+            }
+        ),
+        None => format!(
+            "{head}; no frame of it shows fire: choose a --range where the fire burns, or give --alpha opaque to loop the footage as it is"
+        ),
+    }
 }
 
 /// The best closing of each of the first `top` distinct candidates, in rank order.
@@ -569,13 +681,32 @@ pub fn render(
     })
 }
 
-/// `(1 - w)·a + w·b` per channel (linear light).
+/// `(1 - w)·a + w·b` on premultiplied values (linear light, straight alpha in and out),
+/// as the morph blends: where one frame's matte keys a pixel out, its colour there (the
+/// footage's dark surroundings) does not darken the other's flame — the crossfade composites
+/// over any background as the crossfade of the two composites. Opaque frames blend
+/// per channel, bit for bit.
 pub fn blend_rgba(a: &RgbaFrame, b: &RgbaFrame, w: f32) -> RgbaFrame {
     let data = a
         .data()
         .iter()
         .zip(b.data())
-        .map(|(p, q)| std::array::from_fn(|c| p[c] + (q[c] - p[c]) * w))
+        .map(|(p, q)| {
+            let alpha = p[3] + (q[3] - p[3]) * w;
+            if alpha <= 1e-8 {
+                // Keyed out in both: their colours as they are (what a straight-alpha
+                // sheet's filtering bleeds in), alpha 0.
+                let mut o: [f32; 4] = std::array::from_fn(|c| p[c] + (q[c] - p[c]) * w);
+                o[3] = 0.0;
+                return o;
+            }
+            let mut o: [f32; 4] = std::array::from_fn(|c| {
+                let (x, y) = (p[c] * p[3], q[c] * q[3]);
+                (x + (y - x) * w) / alpha
+            });
+            o[3] = alpha;
+            o
+        })
         .collect();
     RgbaFrame::from_vec(a.size(), data).expect("same size")
 }
@@ -694,14 +825,11 @@ impl<'a> FootageMatte<'a> {
     /// The matte of window frame `i` at `size`.
     pub fn at(&self, i: usize, size: Size) -> Result<GrayFrame> {
         let last = self.frames.max(1) - 1;
-        let (a, b, c) = (
-            self.mask(i.saturating_sub(1))?,
-            self.mask(i.min(last))?,
-            self.mask((i + 1).min(last))?,
+        let m = voted_feather(
+            &self.mask(i.saturating_sub(1))?,
+            &self.mask(i.min(last))?,
+            &self.mask((i + 1).min(last))?,
         );
-        let mask = majority(&a, &b, &c);
-        let (m, _) =
-            ignis_eigen::preprocess::feather_half_in(&mask, mask.width().max(mask.height()));
         Ok(if m.size() == size {
             m
         } else {
@@ -710,39 +838,40 @@ impl<'a> FootageMatte<'a> {
     }
 
     /// The window's metric frames as the matted loop will show them: each multiplied by
-    /// its frame's mask area-averaged to the metric size, the three neighbours' values
-    /// voted by their median (the full-size vote and feather, approximately: the loop is
-    /// chosen on these and measured on the frames written).
+    /// its frame's matte exactly as [`FootageMatte::at`] renders it (voted, feathered at
+    /// the source size), area-averaged to the metric size — so the loop is chosen on what
+    /// it writes, the feather's band of lit surroundings included. Runs of frames are
+    /// done in parallel, each mask decoded once per run.
     pub fn matted_metric(&self, metric: &[GrayFrame]) -> Result<Vec<GrayFrame>> {
         use rayon::prelude::*;
-        let soft: Vec<GrayFrame> = (0..metric.len())
+        const RUN: usize = 16;
+        let n = metric.len();
+        if n > self.frames {
+            bail!("{n} metric frames for a matte of {} frames", self.frames);
+        }
+        let last = self.frames.max(1) - 1;
+        let runs: Vec<Range<usize>> = (0..n).step_by(RUN).map(|s| s..(s + RUN).min(n)).collect();
+        let parts: Vec<Vec<GrayFrame>> = runs
             .into_par_iter()
-            .map(|i| {
-                let m = self.mask(i)?;
-                let size = Size::new(m.width(), m.height())?;
-                let g = GrayFrame::from_vec(
-                    size,
-                    m.iter().map(|&v| f32::from(u8::from(v > 127))).collect(),
-                )?;
-                Ok(ignis_core::loopq::area_resize(&g, metric[i].size()))
+            .map(|r| {
+                let lo = r.start.saturating_sub(1);
+                let masks = (lo..=r.end.min(last))
+                    .map(|j| self.mask(j))
+                    .collect::<Result<Vec<_>>>()?;
+                let at = |j: usize| &masks[j.min(last) - lo];
+                Ok(r.map(|i| {
+                    let full = voted_feather(at(i.saturating_sub(1)), at(i), at(i + 1));
+                    let soft = ignis_core::loopq::area_resize(&full, metric[i].size());
+                    let mut out = metric[i].clone();
+                    for (o, &a) in out.data_mut().iter_mut().zip(soft.data()) {
+                        *o *= a;
+                    }
+                    out
+                })
+                .collect())
             })
             .collect::<Result<_>>()?;
-        let last = metric.len().saturating_sub(1);
-        Ok((0..metric.len())
-            .map(|i| {
-                let (a, b, c) = (
-                    &soft[i.saturating_sub(1)],
-                    &soft[i],
-                    &soft[(i + 1).min(last)],
-                );
-                let mut out = metric[i].clone();
-                for (j, o) in out.data_mut().iter_mut().enumerate() {
-                    let (x, y, z) = (a.data()[j], b.data()[j], c.data()[j]);
-                    *o *= x.max(y).min(x.min(y).max(z));
-                }
-                out
-            })
-            .collect())
+        Ok(parts.into_iter().flatten().collect())
     }
 
     /// Sets `f`'s alpha to the matte of window frame `i`.
@@ -753,6 +882,13 @@ impl<'a> FootageMatte<'a> {
         }
         Ok(())
     }
+}
+
+/// The matte of a frame from its own mask `b` and its neighbours' `a`, `c`: their
+/// [`majority`], feathered as the footage render feathers database frames.
+fn voted_feather(a: &image::GrayImage, b: &image::GrayImage, c: &image::GrayImage) -> GrayFrame {
+    let mask = majority(a, b, c);
+    ignis_eigen::preprocess::feather_half_in(&mask, mask.width().max(mask.height())).0
 }
 
 /// Per pixel, 255 where at least two of the three binary masks are set (0 elsewhere).
@@ -812,15 +948,19 @@ pub fn make_loop_sized(
         method,
         top,
     } = *ask;
-    let matted;
-    let metric = match &matte {
+    let (matted, lit);
+    let (metric, lit) = match &matte {
         Some(m) => {
             matted = m.matted_metric(metric)?;
-            &matted[..]
+            lit = matted
+                .iter()
+                .map(|f| f.data().iter().any(|&v| v > 0.0))
+                .collect::<Vec<bool>>();
+            (&matted[..], Some(&lit[..]))
         }
-        None => metric,
+        None => (metric, None),
     };
-    let chosen = search_and_choose(first, weights, k, e, metric, length, method)?;
+    let chosen = search_and_choose(first, weights, k, e, metric, lit, length, method)?;
     g.say("best candidates (predicted on the footage's 128-px frames):");
     for (i, c) in top_candidates(&chosen.evaluated, top).iter().enumerate() {
         g.say(format!("  {}. {}", i + 1, describe(c, first)));
@@ -1385,5 +1525,166 @@ mod tests {
             open_entry(&dir, &sha, &settings).is_err(),
             "a damaged entry.json was accepted"
         );
+    }
+
+    /// A synthetic window: `lit` frames show a drifting bright blob (weights along a
+    /// circle, jittered), the others are black (keyed out: all-zero weights and frames).
+    fn window(lit: &[bool]) -> (Vec<f32>, Vec<GrayFrame>) {
+        let k = 3;
+        let size = Size::new(24, 16).unwrap();
+        let mut weights = vec![0.0f32; lit.len() * k];
+        let mut frames = Vec::new();
+        for (i, &l) in lit.iter().enumerate() {
+            let mut f = GrayFrame::new(size);
+            if l {
+                let a = i as f32 * 0.37;
+                let j = ((i * 7919) % 13) as f32 / 13.0 - 0.5;
+                weights[i * k..i * k + k].copy_from_slice(&[a.cos(), a.sin(), 0.3 * j]);
+                let (cx, cy) = (12.0 + 6.0 * a.cos(), 8.0 + 4.0 * a.sin());
+                for (n, v) in f.data_mut().iter_mut().enumerate() {
+                    let (x, y) = ((n % 24) as f32, (n / 24) as f32);
+                    *v = (-((x - cx).powi(2) + (y - cy).powi(2)) / 8.0).exp();
+                }
+            }
+            frames.push(f);
+        }
+        (weights, frames)
+    }
+
+    #[test]
+    fn lit_runs_are_maximal() {
+        let l = [
+            false, true, true, false, false, true, false, true, true, true,
+        ];
+        assert_eq!(lit_runs(&l), vec![1..3, 5..6, 7..10]);
+        assert_eq!(lit_runs(&[false; 4]), Vec::<Range<usize>>::new());
+        assert_eq!(lit_runs(&[true; 3]), vec![0..3]);
+    }
+
+    #[test]
+    fn a_matted_loop_is_never_a_loop_of_nothing() {
+        // 20 lit frames, then 100 keyed out: unfiltered, the search loops the dark stretch
+        // (even, calm, of nothing); with the lit flags it refuses, naming the fire's stretch.
+        let lit: Vec<bool> = (0..120).map(|i| i < 20).collect();
+        let (w, m) = window(&lit);
+        let blind = search_and_choose(100, &w, 3, 3, &m, None, 40, Method::Auto).unwrap();
+        assert!(
+            blind.best.candidate.start >= 20,
+            "{:?}",
+            blind.best.candidate
+        );
+        let err = search_and_choose(100, &w, 3, 3, &m, Some(&lit), 40, Method::Auto)
+            .err()
+            .expect("a loop of keyed-out frames was chosen");
+        let msg = format!("{err:#}");
+        for want in [
+            "keys out all the fire in 100 of the window's 120 frames",
+            "100..120 (20 frames)",
+            "--alpha opaque",
+        ] {
+            assert!(msg.contains(want), "{want:?} not in: {msg}");
+        }
+        // No fire at all.
+        let none = vec![false; 120];
+        let (w, m) = window(&none);
+        let err = search_and_choose(0, &w, 3, 3, &m, Some(&none), 40, Method::Auto)
+            .err()
+            .expect("a loop of a window without fire was chosen");
+        assert!(
+            format!("{err:#}").contains("no frame of it shows fire"),
+            "{err:#}"
+        );
+    }
+
+    #[test]
+    fn a_matted_loop_shows_only_lit_footage_frames() {
+        // Fire in frames 0..70 and 90..160 (two stretches, a dark gap between); a 40-frame
+        // loop is found inside one stretch, its taps included.
+        let lit: Vec<bool> = (0..200).map(|i| i < 70 || (90..160).contains(&i)).collect();
+        let (w, m) = window(&lit);
+        let c = search_and_choose(0, &w, 3, 3, &m, Some(&lit), 40, Method::Auto).unwrap();
+        for e in &c.evaluated {
+            let (s, t) = (e.candidate.start, e.candidate.end);
+            assert!(
+                (s - 2..=t + 1).all(|i| lit[i]),
+                "candidate {s}..{t} reads keyed-out frames"
+            );
+            for p in loops::plan_with(&e.candidate, e.closing, &e.skips) {
+                if let Planned::Src(i) = p {
+                    assert!(lit[i], "{s}..{t} ({}) shows keyed-out frame {i}", e.closing);
+                }
+            }
+        }
+        // Every frame lit: the window's own search, unchanged.
+        let all = vec![true; 200];
+        let (w, m) = window(&all);
+        let a = search_and_choose(0, &w, 3, 3, &m, Some(&all), 40, Method::Auto).unwrap();
+        let b = search_and_choose(0, &w, 3, 3, &m, None, 40, Method::Auto).unwrap();
+        assert_eq!(a.best.candidate, b.best.candidate);
+        assert_eq!(a.evaluated.len(), b.evaluated.len());
+    }
+
+    #[test]
+    fn the_search_sees_the_matte_as_rendered() {
+        let Some(path) = clip("candle.mp4") else {
+            return;
+        };
+        let quiet = Global { quiet: true };
+        let cache = tempfile::tempdir().unwrap();
+        let c = cached(
+            &path,
+            0..40,
+            "16x24".parse().unwrap(),
+            8,
+            cache.path(),
+            &quiet,
+        )
+        .unwrap();
+        let matte = FootageMatte::new(&c.db, 0, c.metric.len());
+        let matted = matte.matted_metric(&c.metric).unwrap();
+        let source = ignis_media::probe(&path).unwrap().size;
+        let mut band = 0;
+        for i in [0, 1, 17, 38, 39] {
+            let full = matte.at(i, source).unwrap();
+            let soft = ignis_core::loopq::area_resize(&full, c.metric[i].size());
+            for ((&m, &g), &a) in matted[i]
+                .data()
+                .iter()
+                .zip(c.metric[i].data())
+                .zip(soft.data())
+            {
+                assert!((m - g * a).abs() <= 1e-6, "frame {i}: {m} vs {}", g * a);
+                band += usize::from(a > 0.0 && a < 1.0 && g > 0.0);
+            }
+        }
+        // The feather's soft band (lit surroundings at part alpha) is part of what is seen.
+        assert!(band > 0, "no soft matte edge in the metric frames");
+    }
+
+    #[test]
+    fn the_crossfade_blends_premultiplied() {
+        let size = Size::new(2, 1).unwrap();
+        // Pixel 0: flame in `a`, keyed-out dark surroundings in `b`; pixel 1: both opaque.
+        let a =
+            RgbaFrame::from_vec(size, vec![[1.0, 0.6, 0.2, 1.0], [0.3, 0.2, 0.1, 1.0]]).unwrap();
+        let b =
+            RgbaFrame::from_vec(size, vec![[0.05, 0.04, 0.03, 0.0], [0.7, 0.5, 0.3, 1.0]]).unwrap();
+        let f = blend_rgba(&a, &b, 0.75);
+        let p = f.data()[0];
+        // The flame's colour at a quarter of its alpha (not darkened by b's hidden colour).
+        for c in 0..3 {
+            assert!((p[c] - a.data()[0][c]).abs() < 1e-6, "{p:?}");
+        }
+        assert!((p[3] - 0.25).abs() < 1e-6);
+        // Over black it is the crossfade of the two composites.
+        assert!((p[0] * p[3] - 0.25 * 1.0).abs() < 1e-6);
+        let q = f.data()[1];
+        for (c, &v) in q.iter().enumerate() {
+            let want = a.data()[1][c] + (b.data()[1][c] - a.data()[1][c]) * 0.75;
+            assert_eq!(v, want, "opaque pixels blend per channel");
+        }
+        // Both keyed out: transparent.
+        let z = RgbaFrame::from_vec(size, vec![[0.5, 0.5, 0.5, 0.0]; 2]).unwrap();
+        assert_eq!(blend_rgba(&z, &z, 0.5).data()[0], [0.5, 0.5, 0.5, 0.0]);
     }
 }
