@@ -205,6 +205,51 @@ mod footage {
         assert!(r.next_decoded().is_none());
     }
 
+    /// The same through ffmpeg (a clip the built-in decoder does not take): ffmpeg pipes
+    /// 8-bit RGBA, which `open_keeping_8bit` hands over as it is; it converts to exactly
+    /// the frames `open` yields.
+    #[test]
+    fn ffmpeg_kept_8bit_converts_to_the_linear_frames() {
+        if !ignis_media::ffmpeg_available() {
+            println!("skipped: ffmpeg/ffprobe not on PATH");
+            return;
+        }
+        let t = tempfile::tempdir().unwrap();
+        let path = t.path().join("clip.mkv");
+        let ok = std::process::Command::new("ffmpeg")
+            .args([
+                "-loglevel",
+                "error",
+                "-f",
+                "lavfi",
+                "-i",
+                "testsrc=size=64x48:rate=10",
+            ])
+            .args(["-frames:v", "6", "-c:v", "mpeg4", "-y"])
+            .arg(&path)
+            .status()
+            .unwrap();
+        assert!(ok.success());
+        let opts = ReadOptions::default();
+        let linear: Vec<RgbaFrame> = open(&path, &opts)
+            .unwrap()
+            .collect::<Result<_, _>>()
+            .unwrap();
+        assert_eq!(linear.len(), 6);
+        let mut r = open_keeping_8bit(&path, &opts).unwrap();
+        let mut n = 0;
+        while let Some(f) = r.next_decoded() {
+            let f = f.unwrap();
+            assert!(
+                matches!(f, DecodedFrame::Srgba8 { .. }),
+                "frame {n} was converted"
+            );
+            assert_eq!(f.into_linear(), linear[n]);
+            n += 1;
+        }
+        assert_eq!(n, 6);
+    }
+
     #[test]
     fn candle_crop_and_scale() {
         let Some(path) = data("candle.mp4") else {

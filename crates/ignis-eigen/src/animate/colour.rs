@@ -559,7 +559,29 @@ fn colour_pixels(
         extra,
         alpha,
     } = px;
+    // Pixels outside the flame and its glow (mask and bloom both exactly +0, no smoke or
+    // extra layer, 8-bit footage, which is not read there) all colour to one value: made
+    // once by the same expression below, only their alpha is per pixel.
+    let quiet_lit: Option<(&[f32], [f32; 4])> = match dest {
+        Dest::Solid(b, ramp) if nonneg && smoke.is_none() && extra.is_none() => {
+            let (s, og, k) = (0.0f32, [0.0f32; 4], [0.0f32; 4]);
+            let (sd, d) = (1.0 - s, ramp.at(0.0));
+            Some((
+                b,
+                std::array::from_fn(|c| (s * og[c] + sd * d[c] + k[c] * sd).clamp(0.0, 1.0)),
+            ))
+        }
+        _ => None,
+    };
     for (i, o) in out.iter_mut().enumerate() {
+        if let Some((b, quiet)) = quiet_lit {
+            if mask[i].to_bits() == 0 && b[i].to_bits() == 0 {
+                let mut v = quiet;
+                v[3] = alpha.at(i, v[3]);
+                o.write(v);
+                continue;
+            }
+        }
         let mut s = if mask[i] > threshold {
             1.0
         } else {
@@ -962,6 +984,61 @@ mod tests {
         let e = original_colouring_src_then(&src, &small, dests[0], None, None, &p, &none);
         assert!(e.unwrap_err().to_string().contains("2x2"));
         assert!(SourceFrame::srgb8(size(2, 2), vec![0; 15]).is_err());
+    }
+
+    /// Pixels outside the flame and its glow (grey and bloom exactly +0) take the shared
+    /// quiet value on 8-bit footage; they colour bit for bit as the general rule does on
+    /// the same frame in linear light (which never takes that path), with the footage
+    /// matte's alpha per pixel, next to −0, negative and lit pixels.
+    #[test]
+    fn quiet_pixels_colour_as_the_general_rule() {
+        let sz = size(64, 3 * TINT_BAND as u32);
+        // A small flame in the middle; +0 elsewhere, with a few −0 and negative pixels.
+        let src = GrayFrame::from_fn(sz, |x, y| {
+            let (dx, dy) = (x as f32 - 32.0, y as f32 - 24.0);
+            let r = (dx * dx + dy * dy).sqrt();
+            match (x + y) % 29 {
+                0 => -0.0,
+                1 => -0.02,
+                _ if r < 6.0 => 0.9 - r * 0.1,
+                _ => 0.0,
+            }
+        });
+        let bp = ignis_core::post::BloomParams {
+            radius: 4.0,
+            ..Default::default()
+        };
+        let bloom = ignis_core::post::bloom(&src, &bp).unwrap();
+        let quiet = src
+            .data()
+            .iter()
+            .zip(bloom.data())
+            .filter(|(g, b)| g.to_bits() == 0 && b.to_bits() == 0)
+            .count();
+        assert!(quiet > sz.pixels() / 2, "{quiet} quiet pixels");
+        let bytes: Vec<u8> = (0..sz.pixels() * 4).map(|i| (i * 53 % 256) as u8).collect();
+        let src8 = SourceFrame::srgb8(sz, bytes).unwrap();
+        let lin = SourceFrame::Linear(src8.to_linear().into_owned());
+        let limit = GrayFrame::from_fn(sz, |x, y| ((x * 7 + y * 3) % 11) as f32 / 10.0);
+        let bits = |f: &RgbaFrame| -> Vec<u32> {
+            f.data().iter().flatten().map(|v| v.to_bits()).collect()
+        };
+        let p = OriginalColour {
+            threshold: T,
+            smoke: false,
+        };
+        for alpha in [
+            AlphaMatte::Keep,
+            AlphaMatte::Opaque,
+            AlphaMatte::Glow(None),
+            AlphaMatte::Glow(Some(&limit)),
+        ] {
+            let dest = Destination::SolidTint(&bloom, [1.0, 0.42, 0.08]);
+            let fast = original_colouring_matted(&src, &src8, dest, None, None, &p, alpha).unwrap();
+            let general =
+                original_colouring_matted(&src, &lin, dest, None, None, &p, alpha).unwrap();
+            assert_eq!(bits(&fast), bits(&general));
+        }
     }
 
     /// The fused path (`original_colouring_matted`: the bloom's rows made band by band,

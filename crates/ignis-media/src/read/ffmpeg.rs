@@ -179,12 +179,19 @@ pub(crate) struct FfmpegSource {
     info: SourceInfo,
     errors: Vec<String>,
     finished: bool,
+    /// Hand frames over as ffmpeg's sRGB bytes ([`super::open_keeping_8bit`]).
+    keep_8bit: bool,
 }
 
 impl FfmpegSource {
     /// Starts `ffmpeg` at frame `start` (an accurate seek: ffmpeg decodes from the previous
     /// keyframe and drops frames before the seek time), stopping after `end` if given.
-    pub(crate) fn start(info: &SourceInfo, start: u64, end: Option<u64>) -> Result<FfmpegSource> {
+    pub(crate) fn start(
+        info: &SourceInfo,
+        start: u64,
+        end: Option<u64>,
+        keep_8bit: bool,
+    ) -> Result<FfmpegSource> {
         let mut cmd = FfmpegCommand::new();
         cmd.hide_banner();
         if start > 0 {
@@ -214,12 +221,31 @@ impl FfmpegSource {
             info: info.clone(),
             errors: Vec::new(),
             finished: false,
+            keep_8bit,
         })
     }
 }
 
 impl FrameSource for FfmpegSource {
     fn next_frame(&mut self) -> Option<Result<RgbaFrame>> {
+        self.next_bytes()
+            .map(|r| r.map(|(size, bytes)| convert::from_srgba8(size, &bytes)))
+    }
+
+    fn next_decoded(&mut self) -> Option<Result<super::DecodedFrame>> {
+        if !self.keep_8bit {
+            return self
+                .next_frame()
+                .map(|r| r.map(super::DecodedFrame::Linear));
+        }
+        self.next_bytes()
+            .map(|r| r.map(|(size, bytes)| super::DecodedFrame::Srgba8 { size, bytes }))
+    }
+}
+
+impl FfmpegSource {
+    /// The next frame as ffmpeg wrote it: 8-bit sRGB RGBA bytes and their size.
+    fn next_bytes(&mut self) -> Option<Result<(Size, Vec<u8>)>> {
         if self.finished {
             return None;
         }
@@ -237,7 +263,7 @@ impl FrameSource for FfmpegSource {
                             "short frame from ffmpeg",
                         )));
                     }
-                    return Some(Ok(convert::from_srgba8(size, &f.data)));
+                    return Some(Ok((size, f.data)));
                 }
                 FfmpegEvent::Log(LogLevel::Error | LogLevel::Fatal, msg)
                 | FfmpegEvent::Error(msg)
@@ -309,7 +335,7 @@ mod tests {
             let rel = Path::new(name);
             let info = probe(&p, None).unwrap_or_else(|e| panic!("{name}: {e}"));
             assert_eq!(info.size, size, "{name}");
-            let mut s = FfmpegSource::start(&info, 0, Some(1)).unwrap();
+            let mut s = FfmpegSource::start(&info, 0, Some(1), false).unwrap();
             let f = s.next_frame().expect("one frame").unwrap();
             assert_eq!(f.size(), size);
             assert!(file_url(rel)

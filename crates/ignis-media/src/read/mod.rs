@@ -338,7 +338,7 @@ pub fn open(path: &Path, opts: &ReadOptions) -> Result<FrameReader> {
 }
 
 /// [`open`], for a reader read with [`FrameReader::next_decoded`]: an 8-bit decoder (the
-/// OpenH264 path) hands over its sRGB bytes uncropped and unscaled instead of converting
+/// OpenH264 path, and ffmpeg, which pipes 8-bit RGBA) hands over its sRGB bytes uncropped and unscaled instead of converting
 /// them to linear light on its thread (a renderer working from 8-bit values saves the
 /// conversion and a frame 4× the size). The iterator still yields linear frames.
 pub fn open_keeping_8bit(path: &Path, opts: &ReadOptions) -> Result<FrameReader> {
@@ -366,7 +366,9 @@ pub(crate) fn open_inner(
     }
     let source: Box<dyn FrameSource> = match probed {
         Probed::Mp4(info, p) => Box::new(h264::Openh264Source::start(&info, p, start, !keep_8bit)?),
-        Probed::Ffmpeg(info) => Box::new(ffmpeg::FfmpegSource::start(&info, start, end)?),
+        Probed::Ffmpeg(info) => {
+            Box::new(ffmpeg::FfmpegSource::start(&info, start, end, keep_8bit)?)
+        }
         Probed::Sequence(_, files) => Box::new(sequence::SequenceSource::new(files, start)),
         Probed::Image(info) => Box::new(sequence::SequenceSource::new(
             vec![info.path.clone()],
