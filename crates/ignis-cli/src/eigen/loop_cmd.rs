@@ -815,7 +815,10 @@ impl<'a> FootageMatte<'a> {
 
     fn mask(&self, i: usize) -> Result<image::GrayImage> {
         let row = self.first_row + i;
-        self.db.source_mask(row)?.with_context(|| {
+        self.db
+            .source_mask(row)
+            .context("reading the pre-processing masks for the matte (--alpha opaque loops without them)")?
+            .with_context(|| {
             format!(
                 "the database stores no pre-processing mask for row {row} (trained by an older Ignis); retrain it, or give --alpha opaque"
             )
