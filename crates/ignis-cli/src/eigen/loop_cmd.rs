@@ -644,6 +644,7 @@ pub fn render(
         });
         // Window frame the reader gives next (left-out frames are read past).
         let mut at = c.start;
+        let mut masks = MaskCache::default();
         let mut next = |want: usize| -> Result<RgbaFrame> {
             loop {
                 let f = rx.recv().ok().transpose()?.with_context(|| {
@@ -653,7 +654,7 @@ pub fn render(
                 if at > want {
                     let mut f = f;
                     if let Some(m) = matte {
-                        m.apply(want, &mut f)?;
+                        m.apply(want, &mut f, &mut masks)?;
                     }
                     return Ok(f);
                 }
@@ -825,14 +826,29 @@ impl<'a> FootageMatte<'a> {
         })
     }
 
-    /// The matte of window frame `i` at `size`.
-    pub fn at(&self, i: usize, size: Size) -> Result<GrayFrame> {
+    /// The matte of window frame `i` at `size`; `cache` keeps the last few decoded masks,
+    /// so frames rendered in order decode each mask once, not once per vote.
+    pub fn at(&self, i: usize, size: Size, cache: &mut MaskCache) -> Result<GrayFrame> {
         let last = self.frames.max(1) - 1;
-        let m = voted_feather(
-            &self.mask(i.saturating_sub(1))?,
-            &self.mask(i.min(last))?,
-            &self.mask((i + 1).min(last))?,
-        );
+        let (a, b, c) = (i.saturating_sub(1), i.min(last), (i + 1).min(last));
+        for j in [a, b, c] {
+            if !cache.0.iter().any(|(k, _)| *k == j) {
+                let m = self.mask(j)?;
+                if cache.0.len() == 4 {
+                    cache.0.remove(0);
+                }
+                cache.0.push((j, m));
+            }
+        }
+        let get = |j: usize| {
+            &cache
+                .0
+                .iter()
+                .find(|(k, _)| *k == j)
+                .expect("just cached")
+                .1
+        };
+        let m = voted_feather(get(a), get(b), get(c));
         Ok(if m.size() == size {
             m
         } else {
@@ -877,15 +893,19 @@ impl<'a> FootageMatte<'a> {
         Ok(parts.into_iter().flatten().collect())
     }
 
-    /// Sets `f`'s alpha to the matte of window frame `i`.
-    pub fn apply(&self, i: usize, f: &mut RgbaFrame) -> Result<()> {
-        let m = self.at(i, f.size())?;
+    /// Sets `f`'s alpha to the matte of window frame `i` (see [`FootageMatte::at`]).
+    pub fn apply(&self, i: usize, f: &mut RgbaFrame, cache: &mut MaskCache) -> Result<()> {
+        let m = self.at(i, f.size(), cache)?;
         for (p, &a) in f.data_mut().iter_mut().zip(m.data()) {
             p[3] = a;
         }
         Ok(())
     }
 }
+
+/// The last few masks [`FootageMatte::at`] decoded, by window frame.
+#[derive(Default)]
+pub struct MaskCache(Vec<(usize, image::GrayImage)>);
 
 /// The matte of a frame from its own mask `b` and its neighbours' `a`, `c`: their
 /// [`majority`], feathered as the footage render feathers database frames.
@@ -1405,7 +1425,7 @@ mod tests {
                 );
             }
             let Planned::Src(i) = *p else { continue };
-            let want = matte.at(i, d.size).unwrap();
+            let want = matte.at(i, d.size, &mut MaskCache::default()).unwrap();
             let mut lit = 0;
             for y in 0..h {
                 for x in 0..w {
@@ -1648,7 +1668,7 @@ mod tests {
         let source = ignis_media::probe(&path).unwrap().size;
         let mut band = 0;
         for i in [0, 1, 17, 38, 39] {
-            let full = matte.at(i, source).unwrap();
+            let full = matte.at(i, source, &mut MaskCache::default()).unwrap();
             let soft = ignis_core::loopq::area_resize(&full, c.metric[i].size());
             for ((&m, &g), &a) in matted[i]
                 .data()

@@ -836,9 +836,13 @@ pub fn mask_edges(mask: &GrayImage, p: &MaskParams) -> GrayImage {
     imageproc::edges::canny(mask, p.canny[0], p.canny[1])
 }
 
-/// Number of pixels inside a mask.
+/// Number of pixels inside a mask, counted 255 bytes at a time in 8-bit sums, which the
+/// compiler vectorises.
 pub fn mask_area(mask: &GrayImage) -> usize {
-    mask.as_raw().iter().filter(|&&v| v > 0).count()
+    mask.as_raw()
+        .chunks(255)
+        .map(|c| c.iter().fold(0u8, |a, &v| a + (v > 0) as u8) as usize)
+        .sum()
 }
 
 #[cfg(test)]

@@ -303,16 +303,8 @@ pub fn source_grey_with_mask_src(
         grey,
         matte,
         angle: 0.0,
-        mask_pixels: count_set(mask.as_raw()),
+        mask_pixels: mask_area(mask),
     }
-}
-
-/// The number of non-zero bytes of `m` ([`mask_area`]), counted 255 bytes at a time in
-/// 8-bit sums, which the compiler vectorises.
-fn count_set(m: &[u8]) -> usize {
-    m.chunks(255)
-        .map(|c| c.iter().fold(0u8, |a, &v| a + (v > 0) as u8) as usize)
-        .sum()
 }
 
 /// A soft matte from a binary mask: 1 inside the mask, and outside it the mask dilated by
