@@ -39,7 +39,7 @@ pub mod transition;
 // The thesis's stages live in folders (`preprocess/` ch. 3, `db/` ch. 4, `transition/` §5.1,
 // `animate/` §5.2 and ch. 6); their parts stay reachable at the crate root as before.
 pub use animate::{colour, loops, render, scenario};
-pub use preprocess::{contour, hermite, mask, pose};
+pub use preprocess::{contour, hermite, mask, pose, still};
 
 pub use analysis::ESelect;
 pub use db::{ClipEntry, EigenfireDb, Manifest, Thresholds};

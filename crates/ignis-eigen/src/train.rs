@@ -14,9 +14,10 @@ use crate::db::{self, ClipEntry, DbWriter, FileEntry, Manifest};
 use crate::error::{EigenError, Result};
 use crate::footage::{Footage, SyntheticFootage};
 use crate::mask::{static_fraction, value8, Isolate, STATIC_LIT};
+use crate::still::{still_lights, StillLights};
 use crate::pose::{auto_framing, clip_pose, ClipPose};
 use crate::preprocess::{
-    frame_mask, preprocess_frame, preprocess_stages, FrameStages, PreprocessParams,
+    frame_mask, frame_mask_without, preprocess_frame, preprocess_stages, FrameStages, PreprocessParams,
 };
 use crate::synthetic::{FlameStyle, SyntheticParams};
 use ignis_core::{RgbaFrame, Size};
@@ -428,16 +429,33 @@ fn plan_clip(
         Isolate::Off => false,
         Isolate::Auto => static_lit > STATIC_LIT,
     };
+    let size = c.footage.info().size;
+    let still = match c.spec.pose {
+        Some(p) if !p.still_lights.is_empty() => p.still_lights,
+        _ if pre.mask.still_lights => {
+            still_lights(&values, size.width, size.height, pre.mask.isolate_floor)
+        }
+        _ => StillLights::default(),
+    };
+    if need_extents && !still.is_empty() {
+        // The scan's extents saw the still lights as flame: measure them again without.
+        extents = rescan_extents(c, (start, end, every), pre, isolate, &still, progress)?;
+    }
     let mut pose = match (c.spec.pose, auto_pose) {
         (Some(p), _) => p,
         (None, Some(p)) => p,
         (None, None) => clip_pose(
             name,
-            if isolate { &extents_isolated } else { &extents },
+            if isolate && still.is_empty() {
+                &extents_isolated
+            } else {
+                &extents
+            },
             &pre.pose,
         )?,
     };
     pose.isolate = isolate;
+    pose.still_lights = still;
     Ok(Planned {
         start,
         end,
@@ -445,6 +463,28 @@ fn plan_clip(
         pose,
         static_lit,
     })
+}
+
+/// The mask extents of the frames [`plan_clip`] samples (every `every`-th training frame
+/// of `start..end`), measured again with the clip's `still` lights left out.
+fn rescan_extents(
+    c: &ClipInput<'_>,
+    (start, end, every): (usize, usize, usize),
+    pre: &PreprocessParams,
+    isolate: bool,
+    still: &StillLights,
+    progress: &mut dyn Progress,
+) -> Result<Vec<Option<crate::pose::MaskExtent>>> {
+    progress.stage(&format!("rescan {} without its still lights", c.spec.name), 0);
+    let mut out = Vec::new();
+    for (count, (_, f)) in training_frames(c, start, end)?.enumerate() {
+        let f = f?;
+        if count % every == 0 {
+            out.push(frame_mask_without(&f, pre, isolate, still).extent);
+        }
+    }
+    progress.finish_stage();
+    Ok(out)
 }
 
 /// What [`train`] did.

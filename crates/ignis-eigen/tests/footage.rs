@@ -720,3 +720,69 @@ fn mp4_render_is_the_same_at_any_thread_count_and_from_linear_frames() {
     assert!(one == run(3, false), "thread count changed the frames");
     assert!(one == run(2, true), "8-bit frames differ from linear ones");
 }
+
+/// A lamp in the shot (a steady white box away from the fire) is found as a still light
+/// over the clip and left out of every stored mask, while the fire stays in; with
+/// `still_lights = false` the lamp is in the masks (what every clip got before).
+#[test]
+fn a_still_lamp_is_left_out_of_the_masks() {
+    let sp = synth(FlameStyle::Campfire, 160, 120, 48);
+    let (lx, ly, lw, lh) = (136u32, 6u32, 14u32, 10u32);
+    let frames: Vec<RgbaFrame> = (0..sp.frames)
+        .map(|t| {
+            let mut f = synthetic_frame(&sp, t).unwrap();
+            for y in ly..ly + lh {
+                for x in lx..lx + lw {
+                    f.data_mut()[(y * 160 + x) as usize] = [1.0, 0.95, 0.85, 1.0];
+                }
+            }
+            f
+        })
+        .collect();
+    let t = tempfile::tempdir().unwrap();
+    let masks = |still: bool| {
+        let mut p = PreprocessParams {
+            train_pixels: 1200,
+            ..Default::default()
+        };
+        p.mask.still_lights = still;
+        let dbp = t.path().join(format!("fire-{still}.db"));
+        let clips = [ClipInput::new(
+            ClipSpec::new("c"),
+            FrameList::new("lamp", &frames, 30.0),
+        )];
+        train(&clips, &p, &TrainParams::default(), &dbp, &mut NoProgress).unwrap();
+        let db = EigenfireDb::open(&dbp).unwrap();
+        let c = db.clip("c").unwrap();
+        let ms: Vec<image::GrayImage> = (c.first_row..c.first_row + c.frames)
+            .map(|r| db.source_mask(r).unwrap().expect("stored masks"))
+            .collect();
+        (c.pose, ms)
+    };
+    let lamp = |m: &image::GrayImage| {
+        (ly..ly + lh)
+            .flat_map(|y| (lx..lx + lw).map(move |x| (x, y)))
+            .filter(|&(x, y)| m.get_pixel(x, y)[0] > 0)
+            .count()
+    };
+    let fire = |m: &image::GrayImage| {
+        m.enumerate_pixels()
+            .filter(|(x, _, p)| *x < 120 && p[0] > 0)
+            .count()
+    };
+    let (pose, with) = masks(true);
+    let boxes = pose.still_lights.boxes().to_vec();
+    assert_eq!(boxes.len(), 1, "one still light: {boxes:?}");
+    let [x0, y0, x1, y1] = boxes[0];
+    assert!(x0 <= lx && y0 <= ly && x1 >= lx + lw && y1 >= ly + lh, "{boxes:?}");
+    assert!(x0 >= 120, "the box stays off the fire: {boxes:?}");
+    let (_, without) = masks(false);
+    for (k, (a, b)) in with.iter().zip(&without).enumerate() {
+        assert_eq!(lamp(a), 0, "frame {k}: the lamp is out of the mask");
+        assert!(lamp(b) > 0, "frame {k}: without still lights the lamp is in");
+        assert!(fire(a) > 0, "frame {k}: the fire is kept");
+        // The fire itself is masked alike with and without (within a few edge pixels).
+        let (fa, fb) = (fire(a) as f64, fire(b) as f64);
+        assert!((fa - fb).abs() <= 0.05 * fb, "frame {k}: fire {fa} vs {fb}");
+    }
+}

@@ -468,6 +468,7 @@ pub fn toml_targets(fx: &Fixtures) -> Vec<Arc<dyn Target>> {
                         base_y: 60.0,
                         scale: 1.0,
                         isolate: true,
+                        still_lights: Default::default(),
                     };
                     let _ = ignis_eigen::preprocess::preprocess_stages(&frame, &pose, &p);
                     Outcome::Ok

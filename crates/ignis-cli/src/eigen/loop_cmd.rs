@@ -25,8 +25,9 @@ use sha2::{Digest, Sha256};
 
 use crate::global::Global;
 
-/// Version of the cache layout; part of the key.
-const CACHE_VERSION: u32 = 1;
+/// Version of the cache layout and of what training stores; part of the key (2: still
+/// lights left out of the masks).
+const CACHE_VERSION: u32 = 2;
 
 #[derive(clap::Args, Debug)]
 #[command(

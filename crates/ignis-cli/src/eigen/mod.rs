@@ -509,6 +509,18 @@ fn info(a: InfoArgs, g: &Global) -> Result<()> {
             c.thresholds.e,
             c.thresholds.peaks.len()
         );
+        let still = c.pose.still_lights.boxes();
+        if !still.is_empty() {
+            let list: Vec<String> = still
+                .iter()
+                .map(|b| format!("{}x{}+{}+{}", b[2] - b[0], b[3] - b[1], b[0], b[1]))
+                .collect();
+            println!(
+                "    {} still light(s) left out of the mask (bright and steady, away from the fire; WxH+X+Y): {}",
+                still.len(),
+                list.join(", ")
+            );
+        }
     }
     for (f, r) in &problems {
         println!("  PROBLEM {f}: {r}");

@@ -767,6 +767,7 @@ mod tests {
             fuel_x: 30.5,
             base_y: 44.0,
             scale: 0.8,
+            still_lights: Default::default(),
         };
         let p = PoseParams {
             frame_size: Some(size(40, 60)),

@@ -9,6 +9,7 @@
 //! [`image::GrayImage`], 255 = inside, 0 = outside.
 
 use crate::error::{EigenError, Result};
+use crate::still::StillLights;
 use ignis_core::palette::{linear_to_srgb, srgb_to_linear};
 use ignis_core::RgbaFrame;
 use image::GrayImage;
@@ -120,6 +121,10 @@ pub struct MaskParams {
     /// grey ≥ 0.8), which issue 14's cover bound counts as flame, and sparing it only on
     /// those frames would make it blink in and out of the animation.
     pub isolate_lit_islands: bool,
+    /// Find still lights over the clip (a lamp, a lit window: bright, steady, away from
+    /// anything that flickers; [`crate::still`]) and keep them out of every frame's mask.
+    /// Default `true`.
+    pub still_lights: bool,
 }
 
 /// When [`isolate_flame`] runs.
@@ -170,6 +175,7 @@ impl Default for MaskParams {
             isolate_saturation: 0.5,
             isolate_edge_tolerance: 0.1,
             isolate_lit_islands: false,
+            still_lights: true,
         }
     }
 }
@@ -322,11 +328,27 @@ pub fn smooth_mask(mask: &GrayImage, sigma: f32) -> GrayImage {
 /// back after the clean-up: specular reflections of the flame are as bright as the flame
 /// and flicker with it, but thin, and opening would erase them.
 pub fn flame_mask(frame: &RgbaFrame, p: &MaskParams, isolate: bool) -> GrayImage {
+    flame_mask_without(frame, p, isolate, &StillLights::default())
+}
+
+/// [`flame_mask`] of a frame whose clip has `still` lights ([`crate::still`]): they are
+/// blanked in the HSV mask and in the luminance the isolation measures (so a lamp at full
+/// white is not a seed), and in the result.
+pub fn flame_mask_without(
+    frame: &RgbaFrame,
+    p: &MaskParams,
+    isolate: bool,
+    still: &StillLights,
+) -> GrayImage {
+    let w = frame.width() as usize;
     let mut m = hsv_mask(frame, &p.layers);
+    still.clear(m.as_mut(), w, 0);
     let mut bright = None;
     if isolate {
+        let mut luma = luma8(frame);
+        still.clear(&mut luma, w, 0);
         let keep = isolate_flame(
-            &luma8(frame),
+            &luma,
             frame.width(),
             frame.height(),
             p.isolate_floor,
@@ -377,6 +399,7 @@ pub fn flame_mask(frame: &RgbaFrame, p: &MaskParams, isolate: bool) -> GrayImage
             *o = (*o).max(v);
         }
     }
+    still.clear(m.as_mut(), w, 0);
     m
 }
 

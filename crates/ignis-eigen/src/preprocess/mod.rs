@@ -12,11 +12,13 @@ pub mod contour;
 pub mod hermite;
 pub mod mask;
 pub mod pose;
+pub mod still;
+use still::StillLights;
 
 use crate::contour::{contour_tree, draw_contours, fill_contours, remove_holes, ContourParams};
 use crate::error::{EigenError, Result};
 use crate::hermite::{hermite_darken_rgba, hermite_darken_rgba_in, HermiteParams};
-use crate::mask::{flame_mask, hsv_mask, mask_area, mask_edges, MaskParams};
+use crate::mask::{flame_mask_without, hsv_mask, mask_area, mask_edges, MaskParams};
 use crate::pose::{lean_angle, mask_extent, resize, warp, ClipPose, MaskExtent, PoseParams};
 use ignis_core::{GrayFrame, RgbaFrame, Size};
 use image::GrayImage;
@@ -159,7 +161,18 @@ pub struct FrameMask {
 /// outer contour at least 1.5× as tall as wide): a sheet or wall of fire is never
 /// rotated.
 pub fn frame_mask(frame: &RgbaFrame, p: &PreprocessParams, isolate: bool) -> FrameMask {
-    let m = flame_mask(frame, &p.mask, isolate);
+    frame_mask_without(frame, p, isolate, &StillLights::default())
+}
+
+/// [`frame_mask`] of a frame of a clip with `still` lights ([`crate::still`]), which the
+/// mask ignores ([`crate::mask::flame_mask_without`]).
+pub fn frame_mask_without(
+    frame: &RgbaFrame,
+    p: &PreprocessParams,
+    isolate: bool,
+    still: &StillLights,
+) -> FrameMask {
+    let m = flame_mask_without(frame, &p.mask, isolate, still);
     let nodes = contour_tree(&m);
     let area = frame.width() as f64 * frame.height() as f64;
     let keep = remove_holes(&nodes, &p.contours, area);
@@ -244,7 +257,7 @@ fn source_grey_and_mask(
     pose: &ClipPose,
     p: &PreprocessParams,
 ) -> (SourceGrey, GrayImage) {
-    let fm = frame_mask(frame, p, pose.isolate);
+    let fm = frame_mask_without(frame, p, pose.isolate, &pose.still_lights);
     let mut sg = source_grey_with_mask(frame, &fm.mask, pose, p);
     sg.angle = fm.angle.unwrap_or(0.0);
     (sg, fm.mask)
@@ -267,12 +280,24 @@ pub fn source_grey_with_mask(
         (true, None) => GrayFrame::new(frame.size()),
         (false, _) => hermite_darken_rgba(frame, mask, None, &p.hermite),
     };
+    let grey = without_still_lights(grey, pose);
     SourceGrey {
         grey,
         matte,
         angle: 0.0,
         mask_pixels: mask_area(mask),
     }
+}
+
+/// `grey` with the clip's still lights blanked: without isolation the Hermite darkening
+/// keeps anything brighter than `i_max`, a lamp too (with isolation the grey is already
+/// cut to the mask, which leaves them out).
+fn without_still_lights(mut grey: GrayFrame, pose: &ClipPose) -> GrayFrame {
+    if !pose.isolate && !pose.still_lights.is_empty() {
+        let w = grey.width() as usize;
+        pose.still_lights.clear(grey.data_mut(), w, 0.0);
+    }
+    grey
 }
 
 /// [`source_grey_with_mask`] for renders: the feather's blur at half resolution
@@ -299,6 +324,7 @@ pub fn source_grey_with_mask_src(
         (true, None, _) => GrayFrame::new(size),
         (false, _, _) => hermite_darken_rgba(&frame.to_linear(), mask, None, &p.hermite),
     };
+    let grey = without_still_lights(grey, pose);
     SourceGrey {
         grey,
         matte,
@@ -753,7 +779,7 @@ fn mask_rgba(m: &GrayImage) -> RgbaFrame {
 /// removed ones dim), `5-filled`, `6-gray`, `7-hermite`, `8-normalised`, `9-train`.
 pub fn preprocess_stages(frame: &RgbaFrame, pose: &ClipPose, p: &PreprocessParams) -> FrameStages {
     let raw = hsv_mask(frame, &p.mask.layers);
-    let m = flame_mask(frame, &p.mask, pose.isolate);
+    let m = flame_mask_without(frame, &p.mask, pose.isolate, &pose.still_lights);
     let nodes = contour_tree(&m);
     let keep = remove_holes(
         &nodes,

@@ -18,6 +18,7 @@
 
 use crate::contour::ContourNode;
 use crate::error::{EigenError, Result};
+use crate::still::StillLights;
 use ignis_core::{GrayFrame, Size};
 use image::GrayImage;
 use serde::{Deserialize, Serialize};
@@ -95,6 +96,10 @@ pub struct ClipPose {
     /// Flame isolation on this clip ([`crate::mask::isolate_flame`]).
     #[serde(default)]
     pub isolate: bool,
+    /// Still lights (a lamp, a lit window) every frame's mask ignores
+    /// ([`crate::still`]); found when the clip is planned. Default none.
+    #[serde(default, skip_serializing_if = "StillLights::is_empty")]
+    pub still_lights: StillLights,
 }
 
 /// Automatic framing: the common frame is the smallest that holds every clip (`sizes`)
@@ -113,6 +118,7 @@ pub fn auto_framing(sizes: &[Size]) -> (Size, Vec<ClipPose>) {
                 base_y: s.height as f32,
                 scale: 1.0,
                 isolate: false,
+                still_lights: StillLights::default(),
             }
         })
         .collect();
@@ -224,6 +230,7 @@ pub fn clip_pose(clip: &str, extents: &[Option<MaskExtent>], p: &PoseParams) -> 
         base_y: percentile(&mut by, 0.5),
         scale,
         isolate: false,
+        still_lights: StillLights::default(),
     })
 }
 
