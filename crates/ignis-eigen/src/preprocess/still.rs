@@ -20,7 +20,8 @@
 //! still light's bounding box, grown by a quarter of `r` (at least 3 px: the mask's
 //! morphology and smoothing reach 3 px), is stored in the clip's pose ([`StillLights`]) and every frame's mask ignores
 //! those boxes (the mask, the isolation's luminance, and, without isolation, the grey
-//! image). Everything is relative to the clip's own samples: nothing is tuned to a clip.
+//! image). A clip where nothing flickers gets none: nothing there tells a lamp from a
+//! steady flame. Everything is relative to the clip's own samples: nothing is tuned to a clip.
 
 use image::GrayImage;
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
@@ -149,6 +150,10 @@ pub fn still_lights(samples: &[Vec<u8>], w: u32, h: u32, floor: f32) -> StillLig
             still.as_mut()[i] = 255;
         }
     }
+    // Where nothing moves, nothing tells a lamp from a steady flame: keep everything.
+    if flicker.as_raw().iter().filter(|&&v| v > 0).count() < MIN_AREA {
+        return StillLights::default();
+    }
     let r = ((0.04 * w.max(h) as f64).round() as u32).clamp(3, 255);
     let near = imageproc::morphology::dilate(&flicker, imageproc::distance_transform::Norm::LInf, r as u8);
     let labels = imageproc::region_labelling::connected_components(
@@ -236,6 +241,9 @@ mod tests {
         assert!(still_lights(&clip(24, false), 120, 80, 0.3).is_empty());
         // Too few samples: nothing is called still.
         assert!(still_lights(&clip(MIN_SAMPLES - 1, true), 120, 80, 0.3).is_empty());
+        // Nothing moves (a frozen clip): nothing tells the lamp from the flame.
+        let frozen = vec![clip(1, true).remove(0); 24];
+        assert!(still_lights(&frozen, 120, 80, 0.3).is_empty());
     }
 
     #[test]
