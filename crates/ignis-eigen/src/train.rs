@@ -14,11 +14,12 @@ use crate::db::{self, ClipEntry, DbWriter, FileEntry, Manifest};
 use crate::error::{EigenError, Result};
 use crate::footage::{Footage, SyntheticFootage};
 use crate::mask::{static_fraction, value8, Isolate, STATIC_LIT};
-use crate::still::{still_lights, StillLights};
 use crate::pose::{auto_framing, clip_pose, ClipPose};
 use crate::preprocess::{
-    frame_mask, frame_mask_without, preprocess_frame, preprocess_stages, FrameStages, PreprocessParams,
+    frame_mask, frame_mask_without, preprocess_frame, preprocess_stages, FrameStages,
+    PreprocessParams,
 };
+use crate::still::{still_lights, StillLights};
 use crate::synthetic::{FlameStyle, SyntheticParams};
 use ignis_core::{RgbaFrame, Size};
 use ignis_pca::npy::{self, Dtype, NpyWriter};
@@ -475,7 +476,10 @@ fn rescan_extents(
     still: &StillLights,
     progress: &mut dyn Progress,
 ) -> Result<Vec<Option<crate::pose::MaskExtent>>> {
-    progress.stage(&format!("rescan {} without its still lights", c.spec.name), 0);
+    progress.stage(
+        &format!("rescan {} without its still lights", c.spec.name),
+        0,
+    );
     let mut out = Vec::new();
     for (count, (_, f)) in training_frames(c, start, end)?.enumerate() {
         let f = f?;

@@ -774,15 +774,76 @@ fn a_still_lamp_is_left_out_of_the_masks() {
     let boxes = pose.still_lights.boxes().to_vec();
     assert_eq!(boxes.len(), 1, "one still light: {boxes:?}");
     let [x0, y0, x1, y1] = boxes[0];
-    assert!(x0 <= lx && y0 <= ly && x1 >= lx + lw && y1 >= ly + lh, "{boxes:?}");
+    assert!(
+        x0 <= lx && y0 <= ly && x1 >= lx + lw && y1 >= ly + lh,
+        "{boxes:?}"
+    );
     assert!(x0 >= 120, "the box stays off the fire: {boxes:?}");
     let (_, without) = masks(false);
     for (k, (a, b)) in with.iter().zip(&without).enumerate() {
         assert_eq!(lamp(a), 0, "frame {k}: the lamp is out of the mask");
-        assert!(lamp(b) > 0, "frame {k}: without still lights the lamp is in");
+        assert!(
+            lamp(b) > 0,
+            "frame {k}: without still lights the lamp is in"
+        );
         assert!(fire(a) > 0, "frame {k}: the fire is kept");
         // The fire itself is masked alike with and without (within a few edge pixels).
         let (fa, fb) = (fire(a) as f64, fire(b) as f64);
         assert!((fa - fb).abs() <= 0.05 * fb, "frame {k}: fire {fa} vs {fb}");
+    }
+}
+
+/// Still lights on real footage (when `../shared/data` and ffmpeg are present): none on
+/// `candle.mp4`, `campfire.mp4` and `fireball.mp4` (their flames, cores, embers and lit
+/// surroundings all flicker or lie beside what does), and on `campfire.mp4` with a white
+/// box painted into a corner of every sample, exactly that box. Samples every 20th frame
+/// (24 of them), at half size: what training's planning pass sees, more cheaply.
+#[test]
+fn still_lights_on_the_dev_clips() {
+    use ignis_eigen::still::still_lights;
+    let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data");
+    if !data.join("campfire.mp4").exists() || !ignis_media::ffmpeg_available() {
+        eprintln!("skipped: ../shared/data clips or ffmpeg not present");
+        return;
+    }
+    let samples = |name: &str, size: Size| -> Vec<RgbaFrame> {
+        let opts = ignis_media::ReadOptions {
+            range: None,
+            crop: None,
+            scale: Some(size),
+        };
+        ignis_media::open(&data.join(name), &opts)
+            .unwrap()
+            .step_by(20)
+            .take(24)
+            .map(|f| f.unwrap())
+            .collect()
+    };
+    let floor = PreprocessParams::default().mask.isolate_floor;
+    for (name, w, h) in [
+        ("candle.mp4", 240, 240),
+        ("campfire.mp4", 480, 270),
+        ("fireball.mp4", 640, 360),
+    ] {
+        let frames = samples(name, Size::new(w, h).unwrap());
+        assert!(frames.len() >= 20, "{name}: {} samples", frames.len());
+        let values: Vec<Vec<u8>> = frames.iter().map(value8).collect();
+        let s = still_lights(&values, w, h, floor);
+        assert!(s.is_empty(), "{name}: no still lights, found {s:?}");
+        if name == "campfire.mp4" {
+            let mut lamp = values.clone();
+            for v in &mut lamp {
+                for y in 10..30 {
+                    v[y * w as usize + 10..y * w as usize + 40].fill(250);
+                }
+            }
+            let s = still_lights(&lamp, w, h, floor);
+            assert_eq!(s.boxes().len(), 1, "{s:?}");
+            let [x0, y0, x1, y1] = s.boxes()[0];
+            assert!(
+                x0 <= 10 && y0 <= 10 && x1 >= 40 && y1 >= 30 && x1 < 100 && y1 < 100,
+                "{s:?}"
+            );
+        }
     }
 }

@@ -155,7 +155,8 @@ pub fn still_lights(samples: &[Vec<u8>], w: u32, h: u32, floor: f32) -> StillLig
         return StillLights::default();
     }
     let r = ((0.04 * w.max(h) as f64).round() as u32).clamp(3, 255);
-    let near = imageproc::morphology::dilate(&flicker, imageproc::distance_transform::Norm::LInf, r as u8);
+    let near =
+        imageproc::morphology::dilate(&flicker, imageproc::distance_transform::Norm::LInf, r as u8);
     let labels = imageproc::region_labelling::connected_components(
         &still,
         imageproc::region_labelling::Connectivity::Eight,
@@ -208,7 +209,11 @@ mod tests {
         (0..frames)
             .map(|k| {
                 let t = k as f32;
-                let (cx, cy, rad) = (30.0 + 6.0 * (t * 0.9).sin(), 45.0, 12.0 + 5.0 * (t * 1.7).cos());
+                let (cx, cy, rad) = (
+                    30.0 + 6.0 * (t * 0.9).sin(),
+                    45.0,
+                    12.0 + 5.0 * (t * 1.7).cos(),
+                );
                 (0..w * h)
                     .map(|i| {
                         let (x, y) = ((i % w) as f32, (i / w) as f32);
@@ -235,7 +240,10 @@ mod tests {
         let s = still_lights(&clip(24, true), 120, 80, 0.3);
         assert_eq!(s.boxes().len(), 1, "{s:?}");
         let [x0, y0, x1, y1] = s.boxes()[0];
-        assert!(x0 <= 90 && y0 <= 10 && x1 >= 104 && y1 >= 22, "the lamp is covered: {s:?}");
+        assert!(
+            x0 <= 90 && y0 <= 10 && x1 >= 104 && y1 >= 22,
+            "the lamp is covered: {s:?}"
+        );
         assert!(x0 > 60, "the flame (x < 50) is not: {s:?}");
         // Without the lamp: nothing is still, even the flame's saturated core.
         assert!(still_lights(&clip(24, false), 120, 80, 0.3).is_empty());
