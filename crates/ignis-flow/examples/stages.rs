@@ -79,6 +79,18 @@ fn main() {
         t("flow_pair 256", &mut || {
             std::hint::black_box(flow_pair(&ga, &gb, &p).unwrap());
         });
+        let s720 = Size::new(1280, 720).unwrap();
+        let (ha, hb) = (
+            bench::texture(s720, 3, [0.0; 2], 3.0).to_rgba(),
+            bench::texture(s720, 3, [3.0, -2.0], 3.0).to_rgba(),
+        );
+        t("motion_vector_pair 720p", &mut || {
+            std::hint::black_box(motion_vector_pair(&ha, &hb, &vp).unwrap());
+        });
+        let (h1, h2) = (luma(&ha), luma(&hb));
+        t("flow_pair 720p", &mut || {
+            std::hint::black_box(flow_pair(&h1, &h2, &p).unwrap());
+        });
         t("whole morph_1080p case", &mut || {
             let (la, lb) = (luma(&ca), luma(&cb));
             let (f, g) = flow_pair_reduced(&la, &lb, &p).unwrap();
