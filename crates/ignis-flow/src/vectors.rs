@@ -114,41 +114,46 @@ fn reliable(
     let (w, h) = (size.width as usize, size.height as usize);
     let (a, b) = (pa.data(), pb.data());
     let inv_s2 = 1.0 / (p.consistency_px * p.consistency_px);
-    // Per pixel: the consistency weight, |a − b| and |a − b(x + F)|.
-    let mut cons = vec![0.0f32; w * h];
+    // Per pixel: |a − b| and |a − b(x + F)|.
     let mut e0 = vec![0.0f32; w * h];
     let mut e1 = vec![0.0f32; w * h];
-    cons.par_chunks_mut(w)
-        .zip(e0.par_chunks_mut(w))
+    e0.par_chunks_mut(w)
         .zip(e1.par_chunks_mut(w))
         .enumerate()
-        .for_each(|(y, ((c, r0), r1))| {
-            for x in 0..w {
-                let i = y * w + x;
-                let [dx, dy] = f.data()[i];
-                let (sx, sy) = (x as f32 + dx, y as f32 + dy);
-                let [bx, by] = g.at(sx, sy);
-                c[x] = (-((dx + bx).powi(2) + (dy + by).powi(2)) * inv_s2).exp();
-                r0[x] = (a[i] - b[i]).abs();
-                r1[x] = (a[i] - sample(b, w, h, sx, sy)).abs();
+        .for_each(|(y, (r0, r1))| {
+            let row = y * w;
+            let fr = &f.data()[row..row + w];
+            for (x, (([dx, dy], o0), o1)) in fr.iter().zip(r0).zip(r1).enumerate() {
+                let i = row + x;
+                *o0 = (a[i] - b[i]).abs();
+                *o1 = (a[i] - sample(b, w, h, x as f32 + dx, y as f32 + dy)).abs();
             }
         });
     let r = p.window as usize;
     let (e0, e1) = rayon::join(|| box_sum(&e0, w, h, r), || box_sum(&e1, w, h, r));
-    let data = f
-        .data()
-        .par_iter()
-        .enumerate()
-        .map(|(i, &[dx, dy])| {
+    // The consistency weight (a read of the reverse flow and an `exp`) only where the
+    // explained change leaves some weight: elsewhere the vector is 0 either way.
+    let mut data = vec![[0.0f32; 2]; w * h];
+    data.par_chunks_mut(w).enumerate().for_each(|(y, out)| {
+        let row = y * w;
+        for (x, o) in out.iter_mut().enumerate() {
+            let i = row + x;
+            let [dx, dy] = f.data()[i];
             let explained = if e0[i] > 0.0 {
                 ((e0[i] - e1[i]) / (p.explained * e0[i])).clamp(0.0, 1.0)
             } else {
                 0.0 // identical neighbourhoods: nothing moved that shows
             };
-            let k = cons[i] * explained;
-            [dx * k, dy * k]
-        })
-        .collect();
+            let k = if explained > 0.0 {
+                let [bx, by] = g.at(x as f32 + dx, y as f32 + dy);
+                let cons = (-((dx + bx).powi(2) + (dy + by).powi(2)) * inv_s2).exp();
+                cons * explained
+            } else {
+                0.0
+            };
+            *o = [dx * k, dy * k];
+        }
+    });
     FlowField::from_parts(size, data)
 }
 
