@@ -263,6 +263,13 @@ mod tests {
     }
 
     #[test]
+    fn the_search_can_be_turned_off_in_the_toml() {
+        let p = crate::PreprocessParams::from_toml("[mask]\nstill_lights = false\n").unwrap();
+        assert!(!p.mask.still_lights);
+        assert!(crate::PreprocessParams::default().mask.still_lights);
+    }
+
+    #[test]
     fn serialises_as_a_list_of_boxes() {
         let s = StillLights::new(&[[1, 2, 3, 4]]);
         let j = serde_json::to_string(&s).unwrap();
