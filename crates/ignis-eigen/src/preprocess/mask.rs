@@ -845,6 +845,22 @@ pub fn mask_area(mask: &GrayImage) -> usize {
         .sum()
 }
 
+/// A mask steadied over time: per pixel 255 where at least two of the three binary masks
+/// `a`, `b`, `c` (a frame's own `b` and its neighbours in the footage) are set, 0
+/// elsewhere — a mask that collapses or flares on one frame alone takes its neighbours'
+/// shape. Masks of different sizes do not vote: `b` is returned as it is.
+pub fn majority3(a: &GrayImage, b: &GrayImage, c: &GrayImage) -> GrayImage {
+    if a.dimensions() != b.dimensions() || c.dimensions() != b.dimensions() {
+        return b.clone();
+    }
+    let mut out = b.clone();
+    for ((o, &x), &z) in out.iter_mut().zip(a.iter()).zip(c.iter()) {
+        let votes = u8::from(x > 127) + u8::from(*o > 127) + u8::from(z > 127);
+        *o = if votes >= 2 { 255 } else { 0 };
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
 
