@@ -240,16 +240,20 @@ fn wide_sheet_and_tall_flame_at_their_own_size() {
     for tf in [0, 7] {
         assert_no_flame_pixel_lost(&synthetic_frame(&wide, tf).unwrap(), &c.pose, p);
     }
-    // A database frame shows the source frame's grey where the flame is.
+    // A database frame shows the source frame's grey where the flame is: the frame
+    // pre-processed with its stored mask voted with its neighbours' (the render's matte).
     let (plan, _) = loop_plan(&db, "sheet", 1..11, Transition::Auto, 8, 0).unwrap();
-    let first = match &plan.frames[0].source {
-        ignis_eigen::transition::FrameRef::Db(r) => db.row_origin(*r).unwrap().1,
+    let (first, row) = match &plan.frames[0].source {
+        ignis_eigen::transition::FrameRef::Db(r) => (db.row_origin(*r).unwrap().1, *r),
         other => panic!("the loop starts with a database frame, not {other:?}"),
     };
     let src = synthetic_frame(&wide, first).unwrap();
-    let pr = preprocess_frame(&src, &c.pose, p);
+    let votes = ignis_eigen::animate::matte_vote_rows(&db, row)
+        .map(|r| db.source_mask(r).unwrap().expect("stored mask"));
+    let voted = ignis_eigen::mask::majority3(&votes[0], &votes[1], &votes[2]);
+    let pr = ignis_eigen::preprocess::source_grey_with_mask(&src, &voted, &c.pose, p);
     let diff: f32 = pr
-        .frame
+        .grey
         .data()
         .iter()
         .zip(frames[0].data())
