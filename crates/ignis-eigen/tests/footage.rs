@@ -724,3 +724,31 @@ fn mp4_render_is_the_same_at_any_thread_count_and_from_linear_frames() {
     assert!(one == run(3, false), "thread count changed the frames");
     assert!(one == run(2, true), "8-bit frames differ from linear ones");
 }
+
+/// The rows whose masks vote on a row's matte: its neighbours inside its own clip when the
+/// clip holds consecutive source frames (the clip's ends vote with themselves, a vote
+/// never reaches into the next clip); a clip trained with a stride has its own mask alone.
+#[test]
+fn matte_votes_stay_inside_consecutive_frames_of_one_clip() {
+    use ignis_eigen::animate::matte_vote_rows;
+    let t = tempfile::tempdir().unwrap();
+    let mut strided = ClipSpec::new("b");
+    strided.stride = 2;
+    let clips = [
+        input("a", synth(FlameStyle::Candle, 48, 64, 6)),
+        ClipInput::new(
+            strided,
+            SyntheticFootage::new(synth(FlameStyle::Candle, 48, 64, 10), 30.0),
+        ),
+    ];
+    let db = train_db(t.path(), &clips);
+    let (a, b) = (db.clip("a").unwrap().clone(), db.clip("b").unwrap().clone());
+    assert_eq!((a.frames, b.stride), (6, 2));
+    let a0 = a.first_row;
+    assert_eq!(matte_vote_rows(&db, a0), [a0, a0, a0 + 1]);
+    assert_eq!(matte_vote_rows(&db, a0 + 3), [a0 + 2, a0 + 3, a0 + 4]);
+    assert_eq!(matte_vote_rows(&db, a0 + 5), [a0 + 4, a0 + 5, a0 + 5]);
+    for r in b.first_row..b.first_row + b.frames {
+        assert_eq!(matte_vote_rows(&db, r), [r; 3], "strided row {r}");
+    }
+}

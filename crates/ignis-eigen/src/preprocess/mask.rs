@@ -864,6 +864,22 @@ pub fn majority3(a: &GrayImage, b: &GrayImage, c: &GrayImage) -> GrayImage {
 #[cfg(test)]
 mod tests {
 
+    /// Two of three votes keep a pixel: a mask that collapses or flares on one frame takes
+    /// its neighbours' shape; masks of another size do not vote.
+    #[test]
+    fn majority3_keeps_what_two_of_three_masks_agree_on() {
+        let full = GrayImage::from_fn(8, 6, |x, _| image::Luma([if x < 6 { 255 } else { 0 }]));
+        let collapsed = GrayImage::from_fn(8, 6, |x, y| {
+            image::Luma([if x < 2 && y < 2 { 255 } else { 0 }])
+        });
+        let flared = GrayImage::from_pixel(8, 6, image::Luma([255]));
+        assert_eq!(majority3(&full, &collapsed, &full), full);
+        assert_eq!(majority3(&full, &flared, &full), full);
+        assert_eq!(majority3(&collapsed, &full, &collapsed), collapsed);
+        let other = GrayImage::from_pixel(4, 4, image::Luma([0]));
+        assert_eq!(majority3(&other, &collapsed, &other), collapsed);
+    }
+
     /// Issue 18 defect 5: a zero low threshold is refused; the smallest accepted one runs.
     #[test]
     fn canny_thresholds_are_checked() {
