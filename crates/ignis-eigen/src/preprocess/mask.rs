@@ -853,12 +853,18 @@ pub fn majority3(a: &GrayImage, b: &GrayImage, c: &GrayImage) -> GrayImage {
     if a.dimensions() != b.dimensions() || c.dimensions() != b.dimensions() {
         return b.clone();
     }
-    let mut out = b.clone();
-    for ((o, &x), &z) in out.iter_mut().zip(a.iter()).zip(c.iter()) {
-        let votes = u8::from(x > 127) + u8::from(*o > 127) + u8::from(z > 127);
-        *o = if votes >= 2 { 255 } else { 0 };
-    }
-    out
+    // Branch-free per byte (vectorised): majority of three bits = (x∧y) ∨ (x∧z) ∨ (y∧z).
+    let data = a
+        .as_raw()
+        .iter()
+        .zip(b.as_raw())
+        .zip(c.as_raw())
+        .map(|((&x, &y), &z)| {
+            let (x, y, z) = (u8::from(x > 127), u8::from(y > 127), u8::from(z > 127));
+            ((x & y) | (x & z) | (y & z)) * 255
+        })
+        .collect();
+    GrayImage::from_raw(b.width(), b.height(), data).expect("the masks' size")
 }
 
 #[cfg(test)]
