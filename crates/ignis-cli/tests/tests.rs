@@ -2162,3 +2162,152 @@ mod loop_matte_dark_stretch {
         assert!(opaque.exists());
     }
 }
+
+/// `ignis eigen loop DB --range` on footage nobody tuned for (hfoot, brief 6): the flipbook
+/// scaled to the sheet limit as `ignis loop` scales it, a window whose matte keys out the
+/// fire refused, and the 3-frame voted matte in the footage render. The footage is a
+/// synthetic 64×48 PNG sequence (no ffmpeg needed): an orange flame, and on frame 10 alone
+/// a bright tongue above it (a mask that flares on one frame).
+mod eigen_db_footage {
+    use super::*;
+
+    /// Writes the sequence (`lit(i)`: frame `i` shows the flame) and trains a database on
+    /// it; returns the database path and the clip's name.
+    fn trained(dir: &Path, lit: &dyn Fn(usize) -> bool) -> (PathBuf, String) {
+        let frames = dir.join("frames");
+        std::fs::create_dir(&frames).unwrap();
+        for i in 0..60usize {
+            let (rx, ry) = (8.0 + (i % 5) as f32 * 0.4, 12.0 + (i % 3) as f32 * 0.5);
+            let img = image::RgbImage::from_fn(64, 48, |x, y| {
+                let d = ((x as f32 - 32.0) / rx).powi(2) + ((y as f32 - 34.0) / ry).powi(2);
+                let tongue = i == 10 && (30..35).contains(&x) && (4..24).contains(&y);
+                image::Rgb(match () {
+                    _ if tongue => [255, 200, 120],
+                    _ if lit(i) && d < 0.4 => [255, 230, 180],
+                    _ if lit(i) && d < 1.0 => [255, 150, 50],
+                    _ => [10, 8, 6],
+                })
+            });
+            img.save(frames.join(format!("f{i:04}.png"))).unwrap();
+        }
+        let db = dir.join("fire.db");
+        let pattern = frames.join("f%04d.png");
+        ignis_ok(&[
+            "eigen",
+            "train",
+            pattern.to_str().unwrap(),
+            "-q",
+            "-o",
+            db.to_str().unwrap(),
+        ]);
+        let info = ignis(&["eigen", "info", db.to_str().unwrap(), "--json"]);
+        let info: serde_json::Value = serde_json::from_slice(&info.stdout).unwrap();
+        (db, info["clips"][0]["name"].as_str().unwrap().to_string())
+    }
+
+    /// `ignis eigen loop DB --clip C EXTRA… -o OUT`.
+    fn eigen_loop(db: &Path, clip: &str, extra: &[&str], out: &Path) -> Output {
+        let mut a = vec!["eigen", "loop", db.to_str().unwrap(), "--clip", clip];
+        a.extend_from_slice(extra);
+        a.extend(["-o", out.to_str().unwrap()]);
+        ignis(&a)
+    }
+
+    #[test]
+    fn range_loop_flipbook_is_scaled_to_the_sheet_limit() {
+        let t = tempfile::tempdir().unwrap();
+        let (db, clip) = trained(t.path(), &|_| true);
+        let out = t.path().join("out");
+        std::fs::create_dir(&out).unwrap();
+        // About 40 cells of 64×48 do not fit a 200×200 sheet: scaled, as `ignis loop` does.
+        let png = out.join("fit.png");
+        let r = eigen_loop(&db, &clip, &["--range", "5..45", "--max-size", "200"], &png);
+        assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+        let m = read_json(&png.with_extension("json"));
+        let (fw, fh) = (
+            m["frame_width"].as_u64().unwrap(),
+            m["frame_height"].as_u64().unwrap(),
+        );
+        assert!(fw < 64 && fh < 48, "cells {fw}x{fh} not scaled");
+        assert_eq!(m["scaled_from"]["width"], 64);
+        assert_eq!(m["scaled_from"]["height"], 48);
+        assert_eq!(m["scaled_from"]["max_size"], 200);
+        let said = String::from_utf8_lossy(&r.stdout);
+        assert!(
+            said.contains(&format!("cells {fw}x{fh}, scaled from 64x48")),
+            "{said}"
+        );
+        let s = ignis_media::probe(&png).unwrap().size;
+        assert!(s.width <= 200 && s.height <= 200, "sheet {s}");
+        // An explicit --size that does not fit stays a clear error; nothing is written.
+        let before = files_in(&out);
+        let r = eigen_loop(
+            &db,
+            &clip,
+            &["--range", "5..45", "--max-size", "200", "--size", "64x48"],
+            &out.join("no.png"),
+        );
+        assert_fails(&r, "--size 64x48");
+        assert_eq!(files_in(&out), before);
+    }
+
+    #[test]
+    fn range_loop_of_keyed_out_frames_is_refused() {
+        let t = tempfile::tempdir().unwrap();
+        let (db, clip) = trained(t.path(), &|i| i < 25);
+        let png = t.path().join("dark.png");
+        let r = eigen_loop(&db, &clip, &["--range", "30..58"], &png);
+        assert_fails(&r, "would show frames of nothing");
+        assert_fails(&r, "--alpha opaque");
+        assert!(!png.exists() && !png.with_extension("json").exists());
+        // Part lit: the lit stretch is named, with the ranges to ask for.
+        let r = eigen_loop(&db, &clip, &["--range", "0..50"], &png);
+        assert_fails(&r, "source frames 0..25 (25 frames)");
+        assert_fails(&r, "--range 0..25");
+        assert!(!png.exists());
+        // Opaque footage loops as it is.
+        let r = eigen_loop(
+            &db,
+            &clip,
+            &["--range", "30..58", "--alpha", "opaque"],
+            &png,
+        );
+        assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+        assert!(png.exists());
+    }
+
+    #[test]
+    fn range_loop_matte_is_voted_over_three_frames() {
+        let t = tempfile::tempdir().unwrap();
+        let (db, clip) = trained(t.path(), &|_| true);
+        let seq = t.path().join("seq");
+        std::fs::create_dir(&seq).unwrap();
+        let pattern = seq.join("%04d.png");
+        let r = eigen_loop(&db, &clip, &["--range", "2..18", "--search", "0"], &pattern);
+        assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+        let names = files_in(&seq);
+        assert!(names.len() >= 16, "{names:?}");
+        // Mean alpha of the tongue's pixels and of the flame's core in output frame `j`
+        // (source frame 2 + j).
+        let alpha = |j: usize| {
+            let f = ignis_media::read_image(&seq.join(&names[j])).unwrap();
+            let mean = |xs: std::ops::Range<usize>, ys: std::ops::Range<usize>| {
+                let n = (xs.len() * ys.len()) as f32;
+                ys.flat_map(|y| xs.clone().map(move |x| (x, y)))
+                    .map(|(x, y)| f.data()[y * 64 + x][3])
+                    .sum::<f32>()
+                    / n
+            };
+            (mean(30..35, 6..20), mean(28..36, 30..38))
+        };
+        let (tongue, core) = alpha(8);
+        assert!(core > 0.95, "the flame is kept: {core}");
+        // The tongue is in frame 10's own mask alone: the vote keys it out as on its
+        // neighbours (only the feather's glow remains), instead of flashing in.
+        let (before, _) = alpha(7);
+        assert!(
+            tongue < 0.25 && tongue < before + 0.1,
+            "the one-frame flare shows: alpha {tongue} (frame before {before})"
+        );
+    }
+}

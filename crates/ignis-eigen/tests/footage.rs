@@ -240,16 +240,20 @@ fn wide_sheet_and_tall_flame_at_their_own_size() {
     for tf in [0, 7] {
         assert_no_flame_pixel_lost(&synthetic_frame(&wide, tf).unwrap(), &c.pose, p);
     }
-    // A database frame shows the source frame's grey where the flame is.
+    // A database frame shows the source frame's grey where the flame is: the frame
+    // pre-processed with its stored mask voted with its neighbours' (the render's matte).
     let (plan, _) = loop_plan(&db, "sheet", 1..11, Transition::Auto, 8, 0).unwrap();
-    let first = match &plan.frames[0].source {
-        ignis_eigen::transition::FrameRef::Db(r) => db.row_origin(*r).unwrap().1,
+    let (first, row) = match &plan.frames[0].source {
+        ignis_eigen::transition::FrameRef::Db(r) => (db.row_origin(*r).unwrap().1, *r),
         other => panic!("the loop starts with a database frame, not {other:?}"),
     };
     let src = synthetic_frame(&wide, first).unwrap();
-    let pr = preprocess_frame(&src, &c.pose, p);
+    let votes = ignis_eigen::animate::matte_vote_rows(&db, row)
+        .map(|r| db.source_mask(r).unwrap().expect("stored mask"));
+    let voted = ignis_eigen::mask::majority3(&votes[0], &votes[1], &votes[2]);
+    let pr = ignis_eigen::preprocess::source_grey_with_mask(&src, &voted, &c.pose, p);
     let diff: f32 = pr
-        .frame
+        .grey
         .data()
         .iter()
         .zip(frames[0].data())
@@ -845,5 +849,33 @@ fn still_lights_on_the_dev_clips() {
                 "{s:?}"
             );
         }
+    }
+}
+
+/// The rows whose masks vote on a row's matte: its neighbours inside its own clip when the
+/// clip holds consecutive source frames (the clip's ends vote with themselves, a vote
+/// never reaches into the next clip); a clip trained with a stride has its own mask alone.
+#[test]
+fn matte_votes_stay_inside_consecutive_frames_of_one_clip() {
+    use ignis_eigen::animate::matte_vote_rows;
+    let t = tempfile::tempdir().unwrap();
+    let mut strided = ClipSpec::new("b");
+    strided.stride = 2;
+    let clips = [
+        input("a", synth(FlameStyle::Candle, 48, 64, 6)),
+        ClipInput::new(
+            strided,
+            SyntheticFootage::new(synth(FlameStyle::Candle, 48, 64, 10), 30.0),
+        ),
+    ];
+    let db = train_db(t.path(), &clips);
+    let (a, b) = (db.clip("a").unwrap().clone(), db.clip("b").unwrap().clone());
+    assert_eq!((a.frames, b.stride), (6, 2));
+    let a0 = a.first_row;
+    assert_eq!(matte_vote_rows(&db, a0), [a0, a0, a0 + 1]);
+    assert_eq!(matte_vote_rows(&db, a0 + 3), [a0 + 2, a0 + 3, a0 + 4]);
+    assert_eq!(matte_vote_rows(&db, a0 + 5), [a0 + 4, a0 + 5, a0 + 5]);
+    for r in b.first_row..b.first_row + b.frames {
+        assert_eq!(matte_vote_rows(&db, r), [r; 3], "strided row {r}");
     }
 }

@@ -58,9 +58,8 @@ pub fn write_plan_chunk(
     out: &crate::output::OutputArgs,
     g: &Global,
 ) -> Result<Size> {
-    let opts = footage.options()?;
+    let mut opts = footage.options()?;
     let mut sources = footage.sources(db)?;
-    let size = opts.size.unwrap_or_else(|| render::output_size(db, plan));
     let n = plan.frames.len();
     let (sub, emit) = match &chunk {
         Some(r) if *r != (0..n) => {
@@ -74,6 +73,7 @@ pub fn write_plan_chunk(
         wopts.loop_ = false;
         wopts.first_frame = r.start as u64;
     }
+    let size = fit_plan_size(db, plan, &emit, &mut opts, &mut wopts, out, g)?;
     let mut w = out.create_with(size, &wopts)?;
     let bar = g.progress(emit.iter().filter(|&&e| e).count() as u64, "rendering");
     let mut at = 0usize;
@@ -94,6 +94,39 @@ pub fn write_plan_chunk(
     bar.finish_and_clear();
     out.finish(w, g)?;
     Ok(size)
+}
+
+/// The frame size to render `plan` at, settled before anything is rendered: the user's
+/// `--size` (a flipbook it does not fit is refused here, with the fix), else the source
+/// clip's own size — for a flipbook whose full-size cells do not fit the sheet limit,
+/// scaled down as `ignis loop` scales ([`crate::output::OutputArgs::fit_flipbook`]: the
+/// note printed, `scaled_from` in the JSON, `opts.size` set to the cells). A chunk's frames
+/// are sized for the whole plan, so they are the full render's frames; an explicit size
+/// is checked against the frames the writer gets (`emit`).
+fn fit_plan_size(
+    db: &EigenfireDb,
+    plan: &Plan,
+    emit: &[bool],
+    opts: &mut render::RenderOptions,
+    wopts: &mut ignis_media::WriteOptions,
+    out: &crate::output::OutputArgs,
+    g: &Global,
+) -> Result<Size> {
+    let (size, explicit) = match opts.size {
+        Some(s) => (s, true),
+        None => (render::output_size(db, plan), false),
+    };
+    let n = if explicit {
+        emit.iter().filter(|&&e| e).count()
+    } else {
+        plan.frames.len()
+    };
+    let fitted = out.fit_flipbook(n, size, explicit, wopts)?;
+    if let Some(note) = fitted.note() {
+        g.say(note);
+        opts.size = Some(fitted.size);
+    }
+    Ok(fitted.size)
 }
 
 /// `--chunk A..B` checked against a plan of `n` frames.

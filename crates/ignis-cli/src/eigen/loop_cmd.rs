@@ -545,41 +545,95 @@ fn search_lit(
         }
     }
     if out.is_empty() {
-        bail!("{}", keyed_out_message(&runs, n, first, p.length, need));
+        let ask = Keyed::Length {
+            length: p.length,
+            need,
+        };
+        bail!("{}", keyed_out_message(&runs, n, &|i| first + i, ask));
     }
     Ok(out)
 }
 
-/// Why no matted loop fits: where the fire is, and what to ask instead.
+/// What a matted loop that would show frames of nothing was asked for.
+#[derive(Clone, Copy)]
+enum Keyed {
+    /// A loop of about `length` frames searched for (`--length`), which needs `need`
+    /// consecutive frames with fire.
+    Length { length: usize, need: usize },
+    /// The loop of exactly the window (`eigen loop --range` without `--length`).
+    Range,
+}
+
+/// Why no matted loop fits: where the fire is (`runs`, the stretches with fire among the
+/// window's `n` frames; `src` turns a window index into a source frame number), and what
+/// to ask instead.
 fn keyed_out_message(
     runs: &[Range<usize>],
     n: usize,
-    first: usize,
-    length: usize,
-    need: usize,
+    src: &dyn Fn(usize) -> usize,
+    ask: Keyed,
 ) -> String {
     let dark = n - runs.iter().map(|r| r.len()).sum::<usize>();
+    let what = match ask {
+        Keyed::Length { length, need } => format!(
+            "a loop of about {length} frames (it needs {need} consecutive frames with fire)"
+        ),
+        Keyed::Range => "the loop of exactly this range".to_string(),
+    };
+    // Source frames first..end of window indices r.
+    let span = |r: &Range<usize>| (src(r.start), src(r.end - 1) + 1);
+    let (w0, w1) = span(&(0..n.max(1)));
     let head = format!(
-        "the matte keys out all the fire in {dark} of the window's {n} frames (source frames {first}..{}), \
-         so a loop of about {length} frames (it needs {need} consecutive frames with fire) would show frames of nothing",
-        first + n
+        "the matte keys out all the fire in {dark} of the window's {n} frames (source frames {w0}..{w1}), \
+         so {what} would show frames of nothing"
     );
     match runs.iter().max_by_key(|r| (r.len(), std::cmp::Reverse(r.start))) {
-        Some(r) => format!(
-            "{head}; the longest stretch with fire is source frames {}..{} ({} frames): {}, \
-             or give --alpha opaque to loop the footage as it is",
-            first + r.start,
-            first + r.end,
-            r.len(),
-            match longest_length(r.len()) {
-                Some(l) => format!("ask for --length {l} or less there (--range {}..{})", first + r.start, first + r.end),
-                None => "too short for any loop; choose a --range where the fire burns longer".to_string(),
-            }
-        ),
+        Some(r) => {
+            let (a, b) = span(r);
+            let fix = match (ask, longest_length(r.len())) {
+                (Keyed::Range, Some(l)) => format!(
+                    "loop it with --range {a}..{b}, or search it with --range {a}..{b} --length {l} or less"
+                ),
+                (Keyed::Length { .. }, Some(l)) => {
+                    format!("ask for --length {l} or less there (--range {a}..{b})")
+                }
+                (_, None) => {
+                    "too short for any loop; choose a --range where the fire burns longer".to_string()
+                }
+            };
+            format!(
+                "{head}; the longest stretch with fire is source frames {a}..{b} ({} frames): {fix}, \
+                 or give --alpha opaque to loop the footage as it is",
+                r.len()
+            )
+        }
         None => format!(
             "{head}; no frame of it shows fire: choose a --range where the fire burns, or give --alpha opaque to loop the footage as it is"
         ),
     }
+}
+
+/// Refuses the matted loop of exactly the database rows `rows` (`eigen loop --range`)
+/// when the matte keys out all the fire of any of their frames — the loop would blink to
+/// nothing there every cycle —, naming the stretches with fire (source frame of row `r`:
+/// `src(r - rows.start)`) as `ignis loop` does. Databases that store no masks (made anew
+/// at render) are not checked.
+pub fn refuse_keyed_out_range(
+    db: &EigenfireDb,
+    rows: Range<usize>,
+    src: &dyn Fn(usize) -> usize,
+) -> Result<()> {
+    if rows.is_empty() || db.source_mask(rows.start)?.is_none() {
+        return Ok(());
+    }
+    let lit = FootageMatte::new(db, rows.start, rows.len()).lit()?;
+    if lit.iter().all(|&l| l) {
+        return Ok(());
+    }
+    bail!(
+        "{}",
+        keyed_out_message(&lit_runs(&lit), lit.len(), src, Keyed::Range)
+    )
 }
 
 /// The best closing of each of the first `top` distinct candidates, in rank order.
@@ -791,18 +845,19 @@ pub const ALPHA_CHOICES: [&str; 2] = ["matte", "opaque"];
 
 /// The alpha of a loop's frames: each window frame's pre-processing mask (stored by
 /// training at the source size, in the source's own framing), steadied over time by a
-/// majority vote with its two neighbours in the footage (a pixel is in when it is in at
-/// least two of the three masks, so a mask that collapses or flares on a single frame does
-/// not flash in the loop), feathered as the footage render feathers database frames
-/// (`ignis_eigen::preprocess::feather_half_in`) and resized to the output. The colour
-/// stays the footage's own (straight alpha), so formats without alpha (MP4, GIF) show the
-/// flame over black and a flipbook keys it out.
+/// majority vote with its two neighbours in the footage (`ignis_eigen::mask::majority3`
+/// over `ignis_eigen::animate::matte_vote_rows`, the vote the footage render of `eigen
+/// loop --range` and `eigen animate` makes: a mask that collapses or flares on a single
+/// frame does not flash in the loop), feathered as the footage render feathers database
+/// frames (`ignis_eigen::preprocess::feather_half_in`) and resized to the output. The
+/// colour stays the footage's own (straight alpha), so formats without alpha (MP4, GIF)
+/// show the flame over black and a flipbook keys it out.
 #[derive(Clone, Copy)]
 pub struct FootageMatte<'a> {
     db: &'a EigenfireDb,
     /// Database row of window frame 0.
     first_row: usize,
-    /// Window frames (the vote's neighbours stay inside them).
+    /// Window frames.
     frames: usize,
 }
 
@@ -815,8 +870,8 @@ impl<'a> FootageMatte<'a> {
         }
     }
 
-    fn mask(&self, i: usize) -> Result<image::GrayImage> {
-        let row = self.first_row + i;
+    /// The stored mask of database row `row`.
+    fn mask(&self, row: usize) -> Result<image::GrayImage> {
         self.db
             .source_mask(row)
             .context("reading the pre-processing masks for the matte (--alpha opaque loops without them)")?
@@ -827,12 +882,19 @@ impl<'a> FootageMatte<'a> {
         })
     }
 
+    /// The rows whose masks vote on window frame `i` (see `matte_vote_rows`).
+    fn votes(&self, i: usize) -> [usize; 3] {
+        ignis_eigen::animate::matte_vote_rows(
+            self.db,
+            self.first_row + i.min(self.frames.max(1) - 1),
+        )
+    }
+
     /// The matte of window frame `i` at `size`; `cache` keeps the last few decoded masks,
     /// so frames rendered in order decode each mask once, not once per vote.
     pub fn at(&self, i: usize, size: Size, cache: &mut MaskCache) -> Result<GrayFrame> {
-        let last = self.frames.max(1) - 1;
-        let (a, b, c) = (i.saturating_sub(1), i.min(last), (i + 1).min(last));
-        for j in [a, b, c] {
+        let rows = self.votes(i);
+        for j in rows {
             if !cache.0.iter().any(|(k, _)| *k == j) {
                 let m = self.mask(j)?;
                 if cache.0.len() == 4 {
@@ -849,12 +911,58 @@ impl<'a> FootageMatte<'a> {
                 .expect("just cached")
                 .1
         };
-        let m = voted_feather(get(a), get(b), get(c));
+        let m = voted_feather(get(rows[0]), get(rows[1]), get(rows[2]));
         Ok(if m.size() == size {
             m
         } else {
             ignis_eigen::pose::resize(&m, size)
         })
+    }
+
+    /// The voted masks (unfeathered, at the source size) of window frames `r`, each
+    /// stored mask decoded once.
+    fn voted_run(&self, r: Range<usize>) -> Result<Vec<image::GrayImage>> {
+        let votes: Vec<[usize; 3]> = r.map(|i| self.votes(i)).collect();
+        let mut rows: Vec<usize> = votes.iter().flatten().copied().collect();
+        rows.sort_unstable();
+        rows.dedup();
+        let masks = rows
+            .iter()
+            .map(|&j| self.mask(j))
+            .collect::<Result<Vec<_>>>()?;
+        let at = |j: usize| &masks[rows.binary_search(&j).expect("decoded")];
+        Ok(votes
+            .iter()
+            .map(|v| ignis_eigen::mask::majority3(at(v[0]), at(v[1]), at(v[2])))
+            .collect())
+    }
+
+    /// `f` on the voted mask of each of the first `n` window frames, in order; runs of 16
+    /// frames done in parallel.
+    fn by_runs<T: Send>(
+        &self,
+        n: usize,
+        f: impl Fn(usize, image::GrayImage) -> T + Sync,
+    ) -> Result<Vec<T>> {
+        use rayon::prelude::*;
+        const RUN: usize = 16;
+        if n > self.frames {
+            bail!("{n} frames asked of a matte of {} frames", self.frames);
+        }
+        let runs: Vec<Range<usize>> = (0..n).step_by(RUN).map(|s| s..(s + RUN).min(n)).collect();
+        let parts: Vec<Vec<T>> = runs
+            .into_par_iter()
+            .map(|r| {
+                let s = r.start;
+                let voted = self.voted_run(r)?;
+                Ok(voted
+                    .into_iter()
+                    .enumerate()
+                    .map(|(j, m)| f(s + j, m))
+                    .collect())
+            })
+            .collect::<Result<_>>()?;
+        Ok(parts.into_iter().flatten().collect())
     }
 
     /// The window's metric frames as the matted loop will show them: each multiplied by
@@ -863,35 +971,24 @@ impl<'a> FootageMatte<'a> {
     /// it writes, the feather's band of lit surroundings included. Runs of frames are
     /// done in parallel, each mask decoded once per run.
     pub fn matted_metric(&self, metric: &[GrayFrame]) -> Result<Vec<GrayFrame>> {
-        use rayon::prelude::*;
-        const RUN: usize = 16;
-        let n = metric.len();
-        if n > self.frames {
-            bail!("{n} metric frames for a matte of {} frames", self.frames);
-        }
-        let last = self.frames.max(1) - 1;
-        let runs: Vec<Range<usize>> = (0..n).step_by(RUN).map(|s| s..(s + RUN).min(n)).collect();
-        let parts: Vec<Vec<GrayFrame>> = runs
-            .into_par_iter()
-            .map(|r| {
-                let lo = r.start.saturating_sub(1);
-                let masks = (lo..=r.end.min(last))
-                    .map(|j| self.mask(j))
-                    .collect::<Result<Vec<_>>>()?;
-                let at = |j: usize| &masks[j.min(last) - lo];
-                Ok(r.map(|i| {
-                    let full = voted_feather(at(i.saturating_sub(1)), at(i), at(i + 1));
-                    let soft = ignis_core::loopq::area_resize(&full, metric[i].size());
-                    let mut out = metric[i].clone();
-                    for (o, &a) in out.data_mut().iter_mut().zip(soft.data()) {
-                        *o *= a;
-                    }
-                    out
-                })
-                .collect())
-            })
-            .collect::<Result<_>>()?;
-        Ok(parts.into_iter().flatten().collect())
+        self.by_runs(metric.len(), |i, mask| {
+            let full =
+                ignis_eigen::preprocess::feather_half_in(&mask, mask.width().max(mask.height())).0;
+            let soft = ignis_core::loopq::area_resize(&full, metric[i].size());
+            let mut out = metric[i].clone();
+            for (o, &a) in out.data_mut().iter_mut().zip(soft.data()) {
+                *o *= a;
+            }
+            out
+        })
+    }
+
+    /// Per window frame: does its voted mask keep any pixel (is any fire left in the
+    /// matte)? What the footage render's matte shows, without decoding the footage.
+    pub fn lit(&self) -> Result<Vec<bool>> {
+        self.by_runs(self.frames, |_, mask| {
+            ignis_eigen::mask::mask_area(&mask) > 0
+        })
     }
 
     /// Sets `f`'s alpha to the matte of window frame `i` (see [`FootageMatte::at`]).
@@ -904,25 +1001,16 @@ impl<'a> FootageMatte<'a> {
     }
 }
 
-/// The last few masks [`FootageMatte::at`] decoded, by window frame.
+/// The last few masks [`FootageMatte::at`] decoded, by database row.
 #[derive(Default)]
 pub struct MaskCache(Vec<(usize, image::GrayImage)>);
 
 /// The matte of a frame from its own mask `b` and its neighbours' `a`, `c`: their
-/// [`majority`], feathered as the footage render feathers database frames.
+/// majority (`ignis_eigen::mask::majority3`), feathered as the footage render feathers
+/// database frames.
 fn voted_feather(a: &image::GrayImage, b: &image::GrayImage, c: &image::GrayImage) -> GrayFrame {
-    let mask = majority(a, b, c);
+    let mask = ignis_eigen::mask::majority3(a, b, c);
     ignis_eigen::preprocess::feather_half_in(&mask, mask.width().max(mask.height())).0
-}
-
-/// Per pixel, 255 where at least two of the three binary masks are set (0 elsewhere).
-fn majority(a: &image::GrayImage, b: &image::GrayImage, c: &image::GrayImage) -> image::GrayImage {
-    let mut out = b.clone();
-    for ((o, &x), &z) in out.iter_mut().zip(a.iter()).zip(c.iter()) {
-        let votes = u8::from(x > 127) + u8::from(*o > 127) + u8::from(z > 127);
-        *o = if votes >= 2 { 255 } else { 0 };
-    }
-    out
 }
 
 /// What loop to make: about `length` frames, closed by `method`; the best `top`
@@ -1487,10 +1575,13 @@ mod tests {
             image::Luma([if x < 2 && y < 2 { 255 } else { 0 }])
         });
         let flared = image::GrayImage::from_pixel(8, 6, image::Luma([255]));
-        assert_eq!(majority(&full, &collapsed, &full), full);
-        assert_eq!(majority(&full, &flared, &full), full);
-        assert_eq!(majority(&collapsed, &full, &collapsed), collapsed);
-        assert_eq!(majority(&full, &full, &flared), full);
+        assert_eq!(ignis_eigen::mask::majority3(&full, &collapsed, &full), full);
+        assert_eq!(ignis_eigen::mask::majority3(&full, &flared, &full), full);
+        assert_eq!(
+            ignis_eigen::mask::majority3(&collapsed, &full, &collapsed),
+            collapsed
+        );
+        assert_eq!(ignis_eigen::mask::majority3(&full, &full, &flared), full);
     }
 
     /// A damaged cache entry is detected and rebuilt; a good one is reused.

@@ -650,6 +650,12 @@ fn loop_cmd(a: &LoopArgs, g: &Global) -> Result<ignis_eigen::transition::Join> {
     let range = a.range.clone().context(
         "give --range START..END (loop exactly that range) or --length (search for a loop)",
     )?;
+    if look.matte {
+        let c = db.clip(&a.clip)?;
+        let rows = animate::clip_rows(&db, &a.clip, range.clone())?;
+        let (first, stride) = (c.start + (rows.start - c.first_row) * c.stride, c.stride);
+        crate::eigen::loop_cmd::refuse_keyed_out_range(&db, rows, &|i| first + i * stride)?;
+    }
     let sp = g.spinner("finding the transition");
     let (plan, report) = render::loop_plan(&db, &a.clip, range.clone(), method, e, a.search)
         .with_context(|| {

@@ -71,6 +71,26 @@ pub fn recognition_params(db: &EigenfireDb) -> RecognitionParams {
     }
 }
 
+/// The database rows whose stored pre-processing masks vote on row `row`'s matte
+/// ([`crate::mask::majority3`]): the row before, the row, the row after — when they are
+/// consecutive source frames of the row's clip (trained with stride 1); at the clip's ends
+/// the row itself stands in for the missing neighbour (its own mask wins the vote). A
+/// clip trained with a stride, or a row outside every clip, has its own mask alone
+/// (`[row; 3]`): frames a stride apart are not the same moment of the flame.
+pub fn matte_vote_rows(db: &EigenfireDb, row: usize) -> [usize; 3] {
+    match db.row_origin(row) {
+        Some((c, _)) if c.stride == 1 && c.frames > 0 => {
+            let last = c.first_row + c.frames - 1;
+            [
+                row.saturating_sub(1).max(c.first_row),
+                row,
+                (row + 1).min(last),
+            ]
+        }
+        _ => [row; 3],
+    }
+}
+
 /// Training rows of clip `clip` whose source frame lies in `range` (source frame numbers).
 pub fn clip_rows(db: &EigenfireDb, clip: &str, range: Range<usize>) -> Result<Range<usize>> {
     let c = db.clip(clip)?;

@@ -868,8 +868,46 @@ pub fn mask_area(mask: &GrayImage) -> usize {
         .sum()
 }
 
+/// A mask steadied over time: per pixel 255 where at least two of the three binary masks
+/// `a`, `b`, `c` (a frame's own `b` and its neighbours in the footage) are set, 0
+/// elsewhere — a mask that collapses or flares on one frame alone takes its neighbours'
+/// shape. Masks of different sizes do not vote: `b` is returned as it is.
+pub fn majority3(a: &GrayImage, b: &GrayImage, c: &GrayImage) -> GrayImage {
+    if a.dimensions() != b.dimensions() || c.dimensions() != b.dimensions() {
+        return b.clone();
+    }
+    // Branch-free per byte (vectorised): majority of three bits = (x∧y) ∨ (x∧z) ∨ (y∧z).
+    let data = a
+        .as_raw()
+        .iter()
+        .zip(b.as_raw())
+        .zip(c.as_raw())
+        .map(|((&x, &y), &z)| {
+            let (x, y, z) = (u8::from(x > 127), u8::from(y > 127), u8::from(z > 127));
+            ((x & y) | (x & z) | (y & z)) * 255
+        })
+        .collect();
+    GrayImage::from_raw(b.width(), b.height(), data).expect("the masks' size")
+}
+
 #[cfg(test)]
 mod tests {
+
+    /// Two of three votes keep a pixel: a mask that collapses or flares on one frame takes
+    /// its neighbours' shape; masks of another size do not vote.
+    #[test]
+    fn majority3_keeps_what_two_of_three_masks_agree_on() {
+        let full = GrayImage::from_fn(8, 6, |x, _| image::Luma([if x < 6 { 255 } else { 0 }]));
+        let collapsed = GrayImage::from_fn(8, 6, |x, y| {
+            image::Luma([if x < 2 && y < 2 { 255 } else { 0 }])
+        });
+        let flared = GrayImage::from_pixel(8, 6, image::Luma([255]));
+        assert_eq!(majority3(&full, &collapsed, &full), full);
+        assert_eq!(majority3(&full, &flared, &full), full);
+        assert_eq!(majority3(&collapsed, &full, &collapsed), collapsed);
+        let other = GrayImage::from_pixel(4, 4, image::Luma([0]));
+        assert_eq!(majority3(&other, &collapsed, &other), collapsed);
+    }
 
     /// Issue 18 defect 5: a zero low threshold is refused; the smallest accepted one runs.
     #[test]
