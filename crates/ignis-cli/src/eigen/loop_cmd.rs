@@ -1198,6 +1198,19 @@ pub fn run(a: &Args, g: &Global) -> Result<()> {
     }
     let d = make_loop_sized(&src, &ask, a.size, &a.out, g)?;
     report(&d, window.start, g);
+    if a.alpha != "opaque" {
+        if let Some(clip) = c.db.manifest().clips.first() {
+            let n = clip.pose.still_lights.boxes().len();
+            if n > 0 {
+                g.say(format!(
+                    "matte: {n} still light(s) left out (bright and steady all clip long, away from \
+                     the fire: a lamp, a lit window; `ignis eigen info {}` lists them); \
+                     --alpha opaque writes the whole frame",
+                    c.dir.join("fire.db").display()
+                ));
+            }
+        }
+    }
     Ok(())
 }
 
