@@ -24,6 +24,8 @@
 //! normalised intensity gain is not part of the state (as in the paper's 26 parameters),
 //! so per-frame brightness flicker lives only in the eigenflame weights.
 
+mod avx2;
+
 use crate::error::{LearnedError, Result};
 use crate::moments::{Moments, Pose};
 use crate::spline::natural_cubic;
@@ -524,6 +526,8 @@ pub struct Placement {
 pub struct RenderScratch {
     path: Vec<f32>,
     width_inv: Vec<f32>,
+    /// The normalised image with a border of zeros ([`render_mapped_into`]).
+    padded: Vec<f32>,
 }
 
 /// Renders a normalised image back into `out` (§3.1 reversed): the flame of `shape`,
@@ -616,6 +620,163 @@ pub(crate) fn render_scaled_into(
             let bot = at(ir + 1, ic) * (1.0 - tx) + at(ir + 1, ic + 1) * tx;
             *o = (top * (1.0 - ty) + bot * ty).max(0.0);
         }
+    }
+}
+
+/// How [`render_encoded_into`] turns a rendered value into what a writer shows: scaled by
+/// `exposure`, clamped to `0..=1` and sRGB-encoded through `lut` (`lut.len() − 1` equal
+/// intervals, linear between them; at least one).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Encoding<'a> {
+    pub exposure: f32,
+    pub lut: &'a [f32],
+}
+
+impl Encoding<'_> {
+    /// One value, encoded.
+    #[inline]
+    pub(crate) fn apply(&self, v: f32) -> f32 {
+        let v = if self.exposure != 1.0 {
+            v * self.exposure
+        } else {
+            v
+        };
+        if v <= 0.0 {
+            return 0.0;
+        }
+        let steps = self.lut.len() - 1;
+        let x = v.min(1.0) * steps as f32;
+        let i = (x as usize).min(steps - 1);
+        self.lut[i] + (self.lut[i + 1] - self.lut[i]) * (x - i as f32)
+    }
+}
+
+/// One output row's sampling of the normalised image for [`render_encoded_into`]: pixel
+/// `x` sits at normalised row `rr0 + drr·x` and across-axis position `u0 + du·x`.
+#[derive(Clone, Copy, Debug)]
+struct RowSampling {
+    rr0: f32,
+    drr: f32,
+    u0: f32,
+    du: f32,
+    kc: f32,
+    c_off: f32,
+    ns: usize,
+}
+
+/// As [`render_scaled_into`] into `out` (`w × h` values, row-major), then exposed and
+/// encoded by `enc` ([`Encoding::apply`]): the same values as those two steps, in less
+/// time per lit pixel (the loop timing's many small grey renders cover mostly lit pixels,
+/// where the general renderer spends ≈ 10 ns a pixel). The bilinear lookup reads a copy
+/// of the normalised image with a border of zeros instead of checking bounds, and rows
+/// go eight pixels at a time with AVX2 where the CPU has it ([`avx2`], equal lane by lane).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn render_encoded_into(
+    normalised: &[f32],
+    shape: &Shape,
+    place: &Placement,
+    p: &ShapeParams,
+    scratch: &mut RenderScratch,
+    frame_height: f64,
+    (w, h): (usize, usize),
+    enc: Encoding,
+    out: &mut [f32],
+) {
+    let ns = p.norm_size as usize;
+    debug_assert_eq!(normalised.len(), ns * ns);
+    debug_assert_eq!(out.len(), w * h);
+    assert!(enc.lut.len() >= 2, "an sRGB table of at least one interval");
+    let (path_r, width_r) = row_profiles(shape, p);
+    scratch.path.clear();
+    scratch.path.extend(path_r.iter().map(|&v| v as f32));
+    scratch.width_inv.clear();
+    scratch
+        .width_inv
+        .extend(width_r.iter().map(|&w| (1.0 / w) as f32));
+    let stride = ns + 2;
+    scratch.padded.clear();
+    scratch.padded.resize(stride * stride, 0.0);
+    for (dst, src) in scratch.padded[stride..]
+        .chunks_exact_mut(stride)
+        .zip(normalised.chunks_exact(ns))
+    {
+        dst[1..=ns].copy_from_slice(src);
+    }
+    let sv = (shape.height * frame_height).max(1e-3);
+    let (upx, upy) = (place.tilt.sin(), -place.tilt.cos());
+    let (rx, ry) = (place.tilt.cos(), place.tilt.sin());
+    let kr = ns as f64 / (p.above + p.below);
+    let kc = (ns as f64 / (2.0 * p.half_width)) as f32;
+    let c_off = (p.half_width * ns as f64 / (2.0 * p.half_width)) as f32 - 0.5;
+    let simd = avx2::available();
+    for (y, row) in out.chunks_exact_mut(w.max(1)).enumerate().take(h) {
+        let dy = (y as f64 + 0.5 - place.cy) / sv;
+        let dx0 = (0.5 - place.cx) / sv;
+        let v0 = (dx0 * upx + dy * upy) as f32;
+        let dv = (upx / sv) as f32;
+        let rs = RowSampling {
+            rr0: ((p.above - v0 as f64) * kr - 0.5) as f32,
+            drr: -(dv as f64 * kr) as f32,
+            u0: (dx0 * rx + dy * ry) as f32,
+            du: (rx / sv) as f32,
+            kc,
+            c_off,
+            ns,
+        };
+        let done = if simd {
+            // SAFETY: `available` checked that the CPU has AVX2.
+            unsafe { avx2::row(&rs, scratch, enc, row) }
+        } else {
+            0
+        };
+        for (x, o) in row.iter_mut().enumerate().skip(done) {
+            *o = enc.apply(sample(&rs, scratch, x));
+        }
+    }
+}
+
+/// The renderer's value of pixel `x` of the row `rs` (as [`render_scaled_into`] computes
+/// it, before exposure), from the tables [`render_encoded_into`] filled in `scratch`.
+#[inline]
+fn sample(rs: &RowSampling, scratch: &RenderScratch, x: usize) -> f32 {
+    let (ns, nsf) = (rs.ns, rs.ns as f32);
+    let xf = x as f32;
+    let rr = rs.rr0 + rs.drr * xf;
+    if !(rr > -1.0 && rr < nsf) {
+        return 0.0;
+    }
+    let u = rs.u0 + rs.du * xf;
+    let rc = rr.clamp(0.0, nsf - 1.0);
+    let r0 = rc as usize;
+    let r1 = (r0 + 1).min(ns - 1);
+    let t = rc - r0 as f32;
+    let (path, winv) = (&scratch.path, &scratch.width_inv);
+    let pth = path[r0] + (path[r1] - path[r0]) * t;
+    let wi = winv[r0] + (winv[r1] - winv[r0]) * t;
+    let cc = (u - pth) * wi * rs.kc + rs.c_off;
+    if !(cc > -1.0 && cc < nsf) {
+        return 0.0;
+    }
+    let (fr, fc) = (floor_in_range(rr), floor_in_range(cc));
+    let (ty, tx) = (rr - fr, cc - fc);
+    // fr, fc ∈ −1..ns−1: the padded image's rows and columns fr + 1 ..= fr + 2
+    let stride = ns + 2;
+    let at = (fr as isize + 1) as usize * stride + (fc as isize + 1) as usize;
+    let pad = &scratch.padded;
+    let top = pad[at] * (1.0 - tx) + pad[at + 1] * tx;
+    let bot = pad[at + stride] * (1.0 - tx) + pad[at + stride + 1] * tx;
+    (top * (1.0 - ty) + bot * ty).max(0.0)
+}
+
+/// `x.floor()` for `x` in `−2³¹..2³¹` (the renderer's coordinates lie in `−1..norm_size`),
+/// without the library call: the same value except that `−0.0` gives `0.0`.
+#[inline]
+fn floor_in_range(x: f32) -> f32 {
+    let t = x as i32 as f32;
+    if t > x {
+        t - 1.0
+    } else {
+        t
     }
 }
 

@@ -40,6 +40,7 @@ use super::Synthesiser;
 use ignis_core::loopq::{arc_times, metric_size};
 use ignis_core::palette::linear_to_srgb;
 use ignis_core::{GrayFrame, Size};
+fn tcpu() -> f64 { let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 }; unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut ts) }; ts.tv_sec as f64 + ts.tv_nsec as f64 * 1e-9 } // TEMP
 
 /// The most preview states per output frame ([`Synthesiser::preview_grid`]): the walk
 /// places frames between them on pixel blends of neighbouring previews, which stand in for
@@ -106,8 +107,10 @@ impl Synthesiser<'_> {
             // too long a loop to preview within the memory bound: even times
             return (0..n).map(|k| k as f64 * steps / n as f64).collect();
         }
+        let t0 = tcpu(); // TEMP
         let [small, metric] = self.loop_canvases([small, metric]);
         let (grid, times) = self.preview_grid(&small);
+        let t1 = tcpu(); // TEMP
         let m = grid.len();
         let mut arc = vec![0.0];
         for j in 0..m {
@@ -121,7 +124,29 @@ impl Synthesiser<'_> {
                 .collect()
         });
         let mut tau: Vec<f64> = pos.iter().map(|&p| time_at(&times, steps, p)).collect();
+        let t2 = tcpu(); // TEMP
+        if std::env::var("LT_MICRO").is_ok() { // TEMP
+            let lit = self.loop_lit();
+            let mc = &metric;
+            for (name, cv) in [("small", small), ("metric", *mc)] {
+                self.set_loop_state(7.3);
+                let mut fr = cv.frame();
+                let a = tcpu();
+                for _ in 0..5000 { self.render_window(3.0, cv.size, cv.origin, &mut fr); std::hint::black_box(encode(&fr)); }
+                let b = tcpu();
+                let mut o = Vec::new();
+                for _ in 0..5000 { self.render_encoded(3.0, &cv, &mut o); std::hint::black_box(&o); }
+                let c = tcpu();
+                for _ in 0..5000 { self.render_encoded(3.0, &Canvas{w:1,h:1,..cv}, &mut o); std::hint::black_box(&o); }
+                let d = tcpu();
+                let px = (cv.w * cv.h) as f64;
+                eprintln!("TEMP {name} {}x{} old {:.2} us new {:.2} us fixed {:.2} us; old {:.2} ns/px new {:.2} ns/px", cv.w, cv.h, (b-a)/5e-3, (c-b)/5e-3, (d-c)/5e-3, (b-a-(d-c))/5e-6/px, (c-b-(d-c))/5e-6/px);
+            }
+            let _ = lit;
+        }
         self.even_out(&mut tau, metric);
+        let t3 = tcpu(); // TEMP
+        if std::env::var("LT_TIMES").is_ok() { eprintln!("TEMP previews {:.4} walk {:.4} even {:.4} grid {} lit {:?} e {}", t1-t0, t2-t1, t3-t2, grid.len(), self.loop_lit(), self.model.pca.components.ncols()); } // TEMP
         tau
     }
 
@@ -217,8 +242,43 @@ impl Synthesiser<'_> {
         let steps = self.looped.as_ref().map_or(0, |s| s.len()) as f64;
         self.set_loop_state(tau);
         let at = tau * f64::from(self.loop_frames) / steps;
-        self.render_window(at, canvas.size, canvas.origin, frame);
-        encode(frame)
+        let mut out = Vec::new();
+        self.render_encoded(at, canvas, &mut out);
+        out
+    }
+
+    /// Renders `raw` (the controls at output frame `at`) within `canvas`'s window of its
+    /// frame into `out`, exposed and encoded as [`encode`] does: the same values as
+    /// [`Self::render_window`] then [`encode`], by the renderer's faster path for small
+    /// grey renders ([`crate::shape::render_mapped_into`]).
+    fn render_encoded(&mut self, at: f64, canvas: &Canvas, out: &mut Vec<f32>) {
+        self.apply_controls(at);
+        let mut place = self.place(canvas.size);
+        place.cx -= f64::from(canvas.origin.0);
+        place.cy -= f64::from(canvas.origin.1);
+        let (shape, w) = self.model.split(&self.shown);
+        self.normalised.resize(self.model.pca.n_pixels(), 0.0);
+        self.model
+            .pca
+            .reconstruct_into(&w, w.len(), &mut self.normalised);
+        let (cw, ch) = (canvas.w as usize, canvas.h as usize);
+        out.clear();
+        out.resize(cw * ch, 0.0);
+        let enc = crate::shape::Encoding {
+            exposure: self.exposure,
+            lut: srgb_lut(),
+        };
+        crate::shape::render_encoded_into(
+            &self.normalised,
+            &shape,
+            &place,
+            &self.model.shape,
+            &mut self.scratch,
+            f64::from(canvas.size.height),
+            (cw, ch),
+            enc,
+            out,
+        );
     }
 
     /// The loop's state at process time `tau` rendered at `canvas`'s frame size within
@@ -230,9 +290,8 @@ impl Synthesiser<'_> {
         let at = tau * f64::from(self.loop_frames) / steps;
         let [b] = self.raw_boxes(at, lit, [canvas.size]);
         let window = Canvas::covering(canvas.size, b);
-        let mut frame = window.frame();
-        self.render_window(at, window.size, window.origin, &mut frame);
-        let data = encode(&frame);
+        let mut data = Vec::new();
+        self.render_encoded(at, &window, &mut data);
         let energy = data.iter().map(|&v| f64::from(v) * f64::from(v)).sum();
         Patch {
             window,
@@ -320,6 +379,19 @@ impl Synthesiser<'_> {
         let step = |img: &[Patch], k: usize| img[k].dist(&img[(k + 1) % n], canvas);
         let mut steps: Vec<f64> = (0..n).map(|k| step(&img, k)).collect();
         let med = ignis_core::loopq::median(&mut steps.clone());
+        if let Ok(dir) = std::env::var("LT_SCREEN") { // TEMP
+            let mut txt = String::new();
+            let ms = canvas.size;
+            let sizes: Vec<Size> = [2u32, 4].iter().map(|d| Size { width: (ms.width / d).max(2), height: (ms.height / d).max(2) }).collect();
+            let cheap: Vec<Vec<f64>> = sizes.iter().map(|&sz| {
+                let [cv] = self.loop_canvases([sz]);
+                let im: Vec<Patch> = pos.iter().map(|&p| self.patch_at(p, lit, &cv)).collect();
+                (0..n).map(|k| im[k].dist(&im[(k + 1) % n], &cv)).collect()
+            }).collect();
+            for k in 0..n { txt += &format!("{} {} {}\n", steps[k], cheap[0][k], cheap[1][k]); }
+            let f = format!("{dir}/screen_{}x{}_{}_{}.txt", ms.width, ms.height, n, std::process::id());
+            std::fs::write(f, txt).unwrap();
+        }
         for _ in 0..EVEN_OUT_PASSES {
             for k in 0..n {
                 if steps[k] <= EVEN_OUT * med {
@@ -538,37 +610,62 @@ const EVEN_OUT_TOLERANCE: f64 = 0.02;
 
 /// `n` positions on the closed preview path (in grid steps from grid point 0, the first
 /// 0) whose consecutive preview frames are equally far apart: the smallest step length
-/// whose [`walk`] fits `n` frames or fewer, found by bisection, the few frames short of `n`
-/// [`fill`]ed in and the seam [`relax`]ed. `None` for a path of zero length or when the
-/// walk falls more than [`MAX_FILL`] frames short.
+/// whose [`walk`] fits `n` frames or fewer, found within [`LENGTH_TOLERANCE`] by regula
+/// falsi on the walk's step count ([`Walk::steps`], continuous where the count changes
+/// from `n` to `n + 1`), the few frames short of `n` [`fill`]ed in and the seam
+/// [`relax`]ed. `None` for a path of zero length or when the walk falls more than
+/// [`MAX_FILL`] frames short.
 fn equal_steps(grid: &[Vec<f32>], arc: &[f64], n: usize) -> Option<Vec<f64>> {
     let total = arc[arc.len() - 1];
     if !(total > 1e-9) || n < 2 {
         return None;
     }
     // A step of length L spans at least L of the path, so L = total / (n − 1) fits n
-    // frames or fewer; shrink it until more than n fit, then bisect.
+    // frames or fewer; shrink it until more than n fit.
     let mut hi = total / (n - 1) as f64;
-    let mut best = walk(grid, arc, hi, n)?;
+    let tol = LENGTH_TOLERANCE * hi;
+    let first = walk(grid, arc, hi, n);
+    let mut h_hi = first.steps - n as f64;
+    let mut best = first.fits.then_some(first.pos)?;
     let mut lo = SHRINK * hi;
+    let mut h_lo = f64::NAN;
     for _ in 0..40 {
-        match walk(grid, arc, lo, n) {
-            Some(p) => {
-                best = p;
-                hi = lo;
-                lo *= SHRINK;
-            }
-            None => break,
+        let w = walk(grid, arc, lo, n);
+        if !w.fits {
+            h_lo = w.steps - n as f64;
+            break;
         }
+        (best, hi, h_hi) = (w.pos, lo, w.steps - n as f64);
+        lo *= SHRINK;
     }
-    for _ in 0..BISECTIONS {
-        let mid = 0.5 * (lo + hi);
-        match walk(grid, arc, mid, n) {
-            Some(p) => {
-                best = p;
-                hi = mid;
+    // Illinois: a secant between the bracket's ends, halving the weight of an end kept
+    // twice in a row; within the bracket's middle 98 %, else its midpoint.
+    let mut kept = 0i32; // −1: lo kept by the last try, +1: hi
+    for _ in 0..MAX_LENGTH_TRIES {
+        if !(hi - lo > tol) || !h_lo.is_finite() {
+            break;
+        }
+        let secant = hi - h_hi * (hi - lo) / (h_hi - h_lo);
+        let margin = 0.01 * (hi - lo);
+        let x = if secant > lo + margin && secant < hi - margin {
+            secant
+        } else {
+            0.5 * (lo + hi)
+        };
+        let w = walk(grid, arc, x, n);
+        let h = w.steps - n as f64;
+        if w.fits {
+            (best, hi, h_hi) = (w.pos, x, h);
+            if kept == 1 {
+                h_lo *= 0.5;
             }
-            None => lo = mid,
+            kept = 1;
+        } else {
+            (lo, h_lo) = (x, h);
+            if kept == -1 {
+                h_hi *= 0.5;
+            }
+            kept = -1;
         }
     }
     if best.len() + MAX_FILL < n {
@@ -616,9 +713,12 @@ fn relax(grid: &[Vec<f32>], pos: &mut [f64]) {
     }
 }
 
-/// Bisections of the walk's step length (to 2⁻¹⁴ of its bracket; the seam's relaxation
-/// spreads what is left over).
-const BISECTIONS: usize = 14;
+/// How close [`equal_steps`] brings the walk's step length to the least that fits, as a
+/// fraction of the first length tried (the seam's relaxation spreads what is left over).
+const LENGTH_TOLERANCE: f64 = 1.0 / 65536.0;
+/// The most walks [`equal_steps`] tries after bracketing the step length (bisection alone
+/// needs 14 to reach [`LENGTH_TOLERANCE`]).
+const MAX_LENGTH_TRIES: usize = 24;
 /// Factor by which the walk's step length is lowered until more than `n` frames fit.
 const SHRINK: f64 = 0.75;
 /// Frames on each side of the seam that share the wrap step's slack.
@@ -653,24 +753,29 @@ const MAX_FILL: usize = 8;
 /// A preview frame as the loop measure sees a written one: clamped to `0..=1` and
 /// sRGB-encoded (through a table of [`SRGB_STEPS`] + 1 points, linear between them).
 fn encode(frame: &GrayFrame) -> Vec<f32> {
+    let lut = srgb_lut();
+    frame.data().iter().map(|&v| encode_value(v, lut)).collect()
+}
+
+/// The sRGB table of [`encode`]: [`SRGB_STEPS`] + 1 points.
+fn srgb_lut() -> &'static [f32] {
     static LUT: std::sync::OnceLock<Vec<f32>> = std::sync::OnceLock::new();
-    let lut = LUT.get_or_init(|| {
+    LUT.get_or_init(|| {
         (0..=SRGB_STEPS)
             .map(|i| linear_to_srgb(i as f32 / SRGB_STEPS as f32))
             .collect()
-    });
-    frame
-        .data()
-        .iter()
-        .map(|&v| {
-            if v <= 0.0 {
-                return 0.0;
-            }
-            let x = v.min(1.0) * SRGB_STEPS as f32;
-            let i = (x as usize).min(SRGB_STEPS - 1);
-            lut[i] + (lut[i + 1] - lut[i]) * (x - i as f32)
-        })
-        .collect()
+    })
+}
+
+/// One value as [`encode`] encodes it, through `lut` ([`srgb_lut`]).
+#[inline]
+fn encode_value(v: f32, lut: &[f32]) -> f32 {
+    if v <= 0.0 {
+        return 0.0;
+    }
+    let x = v.min(1.0) * SRGB_STEPS as f32;
+    let i = (x as usize).min(SRGB_STEPS - 1);
+    lut[i] + (lut[i + 1] - lut[i]) * (x - i as f32)
 }
 
 /// Intervals of the sRGB table.
@@ -681,12 +786,26 @@ fn dist(a: &[f32], b: &[f32]) -> f64 {
     (ignis_core::loopq::sum_sq_diff(a, b) / a.len().max(1) as f64).sqrt()
 }
 
+/// A [`walk`]'s frames and its step count.
+struct Walk {
+    /// The frames' positions (all of them when the walk fits).
+    pos: Vec<f64>,
+    /// Steps of the walk's length around the loop: when it fits, its frames less one plus
+    /// the wrap's fraction of a step (so it runs on continuously where the frame count
+    /// changes); when it does not, `n` over the fraction of the path's length (`arc`) the
+    /// first `n` steps covered, an estimate.
+    steps: f64,
+    /// Whether `n` frames or fewer fit.
+    fits: bool,
+}
+
 /// Walks the closed polyline through `grid` (preview frames at evenly spaced times, the
 /// last joined back to the first) from grid point 0, placing each next frame where the
 /// straight-line (RMS) distance from the previous one first reaches `chord`; positions
 /// are in grid steps, between grid points on the segment (a pixel blend, the preview's
-/// model of the state blend rendered there). `None` when more than `n` frames fit.
-fn walk(grid: &[Vec<f32>], arc: &[f64], chord: f64, n: usize) -> Option<Vec<f64>> {
+/// model of the state blend rendered there). Stops once more than `n` frames fit.
+fn walk(grid: &[Vec<f32>], arc: &[f64], chord: f64, n: usize) -> Walk {
+    if std::env::var("LT_WALKS").is_ok() { eprintln!("TEMP walk {chord:.6e}"); } // TEMP
     let m = grid.len();
     let l2 = chord * chord * grid[0].len() as f64;
     let mut cur: Vec<f32> = grid[0].clone();
@@ -711,7 +830,14 @@ fn walk(grid: &[Vec<f32>], arc: &[f64], chord: f64, n: usize) -> Option<Vec<f64>
             j = (j + 1).max(arc.partition_point(|&v| v - from < slack));
         }
         if j > m {
-            return Some(out);
+            // the wrap: what is left of the path from the last frame, under a step
+            let left = (sq(&grid[0], &cur) / len).sqrt() / chord;
+            let steps = (out.len() - 1) as f64 + left;
+            return Walk {
+                pos: out,
+                steps,
+                fits: true,
+            };
         }
         // the segment into grid point j starts at cur when cur lies on it
         let from_cur = pos > (j - 1) as f64;
@@ -740,7 +866,16 @@ fn walk(grid: &[Vec<f32>], arc: &[f64], chord: f64, n: usize) -> Option<Vec<f64>
         pos = p0_pos + s * (j as f64 - p0_pos);
         cur = next;
         if out.len() == n {
-            return None;
+            // n steps reached at this point of the path: as many again for the rest
+            let i = (pos.floor() as usize).min(m - 1);
+            let at = arc[i] + (pos - i as f64) * (arc[i + 1] - arc[i]);
+            let total = arc[m];
+            let steps = if at > 0.0 { n as f64 * total / at } else { f64::INFINITY };
+            return Walk {
+                pos: out,
+                steps: steps.max(n as f64),
+                fits: false,
+            };
         }
         out.push(pos);
     }
