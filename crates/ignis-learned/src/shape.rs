@@ -526,8 +526,6 @@ pub struct Placement {
 pub struct RenderScratch {
     path: Vec<f32>,
     width_inv: Vec<f32>,
-    /// The normalised image with a border of zeros ([`render_mapped_into`]).
-    padded: Vec<f32>,
 }
 
 /// Renders a normalised image back into `out` (§3.1 reversed): the flame of `shape`,
@@ -667,9 +665,8 @@ struct RowSampling {
 /// As [`render_scaled_into`] into `out` (`w × h` values, row-major), then exposed and
 /// encoded by `enc` ([`Encoding::apply`]): the same values as those two steps, in less
 /// time per lit pixel (the loop timing's many small grey renders cover mostly lit pixels,
-/// where the general renderer spends ≈ 10 ns a pixel). The bilinear lookup reads a copy
-/// of the normalised image with a border of zeros instead of checking bounds, and rows
-/// go eight pixels at a time with AVX2 where the CPU has it ([`avx2`], equal lane by lane).
+/// where the general renderer spends ≈ 10 ns a pixel): rows go eight pixels at a time with
+/// AVX2 where the CPU has it ([`avx2`], equal lane by lane), and `floor` is inlined.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn render_encoded_into(
     normalised: &[f32],
@@ -693,15 +690,6 @@ pub(crate) fn render_encoded_into(
     scratch
         .width_inv
         .extend(width_r.iter().map(|&w| (1.0 / w) as f32));
-    let stride = ns + 2;
-    scratch.padded.clear();
-    scratch.padded.resize(stride * stride, 0.0);
-    for (dst, src) in scratch.padded[stride..]
-        .chunks_exact_mut(stride)
-        .zip(normalised.chunks_exact(ns))
-    {
-        dst[1..=ns].copy_from_slice(src);
-    }
     let sv = (shape.height * frame_height).max(1e-3);
     let (upx, upy) = (place.tilt.sin(), -place.tilt.cos());
     let (rx, ry) = (place.tilt.cos(), place.tilt.sin());
@@ -725,20 +713,21 @@ pub(crate) fn render_encoded_into(
         };
         let done = if simd {
             // SAFETY: `available` checked that the CPU has AVX2.
-            unsafe { avx2::row(&rs, scratch, enc, row) }
+            unsafe { avx2::row(&rs, scratch, normalised, enc, row) }
         } else {
             0
         };
         for (x, o) in row.iter_mut().enumerate().skip(done) {
-            *o = enc.apply(sample(&rs, scratch, x));
+            *o = enc.apply(sample(&rs, scratch, normalised, x));
         }
     }
 }
 
 /// The renderer's value of pixel `x` of the row `rs` (as [`render_scaled_into`] computes
-/// it, before exposure), from the tables [`render_encoded_into`] filled in `scratch`.
+/// it, before exposure) in the normalised image `img`, from the tables
+/// [`render_encoded_into`] filled in `scratch`.
 #[inline]
-fn sample(rs: &RowSampling, scratch: &RenderScratch, x: usize) -> f32 {
+fn sample(rs: &RowSampling, scratch: &RenderScratch, img: &[f32], x: usize) -> f32 {
     let (ns, nsf) = (rs.ns, rs.ns as f32);
     let xf = x as f32;
     let rr = rs.rr0 + rs.drr * xf;
@@ -759,12 +748,16 @@ fn sample(rs: &RowSampling, scratch: &RenderScratch, x: usize) -> f32 {
     }
     let (fr, fc) = (floor_in_range(rr), floor_in_range(cc));
     let (ty, tx) = (rr - fr, cc - fc);
-    // fr, fc ∈ −1..ns−1: the padded image's rows and columns fr + 1 ..= fr + 2
-    let stride = ns + 2;
-    let at = (fr as isize + 1) as usize * stride + (fc as isize + 1) as usize;
-    let pad = &scratch.padded;
-    let top = pad[at] * (1.0 - tx) + pad[at + 1] * tx;
-    let bot = pad[at + stride] * (1.0 - tx) + pad[at + stride + 1] * tx;
+    let (ir, ic) = (fr as isize, fc as isize);
+    let at = |r: isize, c: isize| -> f32 {
+        if r < 0 || c < 0 || r >= ns as isize || c >= ns as isize {
+            0.0
+        } else {
+            img[r as usize * ns + c as usize]
+        }
+    };
+    let top = at(ir, ic) * (1.0 - tx) + at(ir, ic + 1) * tx;
+    let bot = at(ir + 1, ic) * (1.0 - tx) + at(ir + 1, ic + 1) * tx;
     (top * (1.0 - ty) + bot * ty).max(0.0)
 }
 

@@ -3,8 +3,8 @@
 //! Every lane does the scalar [`super::sample`] then [`super::Encoding::apply`] operation
 //! for operation (no fused multiply-adds, the same order), so the values are the same
 //! bit for bit; lanes outside the normalised image take the scalar path's `0`. Table
-//! lookups are gathers with every index clamped into its table, so lanes whose pixel is
-//! dark read valid memory and are then masked to `0`.
+//! and image lookups are gathers with every index clamped into its table, so lanes whose
+//! pixel (or bilinear tap) lies outside read valid memory and are then masked to `0`.
 
 use super::{Encoding, RenderScratch, RowSampling};
 
@@ -29,20 +29,20 @@ pub(super) fn available() -> bool {
 pub(super) unsafe fn row(
     rs: &RowSampling,
     scratch: &RenderScratch,
+    img: &[f32],
     enc: Encoding,
     out: &mut [f32],
 ) -> usize {
     use std::arch::x86_64::*;
     let ns = rs.ns as i32;
-    let stride = rs.ns + 2;
-    let (path, winv, pad, lut) = (
+    let (path, winv, lut) = (
         scratch.path.as_ptr(),
         scratch.width_inv.as_ptr(),
-        scratch.padded.as_ptr(),
         enc.lut.as_ptr(),
     );
-    debug_assert!(scratch.path.len() >= rs.ns && scratch.width_inv.len() >= rs.ns);
-    debug_assert!(scratch.padded.len() >= stride * stride);
+    assert!(scratch.path.len() >= rs.ns && scratch.width_inv.len() >= rs.ns);
+    assert!(img.len() >= rs.ns * rs.ns && rs.ns >= 1);
+    let img = img.as_ptr();
     let steps = (enc.lut.len() - 1) as i32;
     let f = _mm256_set1_ps;
     let (zero, one, neg1, nsf) = (f(0.0), f(1.0), f(-1.0), f(ns as f32));
@@ -55,7 +55,7 @@ pub(super) unsafe fn row(
         _mm256_set1_epi32(ns),
         _mm256_set1_epi32(ns - 1),
     );
-    let (stride_i, zero_i) = (_mm256_set1_epi32(stride as i32), _mm256_setzero_si256());
+    let (neg1_i, zero_i) = (_mm256_set1_epi32(-1), _mm256_setzero_si256());
     let (exposure, expose) = (f(enc.exposure), enc.exposure != 1.0);
     let (steps_f, steps_m1) = (f(steps as f32), _mm256_set1_epi32(steps - 1));
     let mut tail = [0.0f32; 8];
@@ -96,21 +96,32 @@ pub(super) unsafe fn row(
         );
         let (fr, fc) = (_mm256_floor_ps(rr), _mm256_floor_ps(cc));
         let (ty, tx) = (_mm256_sub_ps(rr, fr), _mm256_sub_ps(cc, fc));
-        // padded rows/columns fr + 1, fc + 1, clamped into 0..=ns for dark lanes
-        let clamp = |v: __m256i| _mm256_min_epi32(_mm256_max_epi32(v, zero_i), ns_i);
-        let ir = clamp(_mm256_add_epi32(_mm256_cvttps_epi32(fr), one_i));
-        let ic = clamp(_mm256_add_epi32(_mm256_cvttps_epi32(fc), one_i));
-        let at = _mm256_add_epi32(_mm256_mullo_epi32(ir, stride_i), ic);
-        let below = _mm256_add_epi32(at, stride_i);
-        let g = |i: __m256i| _mm256_i32gather_ps::<4>(pad, i);
+        // the four taps: rows ir, ir + 1 and columns ic, ic + 1, each 0 outside the image
+        // (read at an index clamped into it, then masked)
+        let (ir, ic) = (_mm256_cvttps_epi32(fr), _mm256_cvttps_epi32(fc));
+        let (ir1, ic1) = (_mm256_add_epi32(ir, one_i), _mm256_add_epi32(ic, one_i));
+        let within = |v: __m256i| {
+            _mm256_andnot_si256(_mm256_cmpgt_epi32(v, last_i), _mm256_cmpgt_epi32(v, neg1_i))
+        };
+        let clamp = |v: __m256i| _mm256_min_epi32(_mm256_max_epi32(v, zero_i), last_i);
+        let (vr0, vr1, vc0, vc1) = (within(ir), within(ir1), within(ic), within(ic1));
+        let (row0, row1) = (
+            _mm256_mullo_epi32(clamp(ir), ns_i),
+            _mm256_mullo_epi32(clamp(ir1), ns_i),
+        );
+        let (col0, col1) = (clamp(ic), clamp(ic1));
+        let tap = |row: __m256i, col: __m256i, vr: __m256i, vc: __m256i| {
+            let v = _mm256_i32gather_ps::<4>(img, _mm256_add_epi32(row, col));
+            _mm256_and_ps(v, _mm256_castsi256_ps(_mm256_and_si256(vr, vc)))
+        };
         let one_tx = _mm256_sub_ps(one, tx);
         let top = _mm256_add_ps(
-            _mm256_mul_ps(g(at), one_tx),
-            _mm256_mul_ps(g(_mm256_add_epi32(at, one_i)), tx),
+            _mm256_mul_ps(tap(row0, col0, vr0, vc0), one_tx),
+            _mm256_mul_ps(tap(row0, col1, vr0, vc1), tx),
         );
         let bot = _mm256_add_ps(
-            _mm256_mul_ps(g(below), one_tx),
-            _mm256_mul_ps(g(_mm256_add_epi32(below, one_i)), tx),
+            _mm256_mul_ps(tap(row1, col0, vr1, vc0), one_tx),
+            _mm256_mul_ps(tap(row1, col1, vr1, vc1), tx),
         );
         let mut v = _mm256_add_ps(
             _mm256_mul_ps(top, _mm256_sub_ps(one, ty)),
@@ -150,6 +161,12 @@ pub(super) unsafe fn row(
 /// # Safety
 /// Never called.
 #[cfg(not(target_arch = "x86_64"))]
-pub(super) unsafe fn row(_: &RowSampling, _: &RenderScratch, _: Encoding, _: &mut [f32]) -> usize {
+pub(super) unsafe fn row(
+    _: &RowSampling,
+    _: &RenderScratch,
+    _: &[f32],
+    _: Encoding,
+    _: &mut [f32],
+) -> usize {
     0
 }

@@ -143,6 +143,17 @@ impl Synthesiser<'_> {
                 eprintln!("TEMP {name} {}x{} old {:.2} us new {:.2} us fixed {:.2} us; old {:.2} ns/px new {:.2} ns/px", cv.w, cv.h, (b-a)/5e-3, (c-b)/5e-3, (d-c)/5e-3, (b-a-(d-c))/5e-6/px, (c-b-(d-c))/5e-6/px);
             }
             let _ = lit;
+            let a = tcpu();
+            for _ in 0..5000 { self.apply_controls(3.0); std::hint::black_box(self.place(small.size)); }
+            let b = tcpu();
+            for _ in 0..5000 { std::hint::black_box(self.model.split(&self.shown)); }
+            let c = tcpu();
+            let (shape, w) = self.model.split(&self.shown);
+            for _ in 0..5000 { self.model.pca.reconstruct_into(&w, w.len(), &mut self.normalised); std::hint::black_box(&self.normalised); }
+            let d = tcpu();
+            for _ in 0..5000 { std::hint::black_box(crate::shape::row_profiles(&shape, &self.model.shape)); }
+            let e = tcpu();
+            eprintln!("TEMP controls+place {:.2} split {:.2} reconstruct {:.2} row_profiles {:.2} us", (b-a)/5e-3, (c-b)/5e-3, (d-c)/5e-3, (e-d)/5e-3);
         }
         self.even_out(&mut tau, metric);
         let t3 = tcpu(); // TEMP
@@ -786,6 +797,30 @@ fn dist(a: &[f32], b: &[f32]) -> f64 {
     (ignis_core::loopq::sum_sq_diff(a, b) / a.len().max(1) as f64).sqrt()
 }
 
+/// `[|g − p0|², (p0 − q)·(g − p0), |p0 − q|²]` for equally long `p0`, `g`, `q`: eight
+/// running `f32` sums of each (so the loop vectorises), added in `f64` in a fixed order.
+fn segment_sums(p0: &[f32], g: &[f32], q: &[f32]) -> [f64; 3] {
+    let mut acc = [[0f32; 8]; 3];
+    let (c0, c1, c2) = (p0.chunks_exact(8), g.chunks_exact(8), q.chunks_exact(8));
+    let tail = (c0.remainder(), c1.remainder(), c2.remainder());
+    for ((x0, x1), q) in c0.zip(c1).zip(c2) {
+        for l in 0..8 {
+            let (d0, e) = (x0[l] - q[l], x1[l] - x0[l]);
+            acc[0][l] += e * e;
+            acc[1][l] += d0 * e;
+            acc[2][l] += d0 * d0;
+        }
+    }
+    let mut out = acc.map(|lanes| lanes.iter().map(|&v| f64::from(v)).sum::<f64>());
+    for ((&x0, &x1), &q) in tail.0.iter().zip(tail.1).zip(tail.2) {
+        let (d0, e) = (f64::from(x0 - q), f64::from(x1 - x0));
+        out[0] += e * e;
+        out[1] += d0 * e;
+        out[2] += d0 * d0;
+    }
+    out
+}
+
 /// A [`walk`]'s frames and its step count.
 struct Walk {
     /// The frames' positions (all of them when the walk fits).
@@ -845,14 +880,8 @@ fn walk(grid: &[Vec<f32>], arc: &[f64], chord: f64, n: usize) -> Walk {
         let p0_pos = if from_cur { pos } else { (j - 1) as f64 };
         let g = &grid[j % m];
         // |p0 + s (g − p0) − cur|² = l2
-        let (mut a, mut b, mut c) = (0.0, 0.0, -l2);
-        for ((&x0, &x1), &q) in p0.iter().zip(g.iter()).zip(cur.iter()) {
-            let d0 = f64::from(x0 - q);
-            let e = f64::from(x1 - x0);
-            a += e * e;
-            b += d0 * e;
-            c += d0 * d0;
-        }
+        let [a, b, c] = segment_sums(p0, g, &cur);
+        let c = c - l2;
         let s = if a > 0.0 {
             ((-b + (b * b - a * c).max(0.0).sqrt()) / a).clamp(0.0, 1.0)
         } else {
