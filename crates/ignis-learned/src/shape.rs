@@ -28,7 +28,7 @@ mod avx2;
 
 use crate::error::{LearnedError, Result};
 use crate::moments::{Moments, Pose};
-use crate::spline::natural_cubic;
+use crate::spline::{natural_cubic, SplinePlan};
 use ignis_core::{GrayFrame, Size};
 use serde::{Deserialize, Serialize};
 
@@ -526,6 +526,36 @@ pub struct Placement {
 pub struct RenderScratch {
     path: Vec<f32>,
     width_inv: Vec<f32>,
+    /// [`row_profiles`] by planned splines ([`RenderScratch::row_profiles`]): the plans'
+    /// key (norm size, `above`, `below` bits, slices of path and width), the plans, and the
+    /// last profiles.
+    plans: Option<((u32, u64, u64, usize, usize), [SplinePlan; 2])>,
+    path_rows: Vec<f64>,
+    width_rows: Vec<f64>,
+}
+
+impl RenderScratch {
+    /// [`row_profiles`]`(shape, p)` (the same values), kept in the scratch: splines planned
+    /// once for `p` and the slice counts ([`SplinePlan`]). Returns `(path, width)`.
+    pub(crate) fn row_profiles(&mut self, shape: &Shape, p: &ShapeParams) -> (&[f64], &[f64]) {
+        let ns = p.norm_size as usize;
+        let (np, nw) = (shape.path.len(), shape.width.len());
+        let key = (p.norm_size, p.above.to_bits(), p.below.to_bits(), np, nw);
+        if self.plans.as_ref().map(|(k, _)| *k) != Some(key) {
+            let at: Vec<f64> = (0..ns).map(|r| p.row_v(r as f64)).rev().collect();
+            let plans = [np, nw].map(|n| SplinePlan::new(&p.slice_centres(n), &at));
+            self.plans = Some((key, plans));
+        }
+        let [pp, wp] = &mut self.plans.as_mut().expect("just set").1;
+        self.path_rows.resize(ns, 0.0);
+        self.width_rows.resize(ns, 0.0);
+        pp.eval(&shape.path, &mut self.path_rows);
+        wp.eval(&shape.width, &mut self.width_rows);
+        self.path_rows.reverse();
+        self.width_rows.reverse();
+        self.width_rows.iter_mut().for_each(|w| *w = w.max(0.02));
+        (&self.path_rows, &self.width_rows)
+    }
 }
 
 /// Renders a normalised image back into `out` (§3.1 reversed): the flame of `shape`,
@@ -683,13 +713,13 @@ pub(crate) fn render_encoded_into(
     debug_assert_eq!(normalised.len(), ns * ns);
     debug_assert_eq!(out.len(), w * h);
     assert!(enc.lut.len() >= 2, "an sRGB table of at least one interval");
-    let (path_r, width_r) = row_profiles(shape, p);
+    scratch.row_profiles(shape, p);
     scratch.path.clear();
-    scratch.path.extend(path_r.iter().map(|&v| v as f32));
+    scratch.path.extend(scratch.path_rows.iter().map(|&v| v as f32));
     scratch.width_inv.clear();
     scratch
         .width_inv
-        .extend(width_r.iter().map(|&w| (1.0 / w) as f32));
+        .extend(scratch.width_rows.iter().map(|&w| (1.0 / w) as f32));
     let sv = (shape.height * frame_height).max(1e-3);
     let (upx, upy) = (place.tilt.sin(), -place.tilt.cos());
     let (rx, ry) = (place.tilt.cos(), place.tilt.sin());
@@ -779,9 +809,15 @@ fn floor_in_range(x: f32) -> f32 {
 /// `lit[2]..=lit[3]` hold light: `v` over those rows (a row beyond each, where the
 /// bilinear lookup still reaches them), `u` over every row's path ± the columns' reach at
 /// the widest row's width (the renderer interpolates between rows, within their extremes).
+#[cfg(test)]
 pub(crate) fn canonical_box(shape: &Shape, p: &ShapeParams, lit: [usize; 4]) -> [f64; 4] {
-    let ns = p.norm_size as f64;
     let (path, width) = row_profiles(shape, p);
+    canonical_box_of(&path, &width, p, lit)
+}
+
+/// [`canonical_box`] of a flame whose [`row_profiles`] are `path` and `width`.
+pub(crate) fn canonical_box_of(path: &[f64], width: &[f64], p: &ShapeParams, lit: [usize; 4]) -> [f64; 4] {
+    let ns = p.norm_size as f64;
     let kr = ns / (p.above + p.below);
     let kc = ns / (2.0 * p.half_width);
     let c_off = p.half_width * kc - 0.5;

@@ -16,7 +16,7 @@
 
 use crate::error::{LearnedError, Result};
 use crate::model::FlameModel;
-use crate::shape::{canonical_box, pixel_box, render_scaled_into, Placement, RenderScratch};
+use crate::shape::{canonical_box_of, pixel_box, render_scaled_into, Placement, RenderScratch};
 use ignis_core::{GrayFrame, Rng, Size};
 use serde::{Deserialize, Serialize};
 
@@ -425,7 +425,8 @@ impl<'m> Synthesiser<'m> {
     ) -> [[f64; 4]; N] {
         self.apply_controls(at);
         let (shape, _) = self.model.split(&self.shown);
-        let b = canonical_box(&shape, &self.model.shape, lit);
+        let (path, width) = self.scratch.row_profiles(&shape, &self.model.shape);
+        let b = canonical_box_of(path, width, &self.model.shape, lit);
         sizes.map(|size| {
             let sv = (shape.height * f64::from(size.height)).max(1e-3);
             pixel_box(b, &self.place(size), sv)

@@ -73,16 +73,29 @@ pub(super) unsafe fn row(
         let r1 = _mm256_min_epi32(_mm256_add_epi32(r0, one_i), last_i);
         let t = _mm256_sub_ps(rc, _mm256_cvtepi32_ps(r0));
         let lerp = |a: __m256, b: __m256, t: __m256| _mm256_add_ps(a, _mm256_mul_ps(_mm256_sub_ps(b, a), t));
-        let pth = lerp(
-            _mm256_i32gather_ps::<4>(path, r0),
-            _mm256_i32gather_ps::<4>(path, r1),
-            t,
-        );
-        let wi = lerp(
-            _mm256_i32gather_ps::<4>(winv, r0),
-            _mm256_i32gather_ps::<4>(winv, r1),
-            t,
-        );
+        // r0 is monotonic along the row (rr is affine in x, rounding keeps the order), so
+        // equal end lanes mean one row of the tables for all eight: loads, not gathers
+        let first = _mm256_cvtsi256_si32(r0);
+        let (pth, wi) = if first == _mm256_extract_epi32::<7>(r0) {
+            let (i0, i1) = (first as usize, first.saturating_add(1).min(ns - 1) as usize);
+            (
+                lerp(f(*path.add(i0)), f(*path.add(i1)), t),
+                lerp(f(*winv.add(i0)), f(*winv.add(i1)), t),
+            )
+        } else {
+            (
+                lerp(
+                    _mm256_i32gather_ps::<4>(path, r0),
+                    _mm256_i32gather_ps::<4>(path, r1),
+                    t,
+                ),
+                lerp(
+                    _mm256_i32gather_ps::<4>(winv, r0),
+                    _mm256_i32gather_ps::<4>(winv, r1),
+                    t,
+                ),
+            )
+        };
         let cc = _mm256_add_ps(
             _mm256_mul_ps(_mm256_mul_ps(_mm256_sub_ps(u, pth), wi), kc),
             c_off,

@@ -303,7 +303,7 @@ impl Synthesiser<'_> {
         let window = Canvas::covering(canvas.size, b);
         let mut data = Vec::new();
         self.render_encoded(at, &window, &mut data);
-        let energy = data.iter().map(|&v| f64::from(v) * f64::from(v)).sum();
+        let energy = sum_sq(&data);
         Patch {
             window,
             data,
@@ -386,10 +386,14 @@ impl Synthesiser<'_> {
         let end = self.looped.as_ref().map_or(0, |s| s.len()) as f64;
         let lit = self.loop_lit();
         let canvas = &canvas;
+        let t_start = tcpu(); // TEMP
         let mut img: Vec<Patch> = pos.iter().map(|&p| self.patch_at(p, lit, canvas)).collect();
         let step = |img: &[Patch], k: usize| img[k].dist(&img[(k + 1) % n], canvas);
         let mut steps: Vec<f64> = (0..n).map(|k| step(&img, k)).collect();
         let med = ignis_core::loopq::median(&mut steps.clone());
+        let td = tcpu(); // TEMP
+        if std::env::var("LT_TIMES").is_ok() { eprintln!("TEMP detection {:.4}", td - t_start); } // TEMP
+        let mut nbal = 0; // TEMP
         if let Ok(dir) = std::env::var("LT_SCREEN") { // TEMP
             let mut txt = String::new();
             let ms = canvas.size;
@@ -419,6 +423,7 @@ impl Synthesiser<'_> {
                 let ends = [pos[j - 1], pos.get(j + 1).copied().unwrap_or(end)];
                 let now = (pos[j], steps[j - 1] - steps[j], steps[j - 1].max(steps[j]));
                 let (ia, ib) = (&img[j - 1], &img[(j + 1) % n]);
+                nbal += 1; // TEMP
                 let (best, at) = self.balance([ia, ib], ends, now, lit, canvas);
                 let Some(best) = best else { continue };
                 let before = (
@@ -437,6 +442,7 @@ impl Synthesiser<'_> {
                 }
             }
         }
+        if std::env::var("LT_TIMES").is_ok() { eprintln!("TEMP even: detection done at {:.4} s before end, balances {nbal}", tcpu() - td); } // TEMP
     }
 
     /// A frame between grid positions `ends` whose longer step, from `ends_img[0]` or to
@@ -584,8 +590,8 @@ impl Patch {
             for y in y0..y1 {
                 let (ra, rb) = (row(self, y, x0, x1), row(other, y, x0, x1));
                 diff += ignis_core::loopq::sum_sq_diff(ra, rb);
-                ea += ra.iter().map(|&v| f64::from(v) * f64::from(v)).sum::<f64>();
-                eb += rb.iter().map(|&v| f64::from(v) * f64::from(v)).sum::<f64>();
+                ea += sum_sq(ra);
+                eb += sum_sq(rb);
             }
         }
         let sq = diff + (self.energy - ea).max(0.0) + (other.energy - eb).max(0.0);
@@ -819,6 +825,21 @@ fn segment_sums(p0: &[f32], g: &[f32], q: &[f32]) -> [f64; 3] {
         out[2] += d0 * d0;
     }
     out
+}
+
+/// Σ a² of a patch's samples: eight running `f32` sums (so the loop vectorises), added in
+/// `f64` in a fixed order, as [`ignis_core::loopq::sum_sq_diff`] sums differences.
+fn sum_sq(a: &[f32]) -> f64 {
+    let mut lanes = [0f32; 8];
+    let chunks = a.chunks_exact(8);
+    let tail = chunks.remainder();
+    for c in chunks {
+        for (l, &v) in lanes.iter_mut().zip(c) {
+            *l += v * v;
+        }
+    }
+    let head: f64 = lanes.iter().map(|&v| f64::from(v)).sum();
+    head + tail.iter().map(|&v| f64::from(v) * f64::from(v)).sum::<f64>()
 }
 
 /// A [`walk`]'s frames and its step count.
