@@ -222,12 +222,7 @@ impl Synthesiser<'_> {
         let tm = 0.5 * (ends.t[0] + ends.t[1]);
         let c = self.preview_at(tm, canvas, frame);
         let [a, b] = ends.img;
-        let off: f64 = a
-            .iter()
-            .zip(b)
-            .zip(&c)
-            .map(|((&a, &b), &c)| f64::from(0.5 * (a + b) - c).powi(2))
-            .sum();
+        let off = blend_offset(a, b, &c);
         let split = (off / c.len().max(1) as f64).sqrt() > tol;
         if split {
             let left = Ends {
@@ -644,7 +639,8 @@ fn equal_steps(grid: &[Vec<f32>], arc: &[f64], n: usize) -> Option<Vec<f64>> {
     let first = walk(grid, arc, hi, n);
     let mut h_hi = first.steps - n as f64;
     let mut best = first.fits.then_some(first.pos)?;
-    let mut lo = SHRINK * hi;
+    // the count goes about as 1 / L: first try just under where that puts n steps
+    let mut lo = (hi * first.steps / n as f64 * GUESS_MARGIN).clamp(SHRINK * hi, hi * GUESS_MARGIN);
     let mut h_lo = f64::NAN;
     for _ in 0..40 {
         let w = walk(grid, arc, lo, n);
@@ -738,6 +734,9 @@ const LENGTH_TOLERANCE: f64 = 1.0 / 65536.0;
 const MAX_LENGTH_TRIES: usize = 24;
 /// Factor by which the walk's step length is lowered until more than `n` frames fit.
 const SHRINK: f64 = 0.75;
+/// The first step length [`equal_steps`] lowers to: this factor under the length at which
+/// the first walk's count, taken as inversely proportional to the length, would be `n`.
+const GUESS_MARGIN: f64 = 0.995;
 /// Frames on each side of the seam that share the wrap step's slack.
 const SEAM_WINDOW: usize = 8;
 /// Equalising sweeps over them.
@@ -840,6 +839,25 @@ fn sum_sq(a: &[f32]) -> f64 {
     }
     let head: f64 = lanes.iter().map(|&v| f64::from(v)).sum();
     head + tail.iter().map(|&v| f64::from(v) * f64::from(v)).sum::<f64>()
+}
+
+/// `Σ ((a + b) / 2 − c)²` for equally long slices: eight running `f32` sums (so the loop
+/// vectorises), added in `f64` in a fixed order.
+fn blend_offset(a: &[f32], b: &[f32], c: &[f32]) -> f64 {
+    let mut lanes = [0f32; 8];
+    let (ca, cb, cc) = (a.chunks_exact(8), b.chunks_exact(8), c.chunks_exact(8));
+    let tail = (ca.remainder(), cb.remainder(), cc.remainder());
+    for ((a, b), c) in ca.zip(cb).zip(cc) {
+        for l in 0..8 {
+            let d = 0.5 * (a[l] + b[l]) - c[l];
+            lanes[l] += d * d;
+        }
+    }
+    let head: f64 = lanes.iter().map(|&v| f64::from(v)).sum();
+    let rest: f64 = (tail.0.iter().zip(tail.1).zip(tail.2))
+        .map(|((&a, &b), &c)| f64::from(0.5 * (a + b) - c).powi(2))
+        .sum();
+    head + rest
 }
 
 /// A [`walk`]'s frames and its step count.
