@@ -529,10 +529,14 @@ pub struct RenderScratch {
     /// [`row_profiles`] by planned splines ([`RenderScratch::row_profiles`]): the plans'
     /// key (norm size, `above`, `below` bits, slices of path and width), the plans, and the
     /// last profiles.
-    plans: Option<((u32, u64, u64, usize, usize), [SplinePlan; 2])>,
+    plans: Option<(PlanKey, [SplinePlan; 2])>,
     path_rows: Vec<f64>,
     width_rows: Vec<f64>,
 }
+
+/// What a [`RenderScratch`]'s spline plans are for: norm size, `above` and `below` (bits),
+/// path and width slices.
+type PlanKey = (u32, u64, u64, usize, usize);
 
 impl RenderScratch {
     /// [`row_profiles`]`(shape, p)` (the same values), kept in the scratch: splines planned
@@ -705,9 +709,38 @@ pub(crate) fn render_encoded_into(
     p: &ShapeParams,
     scratch: &mut RenderScratch,
     frame_height: f64,
+    size: (usize, usize),
+    enc: Encoding,
+    out: &mut [f32],
+) {
+    let simd = avx2::available();
+    render_encoded_with(
+        normalised,
+        shape,
+        place,
+        p,
+        scratch,
+        frame_height,
+        size,
+        enc,
+        out,
+        simd,
+    );
+}
+
+/// [`render_encoded_into`], its rows with AVX2 (`simd`, which the CPU must have) or not.
+#[allow(clippy::too_many_arguments)]
+fn render_encoded_with(
+    normalised: &[f32],
+    shape: &Shape,
+    place: &Placement,
+    p: &ShapeParams,
+    scratch: &mut RenderScratch,
+    frame_height: f64,
     (w, h): (usize, usize),
     enc: Encoding,
     out: &mut [f32],
+    simd: bool,
 ) {
     let ns = p.norm_size as usize;
     debug_assert_eq!(normalised.len(), ns * ns);
@@ -715,7 +748,9 @@ pub(crate) fn render_encoded_into(
     assert!(enc.lut.len() >= 2, "an sRGB table of at least one interval");
     scratch.row_profiles(shape, p);
     scratch.path.clear();
-    scratch.path.extend(scratch.path_rows.iter().map(|&v| v as f32));
+    scratch
+        .path
+        .extend(scratch.path_rows.iter().map(|&v| v as f32));
     scratch.width_inv.clear();
     scratch
         .width_inv
@@ -726,7 +761,7 @@ pub(crate) fn render_encoded_into(
     let kr = ns as f64 / (p.above + p.below);
     let kc = (ns as f64 / (2.0 * p.half_width)) as f32;
     let c_off = (p.half_width * ns as f64 / (2.0 * p.half_width)) as f32 - 0.5;
-    let simd = avx2::available();
+    assert!(!simd || avx2::available(), "AVX2 on a CPU without it");
     for (y, row) in out.chunks_exact_mut(w.max(1)).enumerate().take(h) {
         let dy = (y as f64 + 0.5 - place.cy) / sv;
         let dx0 = (0.5 - place.cx) / sv;
@@ -742,7 +777,7 @@ pub(crate) fn render_encoded_into(
             ns,
         };
         let done = if simd {
-            // SAFETY: `available` checked that the CPU has AVX2.
+            // SAFETY: `avx2::available` checked that the CPU has AVX2 (asserted above).
             unsafe { avx2::row(&rs, scratch, normalised, enc, row) }
         } else {
             0
@@ -816,7 +851,12 @@ pub(crate) fn canonical_box(shape: &Shape, p: &ShapeParams, lit: [usize; 4]) -> 
 }
 
 /// [`canonical_box`] of a flame whose [`row_profiles`] are `path` and `width`.
-pub(crate) fn canonical_box_of(path: &[f64], width: &[f64], p: &ShapeParams, lit: [usize; 4]) -> [f64; 4] {
+pub(crate) fn canonical_box_of(
+    path: &[f64],
+    width: &[f64],
+    p: &ShapeParams,
+    lit: [usize; 4],
+) -> [f64; 4] {
     let ns = p.norm_size as f64;
     let kr = ns / (p.above + p.below);
     let kc = ns / (2.0 * p.half_width);
@@ -886,6 +926,66 @@ mod tests {
         );
         let psnr = crate::psnr(&clip[0], &out);
         assert!(psnr > 30.0, "PSNR {psnr}");
+    }
+
+    /// The timing's encoded renders equal the renderer's frame, exposed and encoded, bit
+    /// for bit, with AVX2 and without: upright and tilted flames, windows of widths that
+    /// are and are not multiples of eight, partly outside the normalised image.
+    #[test]
+    fn encoded_renders_equal_the_renderer_then_the_encoding() {
+        let clip = crate::synthetic::flame_clip(Size::new(96, 80).unwrap(), 4, 3);
+        let p = ShapeParams::default();
+        let lut: Vec<f32> = (0..=64)
+            .map(|i| ignis_core::palette::linear_to_srgb(i as f32 / 64.0))
+            .collect();
+        let mut checked = 0;
+        for (k, frame) in clip.iter().enumerate() {
+            let n = normalise(frame, &p).unwrap();
+            // tilted (the rows' table lookups differ across a chunk of eight) and upright,
+            // windows of widths that are and are not multiples of eight, partly outside
+            // the image, exposures at, under and over 1
+            for (tilt, (w, h), exposure) in [
+                (0.0, (40, 30), 1.0),
+                (0.4 * k as f64 - 0.6, (37, 29), 1.7),
+                (0.1, (13, 50), 0.6),
+                (-1.2, (96, 80), 3.0),
+            ] {
+                let place = Placement {
+                    cx: n.pose.cx - 20.0 + 3.0 * k as f64,
+                    cy: n.pose.cy - 12.0,
+                    tilt: n.pose.tilt + tilt,
+                };
+                let enc = Encoding {
+                    exposure,
+                    lut: &lut,
+                };
+                let scratch = &mut RenderScratch::default();
+                let mut want = GrayFrame::new(Size::new(w as u32, h as u32).unwrap());
+                render_scaled_into(&n.image, &n.shape, &place, &p, scratch, 80.0, &mut want);
+                let want: Vec<f32> = want.data().iter().map(|&v| enc.apply(v)).collect();
+                for simd in [false, avx2::available()] {
+                    let mut got = vec![f32::NAN; w * h];
+                    let args = (&n.image, &n.shape, &place, &p);
+                    render_encoded_with(
+                        args.0,
+                        args.1,
+                        args.2,
+                        args.3,
+                        scratch,
+                        80.0,
+                        (w, h),
+                        enc,
+                        &mut got,
+                        simd,
+                    );
+                    for (i, (g, v)) in got.iter().zip(&want).enumerate() {
+                        assert_eq!(g.to_bits(), v.to_bits(), "{k} simd {simd}: pixel {i}");
+                    }
+                }
+                checked += want.iter().filter(|&&v| v > 0.0).count();
+            }
+        }
+        assert!(checked > 1000, "{checked} lit pixels");
     }
 
     /// The timing of loops renders windows only (`synth/looptime.rs`): every pixel a flame

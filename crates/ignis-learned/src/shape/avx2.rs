@@ -72,7 +72,9 @@ pub(super) unsafe fn row(
         let r0 = _mm256_cvttps_epi32(rc);
         let r1 = _mm256_min_epi32(_mm256_add_epi32(r0, one_i), last_i);
         let t = _mm256_sub_ps(rc, _mm256_cvtepi32_ps(r0));
-        let lerp = |a: __m256, b: __m256, t: __m256| _mm256_add_ps(a, _mm256_mul_ps(_mm256_sub_ps(b, a), t));
+        let lerp = |a: __m256, b: __m256, t: __m256| {
+            _mm256_add_ps(a, _mm256_mul_ps(_mm256_sub_ps(b, a), t))
+        };
         // r0 is monotonic along the row (rr is affine in x, rounding keeps the order), so
         // equal end lanes mean one row of the tables for all eight: loads, not gathers
         let first = _mm256_cvtsi256_si32(r0);
@@ -152,7 +154,10 @@ pub(super) unsafe fn row(
         let l1 = _mm256_i32gather_ps::<4>(lut, _mm256_add_epi32(i, one_i));
         let e = _mm256_add_ps(
             l0,
-            _mm256_mul_ps(_mm256_sub_ps(l1, l0), _mm256_sub_ps(x, _mm256_cvtepi32_ps(i))),
+            _mm256_mul_ps(
+                _mm256_sub_ps(l1, l0),
+                _mm256_sub_ps(x, _mm256_cvtepi32_ps(i)),
+            ),
         );
         let e = _mm256_and_ps(e, lit);
         match out.get_mut(k * 8..k * 8 + 8) {

@@ -39,8 +39,7 @@
 use super::Synthesiser;
 use ignis_core::loopq::{arc_times, metric_size};
 use ignis_core::palette::linear_to_srgb;
-use ignis_core::{GrayFrame, Size};
-fn tcpu() -> f64 { let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 }; unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut ts) }; ts.tv_sec as f64 + ts.tv_nsec as f64 * 1e-9 } // TEMP
+use ignis_core::Size;
 
 /// The most preview states per output frame ([`Synthesiser::preview_grid`]): the walk
 /// places frames between them on pixel blends of neighbouring previews, which stand in for
@@ -107,10 +106,8 @@ impl Synthesiser<'_> {
             // too long a loop to preview within the memory bound: even times
             return (0..n).map(|k| k as f64 * steps / n as f64).collect();
         }
-        let t0 = tcpu(); // TEMP
         let [small, metric] = self.loop_canvases([small, metric]);
         let (grid, times) = self.preview_grid(&small);
-        let t1 = tcpu(); // TEMP
         let m = grid.len();
         let mut arc = vec![0.0];
         for j in 0..m {
@@ -124,40 +121,7 @@ impl Synthesiser<'_> {
                 .collect()
         });
         let mut tau: Vec<f64> = pos.iter().map(|&p| time_at(&times, steps, p)).collect();
-        let t2 = tcpu(); // TEMP
-        if std::env::var("LT_MICRO").is_ok() { // TEMP
-            let lit = self.loop_lit();
-            let mc = &metric;
-            for (name, cv) in [("small", small), ("metric", *mc)] {
-                self.set_loop_state(7.3);
-                let mut fr = cv.frame();
-                let a = tcpu();
-                for _ in 0..5000 { self.render_window(3.0, cv.size, cv.origin, &mut fr); std::hint::black_box(encode(&fr)); }
-                let b = tcpu();
-                let mut o = Vec::new();
-                for _ in 0..5000 { self.render_encoded(3.0, &cv, &mut o); std::hint::black_box(&o); }
-                let c = tcpu();
-                for _ in 0..5000 { self.render_encoded(3.0, &Canvas{w:1,h:1,..cv}, &mut o); std::hint::black_box(&o); }
-                let d = tcpu();
-                let px = (cv.w * cv.h) as f64;
-                eprintln!("TEMP {name} {}x{} old {:.2} us new {:.2} us fixed {:.2} us; old {:.2} ns/px new {:.2} ns/px", cv.w, cv.h, (b-a)/5e-3, (c-b)/5e-3, (d-c)/5e-3, (b-a-(d-c))/5e-6/px, (c-b-(d-c))/5e-6/px);
-            }
-            let _ = lit;
-            let a = tcpu();
-            for _ in 0..5000 { self.apply_controls(3.0); std::hint::black_box(self.place(small.size)); }
-            let b = tcpu();
-            for _ in 0..5000 { std::hint::black_box(self.model.split(&self.shown)); }
-            let c = tcpu();
-            let (shape, w) = self.model.split(&self.shown);
-            for _ in 0..5000 { self.model.pca.reconstruct_into(&w, w.len(), &mut self.normalised); std::hint::black_box(&self.normalised); }
-            let d = tcpu();
-            for _ in 0..5000 { std::hint::black_box(crate::shape::row_profiles(&shape, &self.model.shape)); }
-            let e = tcpu();
-            eprintln!("TEMP controls+place {:.2} split {:.2} reconstruct {:.2} row_profiles {:.2} us", (b-a)/5e-3, (c-b)/5e-3, (d-c)/5e-3, (e-d)/5e-3);
-        }
         self.even_out(&mut tau, metric);
-        let t3 = tcpu(); // TEMP
-        if std::env::var("LT_TIMES").is_ok() { eprintln!("TEMP previews {:.4} walk {:.4} even {:.4} grid {} lit {:?} e {}", t1-t0, t2-t1, t3-t2, grid.len(), self.loop_lit(), self.model.pca.components.ncols()); } // TEMP
         tau
     }
 
@@ -169,11 +133,10 @@ impl Synthesiser<'_> {
     fn preview_grid(&mut self, canvas: &Canvas) -> (Vec<Vec<f32>>, Vec<f64>) {
         let n = self.loop_frames as usize;
         let steps = self.looped.as_ref().map_or(0, |s| s.len()) as f64;
-        let mut frame = canvas.frame();
         let base: Vec<(f64, Vec<f32>)> = (0..n)
             .map(|k| {
                 let t = k as f64 * steps / n as f64;
-                (t, self.preview_at(t, canvas, &mut frame))
+                (t, self.preview_at(t, canvas))
             })
             .collect();
         let total: f64 = (0..n).map(|k| dist(&base[k].1, &base[(k + 1) % n].1)).sum();
@@ -189,15 +152,7 @@ impl Synthesiser<'_> {
                 t: [t0, t1],
                 img: [a, b],
             };
-            self.refine(
-                ends,
-                SPLIT_DEPTH,
-                tol,
-                canvas,
-                &mut frame,
-                &mut grid,
-                &mut times,
-            );
+            self.refine(ends, SPLIT_DEPTH, tol, canvas, &mut grid, &mut times);
         }
         (grid, times)
     }
@@ -212,7 +167,6 @@ impl Synthesiser<'_> {
         depth: usize,
         tol: f64,
         canvas: &Canvas,
-        frame: &mut GrayFrame,
         grid: &mut Vec<Vec<f32>>,
         times: &mut Vec<f64>,
     ) {
@@ -220,7 +174,7 @@ impl Synthesiser<'_> {
             return;
         }
         let tm = 0.5 * (ends.t[0] + ends.t[1]);
-        let c = self.preview_at(tm, canvas, frame);
+        let c = self.preview_at(tm, canvas);
         let [a, b] = ends.img;
         let off = blend_offset(a, b, &c);
         let split = (off / c.len().max(1) as f64).sqrt() > tol;
@@ -229,7 +183,7 @@ impl Synthesiser<'_> {
                 t: [ends.t[0], tm],
                 img: [a, &c],
             };
-            self.refine(left, depth - 1, tol, canvas, frame, grid, times);
+            self.refine(left, depth - 1, tol, canvas, grid, times);
         }
         times.push(tm);
         grid.push(c.clone());
@@ -238,13 +192,13 @@ impl Synthesiser<'_> {
                 t: [tm, ends.t[1]],
                 img: [&c, b],
             };
-            self.refine(right, depth - 1, tol, canvas, frame, grid, times);
+            self.refine(right, depth - 1, tol, canvas, grid, times);
         }
     }
 
     /// The preview frame of the loop's state at process time `tau` (cyclic; rendered, not
     /// a pixel blend), the controls taken at the output frame shown near it.
-    fn preview_at(&mut self, tau: f64, canvas: &Canvas, frame: &mut GrayFrame) -> Vec<f32> {
+    fn preview_at(&mut self, tau: f64, canvas: &Canvas) -> Vec<f32> {
         let steps = self.looped.as_ref().map_or(0, |s| s.len()) as f64;
         self.set_loop_state(tau);
         let at = tau * f64::from(self.loop_frames) / steps;
@@ -254,9 +208,10 @@ impl Synthesiser<'_> {
     }
 
     /// Renders `raw` (the controls at output frame `at`) within `canvas`'s window of its
-    /// frame into `out`, exposed and encoded as [`encode`] does: the same values as
-    /// [`Self::render_window`] then [`encode`], by the renderer's faster path for small
-    /// grey renders ([`crate::shape::render_mapped_into`]).
+    /// frame into `out`, exposed, clamped to `0..=1` and sRGB-encoded ([`srgb_lut`]) as the
+    /// loop measure sees a written frame: the same values as [`Self::render_window`] then
+    /// that encoding, by the renderer's faster path for small grey renders
+    /// ([`crate::shape::render_encoded_into`]).
     fn render_encoded(&mut self, at: f64, canvas: &Canvas, out: &mut Vec<f32>) {
         self.apply_controls(at);
         let mut place = self.place(canvas.size);
@@ -289,7 +244,7 @@ impl Synthesiser<'_> {
 
     /// The loop's state at process time `tau` rendered at `canvas`'s frame size within
     /// the state's own box (see [`Self::raw_boxes`]; `lit` from [`Self::loop_lit`]),
-    /// encoded as [`encode`] does: outside the box it lights no pixel.
+    /// encoded as [`Self::render_encoded`] does: outside the box it lights no pixel.
     fn patch_at(&mut self, tau: f64, lit: [usize; 4], canvas: &Canvas) -> Patch {
         let steps = self.looped.as_ref().map_or(0, |s| s.len()) as f64;
         self.set_loop_state(tau);
@@ -381,27 +336,10 @@ impl Synthesiser<'_> {
         let end = self.looped.as_ref().map_or(0, |s| s.len()) as f64;
         let lit = self.loop_lit();
         let canvas = &canvas;
-        let t_start = tcpu(); // TEMP
         let mut img: Vec<Patch> = pos.iter().map(|&p| self.patch_at(p, lit, canvas)).collect();
         let step = |img: &[Patch], k: usize| img[k].dist(&img[(k + 1) % n], canvas);
         let mut steps: Vec<f64> = (0..n).map(|k| step(&img, k)).collect();
         let med = ignis_core::loopq::median(&mut steps.clone());
-        let td = tcpu(); // TEMP
-        if std::env::var("LT_TIMES").is_ok() { eprintln!("TEMP detection {:.4}", td - t_start); } // TEMP
-        let mut nbal = 0; // TEMP
-        if let Ok(dir) = std::env::var("LT_SCREEN") { // TEMP
-            let mut txt = String::new();
-            let ms = canvas.size;
-            let sizes: Vec<Size> = [2u32, 4].iter().map(|d| Size { width: (ms.width / d).max(2), height: (ms.height / d).max(2) }).collect();
-            let cheap: Vec<Vec<f64>> = sizes.iter().map(|&sz| {
-                let [cv] = self.loop_canvases([sz]);
-                let im: Vec<Patch> = pos.iter().map(|&p| self.patch_at(p, lit, &cv)).collect();
-                (0..n).map(|k| im[k].dist(&im[(k + 1) % n], &cv)).collect()
-            }).collect();
-            for k in 0..n { txt += &format!("{} {} {}\n", steps[k], cheap[0][k], cheap[1][k]); }
-            let f = format!("{dir}/screen_{}x{}_{}_{}.txt", ms.width, ms.height, n, std::process::id());
-            std::fs::write(f, txt).unwrap();
-        }
         for _ in 0..EVEN_OUT_PASSES {
             for k in 0..n {
                 if steps[k] <= EVEN_OUT * med {
@@ -418,7 +356,6 @@ impl Synthesiser<'_> {
                 let ends = [pos[j - 1], pos.get(j + 1).copied().unwrap_or(end)];
                 let now = (pos[j], steps[j - 1] - steps[j], steps[j - 1].max(steps[j]));
                 let (ia, ib) = (&img[j - 1], &img[(j + 1) % n]);
-                nbal += 1; // TEMP
                 let (best, at) = self.balance([ia, ib], ends, now, lit, canvas);
                 let Some(best) = best else { continue };
                 let before = (
@@ -437,7 +374,6 @@ impl Synthesiser<'_> {
                 }
             }
         }
-        if std::env::var("LT_TIMES").is_ok() { eprintln!("TEMP even: detection done at {:.4} s before end, balances {nbal}", tcpu() - td); } // TEMP
     }
 
     /// A frame between grid positions `ends` whose longer step, from `ends_img[0]` or to
@@ -542,14 +478,6 @@ impl Canvas {
             w,
             h,
         }
-    }
-
-    /// A frame of the window's size.
-    fn frame(&self) -> GrayFrame {
-        GrayFrame::new(Size {
-            width: self.w,
-            height: self.h,
-        })
     }
 }
 
@@ -766,14 +694,9 @@ fn fill(grid: &[Vec<f32>], pos: &mut Vec<f64>, n: usize) {
 /// frame or two short of `n`).
 const MAX_FILL: usize = 8;
 
-/// A preview frame as the loop measure sees a written one: clamped to `0..=1` and
-/// sRGB-encoded (through a table of [`SRGB_STEPS`] + 1 points, linear between them).
-fn encode(frame: &GrayFrame) -> Vec<f32> {
-    let lut = srgb_lut();
-    frame.data().iter().map(|&v| encode_value(v, lut)).collect()
-}
-
-/// The sRGB table of [`encode`]: [`SRGB_STEPS`] + 1 points.
+/// The sRGB table of the timing's renders ([`crate::shape::Encoding`]): [`SRGB_STEPS`] + 1
+/// points, linear between them. A preview frame is clamped to `0..=1` and encoded as the
+/// loop measure sees a written one.
 fn srgb_lut() -> &'static [f32] {
     static LUT: std::sync::OnceLock<Vec<f32>> = std::sync::OnceLock::new();
     LUT.get_or_init(|| {
@@ -781,17 +704,6 @@ fn srgb_lut() -> &'static [f32] {
             .map(|i| linear_to_srgb(i as f32 / SRGB_STEPS as f32))
             .collect()
     })
-}
-
-/// One value as [`encode`] encodes it, through `lut` ([`srgb_lut`]).
-#[inline]
-fn encode_value(v: f32, lut: &[f32]) -> f32 {
-    if v <= 0.0 {
-        return 0.0;
-    }
-    let x = v.min(1.0) * SRGB_STEPS as f32;
-    let i = (x as usize).min(SRGB_STEPS - 1);
-    lut[i] + (lut[i + 1] - lut[i]) * (x - i as f32)
 }
 
 /// Intervals of the sRGB table.
@@ -838,7 +750,10 @@ fn sum_sq(a: &[f32]) -> f64 {
         }
     }
     let head: f64 = lanes.iter().map(|&v| f64::from(v)).sum();
-    head + tail.iter().map(|&v| f64::from(v) * f64::from(v)).sum::<f64>()
+    head + tail
+        .iter()
+        .map(|&v| f64::from(v) * f64::from(v))
+        .sum::<f64>()
 }
 
 /// `Σ ((a + b) / 2 − c)²` for equally long slices: eight running `f32` sums (so the loop
@@ -879,7 +794,6 @@ struct Walk {
 /// are in grid steps, between grid points on the segment (a pixel blend, the preview's
 /// model of the state blend rendered there). Stops once more than `n` frames fit.
 fn walk(grid: &[Vec<f32>], arc: &[f64], chord: f64, n: usize) -> Walk {
-    if std::env::var("LT_WALKS").is_ok() { eprintln!("TEMP walk {chord:.6e}"); } // TEMP
     let m = grid.len();
     let l2 = chord * chord * grid[0].len() as f64;
     let mut cur: Vec<f32> = grid[0].clone();
@@ -938,7 +852,11 @@ fn walk(grid: &[Vec<f32>], arc: &[f64], chord: f64, n: usize) -> Walk {
             let i = (pos.floor() as usize).min(m - 1);
             let at = arc[i] + (pos - i as f64) * (arc[i + 1] - arc[i]);
             let total = arc[m];
-            let steps = if at > 0.0 { n as f64 * total / at } else { f64::INFINITY };
+            let steps = if at > 0.0 {
+                n as f64 * total / at
+            } else {
+                f64::INFINITY
+            };
             return Walk {
                 pos: out,
                 steps: steps.max(n as f64),
