@@ -17,8 +17,9 @@
 //! states change smoothly between frames gets few and one that changes abruptly up to 8.
 //! A walk from frame 0 places each next frame where the RMS distance from the previous
 //! one first reaches a step length `L`; the smallest `L` that fits the loop's frames is
-//! found by bisection, so every step is `L` and the wrap what is left, at most `L`, which
-//! a few equalising sweeps share among the frames around the seam. Where the walk cannot
+//! found by regula falsi on the walk's step count, so every step is `L` and the wrap what
+//! is left, at most `L`, which a few equalising sweeps share among the frames around the
+//! seam. Where the walk cannot
 //! apply (a still loop) the frames are spaced evenly along the path
 //! ([`ignis_core::loopq::arc_times`]).
 //! Last, the frames are rendered at the measure's own size
@@ -30,7 +31,9 @@
 //! Every preview covers only the window of its frame that some state of the loop can light
 //! ([`Synthesiser::loop_canvases`]): the rest is dark in every frame and adds nothing to
 //! any step. A metric-size render covers only its own state's box within the frame
-//! ([`Synthesiser::patch_at`]), often a small part of that window.
+//! ([`Synthesiser::patch_at`]), often a small part of that window. Both are drawn by the
+//! renderer's path for small encoded grey renders ([`crate::shape::render_encoded_into`]:
+//! the free render's values, eight pixels at a time), since they cover mostly lit pixels.
 //!
 //! The timing depends on the output size (the preview has its aspect), the model, the
 //! controls and the seed, never on which frames are rendered, so a chunk of a loop equals
@@ -690,7 +693,7 @@ fn fill(grid: &[Vec<f32>], pos: &mut Vec<f64>, n: usize) {
     }
 }
 
-/// The most frames [`fill`] adds to a walk (the bisection ends with the walk at most a
+/// The most frames [`fill`] adds to a walk (the search ends with the walk at most a
 /// frame or two short of `n`).
 const MAX_FILL: usize = 8;
 
