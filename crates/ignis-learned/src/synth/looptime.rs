@@ -211,9 +211,10 @@ impl Synthesiser<'_> {
     }
 
     /// Renders `raw` (the controls at output frame `at`) within `canvas`'s window of its
-    /// frame into `out`, exposed, clamped to `0..=1` and sRGB-encoded ([`srgb_lut`]) as the
-    /// loop measure sees a written frame: the same values as [`Self::render_window`] then
-    /// that encoding, by the renderer's faster path for small grey renders
+    /// frame into `out`, exposed, clamped to `0..=1` and encoded as the loop measure sees a
+    /// written frame (sRGB, [`srgb_lut`], or the table given to
+    /// [`Synthesiser::measure_loop_through`]): the same values as [`Self::render_window`]
+    /// then that encoding, by the renderer's faster path for small grey renders
     /// ([`crate::shape::render_encoded_into`]).
     fn render_encoded(&mut self, at: f64, canvas: &Canvas, out: &mut Vec<f32>) {
         self.apply_controls(at);
@@ -230,7 +231,10 @@ impl Synthesiser<'_> {
         out.resize(cw * ch, 0.0);
         let enc = crate::shape::Encoding {
             exposure: self.exposure,
-            lut: srgb_lut(),
+            lut: match &self.loop_measure {
+                Some(table) => table,
+                None => srgb_lut(),
+            },
         };
         crate::shape::render_encoded_into(
             &self.normalised,
