@@ -7,7 +7,7 @@ use crate::frames::FrameArgs;
 use crate::global::{Global, StageBars};
 use crate::output::{OutputArgs, PaletteArg};
 use anyhow::{anyhow, bail, Context, Result};
-use ignis_core::{GrayFrame, Size};
+use ignis_core::{GrayFrame, Palette, RgbaFrame, Size};
 use ignis_learned::{Controls, EmParams, FlameModel, ShapeParams, Synthesiser, TrainParams, Wind};
 use std::cell::RefCell;
 use std::path::{Path, PathBuf};
@@ -295,6 +295,25 @@ pub fn train(a: &TrainArgs, g: &Global) -> Result<FlameModel> {
     Ok(training.model)
 }
 
+/// What the loop measure ([`ignis_core::loopq::metric_frame_rgba`], over the writer's
+/// `background`) reads for a rendered intensity `i / 1024` (`i` in `0..=1024`) multiplied
+/// by `gain` and coloured by `palette`: the table a looping synthesiser times its frames
+/// through ([`Synthesiser::measure_loop_through`]), so the written frames' steps are the
+/// ones evened out (a palette's luma is not the grey frame's).
+fn loop_measure(palette: &Palette, gain: f32, background: [f32; 3]) -> Vec<f32> {
+    let size = Size {
+        width: 2,
+        height: 2,
+    };
+    (0..=1024)
+        .map(|i| {
+            let c = palette.sample(i as f32 / 1024.0 * gain);
+            let f = RgbaFrame::from_vec(size, vec![c; 4]).expect("4 pixels");
+            ignis_core::loopq::metric_frame_rgba(&f, background).data()[0]
+        })
+        .collect()
+}
+
 /// Synthesises and writes frames. Returns what the writer wrote.
 pub fn synth(a: &SynthArgs, g: &Global) -> Result<Vec<PathBuf>> {
     let model =
@@ -311,11 +330,15 @@ pub fn synth(a: &SynthArgs, g: &Global) -> Result<Vec<PathBuf>> {
     let plan = a.frames_args.plan(a.frames, &a.out)?;
     let palette = a.palette.load()?;
     let fps = Some(a.out.fps);
-    let make = |seed: u64| {
+    // a loop is timed on the frames as written: through the gain and the palette
+    let measure = loop_measure(&palette, a.gain, a.out.write_options().background);
+    let make = |seed: u64| -> Result<Synthesiser> {
         if plan.looping {
-            Synthesiser::looping_at(&model, controls.clone(), seed, a.frames, fps)
+            let mut s = Synthesiser::looping_at(&model, controls.clone(), seed, a.frames, fps)?;
+            s.measure_loop_through(measure.clone())?;
+            Ok(s)
         } else {
-            Synthesiser::new_at(&model, controls.clone(), seed, fps)
+            Ok(Synthesiser::new_at(&model, controls.clone(), seed, fps)?)
         }
     };
     // --variants N: N loops with seeds seed, seed + 1, …, one per row of the sheet; the

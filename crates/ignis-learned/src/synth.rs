@@ -16,7 +16,7 @@
 
 use crate::error::{LearnedError, Result};
 use crate::model::FlameModel;
-use crate::shape::{canonical_box, pixel_box, render_scaled_into, Placement, RenderScratch};
+use crate::shape::{canonical_box_of, pixel_box, render_scaled_into, Placement, RenderScratch};
 use ignis_core::{GrayFrame, Rng, Size};
 use serde::{Deserialize, Serialize};
 
@@ -186,6 +186,9 @@ pub struct Synthesiser<'m> {
     /// The process time (in steps, `0..states`) of each of a loop's frames, re-timed to
     /// constant speed for one output size ([`looptime`]).
     loop_times: Option<(Size, Vec<f64>)>,
+    /// How the loop's timing sees an intensity ([`Synthesiser::measure_loop_through`]);
+    /// `None`: as a grey writer shows it.
+    loop_measure: Option<Vec<f32>>,
 }
 
 mod looptime;
@@ -233,6 +236,7 @@ impl<'m> Synthesiser<'m> {
             looped: None,
             loop_frames: 0,
             loop_times: None,
+            loop_measure: None,
             extent: model.mean_extent(),
             rate,
         })
@@ -288,6 +292,32 @@ impl<'m> Synthesiser<'m> {
         s.looped = Some(states);
         s.loop_frames = frames;
         Ok(s)
+    }
+
+    /// Times a loop's frames for the loop measure ([`ignis_core::loopq`]) of frames shown
+    /// through `table` rather than written grey: `table[i]` is the measure's value (the
+    /// writer's sRGB luma) of a pixel of intensity `i / (table.len() − 1)` as rendered,
+    /// `0..=1` (above 1 as at 1), for example after a palette and a gain. Steps are
+    /// differences of these values, so only their changes matter. Call before the first
+    /// frame; every chunk of a loop must be given the same table.
+    ///
+    /// Errors when the table has fewer than 2 entries or one that is not finite.
+    pub fn measure_loop_through(&mut self, table: Vec<f32>) -> Result<()> {
+        if table.len() < 2 || !table.iter().all(|v| v.is_finite()) {
+            return Err(LearnedError::bad(
+                "loop measure",
+                format!(
+                    "needs at least 2 finite values, got {} (of which {} finite)",
+                    table.len(),
+                    table.iter().filter(|v| v.is_finite()).count()
+                ),
+            ));
+        }
+        // dark pixels (outside a render's window) must measure 0
+        let zero = table[0];
+        self.loop_measure = Some(table.into_iter().map(|v| v - zero).collect());
+        self.loop_times = None;
+        Ok(())
     }
 
     /// Skips `n` output frames without rendering them (only the cheap process steps run,
@@ -425,7 +455,8 @@ impl<'m> Synthesiser<'m> {
     ) -> [[f64; 4]; N] {
         self.apply_controls(at);
         let (shape, _) = self.model.split(&self.shown);
-        let b = canonical_box(&shape, &self.model.shape, lit);
+        let (path, width) = self.scratch.row_profiles(&shape, &self.model.shape);
+        let b = canonical_box_of(path, width, &self.model.shape, lit);
         sizes.map(|size| {
             let sv = (shape.height * f64::from(size.height)).max(1e-3);
             pixel_box(b, &self.place(size), sv)

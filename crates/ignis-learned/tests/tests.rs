@@ -353,6 +353,44 @@ mod flame {
         assert!(Synthesiser::looping(&t.model, c, 3, 1).is_err());
     }
 
+    /// A loop timed through a palette's measure ([`Synthesiser::measure_loop_through`]:
+    /// the written frames' sRGB luma per rendered intensity) meets the loop bounds on the
+    /// palette-coloured frames as the loop measure reads them; a bad table is refused.
+    #[test]
+    fn loops_timed_through_a_palette_close_on_the_coloured_frames() {
+        let (_, t) = trained(60, 8);
+        let n = 24u32;
+        let palette = ignis_core::Palette::preset("candle").unwrap();
+        let cell = Size::new(2, 2).unwrap();
+        let table: Vec<f32> = (0..=1024)
+            .map(|i| {
+                let c = palette.sample(i as f32 / 1024.0);
+                let f = ignis_core::RgbaFrame::from_vec(cell, vec![c; 4]).unwrap();
+                ignis_core::loopq::metric_frame_rgba(&f, [0.0; 3]).data()[0]
+            })
+            .collect();
+        for (seed, w, h) in [(3, 64, 64), (4, 96, 54), (5, 54, 96), (1, 128, 128)] {
+            let size = Size::new(w, h).unwrap();
+            let mut s = Synthesiser::looping(&t.model, Controls::default(), seed, n).unwrap();
+            s.measure_loop_through(table.clone()).unwrap();
+            let frames = s.frames(size, n as usize).unwrap();
+            let metric: Vec<_> = frames
+                .iter()
+                .map(|f| ignis_core::loopq::metric_frame_rgba(&palette.apply(f), [0.0; 3]))
+                .collect();
+            let steps = ignis_core::loopq::steps(&metric, true).unwrap();
+            let med = ignis_core::loopq::median(&mut steps.clone());
+            let wrap = steps[steps.len() - 1] / med;
+            let max = steps.iter().cloned().fold(0.0, f64::max) / med;
+            eprintln!("palette loop seed {seed}, {w}x{h}: wrap {wrap:.3}, max step {max:.3}");
+            assert!(wrap <= 1.1, "seed {seed}: wrap {wrap}");
+            assert!(max <= 1.2, "seed {seed}: largest step {max}");
+        }
+        let mut s = Synthesiser::looping(&t.model, Controls::default(), 3, n).unwrap();
+        assert!(s.measure_loop_through(vec![0.5]).is_err());
+        assert!(s.measure_loop_through(vec![0.0, f32::NAN, 1.0]).is_err());
+    }
+
     #[test]
     fn wind_bends_the_flame_to_the_right() {
         let (_, t) = trained(60, 9);

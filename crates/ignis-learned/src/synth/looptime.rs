@@ -17,8 +17,9 @@
 //! states change smoothly between frames gets few and one that changes abruptly up to 8.
 //! A walk from frame 0 places each next frame where the RMS distance from the previous
 //! one first reaches a step length `L`; the smallest `L` that fits the loop's frames is
-//! found by bisection, so every step is `L` and the wrap what is left, at most `L`, which
-//! a few equalising sweeps share among the frames around the seam. Where the walk cannot
+//! found by regula falsi on the walk's step count, so every step is `L` and the wrap what
+//! is left, at most `L`, which a few equalising sweeps share among the frames around the
+//! seam. Where the walk cannot
 //! apply (a still loop) the frames are spaced evenly along the path
 //! ([`ignis_core::loopq::arc_times`]).
 //! Last, the frames are rendered at the measure's own size
@@ -30,7 +31,9 @@
 //! Every preview covers only the window of its frame that some state of the loop can light
 //! ([`Synthesiser::loop_canvases`]): the rest is dark in every frame and adds nothing to
 //! any step. A metric-size render covers only its own state's box within the frame
-//! ([`Synthesiser::patch_at`]), often a small part of that window.
+//! ([`Synthesiser::patch_at`]), often a small part of that window. Both are drawn by the
+//! renderer's path for small encoded grey renders ([`crate::shape::render_encoded_into`]:
+//! the free render's values, eight pixels at a time), since they cover mostly lit pixels.
 //!
 //! The timing depends on the output size (the preview has its aspect), the model, the
 //! controls and the seed, never on which frames are rendered, so a chunk of a loop equals
@@ -39,7 +42,7 @@
 use super::Synthesiser;
 use ignis_core::loopq::{arc_times, metric_size};
 use ignis_core::palette::linear_to_srgb;
-use ignis_core::{GrayFrame, Size};
+use ignis_core::Size;
 
 /// The most preview states per output frame ([`Synthesiser::preview_grid`]): the walk
 /// places frames between them on pixel blends of neighbouring previews, which stand in for
@@ -67,8 +70,9 @@ fn time_at(times: &[f64], steps: f64, pos: f64) -> f64 {
     let next = times.get(i + 1).copied().unwrap_or(times[0] + steps);
     times[i] + f * (next - times[i])
 }
-/// Width of the walk's previews in pixels (at most the output's; height to its aspect).
-const PREVIEW_WIDTH: u32 = 32;
+/// The shorter side of the walk's previews in pixels (at most the output's; the other to
+/// its aspect, [`preview_size`]).
+const PREVIEW_SIDE: u32 = 32;
 
 impl Synthesiser<'_> {
     /// Sets `raw` to a loop's state for the next output frame, re-timing the loop for
@@ -133,11 +137,10 @@ impl Synthesiser<'_> {
     fn preview_grid(&mut self, canvas: &Canvas) -> (Vec<Vec<f32>>, Vec<f64>) {
         let n = self.loop_frames as usize;
         let steps = self.looped.as_ref().map_or(0, |s| s.len()) as f64;
-        let mut frame = canvas.frame();
         let base: Vec<(f64, Vec<f32>)> = (0..n)
             .map(|k| {
                 let t = k as f64 * steps / n as f64;
-                (t, self.preview_at(t, canvas, &mut frame))
+                (t, self.preview_at(t, canvas))
             })
             .collect();
         let total: f64 = (0..n).map(|k| dist(&base[k].1, &base[(k + 1) % n].1)).sum();
@@ -153,15 +156,7 @@ impl Synthesiser<'_> {
                 t: [t0, t1],
                 img: [a, b],
             };
-            self.refine(
-                ends,
-                SPLIT_DEPTH,
-                tol,
-                canvas,
-                &mut frame,
-                &mut grid,
-                &mut times,
-            );
+            self.refine(ends, SPLIT_DEPTH, tol, canvas, &mut grid, &mut times);
         }
         (grid, times)
     }
@@ -176,7 +171,6 @@ impl Synthesiser<'_> {
         depth: usize,
         tol: f64,
         canvas: &Canvas,
-        frame: &mut GrayFrame,
         grid: &mut Vec<Vec<f32>>,
         times: &mut Vec<f64>,
     ) {
@@ -184,21 +178,16 @@ impl Synthesiser<'_> {
             return;
         }
         let tm = 0.5 * (ends.t[0] + ends.t[1]);
-        let c = self.preview_at(tm, canvas, frame);
+        let c = self.preview_at(tm, canvas);
         let [a, b] = ends.img;
-        let off: f64 = a
-            .iter()
-            .zip(b)
-            .zip(&c)
-            .map(|((&a, &b), &c)| f64::from(0.5 * (a + b) - c).powi(2))
-            .sum();
+        let off = blend_offset(a, b, &c);
         let split = (off / c.len().max(1) as f64).sqrt() > tol;
         if split {
             let left = Ends {
                 t: [ends.t[0], tm],
                 img: [a, &c],
             };
-            self.refine(left, depth - 1, tol, canvas, frame, grid, times);
+            self.refine(left, depth - 1, tol, canvas, grid, times);
         }
         times.push(tm);
         grid.push(c.clone());
@@ -207,33 +196,72 @@ impl Synthesiser<'_> {
                 t: [tm, ends.t[1]],
                 img: [&c, b],
             };
-            self.refine(right, depth - 1, tol, canvas, frame, grid, times);
+            self.refine(right, depth - 1, tol, canvas, grid, times);
         }
     }
 
     /// The preview frame of the loop's state at process time `tau` (cyclic; rendered, not
     /// a pixel blend), the controls taken at the output frame shown near it.
-    fn preview_at(&mut self, tau: f64, canvas: &Canvas, frame: &mut GrayFrame) -> Vec<f32> {
+    fn preview_at(&mut self, tau: f64, canvas: &Canvas) -> Vec<f32> {
         let steps = self.looped.as_ref().map_or(0, |s| s.len()) as f64;
         self.set_loop_state(tau);
         let at = tau * f64::from(self.loop_frames) / steps;
-        self.render_window(at, canvas.size, canvas.origin, frame);
-        encode(frame)
+        let mut out = Vec::new();
+        self.render_encoded(at, canvas, &mut out);
+        out
+    }
+
+    /// Renders `raw` (the controls at output frame `at`) within `canvas`'s window of its
+    /// frame into `out`, exposed, clamped to `0..=1` and encoded as the loop measure sees a
+    /// written frame (sRGB, [`srgb_lut`], or the table given to
+    /// [`Synthesiser::measure_loop_through`]): the same values as [`Self::render_window`]
+    /// then that encoding, by the renderer's faster path for small grey renders
+    /// ([`crate::shape::render_encoded_into`]).
+    fn render_encoded(&mut self, at: f64, canvas: &Canvas, out: &mut Vec<f32>) {
+        self.apply_controls(at);
+        let mut place = self.place(canvas.size);
+        place.cx -= f64::from(canvas.origin.0);
+        place.cy -= f64::from(canvas.origin.1);
+        let (shape, w) = self.model.split(&self.shown);
+        self.normalised.resize(self.model.pca.n_pixels(), 0.0);
+        self.model
+            .pca
+            .reconstruct_into(&w, w.len(), &mut self.normalised);
+        let (cw, ch) = (canvas.w as usize, canvas.h as usize);
+        out.clear();
+        out.resize(cw * ch, 0.0);
+        let enc = crate::shape::Encoding {
+            exposure: self.exposure,
+            lut: match &self.loop_measure {
+                Some(table) => table,
+                None => srgb_lut(),
+            },
+        };
+        crate::shape::render_encoded_into(
+            &self.normalised,
+            &shape,
+            &place,
+            &self.model.shape,
+            &mut self.scratch,
+            f64::from(canvas.size.height),
+            (cw, ch),
+            enc,
+            out,
+        );
     }
 
     /// The loop's state at process time `tau` rendered at `canvas`'s frame size within
     /// the state's own box (see [`Self::raw_boxes`]; `lit` from [`Self::loop_lit`]),
-    /// encoded as [`encode`] does: outside the box it lights no pixel.
+    /// encoded as [`Self::render_encoded`] does: outside the box it lights no pixel.
     fn patch_at(&mut self, tau: f64, lit: [usize; 4], canvas: &Canvas) -> Patch {
         let steps = self.looped.as_ref().map_or(0, |s| s.len()) as f64;
         self.set_loop_state(tau);
         let at = tau * f64::from(self.loop_frames) / steps;
         let [b] = self.raw_boxes(at, lit, [canvas.size]);
         let window = Canvas::covering(canvas.size, b);
-        let mut frame = window.frame();
-        self.render_window(at, window.size, window.origin, &mut frame);
-        let data = encode(&frame);
-        let energy = data.iter().map(|&v| f64::from(v) * f64::from(v)).sum();
+        let mut data = Vec::new();
+        self.render_encoded(at, &window, &mut data);
+        let energy = sum_sq(&data);
         Patch {
             window,
             data,
@@ -459,14 +487,6 @@ impl Canvas {
             h,
         }
     }
-
-    /// A frame of the window's size.
-    fn frame(&self) -> GrayFrame {
-        GrayFrame::new(Size {
-            width: self.w,
-            height: self.h,
-        })
-    }
 }
 
 /// An encoded render within a window of its frame; the frame is dark outside it.
@@ -501,8 +521,8 @@ impl Patch {
             for y in y0..y1 {
                 let (ra, rb) = (row(self, y, x0, x1), row(other, y, x0, x1));
                 diff += ignis_core::loopq::sum_sq_diff(ra, rb);
-                ea += ra.iter().map(|&v| f64::from(v) * f64::from(v)).sum::<f64>();
-                eb += rb.iter().map(|&v| f64::from(v) * f64::from(v)).sum::<f64>();
+                ea += sum_sq(ra);
+                eb += sum_sq(rb);
             }
         }
         let sq = diff + (self.energy - ea).max(0.0) + (other.energy - eb).max(0.0);
@@ -510,14 +530,17 @@ impl Patch {
     }
 }
 
-/// The walk's preview size for output frames of `size`: [`PREVIEW_WIDTH`] wide (or the
-/// output's width when narrower), height to the output's aspect, at least 2.
+/// The walk's preview size for output frames of `size`: the shorter side [`PREVIEW_SIDE`]
+/// (or the output's when shorter), the other to the output's aspect, at least 2. A flame's
+/// scale follows the frame's height, so a wide frame's preview keeps its height (its flame
+/// as many preview pixels as in a square frame's) and a tall one its width.
 fn preview_size(size: Size) -> Size {
-    let w = PREVIEW_WIDTH.min(size.width).max(1);
-    let h = (f64::from(w) * f64::from(size.height) / f64::from(size.width)).round() as u32;
+    let short = size.width.min(size.height);
+    let scale = f64::from(PREVIEW_SIDE.min(short).max(1)) / f64::from(short.max(1));
+    let side = |v: u32| ((f64::from(v) * scale).round() as u32).clamp(2, v.max(2));
     Size {
-        width: w,
-        height: h.max(2),
+        width: side(size.width),
+        height: side(size.height),
     }
 }
 
@@ -528,8 +551,10 @@ const MAX_PREVIEW_VALUES: usize = 128 << 20;
 
 /// Steps longer than this many times the median are evened out with their neighbour.
 const EVEN_OUT: f64 = 1.15;
-/// Passes of [`Synthesiser::even_out`] over the loop.
-const EVEN_OUT_PASSES: usize = 3;
+/// Passes of [`Synthesiser::even_out`] over the loop: each shares a long step with one
+/// neighbour, so a run of long steps reaches the shorter ones around it a frame per pass
+/// (3 passes left 1.23–1.25 × the median in 160×90 and 256×144 loops of the bench model).
+const EVEN_OUT_PASSES: usize = 8;
 /// Renders per evened-out frame ([`Synthesiser::balance`]).
 const EVEN_OUT_RENDERS: usize = 6;
 /// [`Synthesiser::balance`] stops when the two steps differ by less than this fraction of
@@ -538,37 +563,63 @@ const EVEN_OUT_TOLERANCE: f64 = 0.02;
 
 /// `n` positions on the closed preview path (in grid steps from grid point 0, the first
 /// 0) whose consecutive preview frames are equally far apart: the smallest step length
-/// whose [`walk`] fits `n` frames or fewer, found by bisection, the few frames short of `n`
-/// [`fill`]ed in and the seam [`relax`]ed. `None` for a path of zero length or when the
-/// walk falls more than [`MAX_FILL`] frames short.
+/// whose [`walk`] fits `n` frames or fewer, found within [`LENGTH_TOLERANCE`] by regula
+/// falsi on the walk's step count ([`Walk::steps`], continuous where the count changes
+/// from `n` to `n + 1`), the few frames short of `n` [`fill`]ed in and the seam
+/// [`relax`]ed. `None` for a path of zero length or when the walk falls more than
+/// [`MAX_FILL`] frames short.
 fn equal_steps(grid: &[Vec<f32>], arc: &[f64], n: usize) -> Option<Vec<f64>> {
     let total = arc[arc.len() - 1];
     if !(total > 1e-9) || n < 2 {
         return None;
     }
     // A step of length L spans at least L of the path, so L = total / (n − 1) fits n
-    // frames or fewer; shrink it until more than n fit, then bisect.
+    // frames or fewer; shrink it until more than n fit.
     let mut hi = total / (n - 1) as f64;
-    let mut best = walk(grid, arc, hi, n)?;
-    let mut lo = SHRINK * hi;
+    let tol = LENGTH_TOLERANCE * hi;
+    let first = walk(grid, arc, hi, n);
+    let mut h_hi = first.steps - n as f64;
+    let mut best = first.fits.then_some(first.pos)?;
+    // the count goes about as 1 / L: first try just under where that puts n steps
+    let mut lo = (hi * first.steps / n as f64 * GUESS_MARGIN).clamp(SHRINK * hi, hi * GUESS_MARGIN);
+    let mut h_lo = f64::NAN;
     for _ in 0..40 {
-        match walk(grid, arc, lo, n) {
-            Some(p) => {
-                best = p;
-                hi = lo;
-                lo *= SHRINK;
-            }
-            None => break,
+        let w = walk(grid, arc, lo, n);
+        if !w.fits {
+            h_lo = w.steps - n as f64;
+            break;
         }
+        (best, hi, h_hi) = (w.pos, lo, w.steps - n as f64);
+        lo *= SHRINK;
     }
-    for _ in 0..BISECTIONS {
-        let mid = 0.5 * (lo + hi);
-        match walk(grid, arc, mid, n) {
-            Some(p) => {
-                best = p;
-                hi = mid;
+    // Illinois: a secant between the bracket's ends, halving the weight of an end kept
+    // twice in a row; within the bracket's middle 98 %, else its midpoint.
+    let mut kept = 0i32; // −1: lo kept by the last try, +1: hi
+    for _ in 0..MAX_LENGTH_TRIES {
+        if !(hi - lo > tol) || !h_lo.is_finite() {
+            break;
+        }
+        let secant = hi - h_hi * (hi - lo) / (h_hi - h_lo);
+        let margin = 0.01 * (hi - lo);
+        let x = if secant > lo + margin && secant < hi - margin {
+            secant
+        } else {
+            0.5 * (lo + hi)
+        };
+        let w = walk(grid, arc, x, n);
+        let h = w.steps - n as f64;
+        if w.fits {
+            (best, hi, h_hi) = (w.pos, x, h);
+            if kept == 1 {
+                h_lo *= 0.5;
             }
-            None => lo = mid,
+            kept = 1;
+        } else {
+            (lo, h_lo) = (x, h);
+            if kept == -1 {
+                h_hi *= 0.5;
+            }
+            kept = -1;
         }
     }
     if best.len() + MAX_FILL < n {
@@ -616,11 +667,17 @@ fn relax(grid: &[Vec<f32>], pos: &mut [f64]) {
     }
 }
 
-/// Bisections of the walk's step length (to 2⁻¹⁴ of its bracket; the seam's relaxation
-/// spreads what is left over).
-const BISECTIONS: usize = 14;
+/// How close [`equal_steps`] brings the walk's step length to the least that fits, as a
+/// fraction of the first length tried (the seam's relaxation spreads what is left over).
+const LENGTH_TOLERANCE: f64 = 1.0 / 65536.0;
+/// The most walks [`equal_steps`] tries after bracketing the step length (bisection alone
+/// needs 14 to reach [`LENGTH_TOLERANCE`]).
+const MAX_LENGTH_TRIES: usize = 24;
 /// Factor by which the walk's step length is lowered until more than `n` frames fit.
 const SHRINK: f64 = 0.75;
+/// The first step length [`equal_steps`] lowers to: this factor under the length at which
+/// the first walk's count, taken as inversely proportional to the length, would be `n`.
+const GUESS_MARGIN: f64 = 0.995;
 /// Frames on each side of the seam that share the wrap step's slack.
 const SEAM_WINDOW: usize = 8;
 /// Equalising sweeps over them.
@@ -646,31 +703,20 @@ fn fill(grid: &[Vec<f32>], pos: &mut Vec<f64>, n: usize) {
     }
 }
 
-/// The most frames [`fill`] adds to a walk (the bisection ends with the walk at most a
+/// The most frames [`fill`] adds to a walk (the search ends with the walk at most a
 /// frame or two short of `n`).
 const MAX_FILL: usize = 8;
 
-/// A preview frame as the loop measure sees a written one: clamped to `0..=1` and
-/// sRGB-encoded (through a table of [`SRGB_STEPS`] + 1 points, linear between them).
-fn encode(frame: &GrayFrame) -> Vec<f32> {
+/// The sRGB table of the timing's renders ([`crate::shape::Encoding`]): [`SRGB_STEPS`] + 1
+/// points, linear between them. A preview frame is clamped to `0..=1` and encoded as the
+/// loop measure sees a written one.
+fn srgb_lut() -> &'static [f32] {
     static LUT: std::sync::OnceLock<Vec<f32>> = std::sync::OnceLock::new();
-    let lut = LUT.get_or_init(|| {
+    LUT.get_or_init(|| {
         (0..=SRGB_STEPS)
             .map(|i| linear_to_srgb(i as f32 / SRGB_STEPS as f32))
             .collect()
-    });
-    frame
-        .data()
-        .iter()
-        .map(|&v| {
-            if v <= 0.0 {
-                return 0.0;
-            }
-            let x = v.min(1.0) * SRGB_STEPS as f32;
-            let i = (x as usize).min(SRGB_STEPS - 1);
-            lut[i] + (lut[i + 1] - lut[i]) * (x - i as f32)
-        })
-        .collect()
+    })
 }
 
 /// Intervals of the sRGB table.
@@ -681,12 +727,86 @@ fn dist(a: &[f32], b: &[f32]) -> f64 {
     (ignis_core::loopq::sum_sq_diff(a, b) / a.len().max(1) as f64).sqrt()
 }
 
+/// `[|g − p0|², (p0 − q)·(g − p0), |p0 − q|²]` for equally long `p0`, `g`, `q`: eight
+/// running `f32` sums of each (so the loop vectorises), added in `f64` in a fixed order.
+fn segment_sums(p0: &[f32], g: &[f32], q: &[f32]) -> [f64; 3] {
+    let mut acc = [[0f32; 8]; 3];
+    let (c0, c1, c2) = (p0.chunks_exact(8), g.chunks_exact(8), q.chunks_exact(8));
+    let tail = (c0.remainder(), c1.remainder(), c2.remainder());
+    for ((x0, x1), q) in c0.zip(c1).zip(c2) {
+        for l in 0..8 {
+            let (d0, e) = (x0[l] - q[l], x1[l] - x0[l]);
+            acc[0][l] += e * e;
+            acc[1][l] += d0 * e;
+            acc[2][l] += d0 * d0;
+        }
+    }
+    let mut out = acc.map(|lanes| lanes.iter().map(|&v| f64::from(v)).sum::<f64>());
+    for ((&x0, &x1), &q) in tail.0.iter().zip(tail.1).zip(tail.2) {
+        let (d0, e) = (f64::from(x0 - q), f64::from(x1 - x0));
+        out[0] += e * e;
+        out[1] += d0 * e;
+        out[2] += d0 * d0;
+    }
+    out
+}
+
+/// Σ a² of a patch's samples: eight running `f32` sums (so the loop vectorises), added in
+/// `f64` in a fixed order, as [`ignis_core::loopq::sum_sq_diff`] sums differences.
+fn sum_sq(a: &[f32]) -> f64 {
+    let mut lanes = [0f32; 8];
+    let chunks = a.chunks_exact(8);
+    let tail = chunks.remainder();
+    for c in chunks {
+        for (l, &v) in lanes.iter_mut().zip(c) {
+            *l += v * v;
+        }
+    }
+    let head: f64 = lanes.iter().map(|&v| f64::from(v)).sum();
+    head + tail
+        .iter()
+        .map(|&v| f64::from(v) * f64::from(v))
+        .sum::<f64>()
+}
+
+/// `Σ ((a + b) / 2 − c)²` for equally long slices: eight running `f32` sums (so the loop
+/// vectorises), added in `f64` in a fixed order.
+fn blend_offset(a: &[f32], b: &[f32], c: &[f32]) -> f64 {
+    let mut lanes = [0f32; 8];
+    let (ca, cb, cc) = (a.chunks_exact(8), b.chunks_exact(8), c.chunks_exact(8));
+    let tail = (ca.remainder(), cb.remainder(), cc.remainder());
+    for ((a, b), c) in ca.zip(cb).zip(cc) {
+        for l in 0..8 {
+            let d = 0.5 * (a[l] + b[l]) - c[l];
+            lanes[l] += d * d;
+        }
+    }
+    let head: f64 = lanes.iter().map(|&v| f64::from(v)).sum();
+    let rest: f64 = (tail.0.iter().zip(tail.1).zip(tail.2))
+        .map(|((&a, &b), &c)| f64::from(0.5 * (a + b) - c).powi(2))
+        .sum();
+    head + rest
+}
+
+/// A [`walk`]'s frames and its step count.
+struct Walk {
+    /// The frames' positions (all of them when the walk fits).
+    pos: Vec<f64>,
+    /// Steps of the walk's length around the loop: when it fits, its frames less one plus
+    /// the wrap's fraction of a step (so it runs on continuously where the frame count
+    /// changes); when it does not, `n` over the fraction of the path's length (`arc`) the
+    /// first `n` steps covered, an estimate.
+    steps: f64,
+    /// Whether `n` frames or fewer fit.
+    fits: bool,
+}
+
 /// Walks the closed polyline through `grid` (preview frames at evenly spaced times, the
 /// last joined back to the first) from grid point 0, placing each next frame where the
 /// straight-line (RMS) distance from the previous one first reaches `chord`; positions
 /// are in grid steps, between grid points on the segment (a pixel blend, the preview's
-/// model of the state blend rendered there). `None` when more than `n` frames fit.
-fn walk(grid: &[Vec<f32>], arc: &[f64], chord: f64, n: usize) -> Option<Vec<f64>> {
+/// model of the state blend rendered there). Stops once more than `n` frames fit.
+fn walk(grid: &[Vec<f32>], arc: &[f64], chord: f64, n: usize) -> Walk {
     let m = grid.len();
     let l2 = chord * chord * grid[0].len() as f64;
     let mut cur: Vec<f32> = grid[0].clone();
@@ -711,7 +831,14 @@ fn walk(grid: &[Vec<f32>], arc: &[f64], chord: f64, n: usize) -> Option<Vec<f64>
             j = (j + 1).max(arc.partition_point(|&v| v - from < slack));
         }
         if j > m {
-            return Some(out);
+            // the wrap: what is left of the path from the last frame, under a step
+            let left = (sq(&grid[0], &cur) / len).sqrt() / chord;
+            let steps = (out.len() - 1) as f64 + left;
+            return Walk {
+                pos: out,
+                steps,
+                fits: true,
+            };
         }
         // the segment into grid point j starts at cur when cur lies on it
         let from_cur = pos > (j - 1) as f64;
@@ -719,14 +846,8 @@ fn walk(grid: &[Vec<f32>], arc: &[f64], chord: f64, n: usize) -> Option<Vec<f64>
         let p0_pos = if from_cur { pos } else { (j - 1) as f64 };
         let g = &grid[j % m];
         // |p0 + s (g − p0) − cur|² = l2
-        let (mut a, mut b, mut c) = (0.0, 0.0, -l2);
-        for ((&x0, &x1), &q) in p0.iter().zip(g.iter()).zip(cur.iter()) {
-            let d0 = f64::from(x0 - q);
-            let e = f64::from(x1 - x0);
-            a += e * e;
-            b += d0 * e;
-            c += d0 * d0;
-        }
+        let [a, b, c] = segment_sums(p0, g, &cur);
+        let c = c - l2;
         let s = if a > 0.0 {
             ((-b + (b * b - a * c).max(0.0).sqrt()) / a).clamp(0.0, 1.0)
         } else {
@@ -740,7 +861,20 @@ fn walk(grid: &[Vec<f32>], arc: &[f64], chord: f64, n: usize) -> Option<Vec<f64>
         pos = p0_pos + s * (j as f64 - p0_pos);
         cur = next;
         if out.len() == n {
-            return None;
+            // n steps reached at this point of the path: as many again for the rest
+            let i = (pos.floor() as usize).min(m - 1);
+            let at = arc[i] + (pos - i as f64) * (arc[i + 1] - arc[i]);
+            let total = arc[m];
+            let steps = if at > 0.0 {
+                n as f64 * total / at
+            } else {
+                f64::INFINITY
+            };
+            return Walk {
+                pos: out,
+                steps: steps.max(n as f64),
+                fits: false,
+            };
         }
         out.push(pos);
     }
