@@ -14,7 +14,8 @@
 //! the floor in some sample and varies by at least that. A still light is an 8-connected
 //! region of still, lit pixels with no flickering pixel within `r` (4 % of the frame's
 //! longer side, at least 3 px): a flame's saturated core is still and lit too, but its
-//! moving edge flickers right beside it, and a steady ember at the edge of a coal bed
+//! moving edge flickers right beside it, and no box may hold a flickering pixel (a large
+//! still region wrapped around moving light would blank it through its box), and a steady ember at the edge of a coal bed
 //! lies within `r` of the flames (at 1.5 % one of `campfire.mp4`'s did not: it would have
 //! been cut out of the fire). A lamp closer than `r` to the fire stays in the mask. Each
 //! still light's bounding box, grown by a quarter of `r` (at least 3 px: the mask's
@@ -175,26 +176,48 @@ pub fn still_lights(samples: &[Vec<u8>], w: u32, h: u32, floor: f32) -> StillLig
         reg.1 += 1;
         reg.2 |= nb > 0;
     }
+    let grow = (r / 4).max(3);
+    let grown = |b: &[u32; 4]| {
+        [
+            b[0].saturating_sub(grow),
+            b[1].saturating_sub(grow),
+            (b[2] + grow).min(w),
+            (b[3] + grow).min(h),
+        ]
+    };
+    // A box must hold no flicker at all (a large still region wrapped around moving light
+    // would blank it through its box): counted on a summed-area table.
+    let sat = summed_area(&flicker);
+    let flickers_in = |b: [u32; 4]| {
+        let at = |x: u32, y: u32| sat[y as usize * (w as usize + 1) + x as usize];
+        at(b[2], b[3]) + at(b[0], b[1]) - at(b[0], b[3]) - at(b[2], b[1]) > 0
+    };
     let mut lights: Vec<_> = regions
         .into_iter()
-        .filter(|(_, area, near)| !near && *area >= MIN_AREA)
+        .filter(|(b, area, near)| !near && *area >= MIN_AREA && !flickers_in(grown(b)))
         .collect();
     // Largest first; ties by position (deterministic).
     lights.sort_by(|a, b| b.1.cmp(&a.1).then(a.0.cmp(&b.0)));
-    let grow = (r / 4).max(3);
     let boxes: Vec<[u32; 4]> = lights
         .iter()
         .take(MAX_LIGHTS)
-        .map(|(b, _, _)| {
-            [
-                b[0].saturating_sub(grow),
-                b[1].saturating_sub(grow),
-                (b[2] + grow).min(w),
-                (b[3] + grow).min(h),
-            ]
-        })
+        .map(|(b, _, _)| grown(b))
         .collect();
     StillLights::new(&boxes)
+}
+
+/// Summed-area table of a mask's set pixels, `(w + 1) × (h + 1)`, row-major.
+fn summed_area(m: &GrayImage) -> Vec<u32> {
+    let (w, h) = (m.width() as usize, m.height() as usize);
+    let mut s = vec![0u32; (w + 1) * (h + 1)];
+    for y in 0..h {
+        let mut row = 0u32;
+        for x in 0..w {
+            row += (m.as_raw()[y * w + x] > 0) as u32;
+            s[(y + 1) * (w + 1) + x + 1] = s[y * (w + 1) + x + 1] + row;
+        }
+    }
+    s
 }
 
 #[cfg(test)]
@@ -252,6 +275,32 @@ mod tests {
         // Nothing moves (a frozen clip): nothing tells the lamp from the flame.
         let frozen = vec![clip(1, true).remove(0); 24];
         assert!(still_lights(&frozen, 120, 80, 0.3).is_empty());
+    }
+
+    /// A still lit ring (a window frame) around a moving light, farther than `r` from it:
+    /// its box would hold the moving light, so it is not a still light.
+    #[test]
+    fn a_box_never_holds_flicker() {
+        let (w, h) = (120usize, 80usize);
+        let frames: Vec<Vec<u8>> = (0..16)
+            .map(|k| {
+                (0..w * h)
+                    .map(|i| {
+                        let (x, y) = ((i % w) as i32, (i / w) as i32);
+                        let ring = (x - 60).abs().max((y - 40).abs());
+                        let blob = (x - 58 - (k % 4) as i32).abs().max((y - 40).abs()) < 4;
+                        if blob && k % 2 == 0 {
+                            250
+                        } else if (30..33).contains(&ring) {
+                            240
+                        } else {
+                            5
+                        }
+                    })
+                    .collect()
+            })
+            .collect();
+        assert!(still_lights(&frames, w as u32, h as u32, 0.3).is_empty());
     }
 
     #[test]

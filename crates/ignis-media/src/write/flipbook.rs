@@ -300,16 +300,27 @@ pub fn plan_layout(n: u32, frame: Size, opts: &FlipbookOptions) -> Result<(Layou
             sheet_height: sh as u32,
         })
     };
-    let too_big = |what: String| {
-        let fit = (max as u64 / cw) * (max as u64 / ch);
-        MediaError::LimitExceeded(format!(
+    let too_big =
+        |what: String| {
+            // Cells that fit by the sides, and by the sheet's pixel cap (which --max-size does
+            // not raise).
+            let by_side = (max as u64 / cw) * (max as u64 / ch);
+            let by_area = MAX_PIXELS / (cw * ch).max(1);
+            MediaError::LimitExceeded(format!(
             "{what} of {}x{} frames (+{pad} padding per side) do not fit a {max}x{max} sheet{} \
-             (at most {fit} cells fit); use fewer or smaller frames, less padding or a larger --max-size",
+             of at most {MAX_PIXELS} pixels (at most {} cells fit); use fewer or smaller frames \
+             (--size), less padding{}",
             frame.width,
             frame.height,
             if opts.pot { " with power-of-two sides" } else { "" },
+            by_side.min(by_area),
+            if by_side < by_area && max < MAX_SIDE {
+                " or a larger --max-size"
+            } else {
+                ", or write a frame sequence (`-o dir/%04d.png`)"
+            },
         ))
-    };
+        };
     if v > 1 {
         if opts.columns.is_some() || opts.rows.is_some() {
             return Err(MediaError::bad(
@@ -1280,6 +1291,33 @@ mod tests {
         };
         match fit_frame(97, hd, &tiny) {
             Err(MediaError::LimitExceeded(m)) => assert!(m.contains("raise --max-size"), "{m}"),
+            other => panic!("{other:?}"),
+        }
+    }
+
+    /// Too many cells for the sheet's pixel cap (not its sides): the message counts the
+    /// cells the cap allows and does not offer a larger --max-size, which would not help.
+    #[test]
+    fn the_pixel_cap_is_counted_in_the_refusal() {
+        let hd = Size::new(1280, 720).unwrap();
+        match plan_layout(103, hd, &FlipbookOptions::default()) {
+            Err(MediaError::LimitExceeded(m)) => {
+                let fit = MAX_PIXELS / (1280 * 720);
+                assert!(m.contains(&format!("at most {fit} cells fit")), "{m}");
+                assert!(!m.contains("--max-size"), "{m}");
+                assert!(m.contains("frame sequence"), "{m}");
+            }
+            other => panic!("{other:?}"),
+        }
+        let small = FlipbookOptions {
+            max_size: Some(4096),
+            ..Default::default()
+        };
+        match plan_layout(103, hd, &small) {
+            Err(MediaError::LimitExceeded(m)) => {
+                assert!(m.contains("at most 15 cells fit"), "{m}");
+                assert!(m.contains("a larger --max-size"), "{m}");
+            }
             other => panic!("{other:?}"),
         }
     }
