@@ -13,16 +13,17 @@
 //! value varies by less than [`STILL_RANGE`] levels, and **flickering** when it reaches
 //! the floor in some sample and varies by at least that. A still light is an 8-connected
 //! region of still, lit pixels with no flickering pixel within `r` (4 % of the frame's
-//! longer side, at least 3 px): a flame's saturated core is still and lit too, but its
-//! moving edge flickers right beside it, and no box may hold a flickering pixel (a large
-//! still region wrapped around moving light would blank it through its box), and a steady ember at the edge of a coal bed
-//! lies within `r` of the flames (at 1.5 % one of `campfire.mp4`'s did not: it would have
-//! been cut out of the fire). A lamp closer than `r` to the fire stays in the mask. Each
-//! still light's bounding box, grown by a quarter of `r` (at least 3 px: the mask's
-//! morphology and smoothing reach 3 px), is stored in the clip's pose ([`StillLights`]) and every frame's mask ignores
-//! those boxes (the mask, the isolation's luminance, and, without isolation, the grey
-//! image). A clip where nothing flickers gets none: nothing there tells a lamp from a
-//! steady flame. Everything is relative to the clip's own samples: nothing is tuned to a clip.
+//! longer side, at least 3 px) nor inside its box. A flame's saturated core is still and
+//! lit too, but its moving edge flickers right beside it; a steady ember at the edge of a
+//! coal bed lies within `r` of the flames (at 1.5 % one of `campfire.mp4`'s did not: it
+//! would have been cut out of the fire); a large still region wrapped around moving light
+//! would blank it through its box. A lamp closer than `r` to the fire stays in the mask.
+//! Each still light's bounding box, grown by a quarter of `r` (at least 3 px: the mask's
+//! morphology and smoothing reach 3 px), is stored in the clip's pose ([`StillLights`])
+//! and every frame's mask ignores those boxes (the mask, the isolation's luminance, and,
+//! without isolation, the grey image). A clip where nothing flickers gets none: nothing
+//! there tells a lamp from a steady flame. Everything is relative to the clip's own
+//! samples: nothing is tuned to a clip.
 
 use image::GrayImage;
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
