@@ -289,7 +289,7 @@ mod tests {
                     .map(|i| {
                         let (x, y) = ((i % w) as i32, (i / w) as i32);
                         let ring = (x - 60).abs().max((y - 40).abs());
-                        let blob = (x - 58 - (k % 4) as i32).abs().max((y - 40).abs()) < 4;
+                        let blob = (x - 58 - (k % 4)).abs().max((y - 40).abs()) < 4;
                         if blob && k % 2 == 0 {
                             250
                         } else if (30..33).contains(&ring) {
