@@ -254,19 +254,20 @@ impl Synthesiser<'_> {
     /// the state's own box (see [`Self::raw_boxes`]; `lit` from [`Self::loop_lit`]),
     /// encoded as [`Self::render_encoded`] does: outside the box it lights no pixel.
     fn patch_at(&mut self, tau: f64, lit: [usize; 4], canvas: &Canvas) -> Patch {
+        let mut patch = Patch::empty(*canvas);
+        self.patch_into(tau, lit, canvas, &mut patch);
+        patch
+    }
+
+    /// [`Self::patch_at`] into `patch`, reusing its buffer.
+    fn patch_into(&mut self, tau: f64, lit: [usize; 4], canvas: &Canvas, patch: &mut Patch) {
         let steps = self.looped.as_ref().map_or(0, |s| s.len()) as f64;
         self.set_loop_state(tau);
         let at = tau * f64::from(self.loop_frames) / steps;
         let [b] = self.raw_boxes(at, lit, [canvas.size]);
-        let window = Canvas::covering(canvas.size, b);
-        let mut data = Vec::new();
-        self.render_encoded(at, &window, &mut data);
-        let energy = sum_sq(&data);
-        Patch {
-            window,
-            data,
-            energy,
-        }
+        patch.window = Canvas::covering(canvas.size, b);
+        self.render_encoded(at, &patch.window, &mut patch.data);
+        patch.energy = sum_sq(&patch.data);
     }
 
     /// The rows and columns of the normalised image (`[r0, r1, c0, c1]`, inclusive) that
@@ -338,15 +339,25 @@ impl Synthesiser<'_> {
     /// `EVEN_OUT` × the median moves its frame other than frame 0 towards where its two
     /// steps are equal ([`Synthesiser::balance`]), a few passes over the loop. Each frame
     /// is rendered only within its own state's box ([`Synthesiser::patch_at`]), a fraction
-    /// of the loop's canvas when the flame moves about its frame.
+    /// of the loop's canvas when the flame moves about its frame. The steps are measured
+    /// on renders streamed through two reused buffers (no memory per frame, each render
+    /// compared while in cache); the few frames around long steps are rendered again
+    /// when a pass needs them (the same values: a render depends on its time only).
     fn even_out(&mut self, pos: &mut [f64], canvas: Canvas) {
         let n = pos.len();
+        if n < 2 {
+            return;
+        }
         let end = self.looped.as_ref().map_or(0, |s| s.len()) as f64;
         let lit = self.loop_lit();
         let canvas = &canvas;
-        let mut img: Vec<Patch> = pos.iter().map(|&p| self.patch_at(p, lit, canvas)).collect();
-        let step = |img: &[Patch], k: usize| img[k].dist(&img[(k + 1) % n], canvas);
-        let mut steps: Vec<f64> = (0..n).map(|k| step(&img, k)).collect();
+        let (mut steps, first, last) = self.streamed_steps(pos, lit, canvas);
+        let mut img: Vec<Option<Patch>> = (0..n).map(|_| None).collect();
+        (img[0], img[n - 1]) = (Some(first), Some(last));
+        let step = |img: &[Option<Patch>], k: usize| {
+            let (a, b) = (&img[k], &img[(k + 1) % n]);
+            a.as_ref().expect("rendered").dist(b.as_ref().expect("rendered"), canvas)
+        };
         let med = ignis_core::loopq::median(&mut steps.clone());
         for _ in 0..EVEN_OUT_PASSES {
             for k in 0..n {
@@ -361,15 +372,21 @@ impl Synthesiser<'_> {
                 } else {
                     1
                 };
+                for i in [j - 1, j, (j + 1) % n] {
+                    if img[i].is_none() {
+                        img[i] = Some(self.patch_at(pos[i], lit, canvas));
+                    }
+                }
                 let ends = [pos[j - 1], pos.get(j + 1).copied().unwrap_or(end)];
                 let now = (pos[j], steps[j - 1] - steps[j], steps[j - 1].max(steps[j]));
                 let (ia, ib) = (&img[j - 1], &img[(j + 1) % n]);
-                let (best, at) = self.balance([ia, ib], ends, now, lit, canvas);
+                let ends_img = [ia, ib].map(|p| p.as_ref().expect("rendered"));
+                let (best, at) = self.balance(ends_img, ends, now, lit, canvas);
                 let Some(best) = best else { continue };
                 let before = (
                     steps[j - 1].max(steps[j]),
                     pos[j],
-                    std::mem::replace(&mut img[j], best),
+                    std::mem::replace(&mut img[j], Some(best)),
                 );
                 pos[j] = at;
                 let (s0, s1) = (step(&img, j - 1), step(&img, j));
@@ -382,6 +399,29 @@ impl Synthesiser<'_> {
                 }
             }
         }
+    }
+
+    /// The steps between consecutive frames at `pos` (the last one the wrap) on their
+    /// metric-size renders ([`Self::patch_at`]), each render compared with the previous
+    /// one as it is made, in two reused buffers; and the renders of the first and last
+    /// frames. `pos` holds at least two frames.
+    fn streamed_steps(
+        &mut self,
+        pos: &[f64],
+        lit: [usize; 4],
+        canvas: &Canvas,
+    ) -> (Vec<f64>, Patch, Patch) {
+        let first = self.patch_at(pos[0], lit, canvas);
+        let mut prev = self.patch_at(pos[1], lit, canvas);
+        let mut steps = vec![first.dist(&prev, canvas)];
+        let mut cur = Patch::empty(*canvas);
+        for &p in &pos[2..] {
+            self.patch_into(p, lit, canvas, &mut cur);
+            steps.push(prev.dist(&cur, canvas));
+            std::mem::swap(&mut prev, &mut cur);
+        }
+        steps.push(prev.dist(&first, canvas));
+        (steps, first, prev)
     }
 
     /// A frame between grid positions `ends` whose longer step, from `ends_img[0]` or to
@@ -498,6 +538,15 @@ struct Patch {
 }
 
 impl Patch {
+    /// A patch of no pixels in a window of `canvas`'s frame (a buffer to render into).
+    fn empty(canvas: Canvas) -> Patch {
+        Patch {
+            window: canvas,
+            data: Vec::new(),
+            energy: 0.0,
+        }
+    }
+
     /// RMS difference of the two frames over `canvas` (a window of the same frame size
     /// holding both patches' light): the sum of squared differences where the windows
     /// overlap, plus each patch's own light outside the overlap.
