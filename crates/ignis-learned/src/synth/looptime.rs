@@ -859,6 +859,8 @@ fn walk(grid: &[Vec<f32>], arc: &[f64], chord: f64, n: usize) -> Walk {
     let m = grid.len();
     let l2 = chord * chord * grid[0].len() as f64;
     let mut cur: Vec<f32> = grid[0].clone();
+    // the next frame's blend is made here, then swapped with `cur` (no allocation a step)
+    let mut spare: Vec<f32> = Vec::with_capacity(cur.len());
     let mut pos = 0.0f64;
     let mut out = vec![0.0];
     let mut j = 1;
@@ -902,13 +904,14 @@ fn walk(grid: &[Vec<f32>], arc: &[f64], chord: f64, n: usize) -> Walk {
         } else {
             1.0
         };
-        let next: Vec<f32> = p0
-            .iter()
-            .zip(g.iter())
-            .map(|(&x0, &x1)| x0 + s as f32 * (x1 - x0))
-            .collect();
+        spare.clear();
+        spare.extend(
+            p0.iter()
+                .zip(g.iter())
+                .map(|(&x0, &x1)| x0 + s as f32 * (x1 - x0)),
+        );
         pos = p0_pos + s * (j as f64 - p0_pos);
-        cur = next;
+        std::mem::swap(&mut cur, &mut spare);
         if out.len() == n {
             // n steps reached at this point of the path: as many again for the rest
             let i = (pos.floor() as usize).min(m - 1);
