@@ -356,7 +356,9 @@ impl Synthesiser<'_> {
         (img[0], img[n - 1]) = (Some(first), Some(last));
         let step = |img: &[Option<Patch>], k: usize| {
             let (a, b) = (&img[k], &img[(k + 1) % n]);
-            a.as_ref().expect("rendered").dist(b.as_ref().expect("rendered"), canvas)
+            a.as_ref()
+                .expect("rendered")
+                .dist(b.as_ref().expect("rendered"), canvas)
         };
         let med = ignis_core::loopq::median(&mut steps.clone());
         for _ in 0..EVEN_OUT_PASSES {
@@ -383,11 +385,7 @@ impl Synthesiser<'_> {
                 let ends_img = [ia, ib].map(|p| p.as_ref().expect("rendered"));
                 let (best, at) = self.balance(ends_img, ends, now, lit, canvas);
                 let Some(best) = best else { continue };
-                let before = (
-                    steps[j - 1].max(steps[j]),
-                    pos[j],
-                    std::mem::replace(&mut img[j], Some(best)),
-                );
+                let before = (steps[j - 1].max(steps[j]), pos[j], img[j].replace(best));
                 pos[j] = at;
                 let (s0, s1) = (step(&img, j - 1), step(&img, j));
                 if s0.max(s1) < before.0 {
