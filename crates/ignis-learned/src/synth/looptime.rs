@@ -934,6 +934,49 @@ fn walk(grid: &[Vec<f32>], arc: &[f64], chord: f64, n: usize) -> Walk {
 mod tests {
     use super::*;
 
+    /// The even-out's steps measured on renders streamed through two reused buffers
+    /// equal those between renders made each on its own (a reused buffer keeps nothing of
+    /// the render before it), and its first and last renders are those frames'.
+    #[test]
+    fn streamed_steps_equal_steps_of_separate_renders() {
+        let size = Size::new(96, 96).unwrap();
+        let clip = crate::synthetic::flame_clip(size, 40, 2);
+        let p = crate::TrainParams {
+            em: crate::EmParams {
+                particles: 60,
+                seed: 2,
+                ..crate::EmParams::default()
+            },
+            ..crate::TrainParams::default()
+        };
+        let t = crate::train(clip, &p, &mut ignis_core::progress::NoProgress).unwrap();
+        let n = 12u32;
+        let mut s = Synthesiser::looping(&t.model, crate::Controls::default(), 3, n).unwrap();
+        let [canvas] = s.loop_canvases([metric_size(Size::new(80, 60).unwrap())]);
+        let lit = s.loop_lit();
+        let steps = s.looped.as_ref().unwrap().len() as f64;
+        // uneven times, so neighbouring boxes differ in size
+        let pos: Vec<f64> = (0..n)
+            .map(|k| (k as f64 + 0.4 * (k % 3) as f64) * steps / (n as f64 + 1.0))
+            .collect();
+        let (streamed, first, last) = s.streamed_steps(&pos, lit, &canvas);
+        let each: Vec<Patch> = pos.iter().map(|&p| s.patch_at(p, lit, &canvas)).collect();
+        let want: Vec<f64> = (0..n as usize)
+            .map(|k| each[k].dist(&each[(k + 1) % n as usize], &canvas))
+            .collect();
+        assert_eq!(streamed, want);
+        for (a, b) in [(&first, &each[0]), (&last, &each[n as usize - 1])] {
+            assert_eq!(a.data, b.data);
+            assert_eq!(a.energy, b.energy);
+        }
+        assert!(want.iter().any(|&d| d > 0.0), "a still loop tests nothing");
+        let sizes: Vec<usize> = each.iter().map(|p| p.data.len()).collect();
+        assert!(
+            sizes.iter().any(|&l| l != sizes[0]),
+            "boxes all alike: {sizes:?}"
+        );
+    }
+
     /// A patch's distance is the RMS difference of the two frames over the canvas, each
     /// dark outside its window: overlapping, nested and disjoint windows.
     #[test]
