@@ -254,19 +254,20 @@ impl Synthesiser<'_> {
     /// the state's own box (see [`Self::raw_boxes`]; `lit` from [`Self::loop_lit`]),
     /// encoded as [`Self::render_encoded`] does: outside the box it lights no pixel.
     fn patch_at(&mut self, tau: f64, lit: [usize; 4], canvas: &Canvas) -> Patch {
+        let mut patch = Patch::empty(*canvas);
+        self.patch_into(tau, lit, canvas, &mut patch);
+        patch
+    }
+
+    /// [`Self::patch_at`] into `patch`, reusing its buffer.
+    fn patch_into(&mut self, tau: f64, lit: [usize; 4], canvas: &Canvas, patch: &mut Patch) {
         let steps = self.looped.as_ref().map_or(0, |s| s.len()) as f64;
         self.set_loop_state(tau);
         let at = tau * f64::from(self.loop_frames) / steps;
         let [b] = self.raw_boxes(at, lit, [canvas.size]);
-        let window = Canvas::covering(canvas.size, b);
-        let mut data = Vec::new();
-        self.render_encoded(at, &window, &mut data);
-        let energy = sum_sq(&data);
-        Patch {
-            window,
-            data,
-            energy,
-        }
+        patch.window = Canvas::covering(canvas.size, b);
+        self.render_encoded(at, &patch.window, &mut patch.data);
+        patch.energy = sum_sq(&patch.data);
     }
 
     /// The rows and columns of the normalised image (`[r0, r1, c0, c1]`, inclusive) that
@@ -338,15 +339,27 @@ impl Synthesiser<'_> {
     /// `EVEN_OUT` × the median moves its frame other than frame 0 towards where its two
     /// steps are equal ([`Synthesiser::balance`]), a few passes over the loop. Each frame
     /// is rendered only within its own state's box ([`Synthesiser::patch_at`]), a fraction
-    /// of the loop's canvas when the flame moves about its frame.
+    /// of the loop's canvas when the flame moves about its frame. The steps are measured
+    /// on renders streamed through two reused buffers (no memory per frame, each render
+    /// compared while in cache); the few frames around long steps are rendered again
+    /// when a pass needs them (the same values: a render depends on its time only).
     fn even_out(&mut self, pos: &mut [f64], canvas: Canvas) {
         let n = pos.len();
+        if n < 2 {
+            return;
+        }
         let end = self.looped.as_ref().map_or(0, |s| s.len()) as f64;
         let lit = self.loop_lit();
         let canvas = &canvas;
-        let mut img: Vec<Patch> = pos.iter().map(|&p| self.patch_at(p, lit, canvas)).collect();
-        let step = |img: &[Patch], k: usize| img[k].dist(&img[(k + 1) % n], canvas);
-        let mut steps: Vec<f64> = (0..n).map(|k| step(&img, k)).collect();
+        let (mut steps, first, last) = self.streamed_steps(pos, lit, canvas);
+        let mut img: Vec<Option<Patch>> = (0..n).map(|_| None).collect();
+        (img[0], img[n - 1]) = (Some(first), Some(last));
+        let step = |img: &[Option<Patch>], k: usize| {
+            let (a, b) = (&img[k], &img[(k + 1) % n]);
+            a.as_ref()
+                .expect("rendered")
+                .dist(b.as_ref().expect("rendered"), canvas)
+        };
         let med = ignis_core::loopq::median(&mut steps.clone());
         for _ in 0..EVEN_OUT_PASSES {
             for k in 0..n {
@@ -361,16 +374,18 @@ impl Synthesiser<'_> {
                 } else {
                     1
                 };
+                for i in [j - 1, j, (j + 1) % n] {
+                    if img[i].is_none() {
+                        img[i] = Some(self.patch_at(pos[i], lit, canvas));
+                    }
+                }
                 let ends = [pos[j - 1], pos.get(j + 1).copied().unwrap_or(end)];
                 let now = (pos[j], steps[j - 1] - steps[j], steps[j - 1].max(steps[j]));
                 let (ia, ib) = (&img[j - 1], &img[(j + 1) % n]);
-                let (best, at) = self.balance([ia, ib], ends, now, lit, canvas);
+                let ends_img = [ia, ib].map(|p| p.as_ref().expect("rendered"));
+                let (best, at) = self.balance(ends_img, ends, now, lit, canvas);
                 let Some(best) = best else { continue };
-                let before = (
-                    steps[j - 1].max(steps[j]),
-                    pos[j],
-                    std::mem::replace(&mut img[j], best),
-                );
+                let before = (steps[j - 1].max(steps[j]), pos[j], img[j].replace(best));
                 pos[j] = at;
                 let (s0, s1) = (step(&img, j - 1), step(&img, j));
                 if s0.max(s1) < before.0 {
@@ -382,6 +397,29 @@ impl Synthesiser<'_> {
                 }
             }
         }
+    }
+
+    /// The steps between consecutive frames at `pos` (the last one the wrap) on their
+    /// metric-size renders ([`Self::patch_at`]), each render compared with the previous
+    /// one as it is made, in two reused buffers; and the renders of the first and last
+    /// frames. `pos` holds at least two frames.
+    fn streamed_steps(
+        &mut self,
+        pos: &[f64],
+        lit: [usize; 4],
+        canvas: &Canvas,
+    ) -> (Vec<f64>, Patch, Patch) {
+        let first = self.patch_at(pos[0], lit, canvas);
+        let mut prev = self.patch_at(pos[1], lit, canvas);
+        let mut steps = vec![first.dist(&prev, canvas)];
+        let mut cur = Patch::empty(*canvas);
+        for &p in &pos[2..] {
+            self.patch_into(p, lit, canvas, &mut cur);
+            steps.push(prev.dist(&cur, canvas));
+            std::mem::swap(&mut prev, &mut cur);
+        }
+        steps.push(prev.dist(&first, canvas));
+        (steps, first, prev)
     }
 
     /// A frame between grid positions `ends` whose longer step, from `ends_img[0]` or to
@@ -498,6 +536,15 @@ struct Patch {
 }
 
 impl Patch {
+    /// A patch of no pixels in a window of `canvas`'s frame (a buffer to render into).
+    fn empty(canvas: Canvas) -> Patch {
+        Patch {
+            window: canvas,
+            data: Vec::new(),
+            energy: 0.0,
+        }
+    }
+
     /// RMS difference of the two frames over `canvas` (a window of the same frame size
     /// holding both patches' light): the sum of squared differences where the windows
     /// overlap, plus each patch's own light outside the overlap.
@@ -810,6 +857,8 @@ fn walk(grid: &[Vec<f32>], arc: &[f64], chord: f64, n: usize) -> Walk {
     let m = grid.len();
     let l2 = chord * chord * grid[0].len() as f64;
     let mut cur: Vec<f32> = grid[0].clone();
+    // the next frame's blend is made here, then swapped with `cur` (no allocation a step)
+    let mut spare: Vec<f32> = Vec::with_capacity(cur.len());
     let mut pos = 0.0f64;
     let mut out = vec![0.0];
     let mut j = 1;
@@ -853,13 +902,14 @@ fn walk(grid: &[Vec<f32>], arc: &[f64], chord: f64, n: usize) -> Walk {
         } else {
             1.0
         };
-        let next: Vec<f32> = p0
-            .iter()
-            .zip(g.iter())
-            .map(|(&x0, &x1)| x0 + s as f32 * (x1 - x0))
-            .collect();
+        spare.clear();
+        spare.extend(
+            p0.iter()
+                .zip(g.iter())
+                .map(|(&x0, &x1)| x0 + s as f32 * (x1 - x0)),
+        );
         pos = p0_pos + s * (j as f64 - p0_pos);
-        cur = next;
+        std::mem::swap(&mut cur, &mut spare);
         if out.len() == n {
             // n steps reached at this point of the path: as many again for the rest
             let i = (pos.floor() as usize).min(m - 1);
@@ -883,6 +933,49 @@ fn walk(grid: &[Vec<f32>], arc: &[f64], chord: f64, n: usize) -> Walk {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The even-out's steps measured on renders streamed through two reused buffers
+    /// equal those between renders made each on its own (a reused buffer keeps nothing of
+    /// the render before it), and its first and last renders are those frames'.
+    #[test]
+    fn streamed_steps_equal_steps_of_separate_renders() {
+        let size = Size::new(96, 96).unwrap();
+        let clip = crate::synthetic::flame_clip(size, 40, 2);
+        let p = crate::TrainParams {
+            em: crate::EmParams {
+                particles: 60,
+                seed: 2,
+                ..crate::EmParams::default()
+            },
+            ..crate::TrainParams::default()
+        };
+        let t = crate::train(clip, &p, &mut ignis_core::progress::NoProgress).unwrap();
+        let n = 12u32;
+        let mut s = Synthesiser::looping(&t.model, crate::Controls::default(), 3, n).unwrap();
+        let [canvas] = s.loop_canvases([metric_size(Size::new(80, 60).unwrap())]);
+        let lit = s.loop_lit();
+        let steps = s.looped.as_ref().unwrap().len() as f64;
+        // uneven times, so neighbouring boxes differ in size
+        let pos: Vec<f64> = (0..n)
+            .map(|k| (k as f64 + 0.4 * (k % 3) as f64) * steps / (n as f64 + 1.0))
+            .collect();
+        let (streamed, first, last) = s.streamed_steps(&pos, lit, &canvas);
+        let each: Vec<Patch> = pos.iter().map(|&p| s.patch_at(p, lit, &canvas)).collect();
+        let want: Vec<f64> = (0..n as usize)
+            .map(|k| each[k].dist(&each[(k + 1) % n as usize], &canvas))
+            .collect();
+        assert_eq!(streamed, want);
+        for (a, b) in [(&first, &each[0]), (&last, &each[n as usize - 1])] {
+            assert_eq!(a.data, b.data);
+            assert_eq!(a.energy, b.energy);
+        }
+        assert!(want.iter().any(|&d| d > 0.0), "a still loop tests nothing");
+        let sizes: Vec<usize> = each.iter().map(|p| p.data.len()).collect();
+        assert!(
+            sizes.iter().any(|&l| l != sizes[0]),
+            "boxes all alike: {sizes:?}"
+        );
+    }
 
     /// A patch's distance is the RMS difference of the two frames over the canvas, each
     /// dark outside its window: overlapping, nested and disjoint windows.
