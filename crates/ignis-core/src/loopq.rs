@@ -64,19 +64,25 @@ pub fn metric_frame_gray(frame: &GrayFrame) -> GrayFrame {
 /// composited over `background` (linear RGB), sRGB-encoded, Rec. 601 luma, area-averaged
 /// down to [`metric_size`].
 pub fn metric_frame_rgba(frame: &RgbaFrame, background: [f32; 3]) -> GrayFrame {
-    let lut = srgb_lut();
     let luma: Vec<f32> = frame
         .data()
         .iter()
-        .map(|p| {
-            let a = p[3].clamp(0.0, 1.0);
-            (0..3)
-                .map(|c| LUMA_601[c] * encode_lut(lut, p[c] * a + background[c] * (1.0 - a)))
-                .sum()
-        })
+        .map(|p| metric_luma(p, background))
         .collect();
     let g = GrayFrame::from_vec(frame.size(), luma).expect("one value per pixel");
     area_resize(&g, metric_size(frame.size()))
+}
+
+/// The metric grey of one linear straight-alpha pixel over `background` (before the area
+/// resize): what [`metric_frame_rgba`] computes per pixel, bit for bit, for callers that
+/// make the pixels themselves (the volume loop's preview fuses it with its bloom).
+#[inline]
+pub fn metric_luma(p: &[f32; 4], background: [f32; 3]) -> f32 {
+    let lut = srgb_lut();
+    let a = p[3].clamp(0.0, 1.0);
+    (0..3)
+        .map(|c| LUMA_601[c] * encode_lut(lut, p[c] * a + background[c] * (1.0 - a)))
+        .sum()
 }
 
 const LUT_SIZE: usize = 4096;

@@ -1,8 +1,10 @@
-//! The post pipeline of a rendered frame: bloom, then straight alpha.
+//! The post pipeline of a rendered frame: bloom, then straight alpha; and the same
+//! pipeline fused with the loop metric's conversion for the loop's preview frames.
 
 use crate::error::Result;
-use ignis_core::post::{bloom_rgba, BloomParams};
-use ignis_core::RgbaFrame;
+use ignis_core::loopq::{area_resize, metric_frame_rgba, metric_luma, metric_size};
+use ignis_core::post::{bloom_rgba, gaussian_kernel, BloomParams};
+use ignis_core::{GrayFrame, RgbaFrame};
 use rayon::prelude::*;
 
 /// The post pipeline: bloom on the premultiplied HDR frame (skipped when
@@ -33,5 +35,161 @@ pub fn finish(premultiplied: &RgbaFrame, bloom: &BloomParams) -> Result<RgbaFram
             .map(straight)
             .collect();
         Ok(RgbaFrame::from_vec(premultiplied.size(), data)?)
+    }
+}
+
+/// Largest bloom σ, in pixels, that [`bloom_rgba`] blurs exactly at full resolution on
+/// any frame (its reduced levels start at σ ≥ 6); the fused preview path below is exact
+/// only there and hands larger σ back to [`finish`].
+const EXACT_SIGMA: f32 = 6.0;
+
+/// The metric frame ([`ignis_core::loopq::metric_frame_rgba`] over black) of what
+/// [`finish`] makes of `premultiplied`, bit for bit, for the loop's preview.
+///
+/// Why: the preview renders hundreds of 64-px frames, and at that size the post pipeline
+/// is a fixed cost per frame comparable to the sampling. Where every bloom pass is blurred
+/// exactly (σ < 6 px, always so at the preview's 64 px wide unless the frame is tall) this
+/// blooms the three colour planes in one sequential pass per frame (the preview already
+/// renders its frames side by side, so nested row tasks only cost wake-ups), with the same
+/// sums in the same order as `ignis_core::post` (compiled for AVX where the CPU has it:
+/// the same IEEE operations on wider vectors, no fused multiply-add), then converts each
+/// pixel to straight alpha and to its metric grey without writing the bloomed RGBA frame.
+/// Otherwise it falls back to `finish` then `metric_frame_rgba`.
+pub fn preview_metric(premultiplied: &RgbaFrame, bloom: &BloomParams) -> Result<GrayFrame> {
+    bloom.validate()?;
+    let sigmas: Vec<f32> = (0..bloom.passes)
+        .scan(bloom.radius, |s, _| {
+            let v = *s;
+            *s *= bloom.radius_falloff;
+            Some(v)
+        })
+        .collect();
+    if sigmas.iter().any(|&s| s >= EXACT_SIGMA) {
+        let f = finish(premultiplied, bloom)?;
+        return Ok(metric_frame_rgba(&f, [0.0; 3]));
+    }
+    let size = premultiplied.size();
+    let (w, h) = (size.width as usize, size.height as usize);
+    let data = premultiplied.data();
+    let kernels: Vec<Vec<f32>> = sigmas.iter().map(|&s| gaussian_kernel(s)).collect();
+    let mut planes: [Vec<f32>; 3] = std::array::from_fn(|c| data.iter().map(|p| p[c]).collect());
+    if !kernels.is_empty() {
+        let mut scratch = Scratch::default();
+        for plane in &mut planes {
+            bloom_plane(plane, w, h, &kernels, bloom.strength, &mut scratch);
+        }
+    }
+    let luma: Vec<f32> = data
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let px = [planes[0][i], planes[1][i], planes[2][i], p[3]];
+            let a = px[3].max(px[0]).max(px[1]).max(px[2]).clamp(0.0, 1.0);
+            let straight = if a > 0.0 {
+                [px[0] / a, px[1] / a, px[2] / a, a]
+            } else {
+                [0.0; 4]
+            };
+            metric_luma(&straight, [0.0; 3])
+        })
+        .collect();
+    let g = GrayFrame::from_vec(size, luma)?;
+    Ok(area_resize(&g, metric_size(size)))
+}
+
+/// Buffers of [`bloom_plane`], reused over the three planes.
+#[derive(Default)]
+struct Scratch {
+    src: Vec<f32>,
+    tmp: Vec<f32>,
+    pad: Vec<f32>,
+    row: Vec<f32>,
+}
+
+/// `plane = max(plane + strength·Σ blur_kᵢ(plane), plane)`, the exact passes of
+/// `ignis_core::post::bloom`: dispatched to an AVX build of [`bloom_plane_generic`] when
+/// the CPU has it (same results: only the vector width differs).
+fn bloom_plane(
+    plane: &mut [f32],
+    w: usize,
+    h: usize,
+    kernels: &[Vec<f32>],
+    strength: f32,
+    s: &mut Scratch,
+) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx") {
+        // SAFETY: the CPU supports AVX (checked just above).
+        unsafe { bloom_plane_avx(plane, w, h, kernels, strength, s) };
+        return;
+    }
+    bloom_plane_generic(plane, w, h, kernels, strength, s);
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+unsafe fn bloom_plane_avx(
+    plane: &mut [f32],
+    w: usize,
+    h: usize,
+    kernels: &[Vec<f32>],
+    strength: f32,
+    s: &mut Scratch,
+) {
+    bloom_plane_generic(plane, w, h, kernels, strength, s);
+}
+
+/// [`bloom_plane`]'s body; inlined into each build so it vectorises for that target.
+#[inline(always)]
+fn bloom_plane_generic(
+    plane: &mut [f32],
+    w: usize,
+    h: usize,
+    kernels: &[Vec<f32>],
+    strength: f32,
+    s: &mut Scratch,
+) {
+    s.src.clear();
+    s.src.extend_from_slice(plane);
+    for k in kernels {
+        if k.len() == 1 {
+            for (a, &v) in plane.iter_mut().zip(&s.src) {
+                *a += strength * v;
+            }
+            continue;
+        }
+        let r = k.len() / 2;
+        // horizontal, as `post::blur_plane`: the row padded with its edge values, then
+        // tap by tap over the row
+        s.tmp.resize(w * h, 0.0);
+        s.pad.resize(w + 2 * r, 0.0);
+        for (o, src) in s.tmp.chunks_exact_mut(w).zip(s.src.chunks_exact(w)) {
+            s.pad[..r].fill(src[0]);
+            s.pad[r..r + w].copy_from_slice(src);
+            s.pad[r + w..].fill(src[w - 1]);
+            o.fill(0.0);
+            for (j, &kv) in k.iter().enumerate() {
+                for (ov, &pv) in o.iter_mut().zip(&s.pad[j..j + w]) {
+                    *ov += kv * pv;
+                }
+            }
+        }
+        // vertical, row by row, then added to the plane at `strength`
+        s.row.resize(w, 0.0);
+        for (y, acc) in plane.chunks_exact_mut(w).enumerate() {
+            s.row.fill(0.0);
+            for (j, &kv) in k.iter().enumerate() {
+                let yy = (y + j).saturating_sub(r).min(h - 1);
+                for (o, &v) in s.row.iter_mut().zip(&s.tmp[yy * w..(yy + 1) * w]) {
+                    *o += kv * v;
+                }
+            }
+            for (a, &v) in acc.iter_mut().zip(&s.row) {
+                *a += strength * v;
+            }
+        }
+    }
+    for (a, &v) in plane.iter_mut().zip(&s.src) {
+        *a = a.max(v);
     }
 }
