@@ -79,18 +79,19 @@ pub fn preview_metric(premultiplied: &RgbaFrame, bloom: &BloomParams) -> Result<
             bloom_plane(plane, w, h, &kernels, bloom.strength, &mut scratch);
         }
     }
+    // where the bloomed frame is empty (most of a flame's frame) the grey is a constant
+    let empty = metric_luma(&[0.0; 4], [0.0; 3]);
     let luma: Vec<f32> = data
         .iter()
         .enumerate()
         .map(|(i, p)| {
             let px = [planes[0][i], planes[1][i], planes[2][i], p[3]];
             let a = px[3].max(px[0]).max(px[1]).max(px[2]).clamp(0.0, 1.0);
-            let straight = if a > 0.0 {
-                [px[0] / a, px[1] / a, px[2] / a, a]
+            if a > 0.0 {
+                metric_luma(&[px[0] / a, px[1] / a, px[2] / a, a], [0.0; 3])
             } else {
-                [0.0; 4]
-            };
-            metric_luma(&straight, [0.0; 3])
+                empty
+            }
         })
         .collect();
     let g = GrayFrame::from_vec(size, luma)?;
