@@ -89,6 +89,13 @@ const LUT_SIZE: usize = 4096;
 
 /// [`linear_to_srgb`] sampled at `LUT_SIZE` points of `0..=1` (interpolated linearly between
 /// them: within 2e-4 of the exact curve above 0.001, a ninth of an 8-bit step).
+/// The table [`metric_frame_rgba`] encodes sRGB with (`LUT_SIZE + 1` = 4,097 values of
+/// [`linear_to_srgb`] at `i / 4096`, interpolated linearly between them), for callers
+/// that vectorise [`metric_luma`] and must give its values bit for bit.
+pub fn srgb_encode_table() -> &'static [f32] {
+    srgb_lut()
+}
+
 #[inline]
 fn srgb_lut() -> &'static [f32; LUT_SIZE + 1] {
     static LUT: std::sync::OnceLock<[f32; LUT_SIZE + 1]> = std::sync::OnceLock::new();
