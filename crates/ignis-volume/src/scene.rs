@@ -1155,7 +1155,9 @@ mod preview_tests {
 
     /// The loop preview's fused post pipeline gives the metric frames of the full one bit
     /// for bit: every preset, wide, tall and square, with and without bloom, and a bloom
-    /// too wide for the exact path (the fallback).
+    /// too wide for the exact path (the fallback). (The wall at 33×64 also guards the
+    /// renderer: it panicked there before `march_cells` skipped candidates whose pixel
+    /// rectangle misses a tile.)
     #[test]
     fn preview_metric_equals_the_metric_of_the_finished_frame() {
         let mut checked = 0;
