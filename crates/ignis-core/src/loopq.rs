@@ -64,30 +64,45 @@ pub fn metric_frame_gray(frame: &GrayFrame) -> GrayFrame {
 /// composited over `background` (linear RGB), sRGB-encoded, Rec. 601 luma, area-averaged
 /// down to [`metric_size`].
 pub fn metric_frame_rgba(frame: &RgbaFrame, background: [f32; 3]) -> GrayFrame {
-    let lut = srgb_lut();
     let luma: Vec<f32> = frame
         .data()
         .iter()
-        .map(|p| {
-            let a = p[3].clamp(0.0, 1.0);
-            (0..3)
-                .map(|c| LUMA_601[c] * encode_lut(lut, p[c] * a + background[c] * (1.0 - a)))
-                .sum()
-        })
+        .map(|p| metric_luma(p, background))
         .collect();
     let g = GrayFrame::from_vec(frame.size(), luma).expect("one value per pixel");
     area_resize(&g, metric_size(frame.size()))
+}
+
+/// The metric grey of one linear straight-alpha pixel over `background` (before the area
+/// resize): what [`metric_frame_rgba`] computes per pixel, bit for bit, for callers that
+/// make the pixels themselves (the volume loop's preview fuses it with its bloom).
+#[inline]
+pub fn metric_luma(p: &[f32; 4], background: [f32; 3]) -> f32 {
+    let lut = srgb_lut();
+    let a = p[3].clamp(0.0, 1.0);
+    (0..3)
+        .map(|c| LUMA_601[c] * encode_lut(lut, p[c] * a + background[c] * (1.0 - a)))
+        .sum()
 }
 
 const LUT_SIZE: usize = 4096;
 
 /// [`linear_to_srgb`] sampled at `LUT_SIZE` points of `0..=1` (interpolated linearly between
 /// them: within 2e-4 of the exact curve above 0.001, a ninth of an 8-bit step).
+/// The table [`metric_frame_rgba`] encodes sRGB with (`LUT_SIZE + 1` = 4,097 values of
+/// [`linear_to_srgb`] at `i / 4096`, interpolated linearly between them), for callers
+/// that vectorise [`metric_luma`] and must give its values bit for bit.
+pub fn srgb_encode_table() -> &'static [f32] {
+    srgb_lut()
+}
+
+#[inline]
 fn srgb_lut() -> &'static [f32; LUT_SIZE + 1] {
     static LUT: std::sync::OnceLock<[f32; LUT_SIZE + 1]> = std::sync::OnceLock::new();
     LUT.get_or_init(|| std::array::from_fn(|i| linear_to_srgb(i as f32 / LUT_SIZE as f32)))
 }
 
+#[inline]
 fn encode_lut(lut: &[f32; LUT_SIZE + 1], v: f32) -> f32 {
     let x = v.clamp(0.0, 1.0) * LUT_SIZE as f32;
     let i = (x as usize).min(LUT_SIZE - 1);

@@ -625,8 +625,9 @@ impl FireScene {
                     looping: Some(probe_looping.clone()),
                     scroll: a.scroll.clone(),
                 };
-                let f = probe.next_frame()?;
-                Ok(ignis_core::loopq::metric_frame_rgba(&f.image, [0.0; 3]))
+                // the metric frame of `next_frame`'s image, made without that image
+                let (hdr, ..) = probe.next_hdr()?;
+                crate::render::preview_metric(&hdr, &small.bloom)
             })
             .collect::<Result<_>>()?;
         let bad = |e: String| VolumeError::bad("loop", e);
@@ -854,6 +855,10 @@ fn static_points(p: &[[f32; 4]]) -> Script {
     }
 }
 
+/// What [`Animator::next_hdr`] returns: the HDR frame, its statistics, the collisions and
+/// the control points.
+type HdrFrame = (RgbaFrame, RenderStats, Vec<Collision>, Vec<Vec<[f32; 4]>>);
+
 /// One rendered frame.
 #[derive(Clone, Debug)]
 pub struct Frame {
@@ -1038,6 +1043,21 @@ impl Animator<'_> {
 
     /// Renders the next frame.
     pub fn next_frame(&mut self) -> Result<Frame> {
+        let (hdr, stats, collisions, control_points) = self.next_hdr()?;
+        let image = finish(&hdr, &self.scene.bloom)?;
+        Ok(Frame {
+            image,
+            hdr,
+            stats,
+            collisions,
+            control_points,
+        })
+    }
+
+    /// [`Self::next_frame`] before the post pipeline: the renderer's premultiplied HDR
+    /// frame, its statistics, the collisions and the control points (the loop's preview
+    /// takes its metric frames from the HDR frame directly).
+    fn next_hdr(&mut self) -> Result<HdrFrame> {
         let s = self.scene;
         let t = self.time();
         let puffs: Vec<Option<Puff>> = (0..s.fires.len()).map(|i| self.puff_wave(i)).collect();
@@ -1070,14 +1090,7 @@ impl Animator<'_> {
             ..s.render_params()
         };
         let (hdr, stats) = render(&inst, &s.camera, &params, t)?;
-        let image = finish(&hdr, &s.bloom)?;
-        Ok(Frame {
-            image,
-            hdr,
-            stats,
-            collisions,
-            control_points: pts,
-        })
+        Ok((hdr, stats, collisions, pts))
     }
 }
 
@@ -1133,5 +1146,47 @@ mod hardening_tests {
             p.blend = Blend::Tint(t);
             assert!(p.validate().is_err(), "{t:?}");
         }
+    }
+}
+
+#[cfg(test)]
+mod preview_tests {
+    use super::*;
+
+    /// The loop preview's fused post pipeline gives the metric frames of the full one bit
+    /// for bit: every preset, wide, tall and square, with and without bloom, and a bloom
+    /// too wide for the exact path (the fallback). (The wall at 33×64 also guards the
+    /// renderer: it panicked there before `march_cells` skipped candidates whose pixel
+    /// rectangle misses a tile.)
+    #[test]
+    fn preview_metric_equals_the_metric_of_the_finished_frame() {
+        let mut checked = 0;
+        for p in Preset::ALL {
+            for (w, h) in [(64, 64), (64, 37), (33, 64), (64, 150)] {
+                let base = FireScene::preset(p).with_size(Size::new(w, h).unwrap());
+                let mut no_bloom = base.clone();
+                no_bloom.bloom.passes = 0;
+                let mut wide_bloom = base.clone();
+                wide_bloom.bloom.radius = 9.0;
+                for s in [base, no_bloom, wide_bloom] {
+                    let mut a = s.animator().unwrap();
+                    for _ in 0..2 {
+                        let f = a.next_frame().unwrap();
+                        let full = ignis_core::loopq::metric_frame_rgba(&f.image, [0.0; 3]);
+                        let fused = crate::render::preview_metric(&f.hdr, &s.bloom).unwrap();
+                        assert_eq!(full.size(), fused.size());
+                        let same = full
+                            .data()
+                            .iter()
+                            .zip(fused.data())
+                            .all(|(x, y)| x.to_bits() == y.to_bits());
+                        assert!(same, "{p:?} {w}x{h} bloom {:?}", s.bloom);
+                        assert!(full.data().iter().any(|&v| v > 0.05), "{p:?}: blank frame");
+                        checked += 1;
+                    }
+                }
+            }
+        }
+        assert!(checked >= 24);
     }
 }

@@ -107,6 +107,11 @@ impl FrameRenderer<'_, '_> {
             if cand.visible_min[0] > cand.visible_max[0] {
                 continue; // nothing of this cell can be visible
             }
+            if cx0 > cx1 || cy0 > cy1 {
+                // its pixel rectangle misses this tile (its edge lies beyond a frame
+                // edge that is not a multiple of the tile); `row_pixels` needs cx0 ≤ cx1 + 2
+                continue;
+            }
             let j = cand.cell as usize;
             let mut batch = SampleBatch::default();
             for y in cy0..cy1 + 1 {

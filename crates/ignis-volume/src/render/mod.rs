@@ -49,6 +49,7 @@ mod visible;
 pub use blend::Blend;
 pub use camera::Camera;
 pub use finish::finish;
+pub(crate) use finish::preview_metric;
 
 use crate::error::{Result, VolumeError};
 use crate::lattice::Lattice;
