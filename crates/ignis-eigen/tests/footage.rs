@@ -879,3 +879,57 @@ fn matte_votes_stay_inside_consecutive_frames_of_one_clip() {
         assert_eq!(matte_vote_rows(&db, r), [r; 3], "strided row {r}");
     }
 }
+
+/// With a fixed common frame the clip is framed from its masks' extents: a lamp found as a
+/// still light is measured out of them again (the planning pass rescans), so the clip is
+/// placed and scaled as the same fire without the lamp; with the search off the lamp
+/// widens the extents and the fire is framed differently.
+#[test]
+fn a_still_lamp_does_not_move_the_framing() {
+    let sp = synth(FlameStyle::Campfire, 160, 120, 48);
+    let clip = |lamp: bool| -> Vec<RgbaFrame> {
+        (0..sp.frames)
+            .map(|t| {
+                let mut f = synthetic_frame(&sp, t).unwrap();
+                if lamp {
+                    for y in 6..16u32 {
+                        for x in 136..150u32 {
+                            f.data_mut()[(y * 160 + x) as usize] = [1.0, 0.95, 0.85, 1.0];
+                        }
+                    }
+                }
+                f
+            })
+            .collect()
+    };
+    let t = tempfile::tempdir().unwrap();
+    let pose = |frames: &[RgbaFrame], still: bool, name: &str| {
+        let mut p = PreprocessParams {
+            train_pixels: 1200,
+            ..Default::default()
+        };
+        p.pose.frame_size = Some(Size::new(80, 60).unwrap());
+        p.mask.still_lights = still;
+        let dbp = t.path().join(format!("{name}.db"));
+        let clips = [ClipInput::new(
+            ClipSpec::new("c"),
+            FrameList::new(name, frames, 30.0),
+        )];
+        train(&clips, &p, &TrainParams::default(), &dbp, &mut NoProgress).unwrap();
+        EigenfireDb::open(&dbp).unwrap().clip("c").unwrap().pose
+    };
+    let (with_lamp, plain) = (clip(true), clip(false));
+    let clean = pose(&plain, true, "plain");
+    let found = pose(&with_lamp, true, "lamp");
+    let ignored = pose(&with_lamp, false, "lamp-kept");
+    assert!(clean.still_lights.is_empty() && !found.still_lights.is_empty());
+    let close = |a: f32, b: f32| (a - b).abs() <= 0.02 * b.abs().max(1.0);
+    assert!(
+        close(found.scale, clean.scale) && close(found.fuel_x, clean.fuel_x),
+        "framed as the fire alone: {found:?} vs {clean:?}"
+    );
+    assert!(
+        !close(ignored.scale, clean.scale) || !close(ignored.fuel_x, clean.fuel_x),
+        "the lamp moves the framing when it is kept: {ignored:?} vs {clean:?}"
+    );
+}
