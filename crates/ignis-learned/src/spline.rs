@@ -5,59 +5,15 @@
 /// at each of `at`, writing into `out`. Outside `[xs[0], xs[last]]` the end values are held
 /// (a flame's path and width do not extrapolate well).
 pub fn natural_cubic(xs: &[f64], ys: &[f64], at: &[f64], out: &mut [f64]) {
-    let n = xs.len();
-    debug_assert!(n == ys.len() && at.len() == out.len() && n >= 1);
-    if n == 1 {
-        out.iter_mut().for_each(|o| *o = ys[0]);
-        return;
-    }
-    // Second derivatives by the tridiagonal (Thomas) algorithm, natural ends.
-    let mut m2 = vec![0.0; n];
-    if n > 2 {
-        let mut c = vec![0.0; n];
-        let mut r = vec![0.0; n];
-        for i in 1..n - 1 {
-            let (h0, h1) = (xs[i] - xs[i - 1], xs[i + 1] - xs[i]);
-            let a = h0;
-            let b = 2.0 * (h0 + h1);
-            let rhs = 6.0 * ((ys[i + 1] - ys[i]) / h1 - (ys[i] - ys[i - 1]) / h0);
-            let den = b - a * c[i - 1];
-            c[i] = h1 / den;
-            r[i] = (rhs - a * r[i - 1]) / den;
-        }
-        for i in (1..n - 1).rev() {
-            m2[i] = r[i] - c[i] * m2[i + 1];
-        }
-    }
-    let mut seg = 0;
-    for (o, &x) in out.iter_mut().zip(at) {
-        if x <= xs[0] {
-            *o = ys[0];
-            continue;
-        }
-        if x >= xs[n - 1] {
-            *o = ys[n - 1];
-            continue;
-        }
-        if x < xs[seg] {
-            seg = 0;
-        }
-        while x > xs[seg + 1] {
-            seg += 1;
-        }
-        let h = xs[seg + 1] - xs[seg];
-        let (a, b) = ((xs[seg + 1] - x) / h, (x - xs[seg]) / h);
-        *o = a * ys[seg]
-            + b * ys[seg + 1]
-            + ((a * a * a - a) * m2[seg] + (b * b * b - b) * m2[seg + 1]) * h * h / 6.0;
-    }
+    debug_assert!(xs.len() == ys.len() && at.len() == out.len() && !xs.is_empty());
+    SplinePlan::new(xs, at).eval(ys, out);
 }
 
-/// [`natural_cubic`] for many `ys` at the same knots `xs` and points `at`: where each point
-/// falls and its interpolation weights are worked out once ([`SplinePlan::new`]), so an
-/// evaluation is the tridiagonal solve and a few products per point, with the same
-/// arithmetic as `natural_cubic` and so the same values. For the loop timing's thousands
-/// of renders of one model's states.
+/// The natural cubic spline for many `ys` at the same knots `xs` and points `at`: where
+/// each point falls and its interpolation weights are worked out once
+/// ([`SplinePlan::new`]), so an evaluation is the tridiagonal solve (second derivatives,
+/// Thomas algorithm, natural ends) and a few products per point. [`natural_cubic`] is a
+/// plan used once; the loop timing keeps one per model for its thousands of renders.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct SplinePlan {
     xs: Vec<f64>,
@@ -182,8 +138,9 @@ mod tests {
         }
     }
 
-    /// A plan evaluates to `natural_cubic`'s values bit for bit, for points before, on,
-    /// between and after the knots, increasing or not, and for one and two knots.
+    /// A plan used again for other `ys` gives a fresh plan's values (`natural_cubic`) bit
+    /// for bit, for points before, on, between and after the knots, increasing or not, and
+    /// for one and two knots.
     #[test]
     fn plan_equals_natural_cubic() {
         let cases: [(&[f64], &[f64]); 3] = [
