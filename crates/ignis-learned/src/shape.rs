@@ -588,82 +588,43 @@ pub(crate) fn render_scaled_into(
     frame_height: f64,
     out: &mut GrayFrame,
 ) {
-    debug_assert_eq!(normalised.len(), (p.norm_size as usize).pow(2));
-    let rows = RowSampler::new(shape, place, p, scratch, frame_height);
+    let ns = p.norm_size as usize;
+    debug_assert_eq!(normalised.len(), ns * ns);
+    let (path_r, width_r) = row_profiles(shape, p);
+    scratch.path.clear();
+    scratch.path.extend(path_r.iter().map(|&v| v as f32));
+    scratch.width_inv.clear();
+    scratch
+        .width_inv
+        .extend(width_r.iter().map(|&w| (1.0 / w) as f32));
+    let sv = (shape.height * frame_height).max(1e-3);
+    let (upx, upy) = (place.tilt.sin(), -place.tilt.cos());
+    let (rx, ry) = (place.tilt.cos(), place.tilt.sin());
+    // Row coordinate rr = (above − v) · ns / (above + below) − 0.5; column
+    // cc = (u' + half_width) · ns / (2 half_width) − 0.5.
+    let kr = ns as f64 / (p.above + p.below);
+    let kc = (ns as f64 / (2.0 * p.half_width)) as f32;
+    let c_off = (p.half_width * ns as f64 / (2.0 * p.half_width)) as f32 - 0.5;
     let w = out.width() as usize;
     for (y, row) in out.rows_mut().enumerate() {
-        let rs = rows.row(y);
+        let dy = (y as f64 + 0.5 - place.cy) / sv;
+        // u and v are affine in x along the row.
+        let dx0 = (0.5 - place.cx) / sv;
+        let u0 = (dx0 * rx + dy * ry) as f32;
+        let v0 = (dx0 * upx + dy * upy) as f32;
+        let du = (rx / sv) as f32;
+        let dv = (upx / sv) as f32;
+        let rs = RowSampling {
+            rr0: ((p.above - v0 as f64) * kr - 0.5) as f32,
+            drr: -(dv as f64 * kr) as f32,
+            u0,
+            du,
+            kc,
+            c_off,
+            ns,
+        };
         for (x, o) in row.iter_mut().enumerate().take(w) {
             *o = sample(&rs, scratch, normalised, x);
-        }
-    }
-}
-
-/// What every row of a render shares: the flame's path and inverse width at each row of
-/// the normalised image (filled into the scratch's tables by [`RenderScratch::row_profiles`],
-/// the same values as [`row_profiles`]) and the affine map from output pixels to it.
-struct RowSampler {
-    cx: f64,
-    cy: f64,
-    sv: f64,
-    up: (f64, f64),
-    right: (f64, f64),
-    above: f64,
-    kr: f64,
-    kc: f32,
-    c_off: f32,
-    ns: usize,
-}
-
-impl RowSampler {
-    fn new(
-        shape: &Shape,
-        place: &Placement,
-        p: &ShapeParams,
-        scratch: &mut RenderScratch,
-        frame_height: f64,
-    ) -> RowSampler {
-        let ns = p.norm_size as usize;
-        scratch.row_profiles(shape, p);
-        scratch.path.clear();
-        scratch
-            .path
-            .extend(scratch.path_rows.iter().map(|&v| v as f32));
-        scratch.width_inv.clear();
-        scratch
-            .width_inv
-            .extend(scratch.width_rows.iter().map(|&w| (1.0 / w) as f32));
-        // Row coordinate rr = (above − v) · ns / (above + below) − 0.5; column
-        // cc = (u' + half_width) · ns / (2 half_width) − 0.5.
-        RowSampler {
-            cx: place.cx,
-            cy: place.cy,
-            sv: (shape.height * frame_height).max(1e-3),
-            up: (place.tilt.sin(), -place.tilt.cos()),
-            right: (place.tilt.cos(), place.tilt.sin()),
-            above: p.above,
-            kr: ns as f64 / (p.above + p.below),
-            kc: (ns as f64 / (2.0 * p.half_width)) as f32,
-            c_off: (p.half_width * ns as f64 / (2.0 * p.half_width)) as f32 - 0.5,
-            ns,
-        }
-    }
-
-    /// Output row `y`'s sampling: u and v are affine in x along the row.
-    fn row(&self, y: usize) -> RowSampling {
-        let sv = self.sv;
-        let dy = (y as f64 + 0.5 - self.cy) / sv;
-        let dx0 = (0.5 - self.cx) / sv;
-        let v0 = (dx0 * self.up.0 + dy * self.up.1) as f32;
-        let dv = (self.up.0 / sv) as f32;
-        RowSampling {
-            rr0: ((self.above - v0 as f64) * self.kr - 0.5) as f32,
-            drr: -(dv as f64 * self.kr) as f32,
-            u0: (dx0 * self.right.0 + dy * self.right.1) as f32,
-            du: (self.right.0 / sv) as f32,
-            kc: self.kc,
-            c_off: self.c_off,
-            ns: self.ns,
         }
     }
 }
@@ -755,13 +716,40 @@ fn render_encoded_with(
     out: &mut [f32],
     simd: bool,
 ) {
-    debug_assert_eq!(normalised.len(), (p.norm_size as usize).pow(2));
+    let ns = p.norm_size as usize;
+    debug_assert_eq!(normalised.len(), ns * ns);
     debug_assert_eq!(out.len(), w * h);
     assert!(enc.lut.len() >= 2, "an sRGB table of at least one interval");
-    let rows = RowSampler::new(shape, place, p, scratch, frame_height);
+    scratch.row_profiles(shape, p);
+    scratch.path.clear();
+    scratch
+        .path
+        .extend(scratch.path_rows.iter().map(|&v| v as f32));
+    scratch.width_inv.clear();
+    scratch
+        .width_inv
+        .extend(scratch.width_rows.iter().map(|&w| (1.0 / w) as f32));
+    let sv = (shape.height * frame_height).max(1e-3);
+    let (upx, upy) = (place.tilt.sin(), -place.tilt.cos());
+    let (rx, ry) = (place.tilt.cos(), place.tilt.sin());
+    let kr = ns as f64 / (p.above + p.below);
+    let kc = (ns as f64 / (2.0 * p.half_width)) as f32;
+    let c_off = (p.half_width * ns as f64 / (2.0 * p.half_width)) as f32 - 0.5;
     assert!(!simd || avx2::available(), "AVX2 on a CPU without it");
     for (y, row) in out.chunks_exact_mut(w.max(1)).enumerate().take(h) {
-        let rs = rows.row(y);
+        let dy = (y as f64 + 0.5 - place.cy) / sv;
+        let dx0 = (0.5 - place.cx) / sv;
+        let v0 = (dx0 * upx + dy * upy) as f32;
+        let dv = (upx / sv) as f32;
+        let rs = RowSampling {
+            rr0: ((p.above - v0 as f64) * kr - 0.5) as f32,
+            drr: -(dv as f64 * kr) as f32,
+            u0: (dx0 * rx + dy * ry) as f32,
+            du: (rx / sv) as f32,
+            kc,
+            c_off,
+            ns,
+        };
         let done = if simd {
             // SAFETY: `avx2::available` checked that the CPU has AVX2 (asserted above).
             unsafe { avx2::row(&rs, scratch, normalised, enc, row) }
