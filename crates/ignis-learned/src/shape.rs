@@ -605,6 +605,7 @@ pub(crate) fn render_scaled_into(
     let kr = ns as f64 / (p.above + p.below);
     let kc = (ns as f64 / (2.0 * p.half_width)) as f32;
     let c_off = (p.half_width * ns as f64 / (2.0 * p.half_width)) as f32 - 0.5;
+    let nsf = ns as f32;
     let w = out.width() as usize;
     for (y, row) in out.rows_mut().enumerate() {
         let dy = (y as f64 + 0.5 - place.cy) / sv;
@@ -614,17 +615,42 @@ pub(crate) fn render_scaled_into(
         let v0 = (dx0 * upx + dy * upy) as f32;
         let du = (rx / sv) as f32;
         let dv = (upx / sv) as f32;
-        let rs = RowSampling {
-            rr0: ((p.above - v0 as f64) * kr - 0.5) as f32,
-            drr: -(dv as f64 * kr) as f32,
-            u0,
-            du,
-            kc,
-            c_off,
-            ns,
-        };
+        let rr0 = ((p.above - v0 as f64) * kr - 0.5) as f32;
+        let drr = -(dv as f64 * kr) as f32;
         for (x, o) in row.iter_mut().enumerate().take(w) {
-            *o = sample(&rs, scratch, normalised, x);
+            let xf = x as f32;
+            let rr = rr0 + drr * xf;
+            if !(rr > -1.0 && rr < nsf) {
+                *o = 0.0;
+                continue;
+            }
+            let u = u0 + du * xf;
+            // Path and width at this row: linear between row centres.
+            let rc = rr.clamp(0.0, nsf - 1.0);
+            let r0 = rc as usize;
+            let r1 = (r0 + 1).min(ns - 1);
+            let t = rc - r0 as f32;
+            let path = scratch.path[r0] + (scratch.path[r1] - scratch.path[r0]) * t;
+            let winv = scratch.width_inv[r0] + (scratch.width_inv[r1] - scratch.width_inv[r0]) * t;
+            let cc = (u - path) * winv * kc + c_off;
+            if !(cc > -1.0 && cc < nsf) {
+                *o = 0.0;
+                continue;
+            }
+            // Bilinear in the normalised image, zero outside.
+            let (fr, fc) = (rr.floor(), cc.floor());
+            let (ty, tx) = (rr - fr, cc - fc);
+            let (ir, ic) = (fr as isize, fc as isize);
+            let at = |r: isize, c: isize| -> f32 {
+                if r < 0 || c < 0 || r >= ns as isize || c >= ns as isize {
+                    0.0
+                } else {
+                    normalised[r as usize * ns + c as usize]
+                }
+            };
+            let top = at(ir, ic) * (1.0 - tx) + at(ir, ic + 1) * tx;
+            let bot = at(ir + 1, ic) * (1.0 - tx) + at(ir + 1, ic + 1) * tx;
+            *o = (top * (1.0 - ty) + bot * ty).max(0.0);
         }
     }
 }
