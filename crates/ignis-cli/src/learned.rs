@@ -7,7 +7,7 @@ use crate::frames::FrameArgs;
 use crate::global::{Global, StageBars};
 use crate::output::{OutputArgs, PaletteArg};
 use anyhow::{anyhow, bail, Context, Result};
-use ignis_core::{GrayFrame, Palette, RgbaFrame, Size};
+use ignis_core::{GrayFrame, Palette, Size};
 use ignis_learned::{Controls, EmParams, FlameModel, ShapeParams, Synthesiser, TrainParams, Wind};
 use std::cell::RefCell;
 use std::path::{Path, PathBuf};
@@ -301,15 +301,10 @@ pub fn train(a: &TrainArgs, g: &Global) -> Result<FlameModel> {
 /// through ([`Synthesiser::measure_loop_through`]), so the written frames' steps are the
 /// ones evened out (a palette's luma is not the grey frame's).
 fn loop_measure(palette: &Palette, gain: f32, background: [f32; 3]) -> Vec<f32> {
-    let size = Size {
-        width: 2,
-        height: 2,
-    };
     (0..=1024)
         .map(|i| {
             let c = palette.sample(i as f32 / 1024.0 * gain);
-            let f = RgbaFrame::from_vec(size, vec![c; 4]).expect("4 pixels");
-            ignis_core::loopq::metric_frame_rgba(&f, background).data()[0]
+            ignis_core::loopq::metric_luma(&c, background)
         })
         .collect()
 }

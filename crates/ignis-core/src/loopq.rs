@@ -64,10 +64,11 @@ pub fn metric_frame_gray(frame: &GrayFrame) -> GrayFrame {
 /// composited over `background` (linear RGB), sRGB-encoded, Rec. 601 luma, area-averaged
 /// down to [`metric_size`].
 pub fn metric_frame_rgba(frame: &RgbaFrame, background: [f32; 3]) -> GrayFrame {
+    let lut = srgb_lut();
     let luma: Vec<f32> = frame
         .data()
         .iter()
-        .map(|p| metric_luma(p, background))
+        .map(|p| luma_with(lut, p, background))
         .collect();
     let g = GrayFrame::from_vec(frame.size(), luma).expect("one value per pixel");
     area_resize(&g, metric_size(frame.size()))
@@ -78,7 +79,12 @@ pub fn metric_frame_rgba(frame: &RgbaFrame, background: [f32; 3]) -> GrayFrame {
 /// make the pixels themselves (the volume loop's preview fuses it with its bloom).
 #[inline]
 pub fn metric_luma(p: &[f32; 4], background: [f32; 3]) -> f32 {
-    let lut = srgb_lut();
+    luma_with(srgb_lut(), p, background)
+}
+
+/// [`metric_luma`] with the sRGB table already in hand (per frame, not per pixel).
+#[inline]
+fn luma_with(lut: &[f32; LUT_SIZE + 1], p: &[f32; 4], background: [f32; 3]) -> f32 {
     let a = p[3].clamp(0.0, 1.0);
     (0..3)
         .map(|c| LUMA_601[c] * encode_lut(lut, p[c] * a + background[c] * (1.0 - a)))

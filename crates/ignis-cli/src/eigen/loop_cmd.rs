@@ -875,11 +875,7 @@ impl<'a> FootageMatte<'a> {
         self.db
             .source_mask(row)
             .context("reading the pre-processing masks for the matte (--alpha opaque loops without them)")?
-            .with_context(|| {
-            format!(
-                "the database stores no pre-processing mask for row {row} (trained by an older Ignis); retrain it, or give --alpha opaque"
-            )
-        })
+            .with_context(|| no_mask(row))
     }
 
     /// The rows whose masks vote on window frame `i` (see `matte_vote_rows`).
@@ -919,22 +915,17 @@ impl<'a> FootageMatte<'a> {
         })
     }
 
-    /// The voted masks (unfeathered, at the source size) of window frames `r`, each
-    /// stored mask decoded once.
+    /// The voted masks (unfeathered, at the source size) of window frames `r`
+    /// (`ignis_eigen::animate::voted_masks`, the footage render's vote: each stored mask
+    /// decoded once).
     fn voted_run(&self, r: Range<usize>) -> Result<Vec<image::GrayImage>> {
-        let votes: Vec<[usize; 3]> = r.map(|i| self.votes(i)).collect();
-        let mut rows: Vec<usize> = votes.iter().flatten().copied().collect();
-        rows.sort_unstable();
-        rows.dedup();
-        let masks = rows
-            .iter()
-            .map(|&j| self.mask(j))
-            .collect::<Result<Vec<_>>>()?;
-        let at = |j: usize| &masks[rows.binary_search(&j).expect("decoded")];
-        Ok(votes
-            .iter()
-            .map(|v| ignis_eigen::mask::majority3(at(v[0]), at(v[1]), at(v[2])))
-            .collect())
+        let rows: Vec<usize> = r.map(|i| self.first_row + i).collect();
+        let mut voted = ignis_eigen::animate::voted_masks(self.db, &rows).context(
+            "reading the pre-processing masks for the matte (--alpha opaque loops without them)",
+        )?;
+        rows.iter()
+            .map(|row| voted.remove(row).with_context(|| no_mask(*row)))
+            .collect()
     }
 
     /// `f` on the voted mask of each of the first `n` window frames, in order; runs of 16
@@ -999,6 +990,14 @@ impl<'a> FootageMatte<'a> {
         }
         Ok(())
     }
+}
+
+/// Why a matte cannot be made for database row `row`, and the fix.
+fn no_mask(row: usize) -> String {
+    format!(
+        "the database stores no pre-processing mask for row {row} (trained by an older Ignis); \
+         retrain it, or give --alpha opaque"
+    )
 }
 
 /// The last few masks [`FootageMatte::at`] decoded, by database row.

@@ -21,6 +21,8 @@ pub mod morph;
 pub mod render;
 pub mod scenario;
 
+use rayon::prelude::*;
+use std::collections::HashMap;
 use std::ops::Range;
 
 use ignis_core::GrayFrame;
@@ -89,6 +91,35 @@ pub fn matte_vote_rows(db: &EigenfireDb, row: usize) -> [usize; 3] {
         }
         _ => [row; 3],
     }
+}
+
+/// The matte masks of database rows `rows` as the footage render uses them: each row's
+/// stored pre-processing mask voted with its neighbours' ([`matte_vote_rows`],
+/// [`crate::mask::majority3`]), so a mask that collapses or flares on a single frame does
+/// not flash — the matte the footage render and `ignis loop` write. Each stored mask is decoded once; rows whose
+/// database stores no mask are absent (the caller makes one from the footage).
+pub fn voted_masks(db: &EigenfireDb, rows: &[usize]) -> Result<HashMap<usize, image::GrayImage>> {
+    let votes: Vec<(usize, [usize; 3])> =
+        rows.iter().map(|&r| (r, matte_vote_rows(db, r))).collect();
+    let mut need: Vec<usize> = votes.iter().flat_map(|v| v.1).collect();
+    need.sort_unstable();
+    need.dedup();
+    let decoded: Vec<Result<Option<image::GrayImage>>> =
+        need.par_iter().map(|&r| db.source_mask(r)).collect();
+    let mut masks = HashMap::with_capacity(need.len());
+    for (&r, m) in need.iter().zip(decoded) {
+        if let Some(m) = m? {
+            masks.insert(r, m);
+        }
+    }
+    Ok(votes
+        .into_par_iter()
+        .filter_map(|(r, [a, b, c])| {
+            let own = masks.get(&b)?;
+            let get = |j: usize| masks.get(&j).unwrap_or(own);
+            Some((r, crate::mask::majority3(get(a), own, get(c))))
+        })
+        .collect())
 }
 
 /// Training rows of clip `clip` whose source frame lies in `range` (source frame numbers).

@@ -447,12 +447,12 @@ fn load_layers(
                 }
             }
             // The footage is the training footage: each grey frame is made with the mask
-            // training stored for it, voted with its neighbours' (see [`voted_masks`]).
+            // training stored for it, voted with its neighbours' (see [`super::voted_masks`]).
             let voted = match path {
                 None => {
                     let grey: Vec<usize> =
                         work.iter().map(|w| w.0).filter(|&r| is_grey(r)).collect();
-                    voted_masks(db, &grey)?
+                    super::voted_masks(db, &grey)?
                 }
                 Some(_) => HashMap::new(),
             };
@@ -525,37 +525,6 @@ fn load_layers(
         }
     }
     Ok(layers)
-}
-
-/// The matte masks of database rows `rows` as the footage render uses them: each row's
-/// stored pre-processing mask voted with its neighbours' ([`super::matte_vote_rows`],
-/// [`crate::mask::majority3`]), so a mask that collapses or flares on a single frame does
-/// not flash — the matte `ignis loop` writes. Each stored mask is decoded once; rows whose
-/// database stores no mask are absent (the caller makes one from the footage).
-fn voted_masks(db: &EigenfireDb, rows: &[usize]) -> Result<HashMap<usize, image::GrayImage>> {
-    let votes: Vec<(usize, [usize; 3])> = rows
-        .iter()
-        .map(|&r| (r, super::matte_vote_rows(db, r)))
-        .collect();
-    let mut need: Vec<usize> = votes.iter().flat_map(|v| v.1).collect();
-    need.sort_unstable();
-    need.dedup();
-    let decoded: Vec<Result<Option<image::GrayImage>>> =
-        need.par_iter().map(|&r| db.source_mask(r)).collect();
-    let mut masks = HashMap::with_capacity(need.len());
-    for (&r, m) in need.iter().zip(decoded) {
-        if let Some(m) = m? {
-            masks.insert(r, m);
-        }
-    }
-    Ok(votes
-        .into_par_iter()
-        .filter_map(|(r, [a, b, c])| {
-            let own = masks.get(&b)?;
-            let get = |j: usize| masks.get(&j).unwrap_or(own);
-            Some((r, crate::mask::majority3(get(a), own, get(c))))
-        })
-        .collect())
 }
 
 /// [`render_plan_with`] with the default options (source size, footage read).
