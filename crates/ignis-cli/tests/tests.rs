@@ -1403,8 +1403,11 @@ mod transitions {
 
     /// The worst step of the join (from the last frame of the first motion, `a`, to the
     /// first of the second, `b`) over the written sequence's median step, and the join's
-    /// ghost: the softest of frames `a..=b` over the median sharpness of its ±15
-    /// neighbours (cyclic, as `loopq`).
+    /// ghost: the softest of its in-betweens `a+1..b` over the median sharpness of its ±15
+    /// neighbours (cyclic, as `loopq`). Frames `a` and `b` are the clips' own frames, not
+    /// blends: between a soft clip and a sharp one, `a`'s window is half the other clip,
+    /// so its ratio measures the clips' difference in sharpness, not a ghost (candle →
+    /// campfire: 0.79–0.80 on candle frame 89, every in-between ≥ 1.0).
     fn join_quality(f: &[ignis_core::GrayFrame], a: usize, b: usize) -> (f64, f64) {
         let steps = loopq::steps(f, false).unwrap();
         let median = loopq::median(&mut steps.clone());
@@ -1412,7 +1415,7 @@ mod transitions {
         let sharp: Vec<f64> = f.iter().map(loopq::sharpness).collect();
         let n = sharp.len() as isize;
         let r = loopq::GHOST_RADIUS as isize;
-        let ghost = (a..=b)
+        let ghost = (a + 1..b)
             .map(|t| {
                 let mut w: Vec<f64> = (-r..=r)
                     .map(|o| sharp[(t as isize + o).rem_euclid(n) as usize])

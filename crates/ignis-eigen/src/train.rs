@@ -607,6 +607,8 @@ struct Collected {
 struct ClipFiles {
     frames: Option<FileEntry>,
     masks: FileEntry,
+    /// The flame's own colour over the clip's training frames.
+    flame_colour: Option<[f32; 3]>,
 }
 
 /// The fitted model: PCA, weights (M×k row-major), angles, stored frames per clip.
@@ -706,11 +708,14 @@ fn collect_clip(
     let src = c.footage.info().size;
     let mut masks = crate::db::masks::MaskWriter::new(src.width, src.height);
     let (mut done, mut lit) = (0, 0);
+    let mut colour = crate::preprocess::FlameColour::default();
     for (_, f) in training_frames(c, plan.start, plan.end)? {
         if done == plan.frames {
             break;
         }
-        let pr = preprocess_frame(&f?, &plan.pose, pre);
+        let f = f?;
+        let pr = preprocess_frame(&f, &plan.pose, pre);
+        colour.add(&f, &pr.mask);
         if pr.mask_pixels > 0 {
             lit += 1;
         }
@@ -754,7 +759,11 @@ fn collect_clip(
         None => None,
     };
     let masks = writer.write_bytes(&format!("masks/{name}.rle"), &masks.into_bytes())?;
-    Ok(ClipFiles { frames, masks })
+    Ok(ClipFiles {
+        frames,
+        masks,
+        flame_colour: colour.colour(),
+    })
 }
 
 /// Fits the PCA to the data matrix and projects every training frame: the weights are
@@ -861,6 +870,7 @@ fn write_model(
             mask_file: Some(ff.masks.clone()),
             source_check: db::source_check(&info.source, info.frame_count)?,
             static_lit: Some(plan.static_lit),
+            flame_colour: ff.flame_colour,
         });
         first_row += plan.frames;
     }

@@ -43,6 +43,7 @@ fn grey_look() -> Look {
     Look {
         mode: ColourMode::Grey,
         tint: ignis_core::colour::Tint::Solid([1.0, 0.42, 0.08]),
+        tint_from_footage: true,
         threshold: ignis_eigen::colour::THESIS_THRESHOLD,
         bloom: None,
         smoke: None,
@@ -931,5 +932,101 @@ fn a_still_lamp_does_not_move_the_framing() {
     assert!(
         !close(ignored.scale, clean.scale) || !close(ignored.fuel_x, clean.fuel_x),
         "the lamp moves the framing when it is kept: {ignored:?} vs {clean:?}"
+    );
+}
+
+/// Training measures each clip's own flame colour: an orange synthetic fire reads as
+/// orange, the same fire with red and blue swapped (a blue gas flame) as blue.
+#[test]
+fn training_measures_the_flames_own_colour() {
+    let sp = synth(FlameStyle::Candle, 96, 128, 24);
+    let orange: Vec<RgbaFrame> = (0..sp.frames)
+        .map(|t| synthetic_frame(&sp, t).unwrap())
+        .collect();
+    let blue: Vec<RgbaFrame> = orange
+        .iter()
+        .map(|f| {
+            let mut b = f.clone();
+            for p in b.data_mut() {
+                p.swap(0, 2);
+            }
+            b
+        })
+        .collect();
+    let t = tempfile::tempdir().unwrap();
+    let clips = [
+        ClipInput::new(ClipSpec::new("orange"), FrameList::new("o", &orange, 30.0)),
+        ClipInput::new(ClipSpec::new("blue"), FrameList::new("b", &blue, 30.0)),
+    ];
+    let db = train_db(t.path(), &clips);
+    let colour = |name: &str| db.clip(name).unwrap().flame_colour.unwrap();
+    let (o, b) = (colour("orange"), colour("blue"));
+    assert_eq!(
+        o[0], 1.0,
+        "orange flame: red is the brightest channel, {o:?}"
+    );
+    assert!(o[2] < 0.5 * o[0], "orange flame: little blue, {o:?}");
+    assert_eq!(
+        b[2], 1.0,
+        "blue flame: blue is the brightest channel, {b:?}"
+    );
+    assert!(b[0] < 0.5 * b[2], "blue flame: little red, {b:?}");
+    // The swap swaps the measured colour: the same pixels were measured.
+    // The swap swaps the measured colour (the HSV mask, being hue-dependent, keeps
+    // slightly different pixels of the blue flame).
+    assert!(
+        (o[0] - b[2]).abs() < 0.02 && (o[2] - b[0]).abs() < 0.02,
+        "{o:?} {b:?}"
+    );
+}
+
+/// Original colouring tints the bloom with the clip's flame colour unless the look sets
+/// its own tint: the glow of an orange synthetic fire is orange by default and blue when
+/// a scenario asks for a blue tint.
+#[test]
+fn the_bloom_takes_the_clips_flame_colour_unless_a_tint_is_set() {
+    let t = tempfile::tempdir().unwrap();
+    let db = train_db(
+        t.path(),
+        &[input("fire", synth(FlameStyle::Campfire, 128, 96, 16))],
+    );
+    assert!(db.clip("fire").unwrap().flame_colour.is_some());
+    let opts = RenderOptions {
+        size: None,
+        from_database: false,
+        batch: None,
+    };
+    let blue = ignis_core::colour::Tint::Solid([0.1, 0.3, 1.0]);
+    let look = |from_footage: bool| Look {
+        tint: blue.clone(),
+        tint_from_footage: from_footage,
+        smoke: None,
+        ..original_look()
+    };
+    let footage = render_with(&db, "fire", 2..6, &look(true), &opts);
+    let tinted = render_with(&db, "fire", 2..6, &look(false), &opts);
+    let (mut differ, mut footage_red, mut tinted_blue) = (0, 0, 0);
+    for (a, b) in footage.iter().zip(&tinted) {
+        for (p, q) in a.data().iter().zip(b.data()) {
+            if p != q {
+                differ += 1;
+                footage_red += usize::from(p[0] > p[2]);
+                tinted_blue += usize::from(q[2] > q[0]);
+            }
+        }
+    }
+    assert!(
+        differ > 500,
+        "the tint reaches the glow ({differ} pixels differ)"
+    );
+    // Where the footage's own colour outweighs the glow, either render's pixel is the
+    // footage's: allow 1 % such pixels.
+    assert!(
+        100 * footage_red >= 99 * differ,
+        "the footage's glow is red: {footage_red} of {differ}"
+    );
+    assert!(
+        100 * tinted_blue >= 99 * differ,
+        "the set tint's glow is blue: {tinted_blue} of {differ}"
     );
 }

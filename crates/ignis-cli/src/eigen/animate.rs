@@ -559,7 +559,7 @@ pub fn template(db: &EigenfireDb, db_path: &str) -> String {
     }
     s.push_str("[transition]                # defaults for every join\nmethod = \"auto\"             # auto | end-growing | direct | low-pass | morph\n\n");
     s.push_str("# [[join]]                  # join 1 (positional), overrides [transition]\n# method = \"end-growing\"\n# steps = 40                # N: most frames (end-growing) / frames (direct)\n# theta_min = 2.5           # fixed θ_min (default: adaptive, per clip)\n# kernel = [0.2, 0.2, 0.6]  # low-pass\n# eigenfires = 50           # low-pass: E of the morphs\n\n");
-    s.push_str("[colour]\nmode = \"original\"           # original (Algorithm 2) | synthetic | palette | grey\ntint = [1.0, 0.42, 0.08]    # synthetic colour, and the bloom's tint\n# palette = \"candle\"        # palette mode\nthreshold = 0.013           # original: copy the footage above this grey level (thesis 30/255)\nalpha = \"matte\"             # matte | opaque\nfast_path = true            # §7.1.2: stored pre-processed frames for database frames\n# mask_mode = \"add\"         # add | replace (custom masks, §6.4)\n\n");
+    s.push_str("[colour]\nmode = \"original\"           # original (Algorithm 2) | synthetic | palette | grey\n# tint = [1.0, 0.42, 0.08]  # synthetic colour; in original mode the bloom's tint (default: each clip's own flame colour, measured at training)\n# palette = \"candle\"        # palette mode\nthreshold = 0.013           # original: copy the footage above this grey level (thesis 30/255)\nalpha = \"matte\"             # matte | opaque\nfast_path = true            # §7.1.2: stored pre-processed frames for database frames\n# mask_mode = \"add\"         # add | replace (custom masks, §6.4)\n\n");
     s.push_str("[bloom]\npasses = 3\nradius = 24.0\nstrength = 0.4\n\n");
     s.push_str("# [smoke]                   # §6.3 (original mode)\n# threshold = 0.03\n# blur = 1.0\n# colour = [0.35, 0.35, 0.35]\n\n");
     s.push_str(
@@ -818,6 +818,7 @@ pub fn default_look() -> ignis_eigen::scenario::Look {
     ignis_eigen::scenario::Look {
         mode: ignis_eigen::scenario::ColourMode::Original,
         tint: ignis_core::colour::Tint::Solid([1.0, 0.42, 0.08]),
+        tint_from_footage: true,
         threshold: ignis_eigen::colour::THESIS_THRESHOLD,
         bloom: Some(ignis_core::post::BloomParams::default()),
         smoke: None,

@@ -509,6 +509,12 @@ fn info(a: InfoArgs, g: &Global) -> Result<()> {
             c.thresholds.e,
             c.thresholds.peaks.len()
         );
+        if let Some(fc) = c.flame_colour {
+            println!(
+                "    flame colour (linear RGB, the bloom's tint in original colouring) {:.3}, {:.3}, {:.3}",
+                fc[0], fc[1], fc[2]
+            );
+        }
         let still = c.pose.still_lights.boxes();
         if !still.is_empty() {
             let list: Vec<String> = still

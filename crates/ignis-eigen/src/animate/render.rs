@@ -730,7 +730,7 @@ pub(crate) fn render_frames(
                 } else {
                     None
                 };
-                finish_frame(&g, m, row, look, &layers)
+                finish_frame(&g, m, row, look, &frame_tint(db, look, row), &layers)
             })
             .collect();
         for f in batch {
@@ -740,18 +740,33 @@ pub(crate) fn render_frames(
     Ok(())
 }
 
+/// The tint of a frame coloured from database row `row`: in original colouring, the
+/// row's clip's own flame colour where the look takes it from the footage and training
+/// measured one; otherwise the look's tint.
+fn frame_tint<'a>(db: &EigenfireDb, look: &'a Look, row: Option<usize>) -> Cow<'a, Tint> {
+    let footage = look.tint_from_footage && matches!(look.mode, ColourMode::Original);
+    match row.and_then(|r| db.row_origin(r)) {
+        Some((clip, _)) if footage => match clip.flame_colour {
+            Some(c) => Cow::Owned(Tint::Solid(c)),
+            None => Cow::Borrowed(&look.tint),
+        },
+        _ => Cow::Borrowed(&look.tint),
+    }
+}
+
 /// Bloom (§6.2), colouring and the alpha matte of one grey frame: `row` is the database
 /// row whose layers colour it (original colouring), `matte` the pre-processing matte of a
-/// frame made from the footage.
+/// frame made from the footage, `tint` the bloom's (or synthetic colouring's) tint.
 fn finish_frame(
     grey: &GrayFrame,
     matte: Option<&GrayFrame>,
     row: Option<usize>,
     look: &Look,
+    tint: &Tint,
     layers: &Layers,
 ) -> Result<RgbaFrame> {
     if let (ColourMode::Original, Some(r), Some(b), Tint::Solid(tint)) =
-        (&look.mode, row, &look.bloom, &look.tint)
+        (&look.mode, row, &look.bloom, tint)
     {
         // The common case in one pass: the bloom's full-resolution rows, the solid tint,
         // Algorithm 2 and the alpha matte made band by band (the same values as the
@@ -786,7 +801,7 @@ fn finish_frame(
     let mut out = match (&look.mode, row) {
         (ColourMode::Grey, _) => lit.to_rgba(),
         (ColourMode::Palette(p), _) => p.apply(lit),
-        (ColourMode::Synthetic, _) => synthetic_colour(lit, &look.tint)?,
+        (ColourMode::Synthetic, _) => synthetic_colour(lit, tint)?,
         (ColourMode::Original, None) => {
             return Err(EigenError::bad(
                 "colour",
@@ -796,13 +811,13 @@ fn finish_frame(
         (ColourMode::Original, Some(r)) => {
             // The tinted bloom is the destination; a solid tint is made band by band
             // inside the colouring (the same values, no frame of them held).
-            let image = match (&bloomed, &look.tint) {
+            let image = match (&bloomed, tint) {
                 (Some(b), tint) if !matches!(tint, Tint::Solid(_)) => {
                     Some(synthetic_colour(b, tint)?)
                 }
                 _ => None,
             };
-            let dest = match (&bloomed, &look.tint, &image) {
+            let dest = match (&bloomed, tint, &image) {
                 (_, _, Some(i)) => Destination::Image(i),
                 (Some(b), Tint::Solid(c), None) => Destination::SolidTint(b, *c),
                 _ => Destination::Empty,

@@ -125,6 +125,14 @@ pub struct ClipEntry {
     /// decided flame isolation (`pose.isolate`).
     #[serde(default)]
     pub static_lit: Option<f64>,
+    /// The flame's own colour (linear RGB, brightest channel 1): the sum of the footage's
+    /// colour over every training frame's masked pixels that are not clipped
+    /// ([`crate::preprocess::FlameColour`]). Original colouring tints the bloom with it
+    /// unless the scenario sets `tint`, so a blue or white flame does not get an orange
+    /// halo. `None` in databases from before it was measured (the bloom then keeps the
+    /// default tint) and for clips with no lit pixel.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub flame_colour: Option<[f32; 3]>,
 }
 
 /// A source file's fingerprint.

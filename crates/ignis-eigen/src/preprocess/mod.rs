@@ -9,10 +9,12 @@
 //! (luminance with Rec. 709 weights); masks are 8-bit, 255 = flame.
 
 pub mod contour;
+pub mod flame_colour;
 pub mod hermite;
 pub mod mask;
 pub mod pose;
 pub mod still;
+pub use flame_colour::FlameColour;
 use still::StillLights;
 
 use crate::contour::{contour_tree, draw_contours, fill_contours, remove_holes, ContourParams};

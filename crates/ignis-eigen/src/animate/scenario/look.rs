@@ -63,6 +63,7 @@ pub(super) fn parse(src: &Source, raw: &RawScenario) -> Result<Look> {
             ));
         }
         look.tint = Tint::Solid(*v);
+        look.tint_from_footage = false;
     }
     if let Some(m) = &c.mode {
         look.mode = mode(src, c, m)?;

@@ -183,8 +183,13 @@ struct JoinSpec {
 #[derive(Clone, Debug)]
 pub struct Look {
     pub mode: ColourMode,
-    /// Tint of synthetic colouring, and of the bloom in original colouring.
+    /// Tint of synthetic colouring, and of the bloom in original colouring (unless
+    /// `tint_from_footage`).
     pub tint: Tint,
+    /// Original colouring tints each frame's bloom with its clip's own flame colour
+    /// (`ClipEntry::flame_colour`, measured at training) instead of `tint`; clips without
+    /// one keep `tint`. On by default; a scenario's `[colour] tint` turns it off.
+    pub tint_from_footage: bool,
     /// Original colouring's threshold (grey units).
     pub threshold: f32,
     pub bloom: Option<BloomParams>,
@@ -231,6 +236,7 @@ impl Default for Look {
         Look {
             mode: ColourMode::Original,
             tint: Tint::Solid([1.0, 0.42, 0.08]),
+            tint_from_footage: true,
             threshold: crate::colour::THESIS_THRESHOLD,
             bloom: Some(BloomParams::default()),
             smoke: None,
@@ -513,6 +519,18 @@ mod tests {
             Path::new("dir/scene.toml"),
         )
         .unwrap();
+    }
+
+    /// The bloom takes each clip's own flame colour unless `[colour] tint` is set.
+    #[test]
+    fn a_set_tint_replaces_the_footages_flame_colour() {
+        let base = "database = \"fire.db\"\nsequence = [\"a\"]\n[motions.a]\nclip = \"c\"\n";
+        let parse = |t: &str| Scenario::parse(t, Path::new("dir/scene.toml")).unwrap();
+        let plain = parse(base);
+        assert!(plain.look.tint_from_footage);
+        let set = parse(&format!("{base}[colour]\ntint = [0.2, 0.4, 1.0]\n"));
+        assert!(!set.look.tint_from_footage);
+        assert_eq!(set.look.tint, Tint::Solid([0.2, 0.4, 1.0]));
     }
 
     /// A bad value in each section: the error names the key (`key` in backticks, or
