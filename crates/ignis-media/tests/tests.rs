@@ -394,7 +394,7 @@ mod probing {
             return;
         }
         let dir = tempfile::tempdir().unwrap();
-        let cases: [(&str, &[&str], Decoder, &str); 4] = [
+        let cases: [(&str, &[&str], Decoder, &str); 6] = [
             (
                 "base.mp4",
                 &[
@@ -429,6 +429,19 @@ mod probing {
                 "mjpeg",
             ),
             ("clip.webm", &["-c:v", "libvpx-vp9"], Decoder::Ffmpeg, "vp9"),
+            // Matroska and WebM never store a frame count: it is counted.
+            (
+                "vp8.webm",
+                &["-c:v", "libvpx", "-auto-alt-ref", "1", "-lag-in-frames", "8"],
+                Decoder::Ffmpeg,
+                "vp8",
+            ),
+            (
+                "clip.mkv",
+                &["-pix_fmt", "yuv420p", "-c:v", "libx264"],
+                Decoder::Ffmpeg,
+                "h264",
+            ),
         ];
         for (name, args, decoder, codec) in cases {
             let Some(path) = make(dir.path(), name, args) else {
@@ -436,6 +449,7 @@ mod probing {
             };
             let info = probe(&path).unwrap();
             assert_eq!(info.decoder, decoder, "{name}: {info:?}");
+            assert_eq!(info.frame_count, Some(12), "{name}: the frame count is known");
             assert!(info.codec.contains(codec), "{name}: {}", info.codec);
             assert_eq!(info.size, Size::new(64, 48).unwrap());
             let frames = read_all(&path);

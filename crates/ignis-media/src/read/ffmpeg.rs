@@ -162,14 +162,57 @@ pub(crate) fn probe(path: &Path, _hint: Option<&str>) -> Result<SourceInfo> {
         Some(p) if !p.is_empty() && p != "unknown" => format!("{codec_name} ({p})"),
         _ => codec_name,
     };
+    let frame_count = match s.nb_frames.and_then(|n| n.parse().ok()).filter(|&n| n > 0) {
+        Some(n) => Some(n),
+        None => counted_packets(path)?,
+    };
     Ok(SourceInfo {
         size,
         fps,
-        frame_count: s.nb_frames.and_then(|n| n.parse().ok()).filter(|&n| n > 0),
+        frame_count,
         codec,
         decoder: Decoder::Ffmpeg,
         path: path.to_path_buf(),
     })
+}
+
+/// The video frames of a file whose container does not say how many it holds (Matroska
+/// and WebM never do; some MOV and AVI files do not): `ffprobe -count_packets` counts the
+/// first video stream's packets, demuxing only (no decoding: a few ms for a short clip,
+/// about a disk read of the file for a long one). One packet is one frame for the video
+/// codecs ffmpeg muxes (H.264, HEVC, ProRes, VP8 with alt-ref frames, VP9 superframes,
+/// AV1 temporal units; checked against `-count_frames` on each). Counted once per file
+/// and modification time in a process (a command opens its input several times).
+/// `None` when ffprobe counts nothing.
+fn counted_packets(path: &Path) -> Result<Option<u64>> {
+    use std::collections::HashMap;
+    use std::sync::{Mutex, OnceLock};
+    type Key = (std::path::PathBuf, u64, Option<std::time::SystemTime>);
+    static COUNTS: OnceLock<Mutex<HashMap<Key, Option<u64>>>> = OnceLock::new();
+    let meta = std::fs::metadata(path).map_err(|e| MediaError::io(path, e))?;
+    let key = (path.to_path_buf(), meta.len(), meta.modified().ok());
+    let counts = COUNTS.get_or_init(Default::default);
+    if let Some(n) = counts.lock().ok().and_then(|c| c.get(&key).copied()) {
+        return Ok(n);
+    }
+    let out = Command::new(ffmpeg_sidecar::ffprobe::ffprobe_path())
+        .args(["-v", "error", "-select_streams", "v:0", "-count_packets"])
+        .args(["-show_entries", "stream=nb_read_packets", "-of", "csv=p=0"])
+        .args(PROTOCOL_WHITELIST)
+        .arg("-i")
+        .arg(file_url(path)?)
+        .output()
+        .map_err(|e| MediaError::io(path, e))?;
+    let n = String::from_utf8_lossy(&out.stdout)
+        .trim()
+        .trim_end_matches(',')
+        .parse::<u64>()
+        .ok()
+        .filter(|&n| out.status.success() && n > 0);
+    if let Ok(mut c) = counts.lock() {
+        c.insert(key, n);
+    }
+    Ok(n)
 }
 
 /// A running `ffmpeg` decoding to raw RGBA on stdout.
