@@ -58,6 +58,8 @@ enum Cmd {
     #[command(subcommand)]
     Volume(volume::Command),
     /// A seamless loop of a fire clip, found, closed and written at the clip's own size.
+    // The output keeps the footage's frame rate and refuses --fps: not listed in --help.
+    #[command(mut_arg("fps", |a| a.hide(true)))]
     Loop(eigen::loop_cmd::Args),
     /// Headline performance figures of a method as one JSON object.
     Bench(bench::BenchArgs),
