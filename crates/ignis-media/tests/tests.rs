@@ -432,7 +432,14 @@ mod probing {
             // Matroska and WebM never store a frame count: it is counted.
             (
                 "vp8.webm",
-                &["-c:v", "libvpx", "-auto-alt-ref", "1", "-lag-in-frames", "8"],
+                &[
+                    "-c:v",
+                    "libvpx",
+                    "-auto-alt-ref",
+                    "1",
+                    "-lag-in-frames",
+                    "8",
+                ],
                 Decoder::Ffmpeg,
                 "vp8",
             ),
@@ -449,7 +456,11 @@ mod probing {
             };
             let info = probe(&path).unwrap();
             assert_eq!(info.decoder, decoder, "{name}: {info:?}");
-            assert_eq!(info.frame_count, Some(12), "{name}: the frame count is known");
+            assert_eq!(
+                info.frame_count,
+                Some(12),
+                "{name}: the frame count is known"
+            );
             assert!(info.codec.contains(codec), "{name}: {}", info.codec);
             assert_eq!(info.size, Size::new(64, 48).unwrap());
             let frames = read_all(&path);
