@@ -9,6 +9,8 @@
 //! in-between frames (marked `uses_in_between_frame`). A `diagnosis` per row separates the
 //! causes: vector quantisation, gating, flow resolution, the generator's own motion, and a
 //! per-pixel best-velocity bound (what any vector sheet could reach with this blend).
+//! Generators that know their motion (the moving texture, classic, the learned flame:
+//! [`ignis_learned::model_motion`]) add it to the diagnosis as `model`.
 
 use crate::global::Global;
 use crate::output::flow_source;
@@ -101,7 +103,7 @@ fn case(
     name: &str,
     frames: &[RgbaFrame],
     dir: &std::path::Path,
-    model: Option<Vec<Vec<[f32; 2]>>>,
+    models: Vec<(&str, Vec<Field>)>,
 ) -> Result<serde_json::Value> {
     let kept: Vec<RgbaFrame> = frames.iter().step_by(2).cloned().collect();
     let path = dir.join(format!("{name}.png"));
@@ -141,7 +143,7 @@ fn case(
             "sheet": figures_of(blend_errors(&fb.frames, &mid, frames)),
             "exact_colour": figures_of(blend_errors(&kept, &mid, frames)),
         },
-        "diagnosis": diagnosis(&kept, frames, &mv, model)?,
+        "diagnosis": diagnosis(&kept, frames, &mv, models)?,
     });
     if let (Some(r), serde_json::Value::Object(e)) = (row.as_object_mut(), extra) {
         r.extend(e);
@@ -183,6 +185,82 @@ fn volume(n: usize, preset: ignis_volume::Preset, rate: f32) -> Result<Vec<RgbaF
         .collect::<Result<Vec<_>>>()
 }
 
+/// The learned row's model: `candle.mp4` trained as `bench realism` trains it, or without
+/// the footage the synthetic clip `bench learned` trains on, so the row exists anyway.
+fn learned_model(g: &Global, quick: bool) -> Result<(ignis_learned::FlameModel, &'static str)> {
+    if let Some(clip) = crate::demo::shared_data("candle.mp4") {
+        return Ok((super::realism::candle_model(g, &clip, quick)?, "candle.mp4"));
+    }
+    let clip = ignis_learned::synthetic::flame_clip(Size::new(256, 256)?, 100, 1);
+    let p = ignis_learned::TrainParams {
+        em: ignis_learned::EmParams {
+            seed: 1,
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    let mut model = ignis_learned::train(clip, &p, &mut ignis_core::progress::NoProgress)?.model;
+    // the synthetic clip's oscillators are defined at 30 frames per second
+    model.summary.fps = Some(30.0);
+    Ok((model, "synthetic clip (ignis_learned::synthetic, candle.mp4 not found)"))
+}
+
+/// Process steps the learned row skips first (from the model's last training states).
+const LEARNED_WARM_UP: f64 = 30.0;
+
+/// `n` frames of the learned flame at `rate` times the model's frame rate, 128², as
+/// `ignis learned synth --fps` renders them (the process at the footage's rate, each frame
+/// the state at its own time: [`ignis_learned::Synthesiser::new_at`]; seed 1, the `candle`
+/// palette), after [`LEARNED_WARM_UP`] steps, and the warp each frame was drawn with.
+fn learned(
+    model: &ignis_learned::FlameModel,
+    n: usize,
+    rate: f64,
+) -> Result<(Vec<RgbaFrame>, Vec<ignis_learned::Warp>)> {
+    let fps = model.summary.fps.context("the learned model has no frame rate")? * rate;
+    let mut synth = ignis_learned::Synthesiser::new_at(model, Default::default(), 1, Some(fps))?;
+    synth.skip((LEARNED_WARM_UP * rate).round() as u64);
+    let palette = ignis_core::Palette::preset("candle")?;
+    let size = Size::new(128, 128)?;
+    let mut grey = ignis_core::GrayFrame::new(size);
+    let (mut frames, mut warps) = (Vec::new(), Vec::new());
+    for _ in 0..n {
+        synth.next_frame_into(&mut grey);
+        frames.push(palette.apply(&grey));
+        warps.push(synth.warp(size));
+    }
+    Ok((frames, warps))
+}
+
+/// The learned flame's own motion ([`ignis_learned::model_motion`]) as a velocity over one
+/// key interval for each key frame (every `step`-th of `warps`): from the model motion to
+/// the frames `reach` on either side, `(ahead − behind) · step / (2 · reach)`, one-sided at
+/// the ends. `reach = step` is the convention of classic's `model` and the flipbook
+/// writer (neighbouring key frames); a smaller reach uses in-between times, which the
+/// model knows without rendering them.
+fn model_velocities(
+    model: &ignis_learned::FlameModel,
+    warps: &[ignis_learned::Warp],
+    size: Size,
+    (step, reach): (usize, usize),
+) -> Vec<Field> {
+    let k = step as f32 / reach as f32;
+    let motion = |i: usize, j: usize| -> Field {
+        let m = ignis_learned::model_motion(&model.shape, &warps[i], &warps[j], size);
+        m.into_iter().map(|v| [v[0] * k, v[1] * k]).collect()
+    };
+    let last = (warps.len() - 1) / step * step;
+    (0..=last)
+        .step_by(step)
+        .map(|i| {
+            let ahead = (i + step <= last).then(|| motion(i, i + reach));
+            let behind = (i > 0).then(|| motion(i, i - reach));
+            ignis_media::write::motion::frame_velocity(ahead.as_deref(), behind.as_deref())
+                .expect("at least two key frames")
+        })
+        .collect()
+}
+
 fn footage(name: &str, n: usize) -> Result<Option<Vec<RgbaFrame>>> {
     let Some(path) = crate::demo::shared_data(name) else {
         return Ok(None);
@@ -213,23 +291,36 @@ pub fn figures(g: &Global, quick: bool) -> Result<serde_json::Value> {
         })
         .collect();
     let truth = vec![vec![[1.5f32 * 2.0, -2.0]; 128 * 128]; n.div_ceil(2)];
-    rows.push(case("moving-texture", &shift, dir.path(), Some(truth))?);
+    rows.push(case("moving-texture", &shift, dir.path(), vec![("model", truth)])?);
     let mut held = serde_json::Map::new();
     let (frames, model) = classic(n)?;
-    rows.push(case("classic", &frames, dir.path(), Some(model))?);
-    held.insert("classic".into(), held_out(&classic(2 * n - 1)?.0)?);
+    rows.push(case("classic", &frames, dir.path(), vec![("model", model)])?);
+    held.insert("classic".into(), held_out(&classic(2 * n - 1)?.0, None)?);
     for p in [ignis_volume::Preset::Candle, ignis_volume::Preset::Campfire] {
         let name = format!("volume-{}", p.name());
-        rows.push(case(&name, &volume(n, p, 2.0)?, dir.path(), None)?);
-        held.insert(name, held_out(&volume(2 * n - 1, p, 4.0)?)?);
+        rows.push(case(&name, &volume(n, p, 2.0)?, dir.path(), vec![])?);
+        held.insert(name, held_out(&volume(2 * n - 1, p, 4.0)?, None)?);
     }
+    let (model, trained_on) = learned_model(g, quick)?;
+    let (frames, warps) = learned(&model, n, 2.0)?;
+    let size = frames[0].size();
+    let models = vec![
+        ("model", model_velocities(&model, &warps, size, (2, 2))),
+        ("model_half_steps", model_velocities(&model, &warps, size, (2, 1))),
+    ];
+    let mut row = case("learned", &frames, dir.path(), models)?;
+    row["trained_on"] = json!(trained_on);
+    rows.push(row);
+    let (frames, warps) = learned(&model, 2 * n - 1, 4.0)?;
+    let m = model_velocities(&model, &warps, size, (4, 4));
+    held.insert("learned".into(), held_out(&frames, Some(m))?);
     let mut skipped = Vec::new();
     for clip in ["candle.mp4", "campfire.mp4"] {
         match footage(clip, n)? {
             Some(frames) => {
-                rows.push(case(clip, &frames, dir.path(), None)?);
+                rows.push(case(clip, &frames, dir.path(), vec![])?);
                 if let Some(f) = footage(clip, 2 * n - 1)? {
-                    held.insert(clip.to_string(), held_out(&f)?);
+                    held.insert(clip.to_string(), held_out(&f, None)?);
                 }
             }
             None => skipped.push(format!("{clip}: ../shared/data not found")),
@@ -289,8 +380,8 @@ pub fn figures(g: &Global, quick: bool) -> Result<serde_json::Value> {
             "exact_colour": "the same vectors on the unquantised key frames (what the --hdr EXR colour sheet gives): separates the 8-bit sheet's rounding from the blend",
             "in_between_flow": "velocities from flows key -> true in-between frames (uses the dropped frames: possible only when the exporter has them, e.g. decimated footage or a generator rendered at twice the rate); vectors unquantised",
             "key_frame_change": "mean |error| between consecutive key frames: how much there is to blend",
-            "held_out_t": "error_reduction at blends t = 0.25 / 0.5 / 0.75 with key frames every 4th frame (footage: every 4th source frame), default vs loose gating, vectors unquantised: checks a change on frames it was not tuned on",
-            "diagnosis": "error_reduction of other vectors on the unquantised key frames: gated_sheet_16bit (the sheet's vectors read back), gated_unquantised (the same before 16-bit encoding), raw_flow / raw_flow_full_res (ungated DIS velocities, finest pyramid level 1 / 0), raw_flow_halved, gated_loose (consistency 8 px, explained 0.05), model (the generator's own motion: exact shift for the texture, ignis_classic::motion for classic), best_per_pixel_bound (per pixel the best velocity within 4 px chosen by looking at the true frame: a bound no vector sheet can beat)",
+            "held_out_t": "error_reduction at blends t = 0.25 / 0.5 / 0.75 with key frames every 4th frame (footage: every 4th source frame), default vs loose gating (and the model's motion for the learned flame), vectors unquantised: checks a change on frames it was not tuned on",
+            "diagnosis": "error_reduction of other vectors on the unquantised key frames: gated_sheet_16bit (the sheet's vectors read back), gated_unquantised (the same before 16-bit encoding), raw_flow / raw_flow_full_res (ungated DIS velocities, finest pyramid level 1 / 0), raw_flow_halved, gated_loose (consistency 8 px, explained 0.05), model (the generator's own motion: exact shift for the texture, ignis_classic::motion for classic, ignis_learned::model_motion for the learned flame: its texture attached to the flame's canonical coordinates; central over the neighbouring key frames), model_half_steps (learned: the same from the model's motion to the in-between times, known without rendering them), best_per_pixel_bound (per pixel the best velocity within 4 px chosen by looking at the true frame: a bound no vector sheet can beat)",
         },
         "goal_error_reduction": GOAL_REDUCTION,
         "blend": rows,
@@ -400,7 +491,7 @@ fn diagnosis(
     keys: &[RgbaFrame],
     truth: &[RgbaFrame],
     sheet_mv: &[Vec<[f32; 2]>],
-    model: Option<Vec<Vec<[f32; 2]>>>,
+    models: Vec<(&str, Vec<Field>)>,
 ) -> Result<serde_json::Value> {
     let plain = blend_errors(
         keys,
@@ -435,26 +526,28 @@ fn diagnosis(
         ..Default::default()
     };
     d["gated_loose"] = json!(red(&gated_with(keys, &loose)?));
-    if let Some(m) = model {
-        d["model"] = json!(red(&m));
+    for (name, m) in models {
+        d[name] = json!(red(&m));
     }
     Ok(d)
 }
 
 /// Held-out blends: key frames every 4th of `frames`, the three frames between each pair
 /// rebuilt at t = 0.25, 0.5, 0.75 with the writer's default vectors and with looser gating
-/// (so a change tuned at t = 0.5 on every other frame is checked on frames it never saw).
-fn held_out(frames: &[RgbaFrame]) -> Result<serde_json::Value> {
+/// (so a change tuned at t = 0.5 on every other frame is checked on frames it never saw),
+/// and with `model` velocities (one per key frame) when the generator knows its motion.
+fn held_out(frames: &[RgbaFrame], model: Option<Vec<Field>>) -> Result<serde_json::Value> {
     let keys: Vec<RgbaFrame> = frames.iter().step_by(4).cloned().collect();
     let loose = ignis_flow::VectorParams {
         consistency_px: 8.0,
         explained: 0.05,
         ..Default::default()
     };
-    let sets = [
+    let mut sets = vec![
         ("gated", gated_velocities(&keys)?),
         ("gated_loose", gated_with(&keys, &loose)?),
     ];
+    sets.extend(model.map(|m| ("model", m)));
     let mut out = serde_json::Map::new();
     for (name, mv) in &sets {
         let mut per_t = serde_json::Map::new();
