@@ -24,6 +24,16 @@ use std::time::Instant;
 /// One motion vector per pixel, `[dx, dy]` in pixels.
 type Field = Vec<[f32; 2]>;
 
+/// What a generator knows of its own motion, for the diagnosis.
+#[derive(Default)]
+struct Known<'a> {
+    /// Named velocities, one field per key frame.
+    velocities: Vec<(&'a str, Vec<Field>)>,
+    /// Per key interval, the forward motion (from the earlier key frame's pixels) and the
+    /// backward motion (from the later one's).
+    pairs: Option<Vec<(Field, Field)>>,
+}
+
 /// Goal: motion-vector blend error at least 30% below the cross-fade's.
 const GOAL_REDUCTION: f64 = 0.30;
 /// Goal: a 64-frame 256² flipbook with motion vectors, in seconds.
@@ -103,7 +113,7 @@ fn case(
     name: &str,
     frames: &[RgbaFrame],
     dir: &std::path::Path,
-    models: Vec<(&str, Vec<Field>)>,
+    known: Known,
 ) -> Result<serde_json::Value> {
     let kept: Vec<RgbaFrame> = frames.iter().step_by(2).cloned().collect();
     let path = dir.join(format!("{name}.png"));
@@ -143,7 +153,7 @@ fn case(
             "sheet": figures_of(blend_errors(&fb.frames, &mid, frames)),
             "exact_colour": figures_of(blend_errors(&kept, &mid, frames)),
         },
-        "diagnosis": diagnosis(&kept, frames, &mv, models)?,
+        "diagnosis": diagnosis(&kept, frames, &mv, known)?,
     });
     if let (Some(r), serde_json::Value::Object(e)) = (row.as_object_mut(), extra) {
         r.extend(e);
@@ -202,7 +212,10 @@ fn learned_model(g: &Global, quick: bool) -> Result<(ignis_learned::FlameModel, 
     let mut model = ignis_learned::train(clip, &p, &mut ignis_core::progress::NoProgress)?.model;
     // the synthetic clip's oscillators are defined at 30 frames per second
     model.summary.fps = Some(30.0);
-    Ok((model, "synthetic clip (ignis_learned::synthetic, candle.mp4 not found)"))
+    Ok((
+        model,
+        "synthetic clip (ignis_learned::synthetic, candle.mp4 not found)",
+    ))
 }
 
 /// Process steps the learned row skips first (from the model's last training states).
@@ -217,7 +230,11 @@ fn learned(
     n: usize,
     rate: f64,
 ) -> Result<(Vec<RgbaFrame>, Vec<ignis_learned::Warp>)> {
-    let fps = model.summary.fps.context("the learned model has no frame rate")? * rate;
+    let fps = model
+        .summary
+        .fps
+        .context("the learned model has no frame rate")?
+        * rate;
     let mut synth = ignis_learned::Synthesiser::new_at(model, Default::default(), 1, Some(fps))?;
     synth.skip((LEARNED_WARM_UP * rate).round() as u64);
     let palette = ignis_core::Palette::preset("candle")?;
@@ -239,14 +256,14 @@ fn learned(
 /// writer (neighbouring key frames); a smaller reach uses in-between times, which the
 /// model knows without rendering them.
 fn model_velocities(
-    model: &ignis_learned::FlameModel,
+    p: &ignis_learned::ShapeParams,
     warps: &[ignis_learned::Warp],
     size: Size,
     (step, reach): (usize, usize),
 ) -> Vec<Field> {
     let k = step as f32 / reach as f32;
     let motion = |i: usize, j: usize| -> Field {
-        let m = ignis_learned::model_motion(&model.shape, &warps[i], &warps[j], size);
+        let m = ignis_learned::model_motion(p, &warps[i], &warps[j], size);
         m.into_iter().map(|v| [v[0] * k, v[1] * k]).collect()
     };
     let last = (warps.len() - 1) / step * step;
@@ -258,6 +275,20 @@ fn model_velocities(
             ignis_media::write::motion::frame_velocity(ahead.as_deref(), behind.as_deref())
                 .expect("at least two key frames")
         })
+        .collect()
+}
+
+/// The learned flame's model motion over each key interval (key frames every `step`-th
+/// of `warps`): forward from the earlier key frame, backward from the later.
+fn model_pairs(
+    p: &ignis_learned::ShapeParams,
+    warps: &[ignis_learned::Warp],
+    size: Size,
+    step: usize,
+) -> Vec<(Field, Field)> {
+    let m = |i: usize, j: usize| ignis_learned::model_motion(p, &warps[i], &warps[j], size);
+    (0..(warps.len() - 1) / step)
+        .map(|k| (m(step * k, step * k + step), m(step * k + step, step * k)))
         .collect()
 }
 
@@ -291,36 +322,78 @@ pub fn figures(g: &Global, quick: bool) -> Result<serde_json::Value> {
         })
         .collect();
     let truth = vec![vec![[1.5f32 * 2.0, -2.0]; 128 * 128]; n.div_ceil(2)];
-    rows.push(case("moving-texture", &shift, dir.path(), vec![("model", truth)])?);
+    rows.push(case(
+        "moving-texture",
+        &shift,
+        dir.path(),
+        Known {
+            velocities: vec![("model", truth)],
+            ..Default::default()
+        },
+    )?);
     let mut held = serde_json::Map::new();
     let (frames, model) = classic(n)?;
-    rows.push(case("classic", &frames, dir.path(), vec![("model", model)])?);
-    held.insert("classic".into(), held_out(&classic(2 * n - 1)?.0, None)?);
+    rows.push(case(
+        "classic",
+        &frames,
+        dir.path(),
+        Known {
+            velocities: vec![("model", model)],
+            ..Default::default()
+        },
+    )?);
+    held.insert(
+        "classic".into(),
+        held_out(&classic(2 * n - 1)?.0, Known::default())?,
+    );
     for p in [ignis_volume::Preset::Candle, ignis_volume::Preset::Campfire] {
         let name = format!("volume-{}", p.name());
-        rows.push(case(&name, &volume(n, p, 2.0)?, dir.path(), vec![])?);
-        held.insert(name, held_out(&volume(2 * n - 1, p, 4.0)?, None)?);
+        rows.push(case(
+            &name,
+            &volume(n, p, 2.0)?,
+            dir.path(),
+            Known::default(),
+        )?);
+        held.insert(
+            name,
+            held_out(&volume(2 * n - 1, p, 4.0)?, Known::default())?,
+        );
     }
     let (model, trained_on) = learned_model(g, quick)?;
     let (frames, warps) = learned(&model, n, 2.0)?;
     let size = frames[0].size();
-    let models = vec![
-        ("model", model_velocities(&model, &warps, size, (2, 2))),
-        ("model_half_steps", model_velocities(&model, &warps, size, (2, 1))),
-    ];
-    let mut row = case("learned", &frames, dir.path(), models)?;
+    let known = Known {
+        velocities: vec![
+            (
+                "model",
+                model_velocities(&model.shape, &warps, size, (2, 2)),
+            ),
+            (
+                "model_half_steps",
+                model_velocities(&model.shape, &warps, size, (2, 1)),
+            ),
+        ],
+        pairs: Some(model_pairs(&model.shape, &warps, size, 2)),
+    };
+    let mut row = case("learned", &frames, dir.path(), known)?;
     row["trained_on"] = json!(trained_on);
     rows.push(row);
     let (frames, warps) = learned(&model, 2 * n - 1, 4.0)?;
-    let m = model_velocities(&model, &warps, size, (4, 4));
-    held.insert("learned".into(), held_out(&frames, Some(m))?);
+    let known = Known {
+        velocities: vec![(
+            "model",
+            model_velocities(&model.shape, &warps, size, (4, 4)),
+        )],
+        pairs: Some(model_pairs(&model.shape, &warps, size, 4)),
+    };
+    held.insert("learned".into(), held_out(&frames, known)?);
     let mut skipped = Vec::new();
     for clip in ["candle.mp4", "campfire.mp4"] {
         match footage(clip, n)? {
             Some(frames) => {
-                rows.push(case(clip, &frames, dir.path(), vec![])?);
+                rows.push(case(clip, &frames, dir.path(), Known::default())?);
                 if let Some(f) = footage(clip, 2 * n - 1)? {
-                    held.insert(clip.to_string(), held_out(&f, None)?);
+                    held.insert(clip.to_string(), held_out(&f, Known::default())?);
                 }
             }
             None => skipped.push(format!("{clip}: ../shared/data not found")),
@@ -380,8 +453,8 @@ pub fn figures(g: &Global, quick: bool) -> Result<serde_json::Value> {
             "exact_colour": "the same vectors on the unquantised key frames (what the --hdr EXR colour sheet gives): separates the 8-bit sheet's rounding from the blend",
             "in_between_flow": "velocities from flows key -> true in-between frames (uses the dropped frames: possible only when the exporter has them, e.g. decimated footage or a generator rendered at twice the rate); vectors unquantised",
             "key_frame_change": "mean |error| between consecutive key frames: how much there is to blend",
-            "held_out_t": "error_reduction at blends t = 0.25 / 0.5 / 0.75 with key frames every 4th frame (footage: every 4th source frame), default vs loose gating (and the model's motion for the learned flame), vectors unquantised: checks a change on frames it was not tuned on",
-            "diagnosis": "error_reduction of other vectors on the unquantised key frames: gated_sheet_16bit (the sheet's vectors read back), gated_unquantised (the same before 16-bit encoding), raw_flow / raw_flow_full_res (ungated DIS velocities, finest pyramid level 1 / 0), raw_flow_halved, gated_loose (consistency 8 px, explained 0.05), model (the generator's own motion: exact shift for the texture, ignis_classic::motion for classic, ignis_learned::model_motion for the learned flame: its texture attached to the flame's canonical coordinates; central over the neighbouring key frames), model_half_steps (learned: the same from the model's motion to the in-between times, known without rendering them), best_per_pixel_bound (per pixel the best velocity within 4 px chosen by looking at the true frame: a bound no vector sheet can beat)",
+            "held_out_t": "error_reduction at blends t = 0.25 / 0.5 / 0.75 with key frames every 4th frame (footage: every 4th source frame), default vs loose gating (and for the learned flame its model velocities and model_pairwise), vectors unquantised: checks a change on frames it was not tuned on",
+            "diagnosis": "error_reduction of other vectors on the unquantised key frames: gated_sheet_16bit (the sheet's vectors read back), gated_unquantised (the same before 16-bit encoding), raw_flow / raw_flow_full_res (ungated DIS velocities, finest pyramid level 1 / 0), raw_flow_halved, gated_loose (consistency 8 px, explained 0.05), model (the generator's own motion: exact shift for the texture, ignis_classic::motion for classic, ignis_learned::model_motion for the learned flame: its texture attached to the flame's canonical coordinates; central over the neighbouring key frames), model_half_steps (learned: the same from the model's motion to the in-between times, known without rendering them), raw_flow_pairwise / model_pairwise (not one vector per frame: each dropped frame blended with the forward motion for the earlier key frame and the reversed backward motion for the later, from the raw flow / the learned model: what a forward and a backward sheet would give), best_per_pixel_bound (per pixel the best velocity within 4 px chosen by looking at the true frame: a bound no vector sheet can beat)",
         },
         "goal_error_reduction": GOAL_REDUCTION,
         "blend": rows,
@@ -415,19 +488,41 @@ fn velocities(pairs: &[(Field, Field)]) -> Vec<Field> {
 
 /// Velocities from the plain (ungated) flow at `finest` pyramid level.
 fn raw_velocities(keys: &[RgbaFrame], finest: u32) -> Result<Vec<Vec<[f32; 2]>>> {
+    Ok(velocities(&flow_pairs(keys, finest)?))
+}
+
+/// Mean error at blend 0.5 over the dropped frames with a pair of vector fields per key
+/// interval (`pairs[k]`: forward from key `k`, backward from key `k + 1`): the earlier
+/// key frame moved by the forward motion, the later by the reversed backward one. What a
+/// forward and a backward sheet per frame would give; the engines' blend stores one.
+fn pairwise_error(keys: &[RgbaFrame], pairs: &[(Field, Field)], truth: &[RgbaFrame]) -> f64 {
+    let n = keys.len() - 1;
+    (0..n)
+        .map(|k| {
+            let (f, b) = &pairs[k];
+            let back: Field = b.iter().map(|v| [-v[0], -v[1]]).collect();
+            error(
+                &mv_blend(&keys[k], &keys[k + 1], f, &back, 0.5),
+                &truth[2 * k + 1],
+            )
+        })
+        .sum::<f64>()
+        / n as f64
+}
+
+/// The plain (ungated) flows of each key pair at `finest` pyramid level, `(k → k+1, k+1 → k)`.
+fn flow_pairs(keys: &[RgbaFrame], finest: u32) -> Result<Vec<(Field, Field)>> {
     let p = ignis_flow::FlowParams {
         finest_scale: finest,
         ..Default::default()
     };
-    let pairs = keys
-        .windows(2)
+    keys.windows(2)
         .map(|w| {
             let (f, b) =
                 ignis_flow::flow_pair(&ignis_flow::luma(&w[0]), &ignis_flow::luma(&w[1]), &p)?;
             Ok((f.into_vec(), b.into_vec()))
         })
-        .collect::<Result<Vec<_>>>()?;
-    Ok(velocities(&pairs))
+        .collect()
 }
 
 /// Gated velocities ([`ignis_flow::motion_vector_pair`]) unquantised.
@@ -491,7 +586,7 @@ fn diagnosis(
     keys: &[RgbaFrame],
     truth: &[RgbaFrame],
     sheet_mv: &[Vec<[f32; 2]>],
-    models: Vec<(&str, Vec<Field>)>,
+    known: Known,
 ) -> Result<serde_json::Value> {
     let plain = blend_errors(
         keys,
@@ -500,7 +595,8 @@ fn diagnosis(
     )
     .1;
     let red = |mv: &[Vec<[f32; 2]>]| r3(1.0 - blend_errors(keys, mv, truth).0 / plain.max(1e-12));
-    let raw1 = raw_velocities(keys, 1)?;
+    let raw_pairs = flow_pairs(keys, 1)?;
+    let raw1 = velocities(&raw_pairs);
     let max_v = raw1
         .iter()
         .flatten()
@@ -526,8 +622,14 @@ fn diagnosis(
         ..Default::default()
     };
     d["gated_loose"] = json!(red(&gated_with(keys, &loose)?));
-    for (name, m) in models {
+    let pair_red =
+        |pairs: &[(Field, Field)]| r3(1.0 - pairwise_error(keys, pairs, truth) / plain.max(1e-12));
+    d["raw_flow_pairwise"] = json!(pair_red(&raw_pairs));
+    for (name, m) in known.velocities {
         d[name] = json!(red(&m));
+    }
+    if let Some(p) = known.pairs {
+        d["model_pairwise"] = json!(pair_red(&p));
     }
     Ok(d)
 }
@@ -535,30 +637,39 @@ fn diagnosis(
 /// Held-out blends: key frames every 4th of `frames`, the three frames between each pair
 /// rebuilt at t = 0.25, 0.5, 0.75 with the writer's default vectors and with looser gating
 /// (so a change tuned at t = 0.5 on every other frame is checked on frames it never saw),
-/// and with `model` velocities (one per key frame) when the generator knows its motion.
-fn held_out(frames: &[RgbaFrame], model: Option<Vec<Field>>) -> Result<serde_json::Value> {
+/// and with what the generator knows of its motion (`known`, at this key spacing): its
+/// velocities, and its forward/backward pairs as `model_pairwise`.
+fn held_out(frames: &[RgbaFrame], known: Known) -> Result<serde_json::Value> {
     let keys: Vec<RgbaFrame> = frames.iter().step_by(4).cloned().collect();
     let loose = ignis_flow::VectorParams {
         consistency_px: 8.0,
         explained: 0.05,
         ..Default::default()
     };
+    // per key interval, the vectors of its earlier and of its later key frame
+    let intervals = |mv: Vec<Field>| -> Vec<(Field, Field)> {
+        mv.windows(2)
+            .map(|w| (w[0].clone(), w[1].clone()))
+            .collect()
+    };
     let mut sets = vec![
-        ("gated", gated_velocities(&keys)?),
-        ("gated_loose", gated_with(&keys, &loose)?),
+        ("gated", intervals(gated_velocities(&keys)?)),
+        ("gated_loose", intervals(gated_with(&keys, &loose)?)),
     ];
-    sets.extend(model.map(|m| ("model", m)));
+    sets.extend(known.velocities.into_iter().map(|(n, v)| (n, intervals(v))));
+    if let Some(pairs) = known.pairs {
+        let reversed = |b: Field| b.into_iter().map(|v| [-v[0], -v[1]]).collect();
+        let pairs = pairs.into_iter().map(|(f, b)| (f, reversed(b))).collect();
+        sets.push(("model_pairwise", pairs));
+    }
     let mut out = serde_json::Map::new();
     for (name, mv) in &sets {
         let mut per_t = serde_json::Map::new();
         for (j, t) in [0.25f32, 0.5, 0.75].into_iter().enumerate() {
             let (mut e_mv, mut e_plain) = (0.0, 0.0);
-            for k in 0..keys.len() - 1 {
+            for (k, (prev, next)) in mv.iter().enumerate() {
                 let truth = &frames[4 * k + j + 1];
-                e_mv += error(
-                    &mv_blend(&keys[k], &keys[k + 1], &mv[k], &mv[k + 1], t),
-                    truth,
-                );
+                e_mv += error(&mv_blend(&keys[k], &keys[k + 1], prev, next, t), truth);
                 e_plain += error(&linear_blend(&keys[k], &keys[k + 1], t), truth);
             }
             per_t.insert(format!("t{t}"), json!(r3(1.0 - e_mv / e_plain.max(1e-12))));
@@ -566,4 +677,86 @@ fn held_out(frames: &[RgbaFrame], model: Option<Vec<Field>>) -> Result<serde_jso
         out.insert(name.to_string(), serde_json::Value::Object(per_t));
     }
     Ok(serde_json::Value::Object(out))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Warps of a flame whose placement moves `dx` px right per frame.
+    fn sliding(n: usize, dx: f64) -> Vec<ignis_learned::Warp> {
+        (0..n)
+            .map(|i| ignis_learned::Warp {
+                shape: ignis_learned::Shape {
+                    path: vec![0.0; 10],
+                    width: vec![0.5; 10],
+                    height: 0.1,
+                },
+                place: ignis_learned::Placement {
+                    cx: 40.0 + dx * i as f64,
+                    cy: 30.0,
+                    tilt: 0.0,
+                },
+                frame_height: 64.0,
+            })
+            .collect()
+    }
+
+    /// A key frame's model velocity spans one key interval (two frames here), whether taken
+    /// from the neighbouring key frames or the in-between ones, ends included; the pairs
+    /// hold the forward and backward motion of each interval.
+    #[test]
+    fn model_velocities_span_one_key_interval() {
+        let p = ignis_learned::ShapeParams::default();
+        let size = Size::new(64, 48).unwrap();
+        let warps = sliding(7, 1.5);
+        for reach in [2, 1] {
+            let v = model_velocities(&p, &warps, size, (2, reach));
+            assert_eq!(v.len(), 4);
+            for f in &v {
+                assert_eq!(f.len(), size.pixels());
+                assert!(f
+                    .iter()
+                    .all(|m| (m[0] - 3.0).abs() < 1e-3 && m[1].abs() < 1e-3));
+            }
+        }
+        let pairs = model_pairs(&p, &warps, size, 2);
+        assert_eq!(pairs.len(), 3);
+        for (f, b) in &pairs {
+            assert!(f.iter().all(|m| (m[0] - 3.0).abs() < 1e-3));
+            assert!(b.iter().all(|m| (m[0] + 3.0).abs() < 1e-3));
+        }
+    }
+
+    /// The learned row renders at twice the model's rate as `--fps` does: every other frame
+    /// is the model-rate frame, and the frames between are new states, not copies.
+    #[test]
+    fn the_learned_row_doubles_the_rate_with_new_frames() {
+        let clip = ignis_learned::synthetic::flame_clip(Size::new(96, 96).unwrap(), 30, 2);
+        let p = ignis_learned::TrainParams {
+            em: ignis_learned::EmParams {
+                particles: 40,
+                max_iterations: 3,
+                seed: 2,
+                ..Default::default()
+            },
+            ..Default::default()
+        };
+        let mut model = ignis_learned::train(clip, &p, &mut ignis_core::progress::NoProgress)
+            .unwrap()
+            .model;
+        model.summary.fps = Some(30.0);
+        let (twice, warps) = learned(&model, 5, 2.0).unwrap();
+        let (once, _) = learned(&model, 3, 1.0).unwrap();
+        assert_eq!(warps.len(), 5);
+        for j in 0..3 {
+            assert_eq!(twice[2 * j].data(), once[j].data(), "key frame {j}");
+        }
+        for j in 0..2 {
+            assert_ne!(twice[2 * j + 1].data(), twice[2 * j].data());
+            assert_ne!(twice[2 * j + 1].data(), twice[2 * j + 2].data());
+        }
+        // the key frames' warps differ: the flame moves
+        assert_ne!(warps[0], warps[2]);
+    }
 }

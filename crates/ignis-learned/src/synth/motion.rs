@@ -12,8 +12,12 @@
 //!
 //! The map is the renderer's, step by step (profiles linear between row centres, clamped
 //! at the first and last row, the inverse width interpolated as the renderer does), so a
-//! flame that only moves is matched pixel for pixel. Beyond the canonical range, where
-//! the renderer draws nothing, the same (clamped) map continues smoothly.
+//! flame that only moves is matched pixel for pixel. A pixel beyond the canonical range
+//! (`v` outside `[−below, above]`, `u'` outside `±half_width`), where the renderer draws
+//! nothing, moves as the range's nearest point in canonical coordinates does (its
+//! coordinates clamped): continuous at the range's edge, and bounded where the map itself
+//! is not (a slice width near its floor in one state and wide in the other sends distant
+//! pixels thousands of pixels away).
 
 use super::Synthesiser;
 use crate::shape::{row_profiles, Placement, Shape, ShapeParams};
@@ -98,12 +102,15 @@ pub fn model_motion(p: &ShapeParams, from: &Warp, to: &Warp, size: Size) -> Vec<
         for x in 0..size.width {
             let xc = f64::from(x) + 0.5;
             let (u, v) = a.uv(xc, yc);
+            // the canonical point, clamped to the canonical range
+            let v = v.clamp(-p.below, p.above);
             let rr = (p.above - v) * kr - 0.5;
             let (pa, wa) = a.profile(rr);
-            let across = (u - pa) * wa;
+            let across = ((u - pa) * wa).clamp(-p.half_width, p.half_width);
+            let (sx, sy) = a.xy(pa + across / wa, v);
             let (pb, wb) = b.profile(rr);
             let (tx, ty) = b.xy(pb + across / wb, v);
-            out.push([(tx - xc) as f32, (ty - yc) as f32]);
+            out.push([(tx - sx) as f32, (ty - sy) as f32]);
         }
     }
     out
@@ -194,7 +201,24 @@ mod tests {
         assert!(max_error(&m, |_| [3.0, -1.5]) < 0.01);
     }
 
-    /// A taller `σ_v` about the same centroid scales every pixel's offset from it.
+    /// Pixels well inside the canonical range of `w`: where an all-ones normalised image
+    /// renders at full value.
+    fn inside(w: &Warp, p: &ShapeParams) -> Vec<bool> {
+        let ones = vec![1.0; (p.norm_size * p.norm_size) as usize];
+        let mut f = GrayFrame::new(size());
+        render_into(
+            &ones,
+            &w.shape,
+            &w.place,
+            p,
+            &mut RenderScratch::default(),
+            &mut f,
+        );
+        f.data().iter().map(|&v| v > 0.999).collect()
+    }
+
+    /// A taller `σ_v` about the same centroid scales every pixel's offset from it, inside
+    /// the flame's canonical range; outside it, pixels move as the range's edge.
     #[test]
     fn a_height_change_scales_about_the_centroid() {
         let a = warp(0.3);
@@ -202,11 +226,42 @@ mod tests {
         b.shape.height *= 1.2;
         let m = model_motion(&params(), &a, &b, size());
         let (cx, cy) = (a.place.cx, a.place.cy);
+        let inner = inside(&a, &params());
+        assert!(
+            inner.iter().filter(|&&i| i).count() > 200,
+            "a sizeable flame"
+        );
         let want = |i: usize| {
             let (x, y) = ((i % 64) as f64 + 0.5, (i / 64) as f64 + 0.5);
             [0.2 * (x - cx), 0.2 * (y - cy)]
         };
-        assert!(max_error(&m, want) < 0.01);
+        let inside_only: Vec<[f32; 2]> = m
+            .iter()
+            .zip(&inner)
+            .map(|(v, &i)| if i { *v } else { [0.0; 2] })
+            .collect();
+        let want_inside = |i: usize| if inner[i] { want(i) } else { [0.0; 2] };
+        assert!(max_error(&inside_only, want_inside) < 0.01);
+        // the farthest corner from the centroid moves less than it would if attached
+        let far = m[63 * 64 + 63];
+        let would = want(63 * 64 + 63);
+        assert!(far[0].hypot(far[1]) < 0.9 * would[0].hypot(would[1]) as f32);
+    }
+
+    /// A slice width at its floor in one state and wide in the next: the map sends far
+    /// pixels far off, the motion stays within the flame's own extent.
+    #[test]
+    fn motion_outside_the_flame_stays_bounded() {
+        let p = params();
+        let mut a = warp(0.0);
+        a.shape.width[9] = 0.02;
+        let mut b = a.clone();
+        b.shape.width[9] = 2.0;
+        let m = model_motion(&p, &a, &b, size());
+        let reach = 2.0 * p.half_width * 2.0 * a.shape.height * a.frame_height;
+        let worst = m.iter().map(|v| v[0].hypot(v[1])).fold(0.0, f32::max);
+        assert!(worst.is_finite() && (worst as f64) < reach, "{worst} px");
+        assert!(worst > 1.0, "the widening moves the tip ({worst} px)");
     }
 
     /// Against the renderer: one normalised image drawn by two different shapes
