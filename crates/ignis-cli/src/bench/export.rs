@@ -197,8 +197,12 @@ fn volume(n: usize, preset: ignis_volume::Preset, rate: f32) -> Result<Vec<RgbaF
 
 /// The learned row's model: `candle.mp4` trained as `bench realism` trains it, or without
 /// the footage the synthetic clip `bench learned` trains on, so the row exists anyway.
-fn learned_model(g: &Global, quick: bool) -> Result<(ignis_learned::FlameModel, &'static str)> {
-    if let Some(clip) = crate::demo::shared_data("candle.mp4") {
+fn learned_model(
+    g: &Global,
+    quick: bool,
+    candle: Option<std::path::PathBuf>,
+) -> Result<(ignis_learned::FlameModel, &'static str)> {
+    if let Some(clip) = candle {
         return Ok((super::realism::candle_model(g, &clip, quick)?, "candle.mp4"));
     }
     let clip = ignis_learned::synthetic::flame_clip(Size::new(256, 256)?, 100, 1);
@@ -359,7 +363,7 @@ pub fn figures(g: &Global, quick: bool) -> Result<serde_json::Value> {
             held_out(&volume(2 * n - 1, p, 4.0)?, Known::default())?,
         );
     }
-    let (model, trained_on) = learned_model(g, quick)?;
+    let (model, trained_on) = learned_model(g, quick, crate::demo::shared_data("candle.mp4"))?;
     let (frames, warps) = learned(&model, n, 2.0)?;
     let size = frames[0].size();
     let known = Known {
@@ -726,6 +730,19 @@ mod tests {
             assert!(f.iter().all(|m| (m[0] - 3.0).abs() < 1e-3));
             assert!(b.iter().all(|m| (m[0] + 3.0).abs() < 1e-3));
         }
+    }
+
+    /// Without footage the learned row trains the synthetic clip, whose rate is known, so
+    /// it renders at twice the rate too.
+    #[test]
+    fn the_learned_row_exists_without_footage() {
+        let g = Global { quiet: true };
+        let (model, source) = learned_model(&g, true, None).unwrap();
+        assert!(source.starts_with("synthetic"), "{source}");
+        assert_eq!(model.summary.fps, Some(30.0));
+        let (frames, warps) = learned(&model, 3, 2.0).unwrap();
+        assert_eq!((frames.len(), warps.len()), (3, 3));
+        assert!(frames.iter().all(|f| f.data().iter().any(|p| p[3] > 0.0)));
     }
 
     /// The learned row renders at twice the model's rate as `--fps` does: every other frame
