@@ -8,9 +8,13 @@
 //! vectors on unquantised colour, and a variant whose vectors come from flows to the true
 //! in-between frames (marked `uses_in_between_frame`). A `diagnosis` per row separates the
 //! causes: vector quantisation, gating, flow resolution, the generator's own motion, and a
-//! per-pixel best-velocity bound (what any vector sheet could reach with this blend).
-//! Generators that know their motion (the moving texture, classic, the learned flame:
-//! [`ignis_learned::model_motion`]) add it to the diagnosis as `model`.
+//! per-pixel best-velocity bound (what one velocity shared by both key frames could reach
+//! with this blend). Generators that know their motion (the moving texture, classic, the
+//! learned flame: [`ignis_learned::model_motion`]) add it to the diagnosis as `model`.
+//! Two further variants show where one vector per frame falls short: forward/backward
+//! pairs per key interval (`*_pairwise`, two sheets' worth), and one vector per key frame
+//! chosen per pixel among the forward, reversed backward, central and zero vectors by the
+//! true in-between frames (`*_chosen`, storable; held out at t = 0.25 / 0.75).
 
 use crate::global::Global;
 use crate::output::flow_source;
@@ -457,8 +461,8 @@ pub fn figures(g: &Global, quick: bool) -> Result<serde_json::Value> {
             "exact_colour": "the same vectors on the unquantised key frames (what the --hdr EXR colour sheet gives): separates the 8-bit sheet's rounding from the blend",
             "in_between_flow": "velocities from flows key -> true in-between frames (uses the dropped frames: possible only when the exporter has them, e.g. decimated footage or a generator rendered at twice the rate); vectors unquantised",
             "key_frame_change": "mean |error| between consecutive key frames: how much there is to blend",
-            "held_out_t": "error_reduction at blends t = 0.25 / 0.5 / 0.75 with key frames every 4th frame (footage: every 4th source frame), default vs loose gating (and for the learned flame its model velocities and model_pairwise), vectors unquantised: checks a change on frames it was not tuned on",
-            "diagnosis": "error_reduction of other vectors on the unquantised key frames: gated_sheet_16bit (the sheet's vectors read back), gated_unquantised (the same before 16-bit encoding), raw_flow / raw_flow_full_res (ungated DIS velocities, finest pyramid level 1 / 0), raw_flow_halved, gated_loose (consistency 8 px, explained 0.05), model (the generator's own motion: exact shift for the texture, ignis_classic::motion for classic, ignis_learned::model_motion for the learned flame: its texture attached to the flame's canonical coordinates; central over the neighbouring key frames), model_half_steps (learned: the same from the model's motion to the in-between times, known without rendering them), raw_flow_pairwise / model_pairwise (not one vector per frame: each dropped frame blended with the forward motion for the earlier key frame and the reversed backward motion for the later, from the raw flow / the learned model: what a forward and a backward sheet would give), best_per_pixel_bound (per pixel the best velocity within 4 px chosen by looking at the true frame: a bound no vector sheet can beat)",
+            "held_out_t": "error_reduction at blends t = 0.25 / 0.5 / 0.75 with key frames every 4th frame (footage: every 4th source frame), default vs loose gating, raw_flow_chosen (chosen on the t = 0.5 frames only, so t = 0.25 / 0.75 are held out), and for the learned flame model, model_chosen and model_pairwise; vectors unquantised: checks a change on frames it was not tuned on",
+            "diagnosis": "error_reduction of other vectors on the unquantised key frames: gated_sheet_16bit (the sheet's vectors read back), gated_unquantised (the same before 16-bit encoding), raw_flow / raw_flow_full_res (ungated DIS velocities, finest pyramid level 1 / 0), raw_flow_halved, gated_loose (consistency 8 px, explained 0.05), model (the generator's own motion: exact shift for the texture, ignis_classic::motion for classic, ignis_learned::model_motion for the learned flame: its texture attached to the flame's canonical coordinates; central over the neighbouring key frames), model_half_steps (learned: the same from the model's motion to the in-between times, known without rendering them), raw_flow_pairwise / model_pairwise (not one vector per frame: each dropped frame blended with the forward motion for the earlier key frame and the reversed backward motion for the later, from the raw flow / the learned model: what a forward and a backward sheet would give), raw_flow_chosen / model_chosen (uses the in-between frames: one vector per key frame and pixel, storable in a sheet, chosen among none / forward / reversed backward / central so that the blends at 0.5 err least against the true in-between frames, exactly over the run of key frames), best_per_pixel_bound (per dropped pixel the best single velocity within 4 px for both key frames, chosen by looking at the true frame: a bound for vectors shared by the two key frames, not for the chosen ones, which give each key frame its own)",
         },
         "goal_error_reduction": GOAL_REDUCTION,
         "blend": rows,
@@ -629,13 +633,123 @@ fn diagnosis(
     let pair_red =
         |pairs: &[(Field, Field)]| r3(1.0 - pairwise_error(keys, pairs, truth) / plain.max(1e-12));
     d["raw_flow_pairwise"] = json!(pair_red(&raw_pairs));
+    let mids: Vec<&RgbaFrame> = truth.iter().skip(1).step_by(2).collect();
+    d["raw_flow_chosen"] = json!(red(&chosen_velocities(keys, &mids, &raw_pairs)));
     for (name, m) in known.velocities {
         d[name] = json!(red(&m));
     }
     if let Some(p) = known.pairs {
         d["model_pairwise"] = json!(pair_red(&p));
+        d["model_chosen"] = json!(red(&chosen_velocities(keys, &mids, &p)));
     }
     Ok(d)
+}
+
+/// Per pixel of each key frame, one of its vectors from `pairs` (see [`pairwise_error`]):
+/// none, the forward motion, the reversed backward motion or their mean (the central
+/// velocity), chosen so that the blends at 0.5 of the whole run of key frames err least against
+/// the true in-between frames `mids` (exact, by dynamic programming along the key frames,
+/// pixel by pixel: each blend's error at a pixel depends only on its two key frames'
+/// vectors there). One vector per key frame, so a sheet can store it; it needs the
+/// in-between frames, which a generator rendered at twice the rate has.
+fn chosen_velocities(
+    keys: &[RgbaFrame],
+    mids: &[&RgbaFrame],
+    pairs: &[(Field, Field)],
+) -> Vec<Field> {
+    use rayon::prelude::*;
+    let n = keys.len();
+    let candidates = chain_candidates(pairs, n);
+    let w = keys[0].width() as usize;
+    let picks: Vec<Vec<u8>> = (0..keys[0].size().pixels())
+        .into_par_iter()
+        .map(|i| {
+            let xy = ((i % w) as f32 + 0.5, (i / w) as f32 + 0.5);
+            best_chain(keys, mids, &candidates, i, xy)
+        })
+        .collect();
+    (0..n)
+        .map(|k| {
+            let c = &candidates[k];
+            picks
+                .iter()
+                .enumerate()
+                .map(|(i, p)| c[p[k] as usize][i])
+                .collect()
+        })
+        .collect()
+}
+
+/// The vectors [`chosen_velocities`] chooses from for each of `n` key frames: none, the
+/// forward motion, the reversed backward motion, the central velocity (one-sided motion
+/// in place of a missing side at the ends).
+fn chain_candidates(pairs: &[(Field, Field)], n: usize) -> Vec<[Field; 4]> {
+    (0..n)
+        .map(|k| {
+            let ahead = (k + 1 < n).then(|| pairs[k].0.clone());
+            let behind = (k > 0).then(|| pairs[k - 1].1.clone());
+            let central =
+                ignis_media::write::motion::frame_velocity(ahead.as_deref(), behind.as_deref())
+                    .expect("at least two key frames");
+            let reversed = behind.map(|b| b.iter().map(|v| [-v[0], -v[1]]).collect());
+            let zero = vec![[0.0; 2]; central.len()];
+            // ties (a dark pixel) go to the first: no motion
+            [
+                zero,
+                ahead.unwrap_or_else(|| central.clone()),
+                reversed.unwrap_or_else(|| central.clone()),
+                central,
+            ]
+        })
+        .collect()
+}
+
+/// [`chosen_velocities`] at pixel `i` (centre `(x, y)`): the candidate index per key frame.
+fn best_chain(
+    keys: &[RgbaFrame],
+    mids: &[&RgbaFrame],
+    candidates: &[[Field; 4]],
+    i: usize,
+    (x, y): (f32, f32),
+) -> Vec<u8> {
+    use ignis_core::palette::linear_to_srgb;
+    use ignis_media::write::motion::sample_bilinear;
+    let enc =
+        |p: [f32; 4]| [0, 1, 2].map(|c| linear_to_srgb((p[c] * p[3]).clamp(0.0, 1.0)) * 255.0);
+    let n = keys.len();
+    // cost of the best chain ending in each candidate, and the step back to it
+    let mut cost = [0f32; 4];
+    let mut back: Vec<[u8; 4]> = Vec::with_capacity(n);
+    for k in 0..n - 1 {
+        let want = enc(mids[k].data()[i]);
+        let prev = candidates[k]
+            .each_ref()
+            .map(|c| sample_bilinear(&keys[k], x - 0.5 * c[i][0], y - 0.5 * c[i][1]));
+        let next = candidates[k + 1]
+            .each_ref()
+            .map(|c| sample_bilinear(&keys[k + 1], x + 0.5 * c[i][0], y + 0.5 * c[i][1]));
+        let mut to = [f32::MAX; 4];
+        let mut from = [0u8; 4];
+        for (b, q) in next.iter().enumerate() {
+            for (a, p) in prev.iter().enumerate() {
+                let got = enc([0, 1, 2, 3].map(|c| 0.5 * (p[c] + q[c])));
+                let e = cost[a] + (0..3).map(|c| (got[c] - want[c]).abs()).sum::<f32>();
+                if e < to[b] {
+                    (to[b], from[b]) = (e, a as u8);
+                }
+            }
+        }
+        cost = to;
+        back.push(from);
+    }
+    let mut pick = vec![0u8; n];
+    pick[n - 1] = (0..4)
+        .min_by(|&a, &b| cost[a].total_cmp(&cost[b]))
+        .unwrap_or(0) as u8;
+    for k in (0..n - 1).rev() {
+        pick[k] = back[k][pick[k + 1] as usize];
+    }
+    pick
 }
 
 /// Held-out blends: key frames every 4th of `frames`, the three frames between each pair
@@ -656,11 +770,23 @@ fn held_out(frames: &[RgbaFrame], known: Known) -> Result<serde_json::Value> {
             .map(|w| (w[0].clone(), w[1].clone()))
             .collect()
     };
+    // chosen on the t = 0.5 frames only: t = 0.25 and 0.75 are held out
+    let mids: Vec<&RgbaFrame> = (0..keys.len() - 1).map(|k| &frames[4 * k + 2]).collect();
     let mut sets = vec![
         ("gated", intervals(gated_velocities(&keys)?)),
         ("gated_loose", intervals(gated_with(&keys, &loose)?)),
+        (
+            "raw_flow_chosen",
+            intervals(chosen_velocities(&keys, &mids, &flow_pairs(&keys, 1)?)),
+        ),
     ];
     sets.extend(known.velocities.into_iter().map(|(n, v)| (n, intervals(v))));
+    if let Some(pairs) = &known.pairs {
+        sets.push((
+            "model_chosen",
+            intervals(chosen_velocities(&keys, &mids, pairs)),
+        ));
+    }
     if let Some(pairs) = known.pairs {
         let reversed = |b: Field| b.into_iter().map(|v| [-v[0], -v[1]]).collect();
         let pairs = pairs.into_iter().map(|(f, b)| (f, reversed(b))).collect();
@@ -730,6 +856,53 @@ mod tests {
             assert!(f.iter().all(|m| (m[0] - 3.0).abs() < 1e-3));
             assert!(b.iter().all(|m| (m[0] + 3.0).abs() < 1e-3));
         }
+    }
+
+    /// A texture sliding right then back (the middle key frame's motion reverses): the
+    /// chosen vectors, one per key frame, err no more than any single candidate used on
+    /// every key frame (the chain is exact), and on a steady slide they are the motion.
+    #[test]
+    fn chosen_vectors_are_the_best_chain() {
+        let size = Size::new(48, 40).unwrap();
+        let at = |x: f32| ignis_flow::bench::texture(size, 5, [x, 0.0], 1.0).to_rgba();
+        let field = |v: f32| vec![[v, 0.0]; size.pixels()];
+        let constant = |v: f32| -> Vec<Field> { vec![field(v); 3] };
+        // steady: +1.5 px per frame, key frames every other frame
+        let frames: Vec<RgbaFrame> = (0..5).map(|i| at(1.5 * i as f32)).collect();
+        let keys: Vec<RgbaFrame> = frames.iter().step_by(2).cloned().collect();
+        let mids: Vec<&RgbaFrame> = frames.iter().skip(1).step_by(2).collect();
+        let pairs = vec![(field(3.0), field(-3.0)); 2];
+        let chosen = chosen_velocities(&keys, &mids, &pairs);
+        let (e_chosen, plain) = blend_errors(&keys, &chosen, &frames);
+        let (e_exact, _) = blend_errors(&keys, &constant(3.0), &frames);
+        assert!(
+            e_chosen <= e_exact + 1e-9 && e_chosen < 0.5 * plain,
+            "{e_chosen} {plain}"
+        );
+        // there and back
+        let frames: Vec<RgbaFrame> = [0.0, 1.5, 3.0, 1.5, 0.0].map(at).into();
+        let keys: Vec<RgbaFrame> = frames.iter().step_by(2).cloned().collect();
+        let mids: Vec<&RgbaFrame> = frames.iter().skip(1).step_by(2).collect();
+        let pairs = vec![(field(3.0), field(-3.0)), (field(-3.0), field(3.0))];
+        let chosen = chosen_velocities(&keys, &mids, &pairs);
+        let (e_chosen, plain) = blend_errors(&keys, &chosen, &frames);
+        let candidates = chain_candidates(&pairs, 3);
+        for j in 0..4 {
+            let same: Vec<Field> = candidates.iter().map(|c| c[j].clone()).collect();
+            let (e, _) = blend_errors(&keys, &same, &frames);
+            assert!(
+                e_chosen <= e + 1e-9,
+                "{e_chosen} > {e}, candidate {j} throughout"
+            );
+        }
+        // one vector per key frame cannot follow the reversal in both blends
+        let (e_still, _) = blend_errors(&keys, &constant(0.0), &frames);
+        assert!(
+            e_chosen < e_still && e_chosen > 0.05 * plain,
+            "{e_chosen} {e_still}"
+        );
+        assert_eq!(chosen.len(), 3);
+        assert!(chosen.iter().all(|f| f.len() == size.pixels()));
     }
 
     /// Without footage the learned row trains the synthetic clip, whose rate is known, so
