@@ -38,6 +38,16 @@ struct Known<'a> {
     pairs: Option<Vec<(Field, Field)>>,
 }
 
+impl Known<'_> {
+    /// Only velocities, named `model`.
+    fn model(velocities: Vec<Field>) -> Self {
+        Known {
+            velocities: vec![("model", velocities)],
+            pairs: None,
+        }
+    }
+}
+
 /// Goal: motion-vector blend error at least 30% below the cross-fade's.
 const GOAL_REDUCTION: f64 = 0.30;
 /// Goal: a 64-frame 256² flipbook with motion vectors, in seconds.
@@ -199,6 +209,43 @@ fn volume(n: usize, preset: ignis_volume::Preset, rate: f32) -> Result<Vec<RgbaF
         .collect::<Result<Vec<_>>>()
 }
 
+/// The learned row ([`learned`] at twice the model's rate, `n` frames, with its model
+/// motion) and its held-out blends (at four times the rate).
+fn learned_case(
+    g: &Global,
+    quick: bool,
+    n: usize,
+    dir: &std::path::Path,
+) -> Result<(serde_json::Value, serde_json::Value)> {
+    let (model, trained_on) = learned_model(g, quick, crate::demo::shared_data("candle.mp4"))?;
+    let (frames, warps) = learned(&model, n, 2.0)?;
+    let size = frames[0].size();
+    let known = Known {
+        velocities: vec![
+            (
+                "model",
+                model_velocities(&model.shape, &warps, size, (2, 2)),
+            ),
+            (
+                "model_half_steps",
+                model_velocities(&model.shape, &warps, size, (2, 1)),
+            ),
+        ],
+        pairs: Some(model_pairs(&model.shape, &warps, size, 2)),
+    };
+    let mut row = case("learned", &frames, dir, known)?;
+    row["trained_on"] = json!(trained_on);
+    let (frames, warps) = learned(&model, 2 * n - 1, 4.0)?;
+    let known = Known {
+        velocities: vec![(
+            "model",
+            model_velocities(&model.shape, &warps, size, (4, 4)),
+        )],
+        pairs: Some(model_pairs(&model.shape, &warps, size, 4)),
+    };
+    Ok((row, held_out(&frames, known)?))
+}
+
 /// The learned row's model: `candle.mp4` trained as `bench realism` trains it, or without
 /// the footage the synthetic clip `bench learned` trains on, so the row exists anyway.
 fn learned_model(
@@ -334,22 +381,11 @@ pub fn figures(g: &Global, quick: bool) -> Result<serde_json::Value> {
         "moving-texture",
         &shift,
         dir.path(),
-        Known {
-            velocities: vec![("model", truth)],
-            ..Default::default()
-        },
+        Known::model(truth),
     )?);
     let mut held = serde_json::Map::new();
     let (frames, model) = classic(n)?;
-    rows.push(case(
-        "classic",
-        &frames,
-        dir.path(),
-        Known {
-            velocities: vec![("model", model)],
-            ..Default::default()
-        },
-    )?);
+    rows.push(case("classic", &frames, dir.path(), Known::model(model))?);
     held.insert(
         "classic".into(),
         held_out(&classic(2 * n - 1)?.0, Known::default())?,
@@ -367,34 +403,9 @@ pub fn figures(g: &Global, quick: bool) -> Result<serde_json::Value> {
             held_out(&volume(2 * n - 1, p, 4.0)?, Known::default())?,
         );
     }
-    let (model, trained_on) = learned_model(g, quick, crate::demo::shared_data("candle.mp4"))?;
-    let (frames, warps) = learned(&model, n, 2.0)?;
-    let size = frames[0].size();
-    let known = Known {
-        velocities: vec![
-            (
-                "model",
-                model_velocities(&model.shape, &warps, size, (2, 2)),
-            ),
-            (
-                "model_half_steps",
-                model_velocities(&model.shape, &warps, size, (2, 1)),
-            ),
-        ],
-        pairs: Some(model_pairs(&model.shape, &warps, size, 2)),
-    };
-    let mut row = case("learned", &frames, dir.path(), known)?;
-    row["trained_on"] = json!(trained_on);
+    let (row, held_learned) = learned_case(g, quick, n, dir.path())?;
     rows.push(row);
-    let (frames, warps) = learned(&model, 2 * n - 1, 4.0)?;
-    let known = Known {
-        velocities: vec![(
-            "model",
-            model_velocities(&model.shape, &warps, size, (4, 4)),
-        )],
-        pairs: Some(model_pairs(&model.shape, &warps, size, 4)),
-    };
-    held.insert("learned".into(), held_out(&frames, known)?);
+    held.insert("learned".into(), held_learned);
     let mut skipped = Vec::new();
     for clip in ["candle.mp4", "campfire.mp4"] {
         match footage(clip, n)? {
