@@ -192,6 +192,8 @@ pub struct Synthesiser<'m> {
 }
 
 mod looptime;
+mod motion;
+pub use motion::{model_motion, Warp};
 
 /// The most state values a loop may hold (frames × state dimension): 64 M (512 MB).
 const MAX_LOOP_VALUES: usize = 64 << 20;

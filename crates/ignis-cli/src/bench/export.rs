@@ -8,7 +8,13 @@
 //! vectors on unquantised colour, and a variant whose vectors come from flows to the true
 //! in-between frames (marked `uses_in_between_frame`). A `diagnosis` per row separates the
 //! causes: vector quantisation, gating, flow resolution, the generator's own motion, and a
-//! per-pixel best-velocity bound (what any vector sheet could reach with this blend).
+//! per-pixel best-velocity bound (what one velocity shared by both key frames could reach
+//! with this blend). Generators that know their motion (the moving texture, classic, the
+//! learned flame: [`ignis_learned::model_motion`]) add it to the diagnosis as `model`.
+//! Two further variants show where one vector per frame falls short: forward/backward
+//! pairs per key interval (`*_pairwise`, two sheets' worth), and one vector per key frame
+//! chosen per pixel among the forward, reversed backward, central and zero vectors by the
+//! true in-between frames (`*_chosen`, storable; held out at t = 0.25 / 0.75).
 
 use crate::global::Global;
 use crate::output::flow_source;
@@ -21,6 +27,26 @@ use std::time::Instant;
 
 /// One motion vector per pixel, `[dx, dy]` in pixels.
 type Field = Vec<[f32; 2]>;
+
+/// What a generator knows of its own motion, for the diagnosis.
+#[derive(Default)]
+struct Known<'a> {
+    /// Named velocities, one field per key frame.
+    velocities: Vec<(&'a str, Vec<Field>)>,
+    /// Per key interval, the forward motion (from the earlier key frame's pixels) and the
+    /// backward motion (from the later one's).
+    pairs: Option<Vec<(Field, Field)>>,
+}
+
+impl Known<'_> {
+    /// Only velocities, named `model`.
+    fn model(velocities: Vec<Field>) -> Self {
+        Known {
+            velocities: vec![("model", velocities)],
+            pairs: None,
+        }
+    }
+}
 
 /// Goal: motion-vector blend error at least 30% below the cross-fade's.
 const GOAL_REDUCTION: f64 = 0.30;
@@ -101,7 +127,7 @@ fn case(
     name: &str,
     frames: &[RgbaFrame],
     dir: &std::path::Path,
-    model: Option<Vec<Vec<[f32; 2]>>>,
+    known: Known,
 ) -> Result<serde_json::Value> {
     let kept: Vec<RgbaFrame> = frames.iter().step_by(2).cloned().collect();
     let path = dir.join(format!("{name}.png"));
@@ -141,7 +167,7 @@ fn case(
             "sheet": figures_of(blend_errors(&fb.frames, &mid, frames)),
             "exact_colour": figures_of(blend_errors(&kept, &mid, frames)),
         },
-        "diagnosis": diagnosis(&kept, frames, &mv, model)?,
+        "diagnosis": diagnosis(&kept, frames, &mv, known)?,
     });
     if let (Some(r), serde_json::Value::Object(e)) = (row.as_object_mut(), extra) {
         r.extend(e);
@@ -183,6 +209,144 @@ fn volume(n: usize, preset: ignis_volume::Preset, rate: f32) -> Result<Vec<RgbaF
         .collect::<Result<Vec<_>>>()
 }
 
+/// The learned row ([`learned`] at twice the model's rate, `n` frames, with its model
+/// motion) and its held-out blends (at four times the rate).
+fn learned_case(
+    g: &Global,
+    quick: bool,
+    n: usize,
+    dir: &std::path::Path,
+) -> Result<(serde_json::Value, serde_json::Value)> {
+    let (model, trained_on) = learned_model(g, quick, crate::demo::shared_data("candle.mp4"))?;
+    let (frames, warps) = learned(&model, n, 2.0)?;
+    let size = frames[0].size();
+    let known = Known {
+        velocities: vec![
+            (
+                "model",
+                model_velocities(&model.shape, &warps, size, (2, 2)),
+            ),
+            (
+                "model_half_steps",
+                model_velocities(&model.shape, &warps, size, (2, 1)),
+            ),
+        ],
+        pairs: Some(model_pairs(&model.shape, &warps, size, 2)),
+    };
+    let mut row = case("learned", &frames, dir, known)?;
+    row["trained_on"] = json!(trained_on);
+    let (frames, warps) = learned(&model, 2 * n - 1, 4.0)?;
+    let known = Known {
+        velocities: vec![(
+            "model",
+            model_velocities(&model.shape, &warps, size, (4, 4)),
+        )],
+        pairs: Some(model_pairs(&model.shape, &warps, size, 4)),
+    };
+    Ok((row, held_out(&frames, known)?))
+}
+
+/// The learned row's model: `candle.mp4` trained as `bench realism` trains it, or without
+/// the footage the synthetic clip `bench learned` trains on, so the row exists anyway.
+fn learned_model(
+    g: &Global,
+    quick: bool,
+    candle: Option<std::path::PathBuf>,
+) -> Result<(ignis_learned::FlameModel, &'static str)> {
+    if let Some(clip) = candle {
+        return Ok((super::realism::candle_model(g, &clip, quick)?, "candle.mp4"));
+    }
+    let clip = ignis_learned::synthetic::flame_clip(Size::new(256, 256)?, 100, 1);
+    let p = ignis_learned::TrainParams {
+        em: ignis_learned::EmParams {
+            seed: 1,
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    let mut model = ignis_learned::train(clip, &p, &mut ignis_core::progress::NoProgress)?.model;
+    // the synthetic clip's oscillators are defined at 30 frames per second
+    model.summary.fps = Some(30.0);
+    Ok((
+        model,
+        "synthetic clip (ignis_learned::synthetic, candle.mp4 not found)",
+    ))
+}
+
+/// Process steps the learned row skips first (from the model's last training states).
+const LEARNED_WARM_UP: f64 = 30.0;
+
+/// `n` frames of the learned flame at `rate` times the model's frame rate, 128², as
+/// `ignis learned synth --fps` renders them (the process at the footage's rate, each frame
+/// the state at its own time: [`ignis_learned::Synthesiser::new_at`]; seed 1, the `candle`
+/// palette), after [`LEARNED_WARM_UP`] steps, and the warp each frame was drawn with.
+fn learned(
+    model: &ignis_learned::FlameModel,
+    n: usize,
+    rate: f64,
+) -> Result<(Vec<RgbaFrame>, Vec<ignis_learned::Warp>)> {
+    let fps = model
+        .summary
+        .fps
+        .context("the learned model has no frame rate")?
+        * rate;
+    let mut synth = ignis_learned::Synthesiser::new_at(model, Default::default(), 1, Some(fps))?;
+    synth.skip((LEARNED_WARM_UP * rate).round() as u64);
+    let palette = ignis_core::Palette::preset("candle")?;
+    let size = Size::new(128, 128)?;
+    let mut grey = ignis_core::GrayFrame::new(size);
+    let (mut frames, mut warps) = (Vec::new(), Vec::new());
+    for _ in 0..n {
+        synth.next_frame_into(&mut grey);
+        frames.push(palette.apply(&grey));
+        warps.push(synth.warp(size));
+    }
+    Ok((frames, warps))
+}
+
+/// The learned flame's own motion ([`ignis_learned::model_motion`]) as a velocity over one
+/// key interval for each key frame (every `step`-th of `warps`): from the model motion to
+/// the frames `reach` on either side, `(ahead − behind) · step / (2 · reach)`, one-sided at
+/// the ends. `reach = step` is the convention of classic's `model` and the flipbook
+/// writer (neighbouring key frames); a smaller reach uses in-between times, which the
+/// model knows without rendering them.
+fn model_velocities(
+    p: &ignis_learned::ShapeParams,
+    warps: &[ignis_learned::Warp],
+    size: Size,
+    (step, reach): (usize, usize),
+) -> Vec<Field> {
+    let k = step as f32 / reach as f32;
+    let motion = |i: usize, j: usize| -> Field {
+        let m = ignis_learned::model_motion(p, &warps[i], &warps[j], size);
+        m.into_iter().map(|v| [v[0] * k, v[1] * k]).collect()
+    };
+    let last = (warps.len() - 1) / step * step;
+    (0..=last)
+        .step_by(step)
+        .map(|i| {
+            let ahead = (i + step <= last).then(|| motion(i, i + reach));
+            let behind = (i > 0).then(|| motion(i, i - reach));
+            ignis_media::write::motion::frame_velocity(ahead.as_deref(), behind.as_deref())
+                .expect("at least two key frames")
+        })
+        .collect()
+}
+
+/// The learned flame's model motion over each key interval (key frames every `step`-th
+/// of `warps`): forward from the earlier key frame, backward from the later.
+fn model_pairs(
+    p: &ignis_learned::ShapeParams,
+    warps: &[ignis_learned::Warp],
+    size: Size,
+    step: usize,
+) -> Vec<(Field, Field)> {
+    let m = |i: usize, j: usize| ignis_learned::model_motion(p, &warps[i], &warps[j], size);
+    (0..(warps.len() - 1) / step)
+        .map(|k| (m(step * k, step * k + step), m(step * k + step, step * k)))
+        .collect()
+}
+
 fn footage(name: &str, n: usize) -> Result<Option<Vec<RgbaFrame>>> {
     let Some(path) = crate::demo::shared_data(name) else {
         return Ok(None);
@@ -213,23 +377,42 @@ pub fn figures(g: &Global, quick: bool) -> Result<serde_json::Value> {
         })
         .collect();
     let truth = vec![vec![[1.5f32 * 2.0, -2.0]; 128 * 128]; n.div_ceil(2)];
-    rows.push(case("moving-texture", &shift, dir.path(), Some(truth))?);
+    rows.push(case(
+        "moving-texture",
+        &shift,
+        dir.path(),
+        Known::model(truth),
+    )?);
     let mut held = serde_json::Map::new();
     let (frames, model) = classic(n)?;
-    rows.push(case("classic", &frames, dir.path(), Some(model))?);
-    held.insert("classic".into(), held_out(&classic(2 * n - 1)?.0)?);
+    rows.push(case("classic", &frames, dir.path(), Known::model(model))?);
+    held.insert(
+        "classic".into(),
+        held_out(&classic(2 * n - 1)?.0, Known::default())?,
+    );
     for p in [ignis_volume::Preset::Candle, ignis_volume::Preset::Campfire] {
         let name = format!("volume-{}", p.name());
-        rows.push(case(&name, &volume(n, p, 2.0)?, dir.path(), None)?);
-        held.insert(name, held_out(&volume(2 * n - 1, p, 4.0)?)?);
+        rows.push(case(
+            &name,
+            &volume(n, p, 2.0)?,
+            dir.path(),
+            Known::default(),
+        )?);
+        held.insert(
+            name,
+            held_out(&volume(2 * n - 1, p, 4.0)?, Known::default())?,
+        );
     }
+    let (row, held_learned) = learned_case(g, quick, n, dir.path())?;
+    rows.push(row);
+    held.insert("learned".into(), held_learned);
     let mut skipped = Vec::new();
     for clip in ["candle.mp4", "campfire.mp4"] {
         match footage(clip, n)? {
             Some(frames) => {
-                rows.push(case(clip, &frames, dir.path(), None)?);
+                rows.push(case(clip, &frames, dir.path(), Known::default())?);
                 if let Some(f) = footage(clip, 2 * n - 1)? {
-                    held.insert(clip.to_string(), held_out(&f)?);
+                    held.insert(clip.to_string(), held_out(&f, Known::default())?);
                 }
             }
             None => skipped.push(format!("{clip}: ../shared/data not found")),
@@ -289,8 +472,8 @@ pub fn figures(g: &Global, quick: bool) -> Result<serde_json::Value> {
             "exact_colour": "the same vectors on the unquantised key frames (what the --hdr EXR colour sheet gives): separates the 8-bit sheet's rounding from the blend",
             "in_between_flow": "velocities from flows key -> true in-between frames (uses the dropped frames: possible only when the exporter has them, e.g. decimated footage or a generator rendered at twice the rate); vectors unquantised",
             "key_frame_change": "mean |error| between consecutive key frames: how much there is to blend",
-            "held_out_t": "error_reduction at blends t = 0.25 / 0.5 / 0.75 with key frames every 4th frame (footage: every 4th source frame), default vs loose gating, vectors unquantised: checks a change on frames it was not tuned on",
-            "diagnosis": "error_reduction of other vectors on the unquantised key frames: gated_sheet_16bit (the sheet's vectors read back), gated_unquantised (the same before 16-bit encoding), raw_flow / raw_flow_full_res (ungated DIS velocities, finest pyramid level 1 / 0), raw_flow_halved, gated_loose (consistency 8 px, explained 0.05), model (the generator's own motion: exact shift for the texture, ignis_classic::motion for classic), best_per_pixel_bound (per pixel the best velocity within 4 px chosen by looking at the true frame: a bound no vector sheet can beat)",
+            "held_out_t": "error_reduction at blends t = 0.25 / 0.5 / 0.75 with key frames every 4th frame (footage: every 4th source frame), default vs loose gating, raw_flow_chosen (chosen on the t = 0.5 frames only, so t = 0.25 / 0.75 are held out), and for the learned flame model, model_chosen and model_pairwise; vectors unquantised: checks a change on frames it was not tuned on",
+            "diagnosis": "error_reduction of other vectors on the unquantised key frames: gated_sheet_16bit (the sheet's vectors read back), gated_unquantised (the same before 16-bit encoding), raw_flow / raw_flow_full_res (ungated DIS velocities, finest pyramid level 1 / 0), raw_flow_halved, gated_loose (consistency 8 px, explained 0.05), model (the generator's own motion: exact shift for the texture, ignis_classic::motion for classic, ignis_learned::model_motion for the learned flame: its texture attached to the flame's canonical coordinates; central over the neighbouring key frames), model_half_steps (learned: the same from the model's motion to the in-between times, known without rendering them), raw_flow_pairwise / model_pairwise (not one vector per frame: each dropped frame blended with the forward motion for the earlier key frame and the reversed backward motion for the later, from the raw flow / the learned model: what a forward and a backward sheet would give), raw_flow_chosen / model_chosen (uses the in-between frames: one vector per key frame and pixel, storable in a sheet, chosen among none / forward / reversed backward / central so that the blends at 0.5 err least against the true in-between frames, exactly over the run of key frames), best_per_pixel_bound (per dropped pixel the best single velocity within 4 px for both key frames, chosen by looking at the true frame: a bound for vectors shared by the two key frames, not for the chosen ones, which give each key frame its own)",
         },
         "goal_error_reduction": GOAL_REDUCTION,
         "blend": rows,
@@ -324,19 +507,41 @@ fn velocities(pairs: &[(Field, Field)]) -> Vec<Field> {
 
 /// Velocities from the plain (ungated) flow at `finest` pyramid level.
 fn raw_velocities(keys: &[RgbaFrame], finest: u32) -> Result<Vec<Vec<[f32; 2]>>> {
+    Ok(velocities(&flow_pairs(keys, finest)?))
+}
+
+/// Mean error at blend 0.5 over the dropped frames with a pair of vector fields per key
+/// interval (`pairs[k]`: forward from key `k`, backward from key `k + 1`): the earlier
+/// key frame moved by the forward motion, the later by the reversed backward one. What a
+/// forward and a backward sheet per frame would give; the engines' blend stores one.
+fn pairwise_error(keys: &[RgbaFrame], pairs: &[(Field, Field)], truth: &[RgbaFrame]) -> f64 {
+    let n = keys.len() - 1;
+    (0..n)
+        .map(|k| {
+            let (f, b) = &pairs[k];
+            let back: Field = b.iter().map(|v| [-v[0], -v[1]]).collect();
+            error(
+                &mv_blend(&keys[k], &keys[k + 1], f, &back, 0.5),
+                &truth[2 * k + 1],
+            )
+        })
+        .sum::<f64>()
+        / n as f64
+}
+
+/// The plain (ungated) flows of each key pair at `finest` pyramid level, `(k → k+1, k+1 → k)`.
+fn flow_pairs(keys: &[RgbaFrame], finest: u32) -> Result<Vec<(Field, Field)>> {
     let p = ignis_flow::FlowParams {
         finest_scale: finest,
         ..Default::default()
     };
-    let pairs = keys
-        .windows(2)
+    keys.windows(2)
         .map(|w| {
             let (f, b) =
                 ignis_flow::flow_pair(&ignis_flow::luma(&w[0]), &ignis_flow::luma(&w[1]), &p)?;
             Ok((f.into_vec(), b.into_vec()))
         })
-        .collect::<Result<Vec<_>>>()?;
-    Ok(velocities(&pairs))
+        .collect()
 }
 
 /// Gated velocities ([`ignis_flow::motion_vector_pair`]) unquantised.
@@ -400,7 +605,7 @@ fn diagnosis(
     keys: &[RgbaFrame],
     truth: &[RgbaFrame],
     sheet_mv: &[Vec<[f32; 2]>],
-    model: Option<Vec<Vec<[f32; 2]>>>,
+    known: Known,
 ) -> Result<serde_json::Value> {
     let plain = blend_errors(
         keys,
@@ -409,7 +614,8 @@ fn diagnosis(
     )
     .1;
     let red = |mv: &[Vec<[f32; 2]>]| r3(1.0 - blend_errors(keys, mv, truth).0 / plain.max(1e-12));
-    let raw1 = raw_velocities(keys, 1)?;
+    let raw_pairs = flow_pairs(keys, 1)?;
+    let raw1 = velocities(&raw_pairs);
     let max_v = raw1
         .iter()
         .flatten()
@@ -435,37 +641,176 @@ fn diagnosis(
         ..Default::default()
     };
     d["gated_loose"] = json!(red(&gated_with(keys, &loose)?));
-    if let Some(m) = model {
-        d["model"] = json!(red(&m));
+    let pair_red =
+        |pairs: &[(Field, Field)]| r3(1.0 - pairwise_error(keys, pairs, truth) / plain.max(1e-12));
+    d["raw_flow_pairwise"] = json!(pair_red(&raw_pairs));
+    let mids: Vec<&RgbaFrame> = truth.iter().skip(1).step_by(2).collect();
+    d["raw_flow_chosen"] = json!(red(&chosen_velocities(keys, &mids, &raw_pairs)));
+    for (name, m) in known.velocities {
+        d[name] = json!(red(&m));
+    }
+    if let Some(p) = known.pairs {
+        d["model_pairwise"] = json!(pair_red(&p));
+        d["model_chosen"] = json!(red(&chosen_velocities(keys, &mids, &p)));
     }
     Ok(d)
 }
 
+/// Per pixel of each key frame, one of its vectors from `pairs` (see [`pairwise_error`]):
+/// none, the forward motion, the reversed backward motion or their mean (the central
+/// velocity), chosen so that the blends at 0.5 of the whole run of key frames err least against
+/// the true in-between frames `mids` (exact, by dynamic programming along the key frames,
+/// pixel by pixel: each blend's error at a pixel depends only on its two key frames'
+/// vectors there). One vector per key frame, so a sheet can store it; it needs the
+/// in-between frames, which a generator rendered at twice the rate has.
+fn chosen_velocities(
+    keys: &[RgbaFrame],
+    mids: &[&RgbaFrame],
+    pairs: &[(Field, Field)],
+) -> Vec<Field> {
+    use rayon::prelude::*;
+    let n = keys.len();
+    let candidates = chain_candidates(pairs, n);
+    let w = keys[0].width() as usize;
+    let picks: Vec<Vec<u8>> = (0..keys[0].size().pixels())
+        .into_par_iter()
+        .map(|i| {
+            let xy = ((i % w) as f32 + 0.5, (i / w) as f32 + 0.5);
+            best_chain(keys, mids, &candidates, i, xy)
+        })
+        .collect();
+    (0..n)
+        .map(|k| {
+            let c = &candidates[k];
+            picks
+                .iter()
+                .enumerate()
+                .map(|(i, p)| c[p[k] as usize][i])
+                .collect()
+        })
+        .collect()
+}
+
+/// The vectors [`chosen_velocities`] chooses from for each of `n` key frames: none, the
+/// forward motion, the reversed backward motion, the central velocity (one-sided motion
+/// in place of a missing side at the ends).
+fn chain_candidates(pairs: &[(Field, Field)], n: usize) -> Vec<[Field; 4]> {
+    (0..n)
+        .map(|k| {
+            let ahead = (k + 1 < n).then(|| pairs[k].0.clone());
+            let behind = (k > 0).then(|| pairs[k - 1].1.clone());
+            let central =
+                ignis_media::write::motion::frame_velocity(ahead.as_deref(), behind.as_deref())
+                    .expect("at least two key frames");
+            let reversed = behind.map(|b| b.iter().map(|v| [-v[0], -v[1]]).collect());
+            let zero = vec![[0.0; 2]; central.len()];
+            // ties (a dark pixel) go to the first: no motion
+            [
+                zero,
+                ahead.unwrap_or_else(|| central.clone()),
+                reversed.unwrap_or_else(|| central.clone()),
+                central,
+            ]
+        })
+        .collect()
+}
+
+/// [`chosen_velocities`] at pixel `i` (centre `(x, y)`): the candidate index per key frame.
+fn best_chain(
+    keys: &[RgbaFrame],
+    mids: &[&RgbaFrame],
+    candidates: &[[Field; 4]],
+    i: usize,
+    (x, y): (f32, f32),
+) -> Vec<u8> {
+    use ignis_core::palette::linear_to_srgb;
+    use ignis_media::write::motion::sample_bilinear;
+    let enc =
+        |p: [f32; 4]| [0, 1, 2].map(|c| linear_to_srgb((p[c] * p[3]).clamp(0.0, 1.0)) * 255.0);
+    let n = keys.len();
+    // cost of the best chain ending in each candidate, and the step back to it
+    let mut cost = [0f32; 4];
+    let mut back: Vec<[u8; 4]> = Vec::with_capacity(n);
+    for k in 0..n - 1 {
+        let want = enc(mids[k].data()[i]);
+        let prev = candidates[k]
+            .each_ref()
+            .map(|c| sample_bilinear(&keys[k], x - 0.5 * c[i][0], y - 0.5 * c[i][1]));
+        let next = candidates[k + 1]
+            .each_ref()
+            .map(|c| sample_bilinear(&keys[k + 1], x + 0.5 * c[i][0], y + 0.5 * c[i][1]));
+        let mut to = [f32::MAX; 4];
+        let mut from = [0u8; 4];
+        for (b, q) in next.iter().enumerate() {
+            for (a, p) in prev.iter().enumerate() {
+                let got = enc([0, 1, 2, 3].map(|c| 0.5 * (p[c] + q[c])));
+                let e = cost[a] + (0..3).map(|c| (got[c] - want[c]).abs()).sum::<f32>();
+                if e < to[b] {
+                    (to[b], from[b]) = (e, a as u8);
+                }
+            }
+        }
+        cost = to;
+        back.push(from);
+    }
+    let mut pick = vec![0u8; n];
+    pick[n - 1] = (0..4)
+        .min_by(|&a, &b| cost[a].total_cmp(&cost[b]))
+        .unwrap_or(0) as u8;
+    for k in (0..n - 1).rev() {
+        pick[k] = back[k][pick[k + 1] as usize];
+    }
+    pick
+}
+
 /// Held-out blends: key frames every 4th of `frames`, the three frames between each pair
 /// rebuilt at t = 0.25, 0.5, 0.75 with the writer's default vectors and with looser gating
-/// (so a change tuned at t = 0.5 on every other frame is checked on frames it never saw).
-fn held_out(frames: &[RgbaFrame]) -> Result<serde_json::Value> {
+/// (so a change tuned at t = 0.5 on every other frame is checked on frames it never saw),
+/// and with what the generator knows of its motion (`known`, at this key spacing): its
+/// velocities, and its forward/backward pairs as `model_pairwise`.
+fn held_out(frames: &[RgbaFrame], known: Known) -> Result<serde_json::Value> {
     let keys: Vec<RgbaFrame> = frames.iter().step_by(4).cloned().collect();
     let loose = ignis_flow::VectorParams {
         consistency_px: 8.0,
         explained: 0.05,
         ..Default::default()
     };
-    let sets = [
-        ("gated", gated_velocities(&keys)?),
-        ("gated_loose", gated_with(&keys, &loose)?),
+    // per key interval, the vectors of its earlier and of its later key frame
+    let intervals = |mv: Vec<Field>| -> Vec<(Field, Field)> {
+        mv.windows(2)
+            .map(|w| (w[0].clone(), w[1].clone()))
+            .collect()
+    };
+    // chosen on the t = 0.5 frames only: t = 0.25 and 0.75 are held out
+    let mids: Vec<&RgbaFrame> = (0..keys.len() - 1).map(|k| &frames[4 * k + 2]).collect();
+    let mut sets = vec![
+        ("gated", intervals(gated_velocities(&keys)?)),
+        ("gated_loose", intervals(gated_with(&keys, &loose)?)),
+        (
+            "raw_flow_chosen",
+            intervals(chosen_velocities(&keys, &mids, &flow_pairs(&keys, 1)?)),
+        ),
     ];
+    sets.extend(known.velocities.into_iter().map(|(n, v)| (n, intervals(v))));
+    if let Some(pairs) = &known.pairs {
+        sets.push((
+            "model_chosen",
+            intervals(chosen_velocities(&keys, &mids, pairs)),
+        ));
+    }
+    if let Some(pairs) = known.pairs {
+        let reversed = |b: Field| b.into_iter().map(|v| [-v[0], -v[1]]).collect();
+        let pairs = pairs.into_iter().map(|(f, b)| (f, reversed(b))).collect();
+        sets.push(("model_pairwise", pairs));
+    }
     let mut out = serde_json::Map::new();
     for (name, mv) in &sets {
         let mut per_t = serde_json::Map::new();
         for (j, t) in [0.25f32, 0.5, 0.75].into_iter().enumerate() {
             let (mut e_mv, mut e_plain) = (0.0, 0.0);
-            for k in 0..keys.len() - 1 {
+            for (k, (prev, next)) in mv.iter().enumerate() {
                 let truth = &frames[4 * k + j + 1];
-                e_mv += error(
-                    &mv_blend(&keys[k], &keys[k + 1], &mv[k], &mv[k + 1], t),
-                    truth,
-                );
+                e_mv += error(&mv_blend(&keys[k], &keys[k + 1], prev, next, t), truth);
                 e_plain += error(&linear_blend(&keys[k], &keys[k + 1], t), truth);
             }
             per_t.insert(format!("t{t}"), json!(r3(1.0 - e_mv / e_plain.max(1e-12))));
@@ -473,4 +818,146 @@ fn held_out(frames: &[RgbaFrame]) -> Result<serde_json::Value> {
         out.insert(name.to_string(), serde_json::Value::Object(per_t));
     }
     Ok(serde_json::Value::Object(out))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Warps of a flame whose placement moves `dx` px right per frame.
+    fn sliding(n: usize, dx: f64) -> Vec<ignis_learned::Warp> {
+        (0..n)
+            .map(|i| ignis_learned::Warp {
+                shape: ignis_learned::Shape {
+                    path: vec![0.0; 10],
+                    width: vec![0.5; 10],
+                    height: 0.1,
+                },
+                place: ignis_learned::Placement {
+                    cx: 40.0 + dx * i as f64,
+                    cy: 30.0,
+                    tilt: 0.0,
+                },
+                frame_height: 64.0,
+            })
+            .collect()
+    }
+
+    /// A key frame's model velocity spans one key interval (two frames here), whether taken
+    /// from the neighbouring key frames or the in-between ones, ends included; the pairs
+    /// hold the forward and backward motion of each interval.
+    #[test]
+    fn model_velocities_span_one_key_interval() {
+        let p = ignis_learned::ShapeParams::default();
+        let size = Size::new(64, 48).unwrap();
+        let warps = sliding(7, 1.5);
+        for reach in [2, 1] {
+            let v = model_velocities(&p, &warps, size, (2, reach));
+            assert_eq!(v.len(), 4);
+            for f in &v {
+                assert_eq!(f.len(), size.pixels());
+                assert!(f
+                    .iter()
+                    .all(|m| (m[0] - 3.0).abs() < 1e-3 && m[1].abs() < 1e-3));
+            }
+        }
+        let pairs = model_pairs(&p, &warps, size, 2);
+        assert_eq!(pairs.len(), 3);
+        for (f, b) in &pairs {
+            assert!(f.iter().all(|m| (m[0] - 3.0).abs() < 1e-3));
+            assert!(b.iter().all(|m| (m[0] + 3.0).abs() < 1e-3));
+        }
+    }
+
+    /// A texture sliding right then back (the middle key frame's motion reverses): the
+    /// chosen vectors, one per key frame, err no more than any single candidate used on
+    /// every key frame (the chain is exact), and on a steady slide they are the motion.
+    #[test]
+    fn chosen_vectors_are_the_best_chain() {
+        let size = Size::new(48, 40).unwrap();
+        let at = |x: f32| ignis_flow::bench::texture(size, 5, [x, 0.0], 1.0).to_rgba();
+        let field = |v: f32| vec![[v, 0.0]; size.pixels()];
+        let constant = |v: f32| -> Vec<Field> { vec![field(v); 3] };
+        // steady: +1.5 px per frame, key frames every other frame
+        let frames: Vec<RgbaFrame> = (0..5).map(|i| at(1.5 * i as f32)).collect();
+        let keys: Vec<RgbaFrame> = frames.iter().step_by(2).cloned().collect();
+        let mids: Vec<&RgbaFrame> = frames.iter().skip(1).step_by(2).collect();
+        let pairs = vec![(field(3.0), field(-3.0)); 2];
+        let chosen = chosen_velocities(&keys, &mids, &pairs);
+        let (e_chosen, plain) = blend_errors(&keys, &chosen, &frames);
+        let (e_exact, _) = blend_errors(&keys, &constant(3.0), &frames);
+        assert!(
+            e_chosen <= e_exact + 1e-9 && e_chosen < 0.5 * plain,
+            "{e_chosen} {plain}"
+        );
+        // there and back
+        let frames: Vec<RgbaFrame> = [0.0, 1.5, 3.0, 1.5, 0.0].map(at).into();
+        let keys: Vec<RgbaFrame> = frames.iter().step_by(2).cloned().collect();
+        let mids: Vec<&RgbaFrame> = frames.iter().skip(1).step_by(2).collect();
+        let pairs = vec![(field(3.0), field(-3.0)), (field(-3.0), field(3.0))];
+        let chosen = chosen_velocities(&keys, &mids, &pairs);
+        let (e_chosen, plain) = blend_errors(&keys, &chosen, &frames);
+        let candidates = chain_candidates(&pairs, 3);
+        for j in 0..4 {
+            let same: Vec<Field> = candidates.iter().map(|c| c[j].clone()).collect();
+            let (e, _) = blend_errors(&keys, &same, &frames);
+            assert!(
+                e_chosen <= e + 1e-9,
+                "{e_chosen} > {e}, candidate {j} throughout"
+            );
+        }
+        // one vector per key frame cannot follow the reversal in both blends
+        let (e_still, _) = blend_errors(&keys, &constant(0.0), &frames);
+        assert!(
+            e_chosen < e_still && e_chosen > 0.05 * plain,
+            "{e_chosen} {e_still}"
+        );
+        assert_eq!(chosen.len(), 3);
+        assert!(chosen.iter().all(|f| f.len() == size.pixels()));
+    }
+
+    /// Without footage the learned row trains the synthetic clip, whose rate is known, so
+    /// it renders at twice the rate too.
+    #[test]
+    fn the_learned_row_exists_without_footage() {
+        let g = Global { quiet: true };
+        let (model, source) = learned_model(&g, true, None).unwrap();
+        assert!(source.starts_with("synthetic"), "{source}");
+        assert_eq!(model.summary.fps, Some(30.0));
+        let (frames, warps) = learned(&model, 3, 2.0).unwrap();
+        assert_eq!((frames.len(), warps.len()), (3, 3));
+        assert!(frames.iter().all(|f| f.data().iter().any(|p| p[3] > 0.0)));
+    }
+
+    /// The learned row renders at twice the model's rate as `--fps` does: every other frame
+    /// is the model-rate frame, and the frames between are new states, not copies.
+    #[test]
+    fn the_learned_row_doubles_the_rate_with_new_frames() {
+        let clip = ignis_learned::synthetic::flame_clip(Size::new(96, 96).unwrap(), 30, 2);
+        let p = ignis_learned::TrainParams {
+            em: ignis_learned::EmParams {
+                particles: 40,
+                max_iterations: 3,
+                seed: 2,
+                ..Default::default()
+            },
+            ..Default::default()
+        };
+        let mut model = ignis_learned::train(clip, &p, &mut ignis_core::progress::NoProgress)
+            .unwrap()
+            .model;
+        model.summary.fps = Some(30.0);
+        let (twice, warps) = learned(&model, 5, 2.0).unwrap();
+        let (once, _) = learned(&model, 3, 1.0).unwrap();
+        assert_eq!(warps.len(), 5);
+        for j in 0..3 {
+            assert_eq!(twice[2 * j].data(), once[j].data(), "key frame {j}");
+        }
+        for j in 0..2 {
+            assert_ne!(twice[2 * j + 1].data(), twice[2 * j].data());
+            assert_ne!(twice[2 * j + 1].data(), twice[2 * j + 2].data());
+        }
+        // the key frames' warps differ: the flame moves
+        assert_ne!(warps[0], warps[2]);
+    }
 }

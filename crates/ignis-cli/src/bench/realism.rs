@@ -257,6 +257,31 @@ fn learned_row(
     quick: bool,
     reference: Option<(Kind, f64)>,
 ) -> Result<Value> {
+    let model = candle_model(g, clip, quick)?;
+    let fps = FPS;
+    let frames = (SECONDS * fps) as usize;
+    let frames = if quick { frames.min(120) } else { frames };
+    let palette = ignis_core::Palette::preset("candle")?;
+    let size = Size::new(256, 256)?;
+    let mut synth = ignis_learned::Synthesiser::new_at(&model, Default::default(), 1, Some(fps))?;
+    let mut images = Vec::with_capacity(frames);
+    for _ in 0..frames {
+        let mut f = GrayFrame::new(size);
+        synth.next_frame_into(&mut f);
+        images.push(f);
+    }
+    let (f, slope) = measure(frames, fps, |i, _| Ok(palette.apply(&images[i])))?;
+    Ok(row("learned candle", CANDLE_DIAMETER, &f, slope, reference))
+}
+
+/// The learned candle of [`learned_row`] (also `bench export`'s learned row): `candle.mp4`
+/// trained as the demo trains it (the flame cropped out of its glass, the wax glow below
+/// a black level); `quick` trains fewer particles and iterations.
+pub(super) fn candle_model(
+    g: &Global,
+    clip: &Path,
+    quick: bool,
+) -> Result<ignis_learned::FlameModel> {
     let dir = tempfile::tempdir().context("creating a temporary directory")?;
     let model_path = dir.path().join("candle.flame");
     let clip_s = clip.to_string_lossy().into_owned();
@@ -281,18 +306,5 @@ fn learned_row(
     let sp = g.spinner("training a learned flame on candle.mp4");
     let model = crate::learned::train(&a, &Global { quiet: true })?;
     sp.finish_and_clear();
-    let fps = FPS;
-    let frames = (SECONDS * fps) as usize;
-    let frames = if quick { frames.min(120) } else { frames };
-    let palette = ignis_core::Palette::preset("candle")?;
-    let size = Size::new(256, 256)?;
-    let mut synth = ignis_learned::Synthesiser::new_at(&model, Default::default(), 1, Some(fps))?;
-    let mut images = Vec::with_capacity(frames);
-    for _ in 0..frames {
-        let mut f = GrayFrame::new(size);
-        synth.next_frame_into(&mut f);
-        images.push(f);
-    }
-    let (f, slope) = measure(frames, fps, |i, _| Ok(palette.apply(&images[i])))?;
-    Ok(row("learned candle", CANDLE_DIAMETER, &f, slope, reference))
+    Ok(model)
 }
