@@ -44,8 +44,8 @@ impl FlameColour {
                 continue;
             }
             let unclipped = (MIN_LIT..CLIPPED).contains(&top);
-            for c in 0..3 {
-                let v = p[c].max(0.0) as f64;
+            for (c, &v) in p[..3].iter().enumerate() {
+                let v = v.max(0.0) as f64;
                 self.all[c] += v;
                 if unclipped {
                     self.lit[c] += v;
