@@ -2279,6 +2279,55 @@ mod eigen_db_footage {
         assert!(png.exists());
     }
 
+    /// A scenario whose motion runs through frames the matte keys out renders them (it is
+    /// the user's own sequence) but says which output frames are fully transparent; a
+    /// scenario of lit frames, or one that asks for opaque frames, says nothing.
+    #[test]
+    fn animate_warns_of_keyed_out_frames() {
+        let t = tempfile::tempdir().unwrap();
+        let (db, clip) = trained(t.path(), &|i| !(20..30).contains(&i));
+        let run = |start: usize, end: usize, colour: &str| {
+            let sc = t.path().join(format!("s{start}-{end}.toml"));
+            std::fs::write(
+                &sc,
+                format!(
+                    "database = {:?}\nsequence = [\"a\"]\n[motions.a]\nclip = \"{clip}\"\n\
+                     start = {start}\nend = {end}\n[colour]\nmode = \"original\"\n{colour}",
+                    db.to_str().unwrap()
+                ),
+            )
+            .unwrap();
+            let out = t.path().join(format!("s{start}-{end}"));
+            let r = ignis(&[
+                "eigen",
+                "animate",
+                sc.to_str().unwrap(),
+                "-o",
+                out.join("%04d.png").to_str().unwrap(),
+            ]);
+            assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+            String::from_utf8_lossy(&r.stdout).into_owned()
+        };
+        let said = run(15, 40, "");
+        assert!(
+            said.contains(
+                "keys out all the fire of 10 of the 25 output frames (output frames 5..15)"
+            ),
+            "{said}"
+        );
+        assert!(said.contains("alpha = \"opaque\""), "{said}");
+        // What it says is so: output frame 10 (source frame 25) is transparent, 2 is not.
+        let max_alpha = |j: usize| {
+            let names = files_in(&t.path().join("s15-40"));
+            let f = ignis_media::read_image(&t.path().join("s15-40").join(&names[j])).unwrap();
+            f.data().iter().map(|p| p[3]).fold(0.0f32, f32::max)
+        };
+        assert_eq!(max_alpha(10), 0.0);
+        assert!(max_alpha(2) > 0.9);
+        assert!(!run(0, 18, "").contains("keys out"));
+        assert!(!run(15, 40, "alpha = \"opaque\"\n").contains("keys out"));
+    }
+
     #[test]
     fn range_loop_matte_is_voted_over_three_frames() {
         let t = tempfile::tempdir().unwrap();

@@ -466,6 +466,60 @@ fn print_table(g: &Global, plan: &Plan, sc: &Scenario, out_loops: bool) {
     }
 }
 
+/// Warns when the matte keys out all the fire of some of the frames the render takes
+/// from the footage (original colouring with the matte): those frames are written fully
+/// transparent. Names them as stretches of output frames. (`eigen loop --range` refuses
+/// such a window; a scenario is the user's own sequence, so here it is a warning.)
+fn warn_keyed_out(
+    db: &EigenfireDb,
+    plan: &Plan,
+    look: &ignis_eigen::scenario::Look,
+    g: &Global,
+) -> Result<()> {
+    use ignis_eigen::transition::FrameRef;
+    if !look.matte || !matches!(look.mode, ignis_eigen::scenario::ColourMode::Original) {
+        return Ok(());
+    }
+    let row = |f: &ignis_eigen::scenario::PlanFrame| match f.source {
+        FrameRef::Db(r) => Some(r),
+        FrameRef::Weights(_) => None,
+    };
+    let mut rows: Vec<usize> = plan.frames.iter().filter_map(row).collect();
+    rows.sort_unstable();
+    rows.dedup();
+    let dark: std::collections::HashSet<usize> = ignis_eigen::animate::keyed_out_rows(db, &rows)?
+        .into_iter()
+        .collect();
+    if dark.is_empty() {
+        return Ok(());
+    }
+    let out: Vec<usize> = (0..plan.frames.len())
+        .filter(|&i| row(&plan.frames[i]).is_some_and(|r| dark.contains(&r)))
+        .collect();
+    let mut spans: Vec<(usize, usize)> = Vec::new();
+    for &i in &out {
+        match spans.last_mut() {
+            Some(s) if s.1 == i => s.1 = i + 1,
+            _ => spans.push((i, i + 1)),
+        }
+    }
+    let list: Vec<String> = spans
+        .iter()
+        .take(6)
+        .map(|(a, b)| format!("{a}..{b}"))
+        .collect();
+    let more = if spans.len() > 6 { ", …" } else { "" };
+    g.say(format!(
+        "warning: the matte keys out all the fire of {} of the {} output frames (output frames {}{more}): \
+         they are written fully transparent; choose motion ranges where the fire burns, or set \
+         `alpha = \"opaque\"` under [colour]",
+        out.len(),
+        plan.frames.len(),
+        list.join(", ")
+    ));
+    Ok(())
+}
+
 /// `ignis eigen animate`; returns the plan (for the demo's captions).
 pub fn animate_cmd(a: &AnimateArgs, g: &Global) -> Result<Plan> {
     let sc = Scenario::from_file(&a.scenario)?;
@@ -504,6 +558,7 @@ pub fn animate_cmd(a: &AnimateArgs, g: &Global) -> Result<Plan> {
         plan
     };
     print_table(g, &plan, &sc, out_loops);
+    warn_keyed_out(&db, &plan, &look, g)?;
     if a.dry_run {
         a.chunk
             .map(|c| check_chunk(c, plan.frames.len()))

@@ -122,6 +122,23 @@ pub fn voted_masks(db: &EigenfireDb, rows: &[usize]) -> Result<HashMap<usize, im
         .collect())
 }
 
+/// Of database rows `rows`, those whose matte ([`voted_masks`]) keys out every pixel:
+/// frames the footage render writes fully transparent. Rows whose database stores no mask
+/// are not reported. Decoded in runs of 32 rows (consecutive rows share their votes'
+/// masks), so the memory stays bounded for long scenarios.
+pub fn keyed_out_rows(db: &EigenfireDb, rows: &[usize]) -> Result<Vec<usize>> {
+    let mut out = Vec::new();
+    for run in rows.chunks(32) {
+        let masks = voted_masks(db, run)?;
+        out.extend(run.iter().copied().filter(|r| {
+            masks
+                .get(r)
+                .is_some_and(|m| m.as_raw().iter().all(|&v| v == 0))
+        }));
+    }
+    Ok(out)
+}
+
 /// Training rows of clip `clip` whose source frame lies in `range` (source frame numbers).
 pub fn clip_rows(db: &EigenfireDb, clip: &str, range: Range<usize>) -> Result<Range<usize>> {
     let c = db.clip(clip)?;
