@@ -26,8 +26,8 @@ use sha2::{Digest, Sha256};
 use crate::global::Global;
 
 /// Version of the cache layout and of what training stores; part of the key (2: still
-/// lights left out of the masks).
-const CACHE_VERSION: u32 = 2;
+/// lights left out of the masks; 3: colourless parts left out of them).
+const CACHE_VERSION: u32 = 3;
 
 #[derive(clap::Args, Debug)]
 #[command(

@@ -125,6 +125,10 @@ pub struct MaskParams {
     /// anything that flickers; [`crate::still`]) and keep them out of every frame's mask.
     /// Default `true`.
     pub still_lights: bool,
+    /// Drop the parts of a frame's mask that hold no coloured pixel (white text or a
+    /// burnt-in timecode, a white sign, a glint on glass) when the frame has coloured fire
+    /// elsewhere ([`drop_colourless_parts`]). Default `true`.
+    pub colourless_parts: bool,
 }
 
 /// When [`isolate_flame`] runs.
@@ -176,6 +180,7 @@ impl Default for MaskParams {
             isolate_edge_tolerance: 0.1,
             isolate_lit_islands: false,
             still_lights: true,
+            colourless_parts: true,
         }
     }
 }
@@ -399,8 +404,55 @@ pub fn flame_mask_without(
             *o = (*o).max(v);
         }
     }
+    if p.colourless_parts {
+        drop_colourless_parts(&mut m, frame);
+    }
     still.clear(m.as_mut(), w, 0);
     m
+}
+
+/// A mask part is coloured when some pixel of it is at least this saturated (sRGB HSV S,
+/// among pixels with V ≥ 0.3).
+const COLOURED: f32 = 0.1;
+/// ... and parts without one are dropped only when the frame's most saturated masked pixel
+/// reaches this: there is coloured fire to keep.
+const FIRE_COLOURED: f32 = 0.2;
+
+/// Removes from `mask` (255 = kept; the size of `frame`, linear light) every 8-connected
+/// part that holds no pixel at least [`COLOURED`] saturated, when some masked pixel of the
+/// frame reaches [`FIRE_COLOURED`]. Otherwise leaves it alone.
+///
+/// Why: fire always has colour somewhere — the orange, yellow or red of its body and rim,
+/// its blue root — even where its core is clipped to white; white text, a burnt-in
+/// timecode, a white sign or a glint on glass has none, and a timecode changes every frame,
+/// so the still-light rule ([`crate::still`]) cannot catch it. A frame whose every part is
+/// colourless (a flame overexposed to white everywhere) is kept whole. Measured (sRGB S,
+/// the most saturated pixel of each part of ≥ 30 px, every 7th frame): candle.mp4's parts
+/// 0.24–0.62 (isolated), campfire.mp4 ≥ 0.40, fireball.mp4 ≥ 0.74; white burnt-in text
+/// over campfire.mp4 0.00. Deterministic; O(masked pixels).
+pub fn drop_colourless_parts(mask: &mut GrayImage, frame: &RgbaFrame) {
+    let w = mask.width() as usize;
+    if mask.width() != frame.width() || mask.height() != frame.height() {
+        return;
+    }
+    let mut open = vec![false; mask.as_raw().len()];
+    let mut seeds = Vec::new();
+    let mut most = 0.0f32;
+    for (i, (&m, px)) in mask.as_raw().iter().zip(frame.data()).enumerate() {
+        if m == 0 {
+            continue;
+        }
+        open[i] = true;
+        let (_, s, v) = rgb_to_hsv(srgb_encode(px[0]), srgb_encode(px[1]), srgb_encode(px[2]));
+        if v >= 0.3 && s >= COLOURED {
+            seeds.push(i);
+            most = most.max(s);
+        }
+    }
+    if most < FIRE_COLOURED {
+        return;
+    }
+    *mask = grow_into(&mut open, seeds, w);
 }
 
 /// The pixels reachable (8-connected) from `seeds` through `open` pixels, as a mask (the
@@ -935,6 +987,59 @@ mod tests {
 
     fn px(r: f32, g: f32, b: f32) -> [f32; 4] {
         [srgb_to_linear(r), srgb_to_linear(g), srgb_to_linear(b), 1.0]
+    }
+
+    /// White text beside an orange flame is dropped from the mask; a white core inside
+    /// the flame's coloured rim stays; a frame whose only lit part is white (a flame
+    /// overexposed everywhere) keeps it; through `flame_mask`, a burnt-in white label is
+    /// left out and `colourless_parts = false` keeps it.
+    #[test]
+    fn colourless_parts_are_dropped_beside_coloured_fire() {
+        let size = Size::new(40, 20).unwrap();
+        let white = px(1.0, 1.0, 1.0);
+        let orange = px(1.0, 0.55, 0.1);
+        let mut f = RgbaFrame::new(size);
+        let mut m = GrayImage::new(40, 20);
+        for y in 4..16u32 {
+            for x in 4..16u32 {
+                // A flame: an orange rim around a white core.
+                let core = (7..13).contains(&x) && (7..13).contains(&y);
+                f.data_mut()[(y * 40 + x) as usize] = if core { white } else { orange };
+                m.put_pixel(x, y, image::Luma([255]));
+            }
+            for x in 24..36u32 {
+                // A white label, apart from it.
+                f.data_mut()[(y * 40 + x) as usize] = white;
+                m.put_pixel(x, y, image::Luma([255]));
+            }
+        }
+        let mut kept = m.clone();
+        drop_colourless_parts(&mut kept, &f);
+        for y in 0..20 {
+            for x in 0..40 {
+                let want = if x < 20 { m.get_pixel(x, y)[0] } else { 0 };
+                assert_eq!(kept.get_pixel(x, y)[0], want, "({x}, {y})");
+            }
+        }
+        // Only the white label: nothing coloured to keep instead, so it stays.
+        let mut alone = m.clone();
+        for y in 0..20 {
+            for x in 0..20 {
+                alone.put_pixel(x, y, image::Luma([0]));
+            }
+        }
+        let before = alone.clone();
+        drop_colourless_parts(&mut alone, &f);
+        assert_eq!(alone, before);
+        // Through the whole mask.
+        let p = MaskParams::default();
+        let full = flame_mask(&f, &p, false);
+        assert!(full.get_pixel(10, 10)[0] > 0 && full.get_pixel(30, 10)[0] == 0);
+        let off = MaskParams {
+            colourless_parts: false,
+            ..Default::default()
+        };
+        assert!(flame_mask(&f, &off, false).get_pixel(30, 10)[0] > 0);
     }
 
     #[test]
