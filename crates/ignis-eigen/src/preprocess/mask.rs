@@ -412,8 +412,11 @@ pub fn flame_mask_without(
 }
 
 /// A mask part is coloured when some pixel of it is at least this saturated (sRGB HSV S,
-/// among pixels with V ≥ 0.3).
+/// among pixels with V ≥ [`COLOURED_MIN_V`]).
 const COLOURED: f32 = 0.1;
+/// The dimmest pixel whose saturation counts: the blue root's floor in the default mask
+/// layers (darker pixels' hue is noise, and the mask's closing can take some in).
+const COLOURED_MIN_V: f32 = 0.12;
 /// ... and parts without one are dropped only when the frame's most saturated masked pixel
 /// reaches this: there is coloured fire to keep.
 const FIRE_COLOURED: f32 = 0.2;
@@ -444,7 +447,7 @@ pub fn drop_colourless_parts(mask: &mut GrayImage, frame: &RgbaFrame) {
         }
         open[i] = true;
         let (_, s, v) = rgb_to_hsv(srgb_encode(px[0]), srgb_encode(px[1]), srgb_encode(px[2]));
-        if v >= 0.3 && s >= COLOURED {
+        if v >= COLOURED_MIN_V && s >= COLOURED {
             seeds.push(i);
             most = most.max(s);
         }
