@@ -21,7 +21,7 @@
 
 use super::Synthesiser;
 use crate::shape::{row_profiles, Placement, Shape, ShapeParams};
-use ignis_core::Size;
+use ignis_core::{GrayFrame, Size};
 
 /// How one rendered frame maps its pixels to the flame's canonical coordinates: the
 /// state's shape (after controls) and where it was drawn.
@@ -127,6 +127,40 @@ impl Synthesiser<'_> {
             place: self.place(size),
             frame_height: f64::from(size.height),
         }
+    }
+}
+
+impl Synthesiser<'_> {
+    /// Renders into `out` the state half-way in time between the frame last rendered by
+    /// [`Synthesiser::next_frame_into`] and the next one (controls as they apply there: the
+    /// wind half-way between the two frames'), and returns its warp, without advancing:
+    /// the next frame, and [`Synthesiser::warp`], are as without this call. A loop's frame
+    /// after its last is its first, so after the last frame this is the frame half-way
+    /// across the loop's wrap. For a flipbook's motion vectors: the true in-between frame
+    /// of each pair of consecutive frames. Before the first frame, the first frame's
+    /// state.
+    pub fn between_into(&mut self, out: &mut GrayFrame) -> Warp {
+        let size = out.size();
+        let (raw, shown) = (self.raw.clone(), self.shown.clone());
+        let at = (self.frame as f64 - 0.5).max(0.0);
+        if self.looped.is_some() {
+            // the loop's own times of the two frames (timing it for this size if needed)
+            self.loop_frame_state(size);
+            let times = &self.loop_times.as_ref().expect("just timed").1;
+            let steps = self.looped.as_ref().map_or(0, |s| s.len()) as f64;
+            let n = u64::from(self.loop_frames);
+            let b = times[(self.frame % n) as usize];
+            let a = times[((self.frame + n - 1) % n) as usize];
+            let b = if b < a { b + steps } else { b };
+            let tau = if self.frame == 0 { b } else { 0.5 * (a + b) };
+            self.set_loop_state(tau);
+        } else {
+            self.process_state_at(at * self.rate);
+        }
+        self.render_raw(at, out);
+        let warp = self.warp(size);
+        (self.raw, self.shown) = (raw, shown);
+        warp
     }
 }
 
