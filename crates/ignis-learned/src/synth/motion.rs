@@ -409,6 +409,104 @@ mod tests {
         assert_eq!(frame.data(), again.data());
     }
 
+    /// A small trained model whose footage rate is 30 fps.
+    fn small_model() -> crate::FlameModel {
+        let clip = crate::synthetic::flame_clip(Size::new(96, 96).unwrap(), 30, 2);
+        let p = crate::TrainParams {
+            em: crate::EmParams {
+                particles: 40,
+                max_iterations: 3,
+                seed: 2,
+                ..crate::EmParams::default()
+            },
+            ..crate::TrainParams::default()
+        };
+        let mut model = crate::train(clip, &p, &mut ignis_core::progress::NoProgress)
+            .unwrap()
+            .model;
+        model.summary.fps = Some(30.0);
+        model
+    }
+
+    /// The frame between two frames is the one a render at twice the rate draws there
+    /// (wind as it applies, placement, exposure), and rendering it changes neither the
+    /// frames after it nor their warps.
+    #[test]
+    fn the_frame_between_is_the_one_at_twice_the_rate() {
+        let model = small_model();
+        let size = Size::new(48, 40).unwrap();
+        let controls = crate::Controls {
+            wind: crate::Wind::Constant(0.3),
+            ..Default::default()
+        };
+        let mut once = Synthesiser::new_at(&model, controls.clone(), 5, Some(30.0)).unwrap();
+        let mut plain = Synthesiser::new_at(&model, controls.clone(), 5, Some(30.0)).unwrap();
+        let mut twice = Synthesiser::new_at(&model, controls, 5, Some(60.0)).unwrap();
+        let (mut f, mut g, mut mid) = (
+            GrayFrame::new(size),
+            GrayFrame::new(size),
+            GrayFrame::new(size),
+        );
+        for k in 0..5 {
+            once.next_frame_into(&mut f);
+            plain.next_frame_into(&mut g);
+            assert_eq!(f.data(), g.data(), "frame {k}");
+            assert_eq!(once.warp(size), plain.warp(size));
+            twice.next_frame_into(&mut g);
+            assert_eq!(f.data(), g.data(), "frame {k} at twice the rate");
+            let warp = once.between_into(&mut mid);
+            assert_eq!(
+                once.warp(size),
+                plain.warp(size),
+                "the frame's warp is kept"
+            );
+            twice.next_frame_into(&mut g);
+            assert_eq!(mid.data(), g.data(), "between {k} and {}", k + 1);
+            assert_eq!(warp, twice.warp(size));
+            assert_ne!(mid.data(), f.data());
+        }
+    }
+
+    /// In a loop the frame after the last is the first: the frame between them is a new
+    /// state (not either end), and rendering the frames between leaves the loop's frames
+    /// as they were.
+    #[test]
+    fn a_loop_has_a_frame_across_its_wrap() {
+        let model = small_model();
+        let size = Size::new(40, 40).unwrap();
+        let n = 6;
+        let render = |between: bool| {
+            let mut s =
+                Synthesiser::looping_at(&model, Default::default(), 3, n, Some(30.0)).unwrap();
+            let (mut f, mut m) = (GrayFrame::new(size), GrayFrame::new(size));
+            let mut frames = Vec::new();
+            let mut mids = Vec::new();
+            for _ in 0..n {
+                s.next_frame_into(&mut f);
+                frames.push(f.clone());
+                if between {
+                    s.between_into(&mut m);
+                    mids.push(m.clone());
+                }
+            }
+            s.next_frame_into(&mut f);
+            frames.push(f.clone());
+            (frames, mids)
+        };
+        let (plain, _) = render(false);
+        let (frames, mids) = render(true);
+        assert_eq!(plain.len(), frames.len());
+        for (a, b) in plain.iter().zip(&frames) {
+            assert_eq!(a.data(), b.data());
+        }
+        // frame n is frame 0 again
+        assert_eq!(frames[n as usize].data(), frames[0].data());
+        let wrap = &mids[n as usize - 1];
+        assert!(wrap.max() > 0.0);
+        assert_ne!(wrap.data(), frames[0].data());
+        assert_ne!(wrap.data(), frames[n as usize - 1].data());
+    }
+
     fn bilinear(f: &GrayFrame, x: f32, y: f32) -> f32 {
         let (x0, y0) = (x.floor(), y.floor());
         let (tx, ty) = (x - x0, y - y0);

@@ -523,4 +523,131 @@ mod tests {
         assert!(maxdiff(&mv_blend(&a, &b, &mv, &mv, 0.0), &a) < 1e-6);
         assert!(maxdiff(&mv_blend(&a, &b, &mv, &mv, 1.0), &b) < 1e-6);
     }
+
+    /// A smooth texture shifted `dx` px right.
+    fn texture(size: Size, dx: f32) -> RgbaFrame {
+        let w = size.width as usize;
+        let px = (0..size.pixels())
+            .map(|i| {
+                let (x, y) = ((i % w) as f32 + 0.5 - dx, (i / w) as f32 + 0.5);
+                let v = 0.5
+                    + 0.25 * (x * 0.45).sin() * (y * 0.3).cos()
+                    + 0.2 * (x * 0.13 + y * 0.21).sin();
+                [v, 0.8 * v, 0.5 * v, 1.0]
+            })
+            .collect();
+        RgbaFrame::from_vec(size, px).unwrap()
+    }
+
+    /// Total error of the blends at 0.5 of consecutive key frames (the last interval
+    /// wrapping to the first when there are as many `mids` as keys), in the measure
+    /// [`chosen_velocities`] minimises (8-bit sRGB levels of premultiplied colour).
+    fn chain_error(keys: &[RgbaFrame], mids: &[&RgbaFrame], mv: &[Field]) -> f64 {
+        let lut = srgb255_table();
+        let enc = |p: &[f32; 4], c: usize| srgb255(lut, p[c] * p[3]) as f64;
+        let n = keys.len();
+        (0..mids.len())
+            .map(|k| {
+                let j = (k + 1) % n;
+                let m = mv_blend(&keys[k], &keys[j], &mv[k], &mv[j], 0.5);
+                m.data()
+                    .iter()
+                    .zip(mids[k].data())
+                    .map(|(p, q)| (0..3).map(|c| (enc(p, c) - enc(q, c)).abs()).sum::<f64>())
+                    .sum::<f64>()
+            })
+            .sum()
+    }
+
+    /// A texture sliding right then back (the middle key frame's motion reverses), as a
+    /// one-shot and as a loop: the chosen vectors, one per key frame, err no more than no
+    /// motion or any single candidate used on every key frame (the chain is exact), and
+    /// on a steady slide they are close to the motion.
+    #[test]
+    fn chosen_vectors_are_the_best_chain() {
+        let size = Size::new(40, 32).unwrap();
+        let field = |v: f32| vec![[v, 0.0]; size.pixels()];
+        // steady: +1.5 px per frame, key frames every other frame
+        let frames: Vec<RgbaFrame> = (0..5).map(|i| texture(size, 1.5 * i as f32)).collect();
+        let keys: Vec<RgbaFrame> = frames.iter().step_by(2).cloned().collect();
+        let mids: Vec<&RgbaFrame> = frames.iter().skip(1).step_by(2).collect();
+        let pairs = vec![(field(3.0), field(-3.0)); 2];
+        let chosen = chosen_velocities(&keys, &mids, &pairs);
+        let e = chain_error(&keys, &mids, &chosen);
+        let still = chain_error(&keys, &mids, &vec![field(0.0); 3]);
+        let exact = chain_error(&keys, &mids, &vec![field(3.0); 3]);
+        assert!(e <= exact + 1e-6 && e < 0.2 * still, "{e} {exact} {still}");
+        // there and back, as a one-shot and as a loop (its wrap interval blends the last
+        // key frame into the first)
+        let frames: Vec<RgbaFrame> = [0.0, 1.5, 3.0, 1.5].map(|d| texture(size, d)).into();
+        for looped in [false, true] {
+            let keys = vec![frames[0].clone(), frames[2].clone()];
+            let mut mids = vec![&frames[1]];
+            let mut pairs = vec![(field(3.0), field(-3.0))];
+            if looped {
+                mids.push(&frames[3]);
+                pairs.push((field(-3.0), field(3.0)));
+            }
+            let chosen = chosen_velocities(&keys, &mids, &pairs);
+            assert_eq!(chosen.len(), 2);
+            assert!(chosen.iter().all(|f| f.len() == size.pixels()));
+            let e = chain_error(&keys, &mids, &chosen);
+            let candidates = chain_candidates(&pairs, 2);
+            for j in 0..4 {
+                let same: Vec<Field> = candidates.iter().map(|c| c[j].clone()).collect();
+                let e_same = chain_error(&keys, &mids, &same);
+                assert!(
+                    e <= e_same + 1e-6,
+                    "{e} > {e_same}, candidate {j} throughout"
+                );
+            }
+            // one vector per key frame cannot follow the reversal in both blends of the loop
+            let still = chain_error(&keys, &mids, &vec![field(0.0); 2]);
+            let bound = if looped { still } else { 0.5 * still };
+            assert!(e < bound, "looped {looped}: {e} vs {still}");
+        }
+    }
+
+    /// The DP's guarantee on unrelated frames too: never worse than no motion on the
+    /// blends it was chosen on, whatever the candidate vectors (here random ones).
+    #[test]
+    fn chosen_vectors_never_lose_to_none() {
+        let size = Size::new(24, 20).unwrap();
+        let mut rng = ignis_core::Rng::new(3);
+        let mut random_field = || -> Field {
+            (0..size.pixels())
+                .map(|_| [4.0 * rng.normal() as f32, 4.0 * rng.normal() as f32])
+                .collect()
+        };
+        let keys: Vec<RgbaFrame> = (0..4).map(|k| texture(size, 2.3 * k as f32)).collect();
+        let truth: Vec<RgbaFrame> = (0..4)
+            .map(|k| texture(size, 2.3 * k as f32 + 0.9))
+            .collect();
+        for looped in [false, true] {
+            let intervals = if looped { 4 } else { 3 };
+            let mids: Vec<&RgbaFrame> = truth[..intervals].iter().collect();
+            let pairs: Vec<(Field, Field)> = (0..intervals)
+                .map(|_| (random_field(), random_field()))
+                .collect();
+            let chosen = chosen_velocities(&keys, &mids, &pairs);
+            let none = vec![vec![[0.0; 2]; size.pixels()]; 4];
+            let (e, e0) = (
+                chain_error(&keys, &mids, &chosen),
+                chain_error(&keys, &mids, &none),
+            );
+            assert!(e <= e0 + 1e-6, "looped {looped}: {e} > {e0}");
+            assert!(e < e0, "some random vector helps somewhere");
+        }
+    }
+
+    /// The tabled sRGB curve of the choice is within 0.01 levels of the exact one.
+    #[test]
+    fn tabled_srgb_is_close() {
+        let t = srgb255_table();
+        for i in 0..=100_000 {
+            let c = i as f32 / 100_000.0;
+            let exact = ignis_core::palette::linear_to_srgb(c) * 255.0;
+            assert!((srgb255(t, c) - exact).abs() < 0.01, "{c}");
+        }
+    }
 }
