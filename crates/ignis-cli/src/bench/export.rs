@@ -599,11 +599,12 @@ pub fn figures(g: &Global, quick: bool) -> Result<serde_json::Value> {
         "threads": rayon::current_num_threads(),
         "metric": "mean |error| vs the true dropped frame, 8-bit sRGB levels, colour over black",
         "variants": {
-            "headline": "image-only vectors (ignis_flow::motion_vector_pair velocities, as --motion-vectors writes them) on the 8-bit colour sheet read back",
+            "headline": "the vectors --motion-vectors writes, on the 8-bit colour sheet read back: image-only vectors (ignis_flow::motion_vector_pair velocities), except for the learned row, whose sheet is written as `ignis learned synth --motion-vectors` writes it (motion_source: the model's motion chosen per pixel by the rendered in-between frames; flow_sheet: the flow's vectors on the same frames, for comparison)",
+            "filtered": "the headline's vectors sampled as an engine may: bilinear (blend evaluated half-way between pixel centres, vectors, key frames and true frame bilinear there) and mip1 (vector sheet box-averaged 2x2 and upsampled bilinearly); flow_filtered: the same for the flow's vectors on the learned row",
             "exact_colour": "the same vectors on the unquantised key frames (what the --hdr EXR colour sheet gives): separates the 8-bit sheet's rounding from the blend",
             "in_between_flow": "velocities from flows key -> true in-between frames (uses the dropped frames: possible only when the exporter has them, e.g. decimated footage or a generator rendered at twice the rate); vectors unquantised",
             "key_frame_change": "mean |error| between consecutive key frames: how much there is to blend",
-            "held_out_t": "error_reduction at blends t = 0.25 / 0.5 / 0.75 with key frames every 4th frame (footage: every 4th source frame), default vs loose gating, raw_flow_chosen (chosen on the t = 0.5 frames only, so t = 0.25 / 0.75 are held out), and for the learned flame model, model_chosen and model_pairwise; vectors unquantised: checks a change on frames it was not tuned on",
+            "held_out_t": "error_reduction at blends t = 0.25 / 0.5 / 0.75 with key frames every 4th frame (footage: every 4th source frame), default vs loose gating (gated_mip1: the default's vectors read at mip level 1, see filtered), raw_flow_chosen (chosen on the t = 0.5 frames only, so t = 0.25 / 0.75 are held out), and for the learned flame model, model_chosen (what `ignis learned synth --motion-vectors` writes; model_chosen_mip1 read at mip level 1) and model_pairwise; vectors unquantised: checks a change on frames it was not tuned on",
             "diagnosis": "error_reduction of other vectors on the unquantised key frames: gated_sheet_16bit (the sheet's vectors read back), gated_unquantised (the same before 16-bit encoding), raw_flow / raw_flow_full_res (ungated DIS velocities, finest pyramid level 1 / 0), raw_flow_halved, gated_loose (consistency 8 px, explained 0.05), model (the generator's own motion: exact shift for the texture, ignis_classic::motion for classic, ignis_learned::model_motion for the learned flame: its texture attached to the flame's canonical coordinates; central over the neighbouring key frames), model_half_steps (learned: the same from the model's motion to the in-between times, known without rendering them), raw_flow_pairwise / model_pairwise (not one vector per frame: each dropped frame blended with the forward motion for the earlier key frame and the reversed backward motion for the later, from the raw flow / the learned model: what a forward and a backward sheet would give), raw_flow_chosen / model_chosen (uses the in-between frames: one vector per key frame and pixel, storable in a sheet, chosen among none / forward / reversed backward / central so that the blends at 0.5 err least against the true in-between frames, exactly over the run of key frames), best_per_pixel_bound (per dropped pixel the best single velocity within 4 px for both key frames, chosen by looking at the true frame: a bound for vectors shared by the two key frames, not for the chosen ones, which give each key frame its own)",
         },
         "goal_error_reduction": GOAL_REDUCTION,
@@ -811,8 +812,10 @@ fn held_out(frames: &[RgbaFrame], known: Known) -> Result<serde_json::Value> {
     };
     // chosen on the t = 0.5 frames only: t = 0.25 and 0.75 are held out
     let mids: Vec<&RgbaFrame> = (0..keys.len() - 1).map(|k| &frames[4 * k + 2]).collect();
+    let gated = gated_velocities(&keys)?;
     let mut sets = vec![
-        ("gated", intervals(gated_velocities(&keys)?)),
+        ("gated_mip1", intervals(mip1(&gated, keys[0].size()))),
+        ("gated", intervals(gated)),
         ("gated_loose", intervals(gated_with(&keys, &loose)?)),
         (
             "raw_flow_chosen",
@@ -825,12 +828,13 @@ fn held_out(frames: &[RgbaFrame], known: Known) -> Result<serde_json::Value> {
     ];
     sets.extend(known.velocities.into_iter().map(|(n, v)| (n, intervals(v))));
     if let Some(pairs) = &known.pairs {
+        let chosen = ignis_media::write::motion::chosen_velocities(&keys, &mids, pairs);
+        // the chosen sheet read at mip level 1: does switching between candidates survive?
         sets.push((
-            "model_chosen",
-            intervals(ignis_media::write::motion::chosen_velocities(
-                &keys, &mids, pairs,
-            )),
+            "model_chosen_mip1",
+            intervals(mip1(&chosen, keys[0].size())),
         ));
+        sets.push(("model_chosen", intervals(chosen)));
     }
     if let Some(pairs) = known.pairs {
         let reversed = |b: Field| b.into_iter().map(|v| [-v[0], -v[1]]).collect();
