@@ -373,7 +373,7 @@ pub fn synth(a: &SynthArgs, g: &Global) -> Result<Vec<PathBuf>> {
         for i in plan.range.clone() {
             synth.next_frame_into(&mut frame);
             if let Some(m) = &model_motion {
-                m.record(&mut synth, a.size, i + 1 < plan.range.end, &colour);
+                m.record(&mut synth, a.size, i + 1 < plan.range.end, colour);
             }
             writer
                 .push(&colour(&mut frame))

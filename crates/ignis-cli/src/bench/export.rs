@@ -14,7 +14,11 @@
 //! Two further variants show where one vector per frame falls short: forward/backward
 //! pairs per key interval (`*_pairwise`, two sheets' worth), and one vector per key frame
 //! chosen per pixel among the forward, reversed backward, central and zero vectors by the
-//! true in-between frames (`*_chosen`, storable; held out at t = 0.25 / 0.75).
+//! true in-between frames (`*_chosen`, storable; held out at t = 0.25 / 0.75). The learned
+//! row's sheet is written as `ignis learned synth --motion-vectors` writes it (the model's
+//! vectors chosen that way, [`crate::learned::ModelMotion`]), with the flow's vectors beside
+//! it for comparison; every row's vectors are also read as an engine may filter them
+//! (`filtered`: bilinear between pixel centres, mip level 1).
 
 use crate::global::Global;
 use crate::output::flow_source;
