@@ -2363,3 +2363,97 @@ mod eigen_db_footage {
         );
     }
 }
+
+/// Issue 17: a learned flipbook's motion vectors come from the model (chosen per pixel by
+/// the rendered in-between frames).
+mod learned_motion {
+    use super::*;
+
+    /// A small model trained on the synthetic clip (no footage needed).
+    fn model(dir: &Path) -> PathBuf {
+        let clip =
+            ignis_learned::synthetic::flame_clip(ignis_core::Size::new(96, 96).unwrap(), 30, 2);
+        let p = ignis_learned::TrainParams {
+            em: ignis_learned::EmParams {
+                particles: 40,
+                max_iterations: 3,
+                seed: 2,
+                ..Default::default()
+            },
+            ..Default::default()
+        };
+        let mut m = ignis_learned::train(clip, &p, &mut ignis_core::progress::NoProgress)
+            .unwrap()
+            .model;
+        m.summary.fps = Some(30.0);
+        let path = dir.join("m.flame");
+        m.save(&path).unwrap();
+        path
+    }
+
+    /// The sheet of a looping learned flipbook has model vectors for every frame (the
+    /// last frame's included: the loop's wrap interval has its in-between frame), the
+    /// JSON names the source; a one-shot says one side at its ends; a retimed sheet
+    /// (`--fit-frames`) keeps the flow; one frame with `--motion-vectors` is refused
+    /// with nothing written.
+    #[test]
+    fn learned_flipbooks_write_model_vectors() {
+        let dir = tempfile::tempdir().unwrap();
+        let m = model(dir.path());
+        let m = m.to_str().unwrap();
+        let synth = |name: &str, extra: &[&str]| {
+            let out = dir.path().join(name);
+            let mut a = vec![
+                "learned",
+                "synth",
+                m,
+                "--size",
+                "48x48",
+                "-q",
+                "--motion-vectors",
+            ];
+            a.extend_from_slice(extra);
+            a.extend(["-o", out.to_str().unwrap()]);
+            (ignis(&a), out)
+        };
+        let (o, out) = synth("loop.png", &["--frames", "6"]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        assert!(dir.path().join("loop.mv.png").exists());
+        let meta = read_json(&dir.path().join("loop.json"));
+        let mv = &meta["motion_vectors"];
+        assert!(mv["source"].as_str().unwrap().starts_with("model"), "{mv}");
+        assert!(
+            mv["direction"].as_str().unwrap().contains("wrapping"),
+            "{mv}"
+        );
+        let fb = ignis_media::read_flipbook(&out.with_extension("json")).unwrap();
+        let motion = fb.motion.unwrap();
+        assert_eq!(motion.len(), 6);
+        for (k, f) in motion.iter().enumerate() {
+            assert_eq!(f.len(), 48 * 48);
+            let moving = f.iter().filter(|v| v[0].hypot(v[1]) > 0.05).count();
+            assert!(moving > 0, "frame {k} has no motion");
+        }
+        let (o, _) = synth("once.png", &["--frames", "5", "--no-loop"]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let meta = read_json(&dir.path().join("once.json"));
+        let d = meta["motion_vectors"]["direction"].as_str().unwrap();
+        assert!(d.contains("one side only"), "{d}");
+        let (o, _) = synth(
+            "fit.png",
+            &["--frames", "5", "--fit-frames", "--columns", "3"],
+        );
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let meta = read_json(&dir.path().join("fit.json"));
+        assert!(meta["motion_vectors"].get("source").is_none(), "{meta}");
+        for extra in [&["--no-loop"][..], &[]] {
+            let mut a = vec!["--frames", "1"];
+            a.extend_from_slice(extra);
+            let (o, _) = synth("one.png", &a);
+            assert!(!o.status.success());
+            let err = String::from_utf8_lossy(&o.stderr);
+            assert!(err.contains("frames"), "{err}");
+            assert!(files_in(dir.path()).iter().all(|f| !f.starts_with("one")));
+        }
+    }
+}

@@ -368,7 +368,13 @@ impl<'m> Synthesiser<'m> {
             self.loop_frame_state(size);
             return;
         }
-        let tau = self.frame as f64 * self.rate;
+        self.process_state_at(self.frame as f64 * self.rate);
+    }
+
+    /// Sets `raw` to the free-running process's state at process time `tau` (steps): step
+    /// `i = ⌊tau⌋` and, between steps, the linear blend towards step `i + 1`. Runs the
+    /// process on as far as `tau` needs; `tau` must not go back past the last step taken.
+    fn process_state_at(&mut self, tau: f64) {
         let i = tau.floor() as u64;
         let frac = tau - i as f64;
         let need = if frac > 1e-9 { i + 2 } else { i + 1 };

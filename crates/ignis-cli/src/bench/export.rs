@@ -14,14 +14,18 @@
 //! Two further variants show where one vector per frame falls short: forward/backward
 //! pairs per key interval (`*_pairwise`, two sheets' worth), and one vector per key frame
 //! chosen per pixel among the forward, reversed backward, central and zero vectors by the
-//! true in-between frames (`*_chosen`, storable; held out at t = 0.25 / 0.75).
+//! true in-between frames (`*_chosen`, storable; held out at t = 0.25 / 0.75). The learned
+//! row's sheet is written as `ignis learned synth --motion-vectors` writes it (the model's
+//! vectors chosen that way, [`crate::learned::ModelMotion`]), with the flow's vectors beside
+//! it for comparison; every row's vectors are also read as an engine may filter them
+//! (`filtered`: bilinear between pixel centres, mip level 1).
 
 use crate::global::Global;
 use crate::output::flow_source;
 use anyhow::{Context, Result};
 use ignis_core::{RgbaFrame, Size};
 use ignis_media::write::motion::{linear_blend, mv_blend};
-use ignis_media::{FlipbookOptions, ReadOptions, WriteOptions};
+use ignis_media::{FlipbookOptions, MotionSource, ReadOptions, WriteOptions};
 use serde_json::json;
 use std::time::Instant;
 
@@ -128,6 +132,7 @@ fn case(
     frames: &[RgbaFrame],
     dir: &std::path::Path,
     known: Known,
+    motion: MotionSource,
 ) -> Result<serde_json::Value> {
     let kept: Vec<RgbaFrame> = frames.iter().step_by(2).cloned().collect();
     let path = dir.join(format!("{name}.png"));
@@ -135,7 +140,7 @@ fn case(
         loop_: false,
         flipbook: FlipbookOptions {
             padding: 2,
-            motion: Some(flow_source()),
+            motion: Some(motion.clone()),
             ..Default::default()
         },
         ..Default::default()
@@ -167,10 +172,18 @@ fn case(
             "sheet": figures_of(blend_errors(&fb.frames, &mid, frames)),
             "exact_colour": figures_of(blend_errors(&kept, &mid, frames)),
         },
+        "filtered": filtered(&fb.frames, &mv, frames),
         "diagnosis": diagnosis(&kept, frames, &mv, known)?,
     });
     if let (Some(r), serde_json::Value::Object(e)) = (row.as_object_mut(), extra) {
         r.extend(e);
+    }
+    if let Some((source, _)) = motion.description() {
+        // what the flow would have written, for comparison (unquantised)
+        row["motion_source"] = json!(source);
+        let flow = gated_velocities(&fb.frames)?;
+        row["flow_sheet"] = figures_of(blend_errors(&fb.frames, &flow, frames));
+        row["flow_filtered"] = filtered(&fb.frames, &flow, frames);
     }
     Ok(row)
 }
@@ -233,7 +246,13 @@ fn learned_case(
         ],
         pairs: Some(model_pairs(&model.shape, &warps, size, 2)),
     };
-    let mut row = case("learned", &frames, dir, known)?;
+    let mut row = case(
+        "learned",
+        &frames,
+        dir,
+        known,
+        cli_model_source(&model, n.div_ceil(2))?,
+    )?;
     row["trained_on"] = json!(trained_on);
     let (frames, warps) = learned(&model, 2 * n - 1, 4.0)?;
     let known = Known {
@@ -271,6 +290,108 @@ fn learned_model(
         model,
         "synthetic clip (ignis_learned::synthetic, candle.mp4 not found)",
     ))
+}
+
+/// The motion source `ignis learned synth --motion-vectors` gives a one-shot flipbook of
+/// the `keys` frames [`learned`] renders at the model's rate (the key frames of the
+/// learned row): the same recording ([`crate::learned::ModelMotion`]: warps, in-between
+/// frames from [`ignis_learned::Synthesiser::between_into`]) and the same choice.
+fn cli_model_source(model: &ignis_learned::FlameModel, keys: usize) -> Result<MotionSource> {
+    let fps = model
+        .summary
+        .fps
+        .context("the learned model has no frame rate")?;
+    let mut synth = ignis_learned::Synthesiser::new_at(model, Default::default(), 1, Some(fps))?;
+    synth.skip(LEARNED_WARM_UP.round() as u64);
+    let palette = ignis_core::Palette::preset("candle")?;
+    let size = Size::new(128, 128)?;
+    let motion = crate::learned::ModelMotion::new(&model.shape, false);
+    motion.start_row();
+    let mut grey = ignis_core::GrayFrame::new(size);
+    for k in 0..keys {
+        synth.next_frame_into(&mut grey);
+        motion.record(
+            &mut synth,
+            size,
+            k + 1 < keys,
+            |f: &mut ignis_core::GrayFrame| palette.apply(f),
+        );
+    }
+    Ok(motion.source())
+}
+
+/// How an engine may sample the vector sheet: `bilinear`, the blend evaluated half-way
+/// between pixel centres (vectors, key frames and the true frame all bilinear there: the
+/// most a half-texel offset mixes neighbouring vectors), and `mip1`, the vector sheet
+/// box-averaged 2×2 and upsampled bilinearly (a minified sprite), at pixel centres.
+fn filtered(keys: &[RgbaFrame], mv: &[Field], truth: &[RgbaFrame]) -> serde_json::Value {
+    json!({
+        "bilinear": figures_of(offset_blend_errors(keys, mv, truth)),
+        "mip1": figures_of(blend_errors(keys, &mip1(mv, keys[0].size()), truth)),
+    })
+}
+
+/// A field as a frame (`[dx, dy, 0, 0]`), so it can be sampled bilinearly.
+fn field_frame(f: &[[f32; 2]], size: Size) -> RgbaFrame {
+    let px = f.iter().map(|v| [v[0], v[1], 0.0, 0.0]).collect();
+    RgbaFrame::from_vec(size, px).expect("one vector per pixel")
+}
+
+/// Each field box-averaged 2×2 (edge pixels repeated for odd sides) and upsampled
+/// bilinearly to `size` again.
+fn mip1(mv: &[Field], size: Size) -> Vec<Field> {
+    use ignis_media::write::motion::sample_bilinear;
+    let (w, h) = (size.width as usize, size.height as usize);
+    let (mw, mh) = (w.div_ceil(2), h.div_ceil(2));
+    let small = Size::new(mw as u32, mh as u32).expect("half a valid size");
+    mv.iter()
+        .map(|f| {
+            let at = |x: usize, y: usize| f[y.min(h - 1) * w + x.min(w - 1)];
+            let down: Field = (0..mw * mh)
+                .map(|i| {
+                    let (x, y) = (2 * (i % mw), 2 * (i / mw));
+                    let q = [at(x, y), at(x + 1, y), at(x, y + 1), at(x + 1, y + 1)];
+                    [0, 1].map(|c| 0.25 * q.iter().map(|v| v[c]).sum::<f32>())
+                })
+                .collect();
+            let m = field_frame(&down, small);
+            (0..w * h)
+                .map(|i| {
+                    let (x, y) = ((i % w) as f32 + 0.5, (i / w) as f32 + 0.5);
+                    let p = sample_bilinear(&m, 0.5 * x, 0.5 * y);
+                    [p[0], p[1]]
+                })
+                .collect()
+        })
+        .collect()
+}
+
+/// [`blend_errors`] with the blend evaluated half-way between pixel centres (see
+/// [`filtered`]).
+fn offset_blend_errors(keys: &[RgbaFrame], mv: &[Field], truth: &[RgbaFrame]) -> (f64, f64) {
+    use ignis_media::write::motion::sample_bilinear;
+    let size = keys[0].size();
+    let w = size.width as usize;
+    let pairs = keys.len() - 1;
+    let (mut e_mv, mut e_plain) = (0.0, 0.0);
+    for k in 0..pairs {
+        let (a, b) = (&keys[k], &keys[k + 1]);
+        let (fa, fb) = (field_frame(&mv[k], size), field_frame(&mv[k + 1], size));
+        let (mut m, mut l, mut t) = (a.clone(), a.clone(), a.clone());
+        for i in 0..size.pixels() {
+            let (x, y) = ((i % w) as f32 + 1.0, (i / w) as f32 + 1.0);
+            let (u, v) = (sample_bilinear(&fa, x, y), sample_bilinear(&fb, x, y));
+            let p = sample_bilinear(a, x - 0.5 * u[0], y - 0.5 * u[1]);
+            let q = sample_bilinear(b, x + 0.5 * v[0], y + 0.5 * v[1]);
+            let (p0, q0) = (sample_bilinear(a, x, y), sample_bilinear(b, x, y));
+            m.data_mut()[i] = [0, 1, 2, 3].map(|c| 0.5 * (p[c] + q[c]));
+            l.data_mut()[i] = [0, 1, 2, 3].map(|c| 0.5 * (p0[c] + q0[c]));
+            t.data_mut()[i] = sample_bilinear(&truth[2 * k + 1], x, y);
+        }
+        e_mv += error(&m, &t);
+        e_plain += error(&l, &t);
+    }
+    (e_mv / pairs as f64, e_plain / pairs as f64)
 }
 
 /// Process steps the learned row skips first (from the model's last training states).
@@ -382,10 +503,17 @@ pub fn figures(g: &Global, quick: bool) -> Result<serde_json::Value> {
         &shift,
         dir.path(),
         Known::model(truth),
+        flow_source(),
     )?);
     let mut held = serde_json::Map::new();
     let (frames, model) = classic(n)?;
-    rows.push(case("classic", &frames, dir.path(), Known::model(model))?);
+    rows.push(case(
+        "classic",
+        &frames,
+        dir.path(),
+        Known::model(model),
+        flow_source(),
+    )?);
     held.insert(
         "classic".into(),
         held_out(&classic(2 * n - 1)?.0, Known::default())?,
@@ -397,6 +525,7 @@ pub fn figures(g: &Global, quick: bool) -> Result<serde_json::Value> {
             &volume(n, p, 2.0)?,
             dir.path(),
             Known::default(),
+            flow_source(),
         )?);
         held.insert(
             name,
@@ -410,7 +539,13 @@ pub fn figures(g: &Global, quick: bool) -> Result<serde_json::Value> {
     for clip in ["candle.mp4", "campfire.mp4"] {
         match footage(clip, n)? {
             Some(frames) => {
-                rows.push(case(clip, &frames, dir.path(), Known::default())?);
+                rows.push(case(
+                    clip,
+                    &frames,
+                    dir.path(),
+                    Known::default(),
+                    flow_source(),
+                )?);
                 if let Some(f) = footage(clip, 2 * n - 1)? {
                     held.insert(clip.to_string(), held_out(&f, Known::default())?);
                 }
@@ -468,11 +603,12 @@ pub fn figures(g: &Global, quick: bool) -> Result<serde_json::Value> {
         "threads": rayon::current_num_threads(),
         "metric": "mean |error| vs the true dropped frame, 8-bit sRGB levels, colour over black",
         "variants": {
-            "headline": "image-only vectors (ignis_flow::motion_vector_pair velocities, as --motion-vectors writes them) on the 8-bit colour sheet read back",
+            "headline": "the vectors --motion-vectors writes, on the 8-bit colour sheet read back: image-only vectors (ignis_flow::motion_vector_pair velocities), except for the learned row, whose sheet is written as `ignis learned synth --motion-vectors` writes it (motion_source: the model's motion chosen per pixel by the rendered in-between frames; flow_sheet: the flow's vectors on the same frames, for comparison)",
+            "filtered": "the headline's vectors sampled as an engine may: bilinear (blend evaluated half-way between pixel centres, vectors, key frames and true frame bilinear there) and mip1 (vector sheet box-averaged 2x2 and upsampled bilinearly); flow_filtered: the same for the flow's vectors on the learned row",
             "exact_colour": "the same vectors on the unquantised key frames (what the --hdr EXR colour sheet gives): separates the 8-bit sheet's rounding from the blend",
             "in_between_flow": "velocities from flows key -> true in-between frames (uses the dropped frames: possible only when the exporter has them, e.g. decimated footage or a generator rendered at twice the rate); vectors unquantised",
             "key_frame_change": "mean |error| between consecutive key frames: how much there is to blend",
-            "held_out_t": "error_reduction at blends t = 0.25 / 0.5 / 0.75 with key frames every 4th frame (footage: every 4th source frame), default vs loose gating, raw_flow_chosen (chosen on the t = 0.5 frames only, so t = 0.25 / 0.75 are held out), and for the learned flame model, model_chosen and model_pairwise; vectors unquantised: checks a change on frames it was not tuned on",
+            "held_out_t": "error_reduction at blends t = 0.25 / 0.5 / 0.75 with key frames every 4th frame (footage: every 4th source frame), default vs loose gating (gated_mip1: the default's vectors read at mip level 1, see filtered), raw_flow_chosen (chosen on the t = 0.5 frames only, so t = 0.25 / 0.75 are held out), and for the learned flame model, model_chosen (what `ignis learned synth --motion-vectors` writes; model_chosen_mip1 read at mip level 1) and model_pairwise; vectors unquantised: checks a change on frames it was not tuned on",
             "diagnosis": "error_reduction of other vectors on the unquantised key frames: gated_sheet_16bit (the sheet's vectors read back), gated_unquantised (the same before 16-bit encoding), raw_flow / raw_flow_full_res (ungated DIS velocities, finest pyramid level 1 / 0), raw_flow_halved, gated_loose (consistency 8 px, explained 0.05), model (the generator's own motion: exact shift for the texture, ignis_classic::motion for classic, ignis_learned::model_motion for the learned flame: its texture attached to the flame's canonical coordinates; central over the neighbouring key frames), model_half_steps (learned: the same from the model's motion to the in-between times, known without rendering them), raw_flow_pairwise / model_pairwise (not one vector per frame: each dropped frame blended with the forward motion for the earlier key frame and the reversed backward motion for the later, from the raw flow / the learned model: what a forward and a backward sheet would give), raw_flow_chosen / model_chosen (uses the in-between frames: one vector per key frame and pixel, storable in a sheet, chosen among none / forward / reversed backward / central so that the blends at 0.5 err least against the true in-between frames, exactly over the run of key frames), best_per_pixel_bound (per dropped pixel the best single velocity within 4 px for both key frames, chosen by looking at the true frame: a bound for vectors shared by the two key frames, not for the chosen ones, which give each key frame its own)",
         },
         "goal_error_reduction": GOAL_REDUCTION,
@@ -645,122 +781,19 @@ fn diagnosis(
         |pairs: &[(Field, Field)]| r3(1.0 - pairwise_error(keys, pairs, truth) / plain.max(1e-12));
     d["raw_flow_pairwise"] = json!(pair_red(&raw_pairs));
     let mids: Vec<&RgbaFrame> = truth.iter().skip(1).step_by(2).collect();
-    d["raw_flow_chosen"] = json!(red(&chosen_velocities(keys, &mids, &raw_pairs)));
+    d["raw_flow_chosen"] = json!(red(&ignis_media::write::motion::chosen_velocities(
+        keys, &mids, &raw_pairs
+    )));
     for (name, m) in known.velocities {
         d[name] = json!(red(&m));
     }
     if let Some(p) = known.pairs {
         d["model_pairwise"] = json!(pair_red(&p));
-        d["model_chosen"] = json!(red(&chosen_velocities(keys, &mids, &p)));
+        d["model_chosen"] = json!(red(&ignis_media::write::motion::chosen_velocities(
+            keys, &mids, &p
+        )));
     }
     Ok(d)
-}
-
-/// Per pixel of each key frame, one of its vectors from `pairs` (see [`pairwise_error`]):
-/// none, the forward motion, the reversed backward motion or their mean (the central
-/// velocity), chosen so that the blends at 0.5 of the whole run of key frames err least against
-/// the true in-between frames `mids` (exact, by dynamic programming along the key frames,
-/// pixel by pixel: each blend's error at a pixel depends only on its two key frames'
-/// vectors there). One vector per key frame, so a sheet can store it; it needs the
-/// in-between frames, which a generator rendered at twice the rate has.
-fn chosen_velocities(
-    keys: &[RgbaFrame],
-    mids: &[&RgbaFrame],
-    pairs: &[(Field, Field)],
-) -> Vec<Field> {
-    use rayon::prelude::*;
-    let n = keys.len();
-    let candidates = chain_candidates(pairs, n);
-    let w = keys[0].width() as usize;
-    let picks: Vec<Vec<u8>> = (0..keys[0].size().pixels())
-        .into_par_iter()
-        .map(|i| {
-            let xy = ((i % w) as f32 + 0.5, (i / w) as f32 + 0.5);
-            best_chain(keys, mids, &candidates, i, xy)
-        })
-        .collect();
-    (0..n)
-        .map(|k| {
-            let c = &candidates[k];
-            picks
-                .iter()
-                .enumerate()
-                .map(|(i, p)| c[p[k] as usize][i])
-                .collect()
-        })
-        .collect()
-}
-
-/// The vectors [`chosen_velocities`] chooses from for each of `n` key frames: none, the
-/// forward motion, the reversed backward motion, the central velocity (one-sided motion
-/// in place of a missing side at the ends).
-fn chain_candidates(pairs: &[(Field, Field)], n: usize) -> Vec<[Field; 4]> {
-    (0..n)
-        .map(|k| {
-            let ahead = (k + 1 < n).then(|| pairs[k].0.clone());
-            let behind = (k > 0).then(|| pairs[k - 1].1.clone());
-            let central =
-                ignis_media::write::motion::frame_velocity(ahead.as_deref(), behind.as_deref())
-                    .expect("at least two key frames");
-            let reversed = behind.map(|b| b.iter().map(|v| [-v[0], -v[1]]).collect());
-            let zero = vec![[0.0; 2]; central.len()];
-            // ties (a dark pixel) go to the first: no motion
-            [
-                zero,
-                ahead.unwrap_or_else(|| central.clone()),
-                reversed.unwrap_or_else(|| central.clone()),
-                central,
-            ]
-        })
-        .collect()
-}
-
-/// [`chosen_velocities`] at pixel `i` (centre `(x, y)`): the candidate index per key frame.
-fn best_chain(
-    keys: &[RgbaFrame],
-    mids: &[&RgbaFrame],
-    candidates: &[[Field; 4]],
-    i: usize,
-    (x, y): (f32, f32),
-) -> Vec<u8> {
-    use ignis_core::palette::linear_to_srgb;
-    use ignis_media::write::motion::sample_bilinear;
-    let enc =
-        |p: [f32; 4]| [0, 1, 2].map(|c| linear_to_srgb((p[c] * p[3]).clamp(0.0, 1.0)) * 255.0);
-    let n = keys.len();
-    // cost of the best chain ending in each candidate, and the step back to it
-    let mut cost = [0f32; 4];
-    let mut back: Vec<[u8; 4]> = Vec::with_capacity(n);
-    for k in 0..n - 1 {
-        let want = enc(mids[k].data()[i]);
-        let prev = candidates[k]
-            .each_ref()
-            .map(|c| sample_bilinear(&keys[k], x - 0.5 * c[i][0], y - 0.5 * c[i][1]));
-        let next = candidates[k + 1]
-            .each_ref()
-            .map(|c| sample_bilinear(&keys[k + 1], x + 0.5 * c[i][0], y + 0.5 * c[i][1]));
-        let mut to = [f32::MAX; 4];
-        let mut from = [0u8; 4];
-        for (b, q) in next.iter().enumerate() {
-            for (a, p) in prev.iter().enumerate() {
-                let got = enc([0, 1, 2, 3].map(|c| 0.5 * (p[c] + q[c])));
-                let e = cost[a] + (0..3).map(|c| (got[c] - want[c]).abs()).sum::<f32>();
-                if e < to[b] {
-                    (to[b], from[b]) = (e, a as u8);
-                }
-            }
-        }
-        cost = to;
-        back.push(from);
-    }
-    let mut pick = vec![0u8; n];
-    pick[n - 1] = (0..4)
-        .min_by(|&a, &b| cost[a].total_cmp(&cost[b]))
-        .unwrap_or(0) as u8;
-    for k in (0..n - 1).rev() {
-        pick[k] = back[k][pick[k + 1] as usize];
-    }
-    pick
 }
 
 /// Held-out blends: key frames every 4th of `frames`, the three frames between each pair
@@ -783,20 +816,29 @@ fn held_out(frames: &[RgbaFrame], known: Known) -> Result<serde_json::Value> {
     };
     // chosen on the t = 0.5 frames only: t = 0.25 and 0.75 are held out
     let mids: Vec<&RgbaFrame> = (0..keys.len() - 1).map(|k| &frames[4 * k + 2]).collect();
+    let gated = gated_velocities(&keys)?;
     let mut sets = vec![
-        ("gated", intervals(gated_velocities(&keys)?)),
+        ("gated_mip1", intervals(mip1(&gated, keys[0].size()))),
+        ("gated", intervals(gated)),
         ("gated_loose", intervals(gated_with(&keys, &loose)?)),
         (
             "raw_flow_chosen",
-            intervals(chosen_velocities(&keys, &mids, &flow_pairs(&keys, 1)?)),
+            intervals(ignis_media::write::motion::chosen_velocities(
+                &keys,
+                &mids,
+                &flow_pairs(&keys, 1)?,
+            )),
         ),
     ];
     sets.extend(known.velocities.into_iter().map(|(n, v)| (n, intervals(v))));
     if let Some(pairs) = &known.pairs {
+        let chosen = ignis_media::write::motion::chosen_velocities(&keys, &mids, pairs);
+        // the chosen sheet read at mip level 1: does switching between candidates survive?
         sets.push((
-            "model_chosen",
-            intervals(chosen_velocities(&keys, &mids, pairs)),
+            "model_chosen_mip1",
+            intervals(mip1(&chosen, keys[0].size())),
         ));
+        sets.push(("model_chosen", intervals(chosen)));
     }
     if let Some(pairs) = known.pairs {
         let reversed = |b: Field| b.into_iter().map(|v| [-v[0], -v[1]]).collect();
@@ -867,53 +909,6 @@ mod tests {
             assert!(f.iter().all(|m| (m[0] - 3.0).abs() < 1e-3));
             assert!(b.iter().all(|m| (m[0] + 3.0).abs() < 1e-3));
         }
-    }
-
-    /// A texture sliding right then back (the middle key frame's motion reverses): the
-    /// chosen vectors, one per key frame, err no more than any single candidate used on
-    /// every key frame (the chain is exact), and on a steady slide they are the motion.
-    #[test]
-    fn chosen_vectors_are_the_best_chain() {
-        let size = Size::new(48, 40).unwrap();
-        let at = |x: f32| ignis_flow::bench::texture(size, 5, [x, 0.0], 1.0).to_rgba();
-        let field = |v: f32| vec![[v, 0.0]; size.pixels()];
-        let constant = |v: f32| -> Vec<Field> { vec![field(v); 3] };
-        // steady: +1.5 px per frame, key frames every other frame
-        let frames: Vec<RgbaFrame> = (0..5).map(|i| at(1.5 * i as f32)).collect();
-        let keys: Vec<RgbaFrame> = frames.iter().step_by(2).cloned().collect();
-        let mids: Vec<&RgbaFrame> = frames.iter().skip(1).step_by(2).collect();
-        let pairs = vec![(field(3.0), field(-3.0)); 2];
-        let chosen = chosen_velocities(&keys, &mids, &pairs);
-        let (e_chosen, plain) = blend_errors(&keys, &chosen, &frames);
-        let (e_exact, _) = blend_errors(&keys, &constant(3.0), &frames);
-        assert!(
-            e_chosen <= e_exact + 1e-9 && e_chosen < 0.5 * plain,
-            "{e_chosen} {plain}"
-        );
-        // there and back
-        let frames: Vec<RgbaFrame> = [0.0, 1.5, 3.0, 1.5, 0.0].map(at).into();
-        let keys: Vec<RgbaFrame> = frames.iter().step_by(2).cloned().collect();
-        let mids: Vec<&RgbaFrame> = frames.iter().skip(1).step_by(2).collect();
-        let pairs = vec![(field(3.0), field(-3.0)), (field(-3.0), field(3.0))];
-        let chosen = chosen_velocities(&keys, &mids, &pairs);
-        let (e_chosen, plain) = blend_errors(&keys, &chosen, &frames);
-        let candidates = chain_candidates(&pairs, 3);
-        for j in 0..4 {
-            let same: Vec<Field> = candidates.iter().map(|c| c[j].clone()).collect();
-            let (e, _) = blend_errors(&keys, &same, &frames);
-            assert!(
-                e_chosen <= e + 1e-9,
-                "{e_chosen} > {e}, candidate {j} throughout"
-            );
-        }
-        // one vector per key frame cannot follow the reversal in both blends
-        let (e_still, _) = blend_errors(&keys, &constant(0.0), &frames);
-        assert!(
-            e_chosen < e_still && e_chosen > 0.05 * plain,
-            "{e_chosen} {e_still}"
-        );
-        assert_eq!(chosen.len(), 3);
-        assert!(chosen.iter().all(|f| f.len() == size.pixels()));
     }
 
     /// Without footage the learned row trains the synthetic clip, whose rate is known, so

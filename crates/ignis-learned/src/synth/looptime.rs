@@ -88,7 +88,7 @@ impl Synthesiser<'_> {
     }
 
     /// Sets `raw` to the loop's state at process time `tau` (cyclic), linear between steps.
-    fn set_loop_state(&mut self, tau: f64) {
+    pub(super) fn set_loop_state(&mut self, tau: f64) {
         let states = self.looped.as_ref().expect("a looping synthesiser");
         let len = states.len();
         let i = tau.floor();

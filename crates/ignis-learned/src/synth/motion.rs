@@ -21,7 +21,7 @@
 
 use super::Synthesiser;
 use crate::shape::{row_profiles, Placement, Shape, ShapeParams};
-use ignis_core::Size;
+use ignis_core::{GrayFrame, Size};
 
 /// How one rendered frame maps its pixels to the flame's canonical coordinates: the
 /// state's shape (after controls) and where it was drawn.
@@ -127,6 +127,40 @@ impl Synthesiser<'_> {
             place: self.place(size),
             frame_height: f64::from(size.height),
         }
+    }
+}
+
+impl Synthesiser<'_> {
+    /// Renders into `out` the state half-way in time between the frame last rendered by
+    /// [`Synthesiser::next_frame_into`] and the next one (controls as they apply there: the
+    /// wind half-way between the two frames'), and returns its warp, without advancing:
+    /// the next frame, and [`Synthesiser::warp`], are as without this call. A loop's frame
+    /// after its last is its first, so after the last frame this is the frame half-way
+    /// across the loop's wrap. For a flipbook's motion vectors: the true in-between frame
+    /// of each pair of consecutive frames. Before the first frame, the first frame's
+    /// state.
+    pub fn between_into(&mut self, out: &mut GrayFrame) -> Warp {
+        let size = out.size();
+        let (raw, shown) = (self.raw.clone(), self.shown.clone());
+        let at = (self.frame as f64 - 0.5).max(0.0);
+        if self.looped.is_some() {
+            // the loop's own times of the two frames (timing it for this size if needed)
+            self.loop_frame_state(size);
+            let times = &self.loop_times.as_ref().expect("just timed").1;
+            let steps = self.looped.as_ref().map_or(0, |s| s.len()) as f64;
+            let n = u64::from(self.loop_frames);
+            let b = times[(self.frame % n) as usize];
+            let a = times[((self.frame + n - 1) % n) as usize];
+            let b = if b < a { b + steps } else { b };
+            let tau = if self.frame == 0 { b } else { 0.5 * (a + b) };
+            self.set_loop_state(tau);
+        } else {
+            self.process_state_at(at * self.rate);
+        }
+        self.render_raw(at, out);
+        let warp = self.warp(size);
+        (self.raw, self.shown) = (raw, shown);
+        warp
     }
 }
 
@@ -373,6 +407,104 @@ mod tests {
         again.data_mut().iter_mut().for_each(|v| *v *= e);
         assert!(frame.max() > 0.0, "a lit frame");
         assert_eq!(frame.data(), again.data());
+    }
+
+    /// A small trained model whose footage rate is 30 fps.
+    fn small_model() -> crate::FlameModel {
+        let clip = crate::synthetic::flame_clip(Size::new(96, 96).unwrap(), 30, 2);
+        let p = crate::TrainParams {
+            em: crate::EmParams {
+                particles: 40,
+                max_iterations: 3,
+                seed: 2,
+                ..crate::EmParams::default()
+            },
+            ..crate::TrainParams::default()
+        };
+        let mut model = crate::train(clip, &p, &mut ignis_core::progress::NoProgress)
+            .unwrap()
+            .model;
+        model.summary.fps = Some(30.0);
+        model
+    }
+
+    /// The frame between two frames is the one a render at twice the rate draws there
+    /// (wind as it applies, placement, exposure), and rendering it changes neither the
+    /// frames after it nor their warps.
+    #[test]
+    fn the_frame_between_is_the_one_at_twice_the_rate() {
+        let model = small_model();
+        let size = Size::new(48, 40).unwrap();
+        let controls = crate::Controls {
+            wind: crate::Wind::Constant(0.3),
+            ..Default::default()
+        };
+        let mut once = Synthesiser::new_at(&model, controls.clone(), 5, Some(30.0)).unwrap();
+        let mut plain = Synthesiser::new_at(&model, controls.clone(), 5, Some(30.0)).unwrap();
+        let mut twice = Synthesiser::new_at(&model, controls, 5, Some(60.0)).unwrap();
+        let (mut f, mut g, mut mid) = (
+            GrayFrame::new(size),
+            GrayFrame::new(size),
+            GrayFrame::new(size),
+        );
+        for k in 0..5 {
+            once.next_frame_into(&mut f);
+            plain.next_frame_into(&mut g);
+            assert_eq!(f.data(), g.data(), "frame {k}");
+            assert_eq!(once.warp(size), plain.warp(size));
+            twice.next_frame_into(&mut g);
+            assert_eq!(f.data(), g.data(), "frame {k} at twice the rate");
+            let warp = once.between_into(&mut mid);
+            assert_eq!(
+                once.warp(size),
+                plain.warp(size),
+                "the frame's warp is kept"
+            );
+            twice.next_frame_into(&mut g);
+            assert_eq!(mid.data(), g.data(), "between {k} and {}", k + 1);
+            assert_eq!(warp, twice.warp(size));
+            assert_ne!(mid.data(), f.data());
+        }
+    }
+
+    /// In a loop the frame after the last is the first: the frame between them is a new
+    /// state (not either end), and rendering the frames between leaves the loop's frames
+    /// as they were.
+    #[test]
+    fn a_loop_has_a_frame_across_its_wrap() {
+        let model = small_model();
+        let size = Size::new(40, 40).unwrap();
+        let n = 6;
+        let render = |between: bool| {
+            let mut s =
+                Synthesiser::looping_at(&model, Default::default(), 3, n, Some(30.0)).unwrap();
+            let (mut f, mut m) = (GrayFrame::new(size), GrayFrame::new(size));
+            let mut frames = Vec::new();
+            let mut mids = Vec::new();
+            for _ in 0..n {
+                s.next_frame_into(&mut f);
+                frames.push(f.clone());
+                if between {
+                    s.between_into(&mut m);
+                    mids.push(m.clone());
+                }
+            }
+            s.next_frame_into(&mut f);
+            frames.push(f.clone());
+            (frames, mids)
+        };
+        let (plain, _) = render(false);
+        let (frames, mids) = render(true);
+        assert_eq!(plain.len(), frames.len());
+        for (a, b) in plain.iter().zip(&frames) {
+            assert_eq!(a.data(), b.data());
+        }
+        // frame n is frame 0 again
+        assert_eq!(frames[n as usize].data(), frames[0].data());
+        let wrap = &mids[n as usize - 1];
+        assert!(wrap.max() > 0.0);
+        assert_ne!(wrap.data(), frames[0].data());
+        assert_ne!(wrap.data(), frames[n as usize - 1].data());
     }
 
     fn bilinear(f: &GrayFrame, x: f32, y: f32) -> f32 {

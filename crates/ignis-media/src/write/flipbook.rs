@@ -130,6 +130,10 @@ pub struct MotionMeta {
     pub color_space: String,
     /// What the vectors are.
     pub direction: String,
+    /// Where they come from when not from the optical flow between the written frames
+    /// (absent: the flow), e.g. a generator's model motion.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub source: Option<String>,
 }
 
 /// A linear data sheet (heat) in the JSON.
@@ -661,7 +665,7 @@ impl FlipbookSink {
                 return Err(MediaError::encode(
                     &self.path,
                     format!(
-                        "optical flow gave {} vectors for {} pixels",
+                        "the motion source gave {} vectors for {} pixels",
                         f.len(),
                         self.size.pixels()
                     ),
@@ -671,13 +675,37 @@ impl FlipbookSink {
             Ok(f.into_iter().map(|[dx, dy]| [ok(dx), ok(dy)]).collect())
         };
         let mut out = Vec::with_capacity(frames.len());
+        let flow = match &src.0 {
+            motion::Source::Flow(flow) => flow,
+            motion::Source::Velocities { f, .. } => {
+                for (r, row) in frames.chunks(per).enumerate() {
+                    let given = f(r, row).map_err(|e| {
+                        MediaError::encode(&self.path, format!("motion vectors: {e}"))
+                    })?;
+                    if given.len() != row.len() {
+                        return Err(MediaError::encode(
+                            &self.path,
+                            format!(
+                                "the generator gave motion vectors for {} frames of {}",
+                                given.len(),
+                                row.len()
+                            ),
+                        ));
+                    }
+                    for v in given {
+                        out.push(check(v)?);
+                    }
+                }
+                return Ok(out);
+            }
+        };
         for row in frames.chunks(per) {
             // Pair k joins frame k to k+1 (the last one wraps to 0 in a loop).
             let pairs = if self.loop_ { per } else { per - 1 };
             let mut fwd = Vec::with_capacity(pairs);
             let mut bwd = Vec::with_capacity(pairs);
             for k in 0..pairs {
-                let (f, b) = (src.0)(&row[k], &row[(k + 1) % per])
+                let (f, b) = flow(&row[k], &row[(k + 1) % per])
                     .map_err(|e| MediaError::encode(&self.path, format!("optical flow: {e}")))?;
                 fwd.push(check(f)?);
                 bwd.push(check(b)?);
@@ -905,12 +933,22 @@ impl Sink for FlipbookSink {
                 neutral: n0,
                 green: if self.opts.engine.conventions().v_up { "up" } else { "down" }.into(),
                 color_space: "linear".into(),
-                direction: if self.loop_ {
+                direction: match self.opts.motion.as_ref().and_then(|m| m.description()) {
+                    Some((_, d)) => d,
+                    None if self.loop_ => {
                     "velocity at frame k's pixels: the mean of the motion k to k+1 and the reversed motion k to k-1, wrapping within each loop"
-                } else {
+                    }
+                    None => {
                     "velocity at frame k's pixels: the mean of the motion k to k+1 and the reversed motion k to k-1 (one side only at the first and last frame)"
+                    }
                 }
                 .into(),
+                source: self
+                    .opts
+                    .motion
+                    .as_ref()
+                    .and_then(|m| m.description())
+                    .map(|(s, _)| s.to_string()),
             });
         }
 

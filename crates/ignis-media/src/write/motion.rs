@@ -33,21 +33,40 @@ pub type FlowPairFn =
     dyn Fn(&RgbaFrame, &RgbaFrame) -> Result<(Vec<[f32; 2]>, Vec<[f32; 2]>), String> + Send + Sync;
 
 /// Where a flipbook's motion vectors come from: a dense optical flow (the CLI passes
-/// `ignis_flow`), or a generator that knows its own motion. Compared by identity.
+/// `ignis_flow`), or a generator that knows its own motion and gives each loop's
+/// velocities itself ([`MotionSource::velocities`]). Compared by identity.
 ///
-/// The writer stores each frame's **velocity**: the mean of its forward motion (to the
-/// next frame) and its reversed backward motion (from the previous frame), because an
-/// engine reads a frame's one vector both when the frame is `prev` of a blend (sampled at
-/// `−mv·t`) and when it is `next` (sampled at `+mv·(1−t)`).
+/// From a flow, the writer stores each frame's **velocity**: the mean of its forward motion
+/// (to the next frame) and its reversed backward motion (from the previous frame), because
+/// an engine reads a frame's one vector both when the frame is `prev` of a blend (sampled
+/// at `−mv·t`) and when it is `next` (sampled at `+mv·(1−t)`).
 #[derive(Clone)]
-pub struct MotionSource(pub Arc<FlowPairFn>);
+pub struct MotionSource(pub(crate) Source);
+
+/// Gives the velocities of one loop of a sheet (one row with variants): called with the
+/// row index and the row's frames as written, returns one velocity field per frame.
+pub type VelocityFn =
+    dyn Fn(usize, &[RgbaFrame]) -> Result<Vec<Vec<[f32; 2]>>, String> + Send + Sync;
+
+#[derive(Clone)]
+pub(crate) enum Source {
+    /// Both flows of each pair of consecutive frames.
+    Flow(Arc<FlowPairFn>),
+    /// Each loop's velocities from the generator, and what they are (the JSON's
+    /// `motion_vectors.source` and `direction`).
+    Velocities {
+        f: Arc<VelocityFn>,
+        source: String,
+        direction: String,
+    },
+}
 
 impl MotionSource {
     /// Wraps a one-direction flow function (called twice per pair of frames).
     pub fn new(
         f: impl Fn(&RgbaFrame, &RgbaFrame) -> Result<Vec<[f32; 2]>, String> + Send + Sync + 'static,
     ) -> MotionSource {
-        MotionSource(Arc::new(move |a, b| Ok((f(a, b)?, f(b, a)?))))
+        MotionSource(Source::Flow(Arc::new(move |a, b| Ok((f(a, b)?, f(b, a)?)))))
     }
 
     /// Wraps a function giving both directions of a pair at once (cheaper when the two
@@ -58,19 +77,51 @@ impl MotionSource {
             + Sync
             + 'static,
     ) -> MotionSource {
-        MotionSource(Arc::new(f))
+        MotionSource(Source::Flow(Arc::new(f)))
+    }
+
+    /// Velocities the generator gives per loop ([`VelocityFn`], in pixels per frame, +y
+    /// down), described in the JSON by `source` (where they come from) and `direction`
+    /// (what each frame's vector is). The writer checks their count and size.
+    pub fn velocities(
+        f: impl Fn(usize, &[RgbaFrame]) -> Result<Vec<Vec<[f32; 2]>>, String> + Send + Sync + 'static,
+        source: impl Into<String>,
+        direction: impl Into<String>,
+    ) -> MotionSource {
+        MotionSource(Source::Velocities {
+            f: Arc::new(f),
+            source: source.into(),
+            direction: direction.into(),
+        })
+    }
+
+    /// `Some((source, direction))` for velocities from the generator, `None` for a flow.
+    pub fn description(&self) -> Option<(&str, &str)> {
+        match &self.0 {
+            Source::Flow(_) => None,
+            Source::Velocities {
+                source, direction, ..
+            } => Some((source, direction)),
+        }
     }
 }
 
 impl fmt::Debug for MotionSource {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str("MotionSource(..)")
+        match self.description() {
+            None => f.write_str("MotionSource(flow)"),
+            Some((s, _)) => write!(f, "MotionSource({s})"),
+        }
     }
 }
 
 impl PartialEq for MotionSource {
     fn eq(&self, other: &Self) -> bool {
-        Arc::ptr_eq(&self.0, &other.0)
+        match (&self.0, &other.0) {
+            (Source::Flow(a), Source::Flow(b)) => Arc::ptr_eq(a, b),
+            (Source::Velocities { f: a, .. }, Source::Velocities { f: b, .. }) => Arc::ptr_eq(a, b),
+            _ => false,
+        }
     }
 }
 
@@ -130,12 +181,19 @@ pub fn sample_bilinear(frame: &RgbaFrame, x: f32, y: f32) -> [f32; 4] {
     let (w, h) = (frame.width() as i64, frame.height() as i64);
     let fx = x - 0.5;
     let fy = y - 0.5;
-    let x0 = fx.floor();
-    let y0 = fy.floor();
-    let (ax, ay) = (fx - x0, fy - y0);
+    // floor without a libm call (the same value for every finite coordinate)
+    let floor = |v: f32| {
+        let i = v as i64;
+        if i as f32 > v {
+            i - 1
+        } else {
+            i
+        }
+    };
+    let (x0, y0) = (floor(fx), floor(fy));
+    let (ax, ay) = (fx - x0 as f32, fy - y0 as f32);
     let cx = |v: i64| v.clamp(0, w - 1) as usize;
     let cy = |v: i64| v.clamp(0, h - 1) as usize;
-    let (x0, y0) = (x0 as i64, y0 as i64);
     let d = frame.data();
     let wu = w as usize;
     let p00 = d[cy(y0) * wu + cx(x0)];
@@ -190,6 +248,213 @@ pub fn linear_blend(prev: &RgbaFrame, next: &RgbaFrame, t: f32) -> RgbaFrame {
         }
     }
     out
+}
+
+/// One motion vector per pixel, `[dx, dy]` in pixels (+y down), row-major.
+pub type Field = Vec<[f32; 2]>;
+
+/// Per pixel of each key frame, one of its vectors from `pairs` (per key interval, the
+/// forward motion from the earlier key frame's pixels and the backward motion from the
+/// later one's): none, the forward motion, the reversed backward motion or their mean
+/// (the central velocity), chosen so that the blends at 0.5 ([`mv_blend`]) of the whole
+/// run of key frames err least against the true in-between frames `mids` (one per
+/// interval), in 8-bit sRGB levels of the colour premultiplied by alpha. Exact, by dynamic
+/// programming along the key frames, pixel by pixel: each blend's error at a pixel depends
+/// only on its two key frames' vectors there. One vector per key frame, so a sheet can
+/// store it: what a generator that can render its in-between frames gives a flipbook.
+///
+/// `pairs.len()` (= `mids.len()`) is `keys.len() − 1` for a one-shot, or `keys.len()` for
+/// a loop (the last interval joins the last key frame to the first; the chain is then a
+/// cycle, solved exactly for each choice at the first key frame). Never worse than no
+/// motion on the blends it was chosen on. Panics if the counts or sizes disagree.
+pub fn chosen_velocities(
+    keys: &[RgbaFrame],
+    mids: &[&RgbaFrame],
+    pairs: &[(Field, Field)],
+) -> Vec<Field> {
+    use rayon::prelude::*;
+    let n = keys.len();
+    assert!(n >= 2, "chosen_velocities: at least two key frames");
+    assert!(
+        pairs.len() == mids.len() && (pairs.len() == n || pairs.len() + 1 == n),
+        "chosen_velocities: {} key frames, {} pairs, {} in-between frames",
+        n,
+        pairs.len(),
+        mids.len()
+    );
+    let size = keys[0].size();
+    assert!(
+        keys.iter().all(|k| k.size() == size) && mids.iter().all(|m| m.size() == size),
+        "chosen_velocities: frames of different sizes"
+    );
+    let candidates = chain_candidates(pairs, n);
+    let w = size.width as usize;
+    let picks: Vec<Vec<u8>> = (0..size.pixels())
+        .into_par_iter()
+        .map_init(Vec::new, |costs, i| {
+            let xy = ((i % w) as f32 + 0.5, (i / w) as f32 + 0.5);
+            interval_costs(keys, mids, &candidates, i, xy, costs);
+            best_chain(costs, n)
+        })
+        .collect();
+    (0..n)
+        .map(|k| {
+            let c = &candidates[k];
+            picks
+                .iter()
+                .enumerate()
+                .map(|(i, p)| c[p[k] as usize][i])
+                .collect()
+        })
+        .collect()
+}
+
+/// The vectors [`chosen_velocities`] chooses from for each of `n` key frames: none, the
+/// forward motion, the reversed backward motion, the central velocity (one-sided motion
+/// in place of a missing side at the ends of a one-shot).
+fn chain_candidates(pairs: &[(Field, Field)], n: usize) -> Vec<[Field; 4]> {
+    let looped = pairs.len() == n;
+    (0..n)
+        .map(|k| {
+            let ahead = (k < pairs.len()).then(|| pairs[k].0.clone());
+            let behind = (k > 0 || looped).then(|| pairs[(k + n - 1) % n].1.clone());
+            let central = frame_velocity(ahead.as_deref(), behind.as_deref())
+                .expect("at least two key frames");
+            let reversed = behind.map(|b| b.iter().map(|v| [-v[0], -v[1]]).collect());
+            let zero = vec![[0.0; 2]; central.len()];
+            // ties (a dark pixel) go to the first: no motion
+            [
+                zero,
+                ahead.unwrap_or_else(|| central.clone()),
+                reversed.unwrap_or_else(|| central.clone()),
+                central,
+            ]
+        })
+        .collect()
+}
+
+/// At pixel `i` (centre `(x, y)`), for each key interval `k`, the error of its blend at
+/// 0.5 against `mids[k]` for each pair of candidates `[a][b]` (`a` of the earlier key
+/// frame, `b` of the later), into `out`.
+fn interval_costs(
+    keys: &[RgbaFrame],
+    mids: &[&RgbaFrame],
+    candidates: &[[Field; 4]],
+    i: usize,
+    (x, y): (f32, f32),
+    out: &mut Vec<[[f32; 4]; 4]>,
+) {
+    let lut = srgb255_table();
+    let enc = |p: [f32; 4]| [0, 1, 2].map(|c| srgb255(lut, p[c] * p[3]));
+    let n = keys.len();
+    out.clear();
+    out.extend((0..mids.len()).map(|k| {
+        let j = (k + 1) % n;
+        let want = enc(mids[k].data()[i]);
+        let prev = candidates[k]
+            .each_ref()
+            .map(|c| sample_bilinear(&keys[k], x - 0.5 * c[i][0], y - 0.5 * c[i][1]));
+        let next = candidates[j]
+            .each_ref()
+            .map(|c| sample_bilinear(&keys[j], x + 0.5 * c[i][0], y + 0.5 * c[i][1]));
+        // dark everywhere the blend looks (most of a fire's frame): every pair errs 0
+        let dark = |p: &[f32; 4]| (0..3).all(|c| p[c] * p[3] <= 0.0);
+        if want == [0.0; 3] && prev.iter().chain(&next).all(dark) {
+            return [[0.0; 4]; 4];
+        }
+        prev.map(|p| {
+            next.map(|q| {
+                let got = enc([0, 1, 2, 3].map(|c| 0.5 * (p[c] + q[c])));
+                (0..3).map(|c| (got[c] - want[c]).abs()).sum::<f32>()
+            })
+        })
+    }));
+}
+
+/// Entries of [`srgb255_table`] over `[0, 1]`.
+const SRGB_STEPS: usize = 4096;
+
+/// `linear_to_srgb(c) · 255` at `SRGB_STEPS + 1` evenly spaced `c` (the blends' error
+/// measure, tabled: [`chosen_velocities`] evaluates it 16 times per pixel and interval).
+fn srgb255_table() -> &'static [f32] {
+    static TABLE: std::sync::OnceLock<Vec<f32>> = std::sync::OnceLock::new();
+    TABLE.get_or_init(|| {
+        (0..=SRGB_STEPS)
+            .map(|i| ignis_core::palette::linear_to_srgb(i as f32 / SRGB_STEPS as f32) * 255.0)
+            .collect()
+    })
+}
+
+/// 8-bit sRGB level (unrounded) of linear `c` (clamped to `[0, 1]`), linear between the
+/// table's entries (within 0.01 levels of the exact curve).
+fn srgb255(table: &[f32], c: f32) -> f32 {
+    let x = c.clamp(0.0, 1.0) * SRGB_STEPS as f32;
+    let i = (x as usize).min(SRGB_STEPS - 1);
+    let f = x - i as f32;
+    table[i] + (table[i + 1] - table[i]) * f
+}
+
+/// The candidate index per key frame (of `n`) whose chain of interval `costs` is least:
+/// along a path for a one-shot (`costs.len() = n − 1`), around the cycle for a loop
+/// (`costs.len() = n`: the best chain for each fixed first choice, then the best of those).
+fn best_chain(costs: &[[[f32; 4]; 4]], n: usize) -> Vec<u8> {
+    if costs.len() + 1 == n {
+        return chain_from(costs, n, [0.0; 4], None).1;
+    }
+    (0..4u8)
+        .map(|s| {
+            let mut start = [f32::INFINITY; 4];
+            start[s as usize] = 0.0;
+            chain_from(costs, n, start, Some(s))
+        })
+        .min_by(|a, b| a.0.total_cmp(&b.0))
+        .expect("four starts")
+        .1
+}
+
+/// Dynamic programming over `costs` from the initial `cost` per candidate of key frame 0;
+/// `close`: the candidate the chain must end in (a loop's last interval returns to key
+/// frame 0). Returns the least total and the choices.
+fn chain_from(
+    costs: &[[[f32; 4]; 4]],
+    n: usize,
+    mut cost: [f32; 4],
+    close: Option<u8>,
+) -> (f32, Vec<u8>) {
+    // the step back from each candidate of each key frame after the first
+    let mut back: Vec<[u8; 4]> = Vec::with_capacity(costs.len());
+    for c in costs {
+        let mut to = [f32::INFINITY; 4];
+        let mut from = [0u8; 4];
+        for b in 0..4 {
+            for a in 0..4 {
+                let e = cost[a] + c[a][b];
+                if e < to[b] {
+                    (to[b], from[b]) = (e, a as u8);
+                }
+            }
+        }
+        cost = to;
+        back.push(from);
+    }
+    let last = match close {
+        Some(s) => s,
+        None => (0..4)
+            .min_by(|&a, &b| cost[a].total_cmp(&cost[b]))
+            .unwrap_or(0) as u8,
+    };
+    let total = cost[last as usize];
+    // back[k] leads from key frame k + 1 (mod n) to key frame k
+    let mut pick = vec![0u8; n];
+    let mut at = last;
+    for k in (0..costs.len()).rev() {
+        at = back[k][at as usize];
+        pick[k] = at;
+    }
+    if close.is_none() {
+        pick[n - 1] = last;
+    }
+    (total, pick)
 }
 
 #[cfg(test)]
@@ -257,5 +522,132 @@ mod tests {
         };
         assert!(maxdiff(&mv_blend(&a, &b, &mv, &mv, 0.0), &a) < 1e-6);
         assert!(maxdiff(&mv_blend(&a, &b, &mv, &mv, 1.0), &b) < 1e-6);
+    }
+
+    /// A smooth texture shifted `dx` px right.
+    fn texture(size: Size, dx: f32) -> RgbaFrame {
+        let w = size.width as usize;
+        let px = (0..size.pixels())
+            .map(|i| {
+                let (x, y) = ((i % w) as f32 + 0.5 - dx, (i / w) as f32 + 0.5);
+                let v = 0.5
+                    + 0.25 * (x * 0.45).sin() * (y * 0.3).cos()
+                    + 0.2 * (x * 0.13 + y * 0.21).sin();
+                [v, 0.8 * v, 0.5 * v, 1.0]
+            })
+            .collect();
+        RgbaFrame::from_vec(size, px).unwrap()
+    }
+
+    /// Total error of the blends at 0.5 of consecutive key frames (the last interval
+    /// wrapping to the first when there are as many `mids` as keys), in the measure
+    /// [`chosen_velocities`] minimises (8-bit sRGB levels of premultiplied colour).
+    fn chain_error(keys: &[RgbaFrame], mids: &[&RgbaFrame], mv: &[Field]) -> f64 {
+        let lut = srgb255_table();
+        let enc = |p: &[f32; 4], c: usize| srgb255(lut, p[c] * p[3]) as f64;
+        let n = keys.len();
+        (0..mids.len())
+            .map(|k| {
+                let j = (k + 1) % n;
+                let m = mv_blend(&keys[k], &keys[j], &mv[k], &mv[j], 0.5);
+                m.data()
+                    .iter()
+                    .zip(mids[k].data())
+                    .map(|(p, q)| (0..3).map(|c| (enc(p, c) - enc(q, c)).abs()).sum::<f64>())
+                    .sum::<f64>()
+            })
+            .sum()
+    }
+
+    /// A texture sliding right then back (the middle key frame's motion reverses), as a
+    /// one-shot and as a loop: the chosen vectors, one per key frame, err no more than no
+    /// motion or any single candidate used on every key frame (the chain is exact), and
+    /// on a steady slide they are close to the motion.
+    #[test]
+    fn chosen_vectors_are_the_best_chain() {
+        let size = Size::new(40, 32).unwrap();
+        let field = |v: f32| vec![[v, 0.0]; size.pixels()];
+        // steady: +1.5 px per frame, key frames every other frame
+        let frames: Vec<RgbaFrame> = (0..5).map(|i| texture(size, 1.5 * i as f32)).collect();
+        let keys: Vec<RgbaFrame> = frames.iter().step_by(2).cloned().collect();
+        let mids: Vec<&RgbaFrame> = frames.iter().skip(1).step_by(2).collect();
+        let pairs = vec![(field(3.0), field(-3.0)); 2];
+        let chosen = chosen_velocities(&keys, &mids, &pairs);
+        let e = chain_error(&keys, &mids, &chosen);
+        let still = chain_error(&keys, &mids, &vec![field(0.0); 3]);
+        let exact = chain_error(&keys, &mids, &vec![field(3.0); 3]);
+        assert!(e <= exact + 1e-6 && e < 0.2 * still, "{e} {exact} {still}");
+        // there and back, as a one-shot and as a loop (its wrap interval blends the last
+        // key frame into the first)
+        let frames: Vec<RgbaFrame> = [0.0, 1.5, 3.0, 1.5].map(|d| texture(size, d)).into();
+        for looped in [false, true] {
+            let keys = vec![frames[0].clone(), frames[2].clone()];
+            let mut mids = vec![&frames[1]];
+            let mut pairs = vec![(field(3.0), field(-3.0))];
+            if looped {
+                mids.push(&frames[3]);
+                pairs.push((field(-3.0), field(3.0)));
+            }
+            let chosen = chosen_velocities(&keys, &mids, &pairs);
+            assert_eq!(chosen.len(), 2);
+            assert!(chosen.iter().all(|f| f.len() == size.pixels()));
+            let e = chain_error(&keys, &mids, &chosen);
+            let candidates = chain_candidates(&pairs, 2);
+            for j in 0..4 {
+                let same: Vec<Field> = candidates.iter().map(|c| c[j].clone()).collect();
+                let e_same = chain_error(&keys, &mids, &same);
+                assert!(
+                    e <= e_same + 1e-6,
+                    "{e} > {e_same}, candidate {j} throughout"
+                );
+            }
+            // one vector per key frame cannot follow the reversal in both blends of the loop
+            let still = chain_error(&keys, &mids, &vec![field(0.0); 2]);
+            let bound = if looped { still } else { 0.5 * still };
+            assert!(e < bound, "looped {looped}: {e} vs {still}");
+        }
+    }
+
+    /// The DP's guarantee on unrelated frames too: never worse than no motion on the
+    /// blends it was chosen on, whatever the candidate vectors (here random ones).
+    #[test]
+    fn chosen_vectors_never_lose_to_none() {
+        let size = Size::new(24, 20).unwrap();
+        let mut rng = ignis_core::Rng::new(3);
+        let mut random_field = || -> Field {
+            (0..size.pixels())
+                .map(|_| [4.0 * rng.normal() as f32, 4.0 * rng.normal() as f32])
+                .collect()
+        };
+        let keys: Vec<RgbaFrame> = (0..4).map(|k| texture(size, 2.3 * k as f32)).collect();
+        let truth: Vec<RgbaFrame> = (0..4)
+            .map(|k| texture(size, 2.3 * k as f32 + 0.9))
+            .collect();
+        for looped in [false, true] {
+            let intervals = if looped { 4 } else { 3 };
+            let mids: Vec<&RgbaFrame> = truth[..intervals].iter().collect();
+            let pairs: Vec<(Field, Field)> = (0..intervals)
+                .map(|_| (random_field(), random_field()))
+                .collect();
+            let chosen = chosen_velocities(&keys, &mids, &pairs);
+            let none = vec![vec![[0.0; 2]; size.pixels()]; 4];
+            let (e, e0) = (
+                chain_error(&keys, &mids, &chosen),
+                chain_error(&keys, &mids, &none),
+            );
+            assert!(e <= e0 + 1e-6, "looped {looped}: {e} > {e0}");
+            assert!(e < e0, "some random vector helps somewhere");
+        }
+    }
+
+    /// The tabled sRGB curve of the choice is within 0.01 levels of the exact one.
+    #[test]
+    fn tabled_srgb_is_close() {
+        let t = srgb255_table();
+        for i in 0..=100_000 {
+            let c = i as f32 / 100_000.0;
+            let exact = ignis_core::palette::linear_to_srgb(c) * 255.0;
+            assert!((srgb255(t, c) - exact).abs() < 0.01, "{c}");
+        }
     }
 }
