@@ -181,6 +181,11 @@ fn case(
     if let Some((source, _)) = motion.description() {
         // what the flow would have written, for comparison (unquantised)
         row["motion_source"] = json!(source);
+        // the generator chose its vectors on the frames this row rebuilds: say so, and
+        // where the figures on frames it did not see are
+        row["in_sample"] = json!(
+            "the vectors were chosen per pixel on the dropped frames themselves (the exporter renders them); held_out_t gives blends at t = 0.25 / 0.75 on frames not used for the choice"
+        );
         let flow = gated_velocities(&fb.frames)?;
         row["flow_sheet"] = figures_of(blend_errors(&fb.frames, &flow, frames));
         row["flow_filtered"] = filtered(&fb.frames, &flow, frames);
