@@ -2371,21 +2371,7 @@ mod learned_motion {
 
     /// A small model trained on the synthetic clip (no footage needed).
     fn model(dir: &Path) -> PathBuf {
-        let clip =
-            ignis_learned::synthetic::flame_clip(ignis_core::Size::new(96, 96).unwrap(), 30, 2);
-        let p = ignis_learned::TrainParams {
-            em: ignis_learned::EmParams {
-                particles: 40,
-                max_iterations: 3,
-                seed: 2,
-                ..Default::default()
-            },
-            ..Default::default()
-        };
-        let mut m = ignis_learned::train(clip, &p, &mut ignis_core::progress::NoProgress)
-            .unwrap()
-            .model;
-        m.summary.fps = Some(30.0);
+        let m = ignis_learned::synthetic::small_model(2);
         let path = dir.join("m.flame");
         m.save(&path).unwrap();
         path

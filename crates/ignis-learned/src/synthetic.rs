@@ -8,6 +8,28 @@
 
 use ignis_core::{GrayFrame, Rng, Size};
 
+/// A small model trained quickly on [`flame_clip`] (96², 30 frames, 40 particles, 3 EM
+/// iterations, all seeded by `seed`), its rate set to the clip's 30 frames per second: for
+/// tests and examples that need a trained model, not a good one.
+pub fn small_model(seed: u64) -> crate::FlameModel {
+    let clip = flame_clip(Size::new(96, 96).expect("a valid size"), 30, seed);
+    let p = crate::TrainParams {
+        em: crate::EmParams {
+            particles: 40,
+            max_iterations: 3,
+            seed,
+            ..crate::EmParams::default()
+        },
+        ..crate::TrainParams::default()
+    };
+    let mut model = crate::train(clip, &p, &mut ignis_core::progress::NoProgress)
+        .expect("the synthetic clip trains")
+        .model;
+    // the clip's oscillators are defined at 30 frames per second
+    model.summary.fps = Some(30.0);
+    model
+}
+
 /// `frames` frames of a flickering flame of `size`, determined by `seed`.
 pub fn flame_clip(size: Size, frames: usize, seed: u64) -> Vec<GrayFrame> {
     let drivers = drivers(frames, seed);

@@ -933,20 +933,7 @@ mod tests {
     /// is the model-rate frame, and the frames between are new states, not copies.
     #[test]
     fn the_learned_row_doubles_the_rate_with_new_frames() {
-        let clip = ignis_learned::synthetic::flame_clip(Size::new(96, 96).unwrap(), 30, 2);
-        let p = ignis_learned::TrainParams {
-            em: ignis_learned::EmParams {
-                particles: 40,
-                max_iterations: 3,
-                seed: 2,
-                ..Default::default()
-            },
-            ..Default::default()
-        };
-        let mut model = ignis_learned::train(clip, &p, &mut ignis_core::progress::NoProgress)
-            .unwrap()
-            .model;
-        model.summary.fps = Some(30.0);
+        let model = ignis_learned::synthetic::small_model(2);
         let (twice, warps) = learned(&model, 5, 2.0).unwrap();
         let (once, _) = learned(&model, 3, 1.0).unwrap();
         assert_eq!(warps.len(), 5);

@@ -363,19 +363,7 @@ mod tests {
     #[test]
     fn the_synthesisers_warp_redraws_its_frame() {
         let size = Size::new(72, 60).unwrap();
-        let clip = crate::synthetic::flame_clip(Size::new(96, 96).unwrap(), 30, 4);
-        let p = crate::TrainParams {
-            em: crate::EmParams {
-                particles: 40,
-                max_iterations: 3,
-                seed: 4,
-                ..crate::EmParams::default()
-            },
-            ..crate::TrainParams::default()
-        };
-        let model = crate::train(clip, &p, &mut ignis_core::progress::NoProgress)
-            .unwrap()
-            .model;
+        let model = crate::synthetic::small_model(4);
         let controls = crate::Controls {
             wind: crate::Wind::Constant(0.4),
             scale: 1.3,
@@ -409,31 +397,12 @@ mod tests {
         assert_eq!(frame.data(), again.data());
     }
 
-    /// A small trained model whose footage rate is 30 fps.
-    fn small_model() -> crate::FlameModel {
-        let clip = crate::synthetic::flame_clip(Size::new(96, 96).unwrap(), 30, 2);
-        let p = crate::TrainParams {
-            em: crate::EmParams {
-                particles: 40,
-                max_iterations: 3,
-                seed: 2,
-                ..crate::EmParams::default()
-            },
-            ..crate::TrainParams::default()
-        };
-        let mut model = crate::train(clip, &p, &mut ignis_core::progress::NoProgress)
-            .unwrap()
-            .model;
-        model.summary.fps = Some(30.0);
-        model
-    }
-
     /// The frame between two frames is the one a render at twice the rate draws there
     /// (wind as it applies, placement, exposure), and rendering it changes neither the
     /// frames after it nor their warps.
     #[test]
     fn the_frame_between_is_the_one_at_twice_the_rate() {
-        let model = small_model();
+        let model = crate::synthetic::small_model(2);
         let size = Size::new(48, 40).unwrap();
         let controls = crate::Controls {
             wind: crate::Wind::Constant(0.3),
@@ -472,7 +441,7 @@ mod tests {
     /// as they were.
     #[test]
     fn a_loop_has_a_frame_across_its_wrap() {
-        let model = small_model();
+        let model = crate::synthetic::small_model(2);
         let size = Size::new(40, 40).unwrap();
         let n = 6;
         let render = |between: bool| {

@@ -371,27 +371,21 @@ fn interval_costs(
     }));
 }
 
-/// Entries of [`srgb255_table`] over `[0, 1]`.
-const SRGB_STEPS: usize = 4096;
-
-/// `linear_to_srgb(c) · 255` at `SRGB_STEPS + 1` evenly spaced `c` (the blends' error
-/// measure, tabled: [`chosen_velocities`] evaluates it 16 times per pixel and interval).
+/// The sRGB encoding tabled for the blends' error measure ([`chosen_velocities`] evaluates
+/// it 16 times per pixel and interval): `ignis_core::loopq`'s table, `linear_to_srgb` at
+/// `i / (len − 1)`.
 fn srgb255_table() -> &'static [f32] {
-    static TABLE: std::sync::OnceLock<Vec<f32>> = std::sync::OnceLock::new();
-    TABLE.get_or_init(|| {
-        (0..=SRGB_STEPS)
-            .map(|i| ignis_core::palette::linear_to_srgb(i as f32 / SRGB_STEPS as f32) * 255.0)
-            .collect()
-    })
+    ignis_core::loopq::srgb_encode_table()
 }
 
 /// 8-bit sRGB level (unrounded) of linear `c` (clamped to `[0, 1]`), linear between the
 /// table's entries (within 0.01 levels of the exact curve).
 fn srgb255(table: &[f32], c: f32) -> f32 {
-    let x = c.clamp(0.0, 1.0) * SRGB_STEPS as f32;
-    let i = (x as usize).min(SRGB_STEPS - 1);
+    let steps = table.len() - 1;
+    let x = c.clamp(0.0, 1.0) * steps as f32;
+    let i = (x as usize).min(steps - 1);
     let f = x - i as f32;
-    table[i] + (table[i + 1] - table[i]) * f
+    (table[i] + (table[i + 1] - table[i]) * f) * 255.0
 }
 
 /// The candidate index per key frame (of `n`) whose chain of interval `costs` is least:
