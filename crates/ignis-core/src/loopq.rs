@@ -64,12 +64,25 @@ pub fn metric_frame_gray(frame: &GrayFrame) -> GrayFrame {
 /// composited over `background` (linear RGB), sRGB-encoded, Rec. 601 luma, area-averaged
 /// down to [`metric_size`].
 pub fn metric_frame_rgba(frame: &RgbaFrame, background: [f32; 3]) -> GrayFrame {
+    use rayon::prelude::*;
     let lut = srgb_lut();
-    let luma: Vec<f32> = frame
-        .data()
-        .iter()
-        .map(|p| luma_with(lut, p, background))
-        .collect();
+    // Rows of pixels side by side (each pixel on its own: the same values on any threads).
+    let mut luma = vec![0f32; frame.data().len()];
+    let rows = |(out, px): (&mut [f32], &[[f32; 4]])| {
+        for (o, p) in out.iter_mut().zip(px) {
+            *o = luma_with(lut, p, background);
+        }
+    };
+    let chunk = (frame.width() as usize).max(1) * 16;
+    if luma.len() >= 1 << 16 {
+        luma.par_chunks_mut(chunk)
+            .zip(frame.data().par_chunks(chunk))
+            .for_each(rows);
+    } else {
+        luma.chunks_mut(chunk)
+            .zip(frame.data().chunks(chunk))
+            .for_each(rows);
+    }
     let g = GrayFrame::from_vec(frame.size(), luma).expect("one value per pixel");
     area_resize(&g, metric_size(frame.size()))
 }
@@ -328,13 +341,20 @@ pub fn area_resize(src: &GrayFrame, size: Size) -> GrayFrame {
     let (dw, dh) = (size.width as usize, size.height as usize);
     let wx = area_weights(sw, dw);
     let wy = area_weights(sh, dh);
-    // Horizontal pass: sh × dw.
+    // Horizontal pass: sh × dw; rows side by side (each output's sum in the same order on
+    // any threads), for large frames only.
+    use rayon::prelude::*;
     let mut tmp = vec![0f32; sh * dw];
-    for y in 0..sh {
+    let horizontal = |(y, out): (usize, &mut [f32])| {
         let row = &src.data()[y * sw..(y + 1) * sw];
-        for (x, taps) in wx.iter().enumerate() {
-            tmp[y * dw + x] = taps.iter().map(|&(i, w)| row[i] * w).sum();
+        for (o, taps) in out.iter_mut().zip(&wx) {
+            *o = taps.iter().map(|&(i, w)| row[i] * w).sum();
         }
+    };
+    if sw * sh >= 1 << 16 {
+        tmp.par_chunks_mut(dw).enumerate().for_each(horizontal);
+    } else {
+        tmp.chunks_mut(dw).enumerate().for_each(horizontal);
     }
     let mut out = vec![0f32; dw * dh];
     for (y, taps) in wy.iter().enumerate() {

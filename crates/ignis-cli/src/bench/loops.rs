@@ -259,12 +259,15 @@ pub fn bench(clips: &[PathBuf], cache: Option<&Path>, g: &Global) -> Result<Valu
             entry["ignis"] = json!({
                 "loop": format!("{}..{}", window.start + b.candidate.start, window.start + b.candidate.end),
                 "closing": b.closing,
-                "predicted": q_json(&b.quality),
+                "predicted": q_json(&d.chosen.predicted_of(b).quality),
+                "expected": q_json(&b.quality),
+                "closings_rendered": d.chosen.rendered,
                 "quality": q_json(&d.measured),
                 "frames": d.frames, "size": d.size.to_string(),
                 "written_as": if flipbook { "flipbook" } else { "png sequence (a flipbook would exceed the writer's 2^26-pixel sheet)" },
                 "why": d.chosen.why,
                 "seconds": {"search": d.chosen.search_s, "closings": d.chosen.evaluate_s,
+                            "closings_rendered": d.chosen.verify_s,
                             "render_and_write": d.render_s, "total": total_s},
             });
             entry["goal"] = json!({

@@ -655,6 +655,48 @@ fn evaluate_one(
     out
 }
 
+/// `c` closed with `closing` whose transition frames are `mids` as they will be written
+/// (rendered at the output's size, then reduced to metric frames like the window's),
+/// measured and scored as [`evaluate`] measures its own in-betweens, the left-out soft
+/// frames chosen again. `mids` must hold `closing.frames()` frames of the window's metric
+/// size; `min_len` as in [`evaluate_with`].
+pub fn evaluate_rendered(
+    win: &MetricWindow,
+    c: &Candidate,
+    closing: Closing,
+    mids: &[GrayFrame],
+    min_len: usize,
+) -> Result<Evaluated> {
+    if mids.len() != closing.frames() {
+        return Err(EigenError::bad(
+            "mids",
+            format!("{} transition frames for a {closing}", mids.len()),
+        ));
+    }
+    if c.is_empty() || c.end + mids.len() > win.len() || mids.len() >= c.len() {
+        return Err(EigenError::bad(
+            "candidate",
+            format!(
+                "{}..{} closed over {} frames does not fit the window",
+                c.start,
+                c.end,
+                mids.len()
+            ),
+        ));
+    }
+    let size = win.frames[0].size();
+    if let Some(m) = mids.iter().find(|m| m.size() != size) {
+        return Err(EigenError::bad(
+            "mids",
+            format!(
+                "a transition frame of {} in a window of {size} metric frames",
+                m.size()
+            ),
+        ));
+    }
+    Ok(measure(win, c, closing, mids, min_len))
+}
+
 /// Seam and ghost of `c` closed with `closing` whose transition frames are `mids`, and its
 /// best version with soft body frames left out ([`Skips`]): the soft runs ([`soft_runs`])
 /// are left out cumulatively, softest first, and every prefix is measured; the best
@@ -1081,5 +1123,73 @@ mod tests {
             .unwrap()
             .1
             .contains("leaving out 1 soft footage frame(s) (30)"));
+    }
+
+    /// A closing measured on given in-betweens: the crossfade's own blends give exactly
+    /// what `evaluate` predicted; other in-betweens (here the bar moved on, as a morph
+    /// would) measure as the plan built with them; wrong counts and sizes are refused.
+    #[test]
+    fn a_closing_measures_as_its_rendered_frames() {
+        let size = Size::new(32, 8).unwrap();
+        // A bar moving one pixel per frame, its period 23 frames; the loop 5..25 is not a
+        // whole period, so its closing has to bridge a jump.
+        let bar = |x: f32| {
+            let mut f = GrayFrame::new(size);
+            for y in 0..8 {
+                for px in 0..32 {
+                    f.data_mut()[y * 32 + px] = (1.0 - (px as f32 - x).abs()).max(0.0);
+                }
+            }
+            f
+        };
+        let frames: Vec<GrayFrame> = (0..60).map(|i| bar(4.0 + (i % 23) as f32)).collect();
+        let win = MetricWindow::new(&frames).unwrap();
+        let c = Candidate {
+            start: 5,
+            end: 25,
+            cost: 0.0,
+        };
+        let closing = Closing::Crossfade(4);
+        let predicted = *evaluate(&win, &[c], &Crossfade, 0)
+            .iter()
+            .find(|e| e.closing == closing)
+            .unwrap();
+        let blends: Vec<GrayFrame> = (0..4)
+            .map(|t| blend(&frames[25 + t], &frames[5 + t], (t + 1) as f32 / 5.0))
+            .collect();
+        let same = evaluate_rendered(&win, &c, closing, &blends, c.len()).unwrap();
+        assert_eq!(same.quality.seam, predicted.quality.seam);
+        assert_eq!(same.quality.ghost, predicted.quality.ghost);
+        assert_eq!(same.score, predicted.score);
+        // In-betweens that move the bar from where the tail leaves it to where the head
+        // starts: a smoother closing than the blends, measured as the built plan.
+        // (the frames around them: 24 at x = 5, 9 at x = 13).
+        let moved: Vec<GrayFrame> = (0..4)
+            .map(|t| bar((5.0 + 8.0 * (t + 1) as f32 / 5.0).round()))
+            .collect();
+        let e = evaluate_rendered(&win, &c, closing, &moved, c.len()).unwrap();
+        let built: Vec<GrayFrame> = plan(&c, closing)
+            .iter()
+            .map(|p| match *p {
+                Planned::Src(i) => frames[i].clone(),
+                Planned::Mix { from, .. } => moved[from - 25].clone(),
+            })
+            .collect();
+        let q = loopq::loop_quality(&built).unwrap();
+        assert!((q.seam - e.quality.seam).abs() < 1e-9, "{q:?} {e:?}");
+        assert!((q.ghost - e.quality.ghost).abs() < 1e-9);
+        assert!(
+            (e.transition_step - predicted.transition_step).abs() > 0.01,
+            "{e:?} {predicted:?}"
+        );
+        assert!(evaluate_rendered(&win, &c, closing, &moved[..3], c.len()).is_err());
+        let small = vec![GrayFrame::new(Size::new(16, 8).unwrap()); 4];
+        assert!(evaluate_rendered(&win, &c, closing, &small, c.len()).is_err());
+        let late = Candidate {
+            start: 40,
+            end: 58,
+            cost: 0.0,
+        };
+        assert!(evaluate_rendered(&win, &late, closing, &moved, 2).is_err());
     }
 }

@@ -37,6 +37,51 @@ pub(crate) fn ffmpeg_available() -> bool {
     })
 }
 
+/// The output option that hands every decoded frame over once, as decoded: `-fps_mode
+/// passthrough` (ffmpeg 5.1 and later; `-vsync` was removed in 9), or `-vsync
+/// passthrough` for an older ffmpeg. Without it, ffmpeg's default frame-rate mode for raw
+/// output fills the time between an accurate seek and the first frame after it: a clip
+/// with a sound track read from frame 20 gave frames 20, 20, 21, … — every ranged read
+/// (loops, windows, transitions) one frame late after a doubled first frame.
+fn passthrough_args() -> [&'static str; 2] {
+    static NEW: OnceLock<bool> = OnceLock::new();
+    let new = *NEW.get_or_init(|| {
+        let out = Command::new(ffmpeg_sidecar::paths::ffmpeg_path())
+            .args(["-hide_banner", "-version"])
+            .output();
+        match out {
+            Ok(o) => fps_mode_known(&String::from_utf8_lossy(&o.stdout)),
+            Err(_) => true,
+        }
+    });
+    if new {
+        ["-fps_mode", "passthrough"]
+    } else {
+        ["-vsync", "passthrough"]
+    }
+}
+
+/// Whether the ffmpeg whose `-version` printed `text` knows `-fps_mode` (5.1 or later; a
+/// build without a release number, e.g. from git, is taken to be recent).
+fn fps_mode_known(text: &str) -> bool {
+    let Some(v) = text
+        .lines()
+        .next()
+        .and_then(|l| l.strip_prefix("ffmpeg version "))
+    else {
+        return true;
+    };
+    let v = v.trim_start_matches(|c: char| !c.is_ascii_digit() && c != 'N');
+    let mut parts = v.split(|c: char| !c.is_ascii_digit());
+    let (Some(Ok(major)), minor) = (
+        parts.next().map(str::parse::<u32>),
+        parts.next().and_then(|m| m.parse::<u32>().ok()),
+    ) else {
+        return true;
+    };
+    (major, minor.unwrap_or(0)) >= (5, 1)
+}
+
 #[derive(serde::Deserialize)]
 struct ProbeOut {
     #[serde(default)]
@@ -244,6 +289,7 @@ impl FfmpegSource {
         cmd.args(PROTOCOL_WHITELIST);
         cmd.input(file_url(&info.path)?);
         cmd.args(["-map", "0:v:0", "-an", "-sn", "-dn"]);
+        cmd.args(passthrough_args());
         if let Some(e) = end {
             cmd.arg("-frames:v").arg((e - start).to_string());
         }
@@ -342,6 +388,21 @@ impl Drop for FfmpegSource {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn fps_mode_is_used_from_5_1() {
+        assert!(fps_mode_known(
+            "ffmpeg version 5.1.9-0+deb12u1 Copyright (c) 2000-2026"
+        ));
+        assert!(fps_mode_known("ffmpeg version 7.1 Copyright"));
+        assert!(fps_mode_known("ffmpeg version n6.0 Copyright"));
+        assert!(!fps_mode_known(
+            "ffmpeg version 4.4.2-0ubuntu0.22.04.1 Copyright"
+        ));
+        assert!(!fps_mode_known("ffmpeg version 5.0.1 Copyright"));
+        assert!(fps_mode_known("ffmpeg version N-113000-g1234 Copyright"));
+        assert!(fps_mode_known("something else"));
+    }
 
     #[test]
     fn rates() {
