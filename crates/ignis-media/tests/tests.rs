@@ -498,14 +498,16 @@ mod probing {
 
     /// Clips with a sound track (as nearly all real footage has) read from a frame: each
     /// frame once, in order. Before `-fps_mode passthrough`, ffmpeg filled the half frame
-    /// the accurate seek starts early with a copy of the first frame (5, 5, 6, 7).
+    /// the accurate seek starts early with a copy of the first frame (5, 5, 6, 7); before
+    /// seeking by the frames' own timestamps, a variable-rate clip's reads started frames
+    /// off.
     #[test]
     fn a_range_of_a_clip_with_sound_gives_each_frame_once() {
         if !have_ffmpeg() {
             return;
         }
         let dir = tempfile::tempdir().unwrap();
-        let cases: [(&str, &[&str]); 3] = [
+        let cases: [(&str, &[&str]); 4] = [
             (
                 "main.mp4",
                 &[
@@ -521,6 +523,25 @@ mod probing {
             ),
             ("clip.webm", &["-c:v", "libvpx", "-c:a", "libvorbis"]),
             ("clip.mov", &["-c:v", "mjpeg", "-c:a", "pcm_s16le"]),
+            // Variable frame rate, as phones record in low light: 25 fps, then from frame 6
+            // each frame held twice as long (frame k is not at k / the average rate).
+            (
+                "vfr.mp4",
+                &[
+                    "-vf",
+                    "setpts='if(lt(N,6),N,6+(N-6)*2)/25/TB'",
+                    "-fps_mode",
+                    "vfr",
+                    "-pix_fmt",
+                    "yuv420p",
+                    "-c:v",
+                    "libx264",
+                    "-profile:v",
+                    "high",
+                    "-c:a",
+                    "aac",
+                ],
+            ),
         ];
         for (name, args) in cases {
             let out = dir.path().join(name);

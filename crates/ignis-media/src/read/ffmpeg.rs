@@ -4,8 +4,11 @@
 //! same. `ffprobe` (run directly; sidecar only locates it) gives size, fps and frame count
 //! from the container without decoding.
 //!
-//! Frames come out of `ffmpeg` as raw 8-bit RGBA on a pipe; crop and scale are applied in
-//! Rust like every other source so results do not depend on ffmpeg's filters.
+//! Frames come out of `ffmpeg` as raw 8-bit RGBA on a pipe, each decoded frame once
+//! (`-fps_mode passthrough`); crop and scale are applied in Rust like every other source so
+//! results do not depend on ffmpeg's filters. A read from frame `k` seeks by the frames' own
+//! timestamps (variable-frame-rate clips have no fixed frame duration) and decodes from the
+//! keyframe before it.
 //!
 //! Set `IGNIS_NO_FFMPEG=1` to behave as if ffmpeg were absent (e.g. to check that a file
 //! decodes on machines without it).
@@ -260,6 +263,103 @@ fn counted_packets(path: &Path) -> Result<Option<u64>> {
     Ok(n)
 }
 
+/// Presentation times of the first video stream's frames, in order, in seconds from the
+/// file's start (what an input `-ss` counts from), from its packets' timestamps (demuxing
+/// only, like [`counted_packets`]; read once per file and modification time in a process).
+/// `None` when a packet has no timestamp. A variable-frame-rate clip (a phone's, slowing
+/// down in low light) has no fixed frame duration, so frame `k` is not at `k / fps`: a
+/// seek by the average rate landed up to several frames off.
+fn frame_times(path: &Path) -> Result<Option<std::sync::Arc<Vec<f64>>>> {
+    use std::collections::HashMap;
+    use std::sync::{Arc, Mutex};
+    type Key = (std::path::PathBuf, u64, Option<std::time::SystemTime>);
+    type Times = Option<Arc<Vec<f64>>>;
+    static TIMES: OnceLock<Mutex<HashMap<Key, Times>>> = OnceLock::new();
+    let meta = std::fs::metadata(path).map_err(|e| MediaError::io(path, e))?;
+    let key = (path.to_path_buf(), meta.len(), meta.modified().ok());
+    let cache = TIMES.get_or_init(Default::default);
+    if let Some(t) = cache.lock().ok().and_then(|c| c.get(&key).cloned()) {
+        return Ok(t);
+    }
+    let out = Command::new(ffmpeg_sidecar::ffprobe::ffprobe_path())
+        .args(["-v", "error", "-select_streams", "v:0"])
+        .args([
+            "-show_entries",
+            "packet=pts_time:format=start_time",
+            "-of",
+            "json",
+        ])
+        .args(PROTOCOL_WHITELIST)
+        .arg("-i")
+        .arg(file_url(path)?)
+        .output()
+        .map_err(|e| MediaError::io(path, e))?;
+    let times = out
+        .status
+        .success()
+        .then(|| parse_frame_times(&out.stdout))
+        .flatten()
+        .map(Arc::new);
+    if let Ok(mut c) = cache.lock() {
+        c.insert(key, times.clone());
+    }
+    Ok(times)
+}
+
+/// [`frame_times`] from ffprobe's JSON: the packets' `pts_time` sorted (packets come in
+/// decoding order) less the format's `start_time`.
+fn parse_frame_times(json: &[u8]) -> Option<Vec<f64>> {
+    #[derive(serde::Deserialize)]
+    struct Out {
+        #[serde(default)]
+        packets: Vec<Packet>,
+        format: Option<Format>,
+    }
+    #[derive(serde::Deserialize)]
+    struct Packet {
+        pts_time: Option<String>,
+    }
+    #[derive(serde::Deserialize)]
+    struct Format {
+        start_time: Option<String>,
+    }
+    let out: Out = serde_json::from_slice(json).ok()?;
+    let start = out
+        .format
+        .and_then(|f| f.start_time)
+        .and_then(|t| t.parse::<f64>().ok())
+        .filter(|t| t.is_finite())
+        .unwrap_or(0.0);
+    let mut t = out
+        .packets
+        .iter()
+        .map(|p| {
+            p.pts_time
+                .as_deref()?
+                .parse::<f64>()
+                .ok()
+                .filter(|t| t.is_finite())
+        })
+        .collect::<Option<Vec<f64>>>()?;
+    if t.is_empty() {
+        return None;
+    }
+    t.sort_by(f64::total_cmp);
+    Some(t.into_iter().map(|x| x - start).collect())
+}
+
+/// Where an input `-ss` must seek to start decoding at frame `start` (> 0): half way
+/// between the frame before it and it, by the frames' own timestamps when the file has
+/// them, else by the average rate (`fps`) — half a frame early, so rounding of timestamps
+/// cannot skip frame `start`.
+fn seek_seconds(times: Option<&[f64]>, start: u64, fps: f64) -> f64 {
+    let k = start as usize;
+    match times {
+        Some(t) if k < t.len() && k > 0 && t[k] > t[k - 1] => 0.5 * (t[k - 1] + t[k]),
+        _ => (start as f64 - 0.5) / fps,
+    }
+}
+
 /// A running `ffmpeg` decoding to raw RGBA on stdout.
 pub(crate) struct FfmpegSource {
     child: FfmpegChild,
@@ -283,8 +383,9 @@ impl FfmpegSource {
         let mut cmd = FfmpegCommand::new();
         cmd.hide_banner();
         if start > 0 {
-            // Half a frame early, so rounding of timestamps cannot skip frame `start`.
-            cmd.seek(format!("{:.6}", (start as f64 - 0.5) / info.fps));
+            let times = frame_times(&info.path)?;
+            let at = seek_seconds(times.as_deref().map(|t| &t[..]), start, info.fps);
+            cmd.seek(format!("{:.6}", at.max(0.0)));
         }
         cmd.args(PROTOCOL_WHITELIST);
         cmd.input(file_url(&info.path)?);
@@ -388,6 +489,28 @@ impl Drop for FfmpegSource {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn seeks_go_half_way_to_the_frame_before() {
+        let json = br#"{"packets": [{"pts_time": "0.100000"}, {"pts_time": "0.166667"},
+            {"pts_time": "0.133333"}, {"pts_time": "0.300000"}],
+            "format": {"start_time": "0.100000"}}"#;
+        let t = parse_frame_times(json).unwrap();
+        let want = [0.0, 0.033333, 0.066667, 0.2];
+        assert!(
+            t.iter().zip(want).all(|(a, b)| (a - b).abs() < 1e-9),
+            "{t:?}"
+        );
+        // Frame 3 follows a long frame: half way between 0.066667 and 0.2, not 2.5 / fps.
+        assert!((seek_seconds(Some(&t), 3, 30.0) - 0.1333335).abs() < 1e-9);
+        assert!((seek_seconds(None, 3, 30.0) - 2.5 / 30.0).abs() < 1e-12);
+        // Beyond the packets, or two equal times: the average rate.
+        assert!((seek_seconds(Some(&t), 4, 30.0) - 3.5 / 30.0).abs() < 1e-12);
+        assert!((seek_seconds(Some(&[0.0, 0.0]), 1, 30.0) - 0.5 / 30.0).abs() < 1e-12);
+        // A packet without a timestamp: no times.
+        assert!(parse_frame_times(br#"{"packets": [{"pts_time": "0.1"}, {}]}"#).is_none());
+        assert!(parse_frame_times(br#"{"packets": []}"#).is_none());
+    }
 
     #[test]
     fn fps_mode_is_used_from_5_1() {
