@@ -27,7 +27,8 @@ use crate::global::Global;
 
 /// Version of the cache layout and of what training stores; part of the key (2: still
 /// lights left out of the masks; 3: colourless parts left out of them; 4: windows read
-/// through ffmpeg from a frame after 0 no longer start with a doubled frame).
+/// through ffmpeg from a frame after 0 no longer start with a doubled frame, and footage
+/// over 1080p is trained at [`TRAIN_MAX_SIDE`]).
 const CACHE_VERSION: u32 = 4;
 
 #[derive(clap::Args, Debug)]
@@ -321,7 +322,16 @@ fn build_entry(
         spec.start = window.start;
         spec.end = Some(window.end);
         spec.stride = 1;
-        let clips = vec![ClipInput::new(spec, ignis_eigen::MediaFootage::open(path)?)];
+        let mut footage = ignis_eigen::MediaFootage::open(path)?;
+        let work = training_size(info.size);
+        if work != info.size {
+            g.say(format!(
+                "training at {work} (the footage is {}; its masks are scaled to the output)",
+                info.size
+            ));
+            footage = footage.scaled(work);
+        }
+        let clips = vec![ClipInput::new(spec, footage)];
         let pre = PreprocessParams {
             train_size: Some(train_size),
             ..Default::default()
@@ -356,6 +366,25 @@ fn build_entry(
     }
     ignis_core::tempfiles::replace_dir(&tmp, dir)
         .with_context(|| format!("moving the cache entry to {}", dir.display()))
+}
+
+/// Longest side of the frames a loop's database is trained on. Pre-processing (masks,
+/// their distance transforms, contours) costs in proportion to the pixels, and a 4K clip
+/// took 2.4 s a frame to train (a 6-s clip over 6 minutes); the masks it stores only become
+/// the loop's matte, feathered and resized to the output. Footage up to 1080p trains at its
+/// own size.
+pub const TRAIN_MAX_SIDE: u32 = 1920;
+
+/// The size a clip of `size` is trained at: itself, or scaled to [`TRAIN_MAX_SIDE`] on its
+/// longest side, keeping its aspect (each side at least 2 px).
+pub fn training_size(size: Size) -> Size {
+    let long = size.width.max(size.height);
+    if long <= TRAIN_MAX_SIDE {
+        return size;
+    }
+    let k = f64::from(TRAIN_MAX_SIDE) / f64::from(long);
+    let side = |v: u32| ((f64::from(v) * k).round() as u32).max(2);
+    Size::new(side(size.width), side(size.height)).unwrap_or(size)
 }
 
 // ---------------------------------------------------------------------------------------
@@ -1614,6 +1643,17 @@ fn metric_frames(path: &Path, window: &Range<usize>, g: &Global) -> Result<Vec<G
 mod tests {
     use super::*;
     use crate::bench::loops::{video_texture, xfade, K};
+
+    #[test]
+    fn large_footage_trains_at_1080p() {
+        let s = |w, h| Size::new(w, h).unwrap();
+        assert_eq!(training_size(s(1920, 1080)), s(1920, 1080));
+        assert_eq!(training_size(s(480, 480)), s(480, 480));
+        assert_eq!(training_size(s(3840, 2160)), s(1920, 1080));
+        assert_eq!(training_size(s(2160, 3840)), s(1080, 1920));
+        assert_eq!(training_size(s(4096, 1716)), s(1920, 804));
+        assert_eq!(training_size(s(8192, 6)), s(1920, 2));
+    }
 
     #[test]
     fn a_visible_seam_is_warned_about() {
