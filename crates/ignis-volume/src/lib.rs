@@ -34,7 +34,7 @@ pub use error::{Result, VolumeError};
 pub use lattice::{Cell, Lattice, Puff};
 pub use looping::LoopTiming;
 pub use mapping::NoiseParams;
-pub use model_motion::model_motion;
+pub use model_motion::{model_motion, Follow};
 pub use motion::{Collision, Keyframe, Obstacle, ParticleSim, Script, SimParams};
 pub use noise::NoiseKind;
 pub use profile::FireProfile;

@@ -4,12 +4,13 @@
 //!
 //! Source: fuller-procedural-volumetric-fire.txt §3–4. A sample at world point `x` has
 //! texture coordinates `tex = L_a⁻¹(x)` in frame `a`'s lattice; its look comes from the
-//! noise at `noise_position(tex, …)` (eq. 11), which scrolls up along the fire. The same
-//! noise feature (the same spatial noise coordinate) is at `tex'` in frame `b`, where
+//! noise at `noise_position(tex, …)` (eq. 11), which scrolls up along the fire while its
+//! time axis advances. A feature of frame `a` is taken to be at `tex'` in frame `b`, where
 //!
-//! - along the fire, `tex'_z · length_b − W_b = tex_z · length_a − W_a`, `W` the scroll
-//!   in world units at each frame's noise time ([`crate::mapping::scroll_time`] × length;
-//!   a loop's scroll is taken modulo its period, so the seam is not a jump);
+//! - along the fire, `tex'_z · length_b = tex_z · length_a + rise`: it rises by `rise`
+//!   world units, by [`Follow`]: not at all (the lattice carries it), with the scroll (a
+//!   fixed spatial noise coordinate), or along the track through the 4-D noise that
+//!   changes least (the default); over the shortest way round a loop;
 //! - across it, `tex'_xy · r_b(tex'_z) = tex_xy · r_a(tex_z)` (eq. 10 scales the noise by
 //!   the local radius);
 //!
@@ -18,23 +19,54 @@
 //! the mean of its samples' motions weighted by their emission (luminance × alpha of the
 //! shaded sample: what each adds to the additive blend), 0 where it has none.
 //!
-//! What this leaves out: the noise's own change in time (its 4-th coordinate `w`, which no
-//! displacement describes) and the profile, which does not scroll; so it is one candidate
-//! among others (none / forward / backward), chosen per pixel by the rendered in-between
-//! frames where they exist (`ignis_media::write::motion::chosen_velocities`). Samples come
-//! from the renderer's reference path (`render/reference.rs`: every slice, exact inverse):
-//! slow, but exact and the same samples the image is made of.
+//! What no displacement describes: the noise's own change in time and the profile, which
+//! does not scroll; so model motion is one candidate among others (none / forward /
+//! backward), chosen per pixel by the rendered in-between frames where they exist
+//! (`ignis_media::write::motion::chosen_velocities`). Samples come from the renderer's
+//! reference path (`render/reference.rs`: every slice, exact inverse): slow, but exact
+//! and the same samples the image is made of.
 
 use crate::error::{Result, VolumeError};
 use crate::lattice::{Lattice, V3};
+use crate::mapping::{kernel, turbulence_at, turbulence_at_periodic, LoopMix, PeriodicLoop};
 use crate::render::{reference_sums, FireInstance, RenderParams};
 use crate::scene::{FireScene, Pose};
 
-/// Per pixel of `scene`'s frame in pose `from`, its motion to each pose of `to`, in pixels
-/// (`[dx, dy]`, y down; row-major). See the module docs. Fails if the poses do not hold one
-/// lattice per fire of `scene`, or as [`crate::render()`] fails.
-pub fn model_motion(scene: &FireScene, from: &Pose, to: &[&Pose]) -> Result<Vec<Vec<[f32; 2]>>> {
-    for p in std::iter::once(from).chain(to.iter().copied()) {
+/// Which motion of the noise a feature follows (see the module docs).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Follow {
+    /// What the sample shows: the profile is looked up at `v = tex_z + f(tex_z) · T(tex)`
+    /// (eq. 12–13), so the same profile value is, in frame `b`, at the height `z'` on the
+    /// same line along the fire (same `tex_x, tex_y`: same `u`) where
+    /// `z' + f(z') · T_b(z') = v`, found by Newton's method from `tex_z` (the nearest such
+    /// point; a sample where it fails, at a fold of the displaced profile, is left out).
+    /// The noise's scroll, its change in time and the lattice's motion all enter through
+    /// `T_b` and `L_b`: the model's own optical flow, exact for a single sample.
+    Profile,
+    /// The lattice only: a feature keeps its texture coordinates (no scroll).
+    Lattice,
+    /// The lattice and the scroll of eq. (11): a feature keeps its spatial noise
+    /// coordinate, as if the noise did not change in time.
+    Scroll,
+    /// The lattice and the track through the 4-D noise that changes least: the noise
+    /// scrolls up along the fire at `s` (world units per second) while its time axis `w`
+    /// (sheared with height by [`crate::mapping::TIME_SHEAR`] `= c`) advances at `τ`;
+    /// a feature rising at `v` meets a change of `(v − s, τ + c·v)` in noise space per
+    /// second (both scaled by the frequency), least for `v = (s − c·τ) / (1 + c²)`. For
+    /// isotropic noise the blend's expected error grows with that distance, so this is the
+    /// velocity the model predicts best.
+    Noise,
+}
+
+/// Per pixel of `scene`'s frame in pose `from`, its motion to each `(pose, follow)` of
+/// `to`, in pixels (`[dx, dy]`, y down; row-major). See the module docs. Fails if the
+/// poses do not hold one lattice per fire of `scene`, or as [`crate::render()`] fails.
+pub fn model_motion(
+    scene: &FireScene,
+    from: &Pose,
+    to: &[(&Pose, Follow)],
+) -> Result<Vec<Vec<[f32; 2]>>> {
+    for p in std::iter::once(from).chain(to.iter().map(|t| t.0)) {
         if p.lattices.len() != scene.fires.len() || p.scroll_lengths.len() != scene.fires.len() {
             return Err(VolumeError::bad(
                 "pose",
@@ -49,20 +81,32 @@ pub fn model_motion(scene: &FireScene, from: &Pose, to: &[&Pose]) -> Result<Vec<
     let size = scene.size;
     let inst = from.instances(scene);
     let params = from.render_params(scene);
-    let scroll_a: Vec<(f32, Option<f32>)> = inst
+    let rates: Vec<[f32; 2]> = inst
         .iter()
-        .map(|f| world_scroll(f, &params, from.time))
+        .map(|f| noise_rates(f, &params, from.time))
         .collect();
-    let targets: Vec<(Vec<FireInstance>, Vec<(f32, Option<f32>)>)> = to
+    let noise_a: Vec<NoiseAt> = inst
         .iter()
-        .map(|p| {
+        .map(|f| NoiseAt::new(f, &params, from.time))
+        .collect();
+    // per target: its fires, per fire the rise (world units along the fire) and noise
+    let targets: Vec<Target> = to
+        .iter()
+        .map(|&(p, follow)| {
+            let dt = loop_delta(p.time - from.time, from.loop_period);
+            let rise = rates.iter().map(|&r| rise(r, follow) * dt).collect();
             let inst = p.instances(scene);
             let params = p.render_params(scene);
-            let sc = inst
+            let noise = inst
                 .iter()
-                .map(|f| world_scroll(f, &params, p.time))
+                .map(|f| NoiseAt::new(f, &params, p.time))
                 .collect();
-            (inst, sc)
+            Target {
+                inst,
+                rise,
+                noise,
+                follow,
+            }
         })
         .collect();
     let camera = scene.camera;
@@ -78,9 +122,16 @@ pub fn model_motion(scene: &FireScene, from: &Pose, to: &[&Pose]) -> Result<Vec<
             return out;
         };
         for (j, &t) in chunk.iter().enumerate() {
-            let (tinst, tsc) = &targets[t];
-            let b = &tinst[fi];
-            let tex_b = follow(tex, a.lattice, scroll_a[fi], b.lattice, tsc[fi]);
+            let tg = &targets[t];
+            let b = &tg.inst[fi];
+            let tex_b = if tg.follow == Follow::Profile {
+                match same_profile(tex, (a, noise_a[fi]), (b, tg.noise[fi])) {
+                    Some(z) => [tex[0], tex[1], z],
+                    None => continue,
+                }
+            } else {
+                follow(tex, a.lattice, b.lattice, tg.rise[fi])
+            };
             if let Some(p1) = camera.project(forward_extrapolated(b.lattice, tex_b), size) {
                 out[3 * j] = w;
                 out[3 * j + 1] = w * (p1[0] - p0[0]);
@@ -113,33 +164,121 @@ pub fn model_motion(scene: &FireScene, from: &Pose, to: &[&Pose]) -> Result<Vec<
     Ok(fields)
 }
 
-/// Most target poses one march serves (more are done in further marches).
-const MAX_TARGETS: usize = 2;
-
-/// Fire `f`'s scroll at scene time `time` in world units along the fire, `W` in the
-/// module docs, and its period where a loop makes it periodic.
-fn world_scroll(f: &FireInstance, params: &RenderParams, time: f32) -> (f32, Option<f32>) {
-    if let Some(pl) = params.periodic(f, time) {
-        let period = pl.period[0] as f32 / f.noise.frequency;
-        return (pl.scroll_time * pl.scroll_length, Some(period));
-    }
-    if let Some(m) = params.mix(f, time) {
-        return (
-            m.time * f.scroll_length(),
-            Some(m.period * f.scroll_length()),
-        );
-    }
-    (time * f.noise.time_scale * f.scroll_length(), None)
+/// One target pose of [`model_motion`].
+struct Target<'a> {
+    inst: Vec<FireInstance<'a>>,
+    rise: Vec<f32>,
+    noise: Vec<NoiseAt>,
+    follow: Follow,
 }
 
-/// Texture coordinates in lattice `b` (scroll `sb`) of the noise feature at `tex` in
-/// lattice `a` (scroll `sa`): see the module docs.
-fn follow(tex: V3, a: &Lattice, sa: (f32, Option<f32>), b: &Lattice, sb: (f32, Option<f32>)) -> V3 {
-    let mut dw = sb.0 - sa.0;
-    if let Some(p) = sa.1.or(sb.1).filter(|p| *p > 0.0) {
-        dw -= p * (dw / p).round();
+/// How a fire's noise is evaluated at one instant, as the renderer's reference path
+/// evaluates it (`render/reference.rs`).
+#[derive(Clone, Copy, Debug)]
+enum NoiseAt {
+    Periodic(PeriodicLoop),
+    Mix(LoopMix),
+}
+
+impl NoiseAt {
+    fn new(f: &FireInstance, params: &RenderParams, time: f32) -> NoiseAt {
+        if let Some(pl) = params.periodic(f, time) {
+            return NoiseAt::Periodic(pl);
+        }
+        NoiseAt::Mix(params.mix(f, time).unwrap_or(LoopMix {
+            time: time * f.noise.time_scale,
+            period: 0.0,
+            a: 1.0,
+            b: 0.0,
+        }))
     }
-    let z = (tex[2] * a.length() + dw) / b.length().max(1e-12);
+
+    /// The profile height `v = z + f(z) · T(tex)` that fire `f` shows at `tex` (eq. 12–13).
+    fn profile_v(self, f: &FireInstance, tex: V3) -> f32 {
+        let n = &f.noise;
+        if n.octaves == 0 || n.stability == 0.0 {
+            return tex[2];
+        }
+        let radius = f.lattice.radius_at(tex[2]);
+        let length = f.lattice.length();
+        let t = match self {
+            NoiseAt::Periodic(pl) => turbulence_at_periodic(tex, radius, length, pl, n, f.offset),
+            NoiseAt::Mix(m) => {
+                turbulence_at(tex, radius, [length, f.scroll_length()], m, n, f.offset)
+            }
+        };
+        tex[2] + kernel(tex[2], n.stability) * t
+    }
+}
+
+/// [`Follow::Profile`]: the height `z'` in fire `b` (same `tex_x, tex_y`) showing the
+/// profile height that fire `a` shows at `tex`, or `None` where Newton's method from
+/// `tex_z` fails (a fold: the displaced profile turns back on itself there).
+fn same_profile(
+    tex: V3,
+    (a, na): (&FireInstance, NoiseAt),
+    (b, nb): (&FireInstance, NoiseAt),
+) -> Option<f32> {
+    const H: f32 = 1e-3;
+    let v = na.profile_v(a, tex);
+    let g = |z: f32| nb.profile_v(b, [tex[0], tex[1], z]) - v;
+    let mut z = tex[2];
+    let mut gz = g(z);
+    let slope = (g(z + H) - gz) / H;
+    // a slope near zero or negative: a fold, where the nearest match is ill-defined
+    if !(slope > 0.1) {
+        return None;
+    }
+    for _ in 0..12 {
+        if gz.abs() < 1e-4 {
+            return ((z - tex[2]).abs() < 0.5).then_some(z);
+        }
+        z -= gz / slope;
+        gz = g(z);
+    }
+    None
+}
+
+/// Most targets one march serves (more are done in further marches).
+const MAX_TARGETS: usize = 8;
+
+/// Fire `f`'s noise at scene time `time`: `[s, τ]`, how fast its scroll moves along the
+/// fire (world units per second) and its time axis `w` advances (noise time per second).
+fn noise_rates(f: &FireInstance, params: &RenderParams, time: f32) -> [f32; 2] {
+    let ts = f.noise.time_scale;
+    if let Some(pl) = params.periodic(f, time) {
+        // scroll: `scroll_time · scroll_length` with `scroll_time` the loop's noise time;
+        // `w`: `Pw / (period · frequency)` noise-time units per loop noise-time unit
+        let period = params.loop_period.unwrap_or(1.0) * ts;
+        let w = pl.period[1] as f32 / (period * f.noise.frequency);
+        return [ts * pl.scroll_length, ts * w];
+    }
+    [ts * f.scroll_length(), ts]
+}
+
+/// `dt` seconds as the shortest way round a loop of `period` seconds (if any).
+fn loop_delta(dt: f32, period: Option<f32>) -> f32 {
+    match period.filter(|p| *p > 0.0) {
+        Some(p) => dt - p * (dt / p).round(),
+        None => dt,
+    }
+}
+
+/// How fast (world units per second, along the fire) a feature following `follow` rises
+/// in noise moving at `[s, τ]` ([`noise_rates`]).
+fn rise([s, tau]: [f32; 2], follow: Follow) -> f32 {
+    let c = crate::mapping::TIME_SHEAR;
+    match follow {
+        Follow::Lattice | Follow::Profile => 0.0,
+        Follow::Scroll => s,
+        Follow::Noise => (s - c * tau) / (1.0 + c * c),
+    }
+}
+
+/// Texture coordinates in lattice `b` of the feature at `tex` in lattice `a` that rose by
+/// `rise` world units along the fire: see the module docs.
+fn follow(tex: V3, a: &Lattice, b: &Lattice, rise: f32) -> V3 {
+    let z = (tex[2] * a.length() + rise) / b.length().max(1e-12);
     let k = a.radius_at(tex[2]) / b.radius_at(z).max(1e-12);
     [tex[0] * k, tex[1] * k, z]
 }
@@ -194,53 +333,91 @@ mod tests {
 
     /// A fire moved 0.1 world units to the right between two poses (same noise time):
     /// every bright pixel moves right by 0.1 units at the fire's depth (6.5 to 7.5 units),
-    /// not up or down; pixels with no samples do not move.
+    /// not up or down, whatever it follows; pixels with no samples do not move.
     #[test]
     fn a_translated_fire_moves_by_its_translation() {
         let s = scene();
         let (bright, a) = bright(&s);
         let mut b = a.clone();
         b.lattices[0] = lattice(&s, column(0.1));
-        let m = model_motion(&s, &a, &[&b]).unwrap().remove(0);
+        let to = [Follow::Lattice, Follow::Scroll, Follow::Noise].map(|f| (&b, f));
         let (lo, hi) = (0.1 * px_per_unit(7.5), 0.1 * px_per_unit(6.5));
-        for (i, v) in m.iter().enumerate() {
-            if bright[i] {
-                assert!(v[0] > lo - 1e-3 && v[0] < hi + 1e-3, "pixel {i}: {v:?}");
-                assert!(v[1].abs() < 0.02, "pixel {i}: {v:?}");
+        for m in model_motion(&s, &a, &to).unwrap() {
+            for (i, v) in m.iter().enumerate() {
+                if bright[i] {
+                    assert!(v[0] > lo - 1e-3 && v[0] < hi + 1e-3, "pixel {i}: {v:?}");
+                    assert!(v[1].abs() < 0.02, "pixel {i}: {v:?}");
+                }
             }
+            assert_eq!(m[0], [0.0, 0.0], "a corner pixel shows no fire");
         }
-        assert_eq!(m[0], [0.0, 0.0], "a corner pixel shows no fire");
     }
 
     /// A fire standing still while its noise scrolls: half a second later every bright
-    /// pixel shows what was `0.5 · scroll_length` world units lower (its noise rises),
-    /// so it moves straight up by that much on screen.
+    /// pixel shows what was `rise` world units lower, so it moves straight up by that much
+    /// on screen: `0.5 · scroll_length` following the scroll, `0.5 · (scroll_length − ½ ·
+    /// 1) / (1 + ¼)` along the least-changing track (time scale 1), nothing with the lattice.
     #[test]
     fn a_pure_scroll_moves_straight_up() {
         let s = scene();
         let (bright, a) = bright(&s);
         let mut b = a.clone();
         b.time += 0.5;
-        let rise = 0.5 * a.scroll_lengths[0];
-        let m = model_motion(&s, &a, &[&b]).unwrap().remove(0);
-        let (lo, hi) = (rise * px_per_unit(7.5), rise * px_per_unit(6.5));
-        let mut n = 0;
-        for (i, v) in m.iter().enumerate() {
-            if bright[i] {
-                assert!(-v[1] > lo * 0.99 && -v[1] < hi * 1.01, "pixel {i}: {v:?}");
-                assert!(v[0].abs() < 0.02, "pixel {i}: {v:?}");
-                n += 1;
+        let sl = a.scroll_lengths[0];
+        let cases = [
+            (Follow::Scroll, 0.5 * sl),
+            (Follow::Noise, 0.5 * (sl - 0.5) / 1.25),
+            (Follow::Lattice, 0.0),
+        ];
+        let to = cases.map(|(f, _)| (&b, f));
+        let fields = model_motion(&s, &a, &to).unwrap();
+        for ((_, rise), m) in cases.iter().zip(&fields) {
+            let (lo, hi) = (rise * px_per_unit(7.5), rise * px_per_unit(6.5));
+            let mut n = 0;
+            for (i, v) in m.iter().enumerate() {
+                if bright[i] {
+                    assert!(-v[1] >= lo * 0.99 - 1e-4, "pixel {i}: {v:?} {rise}");
+                    assert!(-v[1] <= hi * 1.01 + 1e-4, "pixel {i}: {v:?} {rise}");
+                    assert!(v[0].abs() < 0.02, "pixel {i}: {v:?}");
+                    n += 1;
+                }
             }
+            assert!(n > 200);
         }
-        assert!(n > 200);
-        // backwards in time it moves down by as much
-        let back = model_motion(&s, &b, &[&a]).unwrap().remove(0);
-        let i = m.iter().zip(&bright).position(|(_, &b)| b).unwrap();
+        // backwards in time it moves down
+        let back = model_motion(&s, &b, &[(&a, Follow::Noise)])
+            .unwrap()
+            .remove(0);
+        let i = bright.iter().position(|&b| b).unwrap();
         assert!(back[i][1] > 0.0, "{:?}", back[i]);
     }
 
-    /// Two targets in one march give the same fields as one target each; a pose that does
-    /// not belong to the scene is refused.
+    /// In a loop, a step across the seam is the short way round: the frame just before the
+    /// end moves to frame 0 as it moves to the frame one step later.
+    #[test]
+    fn a_loop_seam_is_one_step() {
+        let s = scene();
+        let (bright, a) = bright(&s);
+        let period = 2.0;
+        let at = |t: f32| Pose {
+            time: t,
+            loop_period: Some(period),
+            ..a.clone()
+        };
+        let (end, start, next) = (at(period - 0.1), at(0.0), at(period + 0.0));
+        let m = model_motion(
+            &s,
+            &end,
+            &[(&start, Follow::Scroll), (&next, Follow::Scroll)],
+        )
+        .unwrap();
+        let i = bright.iter().position(|&b| b).unwrap();
+        assert!(m[0][i][1] < 0.0, "{:?}", m[0][i]);
+        assert_eq!(m[0], m[1]);
+    }
+
+    /// More targets than one march serves give the same fields as one target each; a pose
+    /// that does not belong to the scene is refused.
     #[test]
     fn targets_together_or_apart_and_bad_poses() {
         let s = scene();
@@ -250,14 +427,19 @@ mod tests {
         b.time += 0.1;
         let mut c = a.clone();
         c.time -= 0.2;
-        let both = model_motion(&s, &a, &[&b, &c, &b]).unwrap();
-        assert_eq!(both.len(), 3);
-        assert_eq!(both[0], model_motion(&s, &a, &[&b]).unwrap()[0]);
-        assert_eq!(both[1], model_motion(&s, &a, &[&c]).unwrap()[0]);
-        assert_eq!(both[2], both[0]);
+        let mut to = vec![(&b, Follow::Noise), (&c, Follow::Scroll)];
+        to.extend(std::iter::repeat((&b, Follow::Noise)).take(MAX_TARGETS));
+        let all = model_motion(&s, &a, &to).unwrap();
+        assert_eq!(all.len(), MAX_TARGETS + 2);
+        assert_eq!(all[0], model_motion(&s, &a, &to[..1]).unwrap()[0]);
+        assert_eq!(all[1], model_motion(&s, &a, &to[1..2]).unwrap()[0]);
+        assert!(all[2..].iter().all(|m| *m == all[0]));
+        assert_ne!(all[0], all[1]);
         let mut bad = a.clone();
         bad.lattices.clear();
-        let e = model_motion(&s, &a, &[&bad]).unwrap_err().to_string();
+        let e = model_motion(&s, &a, &[(&bad, Follow::Noise)])
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("pose"), "{e}");
     }
 
