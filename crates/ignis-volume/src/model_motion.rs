@@ -9,8 +9,8 @@
 //!
 //! - along the fire, `tex'_z · length_b = tex_z · length_a + rise`: it rises by `rise`
 //!   world units, by [`Follow`]: not at all (the lattice carries it), with the scroll (a
-//!   fixed spatial noise coordinate), or along the track through the 4-D noise that
-//!   changes least (the default); over the shortest way round a loop;
+//!   fixed spatial noise coordinate, what the paper's scroll moves), or along the track
+//!   through the 4-D noise that changes least; over the shortest way round a loop;
 //! - across it, `tex'_xy · r_b(tex'_z) = tex_xy · r_a(tex_z)` (eq. 10 scales the noise by
 //!   the local radius);
 //!
@@ -28,21 +28,12 @@
 
 use crate::error::{Result, VolumeError};
 use crate::lattice::{Lattice, V3};
-use crate::mapping::{kernel, turbulence_at, turbulence_at_periodic, LoopMix, PeriodicLoop};
 use crate::render::{reference_sums, FireInstance, RenderParams};
 use crate::scene::{FireScene, Pose};
 
 /// Which motion of the noise a feature follows (see the module docs).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Follow {
-    /// What the sample shows: the profile is looked up at `v = tex_z + f(tex_z) · T(tex)`
-    /// (eq. 12–13), so the same profile value is, in frame `b`, at the height `z'` on the
-    /// same line along the fire (same `tex_x, tex_y`: same `u`) where
-    /// `z' + f(z') · T_b(z') = v`, found by Newton's method from `tex_z` (the nearest such
-    /// point; a sample where it fails, at a fold of the displaced profile, is left out).
-    /// The noise's scroll, its change in time and the lattice's motion all enter through
-    /// `T_b` and `L_b`: the model's own optical flow, exact for a single sample.
-    Profile,
     /// The lattice only: a feature keeps its texture coordinates (no scroll).
     Lattice,
     /// The lattice and the scroll of eq. (11): a feature keeps its spatial noise
@@ -85,28 +76,13 @@ pub fn model_motion(
         .iter()
         .map(|f| noise_rates(f, &params, from.time))
         .collect();
-    let noise_a: Vec<NoiseAt> = inst
-        .iter()
-        .map(|f| NoiseAt::new(f, &params, from.time))
-        .collect();
-    // per target: its fires, per fire the rise (world units along the fire) and noise
-    let targets: Vec<Target> = to
+    // per target: its fires, and per fire the rise (world units along the fire)
+    let targets: Vec<(Vec<FireInstance>, Vec<f32>)> = to
         .iter()
         .map(|&(p, follow)| {
             let dt = loop_delta(p.time - from.time, from.loop_period);
             let rise = rates.iter().map(|&r| rise(r, follow) * dt).collect();
-            let inst = p.instances(scene);
-            let params = p.render_params(scene);
-            let noise = inst
-                .iter()
-                .map(|f| NoiseAt::new(f, &params, p.time))
-                .collect();
-            Target {
-                inst,
-                rise,
-                noise,
-                follow,
-            }
+            (p.instances(scene), rise)
         })
         .collect();
     let camera = scene.camera;
@@ -122,16 +98,9 @@ pub fn model_motion(
             return out;
         };
         for (j, &t) in chunk.iter().enumerate() {
-            let tg = &targets[t];
-            let b = &tg.inst[fi];
-            let tex_b = if tg.follow == Follow::Profile {
-                match same_profile(tex, (a, noise_a[fi]), (b, tg.noise[fi])) {
-                    Some(z) => [tex[0], tex[1], z],
-                    None => continue,
-                }
-            } else {
-                follow(tex, a.lattice, b.lattice, tg.rise[fi])
-            };
+            let (tinst, rise) = &targets[t];
+            let b = &tinst[fi];
+            let tex_b = follow(tex, a.lattice, b.lattice, rise[fi]);
             if let Some(p1) = camera.project(forward_extrapolated(b.lattice, tex_b), size) {
                 out[3 * j] = w;
                 out[3 * j + 1] = w * (p1[0] - p0[0]);
@@ -164,83 +133,8 @@ pub fn model_motion(
     Ok(fields)
 }
 
-/// One target pose of [`model_motion`].
-struct Target<'a> {
-    inst: Vec<FireInstance<'a>>,
-    rise: Vec<f32>,
-    noise: Vec<NoiseAt>,
-    follow: Follow,
-}
-
-/// How a fire's noise is evaluated at one instant, as the renderer's reference path
-/// evaluates it (`render/reference.rs`).
-#[derive(Clone, Copy, Debug)]
-enum NoiseAt {
-    Periodic(PeriodicLoop),
-    Mix(LoopMix),
-}
-
-impl NoiseAt {
-    fn new(f: &FireInstance, params: &RenderParams, time: f32) -> NoiseAt {
-        if let Some(pl) = params.periodic(f, time) {
-            return NoiseAt::Periodic(pl);
-        }
-        NoiseAt::Mix(params.mix(f, time).unwrap_or(LoopMix {
-            time: time * f.noise.time_scale,
-            period: 0.0,
-            a: 1.0,
-            b: 0.0,
-        }))
-    }
-
-    /// The profile height `v = z + f(z) · T(tex)` that fire `f` shows at `tex` (eq. 12–13).
-    fn profile_v(self, f: &FireInstance, tex: V3) -> f32 {
-        let n = &f.noise;
-        if n.octaves == 0 || n.stability == 0.0 {
-            return tex[2];
-        }
-        let radius = f.lattice.radius_at(tex[2]);
-        let length = f.lattice.length();
-        let t = match self {
-            NoiseAt::Periodic(pl) => turbulence_at_periodic(tex, radius, length, pl, n, f.offset),
-            NoiseAt::Mix(m) => {
-                turbulence_at(tex, radius, [length, f.scroll_length()], m, n, f.offset)
-            }
-        };
-        tex[2] + kernel(tex[2], n.stability) * t
-    }
-}
-
-/// [`Follow::Profile`]: the height `z'` in fire `b` (same `tex_x, tex_y`) showing the
-/// profile height that fire `a` shows at `tex`, or `None` where Newton's method from
-/// `tex_z` fails (a fold: the displaced profile turns back on itself there).
-fn same_profile(
-    tex: V3,
-    (a, na): (&FireInstance, NoiseAt),
-    (b, nb): (&FireInstance, NoiseAt),
-) -> Option<f32> {
-    const H: f32 = 1e-3;
-    let v = na.profile_v(a, tex);
-    let g = |z: f32| nb.profile_v(b, [tex[0], tex[1], z]) - v;
-    let mut z = tex[2];
-    let mut gz = g(z);
-    let slope = (g(z + H) - gz) / H;
-    // a slope near zero or negative: a fold, where the nearest match is ill-defined
-    if !(slope > 0.1) {
-        return None;
-    }
-    for _ in 0..12 {
-        if gz.abs() < 1e-4 {
-            return ((z - tex[2]).abs() < 0.5).then_some(z);
-        }
-        z -= gz / slope;
-        gz = g(z);
-    }
-    None
-}
-
 /// Most targets one march serves (more are done in further marches).
-const MAX_TARGETS: usize = 8;
+const MAX_TARGETS: usize = 6;
 
 /// Fire `f`'s noise at scene time `time`: `[s, τ]`, how fast its scroll moves along the
 /// fire (world units per second) and its time axis `w` advances (noise time per second).
@@ -269,7 +163,7 @@ fn loop_delta(dt: f32, period: Option<f32>) -> f32 {
 fn rise([s, tau]: [f32; 2], follow: Follow) -> f32 {
     let c = crate::mapping::TIME_SHEAR;
     match follow {
-        Follow::Lattice | Follow::Profile => 0.0,
+        Follow::Lattice => 0.0,
         Follow::Scroll => s,
         Follow::Noise => (s - c * tau) / (1.0 + c * c),
     }

@@ -10,7 +10,9 @@
 //! causes: vector quantisation, gating, flow resolution, the generator's own motion, and a
 //! per-pixel best-velocity bound (what one velocity shared by both key frames could reach
 //! with this blend). Generators that know their motion (the moving texture, classic, the
-//! learned flame: [`ignis_learned::model_motion`]) add it to the diagnosis as `model`.
+//! learned flame: [`ignis_learned::model_motion`], the volumetric fire:
+//! [`ignis_volume::model_motion()`], with `model_noise` and `model_lattice` beside it) add it
+//! to the diagnosis as `model`.
 //! Two further variants show where one vector per frame falls short: forward/backward
 //! pairs per key interval (`*_pairwise`, two sheets' worth), and one vector per key frame
 //! chosen per pixel among the forward, reversed backward, central and zero vectors by the
@@ -246,13 +248,12 @@ fn volume(
     Ok((frames, known))
 }
 
-/// The volume rows' model motions ([`ignis_volume::Follow`]), by name: `model` follows
-/// what each sample shows (its profile value), `model_noise` the noise's least-changing
-/// track, `model_scroll` the scroll alone, `model_lattice` the lattice alone.
-const VOLUME_FOLLOW: [(&str, ignis_volume::Follow); 4] = [
-    ("model", ignis_volume::Follow::Profile),
+/// The volume rows' model motions ([`ignis_volume::Follow`]), by name: `model` follows a
+/// fixed spatial noise coordinate (the lattice and the scroll), `model_noise` the noise's
+/// least-changing track through its time axis too, `model_lattice` the lattice alone.
+const VOLUME_FOLLOW: [(&str, ignis_volume::Follow); 3] = [
+    ("model", ignis_volume::Follow::Scroll),
     ("model_noise", ignis_volume::Follow::Noise),
-    ("model_scroll", ignis_volume::Follow::Scroll),
     ("model_lattice", ignis_volume::Follow::Lattice),
 ];
 
@@ -682,8 +683,8 @@ pub fn figures(g: &Global, quick: bool) -> Result<serde_json::Value> {
             "exact_colour": "the same vectors on the unquantised key frames (what the --hdr EXR colour sheet gives): separates the 8-bit sheet's rounding from the blend",
             "in_between_flow": "velocities from flows key -> true in-between frames (uses the dropped frames: possible only when the exporter has them, e.g. decimated footage or a generator rendered at twice the rate); vectors unquantised",
             "key_frame_change": "mean |error| between consecutive key frames: how much there is to blend",
-            "held_out_t": "error_reduction at blends t = 0.25 / 0.5 / 0.75 with key frames every 4th frame (footage: every 4th source frame), default vs loose gating (gated_mip1: the default's vectors read at mip level 1, see filtered), raw_flow_chosen (chosen on the t = 0.5 frames only, so t = 0.25 / 0.75 are held out), and for the learned flame model, model_chosen (what `ignis learned synth --motion-vectors` writes; model_chosen_mip1 read at mip level 1) and model_pairwise; vectors unquantised: checks a change on frames it was not tuned on",
-            "diagnosis": "error_reduction of other vectors on the unquantised key frames: gated_sheet_16bit (the sheet's vectors read back), gated_unquantised (the same before 16-bit encoding), raw_flow / raw_flow_full_res (ungated DIS velocities, finest pyramid level 1 / 0), raw_flow_halved, gated_loose (consistency 8 px, explained 0.05), model (the generator's own motion: exact shift for the texture, ignis_classic::motion for classic, ignis_learned::model_motion for the learned flame: its texture attached to the flame's canonical coordinates; central over the neighbouring key frames), model_half_steps (learned: the same from the model's motion to the in-between times, known without rendering them), raw_flow_pairwise / model_pairwise (not one vector per frame: each dropped frame blended with the forward motion for the earlier key frame and the reversed backward motion for the later, from the raw flow / the learned model: what a forward and a backward sheet would give), raw_flow_chosen / model_chosen (uses the in-between frames: one vector per key frame and pixel, storable in a sheet, chosen among none / forward / reversed backward / central so that the blends at 0.5 err least against the true in-between frames, exactly over the run of key frames), best_per_pixel_bound (per dropped pixel the best single velocity within 4 px for both key frames, chosen by looking at the true frame: a bound for vectors shared by the two key frames, not for the chosen ones, which give each key frame its own)",
+            "held_out_t": "error_reduction at blends t = 0.25 / 0.5 / 0.75 with key frames every 4th frame (footage: every 4th source frame), default vs loose gating (gated_mip1: the default's vectors read at mip level 1, see filtered), raw_flow_chosen (chosen on the t = 0.5 frames only, so t = 0.25 / 0.75 are held out), and for the learned flame model, model_chosen (what `ignis learned synth --motion-vectors` writes; model_chosen_mip1 read at mip level 1) and model_pairwise; the volume rows the same for each of their model motions (model, model_noise, model_lattice: see diagnosis), none of which the volume sheet uses; vectors unquantised: checks a change on frames it was not tuned on",
+            "diagnosis": "error_reduction of other vectors on the unquantised key frames: gated_sheet_16bit (the sheet's vectors read back), gated_unquantised (the same before 16-bit encoding), raw_flow / raw_flow_full_res (ungated DIS velocities, finest pyramid level 1 / 0), raw_flow_halved, gated_loose (consistency 8 px, explained 0.05), model (the generator's own motion: exact shift for the texture, ignis_classic::motion for classic, ignis_learned::model_motion for the learned flame: its texture attached to the flame's canonical coordinates; ignis_volume::model_motion for the volume rows: a fixed noise coordinate carried by the lattice and the scroll, emission-weighted over each pixel's samples; model_noise: the noise's least-changing track through its time axis instead; model_lattice: the lattice alone; central over the neighbouring key frames), model_half_steps (learned: the same from the model's motion to the in-between times, known without rendering them), raw_flow_pairwise / model_pairwise (not one vector per frame: each dropped frame blended with the forward motion for the earlier key frame and the reversed backward motion for the later, from the raw flow / the learned model: what a forward and a backward sheet would give), raw_flow_chosen / model_chosen (uses the in-between frames: one vector per key frame and pixel, storable in a sheet, chosen among none / forward / reversed backward / central so that the blends at 0.5 err least against the true in-between frames, exactly over the run of key frames), best_per_pixel_bound (per dropped pixel the best single velocity within 4 px for both key frames, chosen by looking at the true frame: a bound for vectors shared by the two key frames, not for the chosen ones, which give each key frame its own)",
         },
         "goal_error_reduction": GOAL_REDUCTION,
         "blend": rows,
