@@ -337,6 +337,29 @@ mod tests {
         assert!(e.contains("pose"), "{e}");
     }
 
+    /// The same fields on one thread as on several (a scripted candle, a bent lattice).
+    #[test]
+    fn the_same_at_any_thread_count() {
+        let s =
+            crate::FireScene::preset(crate::Preset::Candle).with_size(Size::new(40, 56).unwrap());
+        let mut anim = s.animator().unwrap();
+        let a = anim.next_frame_with_pose().unwrap().1;
+        anim.skip(3);
+        let b = anim.next_frame_with_pose().unwrap().1;
+        let to = [(&b, Follow::Scroll), (&b, Follow::Noise)];
+        let many = model_motion(&s, &a, &to).unwrap();
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .unwrap();
+        let one = pool.install(|| model_motion(&s, &a, &to)).unwrap();
+        assert_eq!(many, one);
+        assert!(
+            many[0].iter().any(|v| v[1] < -0.1),
+            "the candle's noise rises"
+        );
+    }
+
     /// The frame [`crate::Animator::next_frame_with_pose`] renders is the frame
     /// `next_frame` renders.
     #[test]
