@@ -322,7 +322,7 @@ mod tests {
         let mut c = a.clone();
         c.time -= 0.2;
         let mut to = vec![(&b, Follow::Noise), (&c, Follow::Scroll)];
-        to.extend(std::iter::repeat((&b, Follow::Noise)).take(MAX_TARGETS));
+        to.extend(std::iter::repeat_n((&b, Follow::Noise), MAX_TARGETS));
         let all = model_motion(&s, &a, &to).unwrap();
         assert_eq!(all.len(), MAX_TARGETS + 2);
         assert_eq!(all[0], model_motion(&s, &a, &to[..1]).unwrap()[0]);
