@@ -9,8 +9,9 @@
 //!
 //! - along the fire, `tex'_z · length_b = tex_z · length_a + rise`: it rises by `rise`
 //!   world units, by [`Follow`]: not at all (the lattice carries it), with the scroll (a
-//!   fixed spatial noise coordinate, what the paper's scroll moves), or along the track
-//!   through the 4-D noise that changes least; over the shortest way round a loop;
+//!   fixed spatial noise coordinate, what the paper's scroll moves), along the track
+//!   through the 4-D noise that changes least, or as the profile the sample shows moves
+//!   ([`Follow::Flow`], the model's own optical flow); over the shortest way round a loop;
 //! - across it, `tex'_xy · r_b(tex'_z) = tex_xy · r_a(tex_z)` (eq. 10 scales the noise by
 //!   the local radius);
 //!
@@ -19,8 +20,9 @@
 //! the mean of its samples' motions weighted by their emission (luminance × alpha of the
 //! shaded sample: what each adds to the additive blend), 0 where it has none.
 //!
-//! What no displacement describes: the noise's own change in time and the profile, which
-//! does not scroll; so model motion is one candidate among others (none / forward /
+//! What no displacement describes: the noise's own change in time (only [`Follow::Flow`]
+//! sees it, as far as it shifts the profile) and the profile, which does not scroll; so
+//! model motion is one candidate among others (none / forward /
 //! backward), chosen per pixel by the rendered in-between frames where they exist
 //! (`ignis_media::write::motion::chosen_velocities`). Samples come from the renderer's
 //! reference path (`render/reference.rs`: every slice, exact inverse): slow, but exact
@@ -28,12 +30,21 @@
 
 use crate::error::{Result, VolumeError};
 use crate::lattice::{Lattice, V3};
+use crate::mapping::{kernel, turbulence_at, turbulence_at_periodic, LoopMix, PeriodicLoop};
 use crate::render::{reference_sums, FireInstance, RenderParams};
 use crate::scene::{FireScene, Pose};
 
 /// Which motion of the noise a feature follows (see the module docs).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Follow {
+    /// The model's own optical flow: each sample shows the profile at
+    /// `v = z + D(tex)`, `D = f(z) · T(tex)` (eq. 12–13), so its brightness `E(v)` is kept
+    /// by a shift `Δz = −ΔD / (1 + ∂D/∂z)` along the fire, `ΔD` the change of `D` at the
+    /// sample between the frames. Per pixel, the least-squares shift over its samples,
+    /// each weighted by `(∂E/∂v)²` (a sample on a flat part of the profile says nothing of
+    /// motion; one at a fold, `1 + ∂D/∂z ≈ 0`, little), on screen along the lattice's
+    /// axis there, plus the lattice's own motion.
+    Flow,
     /// The lattice only: a feature keeps its texture coordinates (no scroll).
     Lattice,
     /// The lattice and the scroll of eq. (11): a feature keeps its spatial noise
@@ -76,35 +87,67 @@ pub fn model_motion(
         .iter()
         .map(|f| noise_rates(f, &params, from.time))
         .collect();
-    // per target: its fires, and per fire the rise (world units along the fire)
-    let targets: Vec<(Vec<FireInstance>, Vec<f32>)> = to
+    let noise_a: Vec<NoiseAt> = inst
+        .iter()
+        .map(|f| NoiseAt::new(f, &params, from.time))
+        .collect();
+    // per target: its fires, per fire the rise (world units along the fire) and noise
+    let targets: Vec<Target> = to
         .iter()
         .map(|&(p, follow)| {
             let dt = loop_delta(p.time - from.time, from.loop_period);
             let rise = rates.iter().map(|&r| rise(r, follow) * dt).collect();
-            (p.instances(scene), rise)
+            let inst = p.instances(scene);
+            let params = p.render_params(scene);
+            let noise = inst
+                .iter()
+                .map(|f| NoiseAt::new(f, &params, p.time))
+                .collect();
+            Target {
+                inst,
+                rise,
+                noise,
+                follow,
+            }
         })
         .collect();
     let camera = scene.camera;
-    // per sample and target of `chunk` (at most MAX_TARGETS): [w, w·dx, w·dy]
-    let f = |fi: usize, tex: V3, col: [f32; 4], chunk: &[usize]| -> [f32; 3 * MAX_TARGETS] {
-        let mut out = [0.0; 3 * MAX_TARGETS];
-        let w = col[3] * (0.2126 * col[0] + 0.7152 * col[1] + 0.0722 * col[2]);
-        if w <= 0.0 {
-            return out;
-        }
+    // per sample and target of `chunk` (at most MAX_TARGETS), SLOT sums: [W, S1, S2, Jx,
+    // Jy, Lx, Ly]: weight; least-squares shift along the fire, −S1/S2 (Follow::Flow);
+    // screen px per unit of tex_z (weighted); the lattice's (or follow's) motion (weighted)
+    let f = |fi: usize, tex: V3, col: [f32; 4], chunk: &[usize]| -> [f32; SLOT * MAX_TARGETS] {
+        let mut out = [0.0; SLOT * MAX_TARGETS];
         let a = &inst[fi];
         let Some(p0) = camera.project(a.lattice.forward(tex), size) else {
             return out;
         };
+        let lum = |c: [f32; 4]| c[3] * (0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2]);
+        let e = lum(col);
+        let flow = chunk.iter().any(|&t| targets[t].follow == Follow::Flow);
+        let local = flow.then(|| flow_terms(tex, a, noise_a[fi], camera, size, &lum));
         for (j, &t) in chunk.iter().enumerate() {
-            let (tinst, rise) = &targets[t];
-            let b = &tinst[fi];
-            let tex_b = follow(tex, a.lattice, b.lattice, rise[fi]);
+            let tg = &targets[t];
+            let b = &tg.inst[fi];
+            let o = &mut out[SLOT * j..SLOT * (j + 1)];
+            let (w, tex_b) = match (tg.follow, local) {
+                (Follow::Flow, Some(l)) => {
+                    let Some(l) = l else { continue };
+                    let dd = tg.noise[fi].displacement(b, tex) - l.d;
+                    o[1] = l.w * l.slope * dd;
+                    o[2] = l.w * l.slope * l.slope;
+                    o[3] = l.w * l.axis[0];
+                    o[4] = l.w * l.axis[1];
+                    (l.w, tex)
+                }
+                _ => (e, follow(tex, a.lattice, b.lattice, tg.rise[fi])),
+            };
+            if w <= 0.0 {
+                continue;
+            }
             if let Some(p1) = camera.project(forward_extrapolated(b.lattice, tex_b), size) {
-                out[3 * j] = w;
-                out[3 * j + 1] = w * (p1[0] - p0[0]);
-                out[3 * j + 2] = w * (p1[1] - p0[1]);
+                o[0] = w;
+                o[5] = w * (p1[0] - p0[0]);
+                o[6] = w * (p1[1] - p0[1]);
             }
         }
         out
@@ -119,12 +162,12 @@ pub fn model_motion(
             fields.push(
                 sums.iter()
                     .map(|s| {
-                        let w = s[3 * j];
-                        if w > 0.0 {
-                            [s[3 * j + 1] / w, s[3 * j + 2] / w]
-                        } else {
-                            [0.0; 2]
+                        let s = &s[SLOT * j..SLOT * (j + 1)];
+                        if !(s[0] > 0.0) {
+                            return [0.0; 2];
                         }
+                        let dz = if s[2] > 0.0 { -s[1] / s[2] } else { 0.0 };
+                        [(s[5] + s[3] * dz) / s[0], (s[6] + s[4] * dz) / s[0]]
                     })
                     .collect(),
             );
@@ -133,8 +176,95 @@ pub fn model_motion(
     Ok(fields)
 }
 
+/// Sums per target and pixel (see [`model_motion`]).
+const SLOT: usize = 7;
+
+/// One target pose of [`model_motion`].
+struct Target<'a> {
+    inst: Vec<FireInstance<'a>>,
+    rise: Vec<f32>,
+    noise: Vec<NoiseAt>,
+    follow: Follow,
+}
+
+/// How a fire's noise is evaluated at one instant, as the renderer's reference path
+/// evaluates it (`render/reference.rs`).
+#[derive(Clone, Copy, Debug)]
+enum NoiseAt {
+    Periodic(PeriodicLoop),
+    Mix(LoopMix),
+}
+
+impl NoiseAt {
+    fn new(f: &FireInstance, params: &RenderParams, time: f32) -> NoiseAt {
+        if let Some(pl) = params.periodic(f, time) {
+            return NoiseAt::Periodic(pl);
+        }
+        NoiseAt::Mix(params.mix(f, time).unwrap_or(LoopMix {
+            time: time * f.noise.time_scale,
+            period: 0.0,
+            a: 1.0,
+            b: 0.0,
+        }))
+    }
+
+    /// The profile displacement `D = f(z) · T(tex)` of fire `f` at `tex` (eq. 12–13).
+    fn displacement(self, f: &FireInstance, tex: V3) -> f32 {
+        let n = &f.noise;
+        if n.octaves == 0 || n.stability == 0.0 {
+            return 0.0;
+        }
+        let radius = f.lattice.radius_at(tex[2]);
+        let length = f.lattice.length();
+        let t = match self {
+            NoiseAt::Periodic(pl) => turbulence_at_periodic(tex, radius, length, pl, n, f.offset),
+            NoiseAt::Mix(m) => {
+                turbulence_at(tex, radius, [length, f.scroll_length()], m, n, f.offset)
+            }
+        };
+        kernel(tex[2], n.stability) * t
+    }
+}
+
+/// [`Follow::Flow`]'s terms of one sample of frame `a`: weight `(∂E/∂v)²`, `D`,
+/// `1 + ∂D/∂z`, and the screen motion per unit of `tex_z`; `None` for a sample
+/// off screen.
+#[derive(Clone, Copy, Debug)]
+struct FlowTerms {
+    w: f32,
+    d: f32,
+    slope: f32,
+    axis: [f32; 2],
+}
+
+fn flow_terms(
+    tex: V3,
+    a: &FireInstance,
+    na: NoiseAt,
+    camera: crate::render::Camera,
+    size: ignis_core::Size,
+    lum: &dyn Fn([f32; 4]) -> f32,
+) -> Option<FlowTerms> {
+    const H: f32 = 1e-3;
+    const HV: f32 = 0.01;
+    let at = |dz: f32| [tex[0], tex[1], tex[2] + dz];
+    let d = na.displacement(a, tex);
+    let slope = 1.0 + (na.displacement(a, at(H)) - na.displacement(a, at(-H))) / (2.0 * H);
+    let u = (tex[0] * tex[0] + tex[1] * tex[1]).sqrt();
+    let v = tex[2] + d;
+    let de = (lum(a.profile.sample(u, v + HV)) - lum(a.profile.sample(u, v - HV))) / (2.0 * HV);
+    let up = camera.project(a.lattice.forward(at(H)), size)?;
+    let down = camera.project(a.lattice.forward(at(-H)), size)?;
+    Some(FlowTerms {
+        w: de * de,
+        d,
+        slope,
+        axis: [(up[0] - down[0]) / (2.0 * H), (up[1] - down[1]) / (2.0 * H)],
+    })
+}
+
 /// Most targets one march serves (more are done in further marches).
-const MAX_TARGETS: usize = 6;
+const MAX_TARGETS: usize = 8;
 
 /// Fire `f`'s noise at scene time `time`: `[s, τ]`, how fast its scroll moves along the
 /// fire (world units per second) and its time axis `w` advances (noise time per second).
@@ -163,7 +293,7 @@ fn loop_delta(dt: f32, period: Option<f32>) -> f32 {
 fn rise([s, tau]: [f32; 2], follow: Follow) -> f32 {
     let c = crate::mapping::TIME_SHEAR;
     match follow {
-        Follow::Lattice => 0.0,
+        Follow::Lattice | Follow::Flow => 0.0,
         Follow::Scroll => s,
         Follow::Noise => (s - c * tau) / (1.0 + c * c),
     }
@@ -234,7 +364,7 @@ mod tests {
         let (bright, a) = bright(&s);
         let mut b = a.clone();
         b.lattices[0] = lattice(&s, column(0.1));
-        let to = [Follow::Lattice, Follow::Scroll, Follow::Noise].map(|f| (&b, f));
+        let to = [Follow::Lattice, Follow::Scroll, Follow::Noise, Follow::Flow].map(|f| (&b, f));
         let (lo, hi) = (0.1 * px_per_unit(7.5), 0.1 * px_per_unit(6.5));
         for m in model_motion(&s, &a, &to).unwrap() {
             for (i, v) in m.iter().enumerate() {
@@ -284,6 +414,61 @@ mod tests {
             .remove(0);
         let i = bright.iter().position(|&b| b).unwrap();
         assert!(back[i][1] > 0.0, "{:?}", back[i]);
+    }
+
+    /// The model's optical flow sees only what changes the picture: without noise, time
+    /// passing changes nothing, so nothing moves (the scroll still says "up"); with noise,
+    /// it explains the change: the picture moved by it is closer to the next one.
+    #[test]
+    fn the_models_flow_moves_only_what_changes() {
+        let mut s = scene();
+        s.fires[0].noise.octaves = 0;
+        let (dark, a) = bright(&s);
+        let mut b = a.clone();
+        b.time += 0.05;
+        let m = model_motion(&s, &a, &[(&b, Follow::Flow), (&b, Follow::Scroll)]).unwrap();
+        let i = dark.iter().position(|&b| b).unwrap();
+        assert!(m[0].iter().all(|v| *v == [0.0, 0.0]), "no noise: no motion");
+        assert!(m[1][i][1] < -0.1, "{:?}", m[1][i]);
+        // with noise: frame a's picture moved by the field predicts frame b better than
+        // frame a unmoved does (over the lit pixels)
+        let s = scene();
+        let (lit, a) = bright(&s);
+        let mut b = a.clone();
+        b.time += 0.05;
+        let m = model_motion(&s, &a, &[(&b, Follow::Flow)])
+            .unwrap()
+            .remove(0);
+        assert!(m.iter().all(|v| v[0].is_finite() && v[1].is_finite()));
+        let img = |p: &Pose| {
+            let inst = p.instances(&s);
+            crate::render(&inst, &s.camera, &p.render_params(&s), p.time)
+                .unwrap()
+                .0
+        };
+        let (fa, fb) = (img(&a), img(&b));
+        let w = s.size.width as usize;
+        let lum = |f: &ignis_core::RgbaFrame, x: f32, y: f32| {
+            // bilinear, edges clamped
+            let (x, y) = ((x - 0.5).max(0.0), (y - 0.5).max(0.0));
+            let (x0, y0) = ((x as usize).min(w - 2), (y as usize).min(w - 2));
+            let (fx, fy) = ((x - x0 as f32).min(1.0), (y - y0 as f32).min(1.0));
+            let l = |i: usize, j: usize| f.data()[j * w + i][1];
+            let top = l(x0, y0) * (1.0 - fx) + l(x0 + 1, y0) * fx;
+            let bot = l(x0, y0 + 1) * (1.0 - fx) + l(x0 + 1, y0 + 1) * fx;
+            top * (1.0 - fy) + bot * fy
+        };
+        let (mut moved, mut still) = (0.0, 0.0);
+        for (i, v) in m.iter().enumerate() {
+            if !lit[i] {
+                continue;
+            }
+            let (x, y) = ((i % w) as f32 + 0.5, (i / w) as f32 + 0.5);
+            let want = lum(&fb, x, y);
+            moved += (lum(&fa, x - v[0], y - v[1]) - want).abs();
+            still += (lum(&fa, x, y) - want).abs();
+        }
+        assert!(moved < 0.9 * still, "moved {moved}, still {still}");
     }
 
     /// In a loop, a step across the seam is the short way round: the frame just before the

@@ -251,7 +251,8 @@ fn volume(
 /// The volume rows' model motions ([`ignis_volume::Follow`]), by name: `model` follows a
 /// fixed spatial noise coordinate (the lattice and the scroll), `model_noise` the noise's
 /// least-changing track through its time axis too, `model_lattice` the lattice alone.
-const VOLUME_FOLLOW: [(&str, ignis_volume::Follow); 3] = [
+const VOLUME_FOLLOW: [(&str, ignis_volume::Follow); 4] = [
+    ("model_flow", ignis_volume::Follow::Flow),
     ("model", ignis_volume::Follow::Scroll),
     ("model_noise", ignis_volume::Follow::Noise),
     ("model_lattice", ignis_volume::Follow::Lattice),

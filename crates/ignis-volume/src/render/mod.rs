@@ -106,7 +106,7 @@ impl RenderParams {
 
     /// The loop mix of `fire` at scene time `time` (seconds): a looping render's fallback
     /// where the noise cannot be periodic ([`RenderParams::periodic`]).
-    fn mix(&self, fire: &FireInstance, time: f32) -> Option<LoopMix> {
+    pub(crate) fn mix(&self, fire: &FireInstance, time: f32) -> Option<LoopMix> {
         let ts = fire.noise.time_scale;
         if self.periodic(fire, time).is_some() {
             return None;
