@@ -68,18 +68,7 @@ pub fn model_motion(
     from: &Pose,
     to: &[(&Pose, Follow)],
 ) -> Result<Vec<Vec<[f32; 2]>>> {
-    for p in std::iter::once(from).chain(to.iter().map(|t| t.0)) {
-        if p.lattices.len() != scene.fires.len() || p.scroll_lengths.len() != scene.fires.len() {
-            return Err(VolumeError::bad(
-                "pose",
-                format!(
-                    "{} lattices for {} fires; take poses from this scene's animator",
-                    p.lattices.len(),
-                    scene.fires.len()
-                ),
-            ));
-        }
-    }
+    check_poses(scene, std::iter::once(from).chain(to.iter().map(|t| t.0)))?;
     let size = scene.size;
     let inst = from.instances(scene);
     let params = from.render_params(scene);
@@ -158,22 +147,42 @@ pub fn model_motion(
         let sums = reference_sums(&inst, &camera, &params, from.time, &|fi, tex, col| {
             f(fi, tex, col, chunk)
         })?;
-        for j in 0..chunk.len() {
-            fields.push(
-                sums.iter()
-                    .map(|s| {
-                        let s = &s[SLOT * j..SLOT * (j + 1)];
-                        if !(s[0] > 0.0) {
-                            return [0.0; 2];
-                        }
-                        let dz = if s[2] > 0.0 { -s[1] / s[2] } else { 0.0 };
-                        [(s[5] + s[3] * dz) / s[0], (s[6] + s[4] * dz) / s[0]]
-                    })
-                    .collect(),
-            );
-        }
+        fields.extend((0..chunk.len()).map(|j| field(&sums, j)));
     }
     Ok(fields)
+}
+
+/// Refuses poses that do not hold one lattice and scroll length per fire of `scene`.
+fn check_poses<'a>(scene: &FireScene, poses: impl Iterator<Item = &'a Pose>) -> Result<()> {
+    for p in poses {
+        if p.lattices.len() != scene.fires.len() || p.scroll_lengths.len() != scene.fires.len() {
+            return Err(VolumeError::bad(
+                "pose",
+                format!(
+                    "{} lattices for {} fires; take poses from this scene's animator",
+                    p.lattices.len(),
+                    scene.fires.len()
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Target `j`'s motion per pixel from the per-pixel sums of [`model_motion`]: the
+/// weighted lattice (or follow) motion plus, for [`Follow::Flow`], the least-squares shift
+/// along the fire times the weighted screen axis; 0 where nothing was weighed.
+fn field(sums: &[[f32; SLOT * MAX_TARGETS]], j: usize) -> Vec<[f32; 2]> {
+    sums.iter()
+        .map(|s| {
+            let s = &s[SLOT * j..SLOT * (j + 1)];
+            if !(s[0] > 0.0) {
+                return [0.0; 2];
+            }
+            let dz = if s[2] > 0.0 { -s[1] / s[2] } else { 0.0 };
+            [(s[5] + s[3] * dz) / s[0], (s[6] + s[4] * dz) / s[0]]
+        })
+        .collect()
 }
 
 /// Sums per target and pixel (see [`model_motion`]).
