@@ -9,7 +9,8 @@
 //! trilinear map to texture coordinates and applies the noise mapping ([`mapping`],
 //! eq. 9–14); [`render::finish`] runs the `ignis-core` bloom. [`FireScene`] ties it all
 //! together (fire files, presets) and [`Animator`] produces frames; a seamless loop's
-//! motion and the constant-speed timing of its frames are in [`looping`].
+//! motion and the constant-speed timing of its frames are in [`looping`]; a frame's motion on
+//! screen, from the model (for motion-vector flipbooks), is [`model_motion()`].
 //!
 //! **Invariants:** this crate reads no image or video files (profile images come in as
 //! [`ignis_core::RgbaFrame`]; `ignis-cli` loads and writes them via `ignis-media`); all
@@ -21,6 +22,7 @@ pub mod error;
 pub mod lattice;
 pub mod looping;
 pub mod mapping;
+pub mod model_motion;
 pub mod motion;
 pub mod noise;
 pub mod profile;
@@ -32,9 +34,10 @@ pub use error::{Result, VolumeError};
 pub use lattice::{Cell, Lattice, Puff};
 pub use looping::LoopTiming;
 pub use mapping::NoiseParams;
+pub use model_motion::{model_motion, Follow};
 pub use motion::{Collision, Keyframe, Obstacle, ParticleSim, Script, SimParams};
 pub use noise::NoiseKind;
 pub use profile::FireProfile;
 pub use render::{finish, render, Blend, Camera, FireInstance, RenderParams, RenderStats};
-pub use scene::{Animator, FireScene, FireSpec, Frame, Motion, Preset};
+pub use scene::{Animator, FireScene, FireSpec, Frame, Motion, Pose, Preset};
 pub use spline::BSpline;

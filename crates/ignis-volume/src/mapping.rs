@@ -255,11 +255,24 @@ pub fn shade_periodic(
     profile: &FireProfile,
 ) -> [f32; 4] {
     shade_with(tex, noise, profile, || {
-        let scale = noise_scale(radius, length, noise.frequency);
-        let scroll = scroll_time(pl.scroll_time, length, pl.scroll_length);
-        let p = noise_position(tex, pl.time, scroll, scale, offset);
-        turbulence_periodic(p, noise.octaves, noise.gain, noise.lacunarity, pl.period)
+        turbulence_at_periodic(tex, radius, length, pl, noise, offset)
     })
+}
+
+/// The turbulence [`shade_periodic`] displaces the profile by (eq. 9–11, periodic noise).
+#[inline]
+pub fn turbulence_at_periodic(
+    tex: [f32; 3],
+    radius: f32,
+    length: f32,
+    pl: PeriodicLoop,
+    noise: &NoiseParams,
+    offset: [f32; 4],
+) -> f32 {
+    let scale = noise_scale(radius, length, noise.frequency);
+    let scroll = scroll_time(pl.scroll_time, length, pl.scroll_length);
+    let p = noise_position(tex, pl.time, scroll, scale, offset);
+    turbulence_periodic(p, noise.octaves, noise.gain, noise.lacunarity, pl.period)
 }
 
 /// The profile colour at `tex` displaced by the turbulence `turb()` (eq. 13–14), which is
@@ -297,21 +310,35 @@ pub fn shade_looped(
     profile: &FireProfile,
 ) -> [f32; 4] {
     shade_with(tex, noise, profile, || {
-        let scale = noise_scale(radius, length[0], noise.frequency);
-        let t = |time: f32| {
-            let scroll = scroll_time(time, length[0], length[1]);
-            let p = noise_position(tex, time, scroll, scale, offset);
-            turbulence(noise.kind, p, noise.octaves, noise.gain, noise.lacunarity)
-        };
-        // the second copy is skipped while its weight is zero (exactly `a · T`, as the
-        // renderer's batched shading does)
-        let first = m.a * t(m.time);
-        if m.b == 0.0 {
-            first
-        } else {
-            first + m.b * t(m.time - m.period)
-        }
+        turbulence_at(tex, radius, length, m, noise, offset)
     })
+}
+
+/// The turbulence [`shade_looped`] (and so [`shade`]) displaces the profile by
+/// (eq. 9–11, the loop's two copies mixed).
+#[inline]
+pub fn turbulence_at(
+    tex: [f32; 3],
+    radius: f32,
+    length: [f32; 2],
+    m: LoopMix,
+    noise: &NoiseParams,
+    offset: [f32; 4],
+) -> f32 {
+    let scale = noise_scale(radius, length[0], noise.frequency);
+    let t = |time: f32| {
+        let scroll = scroll_time(time, length[0], length[1]);
+        let p = noise_position(tex, time, scroll, scale, offset);
+        turbulence(noise.kind, p, noise.octaves, noise.gain, noise.lacunarity)
+    };
+    // the second copy is skipped while its weight is zero (exactly `a · T`, as the
+    // renderer's batched shading does)
+    let first = m.a * t(m.time);
+    if m.b == 0.0 {
+        first
+    } else {
+        first + m.b * t(m.time - m.period)
+    }
 }
 
 /// The whole mapping of eq. (9)–(14) for one sample: the profile colour (straight alpha)

@@ -1054,10 +1054,35 @@ impl Animator<'_> {
         })
     }
 
+    /// [`Self::next_frame`], with the pose it was rendered in (for
+    /// [`crate::model_motion`]: the frame's own motion, from the model).
+    pub fn next_frame_with_pose(&mut self) -> Result<(Frame, Pose)> {
+        let (pose, collisions, control_points) = self.next_pose()?;
+        let (hdr, stats) = self.render_pose(&pose)?;
+        let image = finish(&hdr, &self.scene.bloom)?;
+        let frame = Frame {
+            image,
+            hdr,
+            stats,
+            collisions,
+            control_points,
+        };
+        Ok((frame, pose))
+    }
+
     /// [`Self::next_frame`] before the post pipeline: the renderer's premultiplied HDR
     /// frame, its statistics, the collisions and the control points (the loop's preview
     /// takes its metric frames from the HDR frame directly).
     fn next_hdr(&mut self) -> Result<HdrFrame> {
+        let (pose, collisions, pts) = self.next_pose()?;
+        let (hdr, stats) = self.render_pose(&pose)?;
+        Ok((hdr, stats, collisions, pts))
+    }
+
+    /// Steps the motion to the next frame and builds its lattices: the next frame's
+    /// [`Pose`], its collisions and control points.
+    #[allow(clippy::type_complexity)]
+    fn next_pose(&mut self) -> Result<(Pose, Vec<Collision>, Vec<Vec<[f32; 4]>>)> {
         let s = self.scene;
         let t = self.time();
         let puffs: Vec<Option<Puff>> = (0..s.fires.len()).map(|i| self.puff_wave(i)).collect();
@@ -1072,25 +1097,64 @@ impl Animator<'_> {
                 Lattice::build_puffed(&c, s.lattice, puffs[i])
             })
             .collect::<Result<Vec<_>>>()?;
-        let inst: Vec<FireInstance> = lattices
+        let pose = Pose {
+            time: t,
+            lattices,
+            scroll_lengths: self.scroll.clone(),
+            count_coverage: self.count_coverage,
+            loop_period: self.looping.as_ref().map(|l| l.frames as f32 / s.fps),
+        };
+        Ok((pose, collisions, pts))
+    }
+
+    /// Renders `pose` (the scene's fires in it, seen by the scene's camera).
+    fn render_pose(&self, pose: &Pose) -> Result<(RgbaFrame, RenderStats)> {
+        let inst = pose.instances(self.scene);
+        let params = pose.render_params(self.scene);
+        render(&inst, &self.scene.camera, &params, pose.time)
+    }
+}
+
+/// Everything a frame is rendered from besides the scene: its time, each fire's lattice
+/// and scroll length, and the loop (if any). Made by [`Animator::next_frame_with_pose`].
+#[derive(Clone, Debug)]
+pub struct Pose {
+    /// Scene time, seconds (for a loop, its loop time).
+    pub time: f32,
+    /// Per fire: its lattice at this frame (puffing included).
+    pub lattices: Vec<Lattice>,
+    /// Per fire: its scroll length ([`FireInstance::scroll_length`]).
+    pub scroll_lengths: Vec<f32>,
+    /// The render's [`RenderParams::count_coverage`].
+    pub count_coverage: bool,
+    /// The render's [`RenderParams::loop_period`].
+    pub loop_period: Option<f32>,
+}
+
+impl Pose {
+    /// The fires of `scene` in this pose, ready to render.
+    pub fn instances<'a>(&'a self, scene: &'a FireScene) -> Vec<FireInstance<'a>> {
+        self.lattices
             .iter()
-            .zip(&s.fires)
+            .zip(&scene.fires)
             .enumerate()
             .map(|(i, (l, f))| FireInstance {
                 lattice: l,
                 profile: &f.profile,
                 noise: f.noise,
-                offset: s.offset(i),
-                scroll_length: Some(self.scroll[i]),
+                offset: scene.offset(i),
+                scroll_length: Some(self.scroll_lengths[i]),
             })
-            .collect();
-        let params = RenderParams {
+            .collect()
+    }
+
+    /// The settings `scene`'s frame in this pose is rendered with.
+    pub fn render_params(&self, scene: &FireScene) -> RenderParams {
+        RenderParams {
             count_coverage: self.count_coverage,
-            loop_period: self.looping.as_ref().map(|l| l.frames as f32 / s.fps),
-            ..s.render_params()
-        };
-        let (hdr, stats) = render(&inst, &s.camera, &params, t)?;
-        Ok((hdr, stats, collisions, pts))
+            loop_period: self.loop_period,
+            ..scene.render_params()
+        }
     }
 }
 

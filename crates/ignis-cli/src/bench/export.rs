@@ -10,7 +10,9 @@
 //! causes: vector quantisation, gating, flow resolution, the generator's own motion, and a
 //! per-pixel best-velocity bound (what one velocity shared by both key frames could reach
 //! with this blend). Generators that know their motion (the moving texture, classic, the
-//! learned flame: [`ignis_learned::model_motion`]) add it to the diagnosis as `model`.
+//! learned flame: [`ignis_learned::model_motion`], the volumetric fire:
+//! [`ignis_volume::model_motion()`], with `model_flow`, `model_noise` and `model_lattice`
+//! beside it) add it to the diagnosis as `model`.
 //! Two further variants show where one vector per frame falls short: forward/backward
 //! pairs per key interval (`*_pairwise`, two sheets' worth), and one vector per key frame
 //! chosen per pixel among the forward, reversed backward, central and zero vectors by the
@@ -37,9 +39,9 @@ type Field = Vec<[f32; 2]>;
 struct Known<'a> {
     /// Named velocities, one field per key frame.
     velocities: Vec<(&'a str, Vec<Field>)>,
-    /// Per key interval, the forward motion (from the earlier key frame's pixels) and the
-    /// backward motion (from the later one's).
-    pairs: Option<Vec<(Field, Field)>>,
+    /// Named (`model`, …): per key interval, the forward motion (from the earlier key
+    /// frame's pixels) and the backward motion (from the later one's).
+    pairs: Vec<(&'a str, Vec<(Field, Field)>)>,
 }
 
 impl Known<'_> {
@@ -47,7 +49,7 @@ impl Known<'_> {
     fn model(velocities: Vec<Field>) -> Self {
         Known {
             velocities: vec![("model", velocities)],
-            pairs: None,
+            pairs: Vec::new(),
         }
     }
 }
@@ -217,14 +219,91 @@ fn classic(n: usize) -> Result<(Vec<RgbaFrame>, Vec<Field>)> {
     Ok((frames, model))
 }
 
-/// `n` frames of a volume preset at `rate` times its frame rate.
-fn volume(n: usize, preset: ignis_volume::Preset, rate: f32) -> Result<Vec<RgbaFrame>> {
+/// `n` frames of a volume preset at `rate` times its frame rate, 128², and what the model
+/// knows of their motion with key frames every `step`-th frame
+/// ([`ignis_volume::model_motion()`]): each key frame's velocity (central over its
+/// neighbouring key frames, one-sided at the ends) as `model`, and per key interval the
+/// forward and backward motion.
+fn volume(
+    n: usize,
+    preset: ignis_volume::Preset,
+    rate: f32,
+    step: usize,
+) -> Result<(Vec<RgbaFrame>, Known<'static>)> {
     let mut scene = ignis_volume::FireScene::preset(preset).with_size(Size::new(128, 128)?);
     scene.fps *= rate;
     let mut anim = scene.animator()?;
-    (0..n)
-        .map(|_| Ok(anim.next_frame()?.image))
-        .collect::<Result<Vec<_>>>()
+    let (frames, poses): (Vec<RgbaFrame>, Vec<ignis_volume::Pose>) = (0..n)
+        .map(|_| Ok(anim.next_frame_with_pose().map(|(f, p)| (f.image, p))?))
+        .collect::<Result<Vec<_>>>()?
+        .into_iter()
+        .unzip();
+    let keys: Vec<&ignis_volume::Pose> = poses.iter().step_by(step).collect();
+    let mut known = Known::default();
+    for ((name, _), (velocities, pairs)) in VOLUME_FOLLOW.iter().zip(volume_motion(&scene, &keys)?)
+    {
+        known.velocities.push((name, velocities));
+        known.pairs.push((name, pairs));
+    }
+    Ok((frames, known))
+}
+
+/// The volume rows' model motions ([`ignis_volume::Follow`]), by name: `model_flow` the
+/// model's own optical flow (the displaced profile each sample shows), `model` a fixed
+/// spatial noise coordinate (the lattice and the scroll), `model_noise` the noise's
+/// least-changing track through its time axis too, `model_lattice` the lattice alone.
+const VOLUME_FOLLOW: [(&str, ignis_volume::Follow); 4] = [
+    ("model_flow", ignis_volume::Follow::Flow),
+    ("model", ignis_volume::Follow::Scroll),
+    ("model_noise", ignis_volume::Follow::Noise),
+    ("model_lattice", ignis_volume::Follow::Lattice),
+];
+
+/// The model motions ([`VOLUME_FOLLOW`]) of a volume scene between its key frames'
+/// poses, per kind: each key frame's velocity (central over its neighbouring key frames,
+/// one-sided at the ends), and per key interval the forward and backward motion.
+#[allow(clippy::type_complexity)]
+fn volume_motion(
+    scene: &ignis_volume::FireScene,
+    keys: &[&ignis_volume::Pose],
+) -> Result<Vec<(Vec<Field>, Vec<(Field, Field)>)>> {
+    let kinds = VOLUME_FOLLOW.len();
+    // per kind, per key frame: its motion to the next and to the previous key frame
+    let mut ahead = vec![Vec::new(); kinds];
+    let mut behind = vec![Vec::new(); kinds];
+    for (k, pose) in keys.iter().enumerate() {
+        let (next, prev) = (keys.get(k + 1), k.checked_sub(1).map(|j| &keys[j]));
+        let mut to = Vec::new();
+        for (_, follow) in VOLUME_FOLLOW {
+            to.extend(next.map(|&p| (p, follow)));
+            to.extend(prev.map(|&p| (p, follow)));
+        }
+        let mut m = ignis_volume::model_motion(scene, pose, &to)?.into_iter();
+        for i in 0..kinds {
+            ahead[i].push(next.and_then(|_| m.next()));
+            behind[i].push(prev.and_then(|_| m.next()));
+        }
+    }
+    (0..kinds)
+        .map(|i| {
+            let velocities = ahead[i]
+                .iter()
+                .zip(&behind[i])
+                .map(|(a, b)| {
+                    ignis_media::write::motion::frame_velocity(a.as_deref(), b.as_deref())
+                        .context("at least two key frames")
+                })
+                .collect::<Result<Vec<_>>>()?;
+            let pairs = (0..keys.len() - 1)
+                .map(|k| {
+                    let f = ahead[i][k].clone().context("a forward motion")?;
+                    let b = behind[i][k + 1].clone().context("a backward motion")?;
+                    Ok((f, b))
+                })
+                .collect::<Result<Vec<_>>>()?;
+            Ok((velocities, pairs))
+        })
+        .collect()
 }
 
 /// The learned row ([`learned`] at twice the model's rate, `n` frames, with its model
@@ -249,7 +328,7 @@ fn learned_case(
                 model_velocities(&model.shape, &warps, size, (2, 1)),
             ),
         ],
-        pairs: Some(model_pairs(&model.shape, &warps, size, 2)),
+        pairs: vec![("model", model_pairs(&model.shape, &warps, size, 2))],
     };
     let mut row = case(
         "learned",
@@ -265,7 +344,7 @@ fn learned_case(
             "model",
             model_velocities(&model.shape, &warps, size, (4, 4)),
         )],
-        pairs: Some(model_pairs(&model.shape, &warps, size, 4)),
+        pairs: vec![("model", model_pairs(&model.shape, &warps, size, 4))],
     };
     Ok((row, held_out(&frames, known)?))
 }
@@ -525,17 +604,10 @@ pub fn figures(g: &Global, quick: bool) -> Result<serde_json::Value> {
     );
     for p in [ignis_volume::Preset::Candle, ignis_volume::Preset::Campfire] {
         let name = format!("volume-{}", p.name());
-        rows.push(case(
-            &name,
-            &volume(n, p, 2.0)?,
-            dir.path(),
-            Known::default(),
-            flow_source(),
-        )?);
-        held.insert(
-            name,
-            held_out(&volume(2 * n - 1, p, 4.0)?, Known::default())?,
-        );
+        let (frames, known) = volume(n, p, 2.0, 2)?;
+        rows.push(case(&name, &frames, dir.path(), known, flow_source())?);
+        let (frames, known) = volume(2 * n - 1, p, 4.0, 4)?;
+        held.insert(name, held_out(&frames, known)?);
     }
     let (row, held_learned) = learned_case(g, quick, n, dir.path())?;
     rows.push(row);
@@ -613,8 +685,8 @@ pub fn figures(g: &Global, quick: bool) -> Result<serde_json::Value> {
             "exact_colour": "the same vectors on the unquantised key frames (what the --hdr EXR colour sheet gives): separates the 8-bit sheet's rounding from the blend",
             "in_between_flow": "velocities from flows key -> true in-between frames (uses the dropped frames: possible only when the exporter has them, e.g. decimated footage or a generator rendered at twice the rate); vectors unquantised",
             "key_frame_change": "mean |error| between consecutive key frames: how much there is to blend",
-            "held_out_t": "error_reduction at blends t = 0.25 / 0.5 / 0.75 with key frames every 4th frame (footage: every 4th source frame), default vs loose gating (gated_mip1: the default's vectors read at mip level 1, see filtered), raw_flow_chosen (chosen on the t = 0.5 frames only, so t = 0.25 / 0.75 are held out), and for the learned flame model, model_chosen (what `ignis learned synth --motion-vectors` writes; model_chosen_mip1 read at mip level 1) and model_pairwise; vectors unquantised: checks a change on frames it was not tuned on",
-            "diagnosis": "error_reduction of other vectors on the unquantised key frames: gated_sheet_16bit (the sheet's vectors read back), gated_unquantised (the same before 16-bit encoding), raw_flow / raw_flow_full_res (ungated DIS velocities, finest pyramid level 1 / 0), raw_flow_halved, gated_loose (consistency 8 px, explained 0.05), model (the generator's own motion: exact shift for the texture, ignis_classic::motion for classic, ignis_learned::model_motion for the learned flame: its texture attached to the flame's canonical coordinates; central over the neighbouring key frames), model_half_steps (learned: the same from the model's motion to the in-between times, known without rendering them), raw_flow_pairwise / model_pairwise (not one vector per frame: each dropped frame blended with the forward motion for the earlier key frame and the reversed backward motion for the later, from the raw flow / the learned model: what a forward and a backward sheet would give), raw_flow_chosen / model_chosen (uses the in-between frames: one vector per key frame and pixel, storable in a sheet, chosen among none / forward / reversed backward / central so that the blends at 0.5 err least against the true in-between frames, exactly over the run of key frames), best_per_pixel_bound (per dropped pixel the best single velocity within 4 px for both key frames, chosen by looking at the true frame: a bound for vectors shared by the two key frames, not for the chosen ones, which give each key frame its own)",
+            "held_out_t": "error_reduction at blends t = 0.25 / 0.5 / 0.75 with key frames every 4th frame (footage: every 4th source frame), default vs loose gating (gated_mip1: the default's vectors read at mip level 1, see filtered), raw_flow_chosen (chosen on the t = 0.5 frames only, so t = 0.25 / 0.75 are held out), and for the learned flame model, model_chosen (what `ignis learned synth --motion-vectors` writes; model_chosen_mip1 read at mip level 1) and model_pairwise; the volume rows the same for each of their model motions (model, model_flow, model_noise, model_lattice: see diagnosis), none of which the volume sheet uses; vectors unquantised: checks a change on frames it was not tuned on",
+            "diagnosis": "error_reduction of other vectors on the unquantised key frames: gated_sheet_16bit (the sheet's vectors read back), gated_unquantised (the same before 16-bit encoding), raw_flow / raw_flow_full_res (ungated DIS velocities, finest pyramid level 1 / 0), raw_flow_halved, gated_loose (consistency 8 px, explained 0.05), model (the generator's own motion: exact shift for the texture, ignis_classic::motion for classic, ignis_learned::model_motion for the learned flame: its texture attached to the flame's canonical coordinates; ignis_volume::model_motion for the volume rows: a fixed noise coordinate carried by the lattice and the scroll, emission-weighted over each pixel's samples; model_noise: the noise's least-changing track through its time axis instead; model_lattice: the lattice alone; model_flow: the model's own optical flow, the least-squares shift that keeps each sample's displaced-profile brightness, plus the lattice's motion; central over the neighbouring key frames), model_half_steps (learned: the same from the model's motion to the in-between times, known without rendering them), raw_flow_pairwise / model_pairwise (not one vector per frame: each dropped frame blended with the forward motion for the earlier key frame and the reversed backward motion for the later, from the raw flow / the learned model: what a forward and a backward sheet would give), raw_flow_chosen / model_chosen (uses the in-between frames: one vector per key frame and pixel, storable in a sheet, chosen among none / forward / reversed backward / central so that the blends at 0.5 err least against the true in-between frames, exactly over the run of key frames), best_per_pixel_bound (per dropped pixel the best single velocity within 4 px for both key frames, chosen by looking at the true frame: a bound for vectors shared by the two key frames, not for the chosen ones, which give each key frame its own)",
         },
         "goal_error_reduction": GOAL_REDUCTION,
         "blend": rows,
@@ -792,9 +864,9 @@ fn diagnosis(
     for (name, m) in known.velocities {
         d[name] = json!(red(&m));
     }
-    if let Some(p) = known.pairs {
-        d["model_pairwise"] = json!(pair_red(&p));
-        d["model_chosen"] = json!(red(&ignis_media::write::motion::chosen_velocities(
+    for (name, p) in known.pairs {
+        d[format!("{name}_pairwise")] = json!(pair_red(&p));
+        d[format!("{name}_chosen")] = json!(red(&ignis_media::write::motion::chosen_velocities(
             keys, &mids, &p
         )));
     }
@@ -822,12 +894,12 @@ fn held_out(frames: &[RgbaFrame], known: Known) -> Result<serde_json::Value> {
     // chosen on the t = 0.5 frames only: t = 0.25 and 0.75 are held out
     let mids: Vec<&RgbaFrame> = (0..keys.len() - 1).map(|k| &frames[4 * k + 2]).collect();
     let gated = gated_velocities(&keys)?;
-    let mut sets = vec![
-        ("gated_mip1", intervals(mip1(&gated, keys[0].size()))),
-        ("gated", intervals(gated)),
-        ("gated_loose", intervals(gated_with(&keys, &loose)?)),
+    let mut sets: Vec<(String, Vec<(Field, Field)>)> = vec![
+        ("gated_mip1".into(), intervals(mip1(&gated, keys[0].size()))),
+        ("gated".into(), intervals(gated)),
+        ("gated_loose".into(), intervals(gated_with(&keys, &loose)?)),
         (
-            "raw_flow_chosen",
+            "raw_flow_chosen".into(),
             intervals(ignis_media::write::motion::chosen_velocities(
                 &keys,
                 &mids,
@@ -835,20 +907,23 @@ fn held_out(frames: &[RgbaFrame], known: Known) -> Result<serde_json::Value> {
             )),
         ),
     ];
-    sets.extend(known.velocities.into_iter().map(|(n, v)| (n, intervals(v))));
-    if let Some(pairs) = &known.pairs {
-        let chosen = ignis_media::write::motion::chosen_velocities(&keys, &mids, pairs);
+    sets.extend(
+        known
+            .velocities
+            .into_iter()
+            .map(|(n, v)| (n.to_string(), intervals(v))),
+    );
+    for (name, pairs) in known.pairs {
+        let chosen = ignis_media::write::motion::chosen_velocities(&keys, &mids, &pairs);
         // the chosen sheet read at mip level 1: does switching between candidates survive?
         sets.push((
-            "model_chosen_mip1",
+            format!("{name}_chosen_mip1"),
             intervals(mip1(&chosen, keys[0].size())),
         ));
-        sets.push(("model_chosen", intervals(chosen)));
-    }
-    if let Some(pairs) = known.pairs {
+        sets.push((format!("{name}_chosen"), intervals(chosen)));
         let reversed = |b: Field| b.into_iter().map(|v| [-v[0], -v[1]]).collect();
         let pairs = pairs.into_iter().map(|(f, b)| (f, reversed(b))).collect();
-        sets.push(("model_pairwise", pairs));
+        sets.push((format!("{name}_pairwise"), pairs));
     }
     let mut out = serde_json::Map::new();
     for (name, mv) in &sets {

@@ -53,4 +53,21 @@ impl Camera {
         let u = cross(r, f);
         (f, r, u)
     }
+
+    /// Where world point `p` appears in a `size` image, in pixels from the top-left
+    /// corner (pixel `(x, y)`'s centre is at `(x + 0.5, y + 0.5)`, as the renderer's rays
+    /// go); `None` at or behind the camera plane.
+    pub(crate) fn project(&self, p: V3, size: ignis_core::Size) -> Option<[f32; 2]> {
+        let (f, r, u) = self.basis();
+        let d = sub(p, self.position);
+        let z = crate::lattice::dot(d, f);
+        if !(z > 1e-6) {
+            return None;
+        }
+        let tan = (self.fov.to_radians() * 0.5).tan();
+        let (w, h) = (size.width as f32, size.height as f32);
+        let sx = crate::lattice::dot(d, r) / z / (tan * (w / h));
+        let sy = crate::lattice::dot(d, u) / z / tan;
+        Some([(sx + 1.0) * 0.5 * w, (1.0 - sy) * 0.5 * h])
+    }
 }

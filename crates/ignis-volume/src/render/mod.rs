@@ -52,7 +52,7 @@ pub use finish::finish;
 pub(crate) use finish::preview_metric;
 
 use crate::error::{Result, VolumeError};
-use crate::lattice::Lattice;
+use crate::lattice::{Lattice, V3};
 use crate::mapping::{loop_mix, periodic_loop, LoopMix, NoiseParams, PeriodicLoop};
 use crate::profile::FireProfile;
 use bin::bin_cells;
@@ -98,7 +98,7 @@ pub struct RenderParams {
 impl RenderParams {
     /// A looping render's periodic noise for `fire` at scene time `time` (seconds), where
     /// its noise can be periodic ([`PeriodicLoop`]).
-    fn periodic(&self, fire: &FireInstance, time: f32) -> Option<PeriodicLoop> {
+    pub(crate) fn periodic(&self, fire: &FireInstance, time: f32) -> Option<PeriodicLoop> {
         let ts = fire.noise.time_scale;
         let p = self.loop_period?;
         periodic_loop(time * ts, p * ts, &fire.noise, fire.scroll_length())
@@ -106,7 +106,7 @@ impl RenderParams {
 
     /// The loop mix of `fire` at scene time `time` (seconds): a looping render's fallback
     /// where the noise cannot be periodic ([`RenderParams::periodic`]).
-    fn mix(&self, fire: &FireInstance, time: f32) -> Option<LoopMix> {
+    pub(crate) fn mix(&self, fire: &FireInstance, time: f32) -> Option<LoopMix> {
         let ts = fire.noise.time_scale;
         if self.periodic(fire, time).is_some() {
             return None;
@@ -233,39 +233,10 @@ fn render_with(
     time: f32,
     simd: bool,
 ) -> Result<(RgbaFrame, RenderStats)> {
-    camera.validate()?;
-    params.validate()?;
+    let (renderer, bins) = prepare(fires, camera, params, time, simd)?;
     let size = params.size;
-    let (w, h) = (size.width, size.height);
-    let (forward, right, up) = camera.basis();
-    let tan = (camera.fov.to_radians() * 0.5).tan();
-    let aspect = w as f32 / h as f32;
-    let (tx, ty) = (w.div_ceil(TILE), h.div_ceil(TILE));
-    let bins = bin_cells(
-        fires,
-        camera,
-        params,
-        time,
-        [forward, right, up],
-        tan,
-        aspect,
-    )?;
-    let renderer = FrameRenderer {
-        fires,
-        camera,
-        params,
-        forward,
-        right,
-        up,
-        tan,
-        aspect,
-        time,
-        simd,
-        per_cell: fires
-            .iter()
-            .map(|f| !params.exact_inverse && per_cell_ok(f.lattice))
-            .collect(),
-    };
+    let w = size.width;
+    let (tx, ty) = (w.div_ceil(TILE), size.height.div_ceil(TILE));
     let tiles: Vec<(Vec<[f32; 4]>, RenderStats)> = (0..tx * ty)
         .into_par_iter()
         .map(|t| {
@@ -304,4 +275,89 @@ fn render_with(
             }
         });
     Ok((RgbaFrame::from_vec(size, data)?, stats))
+}
+
+/// Checks the camera and settings, bins the cells into tiles and sets up the frame's
+/// renderer (shared by [`render`] and [`reference_sums`]).
+fn prepare<'a, 'b>(
+    fires: &'a [FireInstance<'b>],
+    camera: &'a Camera,
+    params: &'a RenderParams,
+    time: f32,
+    simd: bool,
+) -> Result<(FrameRenderer<'a, 'b>, Vec<Vec<bin::Candidate>>)> {
+    camera.validate()?;
+    params.validate()?;
+    let (w, h) = (params.size.width, params.size.height);
+    let (forward, right, up) = camera.basis();
+    let tan = (camera.fov.to_radians() * 0.5).tan();
+    let aspect = w as f32 / h as f32;
+    let bins = bin_cells(
+        fires,
+        camera,
+        params,
+        time,
+        [forward, right, up],
+        tan,
+        aspect,
+    )?;
+    let renderer = FrameRenderer {
+        fires,
+        camera,
+        params,
+        forward,
+        right,
+        up,
+        tan,
+        aspect,
+        time,
+        simd,
+        per_cell: fires
+            .iter()
+            .map(|f| !params.exact_inverse && per_cell_ok(f.lattice))
+            .collect(),
+    };
+    Ok((renderer, bins))
+}
+
+/// Per pixel (row-major), the sum over the samples of the reference path
+/// ([`RenderParams::exact_inverse`], whatever `params` says) of `f(fire, tex, colour)`:
+/// the fire's index, the sample's texture coordinates and its shaded straight-alpha
+/// colour. What [`crate::model_motion`] weighs each sample's velocity with; the image
+/// itself is not made. Deterministic at any thread count (each pixel's samples are summed
+/// in march order within its tile).
+pub(crate) fn reference_sums<const N: usize>(
+    fires: &[FireInstance],
+    camera: &Camera,
+    params: &RenderParams,
+    time: f32,
+    f: &(dyn Fn(usize, V3, [f32; 4]) -> [f32; N] + Sync),
+) -> Result<Vec<[f32; N]>> {
+    let params = RenderParams {
+        exact_inverse: true,
+        count_coverage: false,
+        ..*params
+    };
+    let (renderer, bins) = prepare(fires, camera, &params, time, false)?;
+    let (w, h) = (params.size.width, params.size.height);
+    let tx = w.div_ceil(TILE);
+    let tiles: Vec<Vec<[f32; N]>> = (0..bins.len() as u32)
+        .into_par_iter()
+        .map(|t| {
+            let mut scratch = Scratch::default();
+            renderer.tile_sums(t % tx, t / tx, &bins[t as usize], &mut scratch, f)
+        })
+        .collect();
+    let mut out = vec![[0.0f32; N]; params.size.pixels()];
+    for (t, buf) in tiles.iter().enumerate() {
+        let (x0, y0) = ((t as u32 % tx) * TILE, (t as u32 / tx) * TILE);
+        let tw = TILE.min(w - x0) as usize;
+        for (i, v) in buf.iter().enumerate() {
+            let (x, y) = (x0 as usize + i % tw, y0 as usize + i / tw);
+            if y < h as usize {
+                out[y * w as usize + x] = *v;
+            }
+        }
+    }
+    Ok(out)
 }

@@ -8,7 +8,9 @@
 use super::bin::Candidate;
 use super::march_ray::{finish_sample, locate, Ray, MAX_RANGES};
 use super::tile::{FrameRenderer, Scratch};
+use super::TILE;
 use super::{FireInstance, RenderStats};
+use crate::lattice::V3;
 use crate::mapping::{shade, shade_looped, shade_periodic};
 
 impl FrameRenderer<'_, '_> {
@@ -60,6 +62,57 @@ impl FrameRenderer<'_, '_> {
             p,
         );
         finish_sample(fire, r, k, found, |_| None, stats, out);
+    }
+
+    /// One tile of [`super::reference_sums`]: per pixel of the tile (row-major within it),
+    /// the sum of `f(fire, tex, colour)` over its reference-path samples; empty when the
+    /// tile has no candidate cells.
+    pub(super) fn tile_sums<const N: usize>(
+        &self,
+        tx: u32,
+        ty: u32,
+        cands: &[Candidate],
+        scratch: &mut Scratch,
+        f: &(dyn Fn(usize, V3, [f32; 4]) -> [f32; N] + Sync),
+    ) -> Vec<[f32; N]> {
+        if cands.is_empty() {
+            return Vec::new();
+        }
+        let size = self.params.size;
+        let (x0, y0) = (tx * TILE, ty * TILE);
+        let (x1, y1) = ((x0 + TILE).min(size.width), (y0 + TILE).min(size.height));
+        let tw = (x1 - x0) as usize;
+        let mut acc = vec![[0.0f32; N]; tw * (y1 - y0) as usize];
+        let mut ranges = [(0u32, 0.0f32, 0.0f32); MAX_RANGES];
+        let mut stats = RenderStats::default();
+        let mut i = 0;
+        while i < cands.len() {
+            let fi = cands[i].fire;
+            let start = i;
+            while i < cands.len() && cands[i].fire == fi {
+                i += 1;
+            }
+            let fire = &self.fires[fi as usize];
+            scratch.pix.clear();
+            scratch.slice.clear();
+            scratch.tex.clear();
+            for y in y0..y1 {
+                for x in x0..x1 {
+                    let p = ((y - y0) as usize * tw + (x - x0) as usize) as u16;
+                    let (r, st) = (&mut ranges, &mut stats);
+                    self.march_reference(fire, &cands[start..i], x, y, i64::MAX, p, r, st, scratch);
+                }
+            }
+            self.shade_reference(fire, scratch);
+            for s in 0..scratch.pix.len() {
+                let v = f(fi as usize, scratch.tex[s], scratch.col[s]);
+                let a = &mut acc[scratch.pix[s] as usize];
+                for c in 0..N {
+                    a[c] += v[c];
+                }
+            }
+        }
+        acc
     }
 
     /// Shades every collected sample with [`shade`], one by one: the reference.
