@@ -364,20 +364,24 @@ mod probing {
 
     /// Makes a 12-frame 64x48 clip with the system ffmpeg; None if this ffmpeg lacks the codec.
     fn make(dir: &Path, name: &str, args: &[&str]) -> Option<PathBuf> {
+        let inputs = [
+            "-f",
+            "lavfi",
+            "-i",
+            "testsrc=size=64x48:rate=10",
+            "-frames:v",
+            "12",
+        ];
+        make_from(dir, name, &inputs, args)
+    }
+
+    /// Makes `name` in `dir` from ffmpeg `inputs` (and their options) encoded with `args`;
+    /// None if this ffmpeg cannot.
+    fn make_from(dir: &Path, name: &str, inputs: &[&str], args: &[&str]) -> Option<PathBuf> {
         let out = dir.join(name);
         let ok = std::process::Command::new("ffmpeg")
-            .args([
-                "-nostdin",
-                "-y",
-                "-v",
-                "error",
-                "-f",
-                "lavfi",
-                "-i",
-                "testsrc=size=64x48:rate=10",
-                "-frames:v",
-                "12",
-            ])
+            .args(["-nostdin", "-y", "-v", "error"])
+            .args(inputs)
             .args(args)
             .arg(&out)
             .status()
@@ -543,29 +547,23 @@ mod probing {
                 ],
             ),
         ];
+        let inputs = [
+            "-f",
+            "lavfi",
+            "-i",
+            "testsrc=size=64x48:rate=25",
+            "-f",
+            "lavfi",
+            "-i",
+            "sine=frequency=440:sample_rate=48000",
+            "-frames:v",
+            "16",
+            "-shortest",
+        ];
         for (name, args) in cases {
-            let out = dir.path().join(name);
-            let ok = std::process::Command::new("ffmpeg")
-                .args([
-                    "-nostdin",
-                    "-y",
-                    "-v",
-                    "error",
-                    "-f",
-                    "lavfi",
-                    "-i",
-                    "testsrc=size=64x48:rate=25",
-                ])
-                .args(["-f", "lavfi", "-i", "sine=frequency=440:sample_rate=48000"])
-                .args(["-frames:v", "16", "-shortest"])
-                .args(args)
-                .arg(&out)
-                .status()
-                .is_ok_and(|s| s.success());
-            if !ok {
-                println!("skipped {name}: this ffmpeg cannot encode it");
+            let Some(out) = make_from(dir.path(), name, &inputs, args) else {
                 continue;
-            }
+            };
             assert_eq!(probe(&out).unwrap().decoder, Decoder::Ffmpeg, "{name}");
             let frames = read_all(&out);
             for start in [1u64, 5, 9] {

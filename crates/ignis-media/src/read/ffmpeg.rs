@@ -233,16 +233,11 @@ pub(crate) fn probe(path: &Path, _hint: Option<&str>) -> Result<SourceInfo> {
 /// and modification time in a process (a command opens its input several times).
 /// `None` when ffprobe counts nothing.
 fn counted_packets(path: &Path) -> Result<Option<u64>> {
-    use std::collections::HashMap;
-    use std::sync::{Mutex, OnceLock};
-    type Key = (std::path::PathBuf, u64, Option<std::time::SystemTime>);
-    static COUNTS: OnceLock<Mutex<HashMap<Key, Option<u64>>>> = OnceLock::new();
-    let meta = std::fs::metadata(path).map_err(|e| MediaError::io(path, e))?;
-    let key = (path.to_path_buf(), meta.len(), meta.modified().ok());
-    let counts = COUNTS.get_or_init(Default::default);
-    if let Some(n) = counts.lock().ok().and_then(|c| c.get(&key).copied()) {
-        return Ok(n);
-    }
+    static COUNTS: PerFile<Option<u64>> = OnceLock::new();
+    per_file(&COUNTS, path, || count_packets(path))
+}
+
+fn count_packets(path: &Path) -> Result<Option<u64>> {
     let out = Command::new(ffmpeg_sidecar::ffprobe::ffprobe_path())
         .args(["-v", "error", "-select_streams", "v:0", "-count_packets"])
         .args(["-show_entries", "stream=nb_read_packets", "-of", "csv=p=0"])
@@ -257,10 +252,34 @@ fn counted_packets(path: &Path) -> Result<Option<u64>> {
         .parse::<u64>()
         .ok()
         .filter(|&n| out.status.success() && n > 0);
-    if let Ok(mut c) = counts.lock() {
-        c.insert(key, n);
-    }
     Ok(n)
+}
+
+/// A per-process cache of something read from a file, by path, length and modification
+/// time (a command opens its input several times).
+type PerFile<T> = OnceLock<
+    std::sync::Mutex<
+        std::collections::HashMap<(std::path::PathBuf, u64, Option<std::time::SystemTime>), T>,
+    >,
+>;
+
+/// `read()` of `path`, once per file and modification time in a process (kept in `cache`).
+fn per_file<T: Clone>(
+    cache: &'static PerFile<T>,
+    path: &Path,
+    read: impl FnOnce() -> Result<T>,
+) -> Result<T> {
+    let meta = std::fs::metadata(path).map_err(|e| MediaError::io(path, e))?;
+    let key = (path.to_path_buf(), meta.len(), meta.modified().ok());
+    let cache = cache.get_or_init(Default::default);
+    if let Some(v) = cache.lock().ok().and_then(|c| c.get(&key).cloned()) {
+        return Ok(v);
+    }
+    let v = read()?;
+    if let Ok(mut c) = cache.lock() {
+        c.insert(key, v.clone());
+    }
+    Ok(v)
 }
 
 /// Presentation times of the first video stream's frames, in order, in seconds from the
@@ -270,17 +289,11 @@ fn counted_packets(path: &Path) -> Result<Option<u64>> {
 /// down in low light) has no fixed frame duration, so frame `k` is not at `k / fps`: a
 /// seek by the average rate landed up to several frames off.
 fn frame_times(path: &Path) -> Result<Option<std::sync::Arc<Vec<f64>>>> {
-    use std::collections::HashMap;
-    use std::sync::{Arc, Mutex};
-    type Key = (std::path::PathBuf, u64, Option<std::time::SystemTime>);
-    type Times = Option<Arc<Vec<f64>>>;
-    static TIMES: OnceLock<Mutex<HashMap<Key, Times>>> = OnceLock::new();
-    let meta = std::fs::metadata(path).map_err(|e| MediaError::io(path, e))?;
-    let key = (path.to_path_buf(), meta.len(), meta.modified().ok());
-    let cache = TIMES.get_or_init(Default::default);
-    if let Some(t) = cache.lock().ok().and_then(|c| c.get(&key).cloned()) {
-        return Ok(t);
-    }
+    static TIMES: PerFile<Option<std::sync::Arc<Vec<f64>>>> = OnceLock::new();
+    per_file(&TIMES, path, || read_frame_times(path))
+}
+
+fn read_frame_times(path: &Path) -> Result<Option<std::sync::Arc<Vec<f64>>>> {
     let out = Command::new(ffmpeg_sidecar::ffprobe::ffprobe_path())
         .args(["-v", "error", "-select_streams", "v:0"])
         .args([
@@ -299,10 +312,7 @@ fn frame_times(path: &Path) -> Result<Option<std::sync::Arc<Vec<f64>>>> {
         .success()
         .then(|| parse_frame_times(&out.stdout))
         .flatten()
-        .map(Arc::new);
-    if let Ok(mut c) = cache.lock() {
-        c.insert(key, times.clone());
-    }
+        .map(std::sync::Arc::new);
     Ok(times)
 }
 
