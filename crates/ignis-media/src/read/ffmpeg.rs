@@ -13,9 +13,10 @@
 //! Set `IGNIS_NO_FFMPEG=1` to behave as if ffmpeg were absent (e.g. to check that a file
 //! decodes on machines without it).
 
+use std::collections::HashMap;
 use std::path::Path;
 use std::process::Command;
-use std::sync::OnceLock;
+use std::sync::{Arc, Mutex, OnceLock};
 
 use ffmpeg_sidecar::child::FfmpegChild;
 use ffmpeg_sidecar::command::FfmpegCommand;
@@ -225,75 +226,43 @@ pub(crate) fn probe(path: &Path, _hint: Option<&str>) -> Result<SourceInfo> {
 }
 
 /// The video frames of a file whose container does not say how many it holds (Matroska
-/// and WebM never do; some MOV and AVI files do not): `ffprobe -count_packets` counts the
-/// first video stream's packets, demuxing only (no decoding: a few ms for a short clip,
-/// about a disk read of the file for a long one). One packet is one frame for the video
-/// codecs ffmpeg muxes (H.264, HEVC, ProRes, VP8 with alt-ref frames, VP9 superframes,
-/// AV1 temporal units; checked against `-count_frames` on each). Counted once per file
-/// and modification time in a process (a command opens its input several times).
-/// `None` when ffprobe counts nothing.
+/// and WebM never do; some MOV and AVI files do not): the first video stream's packets
+/// ([`packets`]). One packet is one frame for the video codecs ffmpeg muxes (H.264, HEVC,
+/// ProRes, VP8 with alt-ref frames, VP9 superframes, AV1 temporal units; checked against
+/// `-count_frames` on each). `None` when ffprobe lists none.
 fn counted_packets(path: &Path) -> Result<Option<u64>> {
-    static COUNTS: PerFile<Option<u64>> = OnceLock::new();
-    per_file(&COUNTS, path, || count_packets(path))
-}
-
-fn count_packets(path: &Path) -> Result<Option<u64>> {
-    let out = Command::new(ffmpeg_sidecar::ffprobe::ffprobe_path())
-        .args(["-v", "error", "-select_streams", "v:0", "-count_packets"])
-        .args(["-show_entries", "stream=nb_read_packets", "-of", "csv=p=0"])
-        .args(PROTOCOL_WHITELIST)
-        .arg("-i")
-        .arg(file_url(path)?)
-        .output()
-        .map_err(|e| MediaError::io(path, e))?;
-    let n = String::from_utf8_lossy(&out.stdout)
-        .trim()
-        .trim_end_matches(',')
-        .parse::<u64>()
-        .ok()
-        .filter(|&n| out.status.success() && n > 0);
-    Ok(n)
-}
-
-/// A per-process cache of something read from a file, by path, length and modification
-/// time (a command opens its input several times).
-type PerFile<T> = OnceLock<
-    std::sync::Mutex<
-        std::collections::HashMap<(std::path::PathBuf, u64, Option<std::time::SystemTime>), T>,
-    >,
->;
-
-/// `read()` of `path`, once per file and modification time in a process (kept in `cache`).
-fn per_file<T: Clone>(
-    cache: &'static PerFile<T>,
-    path: &Path,
-    read: impl FnOnce() -> Result<T>,
-) -> Result<T> {
-    let meta = std::fs::metadata(path).map_err(|e| MediaError::io(path, e))?;
-    let key = (path.to_path_buf(), meta.len(), meta.modified().ok());
-    let cache = cache.get_or_init(Default::default);
-    if let Some(v) = cache.lock().ok().and_then(|c| c.get(&key).cloned()) {
-        return Ok(v);
-    }
-    let v = read()?;
-    if let Ok(mut c) = cache.lock() {
-        c.insert(key, v.clone());
-    }
-    Ok(v)
+    Ok(packets(path)?.map(|p| p.count))
 }
 
 /// Presentation times of the first video stream's frames, in order, in seconds from the
-/// file's start (what an input `-ss` counts from), from its packets' timestamps (demuxing
-/// only, like [`counted_packets`]; read once per file and modification time in a process).
-/// `None` when a packet has no timestamp. A variable-frame-rate clip (a phone's, slowing
-/// down in low light) has no fixed frame duration, so frame `k` is not at `k / fps`: a
-/// seek by the average rate landed up to several frames off.
-fn frame_times(path: &Path) -> Result<Option<std::sync::Arc<Vec<f64>>>> {
-    static TIMES: PerFile<Option<std::sync::Arc<Vec<f64>>>> = OnceLock::new();
-    per_file(&TIMES, path, || read_frame_times(path))
+/// file's start (what an input `-ss` counts from), from its packets' timestamps
+/// ([`packets`]); `None` when a packet has no timestamp. A variable-frame-rate clip (a
+/// phone's, slowing down in low light) has no fixed frame duration, so frame `k` is not at
+/// `k / fps`: a seek by the average rate landed up to several frames off.
+fn frame_times(path: &Path) -> Result<Option<Arc<Vec<f64>>>> {
+    Ok(packets(path)?.and_then(|p| p.times.clone()))
 }
 
-fn read_frame_times(path: &Path) -> Result<Option<std::sync::Arc<Vec<f64>>>> {
+/// What the first video stream's packets say: how many, and their presentation times
+/// ([`frame_times`]).
+struct Packets {
+    count: u64,
+    times: Option<Arc<Vec<f64>>>,
+}
+
+/// The first video stream's [`Packets`], listed by `ffprobe` demuxing only (no decoding:
+/// a few ms for a short clip, about a disk read of the file for a long one); once per file,
+/// length and modification time in a process (a command opens its input several times).
+/// `None` when ffprobe lists no packet.
+fn packets(path: &Path) -> Result<Option<Arc<Packets>>> {
+    type Key = (std::path::PathBuf, u64, Option<std::time::SystemTime>);
+    static CACHE: OnceLock<Mutex<HashMap<Key, Option<Arc<Packets>>>>> = OnceLock::new();
+    let meta = std::fs::metadata(path).map_err(|e| MediaError::io(path, e))?;
+    let key = (path.to_path_buf(), meta.len(), meta.modified().ok());
+    let cache = CACHE.get_or_init(Default::default);
+    if let Some(v) = cache.lock().ok().and_then(|c| c.get(&key).cloned()) {
+        return Ok(v);
+    }
     let out = Command::new(ffmpeg_sidecar::ffprobe::ffprobe_path())
         .args(["-v", "error", "-select_streams", "v:0"])
         .args([
@@ -307,18 +276,21 @@ fn read_frame_times(path: &Path) -> Result<Option<std::sync::Arc<Vec<f64>>>> {
         .arg(file_url(path)?)
         .output()
         .map_err(|e| MediaError::io(path, e))?;
-    let times = out
+    let v = out
         .status
         .success()
-        .then(|| parse_frame_times(&out.stdout))
+        .then(|| parse_packets(&out.stdout))
         .flatten()
-        .map(std::sync::Arc::new);
-    Ok(times)
+        .map(Arc::new);
+    if let Ok(mut c) = cache.lock() {
+        c.insert(key, v.clone());
+    }
+    Ok(v)
 }
 
-/// [`frame_times`] from ffprobe's JSON: the packets' `pts_time` sorted (packets come in
-/// decoding order) less the format's `start_time`.
-fn parse_frame_times(json: &[u8]) -> Option<Vec<f64>> {
+/// [`Packets`] from ffprobe's JSON: their number, and the packets' `pts_time` sorted
+/// (packets come in decoding order) less the format's `start_time`.
+fn parse_packets(json: &[u8]) -> Option<Packets> {
     #[derive(serde::Deserialize)]
     struct Out {
         #[serde(default)]
@@ -334,13 +306,16 @@ fn parse_frame_times(json: &[u8]) -> Option<Vec<f64>> {
         start_time: Option<String>,
     }
     let out: Out = serde_json::from_slice(json).ok()?;
+    if out.packets.is_empty() {
+        return None;
+    }
     let start = out
         .format
         .and_then(|f| f.start_time)
         .and_then(|t| t.parse::<f64>().ok())
         .filter(|t| t.is_finite())
         .unwrap_or(0.0);
-    let mut t = out
+    let times = out
         .packets
         .iter()
         .map(|p| {
@@ -350,12 +325,15 @@ fn parse_frame_times(json: &[u8]) -> Option<Vec<f64>> {
                 .ok()
                 .filter(|t| t.is_finite())
         })
-        .collect::<Option<Vec<f64>>>()?;
-    if t.is_empty() {
-        return None;
-    }
-    t.sort_by(f64::total_cmp);
-    Some(t.into_iter().map(|x| x - start).collect())
+        .collect::<Option<Vec<f64>>>()
+        .map(|mut t| {
+            t.sort_by(f64::total_cmp);
+            Arc::new(t.into_iter().map(|x| x - start).collect())
+        });
+    Some(Packets {
+        count: out.packets.len() as u64,
+        times,
+    })
 }
 
 /// Where an input `-ss` must seek to start decoding at frame `start` (> 0): half way
@@ -505,7 +483,9 @@ mod tests {
         let json = br#"{"packets": [{"pts_time": "0.100000"}, {"pts_time": "0.166667"},
             {"pts_time": "0.133333"}, {"pts_time": "0.300000"}],
             "format": {"start_time": "0.100000"}}"#;
-        let t = parse_frame_times(json).unwrap();
+        let p = parse_packets(json).unwrap();
+        assert_eq!(p.count, 4);
+        let t = p.times.unwrap();
         let want = [0.0, 0.033333, 0.066667, 0.2];
         assert!(
             t.iter().zip(want).all(|(a, b)| (a - b).abs() < 1e-9),
@@ -518,8 +498,9 @@ mod tests {
         assert!((seek_seconds(Some(&t), 4, 30.0) - 3.5 / 30.0).abs() < 1e-12);
         assert!((seek_seconds(Some(&[0.0, 0.0]), 1, 30.0) - 0.5 / 30.0).abs() < 1e-12);
         // A packet without a timestamp: no times.
-        assert!(parse_frame_times(br#"{"packets": [{"pts_time": "0.1"}, {}]}"#).is_none());
-        assert!(parse_frame_times(br#"{"packets": []}"#).is_none());
+        let p = parse_packets(br#"{"packets": [{"pts_time": "0.1"}, {}]}"#).unwrap();
+        assert_eq!((p.count, p.times.is_none()), (2, true));
+        assert!(parse_packets(br#"{"packets": []}"#).is_none());
     }
 
     #[test]
