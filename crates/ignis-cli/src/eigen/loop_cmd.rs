@@ -450,9 +450,6 @@ pub struct Chosen {
     /// The shortest candidate (the written loop is never shorter, see
     /// [`loops::evaluate_with`]).
     pub min_len: usize,
-    /// `best` as predicted on the footage's metric frames, before its closing was rendered
-    /// and measured ([`verify_closings`]); equal to `best` when it was not.
-    pub predicted: Evaluated,
     /// Closings rendered at the output's size and measured before choosing.
     pub rendered: usize,
     /// Seconds spent rendering and measuring them.
@@ -460,15 +457,27 @@ pub struct Chosen {
 }
 
 impl Chosen {
+    /// The best loop as predicted on the footage's metric frames (the first evaluated),
+    /// before closings were rendered and measured ([`verify_closings`]).
+    pub fn predicted_best(&self) -> Evaluated {
+        self.evaluated.first().copied().unwrap_or(self.best)
+    }
+
     /// `e`'s loop as the search predicted it on the footage's metric frames (`e` itself
     /// when it is not among the evaluated).
     pub fn predicted_of(&self, e: &Evaluated) -> Evaluated {
         self.evaluated
             .iter()
-            .find(|p| p.candidate == e.candidate && p.closing == e.closing)
+            .find(|p| same_loop(p, e))
             .copied()
             .unwrap_or(*e)
     }
+}
+
+/// Whether two evaluated loops are the same loop closed the same way (their measures and
+/// left-out frames aside).
+fn same_loop(a: &Evaluated, b: &Evaluated) -> bool {
+    a.candidate == b.candidate && a.closing == b.closing
 }
 
 /// Searches the n×k weights (one row per window frame; window frame 0 = source frame
@@ -531,7 +540,6 @@ pub fn search_and_choose(
         search_s,
         evaluate_s,
         min_len,
-        predicted: best,
         rendered: 0,
         verify_s: 0.0,
     })
@@ -813,7 +821,7 @@ pub const MORPHS_PER_LOOP: usize = 2;
 /// and measured with the footage's own frames around them ([`loops::evaluate_rendered`]),
 /// until the next prediction cannot beat the best measured score (predictions are taken as
 /// optimistic) or [`VERIFY_LOOPS`] loops have been rendered. `chosen.best` becomes the best
-/// measured; `chosen.predicted` keeps the best predicted. `metric` is the window's metric
+/// measured ([`Chosen::predicted_best`] still gives the best predicted). `metric` is the window's metric
 /// frames the search ranked (matted when `matte` is).
 pub fn verify_closings(
     chosen: &mut Chosen,
@@ -828,8 +836,7 @@ pub fn verify_closings(
     let win = loops::MetricWindow::new(metric)?;
     let size = metric[0].size();
     let pb = g.progress(VERIFY_LOOPS as u64, "checking closings");
-    let p = chosen.predicted;
-    let same = |a: &Evaluated, b: &Evaluated| a.candidate == b.candidate && a.closing == b.closing;
+    let p = chosen.predicted_best();
     let mut best: Option<Evaluated> = None;
     // What the best predicted measured as rendered.
     let mut top: Option<Evaluated> = None;
@@ -873,7 +880,7 @@ pub fn verify_closings(
                 .collect::<std::result::Result<_, _>>()?
         };
         for v in measured {
-            if same(&v, &p) {
+            if same_loop(&v, &p) {
                 top = Some(v);
             }
             if best.is_none_or(|b| v.score < b.score) {
@@ -893,7 +900,7 @@ pub fn verify_closings(
             first + e.candidate.end
         )
     };
-    if same(&best, &p) {
+    if same_loop(&best, &p) {
         if p.closing.frames() > 0 {
             chosen.why.push_str(&format!(
                 "; rendered at the output's size, its closing measures seam {:.2}, ghost {:.2}",
@@ -955,7 +962,6 @@ fn rendered_mids(
     };
     let (mut tails, mut heads) = (reader(c.end)?, reader(c.start)?);
     let (mut tail_masks, mut head_masks) = (MaskCache::default(), MaskCache::default());
-    let flow_params = FlowMorph::new(RENDER_FLOW_SIDE).params;
     for t in 0..n {
         // As `plan_with`'s mixes: window frame c.end + t into c.start + t.
         let (from, to) = (c.end + t, c.start + t);
@@ -970,8 +976,7 @@ fn rendered_mids(
             .iter()
             .any(|k| matches!(k, Closing::Morph(m) if *m > t));
         let flow = if morphs {
-            let (la, lb) = rayon::join(|| ignis_flow::luma(&a), || ignis_flow::luma(&b));
-            Some(ignis_flow::flow_pair_reduced(&la, &lb, &flow_params)?)
+            Some(render_flow(&a, &b)?)
         } else {
             None
         };
@@ -1029,10 +1034,20 @@ pub fn blend_rgba(a: &RgbaFrame, b: &RgbaFrame, w: f32) -> RgbaFrame {
 /// The motion-compensated in-between `w` of the way from `a` to `b`, flow computed on the
 /// luma at most [`RENDER_FLOW_SIDE`] pixels on the longest side and resampled.
 fn morph_rgba(a: &RgbaFrame, b: &RgbaFrame, w: f32) -> Result<RgbaFrame> {
-    let p = FlowMorph::new(RENDER_FLOW_SIDE).params;
-    let (la, lb) = rayon::join(|| ignis_flow::luma(a), || ignis_flow::luma(b));
-    let (f, g) = ignis_flow::flow_pair_reduced(&la, &lb, &p)?;
+    let (f, g) = render_flow(a, b)?;
     Ok(ignis_flow::morph_rgba(a, b, &f, &g, w)?)
+}
+
+/// The forward and backward flow between two full-size frames as the render's morph
+/// computes it: on their luma, at most [`RENDER_FLOW_SIDE`] pixels on the longest side
+/// (`ignis_flow::flow_pair_reduced_rgba`: the luma taken inside the resize, no full-size
+/// grey frames).
+fn render_flow(
+    a: &RgbaFrame,
+    b: &RgbaFrame,
+) -> Result<(ignis_flow::FlowField, ignis_flow::FlowField)> {
+    let p = FlowMorph::new(RENDER_FLOW_SIDE).params;
+    Ok(ignis_flow::flow_pair_reduced_rgba(a, b, &p)?)
 }
 
 /// Text lines for the candidate table.
