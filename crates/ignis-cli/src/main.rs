@@ -11,6 +11,7 @@ mod demo;
 mod eigen;
 mod frames;
 mod global;
+mod inbetween;
 mod info;
 mod learned;
 mod output;

@@ -47,7 +47,9 @@ pub struct OutputArgs {
     pub engine: String,
     /// Flipbook: also write `x.mv.png`, a 16-bit motion-vector sheet (RG, 0.5 = still) from
     /// dense optical flow between consecutive frames, for engines' motion-vector frame
-    /// blending; the JSON's `motion_vectors.scale` is the material's strength.
+    /// blending; the JSON's `motion_vectors.scale` is the material's strength. `volume
+    /// render` and `learned synth` also render each in-between frame and keep, per pixel,
+    /// the vector whose blend comes closest to it (about twice the render time).
     #[arg(long)]
     pub motion_vectors: bool,
     /// Flipbook: also write `x.heat.png`, an emission/temperature sheet (16-bit linear

@@ -167,6 +167,13 @@ pub fn render(a: &RenderArgs, g: &Global) -> Result<Vec<PathBuf>> {
     opts.first_frame = plan.range.start as u64;
     // --variants N: N loops with seeds seed, seed + 1, …, one per row of the sheet.
     let whole_loop = plan.looping && plan.range == (0..a.frames);
+    // motion vectors chosen by the rendered in-between frames, unless the sheet is retimed
+    // (its frames are then cross-fades the renderer never drew): then the flow's
+    let in_between = (opts.flipbook.motion.is_some() && !opts.flipbook.fit_frames)
+        .then(|| crate::inbetween::InBetween::new(opts.loop_));
+    if let Some(m) = &in_between {
+        opts.flipbook.motion = Some(m.source());
+    }
     let (mut writer, variants) = a.out.create_variants(scene.size, &mut opts, whole_loop)?;
     let mut hits = String::new();
     let scenes: Vec<_> = (0..variants)
@@ -190,12 +197,17 @@ pub fn render(a: &RenderArgs, g: &Global) -> Result<Vec<PathBuf>> {
             if let Some(an) = anim.as_mut() {
                 an.skip(plan.range.start as u64);
             }
+            if let Some(m) = &in_between {
+                m.start_row();
+            }
         }
-        let f = anim
-            .as_mut()
-            .expect("made at the range's start")
-            .next_frame()
-            .context("rendering")?;
+        let an = anim.as_mut().expect("made at the range's start");
+        let f = an.next_frame().context("rendering")?;
+        if let Some(m) = &in_between {
+            if m.wants(i + 1 < plan.range.end) {
+                m.record(an.frame_between(0.5).context("rendering")?.image);
+            }
+        }
         if a.collisions.is_some() {
             for c in &f.collisions {
                 let mut v = serde_json::to_value(c)?;

@@ -2443,3 +2443,53 @@ mod learned_motion {
         }
     }
 }
+
+/// Issue 17: a volumetric flipbook's motion vectors are the flow's, chosen per pixel by the
+/// in-between frames the renderer draws.
+mod volume_motion {
+    use super::*;
+
+    /// A loop names the source and wraps; a one-shot (`--no-loop`, the torch's simulation
+    /// stepped on a copy) says one side at its ends; a retimed sheet (`--fit-frames`)
+    /// keeps the gated flow, whose JSON names no source.
+    #[test]
+    fn volume_flipbooks_write_vectors_chosen_by_in_between_frames() {
+        let dir = tempfile::tempdir().unwrap();
+        let render = |name: &str, preset: &str, extra: &[&str]| {
+            let out = dir.path().join(name);
+            let mut a = vec![
+                "volume",
+                "render",
+                "--preset",
+                preset,
+                "--size",
+                "32x32",
+                "-q",
+                "--motion-vectors",
+            ];
+            a.extend_from_slice(extra);
+            a.extend(["-o", out.to_str().unwrap()]);
+            let o = ignis(&a);
+            assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+            (read_json(&out.with_extension("json")), out)
+        };
+        let (meta, out) = render("loop.png", "candle", &["--frames", "6"]);
+        let mv = &meta["motion_vectors"];
+        assert!(
+            mv["source"].as_str().unwrap().contains("chosen per pixel by the rendered in-between frames"),
+            "{mv}"
+        );
+        assert!(mv["direction"].as_str().unwrap().contains("wrapping"), "{mv}");
+        let fb = ignis_media::read_flipbook(&out.with_extension("json")).unwrap();
+        assert_eq!(fb.motion.unwrap().len(), 6);
+        let (meta, _) = render("once.png", "torch", &["--frames", "5", "--no-loop"]);
+        let d = meta["motion_vectors"]["direction"].as_str().unwrap();
+        assert!(d.contains("one side only"), "{d}");
+        let (meta, _) = render(
+            "fit.png",
+            "candle",
+            &["--frames", "5", "--fit-frames", "--columns", "3"],
+        );
+        assert!(meta["motion_vectors"].get("source").is_none(), "{meta}");
+    }
+}

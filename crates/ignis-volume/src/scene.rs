@@ -1037,8 +1037,15 @@ impl Animator<'_> {
                 let cycles = (f * l.frames as f64 / f64::from(s.fps)).round().max(1.0);
                 (tau * cycles * l.time(self.frame) / l.frames as f64) as f32
             }
-            None => (tau * (f * self.frame as f64 / f64::from(s.fps)).fract()) as f32,
+            None => self.plain_puff_phase(self.frame as f64),
         }
+    }
+
+    /// A plain animation's puffing phase at frame `frame` (fractional between frames).
+    fn plain_puff_phase(&self, frame: f64) -> f32 {
+        let s = self.scene;
+        let f = ignis_core::realism::puffing_frequency(f64::from(s.diameter));
+        (std::f64::consts::TAU * (f * frame / f64::from(s.fps)).fract()) as f32
     }
 
     /// Renders the next frame.
@@ -1070,6 +1077,95 @@ impl Animator<'_> {
         Ok((frame, pose))
     }
 
+    /// The frame a fraction `s` (in `[0, 1]`) of the way in time from the frame rendered
+    /// last to the next one, rendered as [`Self::next_frame`] renders frames, without
+    /// stepping the animation: what a flipbook's motion vectors are chosen against (the
+    /// engines blend a sheet's neighbouring frames at every fraction in between).
+    ///
+    /// A loop's frames are functions of loop time, so the in-between frame is exact (the
+    /// cycle's last frame is followed by its first); a simulation's control points move
+    /// linearly between the two frames' states, as in a loop. In a plain animation,
+    /// scripts and static fires are evaluated at the in-between time, and a simulation's
+    /// next state is stepped on a copy. Fails before the first frame.
+    pub fn frame_between(&self, s: f64) -> Result<Frame> {
+        let k = self.frame.checked_sub(1).ok_or_else(|| {
+            VolumeError::bad("frame_between", "no frame rendered yet: render one first")
+        })?;
+        let s = s.clamp(0.0, 1.0);
+        let sc = self.scene;
+        let (pose, control_points) = match &self.looping {
+            Some(l) => {
+                let cycle = l.times.len() as u64;
+                let lo = l.time(k);
+                let hi = if (k + 1) % cycle == 0 {
+                    l.frames as f64
+                } else {
+                    l.time(k + 1)
+                };
+                // a loop whose one time is the in-between one: its frame 0 is that frame
+                let mut probe = Animator {
+                    scene: sc,
+                    sims: Vec::new(),
+                    frame: 0,
+                    count_coverage: self.count_coverage,
+                    looping: Some(Looping {
+                        times: vec![lo + s * (hi - lo)],
+                        ..l.clone()
+                    }),
+                    scroll: self.scroll.clone(),
+                };
+                let (pose, _, pts) = probe.next_pose()?;
+                (pose, pts)
+            }
+            None => {
+                let dt = 1.0 / sc.fps;
+                let frame = k as f64 + s;
+                let t = (frame / f64::from(sc.fps)) as f32;
+                let mut pts = Vec::with_capacity(sc.fires.len());
+                for (i, f) in sc.fires.iter().enumerate() {
+                    pts.push(match &f.motion {
+                        Motion::Static(p) => {
+                            static_points(p).at_with_collisions(t, dt, &sc.obstacles, i).0
+                        }
+                        Motion::Script(script) => {
+                            script.at_with_collisions(t, dt, &sc.obstacles, i).0
+                        }
+                        Motion::Simulation(_) => {
+                            let sim = self.sims[i]
+                                .as_ref()
+                                .expect("a simulation per simulated fire");
+                            let (a, mut next) = (sim.control_points(), sim.clone());
+                            next.advance(dt, &sc.obstacles, i);
+                            let b = next.control_points();
+                            a.iter()
+                                .zip(&b)
+                                .map(|(p, q)| [0, 1, 2, 3].map(|c| p[c] + s as f32 * (q[c] - p[c])))
+                                .collect()
+                        }
+                    });
+                }
+                let puffs: Vec<Option<Puff>> = (0..sc.fires.len())
+                    .map(|i| {
+                        (sc.puff > 0.0).then(|| Puff {
+                            amplitude: sc.puff,
+                            phase: self.plain_puff_phase(frame) + sc.puff_offset(i),
+                        })
+                    })
+                    .collect();
+                (self.pose_of(t, &pts, &puffs)?, pts)
+            }
+        };
+        let (hdr, stats) = self.render_pose(&pose)?;
+        let image = finish(&hdr, &sc.bloom)?;
+        Ok(Frame {
+            image,
+            hdr,
+            stats,
+            collisions: Vec::new(),
+            control_points,
+        })
+    }
+
     /// [`Self::next_frame`] before the post pipeline: the renderer's premultiplied HDR
     /// frame, its statistics, the collisions and the control points (the loop's preview
     /// takes its metric frames from the HDR frame directly).
@@ -1087,6 +1183,14 @@ impl Animator<'_> {
         let t = self.time();
         let puffs: Vec<Option<Puff>> = (0..s.fires.len()).map(|i| self.puff_wave(i)).collect();
         let (pts, collisions) = self.step();
+        let pose = self.pose_of(t, &pts, &puffs)?;
+        Ok((pose, collisions, pts))
+    }
+
+    /// The [`Pose`] at scene time `t` of fires with control points `pts` and puffing
+    /// waves `puffs` (one each).
+    fn pose_of(&self, t: f32, pts: &[Vec<[f32; 4]>], puffs: &[Option<Puff>]) -> Result<Pose> {
+        let s = self.scene;
         let lattices = pts
             .iter()
             .zip(&s.fires)
@@ -1097,14 +1201,13 @@ impl Animator<'_> {
                 Lattice::build_puffed(&c, s.lattice, puffs[i])
             })
             .collect::<Result<Vec<_>>>()?;
-        let pose = Pose {
+        Ok(Pose {
             time: t,
             lattices,
             scroll_lengths: self.scroll.clone(),
             count_coverage: self.count_coverage,
             loop_period: self.looping.as_ref().map(|l| l.frames as f32 / s.fps),
-        };
-        Ok((pose, collisions, pts))
+        })
     }
 
     /// Renders `pose` (the scene's fires in it, seen by the scene's camera).

@@ -417,6 +417,64 @@ mod looping {
         }
     }
 
+    /// `frame_between` (issue 17: motion vectors chosen by in-between frames): at 0 it is
+    /// the frame rendered last and at 1 the next one, for every preset (scripts, a
+    /// simulation, static fires), in a loop (bit for bit; the cycle's last frame is
+    /// followed by frame 0, within 1e-4) and in a plain animation (a simulation's points move linearly
+    /// to the next state: within 1e-4); half-way it differs from both; it does not step
+    /// the animation; before any frame it is an error.
+    #[test]
+    fn frame_between_runs_from_one_frame_to_the_next() {
+        let max_diff = |a: &ignis_core::RgbaFrame, b: &ignis_core::RgbaFrame| {
+            a.data()
+                .iter()
+                .zip(b.data())
+                .flat_map(|(p, q)| (0..4).map(move |c| (p[c] - q[c]).abs()))
+                .fold(0f32, f32::max)
+        };
+        for p in Preset::ALL {
+            let s = small(p).with_size(Size::new(24, 24).unwrap());
+            let n = 5;
+            // a loop: 0 → the frame, 1 → the next (after the last: frame 0)
+            let mut a = s.looping_animator(n).unwrap();
+            assert!(a.frame_between(0.5).is_err(), "{}", p.name());
+            let frames: Vec<_> = (0..n)
+                .map(|_| {
+                    let f = a.next_frame().unwrap().image;
+                    let (lo, mid, hi) = (
+                        a.frame_between(0.0).unwrap().image,
+                        a.frame_between(0.5).unwrap().image,
+                        a.frame_between(1.0).unwrap().image,
+                    );
+                    assert_eq!(lo.data(), f.data(), "{}", p.name());
+                    (f, mid, hi)
+                })
+                .collect();
+            for k in 0..n as usize {
+                let (f, mid, hi) = &frames[k];
+                let next = &frames[(k + 1) % n as usize].0;
+                // bit for bit but at the wrap, whose loop time is a period later
+                if k + 1 < n as usize {
+                    assert_eq!(hi.data(), next.data(), "{} loop frame {k}", p.name());
+                } else {
+                    let d = max_diff(hi, next);
+                    assert!(d <= 1e-4, "{} loop's wrap: {d}", p.name());
+                }
+                assert!(max_diff(mid, f) > 1e-3 && max_diff(mid, next) > 1e-3);
+            }
+            // a plain animation: the same within float rounding
+            let mut a = s.animator().unwrap();
+            let f0 = a.next_frame().unwrap().image;
+            let (lo, hi) = (
+                a.frame_between(0.0).unwrap().image,
+                a.frame_between(1.0).unwrap().image,
+            );
+            let f1 = a.next_frame().unwrap().image;
+            assert!(max_diff(&lo, &f0) <= 1e-4, "{}: {}", p.name(), max_diff(&lo, &f0));
+            assert!(max_diff(&hi, &f1) <= 1e-4, "{}: {}", p.name(), max_diff(&hi, &f1));
+        }
+    }
+
     #[test]
     fn a_loop_needs_two_frames() {
         let s = small(Preset::Torch);

@@ -18,8 +18,10 @@
 //! chosen per pixel among the forward, reversed backward, central and zero vectors by the
 //! true in-between frames (`*_chosen`, storable; held out at t = 0.25 / 0.75). The learned
 //! row's sheet is written as `ignis learned synth --motion-vectors` writes it (the model's
-//! vectors chosen that way, [`crate::learned::ModelMotion`]), with the flow's vectors beside
-//! it for comparison; every row's vectors are also read as an engine may filter them
+//! vectors chosen that way, [`crate::learned::ModelMotion`]), and the volume rows' as `ignis
+//! volume render --motion-vectors` writes them (the flow's vectors chosen by the in-between
+//! frames the renderer draws, [`crate::inbetween::InBetween`]), each with the gated flow's
+//! vectors beside it for comparison; every row's vectors are also read as an engine may filter them
 //! (`filtered`: bilinear between pixel centres, mip level 1).
 
 use crate::global::Global;
@@ -404,6 +406,25 @@ fn cli_model_source(model: &ignis_learned::FlameModel, keys: usize) -> Result<Mo
     Ok(motion.source())
 }
 
+/// The motion source `ignis volume render --preset P --no-loop --motion-vectors` gives a
+/// one-shot flipbook of the `keys` frames [`volume`] renders at twice the scene's rate
+/// (every other one: the key frames of the volume rows): the in-between frames rendered by
+/// [`ignis_volume::Animator::frame_between`] and the vectors chosen by them
+/// ([`crate::inbetween::InBetween`]).
+fn cli_volume_source(preset: ignis_volume::Preset, keys: usize) -> Result<MotionSource> {
+    let scene = ignis_volume::FireScene::preset(preset).with_size(Size::new(128, 128)?);
+    let mut anim = scene.animator()?;
+    let motion = crate::inbetween::InBetween::new(false);
+    motion.start_row();
+    for k in 0..keys {
+        anim.next_frame()?;
+        if motion.wants(k + 1 < keys) {
+            motion.record(anim.frame_between(0.5)?.image);
+        }
+    }
+    Ok(motion.source())
+}
+
 /// How an engine may sample the vector sheet: `bilinear`, the blend evaluated half-way
 /// between pixel centres (vectors, key frames and the true frame all bilinear there: the
 /// most a half-texel offset mixes neighbouring vectors), and `mip1`, the vector sheet
@@ -605,7 +626,8 @@ pub fn figures(g: &Global, quick: bool) -> Result<serde_json::Value> {
     for p in [ignis_volume::Preset::Candle, ignis_volume::Preset::Campfire] {
         let name = format!("volume-{}", p.name());
         let (frames, known) = volume(n, p, 2.0, 2)?;
-        rows.push(case(&name, &frames, dir.path(), known, flow_source())?);
+        let source = cli_volume_source(p, n.div_ceil(2))?;
+        rows.push(case(&name, &frames, dir.path(), known, source)?);
         let (frames, known) = volume(2 * n - 1, p, 4.0, 4)?;
         held.insert(name, held_out(&frames, known)?);
     }
@@ -654,10 +676,42 @@ pub fn figures(g: &Global, quick: bool) -> Result<serde_json::Value> {
     w.finish()?;
     let flipbook_s = t.elapsed().as_secs_f64();
     // CPU time of all threads: on a busy machine wall time overstates the cost.
-    let flipbook_cpu_s = match (c0, super::flow::process_cpu_ms()) {
+    let cpu_since = |c0: Option<f64>| match (c0, super::flow::process_cpu_ms()) {
         (Some(a), Some(b)) => Some(((b - a) / 1000.0 * 1000.0).round() / 1000.0),
         _ => None,
     };
+    let flipbook_cpu_s = cpu_since(c0);
+    // The same loop as `ignis volume render --preset candle --size 256x256 --frames 64
+    // --motion-vectors -o x.png` writes it: a loop, each frame's in-between frame rendered
+    // and the vectors chosen by them; timed: the extra renders and the writer.
+    let mut anim = scene.looping_animator(64)?;
+    let looped: Vec<RgbaFrame> = (0..64)
+        .map(|_| Ok(anim.next_frame()?.image))
+        .collect::<Result<_>>()?;
+    let c0 = super::flow::process_cpu_ms();
+    let t = Instant::now();
+    let motion = crate::inbetween::InBetween::new(true);
+    motion.start_row();
+    let mut anim = scene.looping_animator(64)?;
+    for _ in 0..64 {
+        anim.skip(1);
+        motion.record(anim.frame_between(0.5)?.image);
+    }
+    let opts = WriteOptions {
+        loop_: true,
+        flipbook: FlipbookOptions {
+            motion: Some(motion.source()),
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    let mut w = ignis_media::create(&dir.path().join("timed-loop.png"), looped[0].size(), &opts)?;
+    for f in &looped {
+        w.push(f)?;
+    }
+    w.finish()?;
+    let in_between_s = t.elapsed().as_secs_f64();
+    let in_between_cpu_s = cpu_since(c0);
     let load = std::fs::read_to_string("/proc/loadavg")
         .ok()
         .and_then(|l| l.split_whitespace().next()?.parse::<f64>().ok());
@@ -680,12 +734,12 @@ pub fn figures(g: &Global, quick: bool) -> Result<serde_json::Value> {
         "threads": rayon::current_num_threads(),
         "metric": "mean |error| vs the true dropped frame, 8-bit sRGB levels, colour over black",
         "variants": {
-            "headline": "the vectors --motion-vectors writes, on the 8-bit colour sheet read back: image-only vectors (ignis_flow::motion_vector_pair velocities), except for the learned row, whose sheet is written as `ignis learned synth --motion-vectors` writes it (motion_source: the model's motion chosen per pixel by the rendered in-between frames; flow_sheet: the flow's vectors on the same frames, for comparison)",
+            "headline": "the vectors --motion-vectors writes, on the 8-bit colour sheet read back: image-only vectors (ignis_flow::motion_vector_pair velocities), except for the learned row, whose sheet is written as `ignis learned synth --motion-vectors` writes it (motion_source: the model's motion chosen per pixel by the rendered in-between frames), and the volume rows, written as `ignis volume render --motion-vectors` writes them (motion_source: the ungated flow's vectors chosen per pixel by the in-between frames the renderer draws, ignis_volume::Animator::frame_between); flow_sheet: the gated flow's vectors on the same frames, for comparison",
             "filtered": "the headline's vectors sampled as an engine may: bilinear (blend evaluated half-way between pixel centres, vectors, key frames and true frame bilinear there) and mip1 (vector sheet box-averaged 2x2 and upsampled bilinearly); flow_filtered: the same for the flow's vectors on the learned row",
             "exact_colour": "the same vectors on the unquantised key frames (what the --hdr EXR colour sheet gives): separates the 8-bit sheet's rounding from the blend",
             "in_between_flow": "velocities from flows key -> true in-between frames (uses the dropped frames: possible only when the exporter has them, e.g. decimated footage or a generator rendered at twice the rate); vectors unquantised",
             "key_frame_change": "mean |error| between consecutive key frames: how much there is to blend",
-            "held_out_t": "error_reduction at blends t = 0.25 / 0.5 / 0.75 with key frames every 4th frame (footage: every 4th source frame), default vs loose gating (gated_mip1: the default's vectors read at mip level 1, see filtered), raw_flow_chosen (chosen on the t = 0.5 frames only, so t = 0.25 / 0.75 are held out), and for the learned flame model, model_chosen (what `ignis learned synth --motion-vectors` writes; model_chosen_mip1 read at mip level 1) and model_pairwise; the volume rows the same for each of their model motions (model, model_flow, model_noise, model_lattice: see diagnosis), none of which the volume sheet uses; vectors unquantised: checks a change on frames it was not tuned on",
+            "held_out_t": "error_reduction at blends t = 0.25 / 0.5 / 0.75 with key frames every 4th frame (footage: every 4th source frame), default vs loose gating (gated_mip1: the default's vectors read at mip level 1, see filtered), raw_flow_chosen (chosen on the t = 0.5 frames only, so t = 0.25 / 0.75 are held out; what the volume rows' sheets hold), and for the learned flame model, model_chosen (what `ignis learned synth --motion-vectors` writes; model_chosen_mip1 read at mip level 1) and model_pairwise; the volume rows the same for each of their model motions (model, model_flow, model_noise, model_lattice: see diagnosis), none of which the volume sheet uses (it holds raw_flow_chosen); vectors unquantised: checks a change on frames it was not tuned on",
             "diagnosis": "error_reduction of other vectors on the unquantised key frames: gated_sheet_16bit (the sheet's vectors read back), gated_unquantised (the same before 16-bit encoding), raw_flow / raw_flow_full_res (ungated DIS velocities, finest pyramid level 1 / 0), raw_flow_halved, gated_loose (consistency 8 px, explained 0.05), model (the generator's own motion: exact shift for the texture, ignis_classic::motion for classic, ignis_learned::model_motion for the learned flame: its texture attached to the flame's canonical coordinates; ignis_volume::model_motion for the volume rows: a fixed noise coordinate carried by the lattice and the scroll, emission-weighted over each pixel's samples; model_noise: the noise's least-changing track through its time axis instead; model_lattice: the lattice alone; model_flow: the model's own optical flow, the least-squares shift that keeps each sample's displaced-profile brightness, plus the lattice's motion; central over the neighbouring key frames), model_half_steps (learned: the same from the model's motion to the in-between times, known without rendering them), raw_flow_pairwise / model_pairwise (not one vector per frame: each dropped frame blended with the forward motion for the earlier key frame and the reversed backward motion for the later, from the raw flow / the learned model: what a forward and a backward sheet would give), raw_flow_chosen / model_chosen (uses the in-between frames: one vector per key frame and pixel, storable in a sheet, chosen among none / forward / reversed backward / central so that the blends at 0.5 err least against the true in-between frames, exactly over the run of key frames), best_per_pixel_bound (per dropped pixel the best single velocity within 4 px for both key frames, chosen by looking at the true frame: a bound for vectors shared by the two key frames, not for the chosen ones, which give each key frame its own)",
         },
         "goal_error_reduction": GOAL_REDUCTION,
@@ -695,6 +749,11 @@ pub fn figures(g: &Global, quick: bool) -> Result<serde_json::Value> {
         "flipbook_64x256_mv_s": (flipbook_s * 1000.0).round() / 1000.0,
         "flipbook_64x256_mv_cpu_s": flipbook_cpu_s,
         "load_average_1min": load,
+        "flipbook_64x256_loop_in_between": {
+            "what": "ignis volume render --preset candle --size 256x256 --frames 64 --motion-vectors (a loop; vectors chosen by the in-between frames): the 64 in-between renders and the writer, not the 64 frames themselves",
+            "s": (in_between_s * 1000.0).round() / 1000.0,
+            "cpu_s": in_between_cpu_s,
+        },
         "flipbook_goal_s": GOAL_FLIPBOOK_S,
         "flipbook_goal_met": flipbook_s <= GOAL_FLIPBOOK_S,
         "flow": flow,

@@ -289,19 +289,34 @@ pub fn chosen_velocities(
     );
     let candidates = chain_candidates(pairs, n);
     let w = size.width as usize;
-    let picks: Vec<Vec<u8>> = (0..size.pixels())
+    let intervals = mids.len();
+    // Pixels in runs of `RUN`, each run interval by interval (the frames' and vectors'
+    // rows stay in cache), then each pixel's chain: the same costs and choices as pixel
+    // by pixel.
+    const RUN: usize = 256;
+    let picks: Vec<u8> = (0..size.pixels().div_ceil(RUN))
         .into_par_iter()
-        .map_init(Vec::new, |costs, i| {
-            let xy = ((i % w) as f32 + 0.5, (i / w) as f32 + 0.5);
-            interval_costs(keys, mids, &candidates, i, xy, costs);
-            best_chain(costs, n)
+        .flat_map_iter(|r| {
+            let (lo, hi) = (r * RUN, ((r + 1) * RUN).min(size.pixels()));
+            let mut costs = vec![[[0f32; 4]; 4]; (hi - lo) * intervals];
+            for k in 0..intervals {
+                for i in lo..hi {
+                    let xy = ((i % w) as f32 + 0.5, (i / w) as f32 + 0.5);
+                    costs[(i - lo) * intervals + k] =
+                        interval_cost(keys, mids, &candidates, k, i, xy);
+                }
+            }
+            costs
+                .chunks(intervals)
+                .flat_map(|c| best_chain(c, n))
+                .collect::<Vec<u8>>()
         })
         .collect();
     (0..n)
         .map(|k| {
             let c = &candidates[k];
             picks
-                .iter()
+                .chunks(n)
                 .enumerate()
                 .map(|(i, p)| c[p[k] as usize][i])
                 .collect()
@@ -333,42 +348,38 @@ fn chain_candidates(pairs: &[(Field, Field)], n: usize) -> Vec<[Field; 4]> {
         .collect()
 }
 
-/// At pixel `i` (centre `(x, y)`), for each key interval `k`, the error of its blend at
-/// 0.5 against `mids[k]` for each pair of candidates `[a][b]` (`a` of the earlier key
-/// frame, `b` of the later), into `out`.
-fn interval_costs(
+/// At pixel `i` (centre `(x, y)`), for key interval `k`, the error of its blend at 0.5
+/// against `mids[k]` for each pair of candidates `[a][b]` (`a` of the earlier key frame,
+/// `b` of the later).
+fn interval_cost(
     keys: &[RgbaFrame],
     mids: &[&RgbaFrame],
     candidates: &[[Field; 4]],
+    k: usize,
     i: usize,
     (x, y): (f32, f32),
-    out: &mut Vec<[[f32; 4]; 4]>,
-) {
+) -> [[f32; 4]; 4] {
     let lut = srgb255_table();
     let enc = |p: [f32; 4]| [0, 1, 2].map(|c| srgb255(lut, p[c] * p[3]));
-    let n = keys.len();
-    out.clear();
-    out.extend((0..mids.len()).map(|k| {
-        let j = (k + 1) % n;
-        let want = enc(mids[k].data()[i]);
-        let prev = candidates[k]
-            .each_ref()
-            .map(|c| sample_bilinear(&keys[k], x - 0.5 * c[i][0], y - 0.5 * c[i][1]));
-        let next = candidates[j]
-            .each_ref()
-            .map(|c| sample_bilinear(&keys[j], x + 0.5 * c[i][0], y + 0.5 * c[i][1]));
-        // dark everywhere the blend looks (most of a fire's frame): every pair errs 0
-        let dark = |p: &[f32; 4]| (0..3).all(|c| p[c] * p[3] <= 0.0);
-        if want == [0.0; 3] && prev.iter().chain(&next).all(dark) {
-            return [[0.0; 4]; 4];
-        }
-        prev.map(|p| {
-            next.map(|q| {
-                let got = enc([0, 1, 2, 3].map(|c| 0.5 * (p[c] + q[c])));
-                (0..3).map(|c| (got[c] - want[c]).abs()).sum::<f32>()
-            })
+    let j = (k + 1) % keys.len();
+    let want = enc(mids[k].data()[i]);
+    let prev = candidates[k]
+        .each_ref()
+        .map(|c| sample_bilinear(&keys[k], x - 0.5 * c[i][0], y - 0.5 * c[i][1]));
+    let next = candidates[j]
+        .each_ref()
+        .map(|c| sample_bilinear(&keys[j], x + 0.5 * c[i][0], y + 0.5 * c[i][1]));
+    // dark everywhere the blend looks (most of a fire's frame): every pair errs 0
+    let dark = |p: &[f32; 4]| (0..3).all(|c| p[c] * p[3] <= 0.0);
+    if want == [0.0; 3] && prev.iter().chain(&next).all(dark) {
+        return [[0.0; 4]; 4];
+    }
+    prev.map(|p| {
+        next.map(|q| {
+            let got = enc([0, 1, 2, 3].map(|c| 0.5 * (p[c] + q[c])));
+            (0..3).map(|c| (got[c] - want[c]).abs()).sum::<f32>()
         })
-    }));
+    })
 }
 
 /// The sRGB encoding tabled for the blends' error measure ([`chosen_velocities`] evaluates
