@@ -644,6 +644,21 @@ impl FlipbookSink {
         self.path.with_file_name(format!("{stem}{suffix}"))
     }
 
+    /// `frame` as the 8-bit sRGB colour sheet holds it, read back as [`read_flipbook`]
+    /// reads it (straight alpha, linear).
+    fn as_held(&self, frame: &RgbaFrame) -> RgbaFrame {
+        match self.opts.alpha {
+            AlphaMode::Straight => convert::from_srgba8(frame.size(), &convert::to_srgba8(frame)),
+            AlphaMode::Premultiplied => {
+                let mut pre = frame.clone();
+                convert::premultiply(&mut pre);
+                let mut back = convert::from_srgba8(frame.size(), &convert::to_srgba8(&pre));
+                convert::unpremultiply(&mut back);
+                back
+            }
+        }
+    }
+
     /// Forward motion of every frame of `frames` (one loop per row), in pixels (+y down).
     fn motion(
         &self,
@@ -678,7 +693,10 @@ impl FlipbookSink {
         let flow = match &src.0 {
             motion::Source::Flow(flow) => flow,
             motion::Source::Velocities { f, .. } => {
-                for (r, row) in frames.chunks(per).enumerate() {
+                // the generator sees its frames as the 8-bit colour sheet holds them (what
+                // an engine's blend samples), e.g. to choose vectors by blending them
+                let held: Vec<RgbaFrame> = frames.iter().map(|f| self.as_held(f)).collect();
+                for (r, row) in held.chunks(per).enumerate() {
                     let given = f(r, row).map_err(|e| {
                         MediaError::encode(&self.path, format!("motion vectors: {e}"))
                     })?;
