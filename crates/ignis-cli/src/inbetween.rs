@@ -6,10 +6,12 @@
 //! frames along its own stored vector, and the image flow's one vector per frame (the
 //! velocity, gated by consistency) rebuilds a volumetric fire's dropped frames only 5–6 %
 //! better than a cross-fade. A generator that can render the frame half-way between two
-//! of its frames knows what the blend should give there: per pixel of each frame, one of
-//! four vectors from the flow between neighbouring frames (none, forward, reversed
-//! backward, their mean) is kept, whichever makes the blends at 0.5 closest to the
-//! rendered in-between frames
+//! of its frames knows what the blend should give there. The flows from each in-between
+//! frame to its two key frames give, at every pixel, the vector that makes each half of
+//! the blend land on the in-between frame ([`mid_pairs`]); per pixel of each frame, one of
+//! four vectors (none, the one for its blend with the next frame, the one for its blend
+//! with the previous frame, their mean) is kept, whichever makes the blends at 0.5 closest
+//! to the rendered in-between frames
 //! ([`ignis_media::write::motion::chosen_velocities`], exact over the whole loop).
 //! Measured in `ignis bench export` (the volume rows; `crates/ignis-flow/benches/README.md`).
 
@@ -19,7 +21,7 @@ use std::sync::{Arc, Mutex};
 
 /// The JSON's `motion_vectors.source` for vectors chosen by in-between frames.
 pub(crate) const SOURCE: &str =
-    "optical flow (DIS) between neighbouring frames, chosen per pixel by the rendered in-between frames";
+    "optical flow (DIS) from each rendered in-between frame to its two frames, chosen per pixel by the in-between frames";
 
 /// Motion vectors chosen per pixel by the in-between frames a generator renders: gathered
 /// while the frames are rendered ([`InBetween::record`]), given to the writer as a
@@ -61,9 +63,9 @@ impl InBetween {
     pub(crate) fn source(&self) -> MotionSource {
         let (rows, looped) = (self.rows.clone(), self.looped);
         let direction = if looped {
-            "velocity at frame k's pixels: per pixel none, the flow k to k+1, the reversed flow k to k-1 or their mean (wrapping within each loop), whichever makes the blends at 0.5 closest to the rendered in-between frames"
+            "velocity at frame k's pixels: per pixel none, the vector that brings frame k half-way to the in-between frame after it, the one that brings it half-way to the in-between frame before it, or their mean (wrapping within each loop), whichever makes the blends at 0.5 closest to the rendered in-between frames"
         } else {
-            "velocity at frame k's pixels: per pixel none, the flow k to k+1, the reversed flow k to k-1 or their mean (one side only at the first and last frame), whichever makes the blends at 0.5 closest to the rendered in-between frames"
+            "velocity at frame k's pixels: per pixel none, the vector that brings frame k half-way to the in-between frame after it, the one that brings it half-way to the in-between frame before it, or their mean (one side only at the first and last frame), whichever makes the blends at 0.5 closest to the rendered in-between frames"
         };
         MotionSource::velocities(
             move |r, frames| {
@@ -97,19 +99,43 @@ fn chosen(
     if mids.iter().any(|m| m.size() != size) {
         return Err("in-between frames of another size than the frames".into());
     }
-    let p = ignis_flow::FlowParams::default();
-    let grey: Vec<_> = frames.iter().map(ignis_flow::luma).collect();
-    let pairs = (0..intervals)
-        .map(|k| {
-            let (f, b) = ignis_flow::flow_pair(&grey[k], &grey[(k + 1) % n], &p)
-                .map_err(|e| e.to_string())?;
-            Ok((f.into_vec(), b.into_vec()))
-        })
-        .collect::<Result<Vec<_>, String>>()?;
     let mids: Vec<&RgbaFrame> = mids[..intervals].iter().collect();
+    let pairs = mid_pairs(frames, &mids)?;
     Ok(ignis_media::write::motion::chosen_velocities(
         frames, &mids, &pairs,
     ))
+}
+
+/// Per interval `k`, the vectors at each pixel `x` that make each half of the blend at
+/// 0.5 land on the in-between frame there: `mid(x) ≈ key_k(x + F(x))` (the flow from the
+/// in-between frame to the earlier key frame) is matched by `key_k` sampled at
+/// `x − 0.5·v`, so `v = −2F`; likewise for the later key frame sampled at `x + 0.5·v`,
+/// returned as its "backward" vector `−v` (the shape
+/// [`ignis_media::write::motion::chosen_velocities`] takes).
+pub(crate) fn mid_pairs(
+    frames: &[RgbaFrame],
+    mids: &[&RgbaFrame],
+) -> Result<Vec<(Vec<[f32; 2]>, Vec<[f32; 2]>)>, String> {
+    let n = frames.len();
+    let p = ignis_flow::FlowParams::default();
+    let grey: Vec<_> = frames.iter().map(ignis_flow::luma).collect();
+    let doubled = |f: ignis_flow::FlowField| -> Vec<[f32; 2]> {
+        f.into_vec()
+            .into_iter()
+            .map(|v| [-2.0 * v[0], -2.0 * v[1]])
+            .collect()
+    };
+    use rayon::prelude::*;
+    mids.par_iter()
+        .enumerate()
+        .map(|(k, m)| {
+            let g = ignis_flow::luma(m);
+            let to_earlier = ignis_flow::flow(&g, &grey[k], &p).map_err(|e| e.to_string())?;
+            let to_later =
+                ignis_flow::flow(&g, &grey[(k + 1) % n], &p).map_err(|e| e.to_string())?;
+            Ok((doubled(to_earlier), doubled(to_later)))
+        })
+        .collect()
 }
 
 #[cfg(test)]

@@ -2476,7 +2476,7 @@ mod volume_motion {
         let (meta, out) = render("loop.png", "candle", &["--frames", "6"]);
         let mv = &meta["motion_vectors"];
         assert!(
-            mv["source"].as_str().unwrap().contains("chosen per pixel by the rendered in-between frames"),
+            mv["source"].as_str().unwrap().contains("chosen per pixel by the in-between frames"),
             "{mv}"
         );
         assert!(mv["direction"].as_str().unwrap().contains("wrapping"), "{mv}");

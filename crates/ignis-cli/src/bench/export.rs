@@ -19,8 +19,9 @@
 //! true in-between frames (`*_chosen`, storable; held out at t = 0.25 / 0.75). The learned
 //! row's sheet is written as `ignis learned synth --motion-vectors` writes it (the model's
 //! vectors chosen that way, [`crate::learned::ModelMotion`]), and the volume rows' as `ignis
-//! volume render --motion-vectors` writes them (the flow's vectors chosen by the in-between
-//! frames the renderer draws, [`crate::inbetween::InBetween`]), each with the gated flow's
+//! volume render --motion-vectors` writes them (vectors from the flows of each in-between
+//! frame the renderer draws to its two key frames, chosen by the in-between frames,
+//! [`crate::inbetween::InBetween`]), each with the gated flow's
 //! vectors beside it for comparison; every row's vectors are also read as an engine may filter them
 //! (`filtered`: bilinear between pixel centres, mip level 1).
 
@@ -734,13 +735,13 @@ pub fn figures(g: &Global, quick: bool) -> Result<serde_json::Value> {
         "threads": rayon::current_num_threads(),
         "metric": "mean |error| vs the true dropped frame, 8-bit sRGB levels, colour over black",
         "variants": {
-            "headline": "the vectors --motion-vectors writes, on the 8-bit colour sheet read back: image-only vectors (ignis_flow::motion_vector_pair velocities), except for the learned row, whose sheet is written as `ignis learned synth --motion-vectors` writes it (motion_source: the model's motion chosen per pixel by the rendered in-between frames), and the volume rows, written as `ignis volume render --motion-vectors` writes them (motion_source: the ungated flow's vectors chosen per pixel by the in-between frames the renderer draws, ignis_volume::Animator::frame_between); flow_sheet: the gated flow's vectors on the same frames, for comparison",
+            "headline": "the vectors --motion-vectors writes, on the 8-bit colour sheet read back: image-only vectors (ignis_flow::motion_vector_pair velocities), except for the learned row, whose sheet is written as `ignis learned synth --motion-vectors` writes it (motion_source: the model's motion chosen per pixel by the rendered in-between frames), and the volume rows, written as `ignis volume render --motion-vectors` writes them (motion_source: vectors from the flows of each in-between frame the renderer draws, ignis_volume::Animator::frame_between, to its two key frames, chosen per pixel by the in-between frames, on the key frames as the 8-bit sheet holds them: mid_flow_chosen); flow_sheet: the gated flow's vectors on the same frames, for comparison",
             "filtered": "the headline's vectors sampled as an engine may: bilinear (blend evaluated half-way between pixel centres, vectors, key frames and true frame bilinear there) and mip1 (vector sheet box-averaged 2x2 and upsampled bilinearly); flow_filtered: the same for the flow's vectors on the learned row",
             "exact_colour": "the same vectors on the unquantised key frames (what the --hdr EXR colour sheet gives): separates the 8-bit sheet's rounding from the blend",
             "in_between_flow": "velocities from flows key -> true in-between frames (uses the dropped frames: possible only when the exporter has them, e.g. decimated footage or a generator rendered at twice the rate); vectors unquantised",
             "key_frame_change": "mean |error| between consecutive key frames: how much there is to blend",
-            "held_out_t": "error_reduction at blends t = 0.25 / 0.5 / 0.75 with key frames every 4th frame (footage: every 4th source frame), default vs loose gating (gated_mip1: the default's vectors read at mip level 1, see filtered), raw_flow_chosen (chosen on the t = 0.5 frames only, so t = 0.25 / 0.75 are held out; what the volume rows' sheets hold), and for the learned flame model, model_chosen (what `ignis learned synth --motion-vectors` writes; model_chosen_mip1 read at mip level 1) and model_pairwise; the volume rows the same for each of their model motions (model, model_flow, model_noise, model_lattice: see diagnosis), none of which the volume sheet uses (it holds raw_flow_chosen); vectors unquantised: checks a change on frames it was not tuned on",
-            "diagnosis": "error_reduction of other vectors on the unquantised key frames: gated_sheet_16bit (the sheet's vectors read back), gated_unquantised (the same before 16-bit encoding), raw_flow / raw_flow_full_res (ungated DIS velocities, finest pyramid level 1 / 0), raw_flow_halved, gated_loose (consistency 8 px, explained 0.05), model (the generator's own motion: exact shift for the texture, ignis_classic::motion for classic, ignis_learned::model_motion for the learned flame: its texture attached to the flame's canonical coordinates; ignis_volume::model_motion for the volume rows: a fixed noise coordinate carried by the lattice and the scroll, emission-weighted over each pixel's samples; model_noise: the noise's least-changing track through its time axis instead; model_lattice: the lattice alone; model_flow: the model's own optical flow, the least-squares shift that keeps each sample's displaced-profile brightness, plus the lattice's motion; central over the neighbouring key frames), model_half_steps (learned: the same from the model's motion to the in-between times, known without rendering them), raw_flow_pairwise / model_pairwise (not one vector per frame: each dropped frame blended with the forward motion for the earlier key frame and the reversed backward motion for the later, from the raw flow / the learned model: what a forward and a backward sheet would give), raw_flow_chosen / model_chosen (uses the in-between frames: one vector per key frame and pixel, storable in a sheet, chosen among none / forward / reversed backward / central so that the blends at 0.5 err least against the true in-between frames, exactly over the run of key frames), best_per_pixel_bound (per dropped pixel the best single velocity within 4 px for both key frames, chosen by looking at the true frame: a bound for vectors shared by the two key frames, not for the chosen ones, which give each key frame its own)",
+            "held_out_t": "error_reduction at blends t = 0.25 / 0.5 / 0.75 with key frames every 4th frame (footage: every 4th source frame), default vs loose gating (gated_mip1: the default's vectors read at mip level 1, see filtered), raw_flow_chosen and mid_flow_chosen (chosen on the t = 0.5 frames only, so t = 0.25 / 0.75 are held out; mid_flow_chosen is what the volume rows' sheets hold), and for the learned flame model, model_chosen (what `ignis learned synth --motion-vectors` writes; model_chosen_mip1 read at mip level 1) and model_pairwise; the volume rows the same for each of their model motions (model, model_flow, model_noise, model_lattice: see diagnosis), none of which the volume sheet uses (it holds mid_flow_chosen); vectors unquantised: checks a change on frames it was not tuned on",
+            "diagnosis": "error_reduction of other vectors on the unquantised key frames: gated_sheet_16bit (the sheet's vectors read back), gated_unquantised (the same before 16-bit encoding), raw_flow / raw_flow_full_res (ungated DIS velocities, finest pyramid level 1 / 0), raw_flow_halved, gated_loose (consistency 8 px, explained 0.05), model (the generator's own motion: exact shift for the texture, ignis_classic::motion for classic, ignis_learned::model_motion for the learned flame: its texture attached to the flame's canonical coordinates; ignis_volume::model_motion for the volume rows: a fixed noise coordinate carried by the lattice and the scroll, emission-weighted over each pixel's samples; model_noise: the noise's least-changing track through its time axis instead; model_lattice: the lattice alone; model_flow: the model's own optical flow, the least-squares shift that keeps each sample's displaced-profile brightness, plus the lattice's motion; central over the neighbouring key frames), model_half_steps (learned: the same from the model's motion to the in-between times, known without rendering them), raw_flow_pairwise / model_pairwise (not one vector per frame: each dropped frame blended with the forward motion for the earlier key frame and the reversed backward motion for the later, from the raw flow / the learned model: what a forward and a backward sheet would give), raw_flow_chosen / model_chosen (uses the in-between frames: one vector per key frame and pixel, storable in a sheet, chosen among none / forward / reversed backward / central so that the blends at 0.5 err least against the true in-between frames, exactly over the run of key frames), mid_flow_chosen (the same choice among none / the vector that brings the key frame half-way to the in-between frame after it / the one for the frame before it / their mean, from DIS flows of each in-between frame to its two key frames, at the output pixel: crate::inbetween::mid_pairs), best_per_pixel_bound (per dropped pixel the best single velocity within 4 px for both key frames, chosen by looking at the true frame: a bound for vectors shared by the two key frames, not for the chosen ones, which give each key frame its own)",
         },
         "goal_error_reduction": GOAL_REDUCTION,
         "blend": rows,
@@ -920,6 +921,10 @@ fn diagnosis(
     d["raw_flow_chosen"] = json!(red(&ignis_media::write::motion::chosen_velocities(
         keys, &mids, &raw_pairs
     )));
+    let mid_pairs = crate::inbetween::mid_pairs(keys, &mids).map_err(anyhow::Error::msg)?;
+    d["mid_flow_chosen"] = json!(red(&ignis_media::write::motion::chosen_velocities(
+        keys, &mids, &mid_pairs
+    )));
     for (name, m) in known.velocities {
         d[name] = json!(red(&m));
     }
@@ -963,6 +968,14 @@ fn held_out(frames: &[RgbaFrame], known: Known) -> Result<serde_json::Value> {
                 &keys,
                 &mids,
                 &flow_pairs(&keys, 1)?,
+            )),
+        ),
+        (
+            "mid_flow_chosen".into(),
+            intervals(ignis_media::write::motion::chosen_velocities(
+                &keys,
+                &mids,
+                &crate::inbetween::mid_pairs(&keys, &mids).map_err(anyhow::Error::msg)?,
             )),
         ),
     ];
