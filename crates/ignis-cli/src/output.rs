@@ -49,7 +49,8 @@ pub struct OutputArgs {
     /// dense optical flow between consecutive frames, for engines' motion-vector frame
     /// blending; the JSON's `motion_vectors.scale` is the material's strength. `volume
     /// render` and `learned synth` also render each in-between frame and keep, per pixel,
-    /// the vector whose blend comes closest to it (about twice the render time).
+    /// the vector whose blend comes closest to it (about twice the render time), as `loop
+    /// --every 2` does with the footage frames it leaves out.
     #[arg(long)]
     pub motion_vectors: bool,
     /// Flipbook: also write `x.heat.png`, an emission/temperature sheet (16-bit linear

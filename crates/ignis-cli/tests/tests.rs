@@ -1630,6 +1630,62 @@ mod flipbook_fit {
         (s.width, s.height)
     }
 
+    /// `ignis loop --every N` writes every Nth frame of a loop whose length is a multiple
+    /// of N, at 1/N of the clip's rate; with --motion-vectors and an even N the vectors
+    /// are chosen by the frames left out (the JSON names that source), with an odd N they
+    /// are the flow's; N = 0 is refused with nothing written.
+    #[test]
+    fn loop_every_nth_frame() {
+        let t = tempfile::tempdir().unwrap();
+        let clip = clip(t.path());
+        let fps = ignis_media::probe(Path::new(&clip)).unwrap().fps;
+        let cache = t.path().join("cache");
+        let c = cache.to_str().unwrap();
+        let out = t.path().join("out");
+        std::fs::create_dir(&out).unwrap();
+        let run = |every: &str, name: &str| {
+            let o = out.join(name);
+            let a = vec![
+                "loop",
+                &clip,
+                "--length",
+                "24",
+                "--cache",
+                c,
+                "--every",
+                every,
+                "--motion-vectors",
+                "-o",
+                o.to_str().unwrap(),
+            ];
+            (ignis(&a), o)
+        };
+        for (every, nth, chosen) in [(2u64, "2nd", true), (3, "3rd", false)] {
+            let (r, png) = run(&every.to_string(), &format!("e{every}.png"));
+            assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+            let said = String::from_utf8_lossy(&r.stdout).into_owned();
+            let m = read_json(&png.with_extension("json"));
+            let n = m["frame_count"].as_u64().unwrap();
+            assert!(
+                said.contains(&format!("({n} frames at 64x48, every {nth} of its {})", n * every)),
+                "{said}"
+            );
+            assert!((m["fps"].as_f64().unwrap() - fps / every as f64).abs() < 1e-9, "{m}");
+            assert_eq!(m["loop"], true);
+            let source = m["motion_vectors"].get("source").and_then(|v| v.as_str());
+            assert_eq!(
+                source.is_some_and(|s| s.contains("in-between")),
+                chosen,
+                "every {every}: {source:?}"
+            );
+        }
+        let before = files_in(&out);
+        let (r, _) = run("0", "zero.png");
+        assert!(!r.status.success());
+        assert!(String::from_utf8_lossy(&r.stderr).contains("--every"));
+        assert_eq!(files_in(&out), before);
+    }
+
     #[test]
     fn loop_flipbook_cells_fit_the_sheet_limit() {
         let t = tempfile::tempdir().unwrap();

@@ -639,12 +639,19 @@ pub fn figures(g: &Global, quick: bool) -> Result<serde_json::Value> {
     for clip in ["candle.mp4", "campfire.mp4"] {
         match footage(clip, n)? {
             Some(frames) => {
+                // as `ignis loop --every 2 --motion-vectors` writes them: the vectors
+                // chosen by the source frames left out
+                let source = crate::inbetween::InBetween::new(false);
+                source.start_row();
+                for mid in frames.iter().skip(1).step_by(2) {
+                    source.record(mid.clone());
+                }
                 rows.push(case(
                     clip,
                     &frames,
                     dir.path(),
                     Known::default(),
-                    flow_source(),
+                    source.source(),
                 )?);
                 if let Some(f) = footage(clip, 2 * n - 1)? {
                     held.insert(clip.to_string(), held_out(&f, Known::default())?);
@@ -735,7 +742,7 @@ pub fn figures(g: &Global, quick: bool) -> Result<serde_json::Value> {
         "threads": rayon::current_num_threads(),
         "metric": "mean |error| vs the true dropped frame, 8-bit sRGB levels, colour over black",
         "variants": {
-            "headline": "the vectors --motion-vectors writes, on the 8-bit colour sheet read back: image-only vectors (ignis_flow::motion_vector_pair velocities), except for the learned row, whose sheet is written as `ignis learned synth --motion-vectors` writes it (motion_source: the model's motion chosen per pixel by the rendered in-between frames), and the volume rows, written as `ignis volume render --motion-vectors` writes them (motion_source: vectors from the flows of each in-between frame the renderer draws, ignis_volume::Animator::frame_between, to its two key frames, chosen per pixel by the in-between frames, on the key frames as the 8-bit sheet holds them: mid_flow_chosen); flow_sheet: the gated flow's vectors on the same frames, for comparison",
+            "headline": "the vectors --motion-vectors writes, on the 8-bit colour sheet read back: image-only vectors (ignis_flow::motion_vector_pair velocities), except for the learned row, whose sheet is written as `ignis learned synth --motion-vectors` writes it (motion_source: the model's motion chosen per pixel by the rendered in-between frames), the footage rows, written as `ignis loop --every 2 --motion-vectors` writes them (the same choice by the source frames left out), and the volume rows, written as `ignis volume render --motion-vectors` writes them (motion_source: vectors from the flows of each in-between frame the renderer draws, ignis_volume::Animator::frame_between, to its two key frames, chosen per pixel by the in-between frames, on the key frames as the 8-bit sheet holds them: mid_flow_chosen); flow_sheet: the gated flow's vectors on the same frames, for comparison",
             "filtered": "the headline's vectors sampled as an engine may: bilinear (blend evaluated half-way between pixel centres, vectors, key frames and true frame bilinear there) and mip1 (vector sheet box-averaged 2x2 and upsampled bilinearly); flow_filtered: the same for the flow's vectors on the learned row",
             "exact_colour": "the same vectors on the unquantised key frames (what the --hdr EXR colour sheet gives): separates the 8-bit sheet's rounding from the blend",
             "in_between_flow": "velocities from flows key -> true in-between frames (uses the dropped frames: possible only when the exporter has them, e.g. decimated footage or a generator rendered at twice the rate); vectors unquantised",

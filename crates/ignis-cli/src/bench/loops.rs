@@ -241,6 +241,7 @@ pub fn bench(clips: &[PathBuf], cache: Option<&Path>, g: &Global) -> Result<Valu
                 length,
                 method: Method::Auto,
                 top: 3,
+                every: 1,
             };
             // Opaque, as the peers see the footage (the default matte keys the flame out,
             // which the peers' frames do not).

@@ -33,7 +33,7 @@ const CACHE_VERSION: u32 = 4;
 
 #[derive(clap::Args, Debug)]
 #[command(
-    after_help = "Examples:\n  ignis loop campfire.mp4 --length 4s -o loop.png\n  ignis loop candle.mp4 --length 120 -o loop.mp4\n  ignis loop fire.mov --length 2s --range 100..400 --method morph -o frames/%04d.png\n  ignis loop fire.mp4 --length 3s --cache /tmp/ignis-cache -o loop.gif\n  ignis loop plates/%04d.exr --length 96 -o loop.png    (an image sequence: a frame count, as it has no frame rate)\n\nThe first run on a clip trains an Eigenfire database on it (about 0.1 s per frame of 960x540; footage over 1080p is trained at 1920 px on its longest side) and keeps it in the cache ($XDG_CACHE_HOME/ignis or ~/.cache/ignis, or --cache); later runs reuse it. The output has the footage's own size, colours and frame rate (so --fps is refused), with the pre-processing mask's matte as alpha (--alpha opaque: none); a .png flipbook's JSON records the measured loop_quality."
+    after_help = "Examples:\n  ignis loop campfire.mp4 --length 4s -o loop.png\n  ignis loop candle.mp4 --length 120 -o loop.mp4\n  ignis loop fire.mov --length 2s --range 100..400 --method morph -o frames/%04d.png\n  ignis loop fire.mp4 --length 3s --cache /tmp/ignis-cache -o loop.gif\n  ignis loop plates/%04d.exr --length 96 -o loop.png    (an image sequence: a frame count, as it has no frame rate)\n  ignis loop campfire.mp4 --length 4s --every 2 --motion-vectors --engine unity -o loop.png    (half the cells; the engine's motion-vector blend fills in)\n\nThe first run on a clip trains an Eigenfire database on it (about 0.1 s per frame of 960x540; footage over 1080p is trained at 1920 px on its longest side) and keeps it in the cache ($XDG_CACHE_HOME/ignis or ~/.cache/ignis, or --cache); later runs reuse it. The output has the footage's own size, colours and frame rate (1/N of it with --every N; --fps is refused), with the pre-processing mask's matte as alpha (--alpha opaque: none); a .png flipbook's JSON records the measured loop_quality."
 )]
 pub struct Args {
     /// The footage (any video or frame sequence `ignis info` reads).
@@ -70,6 +70,13 @@ pub struct Args {
     /// out of its surroundings) or `opaque` (the footage as it is).
     #[arg(long, default_value = "matte", value_parser = ALPHA_CHOICES)]
     pub alpha: String,
+    /// Write every Nth frame of the loop, at 1/N of the clip's frame rate (a flipbook of
+    /// fewer cells for an engine to blend between); the loop is chosen among those whose
+    /// length is a multiple of N, so its wrap is an ordinary step. With --motion-vectors
+    /// and an even N, each vector is chosen by the frame half-way between two written
+    /// ones (as `volume render` does). Example: --every 2
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=16))]
+    pub every: u32,
     #[command(flatten)]
     pub out: crate::output::OutputArgs,
 }
@@ -454,9 +461,33 @@ pub struct Chosen {
     pub rendered: usize,
     /// Seconds spent rendering and measuring them.
     pub verify_s: f64,
+    /// Loops whose written length is not a multiple of this are left out
+    /// ([`Chosen::keep_multiples_of`]; 1: none).
+    pub every: usize,
 }
 
 impl Chosen {
+    /// Keeps only the loops whose written length ([`planned_frames`]) is a multiple of
+    /// `every` (for `--every`: written every `every`-th frame, their wrap is then an
+    /// ordinary step) and chooses again among them; `first`: the window's first source
+    /// frame. Errors when none is left.
+    pub fn keep_multiples_of(&mut self, every: usize, first: usize) -> Result<()> {
+        self.every = every.max(1);
+        if self.every == 1 {
+            return Ok(());
+        }
+        let every = self.every;
+        self.evaluated.retain(|e| planned_frames(e) % every == 0);
+        let (best, why) = loops::choose(&self.evaluated, first).ok_or_else(|| {
+            anyhow::anyhow!(
+                "no loop of about this length has a multiple of {every} frames; try another --length, or --every 1"
+            )
+        })?;
+        self.best = best;
+        self.why = format!("{why}; among loops of a multiple of {every} frames (--every {every})");
+        Ok(())
+    }
+
     /// The best loop as predicted on the footage's metric frames (the first evaluated),
     /// before closings were rendered and measured ([`verify_closings`]).
     pub fn predicted_best(&self) -> Evaluated {
@@ -542,6 +573,7 @@ pub fn search_and_choose(
         min_len,
         rendered: 0,
         verify_s: 0.0,
+        every: 1,
     })
 }
 
@@ -879,7 +911,12 @@ pub fn verify_closings(
                 })
                 .collect::<std::result::Result<_, _>>()?
         };
-        for v in measured {
+        // a rendered closing keeps its length, but a loop of another length cannot be
+        // written every `every`-th frame
+        for v in measured
+            .into_iter()
+            .filter(|v| planned_frames(v) % chosen.every == 0)
+        {
             if same_loop(&v, &p) {
                 top = Some(v);
             }
@@ -1068,6 +1105,7 @@ pub fn describe(e: &Evaluated, first: usize) -> String {
 pub struct Done {
     pub chosen: Chosen,
     pub measured: LoopQuality,
+    /// Frames written (every `chosen.every`-th of the loop's).
     pub frames: usize,
     pub size: Size,
     pub render_s: f64,
@@ -1293,6 +1331,9 @@ pub struct LoopAsk {
     pub length: usize,
     pub method: Method,
     pub top: usize,
+    /// Write every `every`-th frame (1: all), at 1/`every` of the clip's rate; the loop's
+    /// length is then a multiple of it.
+    pub every: usize,
 }
 
 /// Searches, renders and writes a loop of window `first..` of `path` to `out`, at the
@@ -1332,7 +1373,9 @@ pub fn make_loop_sized(
         length,
         method,
         top,
+        every,
     } = *ask;
+    let every = every.max(1);
     let (matted, lit);
     let (metric, lit) = match &matte {
         Some(m) => {
@@ -1345,14 +1388,15 @@ pub fn make_loop_sized(
         }
         None => (metric, None),
     };
-    let chosen = search_and_choose(first, weights, k, e, metric, lit, length, method)?;
+    let mut chosen = search_and_choose(first, weights, k, e, metric, lit, length, method)?;
+    chosen.keep_multiples_of(every, first)?;
     g.say("best candidates (predicted on the footage's 128-px frames):");
     for (i, c) in top_candidates(&chosen.evaluated, top).iter().enumerate() {
         g.say(format!("  {}. {}", i + 1, describe(c, first)));
     }
     let info = ignis_media::probe(path)?;
     let mut opts = out.write_options();
-    opts.fps = fps;
+    opts.fps = fps / every as f64;
     opts.loop_ = true;
     if let Some(s) = size {
         Size::new(s.width, s.height).context("--size")?;
@@ -1363,12 +1407,21 @@ pub fn make_loop_sized(
     let fit = |n: usize, opts: &mut ignis_media::WriteOptions| {
         out.fit_flipbook(n, size.unwrap_or(info.size), size.is_some(), opts)
     };
-    let mut fitted = fit(planned_frames(&chosen.best), &mut opts.clone())?;
-    let mut chosen = chosen;
+    let mut fitted = fit(planned_frames(&chosen.best) / every, &mut opts.clone())?;
     let scale = (fitted.size != info.size).then_some(fitted.size);
     verify_closings(&mut chosen, path, first, metric, scale, matte.as_ref(), g)?;
     let n = planned_frames(&chosen.best);
-    fitted = fit(n, &mut opts)?;
+    fitted = fit(n / every, &mut opts)?;
+    // --every with an even step: the frame half-way between two written ones is rendered
+    // anyway, so the motion vectors are chosen by it (as generators do)
+    let in_between = (every % 2 == 0
+        && opts.flipbook.motion.is_some()
+        && !opts.flipbook.fit_frames)
+        .then(|| crate::inbetween::InBetween::new(true));
+    if let Some(m) = &in_between {
+        m.start_row();
+        opts.flipbook.motion = Some(m.source());
+    }
     if let Some(note) = fitted.note() {
         g.say(note);
     }
@@ -1376,9 +1429,19 @@ pub fn make_loop_sized(
     let t = Instant::now();
     let mut w = out.create_with(fitted.size, &opts)?;
     let pb = g.progress(n as u64, "rendering");
+    let mut i = 0;
     render(path, first, &chosen.best, scale, matte.as_ref(), &mut |f| {
         pb.inc(1);
-        out.push(&mut w, f)
+        i += 1;
+        match (i - 1) % every {
+            0 => out.push(&mut w, f),
+            j => {
+                if let Some(m) = in_between.as_ref().filter(|_| 2 * j == every) {
+                    m.record(f.clone());
+                }
+                Ok(())
+            }
+        }
     })?;
     pb.finish_and_clear();
     let measured = w
@@ -1399,8 +1462,14 @@ pub fn make_loop_sized(
 /// Prints what a loop did.
 pub fn report(d: &Done, first: usize, g: &Global) {
     let b = &d.chosen.best;
+    let every = match d.chosen.every {
+        1 => String::new(),
+        2 => format!(", every 2nd of its {}", planned_frames(b)),
+        3 => format!(", every 3rd of its {}", planned_frames(b)),
+        k => format!(", every {k}th of its {}", planned_frames(b)),
+    };
     g.say(format!(
-        "loop: source frames {}..{}, {} ({} frames at {})",
+        "loop: source frames {}..{}, {} ({} frames at {}{every})",
         first + b.candidate.start,
         first + b.candidate.end,
         b.closing,
@@ -1410,7 +1479,12 @@ pub fn report(d: &Done, first: usize, g: &Global) {
     g.say(format!("why: {}", d.chosen.why));
     let p = d.chosen.predicted_of(b).quality;
     g.say(format!(
-        "measured on the frames written: seam {:.2}, ghost {:.2} (predicted {:.2}, {:.2}; with the closing rendered {:.2}, {:.2}); search {:.3} s, closings {:.3} s, {} closing(s) checked as rendered {:.2} s, render {:.2} s",
+        "measured on the frames written{}: seam {:.2}, ghost {:.2} (predicted {:.2}, {:.2}; with the closing rendered {:.2}, {:.2}); search {:.3} s, closings {:.3} s, {} closing(s) checked as rendered {:.2} s, render {:.2} s",
+        if d.chosen.every > 1 {
+            " (their own steps; the predictions are per source frame)"
+        } else {
+            ""
+        },
         d.measured.seam,
         d.measured.ghost,
         p.seam,
@@ -1479,6 +1553,7 @@ pub fn run(a: &Args, g: &Global) -> Result<()> {
         length,
         method,
         top: a.top,
+        every: a.every as usize,
     };
     let mut src = LoopFootage::cached(&a.input, window.start, &c);
     if a.alpha == "opaque" {
@@ -1586,6 +1661,7 @@ pub fn eigen_length_loop(a: &crate::eigen::LoopArgs, g: &Global) -> Result<()> {
         length,
         method,
         top: a.top,
+        every: 1,
     };
     let d = make_loop_sized(&src, &ask, a.footage.size, &a.out, g)?;
     report(&d, window.start, g);
@@ -1732,6 +1808,7 @@ mod tests {
                 length,
                 method: Method::Auto,
                 top: 3,
+                every: 1,
             };
             // Opaque, like the peers' frames.
             let src = LoopFootage::cached(&path, window.start, &c).opaque();
