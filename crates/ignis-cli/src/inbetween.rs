@@ -16,6 +16,7 @@
 //! Measured in `ignis bench export` (the volume rows; `crates/ignis-flow/benches/README.md`).
 
 use ignis_core::Size;
+use ignis_media::write::motion::Field;
 use ignis_media::{MotionSource, RgbaFrame};
 use std::sync::{Arc, Mutex};
 
@@ -115,11 +116,11 @@ fn chosen(
 pub(crate) fn mid_pairs(
     frames: &[RgbaFrame],
     mids: &[&RgbaFrame],
-) -> Result<Vec<(Vec<[f32; 2]>, Vec<[f32; 2]>)>, String> {
+) -> Result<Vec<(Field, Field)>, String> {
     let n = frames.len();
     let p = ignis_flow::FlowParams::default();
     let grey: Vec<_> = frames.iter().map(ignis_flow::luma).collect();
-    let doubled = |f: ignis_flow::FlowField| -> Vec<[f32; 2]> {
+    let doubled = |f: ignis_flow::FlowField| -> Field {
         f.into_vec()
             .into_iter()
             .map(|v| [-2.0 * v[0], -2.0 * v[1]])

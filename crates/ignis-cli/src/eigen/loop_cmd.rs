@@ -477,7 +477,7 @@ impl Chosen {
             return Ok(());
         }
         let every = self.every;
-        self.evaluated.retain(|e| planned_frames(e) % every == 0);
+        self.evaluated.retain(|e| planned_frames(e).is_multiple_of(every));
         let (best, why) = loops::choose(&self.evaluated, first).ok_or_else(|| {
             anyhow::anyhow!(
                 "no loop of about this length has a multiple of {every} frames; try another --length, or --every 1"
@@ -915,7 +915,7 @@ pub fn verify_closings(
         // written every `every`-th frame
         for v in measured
             .into_iter()
-            .filter(|v| planned_frames(v) % chosen.every == 0)
+            .filter(|v| planned_frames(v).is_multiple_of(chosen.every))
         {
             if same_loop(&v, &p) {
                 top = Some(v);
@@ -1414,7 +1414,7 @@ pub fn make_loop_sized(
     fitted = fit(n / every, &mut opts)?;
     // --every with an even step: the frame half-way between two written ones is rendered
     // anyway, so the motion vectors are chosen by it (as generators do)
-    let in_between = (every % 2 == 0
+    let in_between = (every.is_multiple_of(2)
         && opts.flipbook.motion.is_some()
         && !opts.flipbook.fit_frames)
         .then(|| crate::inbetween::InBetween::new(true));
