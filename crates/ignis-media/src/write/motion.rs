@@ -288,6 +288,11 @@ pub fn chosen_velocities(
         "chosen_velocities: frames of different sizes"
     );
     let candidates = chain_candidates(pairs, n);
+    let blank: Vec<Vec<bool>> = keys
+        .par_iter()
+        .zip(&candidates)
+        .map(|(k, c)| blank_reach(k, c))
+        .collect();
     let w = size.width as usize;
     let intervals = mids.len();
     // Pixels in runs of `RUN`, each run interval by interval (the frames' and vectors'
@@ -302,8 +307,16 @@ pub fn chosen_velocities(
             for k in 0..intervals {
                 for i in lo..hi {
                     let xy = ((i % w) as f32 + 0.5, (i / w) as f32 + 0.5);
+                    let j = (k + 1) % n;
+                    let dark = |p: [f32; 4]| (0..3).all(|c| p[c] * p[3] <= 0.0);
+                    // every sample either blend reads is blank and so is the truth: every
+                    // pair errs 0 (what `interval_cost` gives there, without its samples)
                     costs[(i - lo) * intervals + k] =
-                        interval_cost(keys, mids, &candidates, k, i, xy);
+                        if blank[k][i] && blank[j][i] && dark(mids[k].data()[i]) {
+                            [[0.0; 4]; 4]
+                        } else {
+                            interval_cost(keys, mids, &candidates, k, i, xy)
+                        };
                 }
             }
             costs
@@ -320,6 +333,51 @@ pub fn chosen_velocities(
                 .enumerate()
                 .map(|(i, p)| c[p[k] as usize][i])
                 .collect()
+        })
+        .collect()
+}
+
+/// Per pixel of `frame`: whether every pixel a bilinear sample at any of the `candidates`'
+/// half-vectors from it reads (`|½v| + 1` around it, clamped to the frame) has no colour,
+/// or every one has no alpha, so that every such sample is exactly dark (its colour or its
+/// alpha interpolates zeros). All `false` when a vector is not finite.
+fn blank_reach(frame: &RgbaFrame, candidates: &[Field; 4]) -> Vec<bool> {
+    let (w, h) = (frame.width() as usize, frame.height() as usize);
+    let reach = candidates
+        .iter()
+        .flatten()
+        .try_fold(0f32, |m, v| {
+            (v[0].is_finite() && v[1].is_finite()).then(|| m.max(v[0].abs()).max(v[1].abs()))
+        });
+    let Some(reach) = reach else {
+        return vec![false; w * h];
+    };
+    let r = (0.5 * reach).ceil() as usize + 1;
+    // summed-area tables of the pixels with colour and with alpha
+    let table = |lit: &dyn Fn(&[f32; 4]) -> bool| {
+        let mut t = vec![0u32; (w + 1) * (h + 1)];
+        for y in 0..h {
+            let mut row = 0u32;
+            for x in 0..w {
+                row += u32::from(lit(&frame.data()[y * w + x]));
+                t[(y + 1) * (w + 1) + x + 1] = t[y * (w + 1) + x + 1] + row;
+            }
+        }
+        t
+    };
+    let colour = table(&|p| p[0] != 0.0 || p[1] != 0.0 || p[2] != 0.0);
+    let alpha = table(&|p| p[3] != 0.0);
+    (0..w * h)
+        .map(|i| {
+            let (x, y) = (i % w, i / w);
+            let (x0, x1) = (x.saturating_sub(r), (x + r).min(w - 1) + 1);
+            let (y0, y1) = (y.saturating_sub(r), (y + r).min(h - 1) + 1);
+            let sum = |t: &[u32]| {
+                t[y1 * (w + 1) + x1] + t[y0 * (w + 1) + x0]
+                    - t[y0 * (w + 1) + x1]
+                    - t[y1 * (w + 1) + x0]
+            };
+            sum(&colour) == 0 || sum(&alpha) == 0
         })
         .collect()
 }
@@ -642,6 +700,55 @@ mod tests {
             );
             assert!(e <= e0 + 1e-6, "looped {looped}: {e} > {e0}");
             assert!(e < e0, "some random vector helps somewhere");
+        }
+    }
+
+    /// Where `blank_reach` says a pixel is blank, every candidate's half-vector sample
+    /// from it is exactly dark (so skipping it changes no choice); it finds such pixels
+    /// in frames keyed out by alpha (colour left) and by colour (alpha left), and none
+    /// when a vector is not finite.
+    #[test]
+    fn blank_reach_marks_only_exactly_dark_samples() {
+        let size = Size::new(80, 40).unwrap();
+        let mut rng = ignis_core::Rng::new(5);
+        for keyed_by_alpha in [true, false] {
+            // a lit disc, the rest keyed out one way or the other
+            let px = (0..size.pixels())
+                .map(|i| {
+                    let (x, y) = ((i % 80) as f32 - 20.0, (i / 80) as f32 - 20.0);
+                    let inside = x * x + y * y < 20.0;
+                    match (inside, keyed_by_alpha) {
+                        (true, _) => [0.8, 0.5, 0.2, 1.0],
+                        (false, true) => [0.9, 0.9, 0.9, 0.0],
+                        (false, false) => [0.0, 0.0, 0.0, 0.7],
+                    }
+                })
+                .collect();
+            let frame = RgbaFrame::from_vec(size, px).unwrap();
+            let mut field = || -> Field {
+                (0..size.pixels())
+                    .map(|_| {
+                        // 4.6 px in a random direction: samples reach 2.3 px away
+                        let a = rng.uniform(0.0, std::f64::consts::TAU) as f32;
+                        [4.6 * a.cos(), 4.6 * a.sin()]
+                    })
+                    .collect()
+            };
+            let c: [Field; 4] = [field(), field(), field(), field()];
+            let blank = blank_reach(&frame, &c);
+            assert!(blank.iter().filter(|&&b| b).count() > size.pixels() / 4);
+            for (i, _) in blank.iter().enumerate().filter(|(_, &b)| b) {
+                let (x, y) = ((i % 80) as f32 + 0.5, (i / 80) as f32 + 0.5);
+                for f in &c {
+                    for s in [-0.5f32, 0.5] {
+                        let p = sample_bilinear(&frame, x + s * f[i][0], y + s * f[i][1]);
+                        assert!((0..3).all(|k| p[k] * p[3] <= 0.0), "pixel {i}: {p:?}");
+                    }
+                }
+            }
+            let mut bad = c.clone();
+            bad[2][7] = [f32::NAN, 0.0];
+            assert!(blank_reach(&frame, &bad).iter().all(|&b| !b));
         }
     }
 
