@@ -1,6 +1,7 @@
 //! Motion vectors chosen by rendered in-between frames, for generators that can render a
 //! frame at any time between two of theirs (the volumetric fire,
-//! [`ignis_volume::Animator::frame_between`]).
+//! [`ignis_volume::Animator::frame_between`]) and for footage loops written every other
+//! frame (`ignis loop --every 2`, whose left-out frames are the in-between ones).
 //!
 //! Fire is mostly not motion: the engines' flipbook blend moves each of two neighbouring
 //! frames along its own stored vector, and the image flow's one vector per frame (the
@@ -13,7 +14,8 @@
 //! with the previous frame, their mean) is kept, whichever makes the blends at 0.5 closest
 //! to the rendered in-between frames
 //! ([`ignis_media::write::motion::chosen_velocities`], exact over the whole loop).
-//! Measured in `ignis bench export` (the volume rows; `crates/ignis-flow/benches/README.md`).
+//! Measured in `ignis bench export` (the volume and footage rows;
+//! `crates/ignis-flow/benches/README.md`).
 
 use ignis_core::Size;
 use ignis_media::write::motion::Field;
