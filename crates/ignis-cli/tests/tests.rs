@@ -1679,11 +1679,15 @@ mod flipbook_fit {
                 "every {every}: {source:?}"
             );
         }
+        // 0 is refused; so is a step that leaves fewer than two frames of a ~24-frame loop
         let before = files_in(&out);
-        let (r, _) = run("0", "zero.png");
-        assert!(!r.status.success());
-        assert!(String::from_utf8_lossy(&r.stderr).contains("--every"));
-        assert_eq!(files_in(&out), before);
+        for (every, name) in [("0", "zero.png"), ("16", "sixteen.png")] {
+            let (r, _) = run(every, name);
+            assert!(!r.status.success(), "--every {every}");
+            let err = String::from_utf8_lossy(&r.stderr);
+            assert!(err.contains("--every"), "{err}");
+            assert_eq!(files_in(&out), before);
+        }
     }
 
     #[test]

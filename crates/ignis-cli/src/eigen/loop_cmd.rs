@@ -469,18 +469,18 @@ pub struct Chosen {
 impl Chosen {
     /// Keeps only the loops whose written length ([`planned_frames`]) is a multiple of
     /// `every` (for `--every`: written every `every`-th frame, their wrap is then an
-    /// ordinary step) and chooses again among them; `first`: the window's first source
-    /// frame. Errors when none is left.
+    /// ordinary step) and at least two such steps long, and chooses again among them;
+    /// `first`: the window's first source frame. Errors when none is left.
     pub fn keep_multiples_of(&mut self, every: usize, first: usize) -> Result<()> {
         self.every = every.max(1);
         if self.every == 1 {
             return Ok(());
         }
         let every = self.every;
-        self.evaluated.retain(|e| planned_frames(e).is_multiple_of(every));
+        self.evaluated.retain(|e| writable_every(e, every));
         let (best, why) = loops::choose(&self.evaluated, first).ok_or_else(|| {
             anyhow::anyhow!(
-                "no loop of about this length has a multiple of {every} frames; try another --length, or --every 1"
+                "no loop of about this length has a multiple of {every} frames with at least two of them written (--every {every}); ask for a longer --length or a smaller --every"
             )
         })?;
         self.best = best;
@@ -503,6 +503,13 @@ impl Chosen {
             .copied()
             .unwrap_or(*e)
     }
+}
+
+/// Whether `e`'s loop can be written every `every`-th frame: a multiple of `every` frames
+/// (so the wrap is an ordinary step), at least two of them written.
+fn writable_every(e: &Evaluated, every: usize) -> bool {
+    let n = planned_frames(e);
+    n.is_multiple_of(every) && n / every >= 2
 }
 
 /// Whether two evaluated loops are the same loop closed the same way (their measures and
@@ -915,7 +922,7 @@ pub fn verify_closings(
         // written every `every`-th frame
         for v in measured
             .into_iter()
-            .filter(|v| planned_frames(v).is_multiple_of(chosen.every))
+            .filter(|v| writable_every(v, chosen.every))
         {
             if same_loop(&v, &p) {
                 top = Some(v);
