@@ -1667,10 +1667,16 @@ mod flipbook_fit {
             let m = read_json(&png.with_extension("json"));
             let n = m["frame_count"].as_u64().unwrap();
             assert!(
-                said.contains(&format!("({n} frames at 64x48, every {nth} of its {})", n * every)),
+                said.contains(&format!(
+                    "({n} frames at 64x48, every {nth} of its {})",
+                    n * every
+                )),
                 "{said}"
             );
-            assert!((m["fps"].as_f64().unwrap() - fps / every as f64).abs() < 1e-9, "{m}");
+            assert!(
+                (m["fps"].as_f64().unwrap() - fps / every as f64).abs() < 1e-9,
+                "{m}"
+            );
             assert_eq!(m["loop"], true);
             let source = m["motion_vectors"].get("source").and_then(|v| v.as_str());
             assert_eq!(
@@ -2536,10 +2542,16 @@ mod volume_motion {
         let (meta, out) = render("loop.png", "candle", &["--frames", "6"]);
         let mv = &meta["motion_vectors"];
         assert!(
-            mv["source"].as_str().unwrap().contains("chosen per pixel by the in-between frames"),
+            mv["source"]
+                .as_str()
+                .unwrap()
+                .contains("chosen per pixel by the in-between frames"),
             "{mv}"
         );
-        assert!(mv["direction"].as_str().unwrap().contains("wrapping"), "{mv}");
+        assert!(
+            mv["direction"].as_str().unwrap().contains("wrapping"),
+            "{mv}"
+        );
         let fb = ignis_media::read_flipbook(&out.with_extension("json")).unwrap();
         assert_eq!(fb.motion.unwrap().len(), 6);
         let (meta, _) = render("once.png", "torch", &["--frames", "5", "--no-loop"]);

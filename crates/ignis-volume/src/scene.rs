@@ -1125,7 +1125,9 @@ impl Animator<'_> {
                 for (i, f) in sc.fires.iter().enumerate() {
                     pts.push(match &f.motion {
                         Motion::Static(p) => {
-                            static_points(p).at_with_collisions(t, dt, &sc.obstacles, i).0
+                            static_points(p)
+                                .at_with_collisions(t, dt, &sc.obstacles, i)
+                                .0
                         }
                         Motion::Script(script) => {
                             script.at_with_collisions(t, dt, &sc.obstacles, i).0

@@ -470,8 +470,18 @@ mod looping {
                 a.frame_between(1.0).unwrap().image,
             );
             let f1 = a.next_frame().unwrap().image;
-            assert!(max_diff(&lo, &f0) <= 1e-4, "{}: {}", p.name(), max_diff(&lo, &f0));
-            assert!(max_diff(&hi, &f1) <= 1e-4, "{}: {}", p.name(), max_diff(&hi, &f1));
+            assert!(
+                max_diff(&lo, &f0) <= 1e-4,
+                "{}: {}",
+                p.name(),
+                max_diff(&lo, &f0)
+            );
+            assert!(
+                max_diff(&hi, &f1) <= 1e-4,
+                "{}: {}",
+                p.name(),
+                max_diff(&hi, &f1)
+            );
         }
     }
 

@@ -1421,10 +1421,9 @@ pub fn make_loop_sized(
     fitted = fit(n / every, &mut opts)?;
     // --every with an even step: the frame half-way between two written ones is rendered
     // anyway, so the motion vectors are chosen by it (as generators do)
-    let in_between = (every.is_multiple_of(2)
-        && opts.flipbook.motion.is_some()
-        && !opts.flipbook.fit_frames)
-        .then(|| crate::inbetween::InBetween::new(true));
+    let in_between =
+        (every.is_multiple_of(2) && opts.flipbook.motion.is_some() && !opts.flipbook.fit_frames)
+            .then(|| crate::inbetween::InBetween::new(true));
     if let Some(m) = &in_between {
         m.start_row();
         opts.flipbook.motion = Some(m.source());

@@ -343,12 +343,9 @@ pub fn chosen_velocities(
 /// alpha interpolates zeros). All `false` when a vector is not finite.
 fn blank_reach(frame: &RgbaFrame, candidates: &[Field; 4]) -> Vec<bool> {
     let (w, h) = (frame.width() as usize, frame.height() as usize);
-    let reach = candidates
-        .iter()
-        .flatten()
-        .try_fold(0f32, |m, v| {
-            (v[0].is_finite() && v[1].is_finite()).then(|| m.max(v[0].abs()).max(v[1].abs()))
-        });
+    let reach = candidates.iter().flatten().try_fold(0f32, |m, v| {
+        (v[0].is_finite() && v[1].is_finite()).then(|| m.max(v[0].abs()).max(v[1].abs()))
+    });
     let Some(reach) = reach else {
         return vec![false; w * h];
     };
