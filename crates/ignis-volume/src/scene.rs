@@ -1018,10 +1018,15 @@ impl Animator<'_> {
 
     /// Fire `i`'s puffing wave at the next frame, if the scene puffs.
     fn puff_wave(&self, i: usize) -> Option<Puff> {
+        self.puff_wave_at(i, self.puff_phase())
+    }
+
+    /// Fire `i`'s puffing wave when the scene's puffing cycle is at `phase`.
+    fn puff_wave_at(&self, i: usize, phase: f32) -> Option<Puff> {
         let s = self.scene;
         (s.puff > 0.0).then(|| Puff {
             amplitude: s.puff,
-            phase: self.puff_phase() + s.puff_offset(i),
+            phase: phase + s.puff_offset(i),
         })
     }
 
@@ -1146,13 +1151,9 @@ impl Animator<'_> {
                         }
                     });
                 }
+                let phase = self.plain_puff_phase(frame);
                 let puffs: Vec<Option<Puff>> = (0..sc.fires.len())
-                    .map(|i| {
-                        (sc.puff > 0.0).then(|| Puff {
-                            amplitude: sc.puff,
-                            phase: self.plain_puff_phase(frame) + sc.puff_offset(i),
-                        })
-                    })
+                    .map(|i| self.puff_wave_at(i, phase))
                     .collect();
                 (self.pose_of(t, &pts, &puffs)?, pts)
             }

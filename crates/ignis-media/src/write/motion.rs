@@ -308,11 +308,10 @@ pub fn chosen_velocities(
                 for i in lo..hi {
                     let xy = ((i % w) as f32 + 0.5, (i / w) as f32 + 0.5);
                     let j = (k + 1) % n;
-                    let dark = |p: [f32; 4]| (0..3).all(|c| p[c] * p[3] <= 0.0);
                     // every sample either blend reads is blank and so is the truth: every
                     // pair errs 0 (what `interval_cost` gives there, without its samples)
                     costs[(i - lo) * intervals + k] =
-                        if blank[k][i] && blank[j][i] && dark(mids[k].data()[i]) {
+                        if blank[k][i] && blank[j][i] && dark(&mids[k].data()[i]) {
                             [[0.0; 4]; 4]
                         } else {
                             interval_cost(keys, mids, &candidates, k, i, xy)
@@ -425,7 +424,6 @@ fn interval_cost(
         .each_ref()
         .map(|c| sample_bilinear(&keys[j], x + 0.5 * c[i][0], y + 0.5 * c[i][1]));
     // dark everywhere the blend looks (most of a fire's frame): every pair errs 0
-    let dark = |p: &[f32; 4]| (0..3).all(|c| p[c] * p[3] <= 0.0);
     if want == [0.0; 3] && prev.iter().chain(&next).all(dark) {
         return [[0.0; 4]; 4];
     }
@@ -435,6 +433,12 @@ fn interval_cost(
             (0..3).map(|c| (got[c] - want[c]).abs()).sum::<f32>()
         })
     })
+}
+
+/// Whether a straight-alpha pixel's premultiplied colour is black (what the choice's
+/// error measure encodes as 0 in every channel).
+fn dark(p: &[f32; 4]) -> bool {
+    (0..3).all(|c| p[c] * p[3] <= 0.0)
 }
 
 /// The sRGB encoding tabled for the blends' error measure ([`chosen_velocities`] evaluates
