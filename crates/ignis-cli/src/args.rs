@@ -104,6 +104,18 @@ pub fn crop(s: &str) -> Result<Rect, String> {
     }
 }
 
+/// An ordinal for messages: `2nd`, `3rd`, `4th`, `11th`, `21st`.
+pub fn nth(k: u32) -> String {
+    let suffix = match (k % 10, k % 100) {
+        (_, 11..=13) => "th",
+        (1, _) => "st",
+        (2, _) => "nd",
+        (3, _) => "rd",
+        _ => "th",
+    };
+    format!("{k}{suffix}")
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -16,7 +16,8 @@ ignis classic --frames 48 -o frames/%04d.exr                           # linear 
 ignis classic --frames 120 --loop -o loop.mp4                          # a seamless loop as MP4\n  \
 ignis classic --frames 1000 --chunk 0..100 -o frames/%04d.png          # job 1 of 10 on a farm\n  \
 ignis classic --size 128x128 --frames 32 --variants 4 -o rows.png      # 4 different loops, one per row\n  \
-ignis classic --cell 1 --puff 0 -o article.mp4                         # the 1999 article's fire exactly\n\n\
+ignis classic --cell 1 --puff 0 -o article.mp4                         # the 1999 article's fire exactly\n  \
+ignis classic --frames 64 --every 2 --motion-vectors --engine unity -o sheet.png\n                       # 32 cells at 15 fps; the engine's motion-vector blend fills in\n\n\
 Realism: by default the fire is a 1 m fire bed simulated on 6-px cells that puffs at 1.5/√D Hz\n\
 (--diameter D); `ignis bench realism` measures it against that law and campfire footage.\n\n\
 Loops (the default for GIFs and flipbooks): the source line and sparklies repeat every N frames and the\n\
@@ -28,7 +29,7 @@ pub struct Args {
     /// Frame size WIDTHxHEIGHT (the simulation buffer is this divided by --cell).
     #[arg(long, default_value = "320x200")]
     pub size: Size,
-    /// Number of frames to write.
+    /// Number of frames to render (all written, or every Nth with --every N).
     #[arg(long, default_value_t = 300)]
     pub frames: u32,
     /// BURNFADE: subtracted after the box filter (0–255); larger = shorter flames.
@@ -86,6 +87,13 @@ pub struct Args {
     /// Seed of every random choice; the same seed gives the same bytes.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// Write every Nth of the --frames frames, at 1/N of --fps: the same fire in fewer
+    /// cells for an engine to blend between (--frames must be a multiple of N; --chunk
+    /// counts written frames). With --motion-vectors and an even N, each vector is chosen
+    /// by the frame half-way between two written ones, which is simulated anyway (as
+    /// `volume render` and `loop --every` do). Example: --every 2
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=16))]
+    pub every: u32,
     #[command(flatten)]
     pub frames_args: FrameArgs,
     #[command(flatten)]
@@ -122,10 +130,7 @@ impl Args {
                 Kernel::Article
             },
             seed: self.seed,
-            cell: self.cell.unwrap_or_else(|| {
-                let side = self.size.width.min(self.size.height);
-                ignis_classic::PRESET_CELL.min(side / 16).max(1)
-            }),
+            cell: self.cell.unwrap_or_else(|| default_cell(self.size)),
             puff: self.puff,
             diameter: self.diameter,
             fps: self.out.fps as f32,
@@ -133,18 +138,44 @@ impl Args {
     }
 }
 
+/// `--cell`'s default for frames of `size`: [`ignis_classic::PRESET_CELL`], fewer on
+/// frames under 96 px so the buffer keeps 16 cells a side.
+pub(crate) fn default_cell(size: Size) -> u32 {
+    let side = size.width.min(size.height);
+    ignis_classic::PRESET_CELL.min(side / 16).max(1)
+}
+
 /// Runs `ignis classic`; returns the files written.
 pub fn run(args: &Args, g: &Global) -> Result<Vec<PathBuf>> {
-    let plan = args.frames_args.plan(args.frames, &args.out)?;
+    let every = args.every.max(1);
+    let written = written_frames(args)?;
+    let plan = args.frames_args.plan(written, &args.out)?;
     // --variants N: N loops with seeds seed, seed + 1, …, one per row of the sheet; the
     // first fire is made before the writer so bad settings are reported first.
     let mut first = Some(new_fire(args, args.seed, plan.looping)?);
     let palette = args.palette.load()?;
     let mut opts = args.out.write_options();
+    opts.fps = args.out.fps / f64::from(every);
     opts.loop_ = plan.mark_loop;
     opts.first_frame = plan.range.start as u64;
-    let whole_loop = plan.looping && plan.range == (0..args.frames);
+    let whole_loop = plan.looping && plan.range == (0..written);
+    // --every with an even N: the frame half-way between two written ones is simulated
+    // anyway, so the motion vectors are chosen by it (unless the sheet is retimed)
+    let in_between =
+        (every.is_multiple_of(2) && opts.flipbook.motion.is_some() && !opts.flipbook.fit_frames)
+            .then(|| crate::inbetween::InBetween::new(opts.loop_));
+    if let Some(m) = &in_between {
+        opts.flipbook.motion = Some(m.source());
+    }
     let (mut writer, variants) = args.out.create_variants(args.size, &mut opts, whole_loop)?;
+    if every > 1 {
+        g.say(format!(
+            "writing every {} of the {} frames: {written} frames at {} fps",
+            crate::args::nth(every),
+            args.frames,
+            opts.fps
+        ));
+    }
     let pb = g.progress(plan.range.len() as u64 * variants as u64, "classic");
     for v in 0..variants {
         let seed = args.seed.wrapping_add(v as u64);
@@ -157,17 +188,62 @@ pub fn run(args: &Args, g: &Global) -> Result<Vec<PathBuf>> {
         // others, measured as the writer's loop metric sees the frames
         fire.even_loop_steps(&palette, opts.background);
         // a chunk steps (without drawing) to its first frame
-        for _ in 0..plan.range.start {
+        for _ in 0..plan.range.start * every {
             fire.step_par();
         }
-        for _ in plan.range.clone() {
+        if let Some(m) = &in_between {
+            m.start_row();
+        }
+        for j in plan.range.clone() {
             fire.step_par();
             args.out.push(&mut writer, &fire.rgba(&palette))?;
             pb.inc(1);
+            // the frames left out up to the next written one (--every), the middle one
+            // kept for the motion vectors
+            let mid = in_between
+                .as_ref()
+                .filter(|m| m.wants(j + 1 < plan.range.end));
+            if j + 1 == plan.range.end && mid.is_none() {
+                break;
+            }
+            for s in 1..every {
+                fire.step_par();
+                if let Some(m) = mid.filter(|_| 2 * s == every) {
+                    m.record(fire.rgba(&palette));
+                }
+            }
         }
     }
     pb.finish_and_clear();
     args.out.finish(writer, g)
+}
+
+/// The number of frames written: every `--every`th of `--frames`, checked so that a loop's
+/// wrap is an ordinary step and at least two frames are written.
+fn written_frames(args: &Args) -> Result<u32> {
+    let every = args.every.max(1);
+    if every == 1 {
+        return Ok(args.frames);
+    }
+    anyhow::ensure!(
+        args.frames.is_multiple_of(every) && args.frames / every >= 2,
+        "--frames {} with --every {every}: the frames must be a multiple of {every} with at least \
+         two of them written; ask for --frames {} (or a smaller --every)",
+        args.frames,
+        (args.frames.div_ceil(every)).max(2) * every
+    );
+    let written = args.frames / every;
+    if let Some(c) = args.frames_args.chunk {
+        anyhow::ensure!(
+            c.start < c.end && c.end <= written,
+            "--chunk {}..{} is not a range of written frames: --frames {} with --every {every} \
+             writes frames 0..{written}; give A..B with A < B ≤ {written}",
+            c.start,
+            c.end,
+            args.frames
+        );
+    }
+    Ok(written)
 }
 
 /// The fire of these settings with `seed` (looping: repeating every `--frames` frames).

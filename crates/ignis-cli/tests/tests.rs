@@ -2565,3 +2565,149 @@ mod volume_motion {
         assert!(meta["motion_vectors"].get("source").is_none(), "{meta}");
     }
 }
+
+/// Issue 17: `ignis classic --every N` writes every Nth frame of the render at 1/N of the
+/// frame rate (fewer cells for an engine to blend between); with an even N and
+/// `--motion-vectors` each vector is chosen by the frame half-way between two written ones.
+mod classic_every {
+    use super::*;
+    use ignis_media::write::motion::{linear_blend, mv_blend};
+    use ignis_media::RgbaFrame;
+
+    /// The frames of a PNG sequence directory, in name order.
+    fn sequence(dir: &Path) -> Vec<RgbaFrame> {
+        files_in(dir)
+            .iter()
+            .map(|f| ignis_media::read_image(&dir.join(f)).unwrap())
+            .collect()
+    }
+
+    /// Mean |difference| of two frames composited over black, in 0..1 units.
+    fn error(a: &RgbaFrame, b: &RgbaFrame) -> f64 {
+        let sum: f64 = a
+            .data()
+            .iter()
+            .zip(b.data())
+            .map(|(p, q)| {
+                (0..3)
+                    .map(|c| f64::from((p[c] * p[3] - q[c] * q[3]).abs()))
+                    .sum::<f64>()
+            })
+            .sum();
+        sum / (3 * a.data().len()) as f64
+    }
+
+    #[test]
+    fn every_nth_frame_with_vectors_chosen_by_the_frames_between() {
+        let t = tempfile::tempdir().unwrap();
+        let pat = |d: &str| t.path().join(d).join("%04d.png");
+        let base = ["--loop", "--seed", "5"];
+        fn with<'a>(base: &[&'a str], extra: &[&'a str]) -> Vec<&'a str> {
+            [base, extra].concat()
+        }
+        assert!(classic("64x48", "16", &base, &pat("all")).status.success());
+        let o = classic("64x48", "16", &with(&base, &["--every", "2"]), &pat("half"));
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let all = sequence(&t.path().join("all"));
+        let half = sequence(&t.path().join("half"));
+        assert_eq!((all.len(), half.len()), (16, 8));
+        for (j, f) in half.iter().enumerate() {
+            assert!(f.data() == all[2 * j].data(), "written frame {j}");
+        }
+        // a chunk counts written frames and keeps their numbers
+        let o = classic(
+            "64x48",
+            "16",
+            &with(&base, &["--every", "2", "--chunk", "3..6"]),
+            &pat("chunk"),
+        );
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        assert_eq!(
+            files_in(&t.path().join("chunk")),
+            ["0003.png", "0004.png", "0005.png"]
+        );
+        for (f, j) in sequence(&t.path().join("chunk")).iter().zip(3..) {
+            assert!(f.data() == half[j].data(), "chunk frame {j}");
+        }
+        // a flipbook at half the rate, its vectors chosen by the frames left out: the
+        // engines' blend read back from the sheets rebuilds them better than a cross-fade
+        let sheet = t.path().join("s.png");
+        let o = classic(
+            "64x48",
+            "16",
+            &with(&base, &["--every", "2", "--motion-vectors"]),
+            &sheet,
+        );
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let meta = read_json(&sheet.with_extension("json"));
+        assert_eq!(meta["frame_count"], 8);
+        assert_eq!(meta["fps"], 15.0);
+        assert_eq!(meta["loop"], true);
+        let mv = &meta["motion_vectors"];
+        assert!(
+            mv["source"]
+                .as_str()
+                .unwrap()
+                .contains("chosen per pixel by the in-between frames"),
+            "{mv}"
+        );
+        assert!(
+            mv["direction"].as_str().unwrap().contains("wrapping"),
+            "{mv}"
+        );
+        let fb = ignis_media::read_flipbook(&sheet.with_extension("json")).unwrap();
+        let vectors = fb.motion.unwrap();
+        let (mut e_mv, mut e_plain) = (0.0, 0.0);
+        for k in 0..8 {
+            let j = (k + 1) % 8;
+            let (a, b) = (&fb.frames[k], &fb.frames[j]);
+            e_mv += error(
+                &mv_blend(a, b, &vectors[k], &vectors[j], 0.5),
+                &all[2 * k + 1],
+            );
+            e_plain += error(&linear_blend(a, b, 0.5), &all[2 * k + 1]);
+        }
+        eprintln!("left-out frames: motion-vector blend {e_mv:.4}, cross-fade {e_plain:.4}");
+        assert!(e_mv < 0.85 * e_plain, "blend {e_mv}, cross-fade {e_plain}");
+        // an odd N has no frame half-way: the gated flow's vectors, whose JSON names no
+        // source
+        let odd = t.path().join("odd.png");
+        let o = classic(
+            "64x48",
+            "12",
+            &with(&base, &["--every", "3", "--motion-vectors"]),
+            &odd,
+        );
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let meta = read_json(&odd.with_extension("json"));
+        assert_eq!(
+            (meta["frame_count"].as_u64(), meta["fps"].as_f64()),
+            (Some(4), Some(10.0))
+        );
+        assert!(meta["motion_vectors"].get("source").is_none(), "{meta}");
+    }
+
+    #[test]
+    fn every_that_cannot_write_a_loop_is_refused_and_nothing_is_written() {
+        let t = tempfile::tempdir().unwrap();
+        let out = t.path().join("x.png");
+        assert_fails(
+            &classic("64x48", "15", &["--every", "2"], &out),
+            "ask for --frames 16",
+        );
+        assert_fails(
+            &classic("64x48", "2", &["--every", "2"], &out),
+            "ask for --frames 4",
+        );
+        assert_fails(
+            &classic("64x48", "16", &["--every", "2", "--chunk", "0..9"], &out),
+            "writes frames 0..8",
+        );
+        assert_fails(&classic("64x48", "16", &["--every", "0"], &out), "every");
+        assert!(
+            files_in(t.path()).is_empty(),
+            "left behind: {:?}",
+            files_in(t.path())
+        );
+    }
+}

@@ -21,7 +21,9 @@
 //! vectors chosen that way, [`crate::learned::ModelMotion`]), and the volume rows' as `ignis
 //! volume render --motion-vectors` writes them (vectors from the flows of each in-between
 //! frame the renderer draws to its two key frames, chosen by the in-between frames,
-//! [`crate::inbetween::InBetween`]), each with the gated flow's
+//! [`crate::inbetween::InBetween`]); the footage and classic rows' as `ignis loop` / `ignis
+//! classic --every 2 --motion-vectors` write them (the same choice by the frames left
+//! out), each with the gated flow's
 //! vectors beside it for comparison; every row's vectors are also read as an engine may filter them
 //! (`filtered`: bilinear between pixel centres, mip level 1).
 
@@ -198,17 +200,38 @@ fn case(
     Ok(row)
 }
 
-/// Classic frames (one step each) and the model's velocity per key frame (two steps).
-fn classic(n: usize) -> Result<(Vec<RgbaFrame>, Vec<Field>)> {
-    use ignis_classic::{ClassicFire, ClassicParams};
-    let params = ClassicParams {
-        size: Size::new(160, 120)?,
+/// The classic fire `ignis classic --size 160x120` renders by default (6-px cells,
+/// puffing), and the 1999 article's fire exactly (`--cell 1 --puff 0`: pixel-level
+/// noise), both with seed 7.
+fn classic_params(article: bool) -> Result<ignis_classic::ClassicParams> {
+    let size = Size::new(160, 120)?;
+    let base = ignis_classic::ClassicParams {
+        size,
         seed: 7,
-        ..Default::default()
+        cell: crate::classic::default_cell(size),
+        ..ignis_classic::ClassicParams::preset()
     };
-    let [vx, vy] = ignis_classic::motion::velocity_per_step(&params);
-    let model = vec![vec![[2.0 * vx, 2.0 * vy]; params.size.pixels()]; n.div_ceil(2)];
-    let mut fire = ClassicFire::new(params)?;
+    Ok(if article {
+        ignis_classic::ClassicParams {
+            cell: 1,
+            puff: 0.0,
+            ..base
+        }
+    } else {
+        base
+    })
+}
+
+/// Classic frames (one step each) and the model's velocity per key frame (two steps), in
+/// output pixels (a buffer cell is `cell` pixels).
+fn classic(
+    n: usize,
+    params: &ignis_classic::ClassicParams,
+) -> Result<(Vec<RgbaFrame>, Vec<Field>)> {
+    let [vx, vy] = ignis_classic::motion::velocity_per_step(params);
+    let c = params.cell as f32;
+    let model = vec![vec![[2.0 * c * vx, 2.0 * c * vy]; params.size.pixels()]; n.div_ceil(2)];
+    let mut fire = ignis_classic::ClassicFire::new(params.clone())?;
     let palette = ignis_core::Palette::preset("classic")?;
     for _ in 0..60 {
         fire.step();
@@ -220,6 +243,17 @@ fn classic(n: usize) -> Result<(Vec<RgbaFrame>, Vec<Field>)> {
         })
         .collect();
     Ok((frames, model))
+}
+
+/// The motion source `--every 2 --motion-vectors` gives `frames` written every other one
+/// (`ignis loop`, `ignis classic`): the vectors chosen by the frames left out.
+fn left_out_source(frames: &[RgbaFrame]) -> MotionSource {
+    let source = crate::inbetween::InBetween::new(false);
+    source.start_row();
+    for mid in frames.iter().skip(1).step_by(2) {
+        source.record(mid.clone());
+    }
+    source.source()
 }
 
 /// `n` frames of a volume preset at `rate` times its frame rate, 128², and what the model
@@ -612,18 +646,24 @@ pub fn figures(g: &Global, quick: bool) -> Result<serde_json::Value> {
         flow_source(),
     )?);
     let mut held = serde_json::Map::new();
-    let (frames, model) = classic(n)?;
-    rows.push(case(
-        "classic",
-        &frames,
-        dir.path(),
-        Known::model(model),
-        flow_source(),
-    )?);
-    held.insert(
-        "classic".into(),
-        held_out(&classic(2 * n - 1)?.0, Known::default())?,
-    );
+    // as `ignis classic --size 160x120 --every 2 --motion-vectors` writes them (with
+    // `--cell 1 --puff 0` for the article's fire)
+    for (name, article) in [("classic", false), ("classic-article", true)] {
+        let params = classic_params(article)?;
+        let (frames, model) = classic(n, &params)?;
+        let source = left_out_source(&frames);
+        rows.push(case(
+            name,
+            &frames,
+            dir.path(),
+            Known::model(model),
+            source,
+        )?);
+        held.insert(
+            name.into(),
+            held_out(&classic(2 * n - 1, &params)?.0, Known::default())?,
+        );
+    }
     for p in [ignis_volume::Preset::Candle, ignis_volume::Preset::Campfire] {
         let name = format!("volume-{}", p.name());
         let (frames, known) = volume(n, p, 2.0, 2)?;
@@ -641,17 +681,12 @@ pub fn figures(g: &Global, quick: bool) -> Result<serde_json::Value> {
             Some(frames) => {
                 // as `ignis loop --every 2 --motion-vectors` writes them: the vectors
                 // chosen by the source frames left out
-                let source = crate::inbetween::InBetween::new(false);
-                source.start_row();
-                for mid in frames.iter().skip(1).step_by(2) {
-                    source.record(mid.clone());
-                }
                 rows.push(case(
                     clip,
                     &frames,
                     dir.path(),
                     Known::default(),
-                    source.source(),
+                    left_out_source(&frames),
                 )?);
                 if let Some(f) = footage(clip, 2 * n - 1)? {
                     held.insert(clip.to_string(), held_out(&f, Known::default())?);
@@ -742,7 +777,7 @@ pub fn figures(g: &Global, quick: bool) -> Result<serde_json::Value> {
         "threads": rayon::current_num_threads(),
         "metric": "mean |error| vs the true dropped frame, 8-bit sRGB levels, colour over black",
         "variants": {
-            "headline": "the vectors --motion-vectors writes, on the 8-bit colour sheet read back: image-only vectors (ignis_flow::motion_vector_pair velocities), except for the learned row, whose sheet is written as `ignis learned synth --motion-vectors` writes it (motion_source: the model's motion chosen per pixel by the rendered in-between frames), the footage rows, written as `ignis loop --every 2 --motion-vectors` writes them (the same choice by the source frames left out), and the volume rows, written as `ignis volume render --motion-vectors` writes them (motion_source: vectors from the flows of each in-between frame the renderer draws, ignis_volume::Animator::frame_between, to its two key frames, chosen per pixel by the in-between frames, on the key frames as the 8-bit sheet holds them: mid_flow_chosen); flow_sheet: the gated flow's vectors on the same frames, for comparison",
+            "headline": "the vectors --motion-vectors writes, on the 8-bit colour sheet read back: image-only vectors (ignis_flow::motion_vector_pair velocities), except for the learned row, whose sheet is written as `ignis learned synth --motion-vectors` writes it (motion_source: the model's motion chosen per pixel by the rendered in-between frames), the footage rows, written as `ignis loop --every 2 --motion-vectors` writes them (the same choice by the source frames left out), the classic rows, written as `ignis classic --size 160x120 --every 2 --motion-vectors` writes them (the same choice by the steps left out; classic-article: with --cell 1 --puff 0, the 1999 article's per-pixel fire), and the volume rows, written as `ignis volume render --motion-vectors` writes them (motion_source: vectors from the flows of each in-between frame the renderer draws, ignis_volume::Animator::frame_between, to its two key frames, chosen per pixel by the in-between frames, on the key frames as the 8-bit sheet holds them: mid_flow_chosen); flow_sheet: the gated flow's vectors on the same frames, for comparison",
             "filtered": "the headline's vectors sampled as an engine may: bilinear (blend evaluated half-way between pixel centres, vectors, key frames and true frame bilinear there) and mip1 (vector sheet box-averaged 2x2 and upsampled bilinearly); flow_filtered: the same for the flow's vectors on the learned row",
             "exact_colour": "the same vectors on the unquantised key frames (what the --hdr EXR colour sheet gives): separates the 8-bit sheet's rounding from the blend",
             "in_between_flow": "velocities from flows key -> true in-between frames (uses the dropped frames: possible only when the exporter has them, e.g. decimated footage or a generator rendered at twice the rate); vectors unquantised",

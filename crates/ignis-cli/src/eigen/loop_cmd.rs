@@ -1470,9 +1470,11 @@ pub fn report(d: &Done, first: usize, g: &Global) {
     let b = &d.chosen.best;
     let every = match d.chosen.every {
         1 => String::new(),
-        2 => format!(", every 2nd of its {}", planned_frames(b)),
-        3 => format!(", every 3rd of its {}", planned_frames(b)),
-        k => format!(", every {k}th of its {}", planned_frames(b)),
+        k => format!(
+            ", every {} of its {}",
+            crate::args::nth(k as u32),
+            planned_frames(b)
+        ),
     };
     g.say(format!(
         "loop: source frames {}..{}, {} ({} frames at {}{every})",
