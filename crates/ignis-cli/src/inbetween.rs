@@ -121,14 +121,14 @@ pub(crate) fn mid_pairs(
 ) -> Result<Vec<(Field, Field)>, String> {
     let n = frames.len();
     let p = ignis_flow::FlowParams::default();
-    let grey: Vec<_> = frames.iter().map(ignis_flow::luma).collect();
+    use rayon::prelude::*;
+    let grey: Vec<_> = frames.par_iter().map(ignis_flow::luma).collect();
     let doubled = |f: ignis_flow::FlowField| -> Field {
         f.into_vec()
             .into_iter()
             .map(|v| [-2.0 * v[0], -2.0 * v[1]])
             .collect()
     };
-    use rayon::prelude::*;
     mids.par_iter()
         .enumerate()
         .map(|(k, m)| {

@@ -644,21 +644,6 @@ impl FlipbookSink {
         self.path.with_file_name(format!("{stem}{suffix}"))
     }
 
-    /// `frame` as the 8-bit sRGB colour sheet holds it, read back as [`read_flipbook`]
-    /// reads it (straight alpha, linear).
-    fn as_held(&self, frame: &RgbaFrame) -> RgbaFrame {
-        match self.opts.alpha {
-            AlphaMode::Straight => convert::from_srgba8(frame.size(), &convert::to_srgba8(frame)),
-            AlphaMode::Premultiplied => {
-                let mut pre = frame.clone();
-                convert::premultiply(&mut pre);
-                let mut back = convert::from_srgba8(frame.size(), &convert::to_srgba8(&pre));
-                convert::unpremultiply(&mut back);
-                back
-            }
-        }
-    }
-
     /// Forward motion of every frame of `frames` (one loop per row), in pixels (+y down).
     fn motion(
         &self,
@@ -695,7 +680,11 @@ impl FlipbookSink {
             motion::Source::Velocities { f, .. } => {
                 // the generator sees its frames as the 8-bit colour sheet holds them (what
                 // an engine's blend samples), e.g. to choose vectors by blending them
-                let held: Vec<RgbaFrame> = frames.iter().map(|f| self.as_held(f)).collect();
+                let alpha = self.opts.alpha;
+                let held: Vec<RgbaFrame> = {
+                    use rayon::prelude::*;
+                    frames.par_iter().map(|f| as_held(alpha, f)).collect()
+                };
                 for (r, row) in held.chunks(per).enumerate() {
                     let given = f(r, row).map_err(|e| {
                         MediaError::encode(&self.path, format!("motion vectors: {e}"))
@@ -761,6 +750,21 @@ fn commit(files: Vec<AtomicFile>) -> Result<Vec<PathBuf>> {
     let paths: Vec<PathBuf> = files.iter().map(|f| f.target().to_path_buf()).collect();
     super::commit_temps(files)?;
     Ok(paths)
+}
+
+/// `frame` as the 8-bit sRGB colour sheet holds it, read back as [`read_flipbook`]
+/// reads it (straight alpha, linear).
+fn as_held(alpha: AlphaMode, frame: &RgbaFrame) -> RgbaFrame {
+    match alpha {
+        AlphaMode::Straight => convert::from_srgba8(frame.size(), &convert::to_srgba8(frame)),
+        AlphaMode::Premultiplied => {
+            let mut pre = frame.clone();
+            convert::premultiply(&mut pre);
+            let mut back = convert::from_srgba8(frame.size(), &convert::to_srgba8(&pre));
+            convert::unpremultiply(&mut back);
+            back
+        }
+    }
 }
 
 /// A sheet filled with `background` with every frame's pixels (`pixels(frame)`, `w × h`

@@ -177,6 +177,7 @@ pub fn mv_scale_for(max_abs: f32) -> f32 {
 /// Bilinear sample of a frame at pixel-centre coordinates `(x, y)` (pixel `i` covers
 /// `[i, i+1)`, its centre at `i + 0.5`), clamping to the edge (what an extruded padding
 /// gives a texture sampler near a cell's border).
+#[inline]
 pub fn sample_bilinear(frame: &RgbaFrame, x: f32, y: f32) -> [f32; 4] {
     let (w, h) = (frame.width() as i64, frame.height() as i64);
     let fx = x - 0.5;
@@ -299,11 +300,14 @@ pub fn chosen_velocities(
     // rows stay in cache), then each pixel's chain: the same costs and choices as pixel
     // by pixel.
     const RUN: usize = 256;
+    // (each thread's cost buffer is reused from run to run: a fresh one per run costs
+    // as much in page faults as the runs' bookkeeping)
     let picks: Vec<u8> = (0..size.pixels().div_ceil(RUN))
         .into_par_iter()
-        .flat_map_iter(|r| {
+        .map_init(Vec::new, |costs, r| {
             let (lo, hi) = (r * RUN, ((r + 1) * RUN).min(size.pixels()));
-            let mut costs = vec![[[0f32; 4]; 4]; (hi - lo) * intervals];
+            costs.clear();
+            costs.resize((hi - lo) * intervals, [[0f32; 4]; 4]);
             for k in 0..intervals {
                 for i in lo..hi {
                     let xy = ((i % w) as f32 + 0.5, (i / w) as f32 + 0.5);
@@ -318,13 +322,16 @@ pub fn chosen_velocities(
                         };
                 }
             }
-            costs
-                .chunks(intervals)
-                .flat_map(|c| best_chain(c, n))
-                .collect::<Vec<u8>>()
+            let mut picks = Vec::with_capacity((hi - lo) * n);
+            for c in costs.chunks(intervals) {
+                picks.extend_from_slice(&best_chain(c, n));
+            }
+            picks
         })
+        .flatten_iter()
         .collect();
     (0..n)
+        .into_par_iter()
         .map(|k| {
             let c = &candidates[k];
             picks
@@ -382,8 +389,10 @@ fn blank_reach(frame: &RgbaFrame, candidates: &[Field; 4]) -> Vec<bool> {
 /// forward motion, the reversed backward motion, the central velocity (one-sided motion
 /// in place of a missing side at the ends of a one-shot).
 fn chain_candidates(pairs: &[(Field, Field)], n: usize) -> Vec<[Field; 4]> {
+    use rayon::prelude::*;
     let looped = pairs.len() == n;
     (0..n)
+        .into_par_iter()
         .map(|k| {
             let ahead = (k < pairs.len()).then(|| pairs[k].0.clone());
             let behind = (k > 0 || looped).then(|| pairs[(k + n - 1) % n].1.clone());
@@ -404,8 +413,27 @@ fn chain_candidates(pairs: &[(Field, Field)], n: usize) -> Vec<[Field; 4]> {
 
 /// At pixel `i` (centre `(x, y)`), for key interval `k`, the error of its blend at 0.5
 /// against `mids[k]` for each pair of candidates `[a][b]` (`a` of the earlier key frame,
-/// `b` of the later).
+/// `b` of the later). With AVX2 where the CPU has it ([`interval_cost_avx2`]), the same
+/// operations in the same order otherwise ([`interval_cost_scalar`]): both give the same
+/// bits (test `interval_costs_match_the_scalar_ones_bit_for_bit`).
 fn interval_cost(
+    keys: &[RgbaFrame],
+    mids: &[&RgbaFrame],
+    candidates: &[[Field; 4]],
+    k: usize,
+    i: usize,
+    xy: (f32, f32),
+) -> [[f32; 4]; 4] {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: AVX2 is present (checked above).
+        return unsafe { interval_cost_avx2(keys, mids, candidates, k, i, xy) };
+    }
+    interval_cost_scalar(keys, mids, candidates, k, i, xy)
+}
+
+/// [`interval_cost`], one sample and one pair at a time.
+fn interval_cost_scalar(
     keys: &[RgbaFrame],
     mids: &[&RgbaFrame],
     candidates: &[[Field; 4]],
@@ -433,6 +461,182 @@ fn interval_cost(
             (0..3).map(|c| (got[c] - want[c]).abs()).sum::<f32>()
         })
     })
+}
+
+/// [`interval_cost`] with AVX2: the eight bilinear samples' coordinates, corners and
+/// weights eight at a time ([`samples_avx2`]), then the 16 pairs eight at a time
+/// ([`pair_costs_avx2`]).
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn interval_cost_avx2(
+    keys: &[RgbaFrame],
+    mids: &[&RgbaFrame],
+    candidates: &[[Field; 4]],
+    k: usize,
+    i: usize,
+    (x, y): (f32, f32),
+) -> [[f32; 4]; 4] {
+    let lut = srgb255_table();
+    let enc = |p: [f32; 4]| [0, 1, 2].map(|c| srgb255(lut, p[c] * p[3]));
+    let j = (k + 1) % keys.len();
+    let want = enc(mids[k].data()[i]);
+    // the scalar coordinates: x − 0.5·v for the earlier frame, x + 0.5·v for the later
+    let at: [[f32; 2]; 8] = std::array::from_fn(|s| {
+        if s < 4 {
+            let v = candidates[k][s][i];
+            [x - 0.5 * v[0], y - 0.5 * v[1]]
+        } else {
+            let v = candidates[j][s - 4][i];
+            [x + 0.5 * v[0], y + 0.5 * v[1]]
+        }
+    });
+    // far outside the frame (or not finite), where lanes of 32-bit indices would not
+    // clamp as the scalar does: the scalar
+    if at.iter().flatten().any(|c| !(c.abs() < 1.0e6)) {
+        return interval_cost_scalar(keys, mids, candidates, k, i, (x, y));
+    }
+    let got = samples_avx2(&keys[k], &keys[j], &at);
+    let prev: [[f32; 4]; 4] = std::array::from_fn(|a| got[a]);
+    let next: [[f32; 4]; 4] = std::array::from_fn(|b| got[4 + b]);
+    if want == [0.0; 3] && got.iter().all(dark) {
+        return [[0.0; 4]; 4];
+    }
+    pair_costs_avx2(&prev, &next, want, lut)
+}
+
+/// [`sample_bilinear`] at the eight points `at`, the first four of `a`, the others of
+/// `b` (frames of one size): floor, weights and clamped corners in eight lanes, each
+/// sample's four corners blended as one 4-channel vector, in the scalar's order.
+///
+/// # Safety
+/// The CPU must support AVX2; coordinates must be finite and within ±10⁶ (so floors and
+/// corners fit 32-bit lanes exactly).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn samples_avx2(a: &RgbaFrame, b: &RgbaFrame, at: &[[f32; 2]; 8]) -> [[f32; 4]; 8] {
+    use std::arch::x86_64::*;
+    let (w, h) = (a.width() as i32, a.height() as i32);
+    let half = _mm256_set1_ps(0.5);
+    let fx = _mm256_sub_ps(
+        _mm256_setr_ps(
+            at[0][0], at[1][0], at[2][0], at[3][0], at[4][0], at[5][0], at[6][0], at[7][0],
+        ),
+        half,
+    );
+    let fy = _mm256_sub_ps(
+        _mm256_setr_ps(
+            at[0][1], at[1][1], at[2][1], at[3][1], at[4][1], at[5][1], at[6][1], at[7][1],
+        ),
+        half,
+    );
+    let (x0f, y0f) = (_mm256_floor_ps(fx), _mm256_floor_ps(fy));
+    let (ax, ay) = (_mm256_sub_ps(fx, x0f), _mm256_sub_ps(fy, y0f));
+    let (x0, y0) = (_mm256_cvttps_epi32(x0f), _mm256_cvttps_epi32(y0f));
+    let one = _mm256_set1_epi32(1);
+    let clamp = |v: __m256i, hi: i32| {
+        _mm256_max_epi32(
+            _mm256_min_epi32(v, _mm256_set1_epi32(hi - 1)),
+            _mm256_setzero_si256(),
+        )
+    };
+    let (cx0, cx1) = (clamp(x0, w), clamp(_mm256_add_epi32(x0, one), w));
+    let wv = _mm256_set1_epi32(w);
+    let (ry0, ry1) = (
+        _mm256_mullo_epi32(clamp(y0, h), wv),
+        _mm256_mullo_epi32(clamp(_mm256_add_epi32(y0, one), h), wv),
+    );
+    let mut idx = [[0i32; 8]; 4];
+    for (o, v) in idx.iter_mut().zip([
+        _mm256_add_epi32(ry0, cx0),
+        _mm256_add_epi32(ry0, cx1),
+        _mm256_add_epi32(ry1, cx0),
+        _mm256_add_epi32(ry1, cx1),
+    ]) {
+        _mm256_storeu_si256(o.as_mut_ptr().cast(), v);
+    }
+    let (mut wx, mut wy) = ([0f32; 8], [0f32; 8]);
+    _mm256_storeu_ps(wx.as_mut_ptr(), ax);
+    _mm256_storeu_ps(wy.as_mut_ptr(), ay);
+    let mut out = [[0f32; 4]; 8];
+    for s in 0..8 {
+        let d = if s < 4 { a.data() } else { b.data() };
+        // SAFETY: the corners are clamped to the frame, so every index is in `d`
+        let load = |n: usize| _mm_loadu_ps(d.get_unchecked(idx[n][s] as usize).as_ptr());
+        let (p00, p10, p01, p11) = (load(0), load(1), load(2), load(3));
+        let (sx, sy) = (_mm_set1_ps(wx[s]), _mm_set1_ps(wy[s]));
+        let top = _mm_add_ps(p00, _mm_mul_ps(_mm_sub_ps(p10, p00), sx));
+        let bot = _mm_add_ps(p01, _mm_mul_ps(_mm_sub_ps(p11, p01), sx));
+        _mm_storeu_ps(
+            out[s].as_mut_ptr(),
+            _mm_add_ps(top, _mm_mul_ps(_mm_sub_ps(bot, top), sy)),
+        );
+    }
+    out
+}
+
+/// The error of each pair's blend at 0.5 (`prev[a]` with `next[b]`) against `want` (8-bit
+/// sRGB levels of the premultiplied colour, summed over the channels), as
+/// [`interval_cost_scalar`] computes it: pairs `(a, b)` in lanes `4a + b`, eight at a time,
+/// each step the scalar one's (no fused multiply-add), the table read by gathers.
+///
+/// # Safety
+/// The CPU must support AVX2; `lut` must have at least 2 entries and fewer than 2³¹.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn pair_costs_avx2(
+    prev: &[[f32; 4]; 4],
+    next: &[[f32; 4]; 4],
+    want: [f32; 3],
+    lut: &[f32],
+) -> [[f32; 4]; 4] {
+    use std::arch::x86_64::*;
+    let steps = lut.len() - 1;
+    let mut out = [[0f32; 4]; 4];
+    let half = _mm256_set1_ps(0.5);
+    let (zero, one) = (_mm256_setzero_ps(), _mm256_set1_ps(1.0));
+    let steps_f = _mm256_set1_ps(steps as f32);
+    let last = _mm256_set1_epi32(steps as i32 - 1);
+    let levels = _mm256_set1_ps(255.0);
+    let sign = _mm256_set1_ps(-0.0);
+    for h in 0..2 {
+        let (a0, a1) = (2 * h, 2 * h + 1);
+        let p = |c: usize| {
+            let (u, v) = (prev[a0][c], prev[a1][c]);
+            _mm256_setr_ps(u, u, u, u, v, v, v, v)
+        };
+        let q = |c: usize| {
+            let n = [next[0][c], next[1][c], next[2][c], next[3][c]];
+            _mm256_setr_ps(n[0], n[1], n[2], n[3], n[0], n[1], n[2], n[3])
+        };
+        let alpha = _mm256_mul_ps(half, _mm256_add_ps(p(3), q(3)));
+        let mut sum = zero;
+        for (c, &w) in want.iter().enumerate() {
+            let got = _mm256_mul_ps(half, _mm256_add_ps(p(c), q(c)));
+            let pm = _mm256_mul_ps(got, alpha);
+            // srgb255: clamp, scale, index, interpolate, levels
+            let x = _mm256_mul_ps(_mm256_min_ps(_mm256_max_ps(pm, zero), one), steps_f);
+            let i = _mm256_min_epi32(_mm256_cvttps_epi32(x), last);
+            let f = _mm256_sub_ps(x, _mm256_cvtepi32_ps(i));
+            // SAFETY: every index is in 0..steps, so i and i + 1 are inside `lut`
+            let t0 = _mm256_i32gather_ps::<4>(lut.as_ptr(), i);
+            let t1 = _mm256_i32gather_ps::<4>(lut.as_ptr().add(1), i);
+            let e = _mm256_mul_ps(
+                _mm256_add_ps(t0, _mm256_mul_ps(_mm256_sub_ps(t1, t0), f)),
+                levels,
+            );
+            let d = _mm256_andnot_ps(sign, _mm256_sub_ps(e, _mm256_set1_ps(w)));
+            // the scalar sum starts from zero: 0 + d0 is d0 (d0 ≥ 0), then + d1, + d2
+            sum = if c == 0 { d } else { _mm256_add_ps(sum, d) };
+        }
+        let mut lanes = [0f32; 8];
+        _mm256_storeu_ps(lanes.as_mut_ptr(), sum);
+        out[a0].copy_from_slice(&lanes[..4]);
+        out[a1].copy_from_slice(&lanes[4..]);
+    }
+    out
 }
 
 /// Whether a straight-alpha pixel's premultiplied colour is black (what the choice's
@@ -463,36 +667,60 @@ fn srgb255(table: &[f32], c: f32) -> f32 {
 /// (`costs.len() = n`: the best chain for each fixed first choice, then the best of those).
 fn best_chain(costs: &[[[f32; 4]; 4]], n: usize) -> Vec<u8> {
     if costs.len() + 1 == n {
-        return chain_from(costs, n, [0.0; 4], None).1;
+        return path_chain(costs, n);
     }
-    (0..4u8)
-        .map(|s| {
-            let mut start = [f32::INFINITY; 4];
-            start[s as usize] = 0.0;
-            chain_from(costs, n, start, Some(s))
-        })
-        .min_by(|a, b| a.0.total_cmp(&b.0))
-        .expect("four starts")
-        .1
+    // a loop: the chains from each first choice `s` side by side, each as `path_chain`
+    // from `cost[s] = 0` (the others infinite) and closing in `s`
+    let mut cost = [[f32::INFINITY; 4]; 4];
+    for (s, c) in cost.iter_mut().enumerate() {
+        c[s] = 0.0;
+    }
+    let mut back: Vec<[[u8; 4]; 4]> = Vec::with_capacity(costs.len());
+    for c in costs {
+        let mut to = [[f32::INFINITY; 4]; 4];
+        let mut from = [[0u8; 4]; 4];
+        // for each (s, b) the candidates a in order, the first least kept (the sixteen
+        // (s, b) side by side)
+        for (a, row) in c.iter().enumerate() {
+            for s in 0..4 {
+                for b in 0..4 {
+                    let e = cost[s][a] + row[b];
+                    if e < to[s][b] {
+                        (to[s][b], from[s][b]) = (e, a as u8);
+                    }
+                }
+            }
+        }
+        cost = to;
+        back.push(from);
+    }
+    // the least total, the first of equals
+    let s = (0..4)
+        .min_by(|&a, &b| cost[a][a].total_cmp(&cost[b][b]))
+        .expect("four starts");
+    let mut pick = vec![0u8; n];
+    let mut at = s as u8;
+    for k in (0..costs.len()).rev() {
+        at = back[k][s][at as usize];
+        pick[k] = at;
+    }
+    pick
 }
 
-/// Dynamic programming over `costs` from the initial `cost` per candidate of key frame 0;
-/// `close`: the candidate the chain must end in (a loop's last interval returns to key
-/// frame 0). Returns the least total and the choices.
-fn chain_from(
-    costs: &[[[f32; 4]; 4]],
-    n: usize,
-    mut cost: [f32; 4],
-    close: Option<u8>,
-) -> (f32, Vec<u8>) {
+/// Dynamic programming along a one-shot's `costs` (`n − 1` intervals): the choices with
+/// the least total, ties to the first candidate.
+fn path_chain(costs: &[[[f32; 4]; 4]], n: usize) -> Vec<u8> {
+    let mut cost = [0f32; 4];
     // the step back from each candidate of each key frame after the first
     let mut back: Vec<[u8; 4]> = Vec::with_capacity(costs.len());
     for c in costs {
         let mut to = [f32::INFINITY; 4];
         let mut from = [0u8; 4];
-        for b in 0..4 {
-            for a in 0..4 {
-                let e = cost[a] + c[a][b];
+        // for each b the candidates a in order, the first least kept (the four b side
+        // by side)
+        for (a, row) in c.iter().enumerate() {
+            for b in 0..4 {
+                let e = cost[a] + row[b];
                 if e < to[b] {
                     (to[b], from[b]) = (e, a as u8);
                 }
@@ -501,24 +729,18 @@ fn chain_from(
         cost = to;
         back.push(from);
     }
-    let last = match close {
-        Some(s) => s,
-        None => (0..4)
-            .min_by(|&a, &b| cost[a].total_cmp(&cost[b]))
-            .unwrap_or(0) as u8,
-    };
-    let total = cost[last as usize];
-    // back[k] leads from key frame k + 1 (mod n) to key frame k
+    let last = (0..4)
+        .min_by(|&a, &b| cost[a].total_cmp(&cost[b]))
+        .unwrap_or(0) as u8;
+    // back[k] leads from key frame k + 1 to key frame k
     let mut pick = vec![0u8; n];
     let mut at = last;
     for k in (0..costs.len()).rev() {
         at = back[k][at as usize];
         pick[k] = at;
     }
-    if close.is_none() {
-        pick[n - 1] = last;
-    }
-    (total, pick)
+    pick[n - 1] = last;
+    pick
 }
 
 #[cfg(test)]
@@ -750,6 +972,102 @@ mod tests {
             let mut bad = c.clone();
             bad[2][7] = [f32::NAN, 0.0];
             assert!(blank_reach(&frame, &bad).iter().all(|&b| !b));
+        }
+    }
+
+    /// The AVX2 costs are the scalar ones bit for bit (what keeps the choice the same on
+    /// any CPU): frames with colour, dark pixels, zero alpha and alpha between, vectors
+    /// that sample inside, across the border and far outside the frame, a frame's last
+    /// column and row, and coordinates past the lanes' range (the scalar's fallback).
+    #[test]
+    fn interval_costs_match_the_scalar_ones_bit_for_bit() {
+        #[cfg(target_arch = "x86_64")]
+        if !std::arch::is_x86_feature_detected!("avx2") {
+            eprintln!("skipped: this CPU has no AVX2 (the scalar path is the only one)");
+            return;
+        }
+        let size = Size::new(23, 17).unwrap();
+        let mut rng = ignis_core::Rng::new(11);
+        let frame = |rng: &mut ignis_core::Rng| {
+            let px = (0..size.pixels())
+                .map(|_| match rng.below(4) {
+                    0 => [0.0, 0.0, 0.0, rng.uniform(0.0, 1.0) as f32],
+                    1 => [0.7, 0.4, 0.1, 0.0],
+                    _ => [0, 1, 2, 3].map(|_| rng.uniform(0.0, 1.2) as f32),
+                })
+                .collect();
+            RgbaFrame::from_vec(size, px).unwrap()
+        };
+        let keys: Vec<RgbaFrame> = (0..3).map(|_| frame(&mut rng)).collect();
+        let truth: Vec<RgbaFrame> = (0..3).map(|_| frame(&mut rng)).collect();
+        let mids: Vec<&RgbaFrame> = truth.iter().collect();
+        let mut field = |scale: f64| -> Field {
+            (0..size.pixels())
+                .map(|_| [0, 1].map(|_| (scale * rng.normal()) as f32))
+                .collect()
+        };
+        for scale in [0.7, 6.0, 60.0] {
+            let pairs: Vec<(Field, Field)> = (0..3).map(|_| (field(scale), field(scale))).collect();
+            let mut candidates = chain_candidates(&pairs, 3);
+            candidates[1][2][5] = [3.0e6, -1.0];
+            candidates[2][1][9] = [0.25, -2.5e7];
+            for k in 0..3 {
+                for i in 0..size.pixels() {
+                    let xy = ((i % 23) as f32 + 0.5, (i / 23) as f32 + 0.5);
+                    let fast = interval_cost(&keys, &mids, &candidates, k, i, xy);
+                    let slow = interval_cost_scalar(&keys, &mids, &candidates, k, i, xy);
+                    let bits = |c: [[f32; 4]; 4]| c.map(|r| r.map(f32::to_bits));
+                    assert_eq!(bits(fast), bits(slow), "interval {k}, pixel {i}");
+                }
+            }
+        }
+    }
+
+    /// A loop's chains from the four first choices side by side are the four chains
+    /// run one by one (each from its first choice, closing in it; the least total, the
+    /// first of equals), on costs with many ties.
+    #[test]
+    fn loop_chains_are_the_four_separate_chains() {
+        fn separate(costs: &[[[f32; 4]; 4]], n: usize) -> Vec<u8> {
+            let chain = |s: usize| {
+                let mut cost = [f32::INFINITY; 4];
+                cost[s] = 0.0;
+                let mut back = Vec::new();
+                for c in costs {
+                    let mut to = [f32::INFINITY; 4];
+                    let mut from = [0u8; 4];
+                    for b in 0..4 {
+                        for a in 0..4 {
+                            if cost[a] + c[a][b] < to[b] {
+                                (to[b], from[b]) = (cost[a] + c[a][b], a as u8);
+                            }
+                        }
+                    }
+                    cost = to;
+                    back.push(from);
+                }
+                let mut pick = vec![0u8; n];
+                let mut at = s as u8;
+                for k in (0..costs.len()).rev() {
+                    at = back[k][at as usize];
+                    pick[k] = at;
+                }
+                (cost[s], pick)
+            };
+            (0..4)
+                .map(chain)
+                .min_by(|a, b| a.0.total_cmp(&b.0))
+                .unwrap()
+                .1
+        }
+        let mut rng = ignis_core::Rng::new(2);
+        for n in [2, 3, 7, 16] {
+            for _ in 0..200 {
+                let costs: Vec<[[f32; 4]; 4]> = (0..n)
+                    .map(|_| [0; 4].map(|_| [0; 4].map(|_| rng.below(3) as f32 * 0.5)))
+                    .collect();
+                assert_eq!(best_chain(&costs, n), separate(&costs, n), "{costs:?}");
+            }
         }
     }
 
