@@ -2711,3 +2711,65 @@ mod classic_every {
         );
     }
 }
+
+/// `ignis loop --alpha emissive`: the matted flame's light as alpha. Over black the same
+/// picture as the matte; over a grey background no pixel darkens it (the matte's half-keyed
+/// dark edges do: the dark fringe of fire shot on black).
+#[test]
+fn loop_alpha_emissive_adds_light_without_a_dark_fringe() {
+    let t = tempfile::tempdir().unwrap();
+    let frames = t.path().join("frames");
+    std::fs::create_dir(&frames).unwrap();
+    let pattern = frames.join("%04d.png");
+    let o = classic("64x48", "40", &["--seed", "5", "--no-loop"], &pattern);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let cache = t.path().join("cache");
+    let run = |alpha: &str| {
+        let dir = t.path().join(alpha);
+        let out = dir.join("%04d.png");
+        let a = [
+            "loop",
+            pattern.to_str().unwrap(),
+            "--length",
+            "16",
+            "--alpha",
+            alpha,
+            "--cache",
+            cache.to_str().unwrap(),
+            "-q",
+            "-o",
+            out.to_str().unwrap(),
+        ];
+        ignis_ok(&a);
+        files_in(&dir)
+            .iter()
+            .map(|f| ignis_media::read_image(&dir.join(f)).unwrap())
+            .collect::<Vec<_>>()
+    };
+    let (matte, light) = (run("matte"), run("emissive"));
+    assert_eq!(matte.len(), light.len());
+    let over = |p: &[f32; 4], bg: f32| [0, 1, 2].map(|c| p[c] * p[3] + bg * (1.0 - p[3]));
+    let (mut fringe, mut darker, mut lit) = (0, 0, 0);
+    for (m, e) in matte.iter().zip(&light) {
+        for (p, q) in m.data().iter().zip(e.data()) {
+            // the same light over black (8-bit rounding of colour and alpha apart)
+            let (a, b) = (over(p, 0.0), over(q, 0.0));
+            for c in 0..3 {
+                assert!((a[c] - b[c]).abs() < 0.02, "over black: {p:?} vs {q:?}");
+            }
+            // alpha is the brightest channel of that light
+            let brightest = a[0].max(a[1]).max(a[2]);
+            assert!((q[3] - brightest).abs() < 0.01, "{p:?} → {q:?}");
+            lit += usize::from(q[3] > 0.05);
+            let dims = |x: [f32; 3]| x.iter().all(|&v| v < 0.5 - 0.02);
+            fringe += usize::from(dims(over(p, 0.5)));
+            darker += usize::from(dims(over(q, 0.5)));
+        }
+    }
+    eprintln!(
+        "over grey, pixels darker in every channel: matte {fringe}, emissive {darker}; lit {lit}"
+    );
+    assert!(lit > 1000, "the loop shows fire");
+    assert!(fringe > 100, "the matte's dark pixels darken grey");
+    assert_eq!(darker, 0, "emissive frames only add light");
+}

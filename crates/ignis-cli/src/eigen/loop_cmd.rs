@@ -33,7 +33,7 @@ const CACHE_VERSION: u32 = 4;
 
 #[derive(clap::Args, Debug)]
 #[command(
-    after_help = "Examples:\n  ignis loop campfire.mp4 --length 4s -o loop.png\n  ignis loop candle.mp4 --length 120 -o loop.mp4\n  ignis loop fire.mov --length 2s --range 100..400 --method morph -o frames/%04d.png\n  ignis loop fire.mp4 --length 3s --cache /tmp/ignis-cache -o loop.gif\n  ignis loop plates/%04d.exr --length 96 -o loop.png    (an image sequence: a frame count, as it has no frame rate)\n  ignis loop campfire.mp4 --length 4s --every 2 --motion-vectors --engine unity -o loop.png    (half the cells; the engine's motion-vector blend fills in)\n\nThe first run on a clip trains an Eigenfire database on it (about 0.1 s per frame of 960x540; footage over 1080p is trained at 1920 px on its longest side) and keeps it in the cache ($XDG_CACHE_HOME/ignis or ~/.cache/ignis, or --cache); later runs reuse it. The output has the footage's own size, colours and frame rate (1/N of it with --every N; --fps is refused), with the pre-processing mask's matte as alpha (--alpha opaque: none); a .png flipbook's JSON records the measured loop_quality."
+    after_help = "Examples:\n  ignis loop campfire.mp4 --length 4s -o loop.png\n  ignis loop candle.mp4 --length 120 -o loop.mp4\n  ignis loop fire.mov --length 2s --range 100..400 --method morph -o frames/%04d.png\n  ignis loop fire.mp4 --length 3s --cache /tmp/ignis-cache -o loop.gif\n  ignis loop plates/%04d.exr --length 96 -o loop.png    (an image sequence: a frame count, as it has no frame rate)\n  ignis loop campfire.mp4 --length 4s --every 2 --motion-vectors --engine unity -o loop.png    (half the cells; the engine's motion-vector blend fills in)\n  ignis loop fireball.mp4 --length 2s --alpha emissive -o loop.png    (to composite over light backgrounds: the fire adds its light)\n\nThe first run on a clip trains an Eigenfire database on it (about 0.1 s per frame of 960x540; footage over 1080p is trained at 1920 px on its longest side) and keeps it in the cache ($XDG_CACHE_HOME/ignis or ~/.cache/ignis, or --cache); later runs reuse it. The output has the footage's own size, colours and frame rate (1/N of it with --every N; --fps is refused), with the pre-processing mask's matte as alpha (--alpha opaque: none; --alpha emissive: the matted flame's own light as alpha, no dark fringe over light backgrounds); a .png flipbook's JSON records the measured loop_quality."
 )]
 pub struct Args {
     /// The footage (any video or frame sequence `ignis info` reads).
@@ -67,8 +67,11 @@ pub struct Args {
     #[arg(long, value_parser = crate::eigen::animate::parse_size)]
     pub size: Option<Size>,
     /// Alpha: `matte` (the pre-processing mask of each frame, feathered: the flame keyed
-    /// out of its surroundings) or `opaque` (the footage as it is).
-    #[arg(long, default_value = "matte", value_parser = ALPHA_CHOICES)]
+    /// out of its surroundings), `emissive` (the matted flame's own light as alpha, the
+    /// "unmultiply" of compositing tools: over black the same picture, over a light
+    /// background no dark fringe; what a fire shot on black needs over anything else) or
+    /// `opaque` (the footage as it is).
+    #[arg(long, default_value = "matte", value_parser = LOOP_ALPHA_CHOICES)]
     pub alpha: String,
     /// Write every Nth frame of the loop, at 1/N of the clip's frame rate (a flipbook of
     /// fewer cells for an engine to blend between); the loop is chosen among those whose
@@ -1132,6 +1135,8 @@ pub struct LoopFootage<'a> {
     pub fps: f64,
     /// Where the frames' alpha comes from; `None` writes the footage opaque.
     pub matte: Option<FootageMatte<'a>>,
+    /// The matted frames' light as alpha (`--alpha emissive`, [`emissive`]).
+    pub emissive: bool,
 }
 
 impl<'a> LoopFootage<'a> {
@@ -1147,6 +1152,7 @@ impl<'a> LoopFootage<'a> {
             metric: &c.metric,
             fps: c.fps,
             matte: Some(FootageMatte::new(&c.db, 0, c.metric.len())),
+            emissive: false,
         }
     }
 
@@ -1154,6 +1160,15 @@ impl<'a> LoopFootage<'a> {
     pub fn opaque(self) -> LoopFootage<'a> {
         LoopFootage {
             matte: None,
+            emissive: false,
+            ..self
+        }
+    }
+
+    /// The same footage, matted, with the matted light as alpha (`--alpha emissive`).
+    pub fn emissive(self) -> LoopFootage<'a> {
+        LoopFootage {
+            emissive: self.matte.is_some(),
             ..self
         }
     }
@@ -1161,6 +1176,34 @@ impl<'a> LoopFootage<'a> {
 
 /// `--alpha`: the pre-processing matte (default) or opaque footage.
 pub const ALPHA_CHOICES: [&str; 2] = ["matte", "opaque"];
+
+/// `ignis loop --alpha`: also `emissive`.
+pub const LOOP_ALPHA_CHOICES: [&str; 3] = ["matte", "emissive", "opaque"];
+
+/// A matted frame with its light as alpha (`--alpha emissive`), the "unmultiply" of
+/// compositing tools for fire shot on black: per pixel the premultiplied light `P = c·a`
+/// (linear) is kept, alpha becomes its brightest channel and the colour `P / alpha`. Over
+/// black it is the same picture; over anything else it adds the fire's light and covers
+/// the background only as much as the fire is bright, so the matte's dark, half-keyed
+/// edges (the footage's black background mixed in) no longer show as a dark fringe. A
+/// pixel without light is transparent black.
+pub fn emissive(frame: &RgbaFrame) -> RgbaFrame {
+    let data = frame
+        .data()
+        .iter()
+        .map(|p| {
+            let a = p[3].clamp(0.0, 1.0);
+            let light = [p[0] * a, p[1] * a, p[2] * a];
+            let alpha = light[0].max(light[1]).max(light[2]).clamp(0.0, 1.0);
+            if alpha > 0.0 {
+                [light[0] / alpha, light[1] / alpha, light[2] / alpha, alpha]
+            } else {
+                [0.0; 4]
+            }
+        })
+        .collect();
+    RgbaFrame::from_vec(frame.size(), data).expect("same size")
+}
 
 /// The alpha of a loop's frames: each window frame's pre-processing mask (stored by
 /// training at the source size, in the source's own framing), steadied over time by a
@@ -1375,6 +1418,7 @@ pub fn make_loop_sized(
         metric,
         fps,
         matte,
+        emissive: light_alpha,
     } = *src;
     let LoopAsk {
         length,
@@ -1439,6 +1483,13 @@ pub fn make_loop_sized(
     render(path, first, &chosen.best, scale, matte.as_ref(), &mut |f| {
         pb.inc(1);
         i += 1;
+        let lit;
+        let f = if light_alpha {
+            lit = emissive(f);
+            &lit
+        } else {
+            f
+        };
         match (i - 1) % every {
             0 => out.push(&mut w, f),
             j => {
@@ -1564,8 +1615,10 @@ pub fn run(a: &Args, g: &Global) -> Result<()> {
         every: a.every as usize,
     };
     let mut src = LoopFootage::cached(&a.input, window.start, &c);
-    if a.alpha == "opaque" {
-        src = src.opaque();
+    match a.alpha.as_str() {
+        "opaque" => src = src.opaque(),
+        "emissive" => src = src.emissive(),
+        _ => {}
     }
     let d = make_loop_sized(&src, &ask, a.size, &a.out, g)?;
     report(&d, window.start, g);
@@ -1664,6 +1717,7 @@ pub fn eigen_length_loop(a: &crate::eigen::LoopArgs, g: &Global) -> Result<()> {
         metric: &metric,
         fps: c.fps,
         matte: (a.alpha == "matte").then(|| FootageMatte::new(&db, rows.start, rows.len())),
+        emissive: false,
     };
     let ask = LoopAsk {
         length,
