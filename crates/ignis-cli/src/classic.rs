@@ -318,6 +318,12 @@ pub fn demo(ctx: &mut crate::demo::Demo) -> Result<()> {
             "EXR sequence (linear f32, for compositing)",
             &["--palette", "classic"],
         ),
+        (
+            "classic/engine.png",
+            "Unity flipbook at half the frame rate (+ engine.json, engine.mv.png): every 2nd frame, \
+             its motion vectors chosen by the frames left out, for the engine's motion-vector blend",
+            &["--every", "2", "--motion-vectors", "--engine", "unity"],
+        ),
     ];
     for (i, (rel, caption, extra)) in variants.iter().enumerate() {
         let path = ctx.path(rel)?;
@@ -344,6 +350,13 @@ pub fn demo(ctx: &mut crate::demo::Demo) -> Result<()> {
                 .join(" ")
         );
         ctx.item(&shown, caption, &settings);
+        if rel.ends_with("engine.png") {
+            ctx.item(
+                "classic/engine.mv.png",
+                "its motion-vector sheet (16-bit, linear; red and green = the motion, 0.5 = none)",
+                &settings,
+            );
+        }
     }
     Ok(())
 }
