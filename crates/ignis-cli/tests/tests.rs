@@ -82,6 +82,23 @@ fn assert_fails(out: &Output, needle: &str) {
     );
 }
 
+/// A flipbook JSON whose motion vectors were chosen by in-between frames, for a loop
+/// (the choice wraps).
+fn assert_looped_vectors_chosen_by_in_betweens(meta: &serde_json::Value) {
+    let mv = &meta["motion_vectors"];
+    assert!(
+        mv["source"]
+            .as_str()
+            .unwrap()
+            .contains("chosen per pixel by the in-between frames"),
+        "{mv}"
+    );
+    assert!(
+        mv["direction"].as_str().unwrap().contains("wrapping"),
+        "{mv}"
+    );
+}
+
 fn files_in(dir: &Path) -> Vec<String> {
     let mut v: Vec<String> = std::fs::read_dir(dir)
         .unwrap()
@@ -2540,18 +2557,7 @@ mod volume_motion {
             (read_json(&out.with_extension("json")), out)
         };
         let (meta, out) = render("loop.png", "candle", &["--frames", "6"]);
-        let mv = &meta["motion_vectors"];
-        assert!(
-            mv["source"]
-                .as_str()
-                .unwrap()
-                .contains("chosen per pixel by the in-between frames"),
-            "{mv}"
-        );
-        assert!(
-            mv["direction"].as_str().unwrap().contains("wrapping"),
-            "{mv}"
-        );
+        assert_looped_vectors_chosen_by_in_betweens(&meta);
         let fb = ignis_media::read_flipbook(&out.with_extension("json")).unwrap();
         assert_eq!(fb.motion.unwrap().len(), 6);
         let (meta, _) = render("once.png", "torch", &["--frames", "5", "--no-loop"]);
@@ -2643,18 +2649,7 @@ mod classic_every {
         assert_eq!(meta["frame_count"], 8);
         assert_eq!(meta["fps"], 15.0);
         assert_eq!(meta["loop"], true);
-        let mv = &meta["motion_vectors"];
-        assert!(
-            mv["source"]
-                .as_str()
-                .unwrap()
-                .contains("chosen per pixel by the in-between frames"),
-            "{mv}"
-        );
-        assert!(
-            mv["direction"].as_str().unwrap().contains("wrapping"),
-            "{mv}"
-        );
+        assert_looped_vectors_chosen_by_in_betweens(&meta);
         let fb = ignis_media::read_flipbook(&sheet.with_extension("json")).unwrap();
         let vectors = fb.motion.unwrap();
         let (mut e_mv, mut e_plain) = (0.0, 0.0);

@@ -442,7 +442,7 @@ fn interval_cost_scalar(
     (x, y): (f32, f32),
 ) -> [[f32; 4]; 4] {
     let lut = srgb255_table();
-    let enc = |p: [f32; 4]| [0, 1, 2].map(|c| srgb255(lut, p[c] * p[3]));
+    let enc = |p: [f32; 4]| levels_of(lut, p);
     let j = (k + 1) % keys.len();
     let want = enc(mids[k].data()[i]);
     let prev = candidates[k]
@@ -480,9 +480,8 @@ unsafe fn interval_cost_avx2(
     (x, y): (f32, f32),
 ) -> [[f32; 4]; 4] {
     let lut = srgb255_table();
-    let enc = |p: [f32; 4]| [0, 1, 2].map(|c| srgb255(lut, p[c] * p[3]));
     let j = (k + 1) % keys.len();
-    let want = enc(mids[k].data()[i]);
+    let want = levels_of(lut, mids[k].data()[i]);
     // the scalar coordinates: x − 0.5·v for the earlier frame, x + 0.5·v for the later
     let at: [[f32; 2]; 8] = std::array::from_fn(|s| {
         if s < 4 {
@@ -650,6 +649,12 @@ fn dark(p: &[f32; 4]) -> bool {
 /// `i / (len − 1)`.
 fn srgb255_table() -> &'static [f32] {
     ignis_core::loopq::srgb_encode_table()
+}
+
+/// The 8-bit sRGB levels (unrounded) of a straight-alpha pixel's premultiplied colour:
+/// what the choice's errors compare.
+fn levels_of(table: &[f32], p: [f32; 4]) -> [f32; 3] {
+    [0, 1, 2].map(|c| srgb255(table, p[c] * p[3]))
 }
 
 /// 8-bit sRGB level (unrounded) of linear `c` (clamped to `[0, 1]`), linear between the
