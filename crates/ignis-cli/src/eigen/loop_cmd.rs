@@ -1483,18 +1483,15 @@ pub fn make_loop_sized(
     render(path, first, &chosen.best, scale, matte.as_ref(), &mut |f| {
         pb.inc(1);
         i += 1;
-        let lit;
-        let f = if light_alpha {
-            lit = emissive(f);
-            &lit
-        } else {
-            f
-        };
+        // the frame as written (with --alpha emissive, its light as alpha), made only for
+        // the frames written or kept as in-between frames
+        let written = |f: &RgbaFrame| if light_alpha { emissive(f) } else { f.clone() };
         match (i - 1) % every {
+            0 if light_alpha => out.push(&mut w, &emissive(f)),
             0 => out.push(&mut w, f),
             j => {
                 if let Some(m) = in_between.as_ref().filter(|_| 2 * j == every) {
-                    m.record(f.clone());
+                    m.record(written(f));
                 }
                 Ok(())
             }
