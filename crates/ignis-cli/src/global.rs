@@ -3,6 +3,22 @@
 use ignis_core::progress::Progress;
 use indicatif::{ProgressBar, ProgressStyle};
 
+/// Writes the command's output to stdout (what `outln!` / `out!` expand to). A reader
+/// that has closed the pipe (`ignis info clip.mp4 | head -1`) stopped wanting the output:
+/// the rest is dropped and the command ends normally, as `grep` or `rg` do, where
+/// `println!` would panic. Any other failure (a full disk behind `> file`) is an error
+/// that names standard output.
+pub fn write_out(args: std::fmt::Arguments) -> anyhow::Result<()> {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    match out.write_fmt(args).and_then(|()| out.flush()) {
+        Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => {
+            Err(anyhow::Error::new(e).context("cannot write to standard output"))
+        }
+        _ => Ok(()),
+    }
+}
+
 /// Global options (`--quiet`).
 #[derive(Clone, Debug, Default)]
 pub struct Global {
@@ -38,10 +54,11 @@ impl Global {
         pb
     }
 
-    /// Prints a line to stdout unless quiet.
+    /// Prints a line to stdout unless quiet. Chatter: a stdout that cannot be written
+    /// (a closed pipe, a full disk) does not stop the work.
     pub fn say(&self, msg: impl AsRef<str>) {
         if !self.quiet {
-            println!("{}", msg.as_ref());
+            let _ = write_out(format_args!("{}\n", msg.as_ref()));
         }
     }
 }

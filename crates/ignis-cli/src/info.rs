@@ -28,19 +28,19 @@ pub fn run(args: &Args) -> Result<()> {
             "codec": info.codec,
             "decoder": info.decoder.to_string(),
         });
-        println!("{}", serde_json::to_string_pretty(&v)?);
+        outln!("{}", serde_json::to_string_pretty(&v)?)?;
     } else {
-        println!("file:    {}", info.path.display());
-        println!(
+        outln!("file:    {}", info.path.display())?;
+        outln!(
             "frames:  {}",
             info.frame_count
                 .map(|n| n.to_string())
                 .unwrap_or_else(|| "unknown (container does not say)".into())
-        );
-        println!("fps:     {}", info.fps);
-        println!("size:    {}", info.size);
-        println!("codec:   {}", info.codec);
-        println!("decoder: {}", info.decoder);
+        )?;
+        outln!("fps:     {}", info.fps)?;
+        outln!("size:    {}", info.size)?;
+        outln!("codec:   {}", info.codec)?;
+        outln!("decoder: {}", info.decoder)?;
     }
     Ok(())
 }

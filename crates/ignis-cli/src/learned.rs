@@ -534,24 +534,24 @@ fn inspect(a: &InspectArgs, g: &Global) -> Result<()> {
             "eigenvalues": m.pca.eigenvalues,
             "images": written.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
         });
-        println!("{}", serde_json::to_string_pretty(&v)?);
+        outln!("{}", serde_json::to_string_pretty(&v)?)?;
         return Ok(());
     }
     let s = &m.summary;
-    println!(
+    outln!(
         "model         {} (format version {})",
         a.model.display(),
         ignis_learned::MODEL_VERSION
-    );
-    println!(
+    )?;
+    outln!(
         "parameters    {} = N_p {} + N_w {} + height + N_e {}",
         m.n_state(),
         m.shape.n_path,
         m.shape.n_width,
         m.shape.n_eigen
-    );
-    println!("normalised    {0}x{0} pixels", m.shape.norm_size);
-    println!(
+    )?;
+    outln!("normalised    {0}x{0} pixels", m.shape.norm_size)?;
+    outln!(
         "training      {} frames of {} ({} dark, {} several flames skipped); dynamics on {}..{}",
         s.frames,
         s.source_size,
@@ -559,12 +559,12 @@ fn inspect(a: &InspectArgs, g: &Global) -> Result<()> {
         s.skipped_multiple,
         s.run_start,
         s.run_start + s.run_len
-    );
-    println!(
+    )?;
+    outln!(
         "eigenflames   explain {:.1}% of the normalised variance",
         100.0 * s.explained_variance
-    );
-    println!(
+    )?;
+    outln!(
         "ARP           order {}, spectral radius {:.4}{}",
         m.arp.order(),
         r.spectral_radius,
@@ -572,14 +572,14 @@ fn inspect(a: &InspectArgs, g: &Global) -> Result<()> {
             Some(st) => format!(" (stabilised from {:.4})", st.before),
             None => " (stable as learned)".into(),
         }
-    );
-    println!(
+    )?;
+    outln!(
         "EM            {} iterations, best {} ",
         r.log_likelihood.len(),
         r.best_iteration
-    );
+    )?;
     for (i, ll) in r.log_likelihood.iter().enumerate() {
-        println!("  iteration {i:>3}  log-likelihood {ll:.3}");
+        outln!("  iteration {i:>3}  log-likelihood {ll:.3}")?;
     }
     let (np, nw) = (m.shape.n_path, m.shape.n_width);
     let name = |i: usize| {
@@ -593,18 +593,21 @@ fn inspect(a: &InspectArgs, g: &Global) -> Result<()> {
             format!("eigenflame[{}]", i - np - nw - 1)
         }
     };
-    println!(
+    outln!(
         "{:<16} {:>12} {:>12} {:>12}",
-        "parameter", "mean", "std", "obs. noise"
-    );
+        "parameter",
+        "mean",
+        "std",
+        "obs. noise"
+    )?;
     for i in 0..m.n_state() {
-        println!(
+        outln!(
             "{:<16} {:>12.5} {:>12.5} {:>12.5}",
             name(i),
             m.state_mean[i],
             m.state_std[i],
             r.obs_noise[i]
-        );
+        )?;
     }
     for p in &written {
         g.say(format!("wrote {}", p.display()));

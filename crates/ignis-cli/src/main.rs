@@ -3,6 +3,21 @@
 //! A thin layer over the library crates: argument parsing, progress bars and error
 //! reporting live here; every capability is a library call.
 
+/// `println!` for a command's output, through [`global::write_out`]: evaluates to an
+/// `anyhow::Result<()>` (a closed pipe is not an error; a failed write is).
+macro_rules! outln {
+    ($($t:tt)*) => {
+        $crate::global::write_out(format_args!("{}\n", format_args!($($t)*)))
+    };
+}
+
+/// `print!` for a command's output, as [`outln!`] without the newline.
+macro_rules! out {
+    ($($t:tt)*) => {
+        $crate::global::write_out(format_args!($($t)*))
+    };
+}
+
 mod args;
 mod bench;
 mod classic;

@@ -738,6 +738,37 @@ mod hardening {
         assert_fails(&o, "device");
         assert!(files_in(t.path()).is_empty(), "{:?}", files_in(t.path()));
     }
+
+    /// `ignis info clip | head -1`: the reader leaves before the output ends. Standard
+    /// output is a pipe whose read end is closed before `ignis` starts, so every write
+    /// fails with a broken pipe; the command ends normally without a panic. A stdout that
+    /// fails otherwise (`/dev/full`) is an error that names it.
+    #[test]
+    fn output_to_a_closed_pipe_or_a_full_device() {
+        let t = tempfile::tempdir().unwrap();
+        let png = t.path().join("f.png");
+        assert!(classic("32x24", "1", &[], &png).status.success());
+        let run = |args: &[&str], stdout: std::process::Stdio| {
+            Command::new(env!("CARGO_BIN_EXE_ignis"))
+                .args(args)
+                .stdout(stdout)
+                .stderr(std::process::Stdio::piped())
+                .output()
+                .expect("runs ignis")
+        };
+        let png = png.to_str().unwrap();
+        for args in [&["info", png][..], &["info", "--json", png][..]] {
+            let (reader, writer) = std::io::pipe().unwrap();
+            drop(reader);
+            let o = run(args, writer.into());
+            let err = String::from_utf8_lossy(&o.stderr);
+            assert!(o.status.success() && err.is_empty(), "{args:?}: {err}");
+        }
+        if let Ok(full) = std::fs::File::create("/dev/full") {
+            let o = run(&["info", png], full.into());
+            assert_fails(&o, "standard output");
+        }
+    }
 }
 
 /// `ignis loop` refuses lengths that do not fit before doing any work, and writes nothing.

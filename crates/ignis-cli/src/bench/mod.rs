@@ -89,6 +89,6 @@ pub fn run(a: &BenchArgs, g: &Global) -> Result<()> {
         }
         other => anyhow::bail!("unknown bench target `{other}`"),
     };
-    println!("{}", serde_json::to_string_pretty(&v)?);
+    outln!("{}", serde_json::to_string_pretty(&v)?)?;
     Ok(())
 }

@@ -633,7 +633,7 @@ pub fn scenario_cmd(a: &ScenarioArgs) -> Result<()> {
     // The scenario resolves paths against its own directory, which is unknown here (the
     // text goes to stdout): name the database absolutely so it resolves from anywhere.
     let abs = std::path::absolute(&a.db).unwrap_or_else(|_| a.db.clone());
-    print!("{}", template(&db, &abs.to_string_lossy()));
+    out!("{}", template(&db, &abs.to_string_lossy()))?;
     Ok(())
 }
 

@@ -455,40 +455,43 @@ fn info(a: InfoArgs, g: &Global) -> Result<()> {
             "clips": m.clips,
             "problems": problems.iter().map(|(f, r)| serde_json::json!({"file": f, "reason": r})).collect::<Vec<_>>(),
         });
-        println!("{}", serde_json::to_string_pretty(&v)?);
+        outln!("{}", serde_json::to_string_pretty(&v)?)?;
         return Ok(());
     }
     let _ = g;
-    println!("{}", a.db.display());
-    println!(
+    outln!("{}", a.db.display())?;
+    outln!(
         "  frames       {} (training size {}, pre-processed size {})",
-        m.frames, m.train_size, m.frame_size
-    );
+        m.frames,
+        m.train_size,
+        m.frame_size
+    )?;
     if !m.framing.is_empty() {
-        println!("  framing      {}", m.framing);
+        outln!("  framing      {}", m.framing)?;
     }
-    println!(
+    outln!(
         "  Eigenfires   {} stored in {} packs of {}, {} usable",
         m.components,
         m.packs.len(),
         m.pack_size,
         db.usable_components()
-    );
-    println!(
+    )?;
+    outln!(
         "  E            detection {}, rendering {}",
-        m.e_detect, m.e_render
-    );
-    println!(
+        m.e_detect,
+        m.e_render
+    )?;
+    outln!(
         "  spectrum     λ1..3 = {}; 90% variance at E={}, 95% at {}, 99% at {}; stored Eigenfires retain {:.2}%",
         ev.iter().take(3).map(|v| format!("{v:.4}")).collect::<Vec<_>>().join(", "),
         for_var(0.9),
         for_var(0.95),
         for_var(0.99),
         retained * 100.0
-    );
-    println!("  size on disk {:.2} MB", db.bytes_on_disk() as f64 / 1e6);
+    )?;
+    outln!("  size on disk {:.2} MB", db.bytes_on_disk() as f64 / 1e6)?;
     for c in &m.clips {
-        println!(
+        outln!(
             "  clip {:<12} {} frames {}..{} step {} @ {:.2} fps, {} → scale {:.3}{}; θ_min {:.4}, θ_average {:.4} (E={}, {} peaks)",
             c.name,
             c.frames,
@@ -508,12 +511,12 @@ fn info(a: InfoArgs, g: &Global) -> Result<()> {
             c.thresholds.theta_average,
             c.thresholds.e,
             c.thresholds.peaks.len()
-        );
+        )?;
         if let Some(fc) = c.flame_colour {
-            println!(
+            outln!(
                 "    flame colour (linear RGB, the bloom's tint in original colouring) {:.3}, {:.3}, {:.3}",
                 fc[0], fc[1], fc[2]
-            );
+            )?;
         }
         let still = c.pose.still_lights.boxes();
         if !still.is_empty() {
@@ -521,15 +524,15 @@ fn info(a: InfoArgs, g: &Global) -> Result<()> {
                 .iter()
                 .map(|b| format!("{}x{}+{}+{}", b[2] - b[0], b[3] - b[1], b[0], b[1]))
                 .collect();
-            println!(
+            outln!(
                 "    {} still light(s) left out of the mask (bright and steady, away from the fire; WxH+X+Y): {}",
                 still.len(),
                 list.join(", ")
-            );
+            )?;
         }
     }
     for (f, r) in &problems {
-        println!("  PROBLEM {f}: {r}");
+        outln!("  PROBLEM {f}: {r}")?;
     }
     Ok(())
 }
@@ -735,7 +738,7 @@ fn preprocess(a: PreprocessArgs, g: &Global) -> Result<()> {
     let mut pre = read_preprocess(a.config.as_deref())?;
     a.frames_from.apply_sizes(&mut pre);
     if a.print_config {
-        print!("{}", pre.to_toml());
+        out!("{}", pre.to_toml())?;
         return Ok(());
     }
     let (Some(input), Some(out)) = (a.input, a.output) else {
