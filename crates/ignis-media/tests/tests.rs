@@ -740,6 +740,44 @@ mod roundtrip {
         );
     }
 
+    /// 30 and 29.97 fps are kept in whole centiseconds by alternating delays (3, 3, 4 cs):
+    /// the probe reads the rate over every frame's delay (the first alone says 33.3 fps)
+    /// and counts the frames. A truncated GIF still probes: the frames before the cut.
+    #[test]
+    fn gif_rate_is_read_over_all_delays() {
+        let dir = tempfile::tempdir().unwrap();
+        let frames: Vec<_> = (0..12)
+            .map(|t| test_frame(size(40, 30), t, false))
+            .collect();
+        for fps in [30.0, 30000.0 / 1001.0, 24.0] {
+            let path = dir.path().join(format!("r{fps}.gif"));
+            let opts = WriteOptions {
+                fps,
+                ..Default::default()
+            };
+            write_all(&path, &frames, &opts);
+            let info = probe(&path).unwrap();
+            assert_eq!(info.frame_count, Some(12), "{fps}");
+            // 12 frames in whole centiseconds: within one centisecond over the clip
+            let whole = 12.0 * 100.0 / fps;
+            let bound = fps * (1.0 - whole / (whole + 1.0));
+            assert!(
+                (info.fps - fps).abs() <= bound,
+                "{fps}: probed {}",
+                info.fps
+            );
+            if fps == 30.0 {
+                assert!((info.fps - 30.0).abs() < 1e-9, "{}", info.fps);
+            }
+        }
+        let bytes = std::fs::read(dir.path().join("r30.gif")).unwrap();
+        let cut = dir.path().join("cut.gif");
+        std::fs::write(&cut, &bytes[..bytes.len() * 2 / 3]).unwrap();
+        let info = probe(&cut).unwrap();
+        assert_eq!(info.frame_count, None);
+        assert!((25.0..=34.0).contains(&info.fps), "{}", info.fps);
+    }
+
     #[test]
     fn gif_composites_alpha_over_background() {
         let dir = tempfile::tempdir().unwrap();

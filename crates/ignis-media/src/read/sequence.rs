@@ -312,24 +312,59 @@ fn gif_decoder(path: &Path) -> Result<GifDecoder> {
 }
 
 pub(crate) fn probe_gif(path: &Path) -> Result<Probed> {
-    let mut dec = gif_decoder(path)?;
+    let f = File::open(path).map_err(|e| MediaError::io(path, e))?;
+    let mut opts = gif::DecodeOptions::new();
+    // Frame headers only: the frames' compressed data is skipped, not decoded.
+    opts.skip_frame_decoding(true);
+    let mut dec = opts
+        .read_info(BufReader::new(f))
+        .map_err(|e| MediaError::decode(path, None, format!("not a readable GIF: {e}")))?;
     let size = Size::new(dec.width() as u32, dec.height() as u32)
         .map_err(|e| MediaError::decode(path, None, e.to_string()))?;
-    // The delay of the first frame gives the rate; counting frames would mean decoding all.
-    let fps = match dec.read_next_frame() {
-        Ok(Some(f)) if f.delay > 0 => 100.0 / f.delay as f64,
-        Ok(Some(_)) => 10.0,
-        Ok(None) => return Err(MediaError::decode(path, None, "the GIF has no frames")),
-        Err(e) => return Err(MediaError::decode(path, Some(0), e.to_string())),
-    };
+    let (frames, centiseconds, complete) =
+        gif_delays(&mut dec).map_err(|e| MediaError::decode(path, Some(0), e.to_string()))?;
+    if frames == 0 {
+        return Err(MediaError::decode(path, None, "the GIF has no frames"));
+    }
     Ok(Probed::Gif(SourceInfo {
         size,
-        fps,
-        frame_count: None,
+        fps: gif_rate(frames, centiseconds),
+        frame_count: complete.then_some(frames),
         codec: "gif".into(),
         decoder: Decoder::Gif,
         path: path.to_path_buf(),
     }))
+}
+
+/// Frames and summed delays (centiseconds) of a GIF, read frame header by frame header,
+/// and whether the file was read to its end. An error on the first frame is returned; a
+/// later one (a truncated file) ends the count there, as the frames before it still play.
+fn gif_delays<R: std::io::Read>(
+    dec: &mut gif::Decoder<R>,
+) -> std::result::Result<(u64, u64, bool), gif::DecodingError> {
+    let (mut frames, mut centiseconds) = (0u64, 0u64);
+    loop {
+        match dec.read_next_frame() {
+            Ok(Some(f)) => {
+                frames += 1;
+                centiseconds += u64::from(f.delay);
+            }
+            Ok(None) => return Ok((frames, centiseconds, true)),
+            Err(e) if frames == 0 => return Err(e),
+            Err(_) => return Ok((frames, centiseconds, false)),
+        }
+    }
+}
+
+/// A GIF's frame rate: frames over their summed delays. Writers that keep a rate such as
+/// 30 fps in whole centiseconds alternate delays (3, 3, 4 cs), so the first delay alone
+/// would read 33.3 fps. Without any delay the rate is 10 fps, as browsers play it.
+fn gif_rate(frames: u64, centiseconds: u64) -> f64 {
+    if centiseconds == 0 {
+        10.0
+    } else {
+        100.0 * frames as f64 / centiseconds as f64
+    }
 }
 
 /// Streams the frames of a GIF composited onto its canvas (disposal methods honoured;
