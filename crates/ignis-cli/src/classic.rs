@@ -133,7 +133,7 @@ impl Args {
             cell: self.cell.unwrap_or_else(|| default_cell(self.size)),
             puff: self.puff,
             diameter: self.diameter,
-            fps: self.out.fps as f32,
+            fps: self.out.fps() as f32,
         }
     }
 }
@@ -155,7 +155,7 @@ pub fn run(args: &Args, g: &Global) -> Result<Vec<PathBuf>> {
     let mut first = Some(new_fire(args, args.seed, plan.looping)?);
     let palette = args.palette.load()?;
     let mut opts = args.out.write_options();
-    opts.fps = args.out.fps / f64::from(every);
+    opts.fps = args.out.fps() / f64::from(every);
     opts.loop_ = plan.mark_loop;
     opts.first_frame = plan.range.start as u64;
     let whole_loop = plan.looping && plan.range == (0..written);

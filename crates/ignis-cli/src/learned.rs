@@ -325,7 +325,7 @@ pub fn synth(a: &SynthArgs, g: &Global) -> Result<Vec<PathBuf>> {
     }
     let plan = a.frames_args.plan(a.frames, &a.out)?;
     let palette = a.palette.load()?;
-    let fps = Some(a.out.fps);
+    let fps = Some(a.out.fps());
     // a loop is timed on the frames as written: through the gain and the palette
     let measure = loop_measure(&palette, a.gain, a.out.write_options().background);
     let make = |seed: u64| -> Result<Synthesiser> {

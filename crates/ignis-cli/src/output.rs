@@ -7,6 +7,9 @@ use ignis_media::{
 };
 use std::path::PathBuf;
 
+/// The frame rate of generated fire when `--fps` is not given.
+pub const DEFAULT_FPS: f64 = 30.0;
+
 /// Where and how to write frames. The format follows the output path unless `--format`
 /// says otherwise.
 ///
@@ -24,9 +27,10 @@ pub struct OutputArgs {
     /// Force the format: mp4, gif, flipbook, png-seq, exr-seq.
     #[arg(long, value_parser = ["mp4", "gif", "flipbook", "png-seq", "exr-seq"])]
     pub format: Option<String>,
-    /// Frames per second stored in the output.
-    #[arg(long, default_value_t = 30.0)]
-    pub fps: f64,
+    /// Frames per second stored in the output (default 30; `ignis eigen animate` and
+    /// `eigen loop`: the rate of the footage the frames come from).
+    #[arg(long)]
+    pub fps: Option<f64>,
     /// Flipbook: columns (default near-square).
     #[arg(long)]
     pub columns: Option<u32>,
@@ -100,6 +104,11 @@ impl OutputArgs {
         .expect("the defaults of OutputArgs parse")
     }
 
+    /// `--fps`, or the default rate of generated fire, 30.
+    pub fn fps(&self) -> f64 {
+        self.fps.unwrap_or(DEFAULT_FPS)
+    }
+
     pub fn write_options(&self) -> WriteOptions {
         WriteOptions {
             format: self.format.as_deref().map(|f| match f {
@@ -109,7 +118,7 @@ impl OutputArgs {
                 "png-seq" => Format::PngSequence,
                 _ => Format::ExrSequence,
             }),
-            fps: self.fps,
+            fps: self.fps(),
             loop_: !self.no_loop,
             flipbook: FlipbookOptions {
                 columns: self.columns,

@@ -142,9 +142,9 @@ impl RenderArgs {
                 f.noise.octaves = o;
             }
         }
-        // --fps other than its default sets the animation rate too
-        if self.out.fps != 30.0 || self.file.is_none() {
-            s.fps = self.out.fps as f32;
+        // --fps sets the animation rate too; a preset plays at the default rate
+        if self.out.fps.is_some() || self.file.is_none() {
+            s.fps = self.out.fps() as f32;
         }
         s.validate().context("volume settings")?;
         Ok(s)

@@ -431,6 +431,74 @@ mod eigen {
         assert!(!out2.exists());
     }
 
+    /// Footage frames play at their own rate: a clip trained at every 2nd frame of 30-fps
+    /// footage is 15 frames a second, and `eigen loop` / `eigen animate` write it at 15
+    /// fps, not at generated fire's default 30 (which would play it twice as fast). A
+    /// scenario mixing 30- and 15-fps clips takes the rate of most of its frames and says
+    /// so; `--fps` overrides.
+    #[test]
+    fn loops_and_scenarios_play_at_their_footage_rate() {
+        let t = tempfile::tempdir().unwrap();
+        let cfg = t.path().join("clips.toml");
+        std::fs::write(
+            &cfg,
+            "[[clip]]\nname = \"candle\"\nsynthetic = \"candle\"\nend = 30\n\n[[clip]]\nname = \"campfire\"\nsynthetic = \"campfire\"\nend = 96\nstride = 2\n\n[preprocess]\ntrain_size = \"24x32\"\npose_samples = 6\n[preprocess.pose]\nframe_size = \"48x64\"\n\n[train]\nstore_frames = true\npack_size = 16\n",
+        )
+        .unwrap();
+        let db = t.path().join("fire.db");
+        let dbs = db.to_str().unwrap();
+        ignis_ok(&["eigen", "train", cfg.to_str().unwrap(), "-q", "-o", dbs]);
+        let fps_of = |json: &Path| read_json(json)["fps"].as_f64().unwrap();
+        let lp = t.path().join("loop.png");
+        let loop_args = [
+            "eigen", "loop", dbs, "--clip", "campfire", "--range", "0..40",
+        ];
+        ignis_ok(&[&loop_args[..], &["-q", "-o", lp.to_str().unwrap()]].concat());
+        assert_eq!(fps_of(&t.path().join("loop.json")), 15.0);
+        let candle = t.path().join("candle.png");
+        ignis_ok(&[
+            "eigen",
+            "loop",
+            dbs,
+            "--clip",
+            "candle",
+            "--range",
+            "0..28",
+            "-q",
+            "-o",
+            candle.to_str().unwrap(),
+        ]);
+        assert_eq!(fps_of(&t.path().join("candle.json")), 30.0);
+        let scene = t.path().join("scene.toml");
+        std::fs::write(&scene, ignis_ok(&["eigen", "scenario", dbs]).stdout).unwrap();
+        let anim = t.path().join("anim.png");
+        let o = ignis_ok(
+            &["eigen", "animate", scene.to_str().unwrap(), "-o"]
+                .iter()
+                .copied()
+                .chain([anim.to_str().unwrap()])
+                .collect::<Vec<_>>(),
+        );
+        let said = String::from_utf8_lossy(&o.stdout);
+        // the campfire's 48 rows outnumber the candle's 30 frames
+        assert!(
+            said.contains("clips at 30, 15 fps: writing at 15 fps"),
+            "{said}"
+        );
+        assert_eq!(fps_of(&t.path().join("anim.json")), 15.0);
+        let o = ignis_ok(&[
+            "eigen",
+            "animate",
+            scene.to_str().unwrap(),
+            "--fps",
+            "12",
+            "-o",
+            anim.to_str().unwrap(),
+        ]);
+        assert!(!String::from_utf8_lossy(&o.stdout).contains("clips at"));
+        assert_eq!(fps_of(&t.path().join("anim.json")), 12.0);
+    }
+
     /// Issue 18 defects 12 and 7: a scenario printed for a relative database path renders
     /// from another directory; a failed `eigen plot` leaves nothing new.
     #[test]

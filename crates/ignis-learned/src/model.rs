@@ -152,10 +152,16 @@ pub fn train(
     }
     progress.finish_stage();
     let k = p.em.order;
+    // what to do about the skipped frames (the CLI's flags; `keep_multiple` in the API)
+    let fix = if multi > 0 {
+        "crop to one flame (`--crop X,Y,W,H`) or model the main flame of each frame \
+         (`--keep-multiple`)"
+    } else {
+        "use footage of a single bright flame on a dark background"
+    };
     if images.is_empty() {
         return Err(LearnedError::Unsupported(format!(
-            "no flame found in {n_frames} frames ({dark} dark, {multi} with several flames); \
-             use footage of a single bright flame on a dark background"
+            "no flame found in {n_frames} frames ({dark} dark, {multi} with several flames); {fix}"
         )));
     }
     // Longest run of consecutive usable frames.
@@ -171,7 +177,7 @@ pub fn train(
     if best.len() < k + 2 {
         return Err(LearnedError::Unsupported(format!(
             "only {} consecutive usable frames (of {n_frames}; {dark} dark, {multi} with several flames); \
-             an ARP of order {k} needs at least {}",
+             an ARP of order {k} needs at least {}: {fix}",
             best.len(),
             k + 2
         )));

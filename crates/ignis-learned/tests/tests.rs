@@ -566,6 +566,30 @@ mod bad_input {
         assert!(err.contains("no flame found in 10 frames"), "{err}");
     }
 
+    /// A campfire's frames hold several flames: the error names the two ways out.
+    #[test]
+    fn several_flames_in_every_frame_name_the_fixes() {
+        let size = Size::new(48, 32).unwrap();
+        let mut f = GrayFrame::new(size);
+        for y in 8..28 {
+            for x in (4..14).chain(34..44) {
+                f.set(x, y, 0.9);
+            }
+        }
+        let err = train(
+            vec![f; 10],
+            &TrainParams::default(),
+            &mut ignis_core::progress::NoProgress,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(err.contains("10 with several flames"), "{err}");
+        assert!(
+            err.contains("--crop") && err.contains("--keep-multiple"),
+            "{err}"
+        );
+    }
+
     #[test]
     fn too_few_frames_is_a_clear_error() {
         let clip = synthetic::flame_clip(Size::new(48, 48).unwrap(), 3, 1);

@@ -227,7 +227,7 @@ pub fn bench(clips: &[PathBuf], cache: Option<&Path>, g: &Global) -> Result<Valu
             let cells = (length as f64 * 1.2).ceil() as u64 * info.size.pixels() as u64;
             let flipbook = cells <= 1 << 26;
             let out_for = |tag: &str| crate::output::OutputArgs {
-                fps: c.fps,
+                fps: Some(c.fps),
                 ..crate::output::OutputArgs::for_path(if flipbook {
                     tmp.join(format!("{stem}-{secs}s{tag}.png"))
                 } else {

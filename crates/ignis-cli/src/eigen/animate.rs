@@ -69,6 +69,13 @@ pub fn write_plan_chunk(
         _ => (None, vec![true; n]),
     };
     let mut wopts = out.write_options();
+    if out.fps.is_none() {
+        let (fps, note) = plan_rate(db, plan);
+        wopts.fps = fps;
+        if let Some(note) = note {
+            g.say(note);
+        }
+    }
     if let Some(r) = chunk.as_ref().filter(|r| **r != (0..n)) {
         wopts.loop_ = false;
         wopts.first_frame = r.start as u64;
@@ -94,6 +101,44 @@ pub fn write_plan_chunk(
     bar.finish_and_clear();
     out.finish(w, g)?;
     Ok(size)
+}
+
+/// The rate `plan` plays at when `--fps` is not given: its footage frames' own (a clip's
+/// rate over its training stride), so a 24-fps clip is not written at 30 fps and played
+/// 25 % fast. A plan that mixes clips of different rates plays at the rate of most of its
+/// footage frames, with a note naming the rates and `--fps`; one with no footage frame at
+/// the default rate.
+pub fn plan_rate(db: &EigenfireDb, plan: &Plan) -> (f64, Option<String>) {
+    use ignis_eigen::transition::FrameRef;
+    // (rate, frames at it), in order of first use
+    let mut rates: Vec<(f64, usize)> = Vec::new();
+    for f in &plan.frames {
+        let FrameRef::Db(row) = f.source else {
+            continue;
+        };
+        let Some((clip, _)) = db.row_origin(row) else {
+            continue;
+        };
+        let rate = clip.fps / clip.stride.max(1) as f64;
+        match rates.iter_mut().find(|(r, _)| *r == rate) {
+            Some((_, n)) => *n += 1,
+            None => rates.push((rate, 1)),
+        }
+    }
+    let Some(&(fps, _)) = rates.iter().rev().max_by_key(|(_, n)| *n) else {
+        return (crate::output::DEFAULT_FPS, None);
+    };
+    let note = (rates.len() > 1).then(|| {
+        let shown = |r: f64| (r * 1000.0).round() / 1000.0;
+        let all: Vec<String> = rates.iter().map(|&(r, _)| shown(r).to_string()).collect();
+        format!(
+            "the frames come from clips at {} fps: writing at {} fps, the rate of most of \
+             them (give --fps to choose another)",
+            all.join(", "),
+            shown(fps)
+        )
+    });
+    (fps, note)
 }
 
 /// The frame size to render `plan` at, settled before anything is rendered: the user's
