@@ -358,6 +358,10 @@ struct Looping {
 /// whole periods at a time and are stepped.
 const REPLAY_MAX_BYTES: usize = 128 << 20;
 
+/// Most memory a looping fire's solve may hold ([`ClassicFire::new_looping`]): a bound on
+/// the loop's length at a size, so a huge `--frames` is refused, not an allocation failure.
+pub const MAX_LOOP_BYTES: u64 = 1 << 30;
+
 /// Streams of the looping fire's per-frame random numbers.
 const WALK_STREAM: u64 = 0x3a1c_0000_0000;
 const SPARK_STREAM: u64 = 0x5a2c_0000_0000;
@@ -409,6 +413,32 @@ impl ClassicFire {
             ));
         }
         let mut fire = ClassicFire::new(params)?;
+        // the solve holds, per frame of the loop, two rows of every phase, a sparkle column
+        // per row and a few counters (`settle_loop`)
+        let (w, h) = (fire.w as u64, fire.h as u64);
+        let per_frame = 2 * w
+            + 32
+            + if fire.params.sparkle.is_some() {
+                4 * h
+            } else {
+                0
+            };
+        let need = u64::from(period) * per_frame;
+        if need > MAX_LOOP_BYTES {
+            return Err(bad(
+                "loop",
+                format!(
+                    "a loop of {period} frames of a {}x{}-cell fire would hold {} MiB while \
+                     it is solved, over the limit of {} MiB; loop fewer frames (at most {} at \
+                     this size) and play the loop over, or turn the loop off",
+                    fire.w,
+                    fire.h,
+                    need >> 20,
+                    MAX_LOOP_BYTES >> 20,
+                    MAX_LOOP_BYTES / per_frame
+                ),
+            ));
+        }
         let n = fire.source.len();
         let p = &fire.params;
         let start: Vec<i64> = fire.source.iter().map(|&v| v as i64).collect();
@@ -1278,6 +1308,26 @@ mod tests {
             }
         }
         assert!(ClassicFire::new_looping(params(32, 32), 1).is_err());
+    }
+
+    /// A loop whose solve would hold more than [`MAX_LOOP_BYTES`] is refused with the
+    /// longest that fits, before anything is allocated; that one is accepted.
+    #[test]
+    fn a_loop_too_long_to_solve_is_refused() {
+        let p = params(32, 24);
+        let Err(e) = ClassicFire::new_looping(p.clone(), u32::MAX) else {
+            panic!("a loop of u32::MAX frames was accepted");
+        };
+        let e = e.to_string();
+        assert!(e.contains("turn the loop off"), "{e}");
+        let most: u32 = e
+            .split("(at most ")
+            .nth(1)
+            .and_then(|r| r.split(' ').next())
+            .and_then(|n| n.parse().ok())
+            .expect("the longest loop named");
+        assert!(ClassicFire::new_looping(p.clone(), most + 1).is_err());
+        assert!(ClassicFire::new_looping(p, most).is_ok());
     }
 
     /// Skipping the black sky gives the bytes of burning every row: each step is checked

@@ -167,7 +167,9 @@ pub fn run(args: &Args, g: &Global) -> Result<Vec<PathBuf>> {
     if let Some(m) = &in_between {
         opts.flipbook.motion = Some(m.source());
     }
-    let (mut writer, variants) = args.out.create_variants(args.size, &mut opts, whole_loop)?;
+    let (mut writer, variants) =
+        args.out
+            .create_variants(args.size, plan.range.len(), &mut opts, whole_loop)?;
     if every > 1 {
         g.say(format!(
             "writing every {} of the {} frames: {written} frames at {} fps",

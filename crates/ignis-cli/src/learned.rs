@@ -351,7 +351,9 @@ pub fn synth(a: &SynthArgs, g: &Global) -> Result<Vec<PathBuf>> {
     if let Some(m) = &model_motion {
         opts.flipbook.motion = Some(m.source());
     }
-    let (mut writer, variants) = a.out.create_variants(a.size, &mut opts, whole_loop)?;
+    let (mut writer, variants) =
+        a.out
+            .create_variants(a.size, plan.range.len(), &mut opts, whole_loop)?;
     let mut frame = GrayFrame::new(a.size);
     let colour = |f: &mut GrayFrame| {
         if a.gain != 1.0 {

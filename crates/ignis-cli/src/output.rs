@@ -170,6 +170,7 @@ impl OutputArgs {
     pub fn create_variants(
         &self,
         size: Size,
+        frames: usize,
         opts: &mut WriteOptions,
         whole_loop: bool,
     ) -> Result<(FrameWriter, u32)> {
@@ -182,6 +183,22 @@ impl OutputArgs {
             "--variants {variants} lays {variants} whole loops as the rows of a flipbook; \
              drop --no-loop and --chunk"
         );
+        // A flipbook's grid is laid out when it is finished: a frame count or a grid that
+        // cannot be laid out is refused now, before the frames are rendered.
+        if opts
+            .format
+            .map_or_else(|| Format::from_path(&self.output).ok(), Some)
+            == Some(Format::Flipbook)
+        {
+            let n = frames.saturating_mul(variants.max(1) as usize);
+            let n32 = u32::try_from(n).unwrap_or(u32::MAX);
+            ignis_media::write::plan_layout(n32, size, &opts.flipbook).map_err(|e| {
+                anyhow::anyhow!(
+                    "{n} frames of {size} in the flipbook {}: {e}",
+                    self.output.display()
+                )
+            })?;
+        }
         Ok((writer, variants))
     }
 

@@ -174,7 +174,9 @@ pub fn render(a: &RenderArgs, g: &Global) -> Result<Vec<PathBuf>> {
     if let Some(m) = &in_between {
         opts.flipbook.motion = Some(m.source());
     }
-    let (mut writer, variants) = a.out.create_variants(scene.size, &mut opts, whole_loop)?;
+    let (mut writer, variants) =
+        a.out
+            .create_variants(scene.size, plan.range.len(), &mut opts, whole_loop)?;
     let mut hits = String::new();
     let scenes: Vec<_> = (0..variants)
         .map(|v| {

@@ -807,6 +807,38 @@ mod hardening {
         assert!(files_in(t.path()).is_empty(), "{:?}", files_in(t.path()));
     }
 
+    /// Frame counts no output can hold are refused before anything is rendered: more
+    /// frames than a flipbook sheet holds (and a grid of 0 columns), and loops longer than
+    /// the generators time (whose bookkeeping would grow without bound), rather than a
+    /// render that fails at the end, an allocation failure or a run that never returns.
+    #[test]
+    fn frame_counts_no_output_can_hold_are_refused_up_front() {
+        let t = tempfile::tempdir().unwrap();
+        let p = |s: &str| t.path().join(s);
+        let small = ["--size", "64x64", "--frames"];
+        let vol = |n: &str, extra: &[&str], out: &Path| {
+            volume_render("torch", &[&small[..], &[n], extra].concat(), out)
+        };
+        let start = std::time::Instant::now();
+        assert_fails(
+            &vol("20000", &["--no-loop"], &p("a.png")),
+            "16384 cells fit",
+        );
+        assert_fails(&vol("10", &["--columns", "0"], &p("a.png")), "columns");
+        assert_fails(&vol("5000000", &[], &p("a.gif")), "turn the loop off");
+        assert_fails(
+            &classic("64x64", "50000", &[], &p("c.png")),
+            "16384 cells fit",
+        );
+        assert_fails(
+            &classic("64x64", "50000000", &[], &p("c.gif")),
+            "turn the loop off",
+        );
+        // for the record (no timing is asserted): five refusals, no render
+        println!("refused in {:?}", start.elapsed());
+        assert!(files_in(t.path()).is_empty(), "{:?}", files_in(t.path()));
+    }
+
     /// `ignis info clip | head -1`: the reader leaves before the output ends. Standard
     /// output is a pipe whose read end is closed before `ignis` starts, so every write
     /// fails with a broken pipe; the command ends normally without a panic. A stdout that

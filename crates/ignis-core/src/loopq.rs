@@ -261,15 +261,23 @@ fn quality(frames: &[GrayFrame], wrap: bool) -> Result<LoopQuality> {
         ));
     }
     let d = steps(frames, wrap)?;
-    let med = median(&mut d.clone());
+    let sharp: Vec<f64> = frames.iter().map(sharpness).collect();
+    Ok(quality_of(&d, &sharp))
+}
+
+/// Seam and ghost from a sequence's steps (RMS differences of consecutive metric frames,
+/// the wrap step last for a loop) and each frame's [`sharpness`]: what [`loop_quality`]
+/// and [`sequence_quality`] compute from the frames, for a caller that measured the frames
+/// as they streamed past instead of keeping them.
+pub fn quality_of(d: &[f64], sharp: &[f64]) -> LoopQuality {
+    let med = median(&mut d.to_vec());
     let (seam_at, max) =
         d.iter().enumerate().fold(
             (0, f64::NEG_INFINITY),
             |b, (i, &v)| if v > b.1 { (i, v) } else { b },
         );
-    let sharp: Vec<f64> = frames.iter().map(sharpness).collect();
-    let (ghost, ghost_at) = ghost(&sharp);
-    Ok(LoopQuality {
+    let (ghost, ghost_at) = ghost(sharp);
+    LoopQuality {
         // A still sequence has no steps to compare: call it perfectly smooth.
         seam: if med > 0.0 {
             max / med
@@ -282,7 +290,7 @@ fn quality(frames: &[GrayFrame], wrap: bool) -> Result<LoopQuality> {
         ghost,
         ghost_at,
         median_step: med,
-    })
+    }
 }
 
 fn same_size(frames: &[GrayFrame]) -> Result<()> {

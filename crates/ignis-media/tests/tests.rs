@@ -1235,6 +1235,44 @@ mod hardening {
         Size::new(8, 6).unwrap()
     }
 
+    /// The writer measures seam and ghost as frames stream past (it keeps 16 bytes a
+    /// frame, not the metric frames): the same values, bit for bit, as measuring the
+    /// metric frames of everything pushed; none before there are enough frames.
+    #[test]
+    fn streamed_loop_quality_equals_the_measure_of_all_frames() {
+        use ignis_core::loopq;
+        let dir = tempfile::tempdir().unwrap();
+        let opts = WriteOptions {
+            background: [0.1, 0.0, 0.2],
+            ..Default::default()
+        };
+        let s = Size::new(40, 30).unwrap();
+        // a jump (frame 9 repeats frame 2) and a soft frame (a blend of two neighbours)
+        let mut frames: Vec<RgbaFrame> = (0..24).map(|t| test_frame(s, t, true)).collect();
+        frames[9] = frames[2].clone();
+        let (a, b) = (frames[14].clone(), frames[16].clone());
+        for y in 0..30 {
+            for x in 0..40 {
+                let (p, q) = (a.get(x, y), b.get(x, y));
+                frames[15].set(x, y, std::array::from_fn(|c| 0.5 * (p[c] + q[c])));
+            }
+        }
+        let mut w = create(&dir.path().join("q.mp4"), s, &opts).unwrap();
+        let mut metric = Vec::new();
+        for (i, f) in frames.iter().enumerate() {
+            w.push(f).unwrap();
+            metric.push(loopq::metric_frame_rgba(f, opts.background));
+            let loop_q = loopq::loop_quality(&metric).ok();
+            let seq_q = loopq::sequence_quality(&metric).ok();
+            assert_eq!(w.loop_quality(), loop_q, "after {} frames", i + 1);
+            assert_eq!(w.sequence_quality(), seq_q, "after {} frames", i + 1);
+            assert_eq!((loop_q.is_some(), seq_q.is_some()), (i >= 1, i >= 2));
+        }
+        // the largest step is into or out of the repeated frame
+        assert!(matches!(w.loop_quality().unwrap().seam_at, 8 | 9));
+        w.finish().unwrap();
+    }
+
     /// Defect 9: frame rates outside 0.001..=1000 are refused for every format.
     #[test]
     fn fps_out_of_range_is_refused() {

@@ -23,6 +23,7 @@
 
 use crate::motion::{Collision, Keyframe, Script};
 use ignis_core::GrayFrame;
+use std::sync::Arc;
 
 /// How a looping animator times its frames (see the module docs).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -288,11 +289,11 @@ pub(crate) struct Looping {
     pub frames: u64,
     /// Loop time (frames, in `0..frames`) of each frame of one cycle, non-decreasing
     /// from 0. A cycle has `frames` frames; a preview has more.
-    pub times: Vec<f64>,
+    pub times: Arc<[f64]>,
     /// Per fire: its script made periodic (scripted fires only).
-    pub scripts: Vec<Option<LoopScript>>,
+    pub scripts: Arc<[Option<LoopScript>]>,
     /// Per fire: its simulation over one loop (simulated fires only).
-    pub sims: Vec<Option<SimTrack>>,
+    pub sims: Arc<[Option<SimTrack>]>,
 }
 
 impl Looping {

@@ -48,6 +48,16 @@ use crate::render::{finish, render, Blend, Camera, FireInstance, RenderParams, R
 use crate::spline::BSpline;
 use ignis_core::post::BloomParams;
 use ignis_core::{RgbaFrame, Rng, Size};
+
+/// The longest loop [`FireScene::looping_animator`] times, in frames (2²⁰: 9.7 hours at
+/// 30 fps). The timing keeps a few hundred bytes a frame (the loop times, the preview's
+/// distances, a simulation's control points) and renders two preview frames per frame,
+/// so an unbounded `--frames` would be an unbounded allocation.
+pub const MAX_LOOP_FRAMES: u32 = 1 << 20;
+
+/// Preview frames rendered side by side before their distances are taken: a bound on the
+/// preview's memory (at 64 px, 4 MB) that keeps both threads busy.
+const PREVIEW_BATCH: usize = 256;
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -506,7 +516,8 @@ impl FireScene {
         Ok(a)
     }
 
-    /// A checked animator for a seamless loop of `frames` frames: frame `frames` (which
+    /// A checked animator for a seamless loop of `frames` frames (at most
+    /// [`MAX_LOOP_FRAMES`]): frame `frames` (which
     /// is never rendered) would equal frame 0, so the frames play as a loop with no jump,
     /// and every step, the seam included, covers about the same distance
     /// ([`FireScene::looping_animator_with`] with [`LoopTiming::DEFAULT`]).
@@ -543,6 +554,18 @@ impl FireScene {
                 ),
             ));
         }
+        if frames > MAX_LOOP_FRAMES {
+            return Err(VolumeError::bad(
+                "loop",
+                format!(
+                    "a loop of {frames} frames is longer than the longest Ignis times \
+                     ({MAX_LOOP_FRAMES} frames, {:.1} hours at {} fps); loop fewer frames and \
+                     play the loop over, or turn the loop off",
+                    f64::from(MAX_LOOP_FRAMES) / f64::from(self.fps) / 3600.0,
+                    self.fps
+                ),
+            ));
+        }
         let mut a = self.animator()?;
         let n = frames as usize;
         let blend = loop_blend_frames(frames) as usize;
@@ -574,11 +597,11 @@ impl FireScene {
         let mut looping = Looping {
             frames: frames as u64,
             times: (0..n).map(|k| k as f64).collect(),
-            scripts,
-            sims,
+            scripts: scripts.into(),
+            sims: sims.into(),
         };
         if timing.retimes() {
-            looping.times = self.constant_speed_times(&a, &looping, timing)?;
+            looping.times = self.constant_speed_times(&a, &looping, timing)?.into();
         }
         a.looping = Some(looping);
         Ok(a)
@@ -612,28 +635,32 @@ impl FireScene {
         // A loop's frames are functions of their loop time alone, so the preview's small
         // frames render side by side, one per thread, rather than one at a time split into
         // tiles (a 64-px frame is too little work to share: the pool's threads spent more
-        // time waking and spinning than sampling). The same frames, in order.
+        // time waking and spinning than sampling). The same frames, in order, a batch at a
+        // time: the distances need only the latest few, so memory stays bounded however
+        // long the loop.
         use rayon::prelude::*;
-        let metric: Vec<ignis_core::GrayFrame> = (0..m)
-            .into_par_iter()
-            .map(|j| {
-                let mut probe = Animator {
-                    scene: &small,
-                    sims: Vec::new(),
-                    frame: j as u64,
-                    count_coverage: false,
-                    looping: Some(probe_looping.clone()),
-                    scroll: a.scroll.clone(),
-                };
-                // the metric frame of `next_frame`'s image, made without that image
-                let (hdr, ..) = probe.next_hdr()?;
-                crate::render::preview_metric(&hdr, &small.bloom)
-            })
-            .collect::<Result<_>>()?;
         let bad = |e: String| VolumeError::bad("loop", e);
         let mut d = PreviewDistances::builder(m, looping.frames as u32).map_err(bad)?;
-        for f in metric {
-            d.push(f).map_err(bad)?;
+        for batch in (0..m).step_by(PREVIEW_BATCH) {
+            let metric: Vec<ignis_core::GrayFrame> = (batch..(batch + PREVIEW_BATCH).min(m))
+                .into_par_iter()
+                .map(|j| {
+                    let mut probe = Animator {
+                        scene: &small,
+                        sims: Vec::new(),
+                        frame: j as u64,
+                        count_coverage: false,
+                        looping: Some(probe_looping.clone()),
+                        scroll: a.scroll.clone(),
+                    };
+                    // the metric frame of `next_frame`'s image, made without that image
+                    let (hdr, ..) = probe.next_hdr()?;
+                    crate::render::preview_metric(&hdr, &small.bloom)
+                })
+                .collect::<Result<_>>()?;
+            for f in metric {
+                d.push(f).map_err(bad)?;
+            }
         }
         Ok(d.finish().map_err(bad)?.even_step_times())
     }
@@ -1114,7 +1141,7 @@ impl Animator<'_> {
                     frame: 0,
                     count_coverage: self.count_coverage,
                     looping: Some(Looping {
-                        times: vec![lo + s * (hi - lo)],
+                        times: [lo + s * (hi - lo)].into(),
                         ..l.clone()
                     }),
                     scroll: self.scroll.clone(),

@@ -491,6 +491,18 @@ mod looping {
         let e = s.looping_animator(1).err().expect("an error").to_string();
         assert!(e.contains("at least 2 frames"), "{e}");
     }
+
+    /// A loop longer than the timing keeps is refused at once, not timed (its preview and
+    /// distances would grow without bound with `--frames`).
+    #[test]
+    fn a_loop_longer_than_the_timing_keeps_is_refused() {
+        use ignis_volume::scene::MAX_LOOP_FRAMES;
+        let s = small(Preset::Campfire);
+        for n in [MAX_LOOP_FRAMES + 1, u32::MAX] {
+            let e = s.looping_animator(n).err().expect("an error").to_string();
+            assert!(e.contains("turn the loop off"), "{e}");
+        }
+    }
 }
 
 /// Issue 16 §2 on short renders: every preset puffs at `1.5/√D` and has the detail of

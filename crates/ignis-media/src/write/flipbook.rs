@@ -378,7 +378,9 @@ pub fn plan_layout(n: u32, frame: Size, opts: &FlipbookOptions) -> Result<(Layou
             // those the squarest sheet, then the wider one.
             let mut best: Option<((bool, u64, u64, u32), Layout)> = None;
             let mut c = 1u32;
-            while c <= n {
+            // more columns than fit the side never lay out (so a huge `n` costs nothing)
+            let most = (max as u64 / cw.max(1)).min(n as u64) as u32;
+            while c <= most {
                 let r = n.div_ceil(c);
                 let r = if opts.pot { r.next_power_of_two() } else { r };
                 if let Some(l) = make(c, r) {
