@@ -1780,7 +1780,8 @@ fn metric_frames(path: &Path, window: &Range<usize>, g: &Global) -> Result<Vec<G
         ..Default::default()
     };
     let pb = g.progress(window.len() as u64, "measuring");
-    let mut metric = Vec::with_capacity(window.len());
+    // reserved up to a bound: the window's length comes from the container's word
+    let mut metric = Vec::with_capacity(window.len().min(1 << 14));
     for f in ignis_media::open(path, &opts)? {
         metric.push(loopq::metric_frame_rgba(&f?, [0.0; 3]));
         pb.inc(1);

@@ -23,7 +23,7 @@
 
 mod ffmpeg;
 mod h264;
-mod sequence;
+pub(crate) mod sequence;
 
 use std::fmt;
 use std::io::Read;
@@ -274,7 +274,7 @@ pub fn source_files(path: &Path) -> Result<Vec<PathBuf>> {
 fn is_pattern(path: &Path) -> bool {
     path.file_name()
         .and_then(|n| n.to_str())
-        .is_some_and(|n| n.contains('%'))
+        .is_some_and(sequence::has_frame_number)
 }
 
 pub(crate) fn probe_inner(path: &Path, have_ffmpeg: bool) -> Result<Probed> {

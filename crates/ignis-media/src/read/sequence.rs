@@ -301,6 +301,15 @@ impl FrameSource for SequenceSource {
     }
 }
 
+/// Whether a file name holds a frame-number field, `%d` or `%0Nd`: a sequence pattern.
+/// A `%` otherwise (`100% fire.mp4`) is part of an ordinary name.
+pub(crate) fn has_frame_number(name: &str) -> bool {
+    name.match_indices('%').any(|(i, _)| {
+        let rest = name[i + 1..].trim_start_matches(|c: char| c.is_ascii_digit());
+        rest.starts_with('d')
+    })
+}
+
 type GifDecoder = gif::Decoder<BufReader<File>>;
 
 fn gif_decoder(path: &Path) -> Result<GifDecoder> {

@@ -77,7 +77,7 @@ impl Format {
             .file_name()
             .map(|n| n.to_string_lossy().to_lowercase())
             .unwrap_or_default();
-        if name.contains('%') {
+        if crate::read::sequence::has_frame_number(&name) {
             return if name.ends_with(".png") {
                 Ok(Format::PngSequence)
             } else if name.ends_with(".exr") {
@@ -519,6 +519,16 @@ mod tests {
             Format::ExrSequence
         );
         assert!(Format::from_path(Path::new("fire.webm")).is_err());
+        // a `%` that is not a frame-number field is part of an ordinary name
+        assert_eq!(
+            Format::from_path(Path::new("100% fire.gif")).unwrap(),
+            Format::Gif
+        );
+        assert_eq!(
+            Format::from_path(Path::new("f_%d.png")).unwrap(),
+            Format::PngSequence
+        );
+        assert!(Format::from_path(Path::new("f/%04d.gif")).is_err());
         assert!(Format::from_path(Path::new("f/%04d.jpg")).is_err());
     }
 }
