@@ -296,10 +296,19 @@ mod eigen {
 
     /// A small database trained by the CLI from Ignis's synthetic clips (no footage).
     pub(super) fn train_db(dir: &Path) -> PathBuf {
+        train_db_of(
+            dir,
+            "[[clip]]\nname = \"candle\"\nsynthetic = \"candle\"\nend = 40\n\n[[clip]]\nname = \"campfire\"\nsynthetic = \"campfire\"\nend = 40\n",
+        )
+    }
+
+    /// A small database trained by the CLI from `clips` (`[[clip]]` tables of synthetic
+    /// clips), pre-processed and packed small.
+    fn train_db_of(dir: &Path, clips: &str) -> PathBuf {
         let cfg = dir.join("clips.toml");
         std::fs::write(
             &cfg,
-            "[[clip]]\nname = \"candle\"\nsynthetic = \"candle\"\nend = 40\n\n[[clip]]\nname = \"campfire\"\nsynthetic = \"campfire\"\nend = 40\n\n[preprocess]\ntrain_size = \"24x32\"\npose_samples = 6\n[preprocess.pose]\nframe_size = \"48x64\"\n\n[train]\nstore_frames = true\npack_size = 16\n",
+            format!("{clips}\n[preprocess]\ntrain_size = \"24x32\"\npose_samples = 6\n[preprocess.pose]\nframe_size = \"48x64\"\n\n[train]\nstore_frames = true\npack_size = 16\n"),
         )
         .unwrap();
         let db = dir.join("fire.db");
@@ -439,15 +448,11 @@ mod eigen {
     #[test]
     fn loops_and_scenarios_play_at_their_footage_rate() {
         let t = tempfile::tempdir().unwrap();
-        let cfg = t.path().join("clips.toml");
-        std::fs::write(
-            &cfg,
-            "[[clip]]\nname = \"candle\"\nsynthetic = \"candle\"\nend = 30\n\n[[clip]]\nname = \"campfire\"\nsynthetic = \"campfire\"\nend = 96\nstride = 2\n\n[preprocess]\ntrain_size = \"24x32\"\npose_samples = 6\n[preprocess.pose]\nframe_size = \"48x64\"\n\n[train]\nstore_frames = true\npack_size = 16\n",
-        )
-        .unwrap();
-        let db = t.path().join("fire.db");
+        let db = train_db_of(
+            t.path(),
+            "[[clip]]\nname = \"candle\"\nsynthetic = \"candle\"\nend = 30\n\n[[clip]]\nname = \"campfire\"\nsynthetic = \"campfire\"\nend = 96\nstride = 2\n",
+        );
         let dbs = db.to_str().unwrap();
-        ignis_ok(&["eigen", "train", cfg.to_str().unwrap(), "-q", "-o", dbs]);
         let fps_of = |json: &Path| read_json(json)["fps"].as_f64().unwrap();
         let lp = t.path().join("loop.png");
         let loop_args = [
