@@ -630,16 +630,20 @@ fn runs(flags: &[bool]) -> impl Iterator<Item = (usize, usize)> + '_ {
 }
 
 /// `imageproc::morphology::dilate(img, Norm::L2, r)`, exactly: 255 where a non-zero pixel
-/// lies within Euclidean distance `r` (`dx² + dy² ≤ r²`), else 0.
+/// lies within Euclidean distance `r` (`dx² + dy² ≤ r²`), else 0. (imageproc clamps
+/// distances at 255, so at `r = 255` every pixel is set.)
 ///
 /// Each row's runs of set pixels are found once; an output row is then the union of the
 /// runs of the rows `dy` away (|dy| ≤ r), each widened by the disc's half-chord
 /// `⌊√(r² − dy²)⌋` — a few intervals per row, merged and filled, instead of imageproc's
 /// floating-point distance transform or a pass over every row in reach.
-fn dilate_l2(img: &GrayImage, r: u8) -> GrayImage {
+pub(crate) fn dilate_l2(img: &GrayImage, r: u8) -> GrayImage {
     let (w, h) = (img.width() as usize, img.height() as usize);
     if w == 0 || h == 0 {
         return GrayImage::new(w as u32, h as u32);
+    }
+    if r == u8::MAX {
+        return GrayImage::from_pixel(w as u32, h as u32, image::Luma([255]));
     }
     let r = r as usize;
     // Runs `[a, b)` of set pixels, row by row (`first[y]..first[y + 1]`).
@@ -692,6 +696,17 @@ fn dilate_l2(img: &GrayImage, r: u8) -> GrayImage {
         }
     }
     GrayImage::from_raw(w as u32, h as u32, data).expect("w × h bytes")
+}
+
+/// `imageproc::morphology::erode(img, Norm::L2, r)`, exactly: 0 where a zero pixel lies
+/// within Euclidean distance `r`, else 255 — the complement of [`dilate_l2`] of the zero
+/// pixels.
+pub(crate) fn erode_l2(img: &GrayImage, r: u8) -> GrayImage {
+    let flip = |g: &GrayImage| {
+        let data = g.as_raw().iter().map(|&v| if v == 0 { 255 } else { 0 });
+        GrayImage::from_raw(g.width(), g.height(), data.collect()).expect("w × h bytes")
+    };
+    flip(&dilate_l2(&flip(img), r))
 }
 
 /// Bytes per block of [`first_set`] / [`last_set`].
@@ -953,7 +968,7 @@ mod tests {
     }
 
     #[test]
-    fn dilate_l2_equals_imageproc() {
+    fn dilate_and_erode_l2_equal_imageproc() {
         let mut seed = 7u64;
         let mut rnd = move || {
             seed = seed
@@ -973,17 +988,16 @@ mod tests {
                 }])
             });
             let empty = GrayImage::new(w, h);
-            for m in [&img, &corner, &empty] {
-                for r in [1u8, 2, 3, 7, 19, 40] {
-                    assert_eq!(
-                        dilate_l2(m, r),
-                        imageproc::morphology::dilate(
-                            m,
-                            imageproc::distance_transform::Norm::L2,
-                            r
-                        ),
-                        "{w}x{h} r {r}"
-                    );
+            let full = GrayImage::from_pixel(w, h, image::Luma([1]));
+            let holes = GrayImage::from_fn(w, h, |_, _| {
+                image::Luma([if rnd() % density == 0 { 0 } else { 77 }])
+            });
+            use imageproc::distance_transform::Norm::L2;
+            use imageproc::morphology as mo;
+            for m in [&img, &corner, &empty, &full, &holes] {
+                for r in [0u8, 1, 2, 3, 7, 19, 40, 255] {
+                    assert_eq!(dilate_l2(m, r), mo::dilate(m, L2, r), "{w}x{h} r {r}");
+                    assert_eq!(erode_l2(m, r), mo::erode(m, L2, r), "{w}x{h} r {r}");
                 }
             }
         }
