@@ -497,16 +497,39 @@ struct SrgbTables {
     enc: [f32; 256],
     /// `bound[k]` (k ≥ 1): the linear value half-way between codes `k − 1` and `k`.
     bound: [f32; 256],
+    /// Where the searches of [`srgb_encode`] and [`srgb_encode8`] start for a value in
+    /// `0..=1`, by its bucket (its bits over [`BUCKET_SHIFT`]): the first `lin` not below
+    /// the bucket's smallest value, and how many `bound[1..]` lie below it. A search then
+    /// walks a step or two instead of bisecting 256 entries (three times a pixel).
+    lin_from: Vec<u16>,
+    bound_from: Vec<u16>,
 }
+
+/// An `f32` in `0..=1` falls in bucket `bits >> BUCKET_SHIFT` (5 mantissa bits: a bucket
+/// spans at most a 32nd of its value, a few 8-bit codes at most).
+const BUCKET_SHIFT: u32 = 18;
+/// The bits of `1.0f32`: non-negative values up to it (not −0.0, not NaN) are bucketed.
+const ONE_BITS: u32 = 0x3f80_0000;
 
 fn srgb_tables() -> &'static SrgbTables {
     static T: std::sync::OnceLock<SrgbTables> = std::sync::OnceLock::new();
     T.get_or_init(|| {
         let lin = *ignis_core::palette::srgb8_to_linear_table();
+        let bound: [f32; 256] =
+            std::array::from_fn(|k| srgb_to_linear((k as f32 - 0.5).max(0.0) / 255.0));
+        let lowest = |b: u32| f32::from_bits(b << BUCKET_SHIFT);
+        let buckets = 0..=ONE_BITS >> BUCKET_SHIFT;
         SrgbTables {
             lin,
             enc: lin.map(linear_to_srgb),
-            bound: std::array::from_fn(|k| srgb_to_linear((k as f32 - 0.5).max(0.0) / 255.0)),
+            bound,
+            lin_from: buckets
+                .clone()
+                .map(|b| lin.partition_point(|&v| v < lowest(b)) as u16)
+                .collect(),
+            bound_from: buckets
+                .map(|b| bound[1..].partition_point(|&x| x < lowest(b)) as u16)
+                .collect(),
         }
     })
 }
@@ -515,7 +538,17 @@ fn srgb_tables() -> &'static SrgbTables {
 /// holds (a table look-up instead of a `powf`; other values take the formula).
 pub fn srgb_encode(c: f32) -> f32 {
     let t = srgb_tables();
-    let k = t.lin.partition_point(|&v| v < c);
+    let bits = c.to_bits();
+    // the first code whose linear value is not below `c` (a bisection outside 0..=1)
+    let k = if bits <= ONE_BITS {
+        let mut k = t.lin_from[(bits >> BUCKET_SHIFT) as usize] as usize;
+        while k < 256 && t.lin[k] < c {
+            k += 1;
+        }
+        k
+    } else {
+        t.lin.partition_point(|&v| v < c)
+    };
     if k < 256 && t.lin[k].to_bits() == c.to_bits() {
         t.enc[k]
     } else {
@@ -528,7 +561,17 @@ pub fn srgb_encode(c: f32) -> f32 {
 /// value (where rounding of the table and the formula could disagree).
 pub fn srgb_encode8(c: f32) -> u8 {
     let t = srgb_tables();
-    let k = t.bound[1..].partition_point(|&b| b <= c);
+    let bits = c.to_bits();
+    // how many half-way values `c` reaches (a bisection outside 0..=1)
+    let k = if bits <= ONE_BITS {
+        let mut k = t.bound_from[(bits >> BUCKET_SHIFT) as usize] as usize;
+        while k < 255 && t.bound[k + 1] <= c {
+            k += 1;
+        }
+        k
+    } else {
+        t.bound[1..].partition_point(|&b| b <= c)
+    };
     let near = |b: f32| (c - b).abs() <= b * 1e-4 + 1e-9;
     if near(t.bound[k.max(1)]) || (k < 255 && near(t.bound[k + 1])) {
         return (linear_to_srgb(c) * 255.0).round() as u8;
@@ -1251,6 +1294,47 @@ mod tests {
             tongues > 8,
             "the synthetic campfire has separate tongues ({tongues})"
         );
+    }
+
+    /// The bucketed searches find what bisecting the whole tables finds, for every value
+    /// (a sweep of bit patterns over `0..=1`, the tables' own values and their neighbours,
+    /// and values outside `0..=1`, −0.0 and NaN).
+    #[test]
+    fn bucketed_searches_equal_bisection() {
+        let t = srgb_tables();
+        let lin_ref = |c: f32| t.lin.partition_point(|&v| v < c);
+        let bound_ref = |c: f32| t.bound[1..].partition_point(|&b| b <= c);
+        let mut xs: Vec<f32> = (0..=ONE_BITS).step_by(101).map(f32::from_bits).collect();
+        for &v in t.lin.iter().chain(&t.bound) {
+            let bits = v.to_bits();
+            xs.extend((bits.saturating_sub(3)..=bits + 3).map(f32::from_bits));
+        }
+        xs.extend([
+            -0.0,
+            -1e-9,
+            -0.5,
+            1.0,
+            1.000_000_1,
+            2.0,
+            f32::INFINITY,
+            f32::NAN,
+        ]);
+        for c in xs {
+            let enc = if lin_ref(c) < 256 && t.lin[lin_ref(c)].to_bits() == c.to_bits() {
+                t.enc[lin_ref(c)]
+            } else {
+                linear_to_srgb(c)
+            };
+            assert_eq!(srgb_encode(c).to_bits(), enc.to_bits(), "{c}");
+            let k = bound_ref(c);
+            let near = |b: f32| (c - b).abs() <= b * 1e-4 + 1e-9;
+            let code = if near(t.bound[k.max(1)]) || (k < 255 && near(t.bound[k + 1])) {
+                (linear_to_srgb(c) * 255.0).round() as u8
+            } else {
+                k as u8
+            };
+            assert_eq!(srgb_encode8(c), code, "{c}");
+        }
     }
 
     #[test]
