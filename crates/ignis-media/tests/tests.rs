@@ -1273,6 +1273,24 @@ mod hardening {
         w.finish().unwrap();
     }
 
+    /// A grid of no columns or no rows is refused when the flipbook is created, before any
+    /// frame is rendered or decoded for it (not when it is finished).
+    #[test]
+    fn an_empty_grid_is_refused_at_creation() {
+        let dir = tempfile::tempdir().unwrap();
+        for (columns, rows) in [(Some(0), None), (None, Some(0)), (Some(3), Some(0))] {
+            let mut opts = WriteOptions::default();
+            opts.flipbook.columns = columns;
+            opts.flipbook.rows = rows;
+            let e = create(&dir.path().join("g.png"), size(), &opts)
+                .err()
+                .expect("refused")
+                .to_string();
+            assert!(e.contains("columns and rows must be ≥ 1"), "{e}");
+        }
+        assert_eq!(dir_entries(dir.path()), Vec::<String>::new());
+    }
+
     /// Defect 9: frame rates outside 0.001..=1000 are refused for every format.
     #[test]
     fn fps_out_of_range_is_refused() {

@@ -602,7 +602,10 @@ impl FlipbookSink {
                 format!("a flipbook is a .png file, not {}", path.display()),
             ));
         }
-        // Checks the options (variants, max-size) before any frame is made.
+        // Checks the options (grid, variants, max-size) before any frame is made.
+        if opts.flipbook.columns == Some(0) || opts.flipbook.rows == Some(0) {
+            return Err(MediaError::bad("flipbook", "columns and rows must be ≥ 1"));
+        }
         plan_layout(
             opts.flipbook.variants.max(1),
             size,
