@@ -37,6 +37,20 @@ fn volume_render(preset: &str, extra: &[&str], out: &Path) -> Output {
     ignis(&a)
 }
 
+/// [`classic`], asserting it succeeded (showing its stderr otherwise).
+fn classic_ok(size: &str, frames: &str, extra: &[&str], out: &Path) -> Output {
+    let o = classic(size, frames, extra, out);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    o
+}
+
+/// [`volume_render`], asserting it succeeded (showing its stderr otherwise).
+fn volume_render_ok(preset: &str, extra: &[&str], out: &Path) -> Output {
+    let o = volume_render(preset, extra, out);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    o
+}
+
 /// A JSON file (a flipbook's sidecar).
 fn read_json(p: &Path) -> serde_json::Value {
     serde_json::from_slice(&std::fs::read(p).unwrap()).unwrap()
@@ -633,8 +647,7 @@ mod volume {
     fn preset_renders_a_flipbook_with_its_layout() {
         let t = tempfile::tempdir().unwrap();
         let png = t.path().join("torch.png");
-        let o = volume_render("torch", &["--size", "48x48", "--frames", "4"], &png);
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        volume_render_ok("torch", &["--size", "48x48", "--frames", "4"], &png);
         assert!(std::fs::metadata(&png).unwrap().len() > 100);
         let layout = read_json(&t.path().join("torch.json"));
         assert_eq!(layout["frame_count"], 4);
@@ -1128,7 +1141,7 @@ mod export {
     fn engine_flipbook_with_motion_vectors_emission_and_hdr() {
         let dir = tempfile::tempdir().unwrap();
         let out = dir.path().join("fire.png");
-        let o = classic(
+        classic_ok(
             "48x32",
             "6",
             &[
@@ -1142,7 +1155,6 @@ mod export {
             ],
             &out,
         );
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
         assert_eq!(
             files_in(dir.path()),
             [
@@ -1730,8 +1742,7 @@ mod classic_loops {
                 let pat = dir.join("%04d.png").to_string_lossy().into_owned();
                 let mut a = vec!["--seed", seed, "--loop"];
                 a.extend(&extra);
-                let o = classic("128x96", "36", &a, Path::new(&pat));
-                assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+                classic_ok("128x96", "36", &a, Path::new(&pat));
                 let mut names: Vec<PathBuf> = std::fs::read_dir(&dir)
                     .unwrap()
                     .map(|e| e.unwrap().path())
@@ -1773,8 +1784,7 @@ mod flipbook_fit {
     /// frames of 64×48.
     fn clip(dir: &Path) -> String {
         let p = dir.join("clip.mp4");
-        let o = classic("64x48", "60", &["--seed", "3"], &p);
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        classic_ok("64x48", "60", &["--seed", "3"], &p);
         p.to_str().unwrap().to_string()
     }
 
@@ -2130,8 +2140,7 @@ mod variants {
         // classic loops are re-timed to even steps (issue 14: wrap within ~15%)
         let frames = check_rows(&out, 1.2);
         let single = dir.path().join("seed7.png");
-        let o = classic("64x48", &ROW.to_string(), &["--seed", "7"], &single);
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        classic_ok("64x48", &ROW.to_string(), &["--seed", "7"], &single);
         row_is_single_loop(&frames, 2, &single);
         refuses_bad_variants(&run, dir.path());
     }
@@ -2748,8 +2757,7 @@ mod classic_every {
             [base, extra].concat()
         }
         assert!(classic("64x48", "16", &base, &pat("all")).status.success());
-        let o = classic("64x48", "16", &with(&base, &["--every", "2"]), &pat("half"));
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        classic_ok("64x48", "16", &with(&base, &["--every", "2"]), &pat("half"));
         let all = sequence(&t.path().join("all"));
         let half = sequence(&t.path().join("half"));
         assert_eq!((all.len(), half.len()), (16, 8));
@@ -2757,13 +2765,12 @@ mod classic_every {
             assert!(f.data() == all[2 * j].data(), "written frame {j}");
         }
         // a chunk counts written frames and keeps their numbers
-        let o = classic(
+        classic_ok(
             "64x48",
             "16",
             &with(&base, &["--every", "2", "--chunk", "3..6"]),
             &pat("chunk"),
         );
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
         assert_eq!(
             files_in(&t.path().join("chunk")),
             ["0003.png", "0004.png", "0005.png"]
@@ -2774,13 +2781,12 @@ mod classic_every {
         // a flipbook at half the rate, its vectors chosen by the frames left out: the
         // engines' blend read back from the sheets rebuilds them better than a cross-fade
         let sheet = t.path().join("s.png");
-        let o = classic(
+        classic_ok(
             "64x48",
             "16",
             &with(&base, &["--every", "2", "--motion-vectors"]),
             &sheet,
         );
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
         let meta = read_json(&sheet.with_extension("json"));
         assert_eq!(meta["frame_count"], 8);
         assert_eq!(meta["fps"], 15.0);
@@ -2803,13 +2809,12 @@ mod classic_every {
         // an odd N has no frame half-way: the gated flow's vectors, whose JSON names no
         // source
         let odd = t.path().join("odd.png");
-        let o = classic(
+        classic_ok(
             "64x48",
             "12",
             &with(&base, &["--every", "3", "--motion-vectors"]),
             &odd,
         );
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
         let meta = read_json(&odd.with_extension("json"));
         assert_eq!(
             (meta["frame_count"].as_u64(), meta["fps"].as_f64()),
