@@ -107,7 +107,7 @@ fn luma_with(lut: &[f32; LUT_SIZE + 1], p: &[f32; 4], background: [f32; 3]) -> f
 fn luma_row(lut: &[f32; LUT_SIZE + 1], px: &[[f32; 4]], background: [f32; 3], out: &mut [f32]) {
     let mut done = 0;
     #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") {
+    if std::arch::is_x86_feature_detected!("avx2") && background.iter().all(|b| b.is_finite()) {
         for (o, p) in out.chunks_exact_mut(8).zip(px.chunks_exact(8)) {
             // SAFETY: the CPU has AVX2 (checked above); `luma8` reads eight pixels and
             // writes eight values, and indexes `lut` below its last entry.
@@ -124,7 +124,8 @@ fn luma_row(lut: &[f32; LUT_SIZE + 1], px: &[[f32; 4]], background: [f32; 3], ou
     }
 }
 
-/// Eight pixels of [`luma_with`]; `false` (nothing written) when a value is not finite.
+/// Eight pixels of [`luma_with`] over a finite `background`; `false` (nothing written)
+/// when a pixel's value is not finite.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 unsafe fn luma8(
@@ -150,23 +151,47 @@ unsafe fn luma8(
                 _mm256_cmp_ps::<_CMP_EQ_OQ>(_mm256_sub_ps(x, x), _mm256_setzero_ps()),
             )
         });
-    if _mm256_movemask_ps(fin) != 0xff || background.iter().any(|b| !b.is_finite()) {
+    if _mm256_movemask_ps(fin) != 0xff {
         return false;
     }
     let (zero, one) = (_mm256_setzero_ps(), _mm256_set1_ps(1.0));
     // a = clamp(α, 0, 1)
     let a = _mm256_min_ps(_mm256_max_ps(v[3], zero), one);
     let rest = _mm256_sub_ps(one, a);
-    let mut sum = _mm256_set1_ps(-0.0);
-    for (c, &w) in LUMA_601.iter().enumerate() {
-        // p · a + background · (1 − a)
-        let lin = _mm256_add_ps(
+    // p · a + background · (1 − a)
+    let lin = std::array::from_fn(|c| {
+        _mm256_add_ps(
             _mm256_mul_ps(v[c], a),
             _mm256_mul_ps(_mm256_set1_ps(background[c]), rest),
-        );
+        )
+    });
+    _mm256_storeu_ps(out.as_mut_ptr(), luma8_avx2(lin, lut));
+    true
+}
+
+/// The Rec. 601 luma of eight linear RGB values as [`metric_luma`] takes it: each channel
+/// clamped to `0..=1` and sRGB-encoded through `table` ([`srgb_encode_table`], linear
+/// between its entries), weighted and summed in the same order — the same IEEE operations
+/// as the scalar code (no fused multiply-add), so the same bits. Shared by the vectorised
+/// metric paths (here and the volume preview's).
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+pub unsafe fn luma8_avx2(
+    lin: [std::arch::x86_64::__m256; 3],
+    table: &[f32],
+) -> std::arch::x86_64::__m256 {
+    use std::arch::x86_64::*;
+    assert_eq!(table.len(), LUT_SIZE + 1, "the sRGB encode table");
+    let (zero, one) = (_mm256_setzero_ps(), _mm256_set1_ps(1.0));
+    let mut sum = _mm256_set1_ps(-0.0);
+    for (c, &w) in LUMA_601.iter().enumerate() {
         // `encode_lut`: x = clamp(v, 0, 1) · 4096, i = min(⌊x⌋, 4095), f = x − i
         let x = _mm256_mul_ps(
-            _mm256_min_ps(_mm256_max_ps(lin, zero), one),
+            _mm256_min_ps(_mm256_max_ps(lin[c], zero), one),
             _mm256_set1_ps(LUT_SIZE as f32),
         );
         let i = _mm256_min_epi32(
@@ -174,13 +199,13 @@ unsafe fn luma8(
             _mm256_set1_epi32(LUT_SIZE as i32 - 1),
         );
         let f = _mm256_sub_ps(x, _mm256_cvtepi32_ps(i));
-        let lo = _mm256_i32gather_ps::<4>(lut.as_ptr(), i);
-        let hi = _mm256_i32gather_ps::<4>(lut.as_ptr().add(1), i);
+        // SAFETY: i ≤ 4095, so i and i + 1 index the table's 4,097 entries
+        let lo = _mm256_i32gather_ps::<4>(table.as_ptr(), i);
+        let hi = _mm256_i32gather_ps::<4>(table.as_ptr().add(1), i);
         let enc = _mm256_add_ps(lo, _mm256_mul_ps(_mm256_sub_ps(hi, lo), f));
         sum = _mm256_add_ps(sum, _mm256_mul_ps(_mm256_set1_ps(w), enc));
     }
-    _mm256_storeu_ps(out.as_mut_ptr(), sum);
-    true
+    sum
 }
 
 const LUT_SIZE: usize = 4096;

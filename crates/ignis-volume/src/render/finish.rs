@@ -202,9 +202,6 @@ fn convolve(out: &mut [f32], k: &[f32], src: &[f32], offs: &[usize]) {
     }
 }
 
-/// Rec. 601 luma weights of the metric (`ignis_core::loopq`'s, on sRGB-encoded values).
-const LUMA_601: [f32; 3] = [0.299, 0.587, 0.114];
-
 /// The metric grey of every pixel of the bloomed planes (`alpha` from `data`): straight
 /// alpha as [`finish`] makes it, then [`metric_luma`] over black — eight pixels at a time
 /// with AVX2 where the CPU has it and the eight values are finite (the same IEEE
@@ -279,21 +276,8 @@ unsafe fn grey8(
     let lit = _mm256_cmp_ps::<_CMP_GT_OQ>(a, zero);
     // over black: straight · a + 0 · (1 − a)
     let bg = _mm256_mul_ps(zero, _mm256_sub_ps(one, a));
-    let mut sum = _mm256_set1_ps(-0.0);
-    for (c, &w) in LUMA_601.iter().enumerate() {
-        let lin = _mm256_add_ps(_mm256_mul_ps(_mm256_div_ps(v[c], a), a), bg);
-        // `encode_lut`: x = clamp(v, 0, 1) · 4096, i = min(⌊x⌋, 4095), f = x − i
-        let x = _mm256_mul_ps(
-            _mm256_min_ps(_mm256_max_ps(lin, zero), one),
-            _mm256_set1_ps(4096.0),
-        );
-        let i = _mm256_min_epi32(_mm256_cvttps_epi32(x), _mm256_set1_epi32(4095));
-        let f = _mm256_sub_ps(x, _mm256_cvtepi32_ps(i));
-        let lo = _mm256_i32gather_ps::<4>(table.as_ptr(), i);
-        let hi = _mm256_i32gather_ps::<4>(table.as_ptr().add(1), i);
-        let enc = _mm256_add_ps(lo, _mm256_mul_ps(_mm256_sub_ps(hi, lo), f));
-        sum = _mm256_add_ps(sum, _mm256_mul_ps(_mm256_set1_ps(w), enc));
-    }
+    let lin = std::array::from_fn(|c| _mm256_add_ps(_mm256_mul_ps(_mm256_div_ps(v[c], a), a), bg));
+    let sum = ignis_core::loopq::luma8_avx2(lin, table);
     let grey = _mm256_blendv_ps(_mm256_set1_ps(empty), sum, lit);
     _mm256_storeu_ps(out.as_mut_ptr(), grey);
     true
