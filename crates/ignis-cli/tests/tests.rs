@@ -1954,8 +1954,7 @@ mod loop_sequence {
         let frames = t.path().join("frames");
         std::fs::create_dir(&frames).unwrap();
         let pattern = frames.join("%04d.png");
-        let o = classic("48x40", "40", &["--seed", "5", "--no-loop"], &pattern);
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        classic_ok("48x40", "40", &["--seed", "5", "--no-loop"], &pattern);
         let cache = t.path().join("cache");
         let c = cache.to_str().unwrap();
         let run = |src: &Path, name: &str| {
@@ -2857,8 +2856,7 @@ fn loop_alpha_emissive_adds_light_without_a_dark_fringe() {
     let frames = t.path().join("frames");
     std::fs::create_dir(&frames).unwrap();
     let pattern = frames.join("%04d.png");
-    let o = classic("64x48", "40", &["--seed", "5", "--no-loop"], &pattern);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    classic_ok("64x48", "40", &["--seed", "5", "--no-loop"], &pattern);
     let cache = t.path().join("cache");
     let run = |alpha: &str| {
         let dir = t.path().join(alpha);

@@ -142,16 +142,7 @@ unsafe fn luma8(
         )
     };
     let v: [__m256; 4] = std::array::from_fn(lane);
-    // finite: x − x == 0 (NaN and ±∞ give NaN)
-    let fin = v
-        .iter()
-        .fold(_mm256_castsi256_ps(_mm256_set1_epi32(-1)), |m, &x| {
-            _mm256_and_ps(
-                m,
-                _mm256_cmp_ps::<_CMP_EQ_OQ>(_mm256_sub_ps(x, x), _mm256_setzero_ps()),
-            )
-        });
-    if _mm256_movemask_ps(fin) != 0xff {
+    if !all_finite8(&v) {
         return false;
     }
     let (zero, one) = (_mm256_setzero_ps(), _mm256_set1_ps(1.0));
@@ -167,6 +158,27 @@ unsafe fn luma8(
     });
     _mm256_storeu_ps(out.as_mut_ptr(), luma8_avx2(lin, lut));
     true
+}
+
+/// Whether every lane of `v` is finite (`x − x == 0`: NaN and ±∞ give NaN), for the
+/// vectorised paths that leave non-finite values to their scalar reference.
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+pub unsafe fn all_finite8(v: &[std::arch::x86_64::__m256]) -> bool {
+    use std::arch::x86_64::*;
+    let fin = v
+        .iter()
+        .fold(_mm256_castsi256_ps(_mm256_set1_epi32(-1)), |m, &x| {
+            _mm256_and_ps(
+                m,
+                _mm256_cmp_ps::<_CMP_EQ_OQ>(_mm256_sub_ps(x, x), _mm256_setzero_ps()),
+            )
+        });
+    _mm256_movemask_ps(fin) == 0xff
 }
 
 /// The Rec. 601 luma of eight linear RGB values as [`metric_luma`] takes it: each channel

@@ -256,17 +256,7 @@ unsafe fn grey8(
     assert!(px.iter().all(|p| p.len() >= 8) && out.len() >= 8 && table.len() == 4097);
     let v: [__m256; 3] = std::array::from_fn(|c| _mm256_loadu_ps(px[c].as_ptr()));
     let al = _mm256_loadu_ps(alpha.as_ptr());
-    // finite: x − x == 0 (NaN and ±∞ give NaN)
-    let fin =
-        [v[0], v[1], v[2], al]
-            .iter()
-            .fold(_mm256_castsi256_ps(_mm256_set1_epi32(-1)), |m, &x| {
-                _mm256_and_ps(
-                    m,
-                    _mm256_cmp_ps::<_CMP_EQ_OQ>(_mm256_sub_ps(x, x), _mm256_setzero_ps()),
-                )
-            });
-    if _mm256_movemask_ps(fin) != 0xff {
+    if !ignis_core::loopq::all_finite8(&[v[0], v[1], v[2], al]) {
         return false;
     }
     let (zero, one) = (_mm256_setzero_ps(), _mm256_set1_ps(1.0));
