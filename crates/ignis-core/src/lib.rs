@@ -12,6 +12,7 @@
 //! - [`progress`]: the one progress-reporting trait the libraries take.
 //! - [`golden`]: golden float images for tests (stored frames compared within a tolerance).
 //! - [`realism`]: flicker frequency and spectral slope, measured on renders and footage alike.
+//! - [`stream`]: per-frame work on a decoded stream, in parallel and in stream order.
 //!
 //! **Invariant:** this crate knows no file formats (it only names, writes atomically and
 //! removes the writers' temporaries: [`tempfiles`], [`atomic`]; the one exception is the
@@ -29,6 +30,7 @@ pub mod post;
 pub mod progress;
 pub mod realism;
 pub mod rng;
+pub mod stream;
 pub mod tempfiles;
 
 pub use error::{CoreError, Result};

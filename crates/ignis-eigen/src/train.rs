@@ -625,6 +625,10 @@ enum Sink {
     Stream(NpyWriter, PathBuf),
 }
 
+/// Decoded frames one pre-processing batch may hold (two batches are in memory at once:
+/// one decoded while the other is processed): 256 MiB, seven 1080p frames.
+const PREPROCESS_BATCH_BYTES: usize = 256 << 20;
+
 /// Pass 2: pre-processes every training frame into the data matrix (and the stored frames).
 fn collect(
     clips: &[ClipInput<'_>],
@@ -709,35 +713,43 @@ fn collect_clip(
     let mut masks = crate::db::masks::MaskWriter::new(src.width, src.height);
     let (mut done, mut lit) = (0, 0);
     let mut colour = crate::preprocess::FlameColour::default();
-    for (_, f) in training_frames(c, plan.start, plan.end)? {
-        if done == plan.frames {
-            break;
-        }
-        let f = f?;
-        let pr = preprocess_frame(&f, &plan.pose, pre);
-        colour.add(&f, &pr.mask);
-        if pr.mask_pixels > 0 {
-            lit += 1;
-        }
-        match sink {
-            Sink::Memory(d) => {
-                let j = angles.len();
-                for (r, &v) in pr.train.data().iter().enumerate() {
-                    d[(r, j)] = v;
-                }
+    // Frames are independent once the pose is known: pre-processed on the pool, a batch at
+    // a time while the next is decoded, and stored in clip order (the same bytes at any
+    // thread count).
+    let frames = training_frames(c, plan.start, plan.end)?
+        .take(plan.frames)
+        .map(|(_, f)| f);
+    let batch = ignis_core::stream::batch_len(src.pixels() * 16, PREPROCESS_BATCH_BYTES);
+    ignis_core::stream::map_in_order(
+        frames,
+        batch,
+        |f| preprocess_frame(f, &plan.pose, pre),
+        |f, pr| {
+            colour.add(&f, &pr.mask);
+            if pr.mask_pixels > 0 {
+                lit += 1;
             }
-            Sink::Stream(s, _) => s.write_f32(pr.train.data())?,
-        }
-        if let Some(w) = fw.as_mut() {
-            w.write_f32(pr.frame.data())?;
-        }
-        masks
-            .push(&pr.mask)
-            .map_err(|r| EigenError::clip(name, format!("frame {done}: {r}")))?;
-        angles.push(pr.angle);
-        done += 1;
-        progress.inc(1);
-    }
+            match sink {
+                Sink::Memory(d) => {
+                    let j = angles.len();
+                    for (r, &v) in pr.train.data().iter().enumerate() {
+                        d[(r, j)] = v;
+                    }
+                }
+                Sink::Stream(s, _) => s.write_f32(pr.train.data())?,
+            }
+            if let Some(w) = fw.as_mut() {
+                w.write_f32(pr.frame.data())?;
+            }
+            masks
+                .push(&pr.mask)
+                .map_err(|r| EigenError::clip(name, format!("frame {done}: {r}")))?;
+            angles.push(pr.angle);
+            done += 1;
+            progress.inc(1);
+            Ok(())
+        },
+    )?;
     progress.finish_stage();
     if done != plan.frames {
         return Err(EigenError::clip(

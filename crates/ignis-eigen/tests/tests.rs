@@ -76,6 +76,69 @@ fn centroid_accuracy(db: &EigenfireDb) -> f64 {
 mod roundtrip {
     use super::*;
 
+    /// Every file of a database directory, by relative path.
+    fn files(dir: &Path) -> std::collections::BTreeMap<String, Vec<u8>> {
+        let mut out = std::collections::BTreeMap::new();
+        let mut stack = vec![dir.to_path_buf()];
+        while let Some(d) = stack.pop() {
+            for e in std::fs::read_dir(&d).unwrap() {
+                let p = e.unwrap().path();
+                if p.is_dir() {
+                    stack.push(p);
+                } else {
+                    let rel = p.strip_prefix(dir).unwrap().display().to_string();
+                    out.insert(rel, std::fs::read(&p).unwrap());
+                }
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn training_writes_the_same_bytes_at_any_thread_count() {
+        // the frames are pre-processed in parallel batches; stored in clip order
+        let dir = tempfile::tempdir().unwrap();
+        let run = |threads: usize| {
+            let out = dir.path().join(format!("t{threads}.db"));
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            pool.install(|| {
+                train(
+                    &two_clips(30),
+                    &small_pre(),
+                    &params(),
+                    &out,
+                    &mut NoProgress,
+                )
+            })
+            .unwrap();
+            files(&out)
+        };
+        let one = run(1);
+        assert!(
+            one.keys().any(|k| k.starts_with("frames")),
+            "{:?}",
+            one.keys()
+        );
+        assert!(
+            one.keys().any(|k| k.starts_with("masks")),
+            "{:?}",
+            one.keys()
+        );
+        for threads in [2, 3] {
+            let other = run(threads);
+            assert_eq!(
+                one.keys().collect::<Vec<_>>(),
+                other.keys().collect::<Vec<_>>()
+            );
+            for (k, v) in &one {
+                assert!(v == &other[k], "{k} differs at {threads} threads");
+            }
+        }
+    }
+
     #[test]
     fn write_load_identical_and_api() {
         let dir = tempfile::tempdir().unwrap();

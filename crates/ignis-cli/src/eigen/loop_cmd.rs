@@ -1782,10 +1782,18 @@ fn metric_frames(path: &Path, window: &Range<usize>, g: &Global) -> Result<Vec<G
     let pb = g.progress(window.len() as u64, "measuring");
     // reserved up to a bound: the window's length comes from the container's word
     let mut metric = Vec::with_capacity(window.len().min(1 << 14));
-    for f in ignis_media::open(path, &opts)? {
-        metric.push(loopq::metric_frame_rgba(&f?, [0.0; 3]));
-        pb.inc(1);
-    }
+    let reader = ignis_media::open(path, &opts)?;
+    let batch = ignis_core::stream::batch_len(reader.info().size.pixels() * 16, 256 << 20);
+    ignis_core::stream::map_in_order(
+        reader.map(|f| f.map_err(anyhow::Error::from)),
+        batch,
+        |f| loopq::metric_frame_rgba(f, [0.0; 3]),
+        |_, m| {
+            metric.push(m);
+            pb.inc(1);
+            Ok(())
+        },
+    )?;
     pb.finish_and_clear();
     Ok(metric)
 }
