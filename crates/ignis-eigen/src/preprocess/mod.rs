@@ -841,8 +841,10 @@ mod tests {
             let img = GrayImage::from_fn(w, h, |x, y| {
                 image::Luma([((x * 37 + y * 91 + x * y * 7) % 256) as u8])
             });
-            for r in 2..=40u8 {
-                let s = r as f32 * 0.5;
+            // the feather's radii, and the mask smoothing's sigmas (`mask.smooth_sigma`,
+            // default 1, any value in 0..=50)
+            let fractional = [0.05, 0.3, 0.7, 1.3, 2.2, 3.7, 25.0, 49.9, 50.0];
+            for s in (2..=40u8).map(|r| r as f32 * 0.5).chain(fractional) {
                 assert_eq!(
                     gaussian_blur_u8(&img, s),
                     imageproc::filter::gaussian_blur_f32(&img, s),
