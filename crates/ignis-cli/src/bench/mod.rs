@@ -13,6 +13,7 @@ mod flow;
 mod learned;
 pub mod loops;
 mod realism;
+mod timing;
 mod volume;
 
 use crate::global::Global;

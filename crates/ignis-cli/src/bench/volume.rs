@@ -2,6 +2,7 @@
 //! looping (issue 16): plain against looping renders of presets, alternating runs, wall
 //! clock and process CPU time.
 
+use super::timing::{overhead_json, Runs};
 use crate::global::Global;
 use anyhow::Result;
 use ignis_core::Size;
@@ -97,29 +98,6 @@ pub fn figures(g: &Global, quick: bool) -> Result<serde_json::Value> {
 /// Alternating plain and looping runs per loop case (odd, so the median is a run).
 const LOOP_REPEATS: usize = 3;
 
-/// Wall-clock and process CPU seconds (every thread, rayon's included) of repeated runs.
-#[derive(Default)]
-struct Runs {
-    wall: Vec<f64>,
-    cpu: Vec<f64>,
-}
-
-impl Runs {
-    fn least_wall(&self) -> f64 {
-        least(&self.wall)
-    }
-}
-
-fn least(v: &[f64]) -> f64 {
-    v.iter().copied().fold(f64::INFINITY, f64::min)
-}
-
-fn median(v: &[f64]) -> f64 {
-    let mut v = v.to_vec();
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
-
 /// One loop case: `n` frames of `scene` rendered plain and looping, `repeats` times each,
 /// alternating so both see the same load (on a shared machine a single run of each swung
 /// from −11 % to +72 % overhead between back-to-back invocations).
@@ -135,22 +113,20 @@ fn loop_case(scene: &FireScene, n: u32, repeats: usize) -> Result<LoopCase> {
     let mut setup_s = f64::INFINITY;
     for _ in 0..repeats {
         for (i, looping) in [false, true].into_iter().enumerate() {
-            let c = super::flow::process_cpu_ms();
-            let t = Instant::now();
-            let mut anim = if looping {
-                let a = scene.looping_animator(n)?;
-                setup_s = setup_s.min(t.elapsed().as_secs_f64());
-                a
-            } else {
-                scene.animator()?
-            };
-            for _ in 0..n {
-                std::hint::black_box(anim.next_frame()?);
-            }
-            runs[i].wall.push(t.elapsed().as_secs_f64());
-            if let (Some(a), Some(b)) = (c, super::flow::process_cpu_ms()) {
-                runs[i].cpu.push((b - a) / 1e3);
-            }
+            runs[i].time(|| -> Result<()> {
+                let t = Instant::now();
+                let mut anim = if looping {
+                    let a = scene.looping_animator(n)?;
+                    setup_s = setup_s.min(t.elapsed().as_secs_f64());
+                    a
+                } else {
+                    scene.animator()?
+                };
+                for _ in 0..n {
+                    std::hint::black_box(anim.next_frame()?);
+                }
+                Ok(())
+            })?;
         }
     }
     let [plain, looping] = runs;
@@ -162,30 +138,10 @@ fn loop_case(scene: &FireScene, n: u32, repeats: usize) -> Result<LoopCase> {
 }
 
 impl LoopCase {
-    /// The case as JSON: least wall times and their overhead (what the goal reads), and
-    /// the CPU times (least and median) where the platform reports them.
+    /// The case as JSON: [`overhead_json`] and the loop's set-up time.
     fn json(&self) -> serde_json::Value {
-        let s3 = |s: f64| (s * 1000.0).round() / 1000.0;
-        let ratio = |a: f64, b: f64| ((a / b - 1.0) * 1000.0).round() / 1000.0;
-        let (p, l) = (self.plain.least_wall(), self.looping.least_wall());
-        let mut out = serde_json::json!({
-            "plain_s": s3(p),
-            "looping_s": s3(l),
-            "overhead": ratio(l, p),
-            "looping_setup_s": s3(self.setup_s),
-            "timing": format!(
-                "least of {} alternating runs each, wall clock",
-                self.plain.wall.len()
-            ),
-        });
-        let (pc, lc) = (&self.plain.cpu, &self.looping.cpu);
-        if !pc.is_empty() && pc.len() == lc.len() {
-            out["plain_cpu_s"] = s3(least(pc)).into();
-            out["looping_cpu_s"] = s3(least(lc)).into();
-            out["cpu_overhead"] = ratio(least(lc), least(pc)).into();
-            out["cpu_median_overhead"] = ratio(median(lc), median(pc)).into();
-            out["cpu_timing"] = "CPU time of the process (every thread, CLOCK_PROCESS_CPUTIME_ID) per run: least, and the overhead of the medians".into();
-        }
+        let mut out = overhead_json(&self.plain, &self.looping);
+        out["looping_setup_s"] = ((self.setup_s * 1000.0).round() / 1000.0).into();
         out
     }
 }
