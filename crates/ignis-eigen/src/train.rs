@@ -626,7 +626,7 @@ enum Sink {
 }
 
 /// Decoded frames one pre-processing batch may hold (two batches are in memory at once:
-/// one decoded while the other is processed): 256 MiB, seven 1080p frames.
+/// one decoded while the other is processed): 256 MiB, eight 1080p frames.
 const PREPROCESS_BATCH_BYTES: usize = 256 << 20;
 
 /// Pass 2: pre-processes every training frame into the data matrix (and the stored frames).
