@@ -42,7 +42,8 @@ where
     C: FnMut(T, U) -> std::result::Result<(), E>,
 {
     let batch = batch.clamp(1, MAX_BATCH);
-    let mut items = items.into_iter();
+    // fused: a batch that ended the stream is followed by one more read
+    let mut items = items.into_iter().fuse();
     let (mut cur, mut failed) = read_batch(&mut items, batch);
     while !cur.is_empty() {
         let mut mapped: Vec<U> = Vec::new();

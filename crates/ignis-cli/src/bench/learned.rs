@@ -69,13 +69,17 @@ pub fn figures(quick: bool) -> Result<Value> {
     // Free-running frames against the same number as a seamless loop (the bridge sample,
     // its timing, then rendering), alternating runs: a single run of each swung the
     // overhead from 0.06 to 0.36 between invocations on the shared 2-core machine.
+    let warmed = |out: &mut GrayFrame| -> Result<Synthesiser> {
+        let mut synth = Synthesiser::new(model, Controls::default(), 1)?;
+        for _ in 0..20 {
+            synth.next_frame_into(out);
+        }
+        Ok(synth)
+    };
     let (mut free, mut looped) = (Runs::default(), Runs::default());
     let mut loop_setup_s = f64::INFINITY;
     for _ in 0..LOOP_REPEATS {
-        let mut synth = Synthesiser::new(model, Controls::default(), 1)?;
-        for _ in 0..20 {
-            synth.next_frame_into(&mut out);
-        }
+        let mut synth = warmed(&mut out)?;
         free.time(|| {
             for _ in 0..frames {
                 synth.next_frame_into(&mut out);
@@ -93,10 +97,7 @@ pub fn figures(quick: bool) -> Result<Value> {
     }
     let gray_fps = frames as f64 / free.least_wall();
     let loop_fps = frames as f64 / looped.least_wall();
-    let mut synth = Synthesiser::new(model, Controls::default(), 1)?;
-    for _ in 0..20 {
-        synth.next_frame_into(&mut out);
-    }
+    let mut synth = warmed(&mut out)?;
     let palette = Palette::preset("candle")?;
     let t = Instant::now();
     let mut checksum = 0.0f32;
