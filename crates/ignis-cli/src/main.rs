@@ -172,8 +172,64 @@ fn refused_flags(m: &clap::ArgMatches) -> Option<String> {
     })
 }
 
+/// Ctrl-C, a closed terminal or a render farm's stop (SIGINT, SIGHUP, SIGTERM): the
+/// process removes the temporaries it is writing ([`ignis_core::tempfiles::remove_live`])
+/// and exits with 128 + the signal, rather than leaving hidden partial files for the next
+/// run in that directory to clean (which still happens after SIGKILL, which no process
+/// can catch). The signals are blocked in every thread and taken by one waiting thread, so
+/// the clean-up runs as ordinary code, not in a signal handler.
+#[cfg(unix)]
+fn remove_partial_output_on_interrupt() {
+    // SAFETY: `sigemptyset`/`sigaddset` fill a local set; `pthread_sigmask` changes the
+    // calling (main) thread's mask before any other thread exists, so every thread
+    // started later inherits it (child processes do not: `std::process::Command` gives
+    // them an empty mask).
+    let set = unsafe {
+        let mut set: libc::sigset_t = std::mem::zeroed();
+        libc::sigemptyset(&mut set);
+        for s in [libc::SIGINT, libc::SIGTERM, libc::SIGHUP] {
+            libc::sigaddset(&mut set, s);
+        }
+        if libc::pthread_sigmask(libc::SIG_BLOCK, &set, std::ptr::null_mut()) != 0 {
+            return;
+        }
+        set
+    };
+    let waiter = std::thread::Builder::new()
+        .name("signals".into())
+        .spawn(move || loop {
+            let mut sig = 0;
+            // SAFETY: `set` is a valid signal set; `sig` receives the signal number.
+            if unsafe { libc::sigwait(&set, &mut sig) } == 0 {
+                let removed = ignis_core::tempfiles::remove_live();
+                let name = match sig {
+                    libc::SIGINT => "interrupted",
+                    libc::SIGTERM => "terminated",
+                    _ => "hung up",
+                };
+                match removed.len() {
+                    0 => eprintln!("\n{name}: stopped (no output was being written)"),
+                    n => eprintln!(
+                        "\n{name}: stopped; removed {n} unfinished output{} (nothing \
+                         half-written is left)",
+                        if n == 1 { "" } else { "s" }
+                    ),
+                }
+                std::process::exit(128 + sig);
+            }
+        });
+    if waiter.is_err() {
+        // SAFETY: as above; the signals' default actions again.
+        unsafe { libc::pthread_sigmask(libc::SIG_UNBLOCK, &set, std::ptr::null_mut()) };
+    }
+}
+
+#[cfg(not(unix))]
+fn remove_partial_output_on_interrupt() {}
+
 fn main() -> ExitCode {
     keep_freed_memory();
+    remove_partial_output_on_interrupt();
     let matches = <Cli as clap::CommandFactory>::command().get_matches();
     let cli = Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
     if let Some(why) = refused_flags(&matches) {

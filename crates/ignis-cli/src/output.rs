@@ -459,7 +459,8 @@ impl StagedDir {
 
     /// Moves the staged files into the target directory (what is left of the staging
     /// directory is removed when `self` drops).
-    pub fn commit(self) -> Result<()> {
+    pub fn commit(mut self) -> Result<()> {
+        self.tmp.into_place();
         let tmp = self.tmp.path();
         if std::fs::symlink_metadata(&self.target).is_err() {
             std::fs::rename(tmp, &self.target)

@@ -857,6 +857,56 @@ mod hardening {
         assert!(files_in(t.path()).is_empty(), "{:?}", files_in(t.path()));
     }
 
+    /// Ctrl-C or a render farm's stop in the middle of a render: the process removes what
+    /// it was writing (a video's temporary file, a sequence's staging directory) and exits
+    /// with 128 + the signal; nothing is left in the output's directory, hidden or not.
+    #[cfg(unix)]
+    #[test]
+    fn an_interrupted_render_leaves_nothing_behind() {
+        let t = tempfile::tempdir().unwrap();
+        for (sig, code, said, out) in [
+            (libc::SIGTERM, 143, "terminated", "fire.mp4"),
+            (libc::SIGINT, 130, "interrupted", "seq/%04d.png"),
+        ] {
+            let dir = t.path().join(format!("s{sig}"));
+            std::fs::create_dir(&dir).unwrap();
+            let child = Command::new(env!("CARGO_BIN_EXE_ignis"))
+                .args([
+                    "volume", "render", "--preset", "campfire", "--size", "256x256",
+                ])
+                .args(["--frames", "2000", "-q", "-o"])
+                .arg(dir.join(out))
+                .stdout(std::process::Stdio::null())
+                .stderr(std::process::Stdio::piped())
+                .spawn()
+                .expect("runs ignis");
+            // wait until the render has started writing (a hidden temporary appears)
+            let start = std::time::Instant::now();
+            while files_in(&dir).is_empty() {
+                assert!(
+                    start.elapsed().as_secs() < 120,
+                    "no temporary appeared in {}",
+                    dir.display()
+                );
+                std::thread::sleep(std::time::Duration::from_millis(20));
+            }
+            // SAFETY: signalling our own child by its pid.
+            assert_eq!(unsafe { libc::kill(child.id() as libc::pid_t, sig) }, 0);
+            let o = child.wait_with_output().unwrap();
+            let err = String::from_utf8_lossy(&o.stderr);
+            assert_eq!(o.status.code(), Some(code), "{err}");
+            assert!(
+                err.contains(said) && err.contains("removed 1 unfinished output"),
+                "{err}"
+            );
+            assert!(
+                files_in(&dir).is_empty(),
+                "left behind: {:?}",
+                files_in(&dir)
+            );
+        }
+    }
+
     /// `ignis info clip | head -1`: the reader leaves before the output ends. Standard
     /// output is a pipe whose read end is closed before `ignis` starts, so every write
     /// fails with a broken pipe; the command ends normally without a panic. A stdout that

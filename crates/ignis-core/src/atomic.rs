@@ -16,6 +16,8 @@ pub struct AtomicFile {
     tmp: PathBuf,
     target: PathBuf,
     file: Option<BufWriter<File>>,
+    /// Registered for removal on an interrupt until the rename ([`crate::tempfiles::track`]).
+    live: Option<crate::tempfiles::Live>,
 }
 
 impl AtomicFile {
@@ -37,11 +39,13 @@ impl AtomicFile {
         static NEXT: AtomicU64 = AtomicU64::new(0);
         let n = NEXT.fetch_add(1, Ordering::Relaxed);
         let tmp = dir.join(crate::tempfiles::temp_name(&name, &format!("{n}.partial")));
+        let live = crate::tempfiles::track(&tmp, false);
         let file = File::create(&tmp)?;
         Ok(AtomicFile {
             tmp,
             target: target.to_path_buf(),
             file: Some(BufWriter::with_capacity(1 << 20, file)),
+            live: Some(live),
         })
     }
 
@@ -83,6 +87,7 @@ impl AtomicFile {
         let f = w.into_inner().map_err(|e| e.into_error())?;
         f.sync_all()?;
         drop(f);
+        self.live.take();
         std::fs::rename(&self.tmp, &self.target)?;
         // Renamed away: nothing for drop to remove.
         self.tmp = PathBuf::new();
@@ -135,6 +140,7 @@ pub fn commit_all(files: Vec<AtomicFile>) -> io::Result<()> {
     }
     for f in &mut files {
         f.file.take();
+        f.live.take();
     }
     crate::tempfiles::commit_files(&dir, &pairs)?;
     for f in &mut files {
@@ -150,6 +156,9 @@ pub fn commit_all(files: Vec<AtomicFile>) -> io::Result<()> {
 /// removed with its contents on drop unless the caller has renamed it away.
 pub struct StagingDir {
     path: PathBuf,
+    /// Registered for removal on an interrupt ([`crate::tempfiles::track`]); see
+    /// [`StagingDir::into_place`].
+    live: Option<crate::tempfiles::Live>,
 }
 
 impl StagingDir {
@@ -166,8 +175,19 @@ impl StagingDir {
         static NEXT: AtomicU64 = AtomicU64::new(0);
         let n = NEXT.fetch_add(1, Ordering::Relaxed);
         let path = parent.join(crate::tempfiles::temp_name(&name, &format!("{n}.dir")));
+        let live = crate::tempfiles::track(&path, true);
         std::fs::create_dir(&path)?;
-        Ok(StagingDir { path })
+        Ok(StagingDir {
+            path,
+            live: Some(live),
+        })
+    }
+
+    /// Stops tracking the directory for removal on an interrupt: call it just before
+    /// renaming the directory into place (the next run cleans or completes what an
+    /// interrupt leaves of that rename).
+    pub fn into_place(&mut self) {
+        self.live.take();
     }
 
     /// Where to write the files.
@@ -254,6 +274,35 @@ pub fn check_regular_target(path: &Path) -> io::Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// What an interrupt would remove: a temporary while it is written, not once it is
+    /// renamed into place (nor while several are committed together), and a staging
+    /// directory until the caller puts it in place.
+    #[test]
+    fn temporaries_are_live_until_they_are_put_in_place() {
+        let d = tempfile::tempdir().unwrap();
+        let f = AtomicFile::create(&d.path().join("a.bin")).unwrap();
+        let tmp = f.temp_path().to_path_buf();
+        assert!(crate::tempfiles::is_live(&tmp));
+        f.commit().unwrap();
+        assert!(!crate::tempfiles::is_live(&tmp));
+        let (a, b) = (
+            AtomicFile::create(&d.path().join("s.png")).unwrap(),
+            AtomicFile::create(&d.path().join("s.json")).unwrap(),
+        );
+        let tmps = [a.temp_path().to_path_buf(), b.temp_path().to_path_buf()];
+        assert!(tmps.iter().all(|t| crate::tempfiles::is_live(t)));
+        commit_all(vec![a, b]).unwrap();
+        assert!(!tmps.iter().any(|t| crate::tempfiles::is_live(t)));
+        let dropped = AtomicFile::create(&d.path().join("c.bin")).unwrap();
+        let tmp = dropped.temp_path().to_path_buf();
+        drop(dropped);
+        assert!(!crate::tempfiles::is_live(&tmp) && !tmp.exists());
+        let mut s = StagingDir::create(&d.path().join("seq")).unwrap();
+        assert!(crate::tempfiles::is_live(s.path()));
+        s.into_place();
+        assert!(!crate::tempfiles::is_live(s.path()));
+    }
 
     #[test]
     fn writes_and_replaces_whole_files() {

@@ -98,6 +98,109 @@ pub fn remove_stale(dir: &Path) -> usize {
     remove_stale_with(dir, |_| false)
 }
 
+/// Temporaries being written, for [`remove_live`] when the process is interrupted: their
+/// paths, and whether each is a directory.
+pub struct LiveSet {
+    list: std::sync::Mutex<Vec<(u64, std::path::PathBuf, bool)>>,
+}
+
+/// The process's temporaries ([`track`], [`remove_live`]).
+static LIVE: LiveSet = LiveSet::new();
+
+/// A temporary registered by [`LiveSet::track`]: unregistered when dropped.
+#[derive(Debug)]
+pub struct Live {
+    id: u64,
+    set: &'static LiveSet,
+}
+
+impl std::fmt::Debug for LiveSet {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("LiveSet").finish_non_exhaustive()
+    }
+}
+
+impl LiveSet {
+    /// An empty set.
+    pub const fn new() -> LiveSet {
+        LiveSet {
+            list: std::sync::Mutex::new(Vec::new()),
+        }
+    }
+
+    /// The list, usable even if a thread panicked while holding it.
+    fn list(&self) -> std::sync::MutexGuard<'_, Vec<(u64, std::path::PathBuf, bool)>> {
+        self.list.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// Registers `path` (a temporary file, or a directory when `dir`) until the returned
+    /// [`Live`] is dropped.
+    pub fn track(&'static self, path: &Path, dir: bool) -> Live {
+        use std::sync::atomic::{AtomicU64, Ordering};
+        static NEXT: AtomicU64 = AtomicU64::new(0);
+        let id = NEXT.fetch_add(1, Ordering::Relaxed);
+        self.list().push((id, path.to_path_buf(), dir));
+        Live { id, set: self }
+    }
+
+    /// Removes every registered temporary (files, and directories with their contents)
+    /// and empties the set; returns the paths removed. The set stays locked meanwhile, so
+    /// none is unregistered (renamed into place) half-way.
+    pub fn remove_all(&self) -> Vec<std::path::PathBuf> {
+        let mut list = self.list();
+        let mut removed = Vec::new();
+        for (_, p, dir) in list.drain(..) {
+            let gone = if dir {
+                std::fs::remove_dir_all(&p).is_ok()
+            } else {
+                std::fs::remove_file(&p).is_ok()
+            };
+            if gone {
+                removed.push(p);
+            }
+        }
+        removed
+    }
+
+    /// Whether `path` is registered.
+    pub fn contains(&self, path: &Path) -> bool {
+        self.list().iter().any(|(_, p, _)| p == path)
+    }
+}
+
+impl Default for LiveSet {
+    fn default() -> LiveSet {
+        LiveSet::new()
+    }
+}
+
+impl Drop for Live {
+    fn drop(&mut self) {
+        self.set.list().retain(|(id, _, _)| *id != self.id);
+    }
+}
+
+/// Registers `path` (a temporary file, or a directory when `dir`) as being written by
+/// this process, until the returned [`Live`] is dropped: an interrupted run removes it
+/// ([`remove_live`]) instead of leaving it for the next run to clean. Drop the `Live`
+/// before renaming the temporary into place (a rename under way is left alone: the next
+/// run completes or cleans it).
+pub fn track(path: &Path, dir: bool) -> Live {
+    LIVE.track(path, dir)
+}
+
+/// Whether `path` is a temporary this process is writing ([`track`]).
+pub fn is_live(path: &Path) -> bool {
+    LIVE.contains(path)
+}
+
+/// Removes every temporary this process registered by [`track`] and is still writing
+/// (for a process about to exit on an interrupt: Ctrl-C, a render farm's stop); returns
+/// the paths removed.
+pub fn remove_live() -> Vec<std::path::PathBuf> {
+    LIVE.remove_all()
+}
+
 /// Moves several complete temporary files into place as one unit (e.g. a flipbook's PNG
 /// and its JSON): a journal `.<first target>.ignis-tmp-<pid>.commit` listing every
 /// (temporary, target) pair is written and synced first, then the renames are done, then
@@ -278,6 +381,33 @@ pub fn replace_dir(tmp: &Path, target: &Path) -> std::io::Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn an_interrupt_removes_the_live_temporaries_only() {
+        static SET: LiveSet = LiveSet::new();
+        let t = tempfile::tempdir().unwrap();
+        let (file, dir, done) = (
+            t.path().join(temp_name("a.mp4", "0.partial")),
+            t.path().join(temp_name("seq", "0.dir")),
+            t.path().join(temp_name("b.gif", "1.partial")),
+        );
+        std::fs::write(&file, b"half").unwrap();
+        std::fs::create_dir(&dir).unwrap();
+        std::fs::write(dir.join("0001.png"), b"x").unwrap();
+        std::fs::write(&done, b"whole").unwrap();
+        let (_a, _b) = (SET.track(&file, false), SET.track(&dir, true));
+        let c = SET.track(&done, false);
+        assert!(SET.contains(&done));
+        drop(c); // renamed into place: no longer the interrupt's to remove
+        assert!(!SET.contains(&done));
+        let mut removed = SET.remove_all();
+        removed.sort();
+        let mut want = vec![file.clone(), dir.clone()];
+        want.sort();
+        assert_eq!(removed, want);
+        assert!(!file.exists() && !dir.exists() && done.exists());
+        assert!(!SET.contains(&file) && SET.remove_all().is_empty());
+    }
 
     #[test]
     fn names_round_trip() {

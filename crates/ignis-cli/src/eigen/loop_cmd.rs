@@ -309,7 +309,7 @@ fn build_entry(
         .with_context(|| format!("creating the cache directory {}", dir.display()))?;
     // Built in a hidden staging directory beside the entry (removed if anything fails) and
     // swapped in whole, so a reader never sees half an entry.
-    let staging = ignis_core::atomic::StagingDir::create(dir)
+    let mut staging = ignis_core::atomic::StagingDir::create(dir)
         .with_context(|| format!("creating a directory beside {}", dir.display()))?;
     let tmp = staging.path().to_path_buf();
     let result = (|| -> Result<()> {
@@ -374,6 +374,7 @@ fn build_entry(
     if let Err(e) = result {
         return Err(e.context(format!("building the cache entry for {}", path.display())));
     }
+    staging.into_place();
     ignis_core::tempfiles::replace_dir(&tmp, dir)
         .with_context(|| format!("moving the cache entry to {}", dir.display()))
 }

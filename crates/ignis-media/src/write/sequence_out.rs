@@ -146,13 +146,14 @@ impl Sink for SequenceSink {
 
     fn finish(mut self: Box<Self>) -> Result<Vec<PathBuf>> {
         let finals: Vec<PathBuf> = self.written.iter().map(|(_, f)| f.clone()).collect();
-        let Some(t) = self.temp_dir.take() else {
+        let Some(mut t) = self.temp_dir.take() else {
             return Err(MediaError::encode(
                 &self.final_dir,
                 "the writer has finished",
             ));
         };
         // Dropping `t` removes what commit_sequence left of the staged directory.
+        t.into_place();
         commit_sequence(t.path(), &self.final_dir, &self.written)?;
         Ok(finals)
     }
