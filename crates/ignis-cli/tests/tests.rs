@@ -880,9 +880,15 @@ mod hardening {
                 .stderr(std::process::Stdio::piped())
                 .spawn()
                 .expect("runs ignis");
-            // wait until the render has started writing (a hidden temporary appears)
+            // wait until the render has started writing (its hidden temporary appears;
+            // not the writability probe, which comes and goes before it)
             let start = std::time::Instant::now();
-            while files_in(&dir).is_empty() {
+            let writing = |names: Vec<String>| {
+                names
+                    .iter()
+                    .any(|n| n.ends_with(".partial") || n.ends_with(".dir"))
+            };
+            while !writing(files_in(&dir)) {
                 assert!(
                     start.elapsed().as_secs() < 120,
                     "no temporary appeared in {}",

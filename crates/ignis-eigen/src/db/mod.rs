@@ -524,6 +524,26 @@ mod tests {
         EigenfireDb::open(&out).unwrap()
     }
 
+    /// A database being written is a temporary an interrupt removes (see
+    /// `ignis_core::tempfiles::remove_live`) until it is committed; dropped unfinished, it
+    /// is gone and no longer registered.
+    #[test]
+    fn a_database_being_written_is_live_until_committed() {
+        let d = tempfile::tempdir().unwrap();
+        let w = DbWriter::create(&d.path().join("x.db")).unwrap();
+        let tmp = w.dir().to_path_buf();
+        assert!(tmp.is_dir() && ignis_core::tempfiles::is_live(&tmp));
+        drop(w);
+        assert!(!tmp.exists() && !ignis_core::tempfiles::is_live(&tmp));
+        // committed by training: the temporary is neither live nor left
+        let _db = small_db(d.path());
+        let left: Vec<_> = std::fs::read_dir(d.path())
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        assert_eq!(left, ["db"]);
+    }
+
     /// Eq. (22) one Eigenfire at a time, the order `reconstruct` promises.
     fn naive(db: &EigenfireDb, w: &[f32], e: usize) -> Vec<f32> {
         let mut out = db.mean().data().to_vec();

@@ -16,16 +16,22 @@ pub struct DbWriter {
     tmp: PathBuf,
     target: PathBuf,
     done: bool,
+    /// The temporary directory, registered for removal on an interrupt until the commit
+    /// ([`ignis_core::tempfiles::track`]).
+    live: Option<ignis_core::tempfiles::Live>,
 }
 
 impl DbWriter {
     /// Starts a database that will replace `target` (see [`commit_dir`] for what may be
     /// replaced).
     pub fn create(target: &Path) -> Result<DbWriter> {
+        let tmp = temp_dir_for(target)?;
+        let live = Some(ignis_core::tempfiles::track(&tmp, true));
         Ok(DbWriter {
-            tmp: temp_dir_for(target)?,
+            tmp,
             target: target.to_path_buf(),
             done: false,
+            live,
         })
     }
 
@@ -113,6 +119,7 @@ impl DbWriter {
         };
         write("manifest.json", text.as_bytes())?;
         write(MANIFEST_SUM, manifest_sum_text(text.as_bytes()).as_bytes())?;
+        self.live.take();
         commit_dir(&self.tmp, &self.target)?;
         self.done = true;
         Ok(self.target.clone())

@@ -326,6 +326,7 @@ fn check_writable_dir(dir: &Path) -> Result<()> {
         }
     };
     let probe = existing.join(ignis_core::tempfiles::temp_name("output", "probe"));
+    let _live = ignis_core::tempfiles::track(&probe, false);
     match std::fs::OpenOptions::new()
         .write(true)
         .create_new(true)
