@@ -176,31 +176,37 @@ fn refused_flags(m: &clap::ArgMatches) -> Option<String> {
 /// process removes the temporaries it is writing ([`ignis_core::tempfiles::remove_live`])
 /// and exits with 128 + the signal, rather than leaving hidden partial files for the next
 /// run in that directory to clean (which still happens after SIGKILL, which no process
-/// can catch). The signals are blocked in every thread and taken by one waiting thread, so
-/// the clean-up runs as ordinary code, not in a signal handler.
+/// can catch). The handler only writes the signal's number to a pipe; a waiting thread
+/// reads it and does the clean-up as ordinary code. No signal mask changes, so child
+/// processes (ffmpeg) get the terminal's Ctrl-C as usual, and `exec` resets the handler
+/// in them.
 #[cfg(unix)]
 fn remove_partial_output_on_interrupt() {
-    // SAFETY: `sigemptyset`/`sigaddset` fill a local set; `pthread_sigmask` changes the
-    // calling (main) thread's mask before any other thread exists, so every thread
-    // started later inherits it (child processes do not: `std::process::Command` gives
-    // them an empty mask).
-    let set = unsafe {
-        let mut set: libc::sigset_t = std::mem::zeroed();
-        libc::sigemptyset(&mut set);
-        for s in [libc::SIGINT, libc::SIGTERM, libc::SIGHUP] {
-            libc::sigaddset(&mut set, s);
-        }
-        if libc::pthread_sigmask(libc::SIG_BLOCK, &set, std::ptr::null_mut()) != 0 {
-            return;
-        }
-        set
-    };
+    use std::sync::atomic::{AtomicI32, Ordering};
+    static WRITE_END: AtomicI32 = AtomicI32::new(-1);
+    extern "C" fn on_signal(sig: libc::c_int) {
+        let b = sig as u8;
+        // SAFETY: `write` is async-signal-safe; the descriptor is the pipe's non-blocking
+        // write end (a full pipe drops the byte: a signal is already waiting there).
+        unsafe { libc::write(WRITE_END.load(Ordering::Relaxed), (&raw const b).cast(), 1) };
+    }
+    let mut fds = [-1 as libc::c_int; 2];
+    // SAFETY: `pipe2` fills `fds`; the write end is made non-blocking.
+    if unsafe { libc::pipe2(fds.as_mut_ptr(), libc::O_CLOEXEC) } != 0 {
+        return;
+    }
+    // SAFETY: fcntl on a descriptor just made.
+    unsafe { libc::fcntl(fds[1], libc::F_SETFL, libc::O_NONBLOCK) };
+    WRITE_END.store(fds[1], Ordering::Relaxed);
+    let read_end = fds[0];
     let waiter = std::thread::Builder::new()
         .name("signals".into())
         .spawn(move || loop {
-            let mut sig = 0;
-            // SAFETY: `set` is a valid signal set; `sig` receives the signal number.
-            if unsafe { libc::sigwait(&set, &mut sig) } == 0 {
+            let mut b = 0u8;
+            // SAFETY: reads one byte into `b` from the pipe's read end.
+            let n = unsafe { libc::read(read_end, (&raw mut b).cast(), 1) };
+            if n == 1 {
+                let sig = libc::c_int::from(b);
                 let removed = ignis_core::tempfiles::remove_live();
                 let name = match sig {
                     libc::SIGINT => "interrupted",
@@ -216,11 +222,31 @@ fn remove_partial_output_on_interrupt() {
                     ),
                 }
                 std::process::exit(128 + sig);
+            } else if n == 0 {
+                return;
             }
         });
     if waiter.is_err() {
-        // SAFETY: as above; the signals' default actions again.
-        unsafe { libc::pthread_sigmask(libc::SIG_UNBLOCK, &set, std::ptr::null_mut()) };
+        return;
+    }
+    for sig in [libc::SIGINT, libc::SIGTERM, libc::SIGHUP] {
+        // SAFETY: reads the signal's current action into a zeroed `sigaction`; then sets
+        // one with an empty mask, `SA_RESTART` (system calls the signal interrupts in
+        // other threads resume) and a handler that only writes to a pipe — unless the
+        // signal is ignored (`nohup`, a shell's background job): that choice stands.
+        unsafe {
+            let mut old: libc::sigaction = std::mem::zeroed();
+            if libc::sigaction(sig, std::ptr::null(), &mut old) != 0
+                || old.sa_sigaction == libc::SIG_IGN
+            {
+                continue;
+            }
+            let mut act: libc::sigaction = std::mem::zeroed();
+            act.sa_sigaction = on_signal as extern "C" fn(libc::c_int) as libc::sighandler_t;
+            act.sa_flags = libc::SA_RESTART;
+            libc::sigemptyset(&mut act.sa_mask);
+            libc::sigaction(sig, &act, std::ptr::null_mut());
+        }
     }
 }
 

@@ -859,35 +859,45 @@ mod hardening {
 
     /// Ctrl-C or a render farm's stop in the middle of a render: the process removes what
     /// it was writing (a video's temporary file, a sequence's staging directory) and exits
-    /// with 128 + the signal; nothing is left in the output's directory, hidden or not.
+    /// with 128 + the signal; nothing is left in the output's directory, hidden or not. A
+    /// signal the caller ignores stays ignored.
     #[cfg(unix)]
     #[test]
     fn an_interrupted_render_leaves_nothing_behind() {
         let t = tempfile::tempdir().unwrap();
+        // the render has started writing: its hidden temporary is there (not the
+        // writability probe, which comes and goes before it)
+        let writing = |names: Vec<String>| {
+            names
+                .iter()
+                .any(|n| n.ends_with(".partial") || n.ends_with(".dir"))
+        };
         for (sig, code, said, out) in [
             (libc::SIGTERM, 143, "terminated", "fire.mp4"),
             (libc::SIGINT, 130, "interrupted", "seq/%04d.png"),
         ] {
             let dir = t.path().join(format!("s{sig}"));
             std::fs::create_dir(&dir).unwrap();
-            let child = Command::new(env!("CARGO_BIN_EXE_ignis"))
-                .args([
-                    "volume", "render", "--preset", "campfire", "--size", "256x256",
-                ])
-                .args(["--frames", "2000", "-q", "-o"])
-                .arg(dir.join(out))
-                .stdout(std::process::Stdio::null())
-                .stderr(std::process::Stdio::piped())
-                .spawn()
-                .expect("runs ignis");
-            // wait until the render has started writing (its hidden temporary appears;
-            // not the writability probe, which comes and goes before it)
+            let mut cmd = Command::new(env!("CARGO_BIN_EXE_ignis"));
+            cmd.args([
+                "volume", "render", "--preset", "campfire", "--size", "256x256",
+            ])
+            .args(["--frames", "2000", "-q", "-o"])
+            .arg(dir.join(out))
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::piped());
+            // `ignis` leaves an ignored signal ignored (`nohup`, a background job), and a
+            // test run may have been started that way: the child gets the default action.
+            // SAFETY: `signal` is async-signal-safe, as `pre_exec` requires.
+            unsafe {
+                use std::os::unix::process::CommandExt;
+                cmd.pre_exec(move || {
+                    libc::signal(sig, libc::SIG_DFL);
+                    Ok(())
+                });
+            }
+            let child = cmd.spawn().expect("runs ignis");
             let start = std::time::Instant::now();
-            let writing = |names: Vec<String>| {
-                names
-                    .iter()
-                    .any(|n| n.ends_with(".partial") || n.ends_with(".dir"))
-            };
             while !writing(files_in(&dir)) {
                 assert!(
                     start.elapsed().as_secs() < 120,
@@ -911,6 +921,37 @@ mod hardening {
                 files_in(&dir)
             );
         }
+        // Under `nohup` (SIGHUP ignored) a hang-up in the middle of a render does not
+        // stop it.
+        let dir = t.path().join("nohup");
+        std::fs::create_dir(&dir).unwrap();
+        let out = dir.join("fire.gif");
+        let mut cmd = Command::new(env!("CARGO_BIN_EXE_ignis"));
+        cmd.args(["volume", "render", "--preset", "torch", "--size", "128x128"])
+            .args(["--frames", "120", "-q", "-o"])
+            .arg(&out)
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::piped());
+        // SAFETY: as above.
+        unsafe {
+            use std::os::unix::process::CommandExt;
+            cmd.pre_exec(|| {
+                libc::signal(libc::SIGHUP, libc::SIG_IGN);
+                Ok(())
+            });
+        }
+        let child = cmd.spawn().expect("runs ignis");
+        let start = std::time::Instant::now();
+        while !writing(files_in(&dir)) && !out.exists() {
+            assert!(start.elapsed().as_secs() < 120, "no temporary appeared");
+            std::thread::sleep(std::time::Duration::from_millis(5));
+        }
+        // SAFETY: signalling our own child by its pid (a child that has already finished
+        // is a zombie until waited for, and takes the signal harmlessly).
+        unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGHUP) };
+        let o = child.wait_with_output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(o.status.success() && out.exists(), "{err}");
     }
 
     /// `ignis info clip | head -1`: the reader leaves before the output ends. Standard
