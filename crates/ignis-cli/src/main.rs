@@ -191,12 +191,17 @@ fn remove_partial_output_on_interrupt() {
         unsafe { libc::write(WRITE_END.load(Ordering::Relaxed), (&raw const b).cast(), 1) };
     }
     let mut fds = [-1 as libc::c_int; 2];
-    // SAFETY: `pipe2` fills `fds`; the write end is made non-blocking.
-    if unsafe { libc::pipe2(fds.as_mut_ptr(), libc::O_CLOEXEC) } != 0 {
-        return;
+    // SAFETY: `pipe` fills `fds`; `fcntl` on the two descriptors just made: neither is
+    // passed to child processes, and the write end is non-blocking.
+    unsafe {
+        if libc::pipe(fds.as_mut_ptr()) != 0 {
+            return;
+        }
+        for fd in fds {
+            libc::fcntl(fd, libc::F_SETFD, libc::FD_CLOEXEC);
+        }
+        libc::fcntl(fds[1], libc::F_SETFL, libc::O_NONBLOCK);
     }
-    // SAFETY: fcntl on a descriptor just made.
-    unsafe { libc::fcntl(fds[1], libc::F_SETFL, libc::O_NONBLOCK) };
     WRITE_END.store(fds[1], Ordering::Relaxed);
     let read_end = fds[0];
     let waiter = std::thread::Builder::new()
