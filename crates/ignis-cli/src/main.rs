@@ -182,12 +182,16 @@ fn refused_flags(m: &clap::ArgMatches) -> Option<String> {
 /// in them.
 #[cfg(unix)]
 fn remove_partial_output_on_interrupt() {
-    use std::sync::atomic::{AtomicI32, Ordering};
+    use std::sync::atomic::{AtomicI32, AtomicU32, Ordering};
     static WRITE_END: AtomicI32 = AtomicI32::new(-1);
+    // The signals given the handler (bit `sig`), not those left ignored.
+    static HANDLED: AtomicU32 = AtomicU32::new(0);
+    const SIGNALS: [libc::c_int; 3] = [libc::SIGINT, libc::SIGTERM, libc::SIGHUP];
     extern "C" fn on_signal(sig: libc::c_int) {
         let b = sig as u8;
         // SAFETY: `write` is async-signal-safe; the descriptor is the pipe's non-blocking
-        // write end (a full pipe drops the byte: a signal is already waiting there).
+        // write end (a full pipe drops the byte: a signal is already waiting there). It
+        // may change `errno` under the interrupted thread; the process exits right after.
         unsafe { libc::write(WRITE_END.load(Ordering::Relaxed), (&raw const b).cast(), 1) };
     }
     let mut fds = [-1 as libc::c_int; 2];
@@ -212,6 +216,13 @@ fn remove_partial_output_on_interrupt() {
             let n = unsafe { libc::read(read_end, (&raw mut b).cast(), 1) };
             if n == 1 {
                 let sig = libc::c_int::from(b);
+                // a second Ctrl-C during the clean-up stops the process at once
+                for s in SIGNALS {
+                    if HANDLED.load(Ordering::Relaxed) & (1 << s) != 0 {
+                        // SAFETY: restores the default action of a signal given the handler.
+                        unsafe { libc::signal(s, libc::SIG_DFL) };
+                    }
+                }
                 let removed = ignis_core::tempfiles::remove_live();
                 let name = match sig {
                     libc::SIGINT => "interrupted",
@@ -234,7 +245,7 @@ fn remove_partial_output_on_interrupt() {
     if waiter.is_err() {
         return;
     }
-    for sig in [libc::SIGINT, libc::SIGTERM, libc::SIGHUP] {
+    for sig in SIGNALS {
         // SAFETY: reads the signal's current action into a zeroed `sigaction`; then sets
         // one with an empty mask, `SA_RESTART` (system calls the signal interrupts in
         // other threads resume) and a handler that only writes to a pipe — unless the
@@ -250,7 +261,9 @@ fn remove_partial_output_on_interrupt() {
             act.sa_sigaction = on_signal as extern "C" fn(libc::c_int) as libc::sighandler_t;
             act.sa_flags = libc::SA_RESTART;
             libc::sigemptyset(&mut act.sa_mask);
-            libc::sigaction(sig, &act, std::ptr::null_mut());
+            if libc::sigaction(sig, &act, std::ptr::null_mut()) == 0 {
+                HANDLED.fetch_or(1 << sig, Ordering::Relaxed);
+            }
         }
     }
 }
