@@ -28,6 +28,11 @@ impl Runs {
     }
 }
 
+/// Seconds (or a ratio) rounded to 3 decimals, as the benches print them.
+pub fn round3(s: f64) -> f64 {
+    (s * 1000.0).round() / 1000.0
+}
+
 pub fn least(v: &[f64]) -> f64 {
     v.iter().copied().fold(f64::INFINITY, f64::min)
 }
@@ -42,8 +47,8 @@ pub fn median(v: &[f64]) -> f64 {
 /// read), and the CPU times (least, and the overhead of the medians) where the platform
 /// reports them.
 pub fn overhead_json(plain: &Runs, looping: &Runs) -> serde_json::Value {
-    let s3 = |s: f64| (s * 1000.0).round() / 1000.0;
-    let ratio = |a: f64, b: f64| ((a / b - 1.0) * 1000.0).round() / 1000.0;
+    let s3 = round3;
+    let ratio = |a: f64, b: f64| round3(a / b - 1.0);
     let (p, l) = (plain.least_wall(), looping.least_wall());
     let mut out = serde_json::json!({
         "plain_s": s3(p),

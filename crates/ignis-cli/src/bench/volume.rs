@@ -2,7 +2,7 @@
 //! looping (issue 16): plain against looping renders of presets, alternating runs, wall
 //! clock and process CPU time.
 
-use super::timing::{overhead_json, Runs};
+use super::timing::{overhead_json, round3, Runs};
 use crate::global::Global;
 use anyhow::Result;
 use ignis_core::Size;
@@ -141,7 +141,7 @@ impl LoopCase {
     /// The case as JSON: [`overhead_json`] and the loop's set-up time.
     fn json(&self) -> serde_json::Value {
         let mut out = overhead_json(&self.plain, &self.looping);
-        out["looping_setup_s"] = ((self.setup_s * 1000.0).round() / 1000.0).into();
+        out["looping_setup_s"] = round3(self.setup_s).into();
         out
     }
 }

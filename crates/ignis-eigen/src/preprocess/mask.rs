@@ -251,6 +251,11 @@ impl MaskParams {
     }
 }
 
+/// The HSV (eq. (3)) of a linear pixel's sRGB-encoded colour, as the mask layers see it.
+fn pixel_hsv(px: &[f32; 4]) -> (f32, f32, f32) {
+    rgb_to_hsv(srgb_encode(px[0]), srgb_encode(px[1]), srgb_encode(px[2]))
+}
+
 /// sRGB-encoded RGB (`0..=1`) → (H degrees, S, V), eq. (3).
 pub fn rgb_to_hsv(r: f32, g: f32, b: f32) -> (f32, f32, f32) {
     let max = r.max(g).max(b);
@@ -289,7 +294,7 @@ pub fn hsv_mask(frame: &RgbaFrame, layers: &[MaskLayer]) -> GrayImage {
     let mut last = LastColour::default();
     for (px, o) in frame.data().iter().zip(out.as_mut().iter_mut()) {
         *o = last.of(px, |px| {
-            let (hh, s, v) = rgb_to_hsv(srgb_encode(px[0]), srgb_encode(px[1]), srgb_encode(px[2]));
+            let (hh, s, v) = pixel_hsv(px);
             let mut m = false;
             for l in layers {
                 let inside = l.range.contains(hh, s, v);
@@ -418,11 +423,7 @@ pub fn flame_mask_without(
                 b.as_mut()[i] = 255;
                 stack.push(i);
             } else {
-                cand[i] = saturated.of(px, |px| {
-                    let (_, sat, _) =
-                        rgb_to_hsv(srgb_encode(px[0]), srgb_encode(px[1]), srgb_encode(px[2]));
-                    sat >= p.isolate_saturation
-                });
+                cand[i] = saturated.of(px, |px| pixel_hsv(px).1 >= p.isolate_saturation);
             }
         }
         let out = grow_into(&mut cand, stack, frame.width() as usize);
@@ -487,9 +488,7 @@ pub fn drop_colourless_parts(mask: &mut GrayImage, frame: &RgbaFrame) {
             continue;
         }
         open[i] = true;
-        let (_, s, v) = hsv.of(px, |px| {
-            rgb_to_hsv(srgb_encode(px[0]), srgb_encode(px[1]), srgb_encode(px[2]))
-        });
+        let (_, s, v) = hsv.of(px, pixel_hsv);
         if v >= COLOURED_MIN_V && s >= COLOURED {
             seeds.push(i);
             most = most.max(s);

@@ -74,6 +74,7 @@ impl GifSink {
             background: opts.background,
             index: 0,
             pending: Vec::new(),
+            // a frame's 4 bytes of RGBA and 1 palette index per pixel
             batch: ignis_core::stream::batch_len(size.pixels() * 5, BATCH_BYTES),
         })
     }
