@@ -83,6 +83,64 @@ pub fn metric_frame_rgba(frame: &RgbaFrame, background: [f32; 3]) -> GrayFrame {
     area_resize(&g, metric_size(frame.size()))
 }
 
+/// [`metric_frame_rgba`] of an 8-bit sRGB frame over black, straight from its bytes
+/// (`size.pixels() * 4` bytes, RGBA, rows top to bottom, as decoders hand them over):
+/// bit for bit the metric frame of the linear frame the readers make of those bytes
+/// (colour through [`crate::palette::srgb8_to_linear_table`], alpha `a / 255`). An opaque
+/// pixel's grey depends on its three codes alone, so it is three table look-ups and two
+/// additions instead of a 16-byte linear pixel, its composite and three sRGB encodes; a
+/// pixel with alpha below 255 takes the linear pixel's own path. `None` when `bytes` is not
+/// `size.pixels() * 4` long.
+pub fn metric_frame_srgba8(size: Size, bytes: &[u8]) -> Option<GrayFrame> {
+    use rayon::prelude::*;
+    if bytes.len() != size.pixels() * 4 {
+        return None;
+    }
+    let tables = opaque_luma8_tables();
+    let lut = srgb_lut();
+    let dec = crate::palette::srgb8_to_linear_table();
+    let row = |(out, px): (&mut [f32], &[u8])| {
+        for (o, p) in out.iter_mut().zip(px.chunks_exact(4)) {
+            *o = if p[3] == 255 {
+                // `luma_with`'s sum of the three weighted encodes, in its order.
+                tables[0][p[0] as usize] + tables[1][p[1] as usize] + tables[2][p[2] as usize]
+            } else {
+                let q = [
+                    dec[p[0] as usize],
+                    dec[p[1] as usize],
+                    dec[p[2] as usize],
+                    p[3] as f32 / 255.0,
+                ];
+                luma_with(lut, &q, [0.0; 3])
+            };
+        }
+    };
+    let mut luma = vec![0f32; size.pixels()];
+    let chunk = (size.width as usize).max(1) * 16;
+    if luma.len() >= 1 << 16 {
+        luma.par_chunks_mut(chunk)
+            .zip(bytes.par_chunks(chunk * 4))
+            .for_each(row);
+    } else {
+        luma.chunks_mut(chunk)
+            .zip(bytes.chunks(chunk * 4))
+            .for_each(row);
+    }
+    let g = GrayFrame::from_vec(size, luma).expect("one value per pixel");
+    Some(area_resize(&g, metric_size(size)))
+}
+
+/// Per channel, the weighted sRGB encode of each 8-bit code's linear value at alpha 1 over
+/// black: `LUMA_601[c] · encode_lut(decode(k))`, the term [`luma_with`] adds for it (at
+/// alpha 1 the composite `p · 1 + 0 · 0` is `p` exactly).
+fn opaque_luma8_tables() -> &'static [[f32; 256]; 3] {
+    static T: std::sync::OnceLock<[[f32; 256]; 3]> = std::sync::OnceLock::new();
+    T.get_or_init(|| {
+        let (lut, dec) = (srgb_lut(), crate::palette::srgb8_to_linear_table());
+        std::array::from_fn(|c| std::array::from_fn(|k| LUMA_601[c] * encode_lut(lut, dec[k])))
+    })
+}
+
 /// The metric grey of one linear straight-alpha pixel over `background` (before the area
 /// resize): what [`metric_frame_rgba`] computes per pixel, bit for bit, for callers that
 /// make the pixels themselves (the volume loop's preview fuses it with its bloom).
@@ -676,6 +734,81 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// The linear frame the readers make of 8-bit RGBA bytes (`ignis_media`'s
+    /// `from_srgba8`, restated: colour through the 8-bit table, alpha `a / 255`).
+    fn linear_of_srgba8(size: Size, bytes: &[u8]) -> RgbaFrame {
+        let dec = crate::palette::srgb8_to_linear_table();
+        let px = bytes
+            .chunks_exact(4)
+            .map(|p| {
+                [
+                    dec[p[0] as usize],
+                    dec[p[1] as usize],
+                    dec[p[2] as usize],
+                    p[3] as f32 / 255.0,
+                ]
+            })
+            .collect();
+        RgbaFrame::from_vec(size, px).unwrap()
+    }
+
+    #[test]
+    fn the_8bit_metric_equals_the_metric_of_the_linear_frame() {
+        // Every (red, green) pair once, blue varied, some pixels part transparent; 128 wide
+        // so the metric frame is the per-pixel grey itself (no resize), and 65,536 pixels
+        // so the rows run side by side.
+        let size = Size::new(128, 512).unwrap();
+        let bytes: Vec<u8> = (0..size.pixels())
+            .flat_map(|i| {
+                let a = if i % 97 == 5 {
+                    (i * 13 % 256) as u8
+                } else {
+                    255
+                };
+                [
+                    (i % 256) as u8,
+                    (i / 256 % 256) as u8,
+                    (i * 31 % 256) as u8,
+                    a,
+                ]
+            })
+            .collect();
+        let fast = metric_frame_srgba8(size, &bytes).unwrap();
+        let slow = metric_frame_rgba(&linear_of_srgba8(size, &bytes), [0.0; 3]);
+        assert_eq!(fast.size(), size);
+        for (i, (a, b)) in fast.data().iter().zip(slow.data()).enumerate() {
+            assert_eq!(a.to_bits(), b.to_bits(), "pixel {i}: {a} against {b}");
+        }
+        // Resized frames of odd sizes, small (one thread) and large, noisy bytes.
+        for (w, h) in [(7, 3), (333, 187), (1280, 720)] {
+            let size = Size::new(w, h).unwrap();
+            let mut x = 0x9e37_79b9_u32;
+            let bytes: Vec<u8> = (0..size.pixels() * 4)
+                .map(|i| {
+                    x ^= x << 13;
+                    x ^= x >> 17;
+                    x ^= x << 5;
+                    if i % 4 == 3 && x % 5 != 0 {
+                        255
+                    } else {
+                        (x >> 24) as u8
+                    }
+                })
+                .collect();
+            let fast = metric_frame_srgba8(size, &bytes).unwrap();
+            let slow = metric_frame_rgba(&linear_of_srgba8(size, &bytes), [0.0; 3]);
+            assert_eq!(fast.size(), slow.size());
+            assert!(
+                fast.data()
+                    .iter()
+                    .zip(slow.data())
+                    .all(|(a, b)| a.to_bits() == b.to_bits()),
+                "{w}x{h}"
+            );
+        }
+        assert!(metric_frame_srgba8(size, &bytes[..bytes.len() - 1]).is_none());
     }
 
     #[test]

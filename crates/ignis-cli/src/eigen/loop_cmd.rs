@@ -1783,14 +1783,28 @@ fn metric_frames(path: &Path, window: &Range<usize>, g: &Global) -> Result<Vec<G
     let pb = g.progress(window.len() as u64, "measuring");
     // reserved up to a bound: the window's length comes from the container's word
     let mut metric = Vec::with_capacity(window.len().min(1 << 14));
-    let reader = ignis_media::open(path, &opts)?;
+    // 8-bit decoders hand over their bytes: the metric straight from them is the same
+    // grey, bit for bit, without a 16-byte linear pixel per pixel (`metric_frame_srgba8`).
+    let mut reader = ignis_media::open_keeping_8bit(path, &opts)?;
     let batch = ignis_core::stream::batch_len(reader.info().size.pixels() * 16, 256 << 20);
+    let frames = std::iter::from_fn(move || reader.next_decoded());
     ignis_core::stream::map_in_order(
-        reader.map(|f| f.map_err(anyhow::Error::from)),
+        frames.map(|f| f.map_err(anyhow::Error::from)),
         batch,
-        |f| loopq::metric_frame_rgba(f, [0.0; 3]),
+        |f| match f {
+            ignis_media::DecodedFrame::Srgba8 { size, bytes } => {
+                loopq::metric_frame_srgba8(*size, bytes).with_context(|| {
+                    format!(
+                        "{} decoded {} bytes for a {size} frame",
+                        path.display(),
+                        bytes.len()
+                    )
+                })
+            }
+            ignis_media::DecodedFrame::Linear(f) => Ok(loopq::metric_frame_rgba(f, [0.0; 3])),
+        },
         |_, m| {
-            metric.push(m);
+            metric.push(m?);
             pb.inc(1);
             Ok(())
         },
