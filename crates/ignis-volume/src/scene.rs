@@ -446,6 +446,25 @@ impl FireScene {
                         return Err(VolumeError::bad(format!("{field}.degree"), "use 1 to 7"));
                     }
                     p.validate(&format!("{field}.simulation"), f.degree)?;
+                    // A step longer than a particle's life emits `step / interval`
+                    // particles that all die within it: nothing is left to draw, and the
+                    // burst grows without bound as the step does (a frame rate of 1e-6
+                    // asked for gigabytes). At most a lifetime a step, a step emits at most
+                    // `3 (control points − 1) + 1` particles.
+                    let step = 1.0 / (f64::from(self.fps) * p.substeps.max(1) as f64);
+                    if step > f64::from(p.lifetime) {
+                        let need = (1.0 / f64::from(p.lifetime) / f64::from(self.fps)).ceil();
+                        return Err(VolumeError::bad(
+                            format!("{field}.simulation.substeps"),
+                            format!(
+                                "{}: at {} fps a simulation step is {step:.3} s, longer than the \
+                                 particles' lifetime of {} s, so every particle would be born \
+                                 and die within one step; use substeps ≥ {need} (at most 64) or \
+                                 a higher fps",
+                                p.substeps, self.fps, p.lifetime
+                            ),
+                        ));
+                    }
                 }
             }
         }
@@ -1318,6 +1337,8 @@ mod hardening_tests {
             fire("[fire.simulation]\nradius = 1e5"),
             fire("[fire.simulation]\ntip_radius = 1e9"),
             fire("[fire.simulation]\nlifetime = 1e-9"),
+            // a frame rate so low that one step emitted ~1e10 particles (found by ignis-fuzz)
+            format!("fps = 1e-6\n{}", fire("[fire.simulation]\nlifetime = 0.5")),
             fire("curve = { points = [[0,0,0,1e9], [0,0,1,1], [0,0,2,1], [0,0,3,1]] }"),
             fire(&format!("curve = {{ points = [{}] }}", many.join(","))),
             format!(
@@ -1329,6 +1350,27 @@ mod hardening_tests {
         for (i, c) in cases.iter().enumerate() {
             assert!(scene(c).is_err(), "case {i} accepted");
         }
+    }
+
+    /// A simulation step may not outlive the particles: the error names the field and the
+    /// substeps that fix it, and those substeps are accepted.
+    #[test]
+    fn a_simulation_step_longer_than_a_lifetime_is_refused() {
+        let file = |fps: &str, substeps: u32| {
+            format!(
+                "fps = {fps}\n[render]\nsize = \"16x16\"\n[[fire]]\n[fire.simulation]\n\
+                 lifetime = 0.5\nsubsteps = {substeps}\n"
+            )
+        };
+        let e = scene(&file("0.5", 1)).err().expect("refused").to_string();
+        assert!(
+            e.contains("fire[0].simulation.substeps") && e.contains("substeps ≥ 4"),
+            "{e}"
+        );
+        let ok = scene(&file("0.5", 4)).expect("four steps a frame fit the lifetime");
+        let mut a = ok.animator().unwrap();
+        a.next_frame().unwrap();
+        assert!(scene(&file("30", 1)).is_ok());
     }
 
     /// Issue 18 defect 10: a tint must be finite and non-negative.

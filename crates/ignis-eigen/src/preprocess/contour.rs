@@ -153,26 +153,40 @@ pub fn fill_contours(
         .map(|(n, _)| simplify(&n.points, epsilon))
         .collect();
     let mut out = GrayImage::new(width, height);
-    let mut xs: Vec<f64> = Vec::new();
-    for y in 0..height {
-        let yc = y as f64 + 0.5;
-        xs.clear();
-        for poly in &polys {
-            let n = poly.len();
-            if n < 3 {
+    // An edge (a, b) crosses the centre line of row y, `y + 0.5`, exactly when y lies in
+    // `min(a.y, b.y)..max(a.y, b.y)` (horizontal edges never do). Edges are bucketed by
+    // their first row in the image and kept in an active list while they cross, so a row
+    // visits only the edges that cross it, not every edge of every polygon (an unsimplified
+    // 1080p contour has thousands of border pixels). Each crossing's x is computed as
+    // before, and the row's crossings are sorted (a total order), so the fill is the same.
+    let (h, w) = (height as i64, width as usize);
+    let mut starts: Vec<Vec<(Point<i32>, Point<i32>)>> = vec![Vec::new(); height as usize];
+    for poly in polys.iter().filter(|p| p.len() >= 3) {
+        let n = poly.len();
+        for i in 0..n {
+            let (a, b) = (poly[i], poly[(i + 1) % n]);
+            let (lo, hi) = (i64::from(a.y.min(b.y)), i64::from(a.y.max(b.y)));
+            if lo == hi || hi <= 0 || lo >= h {
                 continue;
             }
-            for i in 0..n {
-                let (a, b) = (poly[i], poly[(i + 1) % n]);
-                let (ay, by) = (a.y as f64 + 0.5, b.y as f64 + 0.5);
-                if (ay <= yc && by > yc) || (by <= yc && ay > yc) {
-                    let t = (yc - ay) / (by - ay);
-                    xs.push(a.x as f64 + 0.5 + t * (b.x - a.x) as f64);
-                }
-            }
+            starts[lo.max(0) as usize].push((a, b));
+        }
+    }
+    let mut active: Vec<(Point<i32>, Point<i32>)> = Vec::new();
+    let mut xs: Vec<f64> = Vec::new();
+    for (y, new_edges) in starts.into_iter().enumerate() {
+        let yi = y as i64;
+        active.retain(|(a, b)| i64::from(a.y.max(b.y)) > yi);
+        active.extend(new_edges);
+        let yc = y as f64 + 0.5;
+        xs.clear();
+        for &(a, b) in &active {
+            let (ay, by) = (a.y as f64 + 0.5, b.y as f64 + 0.5);
+            let t = (yc - ay) / (by - ay);
+            xs.push(a.x as f64 + 0.5 + t * (b.x - a.x) as f64);
         }
         xs.sort_by(|a, b| a.total_cmp(b));
-        let row = &mut out.as_mut()[(y * width) as usize..((y + 1) * width) as usize];
+        let row = &mut out.as_mut()[y * w..(y + 1) * w];
         for pair in xs.chunks_exact(2) {
             let x0 = (pair[0] - 0.5).ceil().max(0.0) as usize;
             let x1 = ((pair[1] - 0.5).floor() as i64).min(width as i64 - 1);
@@ -270,5 +284,130 @@ mod tests {
             .unwrap();
         let s = simplify(&outer.points, 1.0);
         assert!(s.len() <= 6 && s.len() >= 4, "{} points", s.len());
+    }
+
+    /// The fill as first written: every edge of every polygon tested on every row.
+    fn fill_contours_every_edge(
+        width: u32,
+        height: u32,
+        nodes: &[ContourNode],
+        keep: &[bool],
+        epsilon: f64,
+    ) -> GrayImage {
+        let polys: Vec<Vec<Point<i32>>> = nodes
+            .iter()
+            .zip(keep)
+            .filter(|(_, &k)| k)
+            .map(|(n, _)| simplify(&n.points, epsilon))
+            .collect();
+        let mut out = GrayImage::new(width, height);
+        let mut xs: Vec<f64> = Vec::new();
+        for y in 0..height {
+            let yc = y as f64 + 0.5;
+            xs.clear();
+            for poly in &polys {
+                let n = poly.len();
+                if n < 3 {
+                    continue;
+                }
+                for i in 0..n {
+                    let (a, b) = (poly[i], poly[(i + 1) % n]);
+                    let (ay, by) = (a.y as f64 + 0.5, b.y as f64 + 0.5);
+                    if (ay <= yc && by > yc) || (by <= yc && ay > yc) {
+                        let t = (yc - ay) / (by - ay);
+                        xs.push(a.x as f64 + 0.5 + t * (b.x - a.x) as f64);
+                    }
+                }
+            }
+            xs.sort_by(|a, b| a.total_cmp(b));
+            let row = &mut out.as_mut()[(y * width) as usize..((y + 1) * width) as usize];
+            for pair in xs.chunks_exact(2) {
+                let x0 = (pair[0] - 0.5).ceil().max(0.0) as usize;
+                let x1 = ((pair[1] - 0.5).floor() as i64).min(width as i64 - 1);
+                if x1 >= x0 as i64 {
+                    row[x0..=x1 as usize].fill(255);
+                }
+            }
+        }
+        if epsilon <= 0.0 {
+            for poly in &polys {
+                for pt in poly {
+                    if pt.x >= 0 && pt.y >= 0 && (pt.x as u32) < width && (pt.y as u32) < height {
+                        out.put_pixel(pt.x as u32, pt.y as u32, image::Luma([255]));
+                    }
+                }
+            }
+        }
+        out
+    }
+
+    /// The edge-table fill equals the every-edge fill on every row: random masks (specks,
+    /// holes, rings, shapes touching the borders), all contours and a kept subset, with and
+    /// without simplification, and polygons reaching outside the image.
+    #[test]
+    fn edge_table_fill_equals_every_edge_fill() {
+        let mut x = 0x2545_f491_u32;
+        let mut rnd = move || {
+            x ^= x << 13;
+            x ^= x >> 17;
+            x ^= x << 5;
+            x
+        };
+        for (w, h) in [(1u32, 1u32), (5, 3), (64, 48), (97, 131), (200, 40)] {
+            for _ in 0..12 {
+                // Blobs: a few random discs, some with holes, over a sparse speckle.
+                let blobs: Vec<(i64, i64, i64, i64)> = (0..1 + rnd() % 6)
+                    .map(|_| {
+                        let r = 1 + i64::from(rnd() % (w.max(h) / 3 + 1));
+                        let hole = i64::from(rnd() % 3) * r / 3;
+                        (i64::from(rnd() % w), i64::from(rnd() % h), r, hole)
+                    })
+                    .collect();
+                let speck = rnd() % 40;
+                let m = GrayImage::from_fn(w, h, |px, py| {
+                    let (px, py) = (i64::from(px), i64::from(py));
+                    let inside = blobs.iter().any(|&(cx, cy, r, hole)| {
+                        let d = (px - cx).pow(2) + (py - cy).pow(2);
+                        d <= r * r && d >= hole * hole
+                    });
+                    let s = (px * 7 + py * 13 + i64::from(speck)) % 41 == 0;
+                    image::Luma([if inside || s { 255 } else { 0 }])
+                });
+                let nodes = contour_tree(&m);
+                let all = vec![true; nodes.len()];
+                let some: Vec<bool> = (0..nodes.len()).map(|_| rnd() % 3 != 0).collect();
+                for keep in [&all, &some] {
+                    for eps in [0.0, 0.7, 2.5] {
+                        assert_eq!(
+                            fill_contours(w, h, &nodes, keep, eps),
+                            fill_contours_every_edge(w, h, &nodes, keep, eps),
+                            "{w}x{h} epsilon {eps}"
+                        );
+                    }
+                }
+            }
+        }
+        // Polygons partly or wholly outside the image, and degenerate ones.
+        let node = |pts: &[(i32, i32)]| ContourNode {
+            points: pts.iter().map(|&(x, y)| Point::new(x, y)).collect(),
+            is_hole: false,
+            parent: None,
+            depth: 0,
+            area: 0.0,
+        };
+        let nodes = vec![
+            node(&[(-5, -5), (20, -3), (30, 25), (-2, 40)]),
+            node(&[(10, 10), (50, 12), (12, 60)]),
+            node(&[(3, 3), (9, 3)]),
+            node(&[(-9, 50), (-1, 50), (-4, 70)]),
+            node(&[(4, 100), (8, 120), (2, 130)]),
+        ];
+        let keep = vec![true; nodes.len()];
+        for eps in [0.0, 1.0] {
+            assert_eq!(
+                fill_contours(24, 36, &nodes, &keep, eps),
+                fill_contours_every_edge(24, 36, &nodes, &keep, eps)
+            );
+        }
     }
 }
