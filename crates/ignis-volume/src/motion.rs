@@ -288,7 +288,8 @@ pub struct SimParams {
     /// Radius at the base and at the tip (linear in between). Default 1.0 and 0.5.
     pub radius: f32,
     pub tip_radius: f32,
-    /// Integration steps per frame. Default 4.
+    /// Integration steps per frame, 1–64. Default 4. A step (`1 / (fps · substeps)` s) may
+    /// not be longer than `lifetime`: the scene refuses it, naming the substeps that fit.
     pub substeps: usize,
 }
 
