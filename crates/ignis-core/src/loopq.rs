@@ -790,7 +790,7 @@ mod tests {
                     x ^= x << 13;
                     x ^= x >> 17;
                     x ^= x << 5;
-                    if i % 4 == 3 && x % 5 != 0 {
+                    if i % 4 == 3 && !x.is_multiple_of(5) {
                         255
                     } else {
                         (x >> 24) as u8

@@ -1362,7 +1362,7 @@ mod hardening_tests {
                  lifetime = 0.5\nsubsteps = {substeps}\n"
             )
         };
-        let e = scene(&file("0.5", 1)).err().expect("refused").to_string();
+        let e = scene(&file("0.5", 1)).expect_err("refused").to_string();
         assert!(
             e.contains("fire[0].simulation.substeps") && e.contains("substeps ≥ 4"),
             "{e}"

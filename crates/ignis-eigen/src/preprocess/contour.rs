@@ -185,26 +185,35 @@ pub fn fill_contours(
             let t = (yc - ay) / (by - ay);
             xs.push(a.x as f64 + 0.5 + t * (b.x - a.x) as f64);
         }
-        xs.sort_by(|a, b| a.total_cmp(b));
-        let row = &mut out.as_mut()[y * w..(y + 1) * w];
-        for pair in xs.chunks_exact(2) {
-            let x0 = (pair[0] - 0.5).ceil().max(0.0) as usize;
-            let x1 = ((pair[1] - 0.5).floor() as i64).min(width as i64 - 1);
-            if x1 >= x0 as i64 {
-                row[x0..=x1 as usize].fill(255);
-            }
-        }
+        fill_spans(&mut out.as_mut()[y * w..(y + 1) * w], &mut xs);
     }
     if epsilon <= 0.0 {
-        for poly in &polys {
-            for pt in poly {
-                if pt.x >= 0 && pt.y >= 0 && (pt.x as u32) < width && (pt.y as u32) < height {
-                    out.put_pixel(pt.x as u32, pt.y as u32, image::Luma([255]));
-                }
-            }
-        }
+        draw_borders(&mut out, &polys);
     }
     out
+}
+
+/// Fills a row between the pairs of its sorted crossings (even–odd rule).
+fn fill_spans(row: &mut [u8], xs: &mut [f64]) {
+    xs.sort_by(|a, b| a.total_cmp(b));
+    let width = row.len() as i64;
+    for pair in xs.chunks_exact(2) {
+        let x0 = (pair[0] - 0.5).ceil().max(0.0) as usize;
+        let x1 = ((pair[1] - 0.5).floor() as i64).min(width - 1);
+        if x1 >= x0 as i64 {
+            row[x0..=x1 as usize].fill(255);
+        }
+    }
+}
+
+/// Sets the polygons' own points that lie in the image (border pixels).
+fn draw_borders(out: &mut GrayImage, polys: &[Vec<Point<i32>>]) {
+    let (width, height) = out.dimensions();
+    for pt in polys.iter().flatten() {
+        if pt.x >= 0 && pt.y >= 0 && (pt.x as u32) < width && (pt.y as u32) < height {
+            out.put_pixel(pt.x as u32, pt.y as u32, image::Luma([255]));
+        }
+    }
 }
 
 /// Draws the outlines of the kept contours in white on black (the `contours` stage
@@ -319,24 +328,13 @@ mod tests {
                     }
                 }
             }
-            xs.sort_by(|a, b| a.total_cmp(b));
-            let row = &mut out.as_mut()[(y * width) as usize..((y + 1) * width) as usize];
-            for pair in xs.chunks_exact(2) {
-                let x0 = (pair[0] - 0.5).ceil().max(0.0) as usize;
-                let x1 = ((pair[1] - 0.5).floor() as i64).min(width as i64 - 1);
-                if x1 >= x0 as i64 {
-                    row[x0..=x1 as usize].fill(255);
-                }
-            }
+            fill_spans(
+                &mut out.as_mut()[(y * width) as usize..((y + 1) * width) as usize],
+                &mut xs,
+            );
         }
         if epsilon <= 0.0 {
-            for poly in &polys {
-                for pt in poly {
-                    if pt.x >= 0 && pt.y >= 0 && (pt.x as u32) < width && (pt.y as u32) < height {
-                        out.put_pixel(pt.x as u32, pt.y as u32, image::Luma([255]));
-                    }
-                }
-            }
+            draw_borders(&mut out, &polys);
         }
         out
     }
