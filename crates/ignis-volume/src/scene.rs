@@ -454,13 +454,18 @@ impl FireScene {
                     let step = 1.0 / (f64::from(self.fps) * p.substeps.max(1) as f64);
                     if step > f64::from(p.lifetime) {
                         let need = (1.0 / f64::from(p.lifetime) / f64::from(self.fps)).ceil();
+                        let fix = if need <= 64.0 {
+                            format!("use substeps ≥ {need} or a higher fps")
+                        } else {
+                            let fps = 1.0 / (64.0 * f64::from(p.lifetime));
+                            format!("use fps ≥ {fps:.3} with substeps = 64, or a longer lifetime")
+                        };
                         return Err(VolumeError::bad(
                             format!("{field}.simulation.substeps"),
                             format!(
                                 "{}: at {} fps a simulation step is {step:.3} s, longer than the \
                                  particles' lifetime of {} s, so every particle would be born \
-                                 and die within one step; use substeps ≥ {need} (at most 64) or \
-                                 a higher fps",
+                                 and die within one step; {fix}",
                                 p.substeps, self.fps, p.lifetime
                             ),
                         ));
@@ -1371,6 +1376,8 @@ mod hardening_tests {
         let mut a = ok.animator().unwrap();
         a.next_frame().unwrap();
         assert!(scene(&file("30", 1)).is_ok());
+        let e = scene(&file("0.001", 64)).expect_err("refused").to_string();
+        assert!(e.contains("use fps ≥ 0.031 with substeps = 64"), "{e}");
     }
 
     /// Issue 18 defect 10: a tint must be finite and non-negative.
