@@ -146,12 +146,7 @@ pub fn fill_contours(
     keep: &[bool],
     epsilon: f64,
 ) -> GrayImage {
-    let polys: Vec<Vec<Point<i32>>> = nodes
-        .iter()
-        .zip(keep)
-        .filter(|(_, &k)| k)
-        .map(|(n, _)| simplify(&n.points, epsilon))
-        .collect();
+    let polys = kept_polygons(nodes, keep, epsilon);
     let mut out = GrayImage::new(width, height);
     // An edge (a, b) crosses the centre line of row y, `y + 0.5`, exactly when y lies in
     // `min(a.y, b.y)..max(a.y, b.y)` (horizontal edges never do). Edges are bucketed by
@@ -191,6 +186,16 @@ pub fn fill_contours(
         draw_borders(&mut out, &polys);
     }
     out
+}
+
+/// The kept contours' polygons, simplified with `epsilon` (none at 0).
+fn kept_polygons(nodes: &[ContourNode], keep: &[bool], epsilon: f64) -> Vec<Vec<Point<i32>>> {
+    nodes
+        .iter()
+        .zip(keep)
+        .filter(|(_, &k)| k)
+        .map(|(n, _)| simplify(&n.points, epsilon))
+        .collect()
 }
 
 /// Fills a row between the pairs of its sorted crossings (even–odd rule).
@@ -303,12 +308,7 @@ mod tests {
         keep: &[bool],
         epsilon: f64,
     ) -> GrayImage {
-        let polys: Vec<Vec<Point<i32>>> = nodes
-            .iter()
-            .zip(keep)
-            .filter(|(_, &k)| k)
-            .map(|(n, _)| simplify(&n.points, epsilon))
-            .collect();
+        let polys = kept_polygons(nodes, keep, epsilon);
         let mut out = GrayImage::new(width, height);
         let mut xs: Vec<f64> = Vec::new();
         for y in 0..height {
