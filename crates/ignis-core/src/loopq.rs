@@ -64,23 +64,37 @@ pub fn metric_frame_gray(frame: &GrayFrame) -> GrayFrame {
 /// composited over `background` (linear RGB), sRGB-encoded, Rec. 601 luma, area-averaged
 /// down to [`metric_size`].
 pub fn metric_frame_rgba(frame: &RgbaFrame, background: [f32; 3]) -> GrayFrame {
-    use rayon::prelude::*;
     let lut = srgb_lut();
-    // Rows of pixels side by side (each pixel on its own: the same values on any threads).
-    let mut luma = vec![0f32; frame.data().len()];
-    let rows = |(out, px): (&mut [f32], &[[f32; 4]])| luma_row(lut, px, background, out);
-    let chunk = (frame.width() as usize).max(1) * 16;
+    metric_of_rows(frame.size(), frame.data(), |out, px| {
+        luma_row(lut, px, background, out)
+    })
+}
+
+/// The per-pixel grey of a frame's `pixels` (one `T` or, for bytes, `pixels.len() /
+/// size.pixels()` of them a pixel) made by `row` on runs of 16 rows, side by side for
+/// large frames (each pixel on its own: the same values on any threads), then
+/// area-averaged down to [`metric_size`].
+fn metric_of_rows<T: Sync>(
+    size: Size,
+    pixels: &[T],
+    row: impl Fn(&mut [f32], &[T]) + Sync,
+) -> GrayFrame {
+    use rayon::prelude::*;
+    let per = pixels.len() / size.pixels().max(1);
+    let mut luma = vec![0f32; size.pixels()];
+    let chunk = (size.width as usize).max(1) * 16;
+    let rows = |(out, px): (&mut [f32], &[T])| row(out, px);
     if luma.len() >= 1 << 16 {
         luma.par_chunks_mut(chunk)
-            .zip(frame.data().par_chunks(chunk))
+            .zip(pixels.par_chunks(chunk * per))
             .for_each(rows);
     } else {
         luma.chunks_mut(chunk)
-            .zip(frame.data().chunks(chunk))
+            .zip(pixels.chunks(chunk * per))
             .for_each(rows);
     }
-    let g = GrayFrame::from_vec(frame.size(), luma).expect("one value per pixel");
-    area_resize(&g, metric_size(frame.size()))
+    let g = GrayFrame::from_vec(size, luma).expect("one value per pixel");
+    area_resize(&g, metric_size(size))
 }
 
 /// [`metric_frame_rgba`] of an 8-bit sRGB frame over black, straight from its bytes
@@ -92,42 +106,22 @@ pub fn metric_frame_rgba(frame: &RgbaFrame, background: [f32; 3]) -> GrayFrame {
 /// pixel with alpha below 255 takes the linear pixel's own path. `None` when `bytes` is not
 /// `size.pixels() * 4` long.
 pub fn metric_frame_srgba8(size: Size, bytes: &[u8]) -> Option<GrayFrame> {
-    use rayon::prelude::*;
     if bytes.len() != size.pixels() * 4 {
         return None;
     }
     let tables = opaque_luma8_tables();
     let lut = srgb_lut();
     let dec = crate::palette::srgb8_to_linear_table();
-    let row = |(out, px): (&mut [f32], &[u8])| {
+    Some(metric_of_rows(size, bytes, |out, px| {
         for (o, p) in out.iter_mut().zip(px.chunks_exact(4)) {
             *o = if p[3] == 255 {
                 // `luma_with`'s sum of the three weighted encodes, in its order.
                 tables[0][p[0] as usize] + tables[1][p[1] as usize] + tables[2][p[2] as usize]
             } else {
-                let q = [
-                    dec[p[0] as usize],
-                    dec[p[1] as usize],
-                    dec[p[2] as usize],
-                    p[3] as f32 / 255.0,
-                ];
-                luma_with(lut, &q, [0.0; 3])
+                luma_with(lut, &crate::palette::srgba8_to_linear(dec, p), [0.0; 3])
             };
         }
-    };
-    let mut luma = vec![0f32; size.pixels()];
-    let chunk = (size.width as usize).max(1) * 16;
-    if luma.len() >= 1 << 16 {
-        luma.par_chunks_mut(chunk)
-            .zip(bytes.par_chunks(chunk * 4))
-            .for_each(row);
-    } else {
-        luma.chunks_mut(chunk)
-            .zip(bytes.chunks(chunk * 4))
-            .for_each(row);
-    }
-    let g = GrayFrame::from_vec(size, luma).expect("one value per pixel");
-    Some(area_resize(&g, metric_size(size)))
+    }))
 }
 
 /// Per channel, the weighted sRGB encode of each 8-bit code's linear value at alpha 1 over
@@ -737,19 +731,12 @@ mod tests {
     }
 
     /// The linear frame the readers make of 8-bit RGBA bytes (`ignis_media`'s
-    /// `from_srgba8`, restated: colour through the 8-bit table, alpha `a / 255`).
+    /// `from_srgba8`, pixel by pixel through the same `srgba8_to_linear`).
     fn linear_of_srgba8(size: Size, bytes: &[u8]) -> RgbaFrame {
         let dec = crate::palette::srgb8_to_linear_table();
         let px = bytes
             .chunks_exact(4)
-            .map(|p| {
-                [
-                    dec[p[0] as usize],
-                    dec[p[1] as usize],
-                    dec[p[2] as usize],
-                    p[3] as f32 / 255.0,
-                ]
-            })
+            .map(|p| crate::palette::srgba8_to_linear(dec, p))
             .collect();
         RgbaFrame::from_vec(size, px).unwrap()
     }

@@ -32,6 +32,18 @@ pub fn srgb8_to_linear_table() -> &'static [f32; 256] {
     T.get_or_init(|| std::array::from_fn(|k| srgb_to_linear(k as f32 / 255.0)))
 }
 
+/// One 8-bit sRGB pixel (straight alpha, `[r, g, b, a]` bytes) as the readers make it
+/// linear: colour through [`srgb8_to_linear_table`], alpha `a / 255`.
+#[inline]
+pub fn srgba8_to_linear(table: &[f32; 256], p: &[u8]) -> [f32; 4] {
+    [
+        table[p[0] as usize],
+        table[p[1] as usize],
+        table[p[2] as usize],
+        p[3] as f32 / 255.0,
+    ]
+}
+
 /// Linear light → sRGB-encoded value in `0..=1` (clamped).
 pub fn linear_to_srgb(c: f32) -> f32 {
     let c = c.clamp(0.0, 1.0);

@@ -139,14 +139,7 @@ pub(crate) fn from_srgba8(size: Size, bytes: &[u8]) -> RgbaFrame {
     let lut = srgb8_lut();
     let data = bytes
         .chunks_exact(4)
-        .map(|p| {
-            [
-                lut[p[0] as usize],
-                lut[p[1] as usize],
-                lut[p[2] as usize],
-                p[3] as f32 / 255.0,
-            ]
-        })
+        .map(|p| ignis_core::palette::srgba8_to_linear(lut, p))
         .collect();
     RgbaFrame::from_vec(size, data).expect("length checked by caller")
 }
