@@ -118,6 +118,7 @@ fn run(cli: Cli) -> Result<()> {
         Cmd::Demo(a) => {
             let t = std::time::Instant::now();
             let mut d = demo::Demo::new(&a.output, g.clone(), a.seed, a.quick)?;
+            eigen::loop_demo::demo(&mut d)?;
             classic::demo(&mut d)?;
             eigen::demo(&mut d)?;
             learned::demo(&mut d)?;

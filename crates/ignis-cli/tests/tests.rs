@@ -722,8 +722,11 @@ mod demo {
     #[test]
     fn quick_demo_writes_a_gallery() {
         let t = tempfile::tempdir().unwrap();
+        // the footage loops' databases go to `ignis loop`'s cache: a private one here
+        let cache = t.path().join("cache");
         let o = Command::new(env!("CARGO_BIN_EXE_ignis"))
             .current_dir(t.path())
+            .env("XDG_CACHE_HOME", &cache)
             .args(["demo", "--quick", "-q", "-o", "gallery"])
             .output()
             .expect("runs ignis");
@@ -732,6 +735,34 @@ mod demo {
         let html = std::fs::read_to_string(dir.join("index.html")).unwrap();
         assert!(html.contains("classic/fire.mp4"));
         assert!(html.contains("eigen/scenario-original.gif"));
+        assert!(html.contains("Seamless loops from real footage"));
+        match data("candle.mp4").filter(|_| has_ffmpeg()) {
+            None => {
+                eprintln!(
+                    "skipped: the demo's footage loops need ../shared/data/candle.mp4 and ffmpeg"
+                );
+                assert!(html.contains("Skipped here"));
+            }
+            Some(_) => {
+                // the loop, both peers, the wrap picture and the default flipbook, each
+                // with its measured seam
+                for f in [
+                    "loops/candle.gif",
+                    "loops/candle-crossfade.gif",
+                    "loops/candle-video-textures.gif",
+                    "loops/candle-wrap.png",
+                    "loops/candle-flipbook.png",
+                ] {
+                    assert!(html.contains(f), "gallery shows {f}");
+                }
+                assert!(dir.join("loops/candle-flipbook.json").exists());
+                assert!(html.matches("seam ").count() >= 4, "{html}");
+                let wrap = image::open(dir.join("loops/candle-wrap.png")).unwrap();
+                // three rows of 96-px frames (candle.mp4 is square)
+                assert_eq!((wrap.width(), wrap.height()), (6 * 96 + 8 * 4, 3 * 100 + 4));
+                assert!(cache.join("ignis").read_dir().unwrap().count() > 0);
+            }
+        }
         // every file the gallery names exists
         for part in html.split("href=\"").skip(1) {
             let f = &part[..part.find('"').unwrap()];

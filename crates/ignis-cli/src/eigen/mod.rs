@@ -4,6 +4,7 @@
 
 pub mod animate;
 pub mod loop_cmd;
+pub mod loop_demo;
 
 use crate::global::{Global, StageBars};
 use anyhow::{bail, Context, Result};
