@@ -3,11 +3,19 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
+/// The `ignis` binary, its default cache (`ignis loop`'s databases, `volume render`'s loop
+/// times) in this test run's own temporary directory, never the user's.
+fn ignis_cmd() -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_ignis"));
+    c.env(
+        "XDG_CACHE_HOME",
+        std::env::temp_dir().join(format!("ignis-tests-cache-{}", std::process::id())),
+    );
+    c
+}
+
 fn ignis(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_ignis"))
-        .args(args)
-        .output()
-        .expect("runs ignis")
+    ignis_cmd().args(args).output().expect("runs ignis")
 }
 
 /// Runs `ignis` and asserts it succeeded (showing its stderr otherwise).
@@ -527,7 +535,7 @@ mod eigen {
         std::fs::create_dir(&sub).unwrap();
         train_db(&sub);
         let run = |args: &[&str]| {
-            Command::new(env!("CARGO_BIN_EXE_ignis"))
+            ignis_cmd()
                 .args(args)
                 .current_dir(t.path())
                 .output()
@@ -724,7 +732,7 @@ mod demo {
         let t = tempfile::tempdir().unwrap();
         // the footage loops' databases go to `ignis loop`'s cache: a private one here
         let cache = t.path().join("cache");
-        let o = Command::new(env!("CARGO_BIN_EXE_ignis"))
+        let o = ignis_cmd()
             .current_dir(t.path())
             .env("XDG_CACHE_HOME", &cache)
             .args(["demo", "--quick", "-q", "-o", "gallery"])
@@ -909,7 +917,7 @@ mod hardening {
         ] {
             let dir = t.path().join(format!("s{sig}"));
             std::fs::create_dir(&dir).unwrap();
-            let mut cmd = Command::new(env!("CARGO_BIN_EXE_ignis"));
+            let mut cmd = ignis_cmd();
             cmd.args([
                 "volume", "render", "--preset", "campfire", "--size", "256x256",
             ])
@@ -957,7 +965,7 @@ mod hardening {
         let dir = t.path().join("nohup");
         std::fs::create_dir(&dir).unwrap();
         let out = dir.join("fire.gif");
-        let mut cmd = Command::new(env!("CARGO_BIN_EXE_ignis"));
+        let mut cmd = ignis_cmd();
         cmd.args(["volume", "render", "--preset", "torch", "--size", "128x128"])
             .args(["--frames", "120", "-q", "-o"])
             .arg(&out)
@@ -995,7 +1003,7 @@ mod hardening {
         let png = t.path().join("f.png");
         assert!(classic("32x24", "1", &[], &png).status.success());
         let run = |args: &[&str], stdout: std::process::Stdio| {
-            Command::new(env!("CARGO_BIN_EXE_ignis"))
+            ignis_cmd()
                 .args(args)
                 .stdout(stdout)
                 .stderr(std::process::Stdio::piped())
@@ -1179,6 +1187,71 @@ mod loops_and_chunks {
         chunks_equal_full(&[
             "volume", "render", "--preset", "candle", "--size", "24x24", "--loop",
         ]);
+    }
+
+    /// A looping render keeps its frames' loop times (`--cache`): a farm job rendering
+    /// another chunk, or the same chunk again, reads them and writes the same bytes; a
+    /// damaged entry is timed anew (same bytes, entry repaired); a cache that cannot be
+    /// written costs only a note.
+    #[test]
+    fn volume_loop_times_are_kept_for_the_next_chunk() {
+        let t = tempfile::tempdir().unwrap();
+        let cache = t.path().join("cache");
+        let render = |cache: &Path, out: &str| {
+            let c = cache.to_string_lossy().into_owned();
+            let o = t.path().join(out).join("%04d.png");
+            let o = o.to_string_lossy().into_owned();
+            ignis_ok(&[
+                "volume", "render", "--preset", "campfire", "--size", "24x24", "--frames", "30",
+                "--loop", "--chunk", "10..20", "--cache", &c, "-o", &o,
+            ])
+        };
+        let same = |a: &str, b: &str| {
+            let (x, y) = (t.path().join(a), t.path().join(b));
+            let names = files_in(&x);
+            assert_eq!(names.len(), 10);
+            assert_eq!(names, files_in(&y));
+            for n in &names {
+                assert!(
+                    std::fs::read(x.join(n)).unwrap() == std::fs::read(y.join(n)).unwrap(),
+                    "{a} and {b} differ at {n}"
+                );
+            }
+        };
+        render(&cache, "cold");
+        let kept = cache.join("volume-loop-times");
+        let entries = files_in(&kept);
+        assert_eq!(entries.len(), 1, "{entries:?}");
+        let entry = kept.join(&entries[0]);
+        let v = read_json(&entry);
+        assert_eq!(v["frames"], 30);
+        assert_eq!(v["times"][0], 0.0);
+        render(&cache, "warm");
+        same("cold", "warm");
+        // damaged: timed again, the same frames, the entry rewritten
+        std::fs::write(
+            &entry,
+            "{\"version\": 1, \"frames\": 30, \"times_f64_bits\": [\"zz\"]}",
+        )
+        .unwrap();
+        render(&cache, "damaged");
+        same("cold", "damaged");
+        assert_eq!(read_json(&entry)["frames"], 30);
+        // a file where the cache should be: rendered anyway, with a note
+        let blocked = t.path().join("blocked");
+        std::fs::write(&blocked, "not a directory").unwrap();
+        let c = blocked.to_string_lossy().into_owned();
+        let o = t.path().join("blocked-out").join("%04d.png");
+        let o = o.to_string_lossy().into_owned();
+        let r = ignis_ok(&[
+            "volume", "render", "--preset", "campfire", "--size", "24x24", "--frames", "30",
+            "--loop", "--chunk", "10..20", "--cache", &c, "-o", &o,
+        ]);
+        assert!(
+            String::from_utf8_lossy(&r.stdout).contains("not kept"),
+            "{r:?}"
+        );
+        same("cold", "blocked-out");
     }
 
     /// A looping flipbook says `"loop": true` and carries its measured seam; `--no-loop`

@@ -631,6 +631,45 @@ impl FireScene {
         Ok(a)
     }
 
+    /// [`FireScene::looping_animator`] with its frames' loop times given instead of
+    /// measured on a preview: those an earlier looping animator of this same scene and
+    /// loop length computed ([`Animator::loop_times`]), kept by the caller (a render
+    /// farm's chunks, a second output of one render). The frames are then those of that
+    /// animator, bit for bit, and no preview is rendered. Times of another scene still make
+    /// a seamless loop, only with less even steps. Errors on times no loop has: not
+    /// `frames` of them, not starting at 0, decreasing, or outside `0..frames`.
+    pub fn looping_animator_with_times(&self, frames: u32, times: &[f64]) -> Result<Animator<'_>> {
+        let bad = |why: String| {
+            Err(VolumeError::bad(
+                "loop",
+                format!("loop times {why}; render without them to measure new ones"),
+            ))
+        };
+        if times.len() != frames as usize {
+            return bad(format!(
+                "for {} frames given to a loop of {frames}",
+                times.len()
+            ));
+        }
+        if times.first().is_some_and(|&t| t != 0.0) {
+            return bad("that do not start at 0".into());
+        }
+        if let Some(t) = times
+            .iter()
+            .find(|t| !(t.is_finite() && (0.0..f64::from(frames)).contains(*t)))
+        {
+            return bad(format!("with {t}, outside the loop's 0..{frames}"));
+        }
+        if times.windows(2).any(|w| w[1] < w[0]) {
+            return bad("that go backwards".into());
+        }
+        let mut a = self.looping_animator_with(frames, LoopTiming::UNIFORM)?;
+        if let Some(l) = a.looping.as_mut() {
+            l.times = times.into();
+        }
+        Ok(a)
+    }
+
     /// The loop times at which the frames of `looping` cover equal distances: measured on
     /// a preview `timing.preview_width` pixels wide (at most the metric frames' width) at
     /// `timing.samples_per_frame` uniform loop times per frame ([`crate::looping`]).
@@ -945,6 +984,12 @@ impl Animator<'_> {
     /// Index of the next frame.
     pub fn frame_index(&self) -> u64 {
         self.frame
+    }
+
+    /// A looping animator's loop time of each frame of one cycle (in frames, from 0), to
+    /// give [`FireScene::looping_animator_with_times`] later; `None` when not looping.
+    pub fn loop_times(&self) -> Option<&[f64]> {
+        self.looping.as_ref().map(|l| &l.times[..])
     }
 
     /// Skips `n` frames without rendering them: only the motion (scripts, simulations,
@@ -1321,6 +1366,51 @@ mod hardening_tests {
 
     fn scene(toml: &str) -> Result<FireScene> {
         FireScene::from_toml(toml, Path::new("."), &mut |_| Err("no images".into()))
+    }
+
+    /// Loop times kept from one animator give another the same frames, bit for bit (a
+    /// simulated fire and a scripted one); times no loop has are refused.
+    #[test]
+    fn kept_loop_times_give_the_same_frames() {
+        for p in [Preset::Campfire, Preset::Candle] {
+            let s = FireScene::preset(p).with_size(Size::new(24, 24).unwrap());
+            let mut a = s.looping_animator(8).unwrap();
+            let times = a.loop_times().unwrap().to_vec();
+            assert_eq!(times.len(), 8);
+            assert!(
+                times.iter().skip(1).any(|&t| t != t.round()),
+                "re-timed: {times:?}"
+            );
+            let mut b = s.looping_animator_with_times(8, &times).unwrap();
+            assert_eq!(b.loop_times().unwrap(), &times[..]);
+            // a chunk starting at frame 5, as a farm job renders it
+            let mut c = s.looping_animator_with_times(8, &times).unwrap();
+            c.skip(5);
+            for i in 0..8 {
+                let (fa, fb) = (a.next_frame().unwrap(), b.next_frame().unwrap());
+                assert_eq!(fa.image.data(), fb.image.data(), "{p:?} frame {i}");
+                if i >= 5 {
+                    assert_eq!(fa.image.data(), c.next_frame().unwrap().image.data());
+                }
+            }
+            assert!(s.animator().unwrap().loop_times().is_none());
+        }
+        let s = FireScene::preset(Preset::Torch).with_size(Size::new(16, 16).unwrap());
+        for bad in [
+            vec![0.0, 1.0, 2.0],
+            vec![0.5, 1.0, 2.0, 3.0],
+            vec![0.0, 2.0, 1.0, 3.0],
+            vec![0.0, 1.0, 2.0, 4.0],
+            vec![0.0, 1.0, f64::NAN, 3.0],
+            vec![0.0, -1.0, 2.0, 3.0],
+        ] {
+            let e = s
+                .looping_animator_with_times(4, &bad)
+                .err()
+                .unwrap_or_else(|| panic!("{bad:?} refused"))
+                .to_string();
+            assert!(e.contains("loop times"), "{e}");
+        }
     }
 
     /// Issue 18 defect 4: work past the documented limits is refused before rendering
