@@ -712,6 +712,9 @@ mod volume {
             assert!(p > 0.0 && lw > 0.0, "{l}");
             let setup = l["looping_setup_s"].as_f64().unwrap();
             assert!((0.0..=lw).contains(&setup), "{l}");
+            let kept = &l["with_kept_times"];
+            assert!(kept["looping_s"].as_f64().unwrap() > 0.0, "{l}");
+            assert!(kept["overhead"].is_number(), "{l}");
             assert!(l["overhead"].is_number(), "{l}");
             if cfg!(all(target_os = "linux", target_env = "gnu")) {
                 assert!(l["looping_cpu_s"].as_f64().unwrap() > 0.0, "{l}");
