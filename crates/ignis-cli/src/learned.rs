@@ -126,6 +126,13 @@ pub struct SynthArgs {
     /// Seed; the same model, settings and seed give the same bytes.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// Where a loop's frame times are kept (default: `ignis loop`'s cache,
+    /// $XDG_CACHE_HOME/ignis or ~/.cache/ignis). A looping synthesis times its frames on
+    /// previews of the whole loop; a later one of the same model, settings, seed, size and
+    /// --frames by the same `ignis` (another --chunk of a farm render) reads them instead
+    /// and writes the same bytes. Point the farm's jobs at shared storage
+    #[arg(long, value_name = "DIR")]
+    pub cache: Option<PathBuf>,
     #[command(flatten)]
     pub frames_args: FrameArgs,
     #[command(flatten)]
@@ -361,12 +368,40 @@ pub fn synth(a: &SynthArgs, g: &Global) -> Result<Vec<PathBuf>> {
         }
         palette.apply(f)
     };
+    // a loop's frame times, kept for the farm's other chunks ([`crate::kept_times`]): they
+    // depend on the model, the controls, the seed, the loop, the rate, the size and the
+    // measure
+    let model_sha = if plan.looping {
+        crate::eigen::loop_cmd::source_sha256(&a.model)?
+    } else {
+        String::new()
+    };
+    let kept = |seed: u64| {
+        plan.looping.then(|| {
+            let key = format!(
+                "model={model_sha} controls={controls:?} seed={seed} frames={} fps={fps:?} size={} measure={measure:?}",
+                a.frames, a.size
+            );
+            crate::kept_times::KeptTimes::new(
+                a.cache.as_deref(),
+                "learned",
+                &key,
+                "ignis learned synth: the process time of each of the loop's frames",
+            )
+        })
+    };
     let bar = g.progress(plan.range.len() as u64 * variants as u64, "synthesising");
     for v in 0..variants {
+        let seed = a.seed.wrapping_add(v as u64);
         let mut synth = match first.take() {
             Some(s) => s,
-            None => make(a.seed.wrapping_add(v as u64))?,
+            None => make(seed)?,
         };
+        let kept = kept(seed);
+        let mut timed = false;
+        if let Some(times) = kept.as_ref().and_then(|k| k.read(a.frames as usize)) {
+            timed = synth.set_loop_times(a.size, times).is_ok();
+        }
         // a chunk steps only the (cheap) process to its first frame
         synth.skip(plan.range.start as u64);
         if let Some(m) = &model_motion {
@@ -374,6 +409,12 @@ pub fn synth(a: &SynthArgs, g: &Global) -> Result<Vec<PathBuf>> {
         }
         for i in plan.range.clone() {
             synth.next_frame_into(&mut frame);
+            if let (false, Some(k)) = (timed, &kept) {
+                if let Some((_, times)) = synth.loop_times() {
+                    k.keep(times, g);
+                }
+                timed = true;
+            }
             if let Some(m) = &model_motion {
                 m.record(&mut synth, a.size, i + 1 < plan.range.end, colour);
             }

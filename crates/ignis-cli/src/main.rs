@@ -28,6 +28,7 @@ mod frames;
 mod global;
 mod inbetween;
 mod info;
+mod kept_times;
 mod learned;
 mod output;
 mod volume;

@@ -259,98 +259,38 @@ pub fn render(a: &RenderArgs, g: &Global) -> Result<Vec<PathBuf>> {
     Ok(files)
 }
 
-/// Version of the kept loop times' file (`ignis volume render --cache`).
-const LOOP_TIMES_VERSION: u32 = 1;
-
 /// `sc`'s looping animator of `frames` frames, its frames' loop times read from the cache
-/// (`dir`, else `ignis loop`'s) when a render of the same scene, size and length by this
-/// same build of `ignis` kept them, else timed on a preview and kept there. The cache only
-/// saves time: an entry that is missing, unreadable or not a loop's is timed anew, and
-/// one that cannot be written leaves a note, never an error.
+/// (`dir`, else `ignis loop`'s; [`crate::kept_times`]) when a render of the same scene,
+/// size and length by this same build of `ignis` kept them, else timed on a preview and
+/// kept there.
 fn looping_animator<'a>(
     sc: &'a FireScene,
     frames: u32,
     dir: Option<&Path>,
     g: &Global,
 ) -> Result<ignis_volume::Animator<'a>> {
-    let path = match (dir, loop_times_key(sc, frames)) {
-        (Some(d), Some(key)) => Some(d.join("volume-loop-times").join(format!("{key}.json"))),
-        (None, Some(key)) => crate::eigen::loop_cmd::default_cache_dir()
-            .ok()
-            .map(|d| d.join("volume-loop-times").join(format!("{key}.json"))),
-        (_, None) => None,
-    };
-    if let Some(times) = path.as_deref().and_then(|p| read_loop_times(p, frames)) {
+    // everything the times depend on: the scene (every field, by its `Debug` form, which
+    // prints floats exactly), the loop's length and the timing
+    let key = format!(
+        "frames={frames} timing={:?} scene={sc:?}",
+        ignis_volume::LoopTiming::DEFAULT
+    );
+    let kept = crate::kept_times::KeptTimes::new(
+        dir,
+        "volume",
+        &key,
+        "ignis volume render: the loop time (in frames) of each frame of one cycle",
+    );
+    if let Some(times) = kept.read(frames as usize) {
         if let Ok(a) = sc.looping_animator_with_times(frames, &times) {
             return Ok(a);
         }
     }
     let a = sc.looping_animator(frames)?;
-    if let (Some(p), Some(times)) = (path, a.loop_times()) {
-        if let Err(e) = write_loop_times(&p, frames, times) {
-            g.say(format!(
-                "note: the loop's frame times were not kept ({e:#}); the next render of it times them again"
-            ));
-        }
+    if let Some(times) = a.loop_times() {
+        kept.keep(times, g);
     }
     Ok(a)
-}
-
-/// What the loop times depend on, hashed: the scene (every field, by its `Debug` form,
-/// which prints floats exactly), the loop's length, the timing, and this build of `ignis`
-/// (its version and its executable's size and time: another build may time differently).
-/// `None` when the executable cannot be identified (nothing is then cached).
-fn loop_times_key(sc: &FireScene, frames: u32) -> Option<String> {
-    use sha2::{Digest, Sha256};
-    let exe = std::fs::metadata(std::env::current_exe().ok()?).ok()?;
-    let built = exe
-        .modified()
-        .ok()?
-        .duration_since(std::time::UNIX_EPOCH)
-        .ok()?;
-    let what = format!(
-        "ignis {} {} {} v{LOOP_TIMES_VERSION} frames={frames} timing={:?} scene={sc:?}",
-        env!("CARGO_PKG_VERSION"),
-        exe.len(),
-        built.as_nanos(),
-        ignis_volume::LoopTiming::DEFAULT,
-    );
-    let d = Sha256::digest(what.as_bytes());
-    Some(d[..16].iter().map(|b| format!("{b:02x}")).collect())
-}
-
-/// The kept times of a `frames`-frame loop (exact: each `f64` as its bits in hex), or
-/// `None` when the file is missing or not such a list.
-fn read_loop_times(path: &Path, frames: u32) -> Option<Vec<f64>> {
-    let v: serde_json::Value = serde_json::from_slice(&std::fs::read(path).ok()?).ok()?;
-    if v["version"] != LOOP_TIMES_VERSION || v["frames"] != frames {
-        return None;
-    }
-    let bits = v["times_f64_bits"].as_array()?;
-    if bits.len() != frames as usize {
-        return None;
-    }
-    bits.iter()
-        .map(|b| Some(f64::from_bits(u64::from_str_radix(b.as_str()?, 16).ok()?)))
-        .collect()
-}
-
-fn write_loop_times(path: &Path, frames: u32, times: &[f64]) -> Result<()> {
-    let dir = path.parent().context("a cache file has a directory")?;
-    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    let bits: Vec<String> = times
-        .iter()
-        .map(|t| format!("{:016x}", t.to_bits()))
-        .collect();
-    let v = serde_json::json!({
-        "what": "ignis volume render: the loop time (in frames) of each frame of one cycle",
-        "version": LOOP_TIMES_VERSION,
-        "frames": frames,
-        "times": times,
-        "times_f64_bits": bits,
-    });
-    ignis_core::atomic::write_bytes(path, serde_json::to_string(&v)?.as_bytes())
-        .with_context(|| format!("writing {}", path.display()))
 }
 
 /// The demo section: every preset as a looping GIF and a flipbook with alpha.

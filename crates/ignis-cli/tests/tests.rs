@@ -2393,6 +2393,29 @@ mod variants {
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
         row_is_single_loop(&frames, 1, &single);
         refuses_bad_variants(&run, dir.path());
+        // a farm's chunks keep and read the loop's frame times (`--cache`): the same bytes
+        let cache = dir.path().join("cache");
+        let cache_s = cache.to_str().unwrap();
+        for name in ["cold", "warm"] {
+            let out = dir.path().join(name).join("%04d.png");
+            let chunk = [
+                "--seed", "5", "--loop", "--chunk", "3..9", "--cache", cache_s,
+            ];
+            let o = run(&chunk, &out);
+            assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        }
+        let kept = files_in(&cache.join("learned-loop-times"));
+        assert_eq!(kept.len(), 1, "{kept:?}");
+        let (cold, warm) = (dir.path().join("cold"), dir.path().join("warm"));
+        let names = files_in(&cold);
+        assert_eq!(names.len(), 6);
+        assert_eq!(names, files_in(&warm));
+        for n in &names {
+            assert!(
+                std::fs::read(cold.join(n)).unwrap() == std::fs::read(warm.join(n)).unwrap(),
+                "{n} differs with the kept times"
+            );
+        }
     }
 }
 

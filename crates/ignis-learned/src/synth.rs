@@ -322,6 +322,48 @@ impl<'m> Synthesiser<'m> {
         Ok(())
     }
 
+    /// A looping synthesiser's frame times (the process time of each of the loop's frames)
+    /// and the frame size they were timed for, once its first frame of that size has timed
+    /// them; to give [`Synthesiser::set_loop_times`] later. `None` before, or when not
+    /// looping.
+    pub fn loop_times(&self) -> Option<(Size, &[f64])> {
+        self.loop_times.as_ref().map(|(s, t)| (*s, &t[..]))
+    }
+
+    /// Gives a looping synthesiser the frame times an earlier one of the same model,
+    /// controls, seed, loop length, rate and loop measure timed for frames of `size`
+    /// ([`Synthesiser::loop_times`]), so its frames of that size are that one's, bit for
+    /// bit, without timing them again (a render farm's later chunks). Call after
+    /// [`Synthesiser::measure_loop_through`], which clears them. Times of another loop
+    /// still make a seamless loop, only with less even steps. Errors when not looping, or
+    /// on times no loop of this length has (not one per frame, negative or not finite).
+    pub fn set_loop_times(&mut self, size: Size, times: Vec<f64>) -> Result<()> {
+        if self.looped.is_none() {
+            return Err(LearnedError::bad(
+                "loop times",
+                "given to a synthesiser that does not loop".to_string(),
+            ));
+        }
+        if times.len() != self.loop_frames as usize {
+            return Err(LearnedError::bad(
+                "loop times",
+                format!(
+                    "{} times for a loop of {} frames",
+                    times.len(),
+                    self.loop_frames
+                ),
+            ));
+        }
+        if let Some(t) = times.iter().find(|t| !(t.is_finite() && **t >= 0.0)) {
+            return Err(LearnedError::bad(
+                "loop times",
+                format!("{t} is not a time in the loop"),
+            ));
+        }
+        self.loop_times = Some((size, times));
+        Ok(())
+    }
+
     /// Skips `n` output frames without rendering them (only the cheap process steps run,
     /// when the next frame needs them), so the next frame is exactly the one a full run
     /// would render there: a render-farm chunk.

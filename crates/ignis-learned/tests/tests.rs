@@ -353,6 +353,35 @@ mod flame {
         assert!(Synthesiser::looping(&t.model, c, 3, 1).is_err());
     }
 
+    /// Loop times kept from one synthesiser ([`Synthesiser::loop_times`]) give another of
+    /// the same loop the same frames, bit for bit, from any first frame (a farm's chunk);
+    /// times no loop of that length has are refused.
+    #[test]
+    fn kept_loop_times_give_the_same_frames() {
+        let (_, t) = trained(60, 8);
+        let (n, size) = (24u32, Size::new(40, 40).unwrap());
+        let c = Controls::default();
+        let mut a = Synthesiser::looping(&t.model, c.clone(), 3, n).unwrap();
+        assert!(a.loop_times().is_none(), "timed by the first frame");
+        let full = a.frames(size, n as usize).unwrap();
+        let (at, times) = a.loop_times().map(|(s, t)| (s, t.to_vec())).unwrap();
+        assert_eq!((at, times.len()), (size, n as usize));
+        let mut b = Synthesiser::looping(&t.model, c.clone(), 3, n).unwrap();
+        b.set_loop_times(size, times.clone()).unwrap();
+        b.skip(9);
+        assert_eq!(b.frames(size, 10).unwrap(), full[9..19]);
+        let mut bad = Synthesiser::looping(&t.model, c.clone(), 3, n).unwrap();
+        for wrong in [
+            times[..5].to_vec(),
+            vec![f64::NAN; n as usize],
+            vec![-1.0; n as usize],
+        ] {
+            assert!(bad.set_loop_times(size, wrong).is_err());
+        }
+        let mut free = Synthesiser::new(&t.model, c, 3).unwrap();
+        assert!(free.set_loop_times(size, times).is_err());
+    }
+
     /// A loop timed through a palette's measure ([`Synthesiser::measure_loop_through`]:
     /// the written frames' sRGB luma per rendered intensity) meets the loop bounds on the
     /// palette-coloured frames as the loop measure reads them; a bad table is refused.
