@@ -90,6 +90,21 @@ fn has_ffmpeg() -> bool {
     ok
 }
 
+/// Asserts that directories `x` and `y` hold the same `n` files, byte for byte.
+fn assert_same_files(x: &Path, y: &Path, n: usize) {
+    let names = files_in(x);
+    assert_eq!(names.len(), n, "{}", x.display());
+    assert_eq!(names, files_in(y), "{} and {}", x.display(), y.display());
+    for name in &names {
+        assert!(
+            std::fs::read(x.join(name)).unwrap() == std::fs::read(y.join(name)).unwrap(),
+            "{} and {} differ at {name}",
+            x.display(),
+            y.display()
+        );
+    }
+}
+
 /// Asserts a failed run: non-zero exit, an `error:` line containing `needle`, no panic.
 fn assert_fails(out: &Output, needle: &str) {
     let err = String::from_utf8_lossy(&out.stderr);
@@ -1209,18 +1224,7 @@ mod loops_and_chunks {
                 "--loop", "--chunk", "10..20", "--cache", &c, "-o", &o,
             ])
         };
-        let same = |a: &str, b: &str| {
-            let (x, y) = (t.path().join(a), t.path().join(b));
-            let names = files_in(&x);
-            assert_eq!(names.len(), 10);
-            assert_eq!(names, files_in(&y));
-            for n in &names {
-                assert!(
-                    std::fs::read(x.join(n)).unwrap() == std::fs::read(y.join(n)).unwrap(),
-                    "{a} and {b} differ at {n}"
-                );
-            }
-        };
+        let same = |a: &str, b: &str| assert_same_files(&t.path().join(a), &t.path().join(b), 10);
         render(&cache, "cold");
         let kept = cache.join("volume-loop-times");
         let entries = files_in(&kept);
@@ -2406,16 +2410,7 @@ mod variants {
         }
         let kept = files_in(&cache.join("learned-loop-times"));
         assert_eq!(kept.len(), 1, "{kept:?}");
-        let (cold, warm) = (dir.path().join("cold"), dir.path().join("warm"));
-        let names = files_in(&cold);
-        assert_eq!(names.len(), 6);
-        assert_eq!(names, files_in(&warm));
-        for n in &names {
-            assert!(
-                std::fs::read(cold.join(n)).unwrap() == std::fs::read(warm.join(n)).unwrap(),
-                "{n} differs with the kept times"
-            );
-        }
+        assert_same_files(&dir.path().join("cold"), &dir.path().join("warm"), 6);
     }
 }
 
