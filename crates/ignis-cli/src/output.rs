@@ -78,6 +78,13 @@ pub struct OutputArgs {
     /// raised to keep the duration; reported in the JSON's `retimed`).
     #[arg(long)]
     pub fit_frames: bool,
+    /// Flipbook: crop every cell to the box the animation ever shows (every pixel any frame
+    /// shows, and one transparent pixel around them), so no texture is spent on empty space
+    /// around the fire; the JSON's `trimmed` says where that box lies in the rendered frame
+    /// (offset the sprite's quad by it to keep its pivot). Example: `ignis volume render
+    /// --preset campfire --size 512x512 --frames 64 --trim -o camp.png`
+    #[arg(long)]
+    pub trim: bool,
     /// Flipbook: N statistically different loops of the effect as the N rows of one sheet
     /// (Unity's Single Row mode, a row picked at random per particle): `ignis volume render`,
     /// `ignis classic` and `ignis learned synth` render `--frames` frames per row, each a
@@ -140,6 +147,7 @@ impl OutputArgs {
                 heat: self.emission,
                 hdr: self.hdr,
                 scaled_from: None,
+                trim: self.trim,
             },
             background: [0.0; 3],
             first_frame: 0,
@@ -223,6 +231,7 @@ impl OutputArgs {
             || self.pot
             || self.fit_frames
             || self.variants != 1
+            || self.trim
             || self.engine() != Engine::Generic;
         let format = match opts.format {
             Some(f) => f,
@@ -240,8 +249,8 @@ impl OutputArgs {
         }
         if flipbook_only && format != Format::Flipbook {
             anyhow::bail!(
-                "--engine, --motion-vectors, --emission, --hdr, --max-size, --pot, --fit-frames and \
-                 --variants apply to flipbooks; write to a .png file (e.g. -o fire.png)"
+                "--engine, --motion-vectors, --emission, --hdr, --max-size, --pot, --fit-frames, \
+                 --trim and --variants apply to flipbooks; write to a .png file (e.g. -o fire.png)"
             );
         }
         ignis_media::check_output(&self.output, opts)

@@ -1545,6 +1545,58 @@ mod export {
         assert!(!v.exists() && !mp4.exists());
     }
 
+    /// `--trim`: the cells (and the motion-vector sheet's) hold only the box the fire ever
+    /// shows, and the JSON says where it lies in the rendered frame; the frames are the
+    /// untrimmed ones cropped there.
+    #[test]
+    fn trim_crops_the_cells_to_what_the_fire_shows() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = |name: &str| dir.path().join(name).to_string_lossy().into_owned();
+        let render = |extra: &[&str], name: &str| {
+            let o = out(name);
+            let mut a = vec![
+                "volume", "render", "--preset", "campfire", "--size", "64x64", "--frames", "4",
+                "-q", "-o", &o,
+            ];
+            a.extend_from_slice(extra);
+            ignis_ok(&a);
+        };
+        render(&["--motion-vectors"], "full.png");
+        render(&["--trim", "--motion-vectors"], "trim.png");
+        let meta = read_json(&dir.path().join("trim.json"));
+        let t = &meta["trimmed"];
+        let (w, h) = (
+            meta["frame_width"].as_u64().unwrap() as u32,
+            meta["frame_height"].as_u64().unwrap() as u32,
+        );
+        assert!(w < 64 && h < 64, "{meta}");
+        assert_eq!(
+            (t["from_width"].as_u64(), t["from_height"].as_u64()),
+            (Some(64), Some(64))
+        );
+        let (x0, y0) = (
+            t["x"].as_u64().unwrap() as u32,
+            t["y"].as_u64().unwrap() as u32,
+        );
+        assert!(x0 + w <= 64 && y0 + h <= 64, "{meta}");
+        let colour = image::open(dir.path().join("trim.png")).unwrap();
+        let mv = image::open(dir.path().join("trim.mv.png")).unwrap();
+        assert_eq!(colour.width(), mv.width());
+        assert_eq!(colour.height(), mv.height());
+        let full = ignis_media::read_flipbook(&dir.path().join("full.json")).unwrap();
+        let trim = ignis_media::read_flipbook(&dir.path().join("trim.json")).unwrap();
+        assert!(read_json(&dir.path().join("full.json"))
+            .get("trimmed")
+            .is_none());
+        for (a, b) in full.frames.iter().zip(&trim.frames) {
+            for y in 0..h {
+                for x in 0..w {
+                    assert_eq!(a.get(x + x0, y + y0), b.get(x, y));
+                }
+            }
+        }
+    }
+
     #[test]
     fn bad_export_options_are_refused_and_nothing_is_written() {
         let dir = tempfile::tempdir().unwrap();
@@ -1558,6 +1610,7 @@ mod export {
             &classic("48x32", "2", &["--engine", "unity"], &mp4),
             "apply to flipbooks",
         );
+        assert_fails(&classic("48x32", "2", &["--trim"], &mp4), "--trim");
         assert!(
             files_in(dir.path()).is_empty(),
             "{:?}",

@@ -31,7 +31,7 @@ pub use read::{
 pub use write::{
     check_output, create, fit_frame, read_flipbook, read_flipbook_meta, write_png, AlphaMode,
     Engine, Flipbook, FlipbookMeta, FlipbookOptions, Format, FrameWriter, MotionSource, ScaledFrom,
-    WriteOptions,
+    Trimmed, WriteOptions,
 };
 
 /// Whether the system `ffmpeg` and `ffprobe` are usable (and `IGNIS_NO_FFMPEG` is not set).

@@ -935,6 +935,79 @@ mod roundtrip {
         }
     }
 
+    /// `trim`: the cells hold the box of every pixel any frame shows (alpha not 0 in 8
+    /// bits) and one transparent pixel around it; the JSON says where that box lies; the
+    /// cropped frames equal the untrimmed sheet's frames there. Nothing visible, or the
+    /// whole frame visible: no trim.
+    #[test]
+    fn trimmed_flipbook_holds_the_visible_box() {
+        let dir = tempfile::tempdir().unwrap();
+        let sz = size(20, 16);
+        // a block moving right over x 5..=10, y 4..=10, and a pixel too faint for 8 bits
+        let frames: Vec<RgbaFrame> = (0..4)
+            .map(|t| {
+                let mut f = RgbaFrame::new(sz);
+                for y in 4..11 {
+                    for x in 5 + t..8 + t {
+                        f.data_mut()[y * 20 + x] = [0.8, 0.4, 0.1, 0.5 + 0.1 * t as f32];
+                    }
+                }
+                f.data_mut()[19] = [1.0, 1.0, 1.0, 0.001];
+                f
+            })
+            .collect();
+        let opts = |trim: bool| WriteOptions {
+            flipbook: FlipbookOptions {
+                trim,
+                padding: 2,
+                ..Default::default()
+            },
+            ..Default::default()
+        };
+        write_all(&dir.path().join("full.png"), &frames, &opts(false));
+        write_all(&dir.path().join("trim.png"), &frames, &opts(true));
+        let full = read_flipbook(&dir.path().join("full.json")).unwrap();
+        let tr = read_flipbook(&dir.path().join("trim.json")).unwrap();
+        assert_eq!(full.meta.trimmed, None);
+        assert_eq!((tr.meta.frame_width, tr.meta.frame_height), (8, 9));
+        assert_eq!(
+            tr.meta.trimmed,
+            Some(Trimmed {
+                from_width: 20,
+                from_height: 16,
+                x: 4,
+                y: 3
+            })
+        );
+        assert_eq!((tr.meta.cell_width, tr.meta.padding), (8 + 4, 2));
+        assert_eq!(tr.frames.len(), 4);
+        for (a, b) in full.frames.iter().zip(&tr.frames) {
+            for y in 0..9 {
+                for x in 0..8 {
+                    assert_eq!(a.get(x + 4, y + 3), b.get(x, y), "({x}, {y})");
+                }
+            }
+            // nothing visible was cut off
+            for y in 0..16 {
+                for x in 0..20 {
+                    let inside = (4..12).contains(&x) && (3..12).contains(&y);
+                    assert!(inside || a.get(x, y)[3] == 0.0, "({x}, {y}) cut");
+                }
+            }
+        }
+        let clear = vec![RgbaFrame::new(sz); 2];
+        assert_eq!(ignis_media::write::visible_box(&clear, sz), None);
+        let whole = vec![RgbaFrame::filled(sz, [0.5, 0.5, 0.5, 1.0]); 2];
+        assert_eq!(ignis_media::write::visible_box(&whole, sz), None);
+        assert_eq!(
+            ignis_media::write::visible_box(&frames, sz),
+            Some((4, 3, 8, 9))
+        );
+        write_all(&dir.path().join("clear.png"), &clear, &opts(true));
+        let c = read_flipbook(&dir.path().join("clear.json")).unwrap();
+        assert_eq!((c.meta.frame_width, c.meta.trimmed), (20, None));
+    }
+
     #[test]
     fn flipbook_premultiplied() {
         let dir = tempfile::tempdir().unwrap();

@@ -79,6 +79,10 @@ pub struct FlipbookOptions {
     /// The frames were rendered smaller than the source to fit the sheet limit
     /// ([`fit_frame`]); recorded in the JSON's `scaled_from` (default none).
     pub scaled_from: Option<ScaledFrom>,
+    /// Crop every frame to the box the animation ever shows ([`visible_box`]), so no
+    /// texture is spent on pixels that are transparent in every frame; recorded in the
+    /// JSON's `trimmed` (default false).
+    pub trim: bool,
 }
 
 impl Default for FlipbookOptions {
@@ -97,8 +101,61 @@ impl Default for FlipbookOptions {
             heat: false,
             hdr: false,
             scaled_from: None,
+            trim: false,
         }
     }
+}
+
+/// Where a trimmed flipbook's frames ([`FlipbookOptions::trim`]) lie in the frames as
+/// rendered: the frame is the box `x..x + frame_width`, `y..y + frame_height` (pixels, +y
+/// down) of a `from_width` × `from_height` frame. An engine keeps a sprite's pivot where it
+/// was by offsetting the quad by that box's centre minus the full frame's centre.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct Trimmed {
+    pub from_width: u32,
+    pub from_height: u32,
+    pub x: u32,
+    pub y: u32,
+}
+
+/// The box (`x, y, width, height`) holding every pixel that any of `frames` (all of
+/// `size`) shows — alpha that is not 0 in 8 bits — and a transparent pixel around it where
+/// the frame has room (so filtering at the crop's edge reads transparency, as it did in the
+/// full frame). `None` when nothing is visible or the box is the whole frame.
+pub fn visible_box(frames: &[RgbaFrame], size: Size) -> Option<(u32, u32, u32, u32)> {
+    let (w, h) = (size.width, size.height);
+    let (mut x0, mut y0, mut x1, mut y1) = (u32::MAX, u32::MAX, 0u32, 0u32);
+    for f in frames {
+        for (y, row) in f.data().chunks_exact(w as usize).enumerate() {
+            let y = y as u32;
+            let shown = |p: &[f32; 4]| p[3] * 255.0 >= 0.5;
+            if let (Some(first), Some(last)) =
+                (row.iter().position(shown), row.iter().rposition(shown))
+            {
+                x0 = x0.min(first as u32);
+                x1 = x1.max(last as u32);
+                y0 = y0.min(y);
+                y1 = y1.max(y);
+            }
+        }
+    }
+    if x0 == u32::MAX {
+        return None;
+    }
+    let (x0, y0) = (x0.saturating_sub(1), y0.saturating_sub(1));
+    let (x1, y1) = ((x1 + 1).min(w - 1), (y1 + 1).min(h - 1));
+    let b = (x0, y0, x1 - x0 + 1, y1 - y0 + 1);
+    (b != (0, 0, w, h)).then_some(b)
+}
+
+/// `data` (one value per pixel of a `width`-wide frame) cropped to the box `(x, y, w, h)`.
+fn crop<T: Copy>(data: &[T], width: u32, (x, y, w, h): (u32, u32, u32, u32)) -> Vec<T> {
+    let mut out = Vec::with_capacity(w as usize * h as usize);
+    for r in y..y + h {
+        let start = (r * width + x) as usize;
+        out.extend_from_slice(&data[start..start + w as usize]);
+    }
+    out
 }
 
 /// Why a flipbook's cells are smaller than the source frames: the size the frames were
@@ -211,6 +268,10 @@ pub struct FlipbookMeta {
     /// `frame_height`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub scaled_from: Option<ScaledFrom>,
+    /// Present when the frames were trimmed to what the animation shows: where the
+    /// `frame_width` × `frame_height` frames lie in the frames as rendered.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub trimmed: Option<Trimmed>,
     /// Seam and ghost of the sheet's frames played as a loop, measured on the frames
     /// written ([`ignis_core::loopq`]); present when `loop` is true.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -849,11 +910,22 @@ impl Sink for FlipbookSink {
 
     fn finish(self: Box<Self>) -> Result<Vec<PathBuf>> {
         let n = self.frames.len() as u32;
-        let (layout, m) = plan_layout(n, self.size, &self.opts)?;
+        // --trim: the cells hold only the box the animation ever shows (the frames are
+        // cropped after the motion, which is measured on the frames as rendered)
+        let trim = self
+            .opts
+            .trim
+            .then(|| visible_box(&self.frames, self.size))
+            .flatten();
+        let size = match trim {
+            Some((_, _, w, h)) => Size::new(w, h)?,
+            None => self.size,
+        };
+        let (layout, m) = plan_layout(n, size, &self.opts)?;
         let v = self.opts.variants as usize;
         let per_in = n as usize / v;
         let per = m as usize / v;
-        let frames: std::borrow::Cow<[RgbaFrame]> = if m == n {
+        let mut frames: std::borrow::Cow<[RgbaFrame]> = if m == n {
             std::borrow::Cow::Borrowed(&self.frames)
         } else {
             self.frames
@@ -880,11 +952,25 @@ impl Sink for FlipbookSink {
                 .collect::<Vec<_>>()
         });
         // The motion first: the flow is the slow part and can fail.
-        let motion = match &self.opts.motion {
+        let mut motion = match &self.opts.motion {
             Some(src) => Some(self.motion(src, &frames, per)?),
             None => None,
         };
-        let (w, h) = (self.size.width as usize, self.size.height as usize);
+        if let Some(b) = trim {
+            let fw = self.size.width;
+            frames = frames
+                .iter()
+                .map(|f| RgbaFrame::from_vec(size, crop(f.data(), fw, b)))
+                .collect::<std::result::Result<Vec<_>, _>>()
+                .map_err(|e| MediaError::bad("trim", e.to_string()))?
+                .into();
+            if let Some(mv) = motion.as_mut() {
+                for f in mv.iter_mut() {
+                    *f = crop(f, fw, b);
+                }
+            }
+        }
+        let (w, h) = (size.width as usize, size.height as usize);
         let sheet_size = Size::new(layout.sheet_width, layout.sheet_height)?;
         let name_of = |p: &Path| {
             p.file_name()
@@ -1049,8 +1135,8 @@ impl Sink for FlipbookSink {
         );
         let meta = FlipbookMeta {
             image: name_of(&self.path),
-            frame_width: self.size.width,
-            frame_height: self.size.height,
+            frame_width: size.width,
+            frame_height: size.height,
             columns: layout.columns,
             rows: layout.rows,
             frame_count: m,
@@ -1072,6 +1158,12 @@ impl Sink for FlipbookSink {
             hdr_image,
             retimed,
             scaled_from: self.opts.scaled_from,
+            trimmed: trim.map(|(x, y, _, _)| Trimmed {
+                from_width: self.size.width,
+                from_height: self.size.height,
+                x,
+                y,
+            }),
             // Measured on the pushed frames; a retimed or multi-variant sheet plays other
             // frames, so the figure would not describe it.
             loop_quality: if m == n && v == 1 {

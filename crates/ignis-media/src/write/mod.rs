@@ -47,9 +47,9 @@ use ignis_core::atomic::{self, AtomicFile};
 
 pub use engine::Engine;
 pub use flipbook::{
-    fit_frame, plan_layout, read_flipbook, read_flipbook_meta, retime, sheet_limit, AlphaMode,
-    Flipbook, FlipbookMeta, FlipbookOptions, HeatMeta, Layout, MotionMeta, Retime, ScaledFrom,
-    MIN_FIT_SIDE,
+    fit_frame, plan_layout, read_flipbook, read_flipbook_meta, retime, sheet_limit, visible_box,
+    AlphaMode, Flipbook, FlipbookMeta, FlipbookOptions, HeatMeta, Layout, MotionMeta, Retime,
+    ScaledFrom, Trimmed, MIN_FIT_SIDE,
 };
 pub use motion::MotionSource;
 
