@@ -725,17 +725,30 @@ fn measure(
         .fold(0.0, f64::max);
     let mut skips = Skips::default();
     for run in soft_runs(win, body) {
-        let near = |i: usize| skips.contains(i) || skips.contains(i + 1) || skips.contains(i - 1);
-        if skips.len() + run.len() > room || run.clone().any(near) {
+        // The left-out run this one would join: a pair may grow from a single left out
+        // before it (a duplicated soft frame is its single first, and leaving out one copy
+        // alone keeps the other), but two runs never touch and no run is longer than two.
+        let (mut lo, mut hi) = (run.start, run.end);
+        while skips.contains(lo - 1) {
+            lo -= 1;
+        }
+        while skips.contains(hi) {
+            hi += 1;
+        }
+        let added = run.clone().filter(|&i| !skips.contains(i)).count();
+        if added == 0 || hi - lo > 2 || skips.len() + added > room {
             continue;
         }
         let step = *across
-            .entry((run.start - 1, run.end))
-            .or_insert_with(|| loopq::rms_diff(&win.frames[run.start - 1], &win.frames[run.end]));
+            .entry((lo - 1, hi))
+            .or_insert_with(|| loopq::rms_diff(&win.frames[lo - 1], &win.frames[hi]));
         if step > natural {
             continue;
         }
-        skips = run.fold(skips, |s, i| s.with(i));
+        let before = skips;
+        skips = run
+            .filter(|&i| !before.contains(i))
+            .fold(skips, |s, i| s.with(i));
         let tried = measure_fixed(win, c, closing, &fixed, skips, &mut across);
         if tried.score < best.score {
             best = tried;
@@ -1123,6 +1136,41 @@ mod tests {
             .unwrap()
             .1
             .contains("leaving out 1 soft footage frame(s) (30)"));
+    }
+
+    /// A soft frame shown twice (footage converted to a higher frame rate repeats frames)
+    /// is left out as a pair: leaving out one copy alone keeps the other as the ghost.
+    #[test]
+    fn a_duplicated_soft_frame_is_left_out_as_a_pair() {
+        let size = Size::new(32, 8).unwrap();
+        let frames: Vec<GrayFrame> = (0..100)
+            .map(|i| {
+                let mut f = GrayFrame::new(size);
+                for y in 0..8 {
+                    if i == 30 || i == 31 {
+                        // The same motion-blurred frame, twice.
+                        for d in 0..3 {
+                            f.data_mut()[y * 32 + 3 + 30 % 20 + d] = 1.0 / 3.0;
+                        }
+                    } else {
+                        f.data_mut()[y * 32 + 4 + i % 20] = 1.0;
+                    }
+                }
+                f
+            })
+            .collect();
+        let win = MetricWindow::new(&frames).unwrap();
+        let c = Candidate {
+            start: 10,
+            end: 70,
+            cost: 0.0,
+        };
+        let best = evaluate_with(&win, &[c], &Crossfade, 0, 50)[0];
+        assert_eq!(best.skips.as_slice(), &[30, 31], "{best:?}");
+        assert!(best.quality.ghost > 0.9, "{best:?}");
+        // One copy alone does not help.
+        let one = measure_with(&win, &c, best.closing, &[], Skips::default().with(30));
+        assert!(one.quality.ghost < 0.5, "{one:?}");
     }
 
     /// A closing measured on given in-betweens: the crossfade's own blends give exactly
