@@ -1084,19 +1084,18 @@ mod tests {
         assert!(ev[0].skips.is_empty());
     }
 
-    /// A blurred footage frame inside the loop is left out, and the plan and loopq agree
-    /// with the prediction.
-    #[test]
-    fn soft_footage_frame_is_left_out() {
+    /// 100 frames of a bar moving a pixel a frame (wrapping every 20), the frames `blurred`
+    /// all showing the bar of the first of them smeared over three pixels (motion blur,
+    /// repeated when several), and the candidate loop 10..70 in them.
+    fn bar_clip_blurred_at(blurred: &[usize]) -> (Vec<GrayFrame>, Candidate) {
         let size = Size::new(32, 8).unwrap();
         let frames: Vec<GrayFrame> = (0..100)
             .map(|i| {
                 let mut f = GrayFrame::new(size);
                 for y in 0..8 {
-                    if i == 30 {
-                        // Motion blur: the bar smeared over three pixels.
+                    if blurred.contains(&i) {
                         for d in 0..3 {
-                            f.data_mut()[y * 32 + 3 + i % 20 + d] = 1.0 / 3.0;
+                            f.data_mut()[y * 32 + 3 + blurred[0] % 20 + d] = 1.0 / 3.0;
                         }
                     } else {
                         f.data_mut()[y * 32 + 4 + i % 20] = 1.0;
@@ -1105,12 +1104,20 @@ mod tests {
                 f
             })
             .collect();
-        let win = MetricWindow::new(&frames).unwrap();
         let c = Candidate {
             start: 10,
             end: 70,
             cost: 0.0,
         };
+        (frames, c)
+    }
+
+    /// A blurred footage frame inside the loop is left out, and the plan and loopq agree
+    /// with the prediction.
+    #[test]
+    fn soft_footage_frame_is_left_out() {
+        let (frames, c) = bar_clip_blurred_at(&[30]);
+        let win = MetricWindow::new(&frames).unwrap();
         // A lone candidate is the shortest: nothing may be left out.
         assert!(evaluate(&win, &[c], &Crossfade, 0)[0].skips.is_empty());
         let ev = evaluate_with(&win, &[c], &Crossfade, 0, 50);
@@ -1142,29 +1149,8 @@ mod tests {
     /// is left out as a pair: leaving out one copy alone keeps the other as the ghost.
     #[test]
     fn a_duplicated_soft_frame_is_left_out_as_a_pair() {
-        let size = Size::new(32, 8).unwrap();
-        let frames: Vec<GrayFrame> = (0..100)
-            .map(|i| {
-                let mut f = GrayFrame::new(size);
-                for y in 0..8 {
-                    if i == 30 || i == 31 {
-                        // The same motion-blurred frame, twice.
-                        for d in 0..3 {
-                            f.data_mut()[y * 32 + 3 + 30 % 20 + d] = 1.0 / 3.0;
-                        }
-                    } else {
-                        f.data_mut()[y * 32 + 4 + i % 20] = 1.0;
-                    }
-                }
-                f
-            })
-            .collect();
+        let (frames, c) = bar_clip_blurred_at(&[30, 31]);
         let win = MetricWindow::new(&frames).unwrap();
-        let c = Candidate {
-            start: 10,
-            end: 70,
-            cost: 0.0,
-        };
         let best = evaluate_with(&win, &[c], &Crossfade, 0, 50)[0];
         assert_eq!(best.skips.as_slice(), &[30, 31], "{best:?}");
         assert!(best.quality.ghost > 0.9, "{best:?}");
