@@ -40,10 +40,21 @@ impl KeptTimes {
         KeptTimes { path, what }
     }
 
-    /// The kept times of a loop of `n` frames, or `None` (no entry, or not such a list).
+    /// The kept times of a loop of `n` frames, or `None` (no entry, not such a list, or a
+    /// file larger than such a list's entry: nothing unbounded is read).
     pub fn read(&self, n: usize) -> Option<Vec<f64>> {
-        let v: serde_json::Value =
-            serde_json::from_slice(&std::fs::read(self.path.as_ref()?).ok()?).ok()?;
+        use std::io::Read;
+        let limit = entry_bytes_at_most(n);
+        let mut bytes = Vec::new();
+        std::fs::File::open(self.path.as_ref()?)
+            .ok()?
+            .take(limit + 1)
+            .read_to_end(&mut bytes)
+            .ok()?;
+        if bytes.len() as u64 > limit {
+            return None;
+        }
+        let v: serde_json::Value = serde_json::from_slice(&bytes).ok()?;
         if v["version"] != VERSION || v["frames"] != n {
             return None;
         }
@@ -86,6 +97,13 @@ fn digest(key: &str) -> Option<String> {
     );
     let d = Sha256::digest(all.as_bytes());
     Some(d[..16].iter().map(|b| format!("{b:02x}")).collect())
+}
+
+/// The largest entry [`write`] makes for `n` times: each time as JSON (at most 24
+/// characters) and as 16 hex digits (18 with the quotes), with separators, under 64 bytes,
+/// and the header under 4 KB.
+fn entry_bytes_at_most(n: usize) -> u64 {
+    (n as u64).saturating_mul(64).saturating_add(4096)
 }
 
 fn write(path: &Path, what: &str, times: &[f64]) -> Result<()> {
@@ -132,5 +150,26 @@ mod tests {
             KeptTimes::new(Some(t.path()), "other", "scene A", "").read(4),
             None
         );
+        // The largest times write at most the bound.
+        let wide = [
+            -f64::MIN_POSITIVE * 3.0,
+            -1.234_567_890_123_456_7e-300,
+            f64::MAX,
+        ];
+        let w = KeptTimes::new(Some(t.path()), "test", "wide", "test times");
+        w.keep(&wide, &g);
+        let len = std::fs::metadata(w.path.as_ref().unwrap()).unwrap().len();
+        assert!(len <= entry_bytes_at_most(3), "{len} bytes");
+        assert!(w.read(3).is_some());
+        // A valid entry padded past the bound is not read (nothing unbounded is).
+        let path = k.path.as_ref().unwrap();
+        let mut padded = std::fs::read(path).unwrap();
+        padded.resize(entry_bytes_at_most(4) as usize + 1, b' ');
+        std::fs::write(path, &padded).unwrap();
+        assert!(serde_json::from_slice::<serde_json::Value>(&padded).is_ok());
+        assert_eq!(k.read(4), None);
+        padded.truncate(entry_bytes_at_most(4) as usize);
+        std::fs::write(path, &padded).unwrap();
+        assert!(k.read(4).is_some());
     }
 }
