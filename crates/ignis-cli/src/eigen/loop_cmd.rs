@@ -242,22 +242,36 @@ pub fn cached(
     Ok(c)
 }
 
+/// The largest `entry.json` read (a real one is a few hundred bytes): a damaged or foreign
+/// entry is never read whole.
+const ENTRY_JSON_MAX: u64 = 1 << 20;
+
 fn open_entry(dir: &Path, sha: &str, settings: &CacheSettings) -> Result<Cached> {
-    let meta: EntryMeta = serde_json::from_slice(
-        &std::fs::read(dir.join("entry.json")).context("reading entry.json")?,
-    )
-    .context("entry.json is not valid")?;
+    use std::io::Read;
+    let mut json = Vec::new();
+    std::fs::File::open(dir.join("entry.json"))
+        .and_then(|f| f.take(ENTRY_JSON_MAX + 1).read_to_end(&mut json))
+        .context("reading entry.json")?;
+    if json.len() as u64 > ENTRY_JSON_MAX {
+        bail!("entry.json is larger than {ENTRY_JSON_MAX} bytes");
+    }
+    let meta: EntryMeta = serde_json::from_slice(&json).context("entry.json is not valid")?;
     if meta.source_sha256 != sha || &meta.settings != settings {
         bail!("entry.json is for another file or other settings");
     }
-    let bytes = std::fs::read(dir.join("metric.f32")).context("reading metric.f32")?;
-    if hex(&Sha256::digest(&bytes)) != meta.metric_sha256 {
-        bail!("metric.f32 does not match its checksum");
-    }
     let size = Size::new(meta.metric_width, meta.metric_height)?;
     let per = size.pixels() * 4;
-    if bytes.len() != per * meta.metric_frames {
+    // the length entry.json gives, checked before anything is read
+    let metric_path = dir.join("metric.f32");
+    let len = std::fs::metadata(&metric_path)
+        .context("reading metric.f32")?
+        .len();
+    if per.checked_mul(meta.metric_frames).map(|n| n as u64) != Some(len) {
         bail!("metric.f32 has the wrong length");
+    }
+    let bytes = std::fs::read(&metric_path).context("reading metric.f32")?;
+    if hex(&Sha256::digest(&bytes)) != meta.metric_sha256 {
+        bail!("metric.f32 does not match its checksum");
     }
     let metric: Vec<GrayFrame> = bytes
         .chunks_exact(per)
@@ -2104,10 +2118,31 @@ mod tests {
         let rebuilt = cached(&path, 0..30, size, 8, cache.path(), &quiet).unwrap();
         assert!(rebuilt.built, "the damaged entry was rebuilt");
         assert_eq!(rebuilt.metric.len(), 30);
+        // Grown files are refused by their length, before they are read whole.
+        let sha = source_sha256(&path).unwrap();
+        let good = std::fs::read(&metric).unwrap();
+        let mut grown = good.clone();
+        grown.extend_from_slice(&[0; 4]);
+        std::fs::write(&metric, &grown).unwrap();
+        match open_entry(&dir, &sha, &settings) {
+            Ok(_) => panic!("a grown metric.f32 was accepted"),
+            Err(e) => assert!(e.to_string().contains("wrong length"), "{e}"),
+        }
+        std::fs::write(&metric, &good).unwrap();
+        let entry = dir.join("entry.json");
+        let json = std::fs::read(&entry).unwrap();
+        let mut padded = json.clone();
+        padded.resize(ENTRY_JSON_MAX as usize + 1, b' ');
+        std::fs::write(&entry, &padded).unwrap();
+        match open_entry(&dir, &sha, &settings) {
+            Ok(_) => panic!("an entry.json past the bound was read"),
+            Err(e) => assert!(e.to_string().contains("larger than"), "{e}"),
+        }
+        std::fs::write(&entry, &json).unwrap();
+        assert!(open_entry(&dir, &sha, &settings).is_ok());
         // A damaged database pack or entry.json is caught too (not rebuilt here: training
         // is the slow part).
         drop(rebuilt);
-        let sha = source_sha256(&path).unwrap();
         let pack = std::fs::read_dir(dir.join("fire.db/packs"))
             .unwrap()
             .next()
