@@ -43,17 +43,8 @@ impl KeptTimes {
     /// The kept times of a loop of `n` frames, or `None` (no entry, not such a list, or a
     /// file larger than such a list's entry: nothing unbounded is read).
     pub fn read(&self, n: usize) -> Option<Vec<f64>> {
-        use std::io::Read;
-        let limit = entry_bytes_at_most(n);
-        let mut bytes = Vec::new();
-        std::fs::File::open(self.path.as_ref()?)
-            .ok()?
-            .take(limit + 1)
-            .read_to_end(&mut bytes)
-            .ok()?;
-        if bytes.len() as u64 > limit {
-            return None;
-        }
+        let bytes = ignis_core::atomic::read_at_most(self.path.as_ref()?, entry_bytes_at_most(n))
+            .ok()??;
         let v: serde_json::Value = serde_json::from_slice(&bytes).ok()?;
         if v["version"] != VERSION || v["frames"] != n {
             return None;

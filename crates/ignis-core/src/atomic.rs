@@ -220,6 +220,18 @@ pub fn write_bytes(target: &Path, bytes: &[u8]) -> io::Result<()> {
     write_file(target, |w| w.write_all(bytes))
 }
 
+/// The bytes of the file at `path` when it holds at most `limit` of them, `None` when it
+/// holds more (only `limit + 1` are read): what a cache or index reads before it trusts a
+/// file it wrote, so a damaged or foreign one is never read whole.
+pub fn read_at_most(path: &Path, limit: u64) -> io::Result<Option<Vec<u8>>> {
+    use std::io::Read;
+    let mut bytes = Vec::new();
+    File::open(path)?
+        .take(limit.saturating_add(1))
+        .read_to_end(&mut bytes)?;
+    Ok((bytes.len() as u64 <= limit).then_some(bytes))
+}
+
 /// The directory a path lives in (`.` for a bare file name).
 pub fn parent_dir(path: &Path) -> PathBuf {
     match path.parent() {
@@ -273,6 +285,18 @@ pub fn check_regular_target(path: &Path) -> io::Result<()> {
 
 #[cfg(test)]
 mod tests {
+
+    #[test]
+    fn read_at_most_reads_up_to_its_limit_only() {
+        let d = tempfile::tempdir().unwrap();
+        let p = d.path().join("f");
+        std::fs::write(&p, b"12345").unwrap();
+        assert_eq!(read_at_most(&p, 5).unwrap().as_deref(), Some(&b"12345"[..]));
+        assert_eq!(read_at_most(&p, 9).unwrap().as_deref(), Some(&b"12345"[..]));
+        assert_eq!(read_at_most(&p, 4).unwrap(), None);
+        assert_eq!(read_at_most(&p, 0).unwrap(), None);
+        assert!(read_at_most(&d.path().join("missing"), 5).is_err());
+    }
     use super::*;
 
     /// What an interrupt would remove: a temporary while it is written, not once it is

@@ -226,12 +226,18 @@ pub(crate) fn crop(frame: &RgbaFrame, rect: &Rect) -> RgbaFrame {
         width: rect.width,
         height: rect.height,
     };
-    let mut data = Vec::with_capacity(size.pixels());
+    RgbaFrame::from_vec(size, crop_values(frame.data(), frame.width(), rect)).expect("crop size")
+}
+
+/// Cuts `rect` (already checked) out of `data`, one value per pixel of a `width`-wide
+/// frame (colour, motion vectors), row by row.
+pub(crate) fn crop_values<T: Copy>(data: &[T], width: u32, rect: &Rect) -> Vec<T> {
+    let mut out = Vec::with_capacity(rect.width as usize * rect.height as usize);
     for y in rect.y..rect.y + rect.height {
-        let row = frame.row(y);
-        data.extend_from_slice(&row[rect.x as usize..(rect.x + rect.width) as usize]);
+        let start = y as usize * width as usize + rect.x as usize;
+        out.extend_from_slice(&data[start..start + rect.width as usize]);
     }
-    RgbaFrame::from_vec(size, data).expect("crop size")
+    out
 }
 
 /// One output sample's source taps: first source index and normalised weights.

@@ -247,14 +247,11 @@ pub fn cached(
 const ENTRY_JSON_MAX: u64 = 1 << 20;
 
 fn open_entry(dir: &Path, sha: &str, settings: &CacheSettings) -> Result<Cached> {
-    use std::io::Read;
-    let mut json = Vec::new();
-    std::fs::File::open(dir.join("entry.json"))
-        .and_then(|f| f.take(ENTRY_JSON_MAX + 1).read_to_end(&mut json))
-        .context("reading entry.json")?;
-    if json.len() as u64 > ENTRY_JSON_MAX {
+    let Some(json) = ignis_core::atomic::read_at_most(&dir.join("entry.json"), ENTRY_JSON_MAX)
+        .context("reading entry.json")?
+    else {
         bail!("entry.json is larger than {ENTRY_JSON_MAX} bytes");
-    }
+    };
     let meta: EntryMeta = serde_json::from_slice(&json).context("entry.json is not valid")?;
     if meta.source_sha256 != sha || &meta.settings != settings {
         bail!("entry.json is for another file or other settings");

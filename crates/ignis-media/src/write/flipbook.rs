@@ -125,10 +125,10 @@ pub struct Trimmed {
 pub fn visible_box(frames: &[RgbaFrame], size: Size) -> Option<(u32, u32, u32, u32)> {
     let (w, h) = (size.width, size.height);
     let (mut x0, mut y0, mut x1, mut y1) = (u32::MAX, u32::MAX, 0u32, 0u32);
+    let shown = |p: &[f32; 4]| p[3] * 255.0 >= 0.5;
     for f in frames {
         for (y, row) in f.data().chunks_exact(w as usize).enumerate() {
             let y = y as u32;
-            let shown = |p: &[f32; 4]| p[3] * 255.0 >= 0.5;
             if let (Some(first), Some(last)) =
                 (row.iter().position(shown), row.iter().rposition(shown))
             {
@@ -146,16 +146,6 @@ pub fn visible_box(frames: &[RgbaFrame], size: Size) -> Option<(u32, u32, u32, u
     let (x1, y1) = ((x1 + 1).min(w - 1), (y1 + 1).min(h - 1));
     let b = (x0, y0, x1 - x0 + 1, y1 - y0 + 1);
     (b != (0, 0, w, h)).then_some(b)
-}
-
-/// `data` (one value per pixel of a `width`-wide frame) cropped to the box `(x, y, w, h)`.
-fn crop<T: Copy>(data: &[T], width: u32, (x, y, w, h): (u32, u32, u32, u32)) -> Vec<T> {
-    let mut out = Vec::with_capacity(w as usize * h as usize);
-    for r in y..y + h {
-        let start = (r * width + x) as usize;
-        out.extend_from_slice(&data[start..start + w as usize]);
-    }
-    out
 }
 
 /// Why a flipbook's cells are smaller than the source frames: the size the frames were
@@ -956,17 +946,21 @@ impl Sink for FlipbookSink {
             Some(src) => Some(self.motion(src, &frames, per)?),
             None => None,
         };
-        if let Some(b) = trim {
-            let fw = self.size.width;
+        if let Some((x, y, width, height)) = trim {
+            let rect = crate::read::Rect {
+                x,
+                y,
+                width,
+                height,
+            };
             frames = frames
                 .iter()
-                .map(|f| RgbaFrame::from_vec(size, crop(f.data(), fw, b)))
-                .collect::<std::result::Result<Vec<_>, _>>()
-                .map_err(|e| MediaError::bad("trim", e.to_string()))?
+                .map(|f| crate::convert::crop(f, &rect))
+                .collect::<Vec<_>>()
                 .into();
             if let Some(mv) = motion.as_mut() {
                 for f in mv.iter_mut() {
-                    *f = crop(f, fw, b);
+                    *f = crate::convert::crop_values(f, self.size.width, &rect);
                 }
             }
         }
