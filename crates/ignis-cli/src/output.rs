@@ -20,12 +20,13 @@ pub const DEFAULT_FPS: f64 = 30.0;
 ///   --fit-frames --columns 8 -o fire.png             retime to fill every cell
 #[derive(clap::Args, Debug, Clone)]
 pub struct OutputArgs {
-    /// Output: `x.mp4`, `x.gif`, `x.png` (flipbook + `x.json`), a directory `dir/` or a
-    /// pattern `dir/%04d.png` / `dir/%04d.exr` (sequence).
+    /// Output: `x.mp4`, `x.gif`, `x.png` (flipbook + `x.json`), `x.mov` (ProRes 4444 with
+    /// alpha) or `x.webm` (VP8 with alpha) through the system ffmpeg, a directory `dir/` or
+    /// a pattern `dir/%04d.png` / `dir/%04d.exr` (sequence).
     #[arg(short, long)]
     pub output: PathBuf,
-    /// Force the format: mp4, gif, flipbook, png-seq, exr-seq.
-    #[arg(long, value_parser = ["mp4", "gif", "flipbook", "png-seq", "exr-seq"])]
+    /// Force the format: mp4, gif, flipbook, png-seq, exr-seq, mov, webm.
+    #[arg(long, value_parser = ["mp4", "gif", "flipbook", "png-seq", "exr-seq", "mov", "webm"])]
     pub format: Option<String>,
     /// Frames per second stored in the output (default 30; `ignis eigen animate` and
     /// `eigen loop`: the rate of the footage the frames come from).
@@ -123,6 +124,8 @@ impl OutputArgs {
                 "gif" => Format::Gif,
                 "flipbook" => Format::Flipbook,
                 "png-seq" => Format::PngSequence,
+                "mov" => Format::Mov,
+                "webm" => Format::Webm,
                 _ => Format::ExrSequence,
             }),
             fps: self.fps(),

@@ -196,6 +196,79 @@ mod classic {
     }
 
     #[test]
+    fn mov_and_webm_carry_alpha_or_say_what_they_need() {
+        let t = tempfile::tempdir().unwrap();
+        // Without ffmpeg: a clear error naming it and the alternative, nothing written.
+        for name in ["a.mov", "a.webm"] {
+            let o = ignis_cmd()
+                .env("IGNIS_NO_FFMPEG", "1")
+                .args(["classic", "--size", "48x32", "--frames", "4", "-q", "-o"])
+                .arg(t.path().join(name))
+                .output()
+                .unwrap();
+            assert_fails(&o, "needs the system ffmpeg");
+            assert_fails(&o, "%04d.png");
+        }
+        assert!(files_in(t.path()).is_empty(), "{:?}", files_in(t.path()));
+        if !has_ffmpeg() {
+            return;
+        }
+        // With it: ProRes 4444 and VP8, each with an alpha plane, every frame.
+        for (name, codec, pix) in [
+            ("a.mov", "prores", "yuva444p"),
+            ("a.webm", "vp8", "yuv420p"),
+        ] {
+            let out = t.path().join(name);
+            ignis_ok(&[
+                "classic",
+                "--size",
+                "48x32",
+                "--frames",
+                "5",
+                "-q",
+                "-o",
+                out.to_str().unwrap(),
+            ]);
+            let p = Command::new("ffprobe")
+                .args(["-v", "error", "-count_frames", "-show_streams"])
+                .arg(&out)
+                .output()
+                .unwrap();
+            let s = String::from_utf8_lossy(&p.stdout);
+            for want in [
+                format!("codec_name={codec}"),
+                format!("pix_fmt={pix}"),
+                "width=48".into(),
+                "height=32".into(),
+                "nb_read_frames=5".into(),
+            ] {
+                assert!(s.contains(&want), "{name}: {want} not in {s}");
+            }
+            if name.ends_with(".webm") {
+                assert!(s.contains("alpha_mode=1"), "{s}");
+            }
+        }
+        // A relative path with a colon is a file, not an ffmpeg protocol.
+        let o = ignis_cmd()
+            .current_dir(t.path())
+            .args([
+                "classic",
+                "--size",
+                "16x16",
+                "--frames",
+                "2",
+                "-q",
+                "-o",
+                "d:1/c.mov",
+            ])
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        assert_eq!(files_in(t.path()), ["a.mov", "a.webm", "d:1"]);
+        assert_eq!(files_in(&t.path().join("d:1")), ["c.mov"]);
+    }
+
+    #[test]
     fn bad_sizes_and_palettes_are_refused_and_nothing_is_written() {
         let t = tempfile::tempdir().unwrap();
         let out = t.path().join("x.mp4");

@@ -34,7 +34,7 @@ use ignis_core::{RgbaFrame, Size};
 use crate::convert;
 use crate::error::{MediaError, Result};
 
-pub(crate) use ffmpeg::ffmpeg_available;
+pub(crate) use ffmpeg::{ffmpeg_available, file_url};
 pub use h264::avc_profile_name;
 #[doc(hidden)]
 pub use h264::decode_rgba8_count;

@@ -1,4 +1,5 @@
-//! Writing: PNG and EXR sequences, GIF, MP4/H.264 and flipbooks (sprite sheet + JSON).
+//! Writing: PNG and EXR sequences, GIF, MP4/H.264, video with alpha (ProRes 4444 `.mov`,
+//! VP8 `.webm`, through the system ffmpeg) and flipbooks (sprite sheet + JSON).
 //!
 //! Frames pushed in are **linear light, straight alpha**. What each output stores:
 //!
@@ -8,6 +9,8 @@
 //! | EXR sequence | linear `f32` RGBA | **premultiplied**, the OpenEXR convention compositors expect |
 //! | GIF | 8-bit sRGB, ≤ 256 colours per frame (NeuQuant) | none: composited over `background` (default black) |
 //! | MP4 (H.264 Constrained Baseline, BT.601 limited range, 4:2:0) | 8-bit | none: composited over `background` (default black) |
+//! | MOV (ProRes 4444, system ffmpeg) | 10-bit sRGB 4:4:4 | **straight**, 16-bit |
+//! | WebM (VP8, system ffmpeg) | 8-bit sRGB 4:2:0 | **straight** (WebM's alpha stream) |
 //! | flipbook PNG | 8-bit sRGB RGBA | `straight` or `premultiplied` (linear light premultiplied, then sRGB-encoded), stated in the JSON |
 //!
 //! MP4 needs even dimensions (4:2:0): an odd width or height is padded by one pixel
@@ -29,6 +32,7 @@
 //! refused; frame rates must be in [`MIN_FPS`]..=[`MAX_FPS`].
 
 pub mod engine;
+mod ffmpeg_out;
 mod flipbook;
 mod gif_out;
 pub mod motion;
@@ -66,10 +70,14 @@ pub enum Format {
     ExrSequence,
     /// One sprite-sheet PNG plus a JSON sidecar.
     Flipbook,
+    /// Apple ProRes 4444 with alpha in QuickTime (system ffmpeg).
+    Mov,
+    /// VP8 with alpha in WebM (system ffmpeg).
+    Webm,
 }
 
 impl Format {
-    /// The format a path implies: `.mp4`, `.gif`, `.png` (flipbook), a directory (trailing
+    /// The format a path implies: `.mp4`, `.gif`, `.png` (flipbook), `.mov`, `.webm`, a directory (trailing
     /// `/` or an existing directory: PNG sequence) or a pattern `%04d.png` / `%04d.exr`.
     pub fn from_path(path: &Path) -> Result<Format> {
         let s = path.to_string_lossy();
@@ -96,11 +104,14 @@ impl Format {
             Some("mp4") => Ok(Format::Mp4),
             Some("gif") => Ok(Format::Gif),
             Some("png") => Ok(Format::Flipbook),
+            Some("mov") => Ok(Format::Mov),
+            Some("webm") => Ok(Format::Webm),
             _ => Err(MediaError::bad(
                 "path",
                 format!(
-                    "cannot tell the output format of `{s}`: use .mp4, .gif, .png (flipbook), a directory \
-                     ending in / (PNG sequence), a pattern like frames/%04d.png or frames/%04d.exr, or set the format"
+                    "cannot tell the output format of `{s}`: use .mp4, .gif, .png (flipbook), .mov \
+                     (ProRes 4444 with alpha), .webm (VP8 with alpha), a directory ending in / (PNG \
+                     sequence), a pattern like frames/%04d.png or frames/%04d.exr, or set the format"
                 ),
             )),
         }
@@ -225,6 +236,9 @@ pub fn create(path: &Path, size: Size, opts: &WriteOptions) -> Result<FrameWrite
             Box::new(s)
         }
         Format::Flipbook => Box::new(flipbook::FlipbookSink::new(path, size, opts)?),
+        Format::Mov | Format::Webm => {
+            Box::new(ffmpeg_out::FfmpegSink::new(path, size, opts, format)?)
+        }
     };
     Ok(FrameWriter {
         sink: Some(sink),
@@ -270,6 +284,13 @@ pub fn check_output(path: &Path, opts: &WriteOptions) -> Result<Format> {
     };
     let dir = match format {
         Format::Mp4 | Format::Gif => {
+            check_regular_target(path)?;
+            parent_dir(path)
+        }
+        Format::Mov | Format::Webm => {
+            if !crate::read::ffmpeg_available() {
+                return Err(ffmpeg_out::needs_ffmpeg(path, format));
+            }
             check_regular_target(path)?;
             parent_dir(path)
         }
@@ -519,7 +540,15 @@ mod tests {
             Format::from_path(Path::new("f/%04d.exr")).unwrap(),
             Format::ExrSequence
         );
-        assert!(Format::from_path(Path::new("fire.webm")).is_err());
+        assert_eq!(
+            Format::from_path(Path::new("fire.MOV")).unwrap(),
+            Format::Mov
+        );
+        assert_eq!(
+            Format::from_path(Path::new("fire.webm")).unwrap(),
+            Format::Webm
+        );
+        assert!(Format::from_path(Path::new("fire.mkv")).is_err());
         // a `%` that is not a frame-number field is part of an ordinary name
         assert_eq!(
             Format::from_path(Path::new("100% fire.gif")).unwrap(),
