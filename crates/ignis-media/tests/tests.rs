@@ -1441,7 +1441,7 @@ mod bad_input {
     fn bad_write_parameters() {
         let dir = tempfile::tempdir().unwrap();
         let size = Size::new(4, 4).unwrap();
-        let e = create(&dir.path().join("x.webm"), size, &WriteOptions::default())
+        let e = create(&dir.path().join("x.mkv"), size, &WriteOptions::default())
             .err()
             .unwrap();
         assert!(
