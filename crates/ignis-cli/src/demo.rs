@@ -109,6 +109,7 @@ impl Demo {
              body{background:#111;color:#ddd;font-family:sans-serif;margin:2em}\
              .grid{display:flex;flex-wrap:wrap;gap:1.5em}.card{background:#1c1c1c;padding:1em;border-radius:6px;max-width:520px}\
              img,video{max-width:480px;max-height:480px;background:#000;display:block}\
+             video.keyed{background:repeating-conic-gradient(#777 0 25%,#bbb 0 50%) 0 0/24px 24px}\
              code{color:#fb4;font-size:0.85em;white-space:pre-wrap}a{color:#fb4}</style></head><body>\
              <h1>Ignis demo</h1><p>Every result below was made by <code>ignis demo</code> on built-in defaults.</p>",
         );
@@ -122,6 +123,10 @@ impl Demo {
                 let f = esc(&it.file);
                 let media = if it.file.ends_with(".mp4") {
                     format!("<video src=\"{f}\" controls loop muted autoplay></video>")
+                } else if it.file.ends_with(".webm") {
+                    format!(
+                        "<video class=\"keyed\" src=\"{f}\" controls loop muted autoplay></video>"
+                    )
                 } else if it.file.ends_with(".png")
                     || it.file.ends_with(".gif")
                     || it.file.ends_with(".jpg")

@@ -851,9 +851,11 @@ mod demo {
                     "loops/candle-video-textures.gif",
                     "loops/candle-wrap.png",
                     "loops/candle-flipbook.png",
+                    "loops/candle-keyed.webm",
                 ] {
                     assert!(html.contains(f), "gallery shows {f}");
                 }
+                assert!(html.contains("<video class=\"keyed\""), "{html}");
                 assert!(dir.join("loops/candle-flipbook.json").exists());
                 assert!(html.matches("seam ").count() >= 4, "{html}");
                 let wrap = image::open(dir.join("loops/candle-wrap.png")).unwrap();

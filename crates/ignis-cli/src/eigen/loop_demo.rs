@@ -234,6 +234,27 @@ fn clip(
         ),
         &user("", &format!("{name}-flipbook.png")),
     );
+
+    // The same keyed loop as a video with alpha, played over a checkerboard (browsers
+    // show WebM's alpha): what compositing with the matte looks like.
+    if ignis_media::ffmpeg_available() {
+        let rel = format!("loops/{name}-keyed.webm");
+        let out = OutputArgs {
+            fps: Some(c.fps),
+            ..OutputArgs::for_path(ctx.path(&rel)?)
+        };
+        let d = loop_cmd::make_loop_sized(&src, &ask, Some(size), &out, &quiet)?;
+        ctx.item(
+            &rel,
+            &format!(
+                "{name}.mp4, the keyed loop as VP8 WebM with alpha, over a checkerboard: the \
+                 flame as it composites; seam {:.2}, ghost {:.2} (-o loop.mov writes ProRes 4444 \
+                 with the same alpha for compositing tools)",
+                d.measured.seam, d.measured.ghost
+            ),
+            &user("", &format!("{name}.webm")),
+        );
+    }
     Ok(())
 }
 
