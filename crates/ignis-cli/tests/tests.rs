@@ -2589,6 +2589,45 @@ mod loop_output_checks {
         ]);
         assert_fails(&ignis(&a), "the longest that fits is --length 40");
         assert!(!cache.exists() && !out.exists());
+        // Video with alpha without ffmpeg: refused before the cache is built.
+        let o = ignis_cmd()
+            .env("IGNIS_NO_FFMPEG", "1")
+            .args(["loop", pattern.to_str().unwrap(), "--length", "16"])
+            .args(["--cache", cache.to_str().unwrap(), "-o"])
+            .arg(t.path().join("loop.mov"))
+            .output()
+            .unwrap();
+        assert_fails(&o, "needs the system ffmpeg");
+        assert!(!cache.exists() && !t.path().join("loop.mov").exists());
+    }
+
+    /// A keyed loop written where there is no alpha says so, and names the outputs that
+    /// keep it; an opaque loop, or a flipbook, does not.
+    #[test]
+    fn a_keyed_loop_without_alpha_says_where_the_alpha_went() {
+        let t = tempfile::tempdir().unwrap();
+        let pattern = t.path().join("frames/%04d.png");
+        let o = classic("48x40", "40", &["--seed", "3", "--no-loop"], &pattern);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let cache = t.path().join("cache");
+        let run = |out: &str, extra: &[&str]| {
+            let mut a = vec!["loop", pattern.to_str().unwrap(), "--length", "16"];
+            a.extend_from_slice(extra);
+            let out = t.path().join(out);
+            a.extend([
+                "--cache",
+                cache.to_str().unwrap(),
+                "-o",
+                out.to_str().unwrap(),
+            ]);
+            let o = ignis_ok(&a);
+            String::from_utf8_lossy(&o.stdout).into_owned()
+        };
+        let note = "composited over black";
+        let said = run("loop.gif", &[]);
+        assert!(said.contains(note) && said.contains("loop.mov"), "{said}");
+        assert!(!run("opaque.gif", &["--alpha", "opaque"]).contains(note));
+        assert!(!run("loop.png", &[]).contains(note));
     }
 }
 

@@ -1632,6 +1632,18 @@ pub fn run(a: &Args, g: &Global) -> Result<()> {
     let d = make_loop_sized(&src, &ask, a.size, &a.out, g)?;
     report(&d, window.start, g);
     if a.alpha != "opaque" {
+        let format = a.out.write_options().format;
+        let format = format.or_else(|| ignis_media::Format::from_path(&a.out.output).ok());
+        if matches!(
+            format,
+            Some(ignis_media::Format::Mp4 | ignis_media::Format::Gif)
+        ) {
+            g.say(
+                "alpha: MP4 and GIF have none, so the keyed flame is composited over black; \
+                 -o loop.mov (ProRes 4444), loop.webm, loop.png (flipbook) or frames/%04d.png \
+                 keep the matte as alpha",
+            );
+        }
         if let Some(clip) = c.db.manifest().clips.first() {
             let n = clip.pose.still_lights.boxes().len();
             if n > 0 {
