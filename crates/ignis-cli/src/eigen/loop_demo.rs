@@ -220,11 +220,7 @@ fn clip(
 
     // What `ignis loop` writes by default: an engine flipbook, the flame keyed out.
     let rel = format!("loops/{name}-flipbook.png");
-    let out = OutputArgs {
-        fps: Some(c.fps),
-        ..OutputArgs::for_path(ctx.path(&rel)?)
-    };
-    let d = loop_cmd::make_loop_sized(&src, &ask, Some(size), &out, &quiet)?;
+    let d = keyed_loop(ctx, &rel, &src, &ask, size, c.fps)?;
     ctx.item(
         &rel,
         &format!(
@@ -239,11 +235,7 @@ fn clip(
     // show WebM's alpha): what compositing with the matte looks like.
     if ignis_media::ffmpeg_available() {
         let rel = format!("loops/{name}-keyed.webm");
-        let out = OutputArgs {
-            fps: Some(c.fps),
-            ..OutputArgs::for_path(ctx.path(&rel)?)
-        };
-        let d = loop_cmd::make_loop_sized(&src, &ask, Some(size), &out, &quiet)?;
+        let d = keyed_loop(ctx, &rel, &src, &ask, size, c.fps)?;
         ctx.item(
             &rel,
             &format!(
@@ -256,6 +248,23 @@ fn clip(
         );
     }
     Ok(())
+}
+
+/// `ignis loop`'s loop of `src` (keyed out by its matte) written to the gallery's `rel`
+/// at `size` and the footage's rate `fps`.
+fn keyed_loop(
+    ctx: &Demo,
+    rel: &str,
+    src: &LoopFootage,
+    ask: &LoopAsk,
+    size: Size,
+    fps: f64,
+) -> Result<loop_cmd::Done> {
+    let out = OutputArgs {
+        fps: Some(fps),
+        ..OutputArgs::for_path(ctx.path(rel)?)
+    };
+    loop_cmd::make_loop_sized(src, ask, Some(size), &out, &Global { quiet: true })
 }
 
 /// Writes a peer's loop `body` (window indices) closed by a `K`-frame crossfade of the
