@@ -220,7 +220,11 @@ fn clip(
 
     // What `ignis loop` writes by default: an engine flipbook, the flame keyed out.
     let rel = format!("loops/{name}-flipbook.png");
-    let d = keyed_loop(ctx, &rel, &src, &ask, size, c.fps)?;
+    let out = OutputArgs {
+        fps: Some(c.fps),
+        ..OutputArgs::for_path(ctx.path(&rel)?)
+    };
+    let d = loop_cmd::make_loop_sized(&src, &ask, Some(size), &out, &quiet)?;
     ctx.item(
         &rel,
         &format!(
@@ -232,39 +236,35 @@ fn clip(
     );
 
     // The same keyed loop as a video with alpha, played over a checkerboard (browsers
-    // show WebM's alpha): what compositing with the matte looks like.
+    // show WebM's alpha): what compositing with the matte looks like. Made from the
+    // flipbook's frames rather than a second search: the same loop, as `-o x.webm` writes.
     if ignis_media::ffmpeg_available() {
+        let book = ignis_media::read_flipbook(&ctx.path(&rel)?.with_extension("json"))?;
         let rel = format!("loops/{name}-keyed.webm");
-        let d = keyed_loop(ctx, &rel, &src, &ask, size, c.fps)?;
+        let out = OutputArgs {
+            fps: Some(c.fps),
+            ..OutputArgs::for_path(ctx.path(&rel)?)
+        };
+        let mut w = out.create(size)?;
+        for f in &book.frames {
+            out.push(&mut w, f)?;
+        }
+        let q = w
+            .loop_quality()
+            .context("the loop has fewer than two frames")?;
+        out.finish(w, &quiet)?;
         ctx.item(
             &rel,
             &format!(
                 "{name}.mp4, the keyed loop as VP8 WebM with alpha, over a checkerboard: the \
                  flame as it composites; seam {:.2}, ghost {:.2} (-o loop.mov writes ProRes 4444 \
                  with the same alpha for compositing tools)",
-                d.measured.seam, d.measured.ghost
+                q.seam, q.ghost
             ),
             &user("", &format!("{name}.webm")),
         );
     }
     Ok(())
-}
-
-/// `ignis loop`'s loop of `src` (keyed out by its matte) written to the gallery's `rel`
-/// at `size` and the footage's rate `fps`.
-fn keyed_loop(
-    ctx: &Demo,
-    rel: &str,
-    src: &LoopFootage,
-    ask: &LoopAsk,
-    size: Size,
-    fps: f64,
-) -> Result<loop_cmd::Done> {
-    let out = OutputArgs {
-        fps: Some(fps),
-        ..OutputArgs::for_path(ctx.path(rel)?)
-    };
-    loop_cmd::make_loop_sized(src, ask, Some(size), &out, &Global { quiet: true })
 }
 
 /// Writes a peer's loop `body` (window indices) closed by a `K`-frame crossfade of the
