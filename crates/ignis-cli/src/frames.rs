@@ -54,15 +54,7 @@ impl FrameArgs {
             frames > 0,
             "--frames 0: nothing to write; ask for at least 1 frame"
         );
-        let format = match &out.format {
-            Some(f) => match f.as_str() {
-                "gif" => Some(Format::Gif),
-                "flipbook" => Some(Format::Flipbook),
-                _ => None,
-            },
-            None => Format::from_path(&out.output).ok(),
-        };
-        let loops_by_default = matches!(format, Some(Format::Gif | Format::Flipbook));
+        let loops_by_default = matches!(out.output_format(), Some(Format::Gif | Format::Flipbook));
         let looping = if out.no_loop {
             false
         } else if self.loop_ {

@@ -117,17 +117,29 @@ impl OutputArgs {
         self.fps.unwrap_or(DEFAULT_FPS)
     }
 
+    /// The format `--format` forces, if given.
+    fn forced_format(&self) -> Option<Format> {
+        self.format.as_deref().map(|f| match f {
+            "mp4" => Format::Mp4,
+            "gif" => Format::Gif,
+            "flipbook" => Format::Flipbook,
+            "png-seq" => Format::PngSequence,
+            "mov" => Format::Mov,
+            "webm" => Format::Webm,
+            _ => Format::ExrSequence,
+        })
+    }
+
+    /// The format written: `--format`'s, or the one `-o`'s path implies (`None` when it
+    /// implies none; writing then fails with the reason).
+    pub fn output_format(&self) -> Option<Format> {
+        self.forced_format()
+            .or_else(|| Format::from_path(&self.output).ok())
+    }
+
     pub fn write_options(&self) -> WriteOptions {
         WriteOptions {
-            format: self.format.as_deref().map(|f| match f {
-                "mp4" => Format::Mp4,
-                "gif" => Format::Gif,
-                "flipbook" => Format::Flipbook,
-                "png-seq" => Format::PngSequence,
-                "mov" => Format::Mov,
-                "webm" => Format::Webm,
-                _ => Format::ExrSequence,
-            }),
+            format: self.forced_format(),
             fps: self.fps(),
             loop_: !self.no_loop,
             flipbook: FlipbookOptions {

@@ -285,6 +285,7 @@ pub fn check_regular_target(path: &Path) -> io::Result<()> {
 
 #[cfg(test)]
 mod tests {
+    use super::*;
 
     #[test]
     fn read_at_most_reads_up_to_its_limit_only() {
@@ -297,7 +298,6 @@ mod tests {
         assert_eq!(read_at_most(&p, 0).unwrap(), None);
         assert!(read_at_most(&d.path().join("missing"), 5).is_err());
     }
-    use super::*;
 
     /// What an interrupt would remove: a temporary while it is written, not once it is
     /// renamed into place (nor while several are committed together), and a staging

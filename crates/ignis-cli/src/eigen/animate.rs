@@ -591,8 +591,7 @@ pub fn animate_cmd(a: &AnimateArgs, g: &Global) -> Result<Plan> {
     let opts = a.out.write_options();
     let out_loops = opts.loop_
         && matches!(
-            opts.format
-                .or_else(|| ignis_media::Format::from_path(&a.out.output).ok()),
+            a.out.output_format(),
             Some(ignis_media::Format::Gif | ignis_media::Format::Flipbook)
         );
     let plan = if plan.morphs.iter().any(|r| r.times.is_none() && !r.fixed) {

@@ -1632,10 +1632,8 @@ pub fn run(a: &Args, g: &Global) -> Result<()> {
     let d = make_loop_sized(&src, &ask, a.size, &a.out, g)?;
     report(&d, window.start, g);
     if a.alpha != "opaque" {
-        let format = a.out.write_options().format;
-        let format = format.or_else(|| ignis_media::Format::from_path(&a.out.output).ok());
         if matches!(
-            format,
+            a.out.output_format(),
             Some(ignis_media::Format::Mp4 | ignis_media::Format::Gif)
         ) {
             g.say(

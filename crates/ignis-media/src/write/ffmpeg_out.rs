@@ -108,9 +108,7 @@ impl FfmpegSink {
                  encode; scale down or write a PNG sequence (-o frames/%04d.png)"
             )));
         }
-        if !crate::read::ffmpeg_available() {
-            return Err(needs_ffmpeg(path, format));
-        }
+        // Without ffmpeg, `create`'s `check_output` has refused the format already.
         let tmp = temp_file_for(path)?;
         // `file:` + the absolute path: a name like `a:b.mov` is a file, not a protocol.
         let target = crate::read::file_url(tmp.temp_path())?;
