@@ -27,6 +27,9 @@ pub fn run(args: &Args) -> Result<()> {
             "height": info.size.height,
             "codec": info.codec,
             "decoder": info.decoder.to_string(),
+            "stored_width": info.anamorphic.map(|a| a.stored.width),
+            "stored_height": info.anamorphic.map(|a| a.stored.height),
+            "pixel_aspect": info.anamorphic.map(|a| format!("{}:{}", a.pixel_aspect.0, a.pixel_aspect.1)),
         });
         outln!("{}", serde_json::to_string_pretty(&v)?)?;
     } else {
@@ -38,7 +41,16 @@ pub fn run(args: &Args) -> Result<()> {
                 .unwrap_or_else(|| "unknown (container does not say)".into())
         )?;
         outln!("fps:     {}", info.fps)?;
-        outln!("size:    {}", info.size)?;
+        match info.anamorphic {
+            Some(a) => outln!(
+                "size:    {} (stored {} with {}:{} pixels; read at square pixels)",
+                info.size,
+                a.stored,
+                a.pixel_aspect.0,
+                a.pixel_aspect.1
+            )?,
+            None => outln!("size:    {}", info.size)?,
+        }
         outln!("codec:   {}", info.codec)?;
         outln!("decoder: {}", info.decoder)?;
     }

@@ -330,6 +330,48 @@ mod info {
         let human =
             String::from_utf8_lossy(&ignis(&["info", p.to_str().unwrap()]).stdout).to_string();
         assert!(human.contains("High"), "{human}");
+        // Square pixels: no stored size or pixel aspect.
+        assert!(
+            v["pixel_aspect"].is_null() && v["stored_width"].is_null(),
+            "{v}"
+        );
+    }
+
+    /// An anamorphic clip (4:3 pixels) says what it is stored at and what it is read at.
+    #[test]
+    fn anamorphic_clips_say_both_sizes() {
+        if !has_ffmpeg() {
+            return;
+        }
+        let t = tempfile::tempdir().unwrap();
+        let p = t.path().join("dv.mp4");
+        let ok = std::process::Command::new("ffmpeg")
+            .args(["-nostdin", "-y", "-v", "error", "-f", "lavfi", "-i"])
+            .arg("testsrc=size=96x72:rate=10,setsar=4/3")
+            .args(["-frames:v", "3", "-pix_fmt", "yuv420p", "-c:v", "libx264"])
+            .arg(&p)
+            .status()
+            .is_ok_and(|s| s.success());
+        if !ok {
+            println!("skipped: this ffmpeg cannot encode H.264");
+            return;
+        }
+        let v = info_json(&p);
+        assert_eq!(
+            (v["width"].clone(), v["height"].clone()),
+            (128.into(), 72.into())
+        );
+        assert_eq!(
+            (v["stored_width"].clone(), v["stored_height"].clone()),
+            (96.into(), 72.into())
+        );
+        assert_eq!(v["pixel_aspect"], "4:3");
+        let human =
+            String::from_utf8_lossy(&ignis(&["info", p.to_str().unwrap()]).stdout).to_string();
+        assert!(
+            human.contains("128x72 (stored 96x72 with 4:3 pixels"),
+            "{human}"
+        );
     }
 
     #[test]

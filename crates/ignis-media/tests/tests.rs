@@ -638,6 +638,310 @@ mod probing {
             assert!(e < 8.0, "frame {k}: {e} levels from the upright picture");
         }
     }
+
+    /// The bounding box (width, height) of the pixels brighter than half white.
+    fn bright_box(f: &RgbaFrame) -> (u32, u32) {
+        let (mut x0, mut y0, mut x1, mut y1) = (u32::MAX, u32::MAX, 0, 0);
+        for y in 0..f.height() {
+            for (x, p) in f.row(y).iter().enumerate() {
+                if p[1] > 0.5 {
+                    (x0, y0) = (x0.min(x as u32), y0.min(y));
+                    (x1, y1) = (x1.max(x as u32), y1.max(y));
+                }
+            }
+        }
+        assert!(x1 >= x0, "no bright pixel");
+        (x1 - x0 + 1, y1 - y0 + 1)
+    }
+
+    /// Non-square pixels (anamorphic DV/HDV, some broadcast and phone footage) are read
+    /// at square-pixel size, as players show them: a box stored 30×40 with 4:3 pixels is
+    /// 40×40. Through the pure path (the SAR from the SPS's VUI) and ffmpeg (ffprobe's),
+    /// with a display rotation (which turns the pixels too), and with crops given in the
+    /// shown size.
+    #[test]
+    fn anamorphic_clips_are_read_at_square_pixels() {
+        if !have_ffmpeg() {
+            return;
+        }
+        let dir = tempfile::tempdir().unwrap();
+        let inputs = [
+            "-f",
+            "lavfi",
+            "-i",
+            "color=black:s=96x72:r=10,drawbox=x=24:y=16:w=30:h=40:color=white:t=fill,setsar=4/3",
+            "-frames:v",
+            "6",
+        ];
+        let x264 = |profile| {
+            [
+                "-pix_fmt",
+                "yuv420p",
+                "-c:v",
+                "libx264",
+                "-profile:v",
+                profile,
+            ]
+        };
+        let (Some(base), Some(high)) = (
+            make_from(dir.path(), "base.mp4", &inputs, &x264("baseline")),
+            make_from(dir.path(), "high.mp4", &inputs, &x264("high")),
+        ) else {
+            return;
+        };
+        let turned = dir.path().join("turned.mp4");
+        let ok = std::process::Command::new("ffmpeg")
+            .args(["-nostdin", "-y", "-v", "error", "-i"])
+            .arg(&high)
+            .args(["-c", "copy", "-metadata:s:v:0", "rotate=90"])
+            .arg(&turned)
+            .status()
+            .is_ok_and(|s| s.success());
+        let stored = Size::new(96, 72).unwrap();
+        let mut cases = vec![
+            (
+                &base,
+                Decoder::Openh264,
+                Size::new(128, 72).unwrap(),
+                (4, 3),
+                stored,
+            ),
+            (
+                &high,
+                Decoder::Ffmpeg,
+                Size::new(128, 72).unwrap(),
+                (4, 3),
+                stored,
+            ),
+        ];
+        if ok {
+            let upright = Size::new(72, 96).unwrap();
+            cases.push((
+                &turned,
+                Decoder::Ffmpeg,
+                Size::new(72, 128).unwrap(),
+                (3, 4),
+                upright,
+            ));
+        } else {
+            println!("skipped the rotated case: this ffmpeg cannot set a display rotation");
+        }
+        for (path, decoder, shown, aspect, stored) in cases {
+            let info = probe(path).unwrap();
+            assert_eq!(info.decoder, decoder, "{info:?}");
+            assert_eq!(info.size, shown, "{info:?}");
+            let a = info.anamorphic.expect("anamorphic");
+            assert_eq!((a.stored, a.pixel_aspect), (stored, aspect));
+            let frames = read_all(path);
+            assert_eq!(frames.len(), 6);
+            for f in &frames {
+                assert_eq!(f.size(), shown);
+                let (w, h) = bright_box(f);
+                assert!(
+                    w.abs_diff(40) <= 2 && h.abs_diff(40) <= 2,
+                    "{path:?}: box {w}x{h}"
+                );
+            }
+        }
+        // A crop is in the shown size: the right half of the 128-wide picture.
+        let opts = ReadOptions {
+            crop: Some(Rect {
+                x: 64,
+                y: 0,
+                width: 64,
+                height: 72,
+            }),
+            ..Default::default()
+        };
+        for path in [&base, &high] {
+            let f = open(path, &opts).unwrap().next().unwrap().unwrap();
+            assert_eq!(f.size(), Size::new(64, 72).unwrap());
+            // The box spans shown columns 32..72, so 8 of its columns are in the crop.
+            let (w, h) = bright_box(&f);
+            assert!(
+                w.abs_diff(8) <= 2 && h.abs_diff(40) <= 2,
+                "{path:?}: {w}x{h}"
+            );
+        }
+    }
+
+    /// Decodes `path` with the system ffmpeg alone (no conversion), as 8-bit RGBA frames.
+    fn ffmpeg_plain(path: &Path) -> Vec<Vec<u8>> {
+        let out = std::process::Command::new("ffmpeg")
+            .args(["-nostdin", "-v", "error", "-i"])
+            .arg(path)
+            .args(["-f", "rawvideo", "-pix_fmt", "rgba", "-"])
+            .output()
+            .unwrap();
+        assert!(out.status.success());
+        let n = 96 * 64 * 4;
+        out.stdout.chunks(n).map(<[u8]>::to_vec).collect()
+    }
+
+    /// 8-bit sRGB RGBA bytes of a 96×64 picture as a linear frame.
+    fn frame_of(bytes: &[u8]) -> RgbaFrame {
+        let mut f = RgbaFrame::new(Size::new(96, 64).unwrap());
+        for (i, p) in bytes.chunks(4).enumerate() {
+            let c = |v: u8| srgb_to_linear(v as f32 / 255.0);
+            f.set(
+                i as u32 % 96,
+                i as u32 / 96,
+                [c(p[0]), c(p[1]), c(p[2]), 1.0],
+            );
+        }
+        f
+    }
+
+    /// HDR footage (HLG and PQ, BT.2020: phones record it by default) is read as the SDR
+    /// picture it shows, not the washed-out one its raw code values give: a clip made
+    /// from an SDR picture with SDR white at the HDR reference white (203 cd/m²) reads
+    /// back close to it, and much closer than a plain decode.
+    #[test]
+    fn hdr_clips_are_read_as_sdr() {
+        if !have_ffmpeg() {
+            return;
+        }
+        let dir = tempfile::tempdir().unwrap();
+        // The SDR picture, exactly (RGB PNGs), and HDR clips made from the same RGB frames
+        // (lossless, so only the conversions differ).
+        let src = [
+            "-f",
+            "lavfi",
+            "-i",
+            "testsrc2=size=96x64:rate=10,format=rgb24",
+            "-frames:v",
+            "4",
+        ];
+        let seq = dir.path().join("sdr");
+        std::fs::create_dir_all(&seq).unwrap();
+        if make_from(&seq, "%02d.png", &src, &[]).is_none() {
+            return;
+        }
+        let reference = read_all(&seq);
+        for (name, trc) in [("hlg.mp4", "arib-std-b67"), ("pq.mp4", "smpte2084")] {
+            let vf = format!(
+                "format=gbrp,zscale=tin=bt709:pin=bt709:min=gbr:rin=full:t=linear:p=bt709:npl=203,\
+                 format=gbrpf32le,\
+zscale=p=bt2020:t={trc}:m=bt2020nc:r=tv:npl=203,format=yuv444p10le"
+            );
+            let args = [
+                "-vf",
+                &vf,
+                "-c:v",
+                "libx264",
+                "-qp",
+                "0",
+                "-color_trc",
+                trc,
+                "-color_primaries",
+                "bt2020",
+                "-colorspace",
+                "bt2020nc",
+                "-color_range",
+                "tv",
+            ];
+            let Some(hdr) = make_from(dir.path(), name, &src, &args) else {
+                continue;
+            };
+            let info = probe(&hdr).unwrap();
+            if info.codec.contains("no zscale") {
+                println!("skipped {name}: this ffmpeg has no zscale filter");
+                continue;
+            }
+            assert!(info.codec.contains("read as SDR"), "{}", info.codec);
+            let ours = read_all(&hdr);
+            let plain = ffmpeg_plain(&hdr);
+            assert_eq!((ours.len(), plain.len()), (4, 4));
+            for k in 0..4 {
+                let e = mae_srgb8(&reference[k], &ours[k]);
+                let raw = mae_srgb8(&frame_of(&plain[k]), &reference[k]);
+                println!(
+                    "{name} frame {k}: {e:.2} levels from the SDR picture (plain decode {raw:.2})"
+                );
+                assert!(e < 2.5, "{name} frame {k}: {e:.2} levels");
+                assert!(
+                    raw > 2.0 * e,
+                    "{name}: a plain decode is as close ({raw:.2} vs {e:.2})"
+                );
+            }
+        }
+    }
+
+    /// Interlaced footage (broadcast, older cameras) is deinterlaced: a bar moving at 50
+    /// fields a second, woven into 25 interlaced frames, is read without combing (rows
+    /// alternating between the two fields' pictures).
+    #[test]
+    fn interlaced_clips_are_deinterlaced() {
+        if !have_ffmpeg() {
+            return;
+        }
+        let dir = tempfile::tempdir().unwrap();
+        let inputs = [
+            "-f",
+            "lavfi",
+            "-i",
+            "color=black:s=96x64:r=50[b];color=white:s=16x64:r=50[w];\
+             [b][w]overlay=x='mod(t*400,80)':y=0",
+            "-frames:v",
+            "24",
+        ];
+        let args = [
+            "-vf",
+            "tinterlace=interleave_top,setfield=tff",
+            "-c:v",
+            "libx264",
+            "-qp",
+            "0",
+            "-pix_fmt",
+            "yuv420p",
+            "-flags",
+            "+ildct+ilme",
+            "-x264opts",
+            "tff=1",
+        ];
+        let Some(clip) = make_from(dir.path(), "inter.mp4", &inputs, &args) else {
+            return;
+        };
+        let info = probe(&clip).unwrap();
+        if info.codec.contains("no bwdif") {
+            println!("skipped: this ffmpeg has no bwdif filter");
+            return;
+        }
+        assert!(info.codec.contains("deinterlaced"), "{}", info.codec);
+        // Combing: how far each row is from the mean of its two neighbours (the other
+        // field's rows), mean over the picture.
+        let comb = |rows: &dyn Fn(u32) -> Vec<f32>, h: u32| {
+            let mut across = 0.0;
+            for y in 1..h - 1 {
+                let (a, b, c) = (rows(y - 1), rows(y), rows(y + 1));
+                for x in 0..a.len() {
+                    across += (b[x] - 0.5 * (a[x] + c[x])).abs() as f64;
+                }
+            }
+            across / ((h - 2) as f64 * 96.0)
+        };
+        let ours = read_all(&clip);
+        assert_eq!(ours.len(), 24);
+        let plain = ffmpeg_plain(&clip);
+        let (mut c_ours, mut c_plain) = (0.0, 0.0);
+        for (f, p) in ours.iter().zip(&plain) {
+            c_ours += comb(&|y| f.row(y).iter().map(|q| q[1]).collect(), 64);
+            c_plain += comb(
+                &|y| {
+                    p[(y * 96 * 4) as usize..((y + 1) * 96 * 4) as usize]
+                        .chunks(4)
+                        .map(|q| q[1] as f32 / 255.0)
+                        .collect()
+                },
+                64,
+            );
+        }
+        println!("combing: read {c_ours:.3}, plain decode {c_plain:.3}");
+        assert!(
+            c_plain > 4.0 * c_ours,
+            "read {c_ours:.3}, plain {c_plain:.3}"
+        );
+    }
 }
 
 mod roundtrip {

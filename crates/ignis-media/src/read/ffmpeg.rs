@@ -101,6 +101,12 @@ struct ProbeStream {
     avg_frame_rate: Option<String>,
     r_frame_rate: Option<String>,
     nb_frames: Option<String>,
+    sample_aspect_ratio: Option<String>,
+    color_transfer: Option<String>,
+    color_primaries: Option<String>,
+    color_space: Option<String>,
+    color_range: Option<String>,
+    field_order: Option<String>,
     #[serde(default)]
     side_data_list: Vec<SideData>,
     #[serde(default)]
@@ -158,13 +164,21 @@ pub(crate) fn file_url(path: &Path) -> Result<std::ffi::OsString> {
 /// no nested protocols from playlists or concat lists).
 pub(crate) const PROTOCOL_WHITELIST: [&str; 2] = ["-protocol_whitelist", "file"];
 
-/// Probes `path` with `ffprobe` (container headers only).
-pub(crate) fn probe(path: &Path, _hint: Option<&str>) -> Result<SourceInfo> {
+/// [`probe`], as the reader's [`Probed`](super::Probed).
+pub(crate) fn probed(path: &Path) -> Result<super::Probed> {
+    probe(path, None).map(|(info, filters)| super::Probed::Ffmpeg(info, filters))
+}
+
+/// Probes `path` with `ffprobe` (container headers only): what the source is, and the
+/// [`Filters`] that make its frames ordinary SDR progressive pictures.
+pub(crate) fn probe(path: &Path, _hint: Option<&str>) -> Result<(SourceInfo, Filters)> {
     let url = file_url(path)?;
     let out = Command::new(ffmpeg_sidecar::ffprobe::ffprobe_path())
         .args(["-v", "error", "-select_streams", "v:0", "-show_entries"])
         .arg(
-            "stream=codec_name,profile,width,height,avg_frame_rate,r_frame_rate,nb_frames\
+            "stream=codec_name,profile,width,height,avg_frame_rate,r_frame_rate,nb_frames,\
+             sample_aspect_ratio,color_transfer,color_primaries,color_space,color_range,\
+             field_order\
              :stream_side_data=rotation:stream_tags=rotate",
         )
         .args(["-of", "json"])
@@ -199,10 +213,18 @@ pub(crate) fn probe(path: &Path, _hint: Option<&str>) -> Result<SourceInfo> {
             "ffprobe reports no frame size",
         ));
     };
-    // A portrait phone clip is stored landscape with a rotation; its frames decode upright.
-    let (w, h) = if s.quarter_turn() { (h, w) } else { (w, h) };
-    let size =
+    // A portrait phone clip is stored landscape with a rotation; its frames decode upright,
+    // and so do their pixels: a quarter turn swaps the pixel aspect too.
+    let turned = s.quarter_turn();
+    let (w, h) = if turned { (h, w) } else { (w, h) };
+    let stored =
         Size::new(w, h).map_err(|e| MediaError::decode(path, None, format!("frame size: {e}")))?;
+    let (num, den) = parse_aspect(s.sample_aspect_ratio.as_deref()).unwrap_or((1, 1));
+    let (num, den) = if turned { (den, num) } else { (num, den) };
+    let (anamorphic, size) = match super::anamorphic(stored, num, den) {
+        Some((a, shown)) => (Some(a), shown),
+        None => (None, stored),
+    };
     let fps = parse_rate(s.avg_frame_rate.as_deref())
         .or(parse_rate(s.r_frame_rate.as_deref()))
         .unwrap_or(30.0);
@@ -211,18 +233,147 @@ pub(crate) fn probe(path: &Path, _hint: Option<&str>) -> Result<SourceInfo> {
         Some(p) if !p.is_empty() && p != "unknown" => format!("{codec_name} ({p})"),
         _ => codec_name,
     };
+    let colour = Colour {
+        transfer: s.color_transfer.as_deref(),
+        primaries: s.color_primaries.as_deref(),
+        matrix: s.color_space.as_deref(),
+        range: s.color_range.as_deref(),
+    };
+    let (filters, notes) = conversion(colour, s.field_order.as_deref(), has_filter);
+    let codec = notes.iter().fold(codec, |c, n| format!("{c}, {n}"));
     let frame_count = match s.nb_frames.and_then(|n| n.parse().ok()).filter(|&n| n > 0) {
         Some(n) => Some(n),
         None => counted_packets(path)?,
     };
-    Ok(SourceInfo {
+    let info = SourceInfo {
         size,
         fps,
         frame_count,
         codec,
         decoder: Decoder::Ffmpeg,
         path: path.to_path_buf(),
-    })
+        anamorphic,
+    };
+    Ok((info, filters))
+}
+
+/// The ffmpeg filters a source needs before its frames are the 8-bit SDR BT.709
+/// progressive pictures the rest of Ignis reads (`-vf`; `None`: none).
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub(crate) struct Filters(Option<String>);
+
+/// Whether this ffmpeg has the filter `name` (`ffmpeg -filters`, once per process).
+fn has_filter(name: &str) -> bool {
+    static LIST: OnceLock<String> = OnceLock::new();
+    let list = LIST.get_or_init(|| {
+        Command::new(ffmpeg_sidecar::paths::ffmpeg_path())
+            .args(["-hide_banner", "-filters"])
+            .output()
+            .map(|o| String::from_utf8_lossy(&o.stdout).into_owned())
+            .unwrap_or_default()
+    });
+    list.lines()
+        .any(|l| l.split_whitespace().nth(1) == Some(name))
+}
+
+/// A stream's colour properties as ffprobe names them (`None`: not stated).
+#[derive(Clone, Copy, Debug, Default)]
+struct Colour<'a> {
+    transfer: Option<&'a str>,
+    primaries: Option<&'a str>,
+    matrix: Option<&'a str>,
+    range: Option<&'a str>,
+}
+
+/// The filters for a stream with these ffprobe colour and field properties, and notes for
+/// its codec description (what `ignis info` shows):
+/// - HDR (PQ `smpte2084`, HLG `arib-std-b67`): to linear light with the HDR reference
+///   white of ITU-R BT.2408 (203 cd/m², HLG's 75 % signal) as SDR white 1.0 (`zscale`
+///   `npl=203`; measured: HLG 75 % → 1.001), BT.709 primaries, then BT.709's transfer,
+///   highlights above white clipped as an SDR camera clips them: fire read from an HDR
+///   clip looks as the SDR footage Ignis is measured on does (cores clipped to yellow and
+///   white), and nothing under reference white changes. (A tone curve instead — `tonemap`
+///   `mobius` or `hable` with HLG's 1,000 cd/m² peak — darkens white to 0.68–0.77 to make
+///   room for highlights a flipbook cannot show.)
+/// - SDR with BT.2020 primaries (10-bit SDR from some cameras): the primaries converted;
+/// - interlaced (`tt`, `bb`, `tb`, `bt` field order): deinterlaced to one frame per frame
+///   (`bwdif`, only frames flagged interlaced).
+///
+/// The input's properties are given to `zscale` explicitly (it refuses a frame whose
+/// primaries or matrix are unstated: "no path between colorspaces"), unstated ones as
+/// what such footage uses (BT.2020, its non-constant-luminance matrix, limited range).
+/// Without the filter it needs (`zscale`, e.g. an ffmpeg built without libzimg), the clip
+/// is read as it decodes and the note says so.
+fn conversion(
+    colour: Colour<'_>,
+    field_order: Option<&str>,
+    have: impl Fn(&str) -> bool,
+) -> (Filters, Vec<String>) {
+    let mut chain = Vec::new();
+    let mut notes = Vec::new();
+    if matches!(field_order, Some("tt" | "bb" | "tb" | "bt")) {
+        if have("bwdif") {
+            chain.push("bwdif=mode=send_frame:parity=auto:deint=interlaced".to_string());
+            notes.push("interlaced (deinterlaced)".to_string());
+        } else {
+            notes.push("interlaced (read as is: this ffmpeg has no bwdif filter)".to_string());
+        }
+    }
+    let hdr = match colour.transfer {
+        Some("smpte2084") => Some("HDR PQ"),
+        Some("arib-std-b67") => Some("HDR HLG"),
+        _ => None,
+    };
+    let wide = colour.primaries == Some("bt2020");
+    if hdr.is_some() || wide {
+        let what = hdr.unwrap_or("BT.2020 colour");
+        if have("zscale") {
+            let tin = colour
+                .transfer
+                .filter(|t| {
+                    matches!(
+                        *t,
+                        "smpte2084" | "arib-std-b67" | "bt709" | "bt2020-10" | "bt2020-12"
+                    )
+                })
+                .unwrap_or("bt709");
+            let pin = colour
+                .primaries
+                .filter(|p| matches!(*p, "bt709" | "bt2020"))
+                .unwrap_or("bt2020");
+            let min = match colour.matrix {
+                Some(m @ ("bt709" | "bt2020nc" | "bt2020c")) => m,
+                Some("smpte170m") => "170m",
+                Some("bt470bg") => "470bg",
+                _ => "bt2020nc",
+            };
+            let rin = match colour.range {
+                Some("pc") => "full",
+                _ => "limited",
+            };
+            chain.push(format!(
+                "zscale=tin={tin}:pin={pin}:min={min}:rin={rin}:t=linear:p=bt709:npl=203,\
+                 format=gbrpf32le,zscale=t=bt709,format=gbrp"
+            ));
+            notes.push(match hdr {
+                Some(_) => format!("{what} (read as SDR BT.709, highlights clipped)"),
+                None => format!("{what} (converted to BT.709)"),
+            });
+        } else {
+            notes.push(format!(
+                "{what} (read without conversion: this ffmpeg has no zscale filter; \
+                 colours will look washed out)"
+            ));
+        }
+    }
+    let chain = (!chain.is_empty()).then(|| chain.join(","));
+    (Filters(chain), notes)
+}
+
+/// A sample aspect ratio as ffprobe prints it (`4:3`; `N/A` or `0:1` when unknown).
+fn parse_aspect(r: Option<&str>) -> Option<(u32, u32)> {
+    let (n, d) = r?.trim().split_once(':')?;
+    Some((n.parse().ok()?, d.parse().ok()?))
 }
 
 /// The video frames of a file whose container does not say how many it holds (Matroska
@@ -364,6 +515,7 @@ impl FfmpegSource {
     /// keyframe and drops frames before the seek time), stopping after `end` if given.
     pub(crate) fn start(
         info: &SourceInfo,
+        filters: &Filters,
         start: u64,
         end: Option<u64>,
         keep_8bit: bool,
@@ -378,6 +530,9 @@ impl FfmpegSource {
         cmd.args(PROTOCOL_WHITELIST);
         cmd.input(file_url(&info.path)?);
         cmd.args(["-map", "0:v:0", "-an", "-sn", "-dn"]);
+        if let Filters(Some(chain)) = filters {
+            cmd.args(["-vf", chain]);
+        }
         cmd.args(passthrough_args());
         if let Some(e) = end {
             cmd.arg("-frames:v").arg((e - start).to_string());
@@ -479,6 +634,84 @@ mod tests {
     use super::*;
 
     #[test]
+    fn conversions_follow_the_stream_and_the_filters_at_hand() {
+        let all = |_: &str| true;
+        let none = |_: &str| false;
+        // An ordinary SDR progressive clip, tagged or not: nothing.
+        let col = |transfer, primaries| Colour {
+            transfer,
+            primaries,
+            ..Colour::default()
+        };
+        for (t, p, f) in [
+            (Some("bt709"), Some("bt709"), Some("progressive")),
+            (None, None, None),
+            (Some("bt470bg"), Some("smpte170m"), Some("unknown")),
+        ] {
+            assert_eq!(conversion(col(t, p), f, all), (Filters(None), vec![]));
+        }
+        let (Filters(Some(c)), n) =
+            conversion(col(Some("arib-std-b67"), Some("bt2020")), None, all)
+        else {
+            panic!("HLG needs a conversion")
+        };
+        assert!(c.contains("t=linear") && c.contains("npl=203") && c.ends_with("gbrp"));
+        // Unstated properties are given as what HDR footage uses.
+        assert!(
+            c.contains("tin=arib-std-b67:pin=bt2020:min=bt2020nc:rin=limited"),
+            "{c}"
+        );
+        let tagged = Colour {
+            transfer: Some("smpte2084"),
+            primaries: Some("bt2020"),
+            matrix: Some("bt2020c"),
+            range: Some("pc"),
+        };
+        let (Filters(Some(f)), _) = conversion(tagged, None, all) else {
+            panic!()
+        };
+        assert!(
+            f.contains("tin=smpte2084:pin=bt2020:min=bt2020c:rin=full"),
+            "{f}"
+        );
+        assert_eq!(n, ["HDR HLG (read as SDR BT.709, highlights clipped)"]);
+        let (Filters(Some(c)), n) = conversion(col(Some("smpte2084"), Some("bt2020")), None, all)
+        else {
+            panic!("PQ needs a conversion")
+        };
+        assert!(c.contains("tin=smpte2084"));
+        assert!(n[0].starts_with("HDR PQ"));
+        // BT.2020 SDR: primaries only, no tone mapping.
+        let (Filters(Some(c)), _) = conversion(col(Some("bt2020-10"), Some("bt2020")), None, all)
+        else {
+            panic!("BT.2020 needs a conversion")
+        };
+        assert!(c.contains("p=bt709") && c.contains("tin=bt2020-10"), "{c}");
+        // Interlaced, both field orders; deinterlaced first.
+        for f in ["tt", "bb", "tb", "bt"] {
+            let (Filters(Some(c)), n) = conversion(col(None, None), Some(f), all) else {
+                panic!("{f}")
+            };
+            assert!(c.starts_with("bwdif="), "{c}");
+            assert_eq!(n, ["interlaced (deinterlaced)"]);
+        }
+        let (Filters(Some(c)), n) =
+            conversion(col(Some("arib-std-b67"), Some("bt2020")), Some("tt"), all)
+        else {
+            panic!()
+        };
+        assert!(c.starts_with("bwdif=") && c.contains("zscale"), "{c}");
+        assert_eq!(n.len(), 2);
+        // Without the filters: read as decoded, and the note says so.
+        let (f, n) = conversion(col(Some("arib-std-b67"), Some("bt2020")), Some("tt"), none);
+        assert_eq!(f, Filters(None));
+        assert!(
+            n[0].contains("no bwdif") && n[1].contains("no zscale"),
+            "{n:?}"
+        );
+    }
+
+    #[test]
     fn seeks_go_half_way_to_the_frame_before() {
         let json = br#"{"packets": [{"pts_time": "0.100000"}, {"pts_time": "0.166667"},
             {"pts_time": "0.133333"}, {"pts_time": "0.300000"}],
@@ -551,9 +784,9 @@ mod tests {
             std::fs::copy(&src, &p).unwrap();
             // Relative to the directory, exactly as a user would type it.
             let rel = Path::new(name);
-            let info = probe(&p, None).unwrap_or_else(|e| panic!("{name}: {e}"));
+            let (info, filters) = probe(&p, None).unwrap_or_else(|e| panic!("{name}: {e}"));
             assert_eq!(info.size, size, "{name}");
-            let mut s = FfmpegSource::start(&info, 0, Some(1), false).unwrap();
+            let mut s = FfmpegSource::start(&info, &filters, 0, Some(1), false).unwrap();
             let f = s.next_frame().expect("one frame").unwrap();
             assert_eq!(f.size(), size);
             assert!(file_url(rel)

@@ -77,8 +77,8 @@ pub(crate) fn probe_mp4(path: &Path, len: u64, have_ffmpeg: bool) -> Result<Prob
         // ffmpeg; if ffprobe cannot read it either, report the demuxer's error.
         Err(e) => {
             if have_ffmpeg {
-                if let Ok(info) = ffmpeg::probe(path, None) {
-                    return Ok(Probed::Ffmpeg(info));
+                if let Ok(p) = ffmpeg::probed(path) {
+                    return Ok(p);
                 }
             }
             return Err(e);
@@ -110,7 +110,7 @@ pub(crate) fn probe_mp4(path: &Path, len: u64, have_ffmpeg: bool) -> Result<Prob
     let turned = m.b != 0 || m.c != 0 || m.a < 0 || m.d < 0;
     if turned {
         if have_ffmpeg {
-            return ffmpeg::probe(path, None).map(Probed::Ffmpeg);
+            return ffmpeg::probed(path);
         }
         return Err(MediaError::unsupported(
             path,
@@ -122,7 +122,7 @@ pub(crate) fn probe_mp4(path: &Path, len: u64, have_ffmpeg: bool) -> Result<Prob
     }
     if !baseline || track.trak.mdia.minf.stbl.stsd.avc1.is_none() {
         if have_ffmpeg {
-            return ffmpeg::probe(path, None).map(Probed::Ffmpeg);
+            return ffmpeg::probed(path);
         }
         return Err(MediaError::unsupported(
             path,
@@ -147,6 +147,17 @@ pub(crate) fn probe_mp4(path: &Path, len: u64, have_ffmpeg: bool) -> Result<Prob
     let size = Size::new(track.width() as u32, track.height() as u32).map_err(|e| {
         MediaError::decode(path, None, format!("bad frame size in the MP4 header: {e}"))
     })?;
+    // Non-square pixels, as the stream's sequence parameter set says (what ffmpeg and
+    // players honour); read at square-pixel size like the ffmpeg path.
+    let aspect = stsd
+        .avc1
+        .as_ref()
+        .and_then(|a| a.avcc.sequence_parameter_sets.first())
+        .and_then(|sps| sps_pixel_aspect(&sps.bytes));
+    let (anamorphic, size) = match aspect.and_then(|(n, d)| super::anamorphic(size, n, d)) {
+        Some((a, shown)) => (Some(a), shown),
+        None => (None, size),
+    };
     let info = SourceInfo {
         size,
         fps,
@@ -154,6 +165,7 @@ pub(crate) fn probe_mp4(path: &Path, len: u64, have_ffmpeg: bool) -> Result<Prob
         codec,
         decoder: Decoder::Openh264,
         path: path.to_path_buf(),
+        anamorphic,
     };
     Ok(Probed::Mp4(
         info,
@@ -294,7 +306,7 @@ impl Openh264Source {
             .map_err(|e| MediaError::io(&info.path, e))?;
         Ok(Openh264Source {
             rx,
-            expected: info.size,
+            expected: info.anamorphic.map_or(info.size, |a| a.stored),
         })
     }
 }
@@ -467,6 +479,154 @@ fn rgba8_of(yuv: &openh264::decoder::DecodedYUV<'_>) -> (Vec<u8>, Size) {
     (rgba, size)
 }
 
+/// The sample aspect ratio (width : height of one pixel) an H.264 sequence parameter set
+/// (`sps`: the NAL unit, header byte first, as stored in `avcC`) gives in its VUI, ITU-T
+/// H.264 §7.3.2.1.1 and Table E-1; `None` when it says nothing, says "unspecified", or
+/// the unit is cut short or malformed. Written here because the `mp4` and `openh264`
+/// crates parse the SPS but do not expose its VUI; only the fields before the aspect are
+/// read (skipped), every read is bounds-checked and every loop consumes bits, so a damaged
+/// unit ends with `None`.
+pub(crate) fn sps_pixel_aspect(sps: &[u8]) -> Option<(u32, u32)> {
+    // Emulation prevention: 00 00 03 → 00 00.
+    let mut rbsp = Vec::with_capacity(sps.len());
+    let mut zeros = 0;
+    for &b in sps.get(1..)? {
+        if zeros >= 2 && b == 3 {
+            zeros = 0;
+            continue;
+        }
+        zeros = if b == 0 { zeros + 1 } else { 0 };
+        rbsp.push(b);
+    }
+    let mut r = Bits {
+        data: &rbsp,
+        pos: 0,
+    };
+    let profile = r.u(8)?;
+    r.u(16)?; // constraint flags, level
+    r.ue()?; // seq_parameter_set_id
+    if matches!(
+        profile,
+        100 | 110 | 122 | 244 | 44 | 83 | 86 | 118 | 128 | 138 | 139 | 134 | 135
+    ) {
+        let chroma = r.ue()?;
+        if chroma == 3 {
+            r.u(1)?;
+        }
+        r.ue()?;
+        r.ue()?; // bit depths
+        r.u(1)?;
+        if r.u(1)? == 1 {
+            for i in 0..if chroma == 3 { 12 } else { 8 } {
+                if r.u(1)? == 1 {
+                    let n = if i < 6 { 16 } else { 64 };
+                    let (mut last, mut next) = (8i64, 8i64);
+                    for _ in 0..n {
+                        if next != 0 {
+                            next = (last + r.se()? + 256).rem_euclid(256);
+                        }
+                        if next != 0 {
+                            last = next;
+                        }
+                    }
+                }
+            }
+        }
+    }
+    r.ue()?; // log2_max_frame_num_minus4
+    match r.ue()? {
+        0 => {
+            r.ue()?;
+        }
+        1 => {
+            r.u(1)?;
+            r.se()?;
+            r.se()?;
+            for _ in 0..r.ue()?.min(255) {
+                r.se()?;
+            }
+        }
+        _ => {}
+    }
+    r.ue()?; // max_num_ref_frames
+    r.u(1)?;
+    r.ue()?;
+    r.ue()?; // size in macroblocks
+    if r.u(1)? == 0 {
+        r.u(1)?; // mb_adaptive_frame_field
+    }
+    r.u(1)?; // direct_8x8_inference
+    if r.u(1)? == 1 {
+        for _ in 0..4 {
+            r.ue()?; // cropping
+        }
+    }
+    if r.u(1)? == 0 || r.u(1)? == 0 {
+        return None; // no VUI, or no aspect ratio in it
+    }
+    const TABLE: [(u32, u32); 17] = [
+        (0, 0),
+        (1, 1),
+        (12, 11),
+        (10, 11),
+        (16, 11),
+        (40, 33),
+        (24, 11),
+        (20, 11),
+        (32, 11),
+        (80, 33),
+        (18, 11),
+        (15, 11),
+        (64, 33),
+        (160, 99),
+        (4, 3),
+        (3, 2),
+        (2, 1),
+    ];
+    match r.u(8)? {
+        255 => {
+            let (w, h) = (r.u(16)?, r.u(16)?);
+            (w > 0 && h > 0).then_some((w, h))
+        }
+        i => TABLE.get(i as usize).copied().filter(|&(w, _)| w > 0),
+    }
+}
+
+/// An MSB-first bit reader over an RBSP.
+struct Bits<'a> {
+    data: &'a [u8],
+    pos: usize,
+}
+
+impl Bits<'_> {
+    fn bit(&mut self) -> Option<u32> {
+        let b = self.data.get(self.pos / 8)?;
+        let v = (b >> (7 - self.pos % 8)) & 1;
+        self.pos += 1;
+        Some(v as u32)
+    }
+    /// `n` ≤ 32 bits as an unsigned number.
+    fn u(&mut self, n: u32) -> Option<u32> {
+        (0..n).try_fold(0u32, |acc, _| Some((acc << 1) | self.bit()?))
+    }
+    /// Exp-Golomb unsigned (`ue(v)`); `None` past 31 leading zeros.
+    fn ue(&mut self) -> Option<u32> {
+        let mut zeros = 0;
+        while self.bit()? == 0 {
+            zeros += 1;
+            if zeros > 31 {
+                return None;
+            }
+        }
+        Some(((1u64 << zeros) - 1 + self.u(zeros)? as u64).min(u32::MAX as u64) as u32)
+    }
+    /// Exp-Golomb signed (`se(v)`).
+    fn se(&mut self) -> Option<i64> {
+        let k = self.ue()? as i64;
+        Some(if k % 2 == 1 { (k + 1) / 2 } else { -(k / 2) })
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -478,6 +638,78 @@ mod tests {
         assert_eq!(out, [0, 0, 0, 1, 0x65, 0xAA, 0, 0, 0, 1, 0x41]);
         assert!(avcc_to_annexb(&[0, 0, 0, 9, 0x65], 4, &mut Vec::new()).is_err());
         assert!(avcc_to_annexb(&[0, 0], 4, &mut Vec::new()).is_err());
+    }
+
+    fn hex(s: &str) -> Vec<u8> {
+        (0..s.len())
+            .step_by(2)
+            .map(|i| u8::from_str_radix(&s[i..i + 2], 16).unwrap())
+            .collect()
+    }
+
+    /// SPS units from x264 (their `avcC`): Baseline and High, square, 4:3 and 3:4 pixels
+    /// (the extended `255` form), and `candle.mp4`'s, whose VUI gives no aspect.
+    #[test]
+    fn sps_pixel_aspects() {
+        let cases = [
+            // Baseline 360×480 with 4:3 pixels.
+            (
+                "6742c01ed90170f797c384000003000400000300f03c58b920",
+                Some((4, 3)),
+            ),
+            // High 720×540 with 4:3 pixels.
+            (
+                "6764001eacd940b4117ef0e6a0c0a0a80000030008000003019078b16cb0",
+                Some((4, 3)),
+            ),
+            // High 960×720 with 3:4 pixels.
+            (
+                "6764001facd940f016effc000c0011a830282a000003000200000300641e30632c",
+                Some((3, 4)),
+            ),
+            // candle.mp4: Baseline, VUI without an aspect ratio.
+            ("6742c01ed901e0f684000003000400000300f03c58b920", None),
+            // campfire.mp4: High, square pixels stated (Table E-1 index 1).
+            (
+                "6764001facd940f0117ef016a0c0a0a80000030008000003019078c18cb0",
+                Some((1, 1)),
+            ),
+        ];
+        for (sps, want) in cases {
+            assert_eq!(sps_pixel_aspect(&hex(sps)), want, "{sps}");
+        }
+        // Cut short anywhere, or empty: no panic; before the aspect's last bit no answer,
+        // after it the right one (the VUI's aspect comes before its other fields).
+        let full = hex(cases[1].0);
+        let answers: Vec<_> = (0..full.len())
+            .map(|n| sps_pixel_aspect(&full[..n]))
+            .collect();
+        let first = answers.iter().position(Option::is_some).unwrap();
+        assert!(first > 8, "answered from {first} bytes");
+        assert!(answers[..first].iter().all(Option::is_none));
+        assert!(answers[first..].iter().all(|a| *a == Some((4, 3))));
+        // Any single bit flipped in any of the units, and noise: an answer or none, never a
+        // panic or a hang (the scaling-list and cycle loops are bounded by the data).
+        for (sps, _) in cases {
+            let unit = hex(sps);
+            for bit in 0..unit.len() * 8 {
+                let mut u = unit.clone();
+                u[bit / 8] ^= 0x80 >> (bit % 8);
+                let _ = sps_pixel_aspect(&u);
+            }
+        }
+        let mut x = 0x9E37_79B9_7F4A_7C15u64;
+        for n in 0..4000 {
+            let noise: Vec<u8> = (0..n % 64)
+                .map(|_| {
+                    x ^= x << 13;
+                    x ^= x >> 7;
+                    x ^= x << 17;
+                    x as u8
+                })
+                .collect();
+            let _ = sps_pixel_aspect(&noise);
+        }
     }
 
     #[test]

@@ -193,6 +193,63 @@ pub struct SourceInfo {
     pub decoder: Decoder,
     /// The path as given.
     pub path: PathBuf,
+    /// Non-square pixels (anamorphic DV or HDV, some phone and broadcast footage): the
+    /// pictures are stored at [`Anamorphic::stored`] and read at `size`, resampled to
+    /// square pixels as a player shows them. `None` for square pixels.
+    pub anamorphic: Option<Anamorphic>,
+}
+
+/// A source whose pixels are not square ([`SourceInfo::anamorphic`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Anamorphic {
+    /// The size the pictures are stored (and decoded) at.
+    pub stored: Size,
+    /// Width : height of one stored pixel (the sample aspect ratio), in lowest terms.
+    pub pixel_aspect: (u32, u32),
+}
+
+/// The pixel aspects beyond which a sample aspect ratio is taken to be damaged metadata
+/// and ignored: real anamorphic formats stay within 1:2 … 2:1 (DV 8:9 to 2:1 for
+/// anamorphic 2× lenses), so 1:4 … 4:1 leaves room without letting a bad header blow a
+/// frame up sixteenfold.
+const MAX_PIXEL_ASPECT: f64 = 4.0;
+
+/// What a source with stored pictures of `stored` and a sample aspect ratio `num:den`
+/// is read as: the stored size widened (pixels wider than tall) or heightened (taller
+/// than wide) to square pixels, so that no stored detail is lost. `None` when the
+/// pixels are square, the ratio is unknown (`0:1`, `0:0`), or it is outside
+/// 1:[`MAX_PIXEL_ASPECT`] … [`MAX_PIXEL_ASPECT`]:1.
+pub(crate) fn anamorphic(stored: Size, num: u32, den: u32) -> Option<(Anamorphic, Size)> {
+    if num == 0 || den == 0 || num == den {
+        return None;
+    }
+    let g = gcd(num, den);
+    let (num, den) = (num / g, den / g);
+    let r = num as f64 / den as f64;
+    if !(1.0 / MAX_PIXEL_ASPECT..=MAX_PIXEL_ASPECT).contains(&r) {
+        return None;
+    }
+    let (w, h) = (stored.width as f64, stored.height as f64);
+    let (w, h) = if r > 1.0 {
+        ((w * r).round(), h)
+    } else {
+        (w, (h / r).round())
+    };
+    let shown = Size::new(w as u32, h as u32).ok()?;
+    (shown != stored).then_some((
+        Anamorphic {
+            stored,
+            pixel_aspect: (num, den),
+        },
+        shown,
+    ))
+}
+
+fn gcd(mut a: u32, mut b: u32) -> u32 {
+    while b != 0 {
+        (a, b) = (b, a % b);
+    }
+    a
 }
 
 /// A decoder positioned at some frame, yielding native-size frames in order.
@@ -236,7 +293,7 @@ impl DecodedFrame {
 /// The result of probing: the info plus what the opener needs.
 pub(crate) enum Probed {
     Mp4(SourceInfo, h264::Mp4Probe),
-    Ffmpeg(SourceInfo),
+    Ffmpeg(SourceInfo, ffmpeg::Filters),
     Sequence(SourceInfo, Vec<PathBuf>),
     Image(SourceInfo),
     Gif(SourceInfo),
@@ -246,7 +303,7 @@ impl Probed {
     fn info(&self) -> &SourceInfo {
         match self {
             Probed::Mp4(i, _)
-            | Probed::Ffmpeg(i)
+            | Probed::Ffmpeg(i, _)
             | Probed::Sequence(i, _)
             | Probed::Image(i)
             | Probed::Gif(i) => i,
@@ -311,7 +368,7 @@ pub(crate) fn probe_inner(path: &Path, have_ffmpeg: bool) -> Result<Probed> {
         return sequence::probe_image(path);
     }
     if have_ffmpeg {
-        return ffmpeg::probe(path, None).map(Probed::Ffmpeg);
+        return ffmpeg::probed(path);
     }
     Err(MediaError::unsupported(
         path,
@@ -366,9 +423,9 @@ pub(crate) fn open_inner(
     }
     let source: Box<dyn FrameSource> = match probed {
         Probed::Mp4(info, p) => Box::new(h264::Openh264Source::start(&info, p, start, !keep_8bit)?),
-        Probed::Ffmpeg(info) => {
-            Box::new(ffmpeg::FfmpegSource::start(&info, start, end, keep_8bit)?)
-        }
+        Probed::Ffmpeg(info, filters) => Box::new(ffmpeg::FfmpegSource::start(
+            &info, &filters, start, end, keep_8bit,
+        )?),
         Probed::Sequence(_, files) => Box::new(sequence::SequenceSource::new(files, start)),
         Probed::Image(info) => Box::new(sequence::SequenceSource::new(
             vec![info.path.clone()],
@@ -454,23 +511,29 @@ impl FrameReader {
                 };
             }
         };
-        if frame.size() != self.source_info.size {
+        let stored = self
+            .source_info
+            .anamorphic
+            .map_or(self.source_info.size, |a| a.stored);
+        if frame.size() != stored {
             self.done = true;
             return Some(Err(MediaError::decode(
                 &self.source_info.path,
                 Some(self.index),
-                format!(
-                    "decoded a {} frame, expected {}",
-                    frame.size(),
-                    self.source_info.size
-                ),
+                format!("decoded a {} frame, expected {stored}", frame.size()),
             )));
         }
         self.index += 1;
-        if self.crop.is_none() && self.scale.is_none() {
+        let square = self.source_info.anamorphic.is_none();
+        if square && self.crop.is_none() && self.scale.is_none() {
             return Some(Ok(frame));
         }
         let frame = frame.into_linear();
+        // Non-square pixels first, so that crop rectangles are in the size `probe` reports.
+        let frame = match square {
+            true => frame,
+            false => convert::resize(&frame, self.source_info.size),
+        };
         let frame = match &self.crop {
             Some(r) => convert::crop(&frame, r),
             None => frame,
@@ -519,6 +582,39 @@ pub fn read_image(path: &Path) -> Result<RgbaFrame> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn anamorphic_sizes_widen_or_heighten_to_square_pixels() {
+        let s = |w, h| Size::new(w, h).unwrap();
+        // HDV 1440×1080 with 4:3 pixels is shown 1920×1080; DV NTSC 720×480 at 8:9 (pixels
+        // taller than wide) is heightened, not narrowed: no stored column is lost.
+        assert_eq!(anamorphic(s(1440, 1080), 4, 3).unwrap().1, s(1920, 1080));
+        assert_eq!(anamorphic(s(720, 480), 8, 9).unwrap().1, s(720, 540));
+        assert_eq!(anamorphic(s(720, 576), 64, 45).unwrap().1, s(1024, 576));
+        // Lowest terms.
+        assert_eq!(
+            anamorphic(s(720, 540), 8, 6).unwrap().0,
+            Anamorphic {
+                stored: s(720, 540),
+                pixel_aspect: (4, 3)
+            }
+        );
+        // Square, unknown and absurd ratios: read as stored.
+        for (n, d) in [
+            (1, 1),
+            (7, 7),
+            (0, 1),
+            (1, 0),
+            (0, 0),
+            (5, 1),
+            (1, 5),
+            (1000, 1),
+        ] {
+            assert_eq!(anamorphic(s(720, 540), n, d), None, "{n}:{d}");
+        }
+        // A ratio too close to 1 to change a one-pixel side.
+        assert_eq!(anamorphic(s(1, 1), 101, 100), None);
+    }
 
     #[test]
     fn range_resolution() {

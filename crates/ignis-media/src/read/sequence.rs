@@ -94,6 +94,7 @@ pub(crate) fn probe_image(path: &Path) -> Result<Probed> {
         codec: codec_of(path),
         decoder: Decoder::Image,
         path: path.to_path_buf(),
+        anamorphic: None,
     }))
 }
 
@@ -275,6 +276,7 @@ fn finish_sequence(path: &Path, files: Vec<PathBuf>) -> Result<Probed> {
         codec: format!("{} sequence", codec_of(&files[0])),
         decoder: Decoder::ImageSequence,
         path: path.to_path_buf(),
+        anamorphic: None,
     };
     Ok(Probed::Sequence(info, files))
 }
@@ -342,6 +344,7 @@ pub(crate) fn probe_gif(path: &Path) -> Result<Probed> {
         codec: "gif".into(),
         decoder: Decoder::Gif,
         path: path.to_path_buf(),
+        anamorphic: None,
     }))
 }
 
