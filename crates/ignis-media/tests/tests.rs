@@ -1287,6 +1287,26 @@ mod roundtrip {
             .sum::<f64>()
             / (8.0 * 64.0 * 48.0);
         assert!((mean_alpha - want).abs() < 2.0, "{mean_alpha} vs {want}");
+        // Read back by Ignis: the alpha too (libvpx chosen for a stream tagged with alpha).
+        assert!(info.codec.contains("with alpha"), "{}", info.codec);
+        let ours = read_all(&path);
+        let ours: Vec<Vec<u8>> = ours
+            .iter()
+            .map(|f| {
+                f.data()
+                    .iter()
+                    .flat_map(|p| {
+                        let e =
+                            |v: f32| (ignis_core::palette::linear_to_srgb(v) * 255.0).round() as u8;
+                        [e(p[0]), e(p[1]), e(p[2]), (p[3] * 255.0).round() as u8]
+                    })
+                    .collect()
+            })
+            .collect();
+        let (alpha, colour) = alpha_and_colour_error(&frames, &ours);
+        println!("webm read by ignis: worst alpha error {alpha} levels, colour {colour:.2} levels");
+        assert!(alpha <= 16.0, "alpha off by {alpha} levels");
+        assert!(colour < 4.0, "colour off by {colour:.2} levels");
     }
 
     #[test]

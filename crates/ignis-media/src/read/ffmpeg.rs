@@ -5,10 +5,12 @@
 //! from the container without decoding.
 //!
 //! Frames come out of `ffmpeg` as raw 8-bit RGBA on a pipe, each decoded frame once
-//! (`-fps_mode passthrough`); crop and scale are applied in Rust like every other source so
-//! results do not depend on ffmpeg's filters. A read from frame `k` seeks by the frames' own
-//! timestamps (variable-frame-rate clips have no fixed frame duration) and decodes from the
-//! keyframe before it.
+//! (`-fps_mode passthrough`); crop, scale and square pixels are applied in Rust like every
+//! other source so results do not depend on ffmpeg's scalers. ffmpeg's filters are used only
+//! where a stream is not an ordinary SDR progressive picture ([`Plan`]: deinterlacing, HDR
+//! and BT.2020 to SDR BT.709), and libvpx where a WebM carries alpha. A read from frame `k`
+//! seeks by the frames' own timestamps (variable-frame-rate clips have no fixed frame
+//! duration) and decodes from the keyframe before it.
 //!
 //! Set `IGNIS_NO_FFMPEG=1` to behave as if ffmpeg were absent (e.g. to check that a file
 //! decodes on machines without it).
@@ -123,6 +125,8 @@ struct SideData {
 #[derive(serde::Deserialize, Default)]
 struct StreamTags {
     rotate: Option<String>,
+    /// `1` on a WebM VP8/VP9 stream that carries alpha.
+    alpha_mode: Option<String>,
 }
 
 impl ProbeStream {
@@ -170,8 +174,8 @@ pub(crate) fn probed(path: &Path) -> Result<super::Probed> {
 }
 
 /// Probes `path` with `ffprobe` (container headers only): what the source is, and the
-/// [`Filters`] that make its frames ordinary SDR progressive pictures.
-pub(crate) fn probe(path: &Path, _hint: Option<&str>) -> Result<(SourceInfo, Filters)> {
+/// [`Plan`] that make its frames ordinary SDR progressive pictures.
+pub(crate) fn probe(path: &Path, _hint: Option<&str>) -> Result<(SourceInfo, Plan)> {
     let url = file_url(path)?;
     let out = Command::new(ffmpeg_sidecar::ffprobe::ffprobe_path())
         .args(["-v", "error", "-select_streams", "v:0", "-show_entries"])
@@ -179,7 +183,7 @@ pub(crate) fn probe(path: &Path, _hint: Option<&str>) -> Result<(SourceInfo, Fil
             "stream=codec_name,profile,width,height,avg_frame_rate,r_frame_rate,nb_frames,\
              sample_aspect_ratio,color_transfer,color_primaries,color_space,color_range,\
              field_order\
-             :stream_side_data=rotation:stream_tags=rotate",
+             :stream_side_data=rotation:stream_tags=rotate,alpha_mode",
         )
         .args(["-of", "json"])
         .args(PROTOCOL_WHITELIST)
@@ -229,6 +233,8 @@ pub(crate) fn probe(path: &Path, _hint: Option<&str>) -> Result<(SourceInfo, Fil
         .or(parse_rate(s.r_frame_rate.as_deref()))
         .unwrap_or(30.0);
     let codec_name = s.codec_name.unwrap_or_else(|| "unknown".into());
+    let (decoder, alpha_note) =
+        alpha_decoder(&codec_name, s.tags.alpha_mode.as_deref(), has_decoder);
     let codec = match s.profile {
         Some(p) if !p.is_empty() && p != "unknown" => format!("{codec_name} ({p})"),
         _ => codec_name,
@@ -239,8 +245,12 @@ pub(crate) fn probe(path: &Path, _hint: Option<&str>) -> Result<(SourceInfo, Fil
         matrix: s.color_space.as_deref(),
         range: s.color_range.as_deref(),
     };
-    let (filters, notes) = conversion(colour, s.field_order.as_deref(), has_filter);
-    let codec = notes.iter().fold(codec, |c, n| format!("{c}, {n}"));
+    let (Plan(filters, _), notes) = conversion(colour, s.field_order.as_deref(), has_filter);
+    let codec = alpha_note
+        .iter()
+        .chain(&notes)
+        .fold(codec, |c, n| format!("{c}, {n}"));
+    let plan = Plan(filters, decoder);
     let frame_count = match s.nb_frames.and_then(|n| n.parse().ok()).filter(|&n| n > 0) {
         Some(n) => Some(n),
         None => counted_packets(path)?,
@@ -254,13 +264,52 @@ pub(crate) fn probe(path: &Path, _hint: Option<&str>) -> Result<(SourceInfo, Fil
         path: path.to_path_buf(),
         anamorphic,
     };
-    Ok((info, filters))
+    Ok((info, plan))
 }
 
 /// The ffmpeg filters a source needs before its frames are the 8-bit SDR BT.709
-/// progressive pictures the rest of Ignis reads (`-vf`; `None`: none).
+/// progressive pictures the rest of Ignis reads (`-vf`; `None`: none), and the decoder it
+/// needs when ffmpeg's default would lose something (`-c:v`; `None`: the default).
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
-pub(crate) struct Filters(Option<String>);
+pub(crate) struct Plan(Option<String>, Option<&'static str>);
+
+/// Whether this ffmpeg has the decoder `name` (`ffmpeg -decoders`, once per process).
+fn has_decoder(name: &str) -> bool {
+    static LIST: OnceLock<String> = OnceLock::new();
+    let list = LIST.get_or_init(|| {
+        Command::new(ffmpeg_sidecar::paths::ffmpeg_path())
+            .args(["-hide_banner", "-decoders"])
+            .output()
+            .map(|o| String::from_utf8_lossy(&o.stdout).into_owned())
+            .unwrap_or_default()
+    });
+    list.lines()
+        .any(|l| l.split_whitespace().nth(1) == Some(name))
+}
+
+/// The decoder for a VP8/VP9 stream with alpha (WebM keeps it in a side channel that
+/// ffmpeg's own VP8/VP9 decoders ignore: `ignis loop -o keyed.webm` read back opaque), and
+/// a note for the codec description when this ffmpeg lacks it.
+fn alpha_decoder(
+    codec: &str,
+    alpha_mode: Option<&str>,
+    have: impl Fn(&str) -> bool,
+) -> (Option<&'static str>, Option<String>) {
+    if alpha_mode.map(str::trim) != Some("1") {
+        return (None, None);
+    }
+    let name = match codec {
+        "vp8" => "libvpx",
+        "vp9" => "libvpx-vp9",
+        _ => return (None, None),
+    };
+    if have(name) {
+        (Some(name), Some("with alpha".to_string()))
+    } else {
+        let note = format!("alpha not read: this ffmpeg has no {name} decoder");
+        (None, Some(note))
+    }
+}
 
 /// Whether this ffmpeg has the filter `name` (`ffmpeg -filters`, once per process).
 fn has_filter(name: &str) -> bool {
@@ -308,7 +357,7 @@ fn conversion(
     colour: Colour<'_>,
     field_order: Option<&str>,
     have: impl Fn(&str) -> bool,
-) -> (Filters, Vec<String>) {
+) -> (Plan, Vec<String>) {
     let mut chain = Vec::new();
     let mut notes = Vec::new();
     if matches!(field_order, Some("tt" | "bb" | "tb" | "bt")) {
@@ -367,7 +416,7 @@ fn conversion(
         }
     }
     let chain = (!chain.is_empty()).then(|| chain.join(","));
-    (Filters(chain), notes)
+    (Plan(chain, None), notes)
 }
 
 /// A sample aspect ratio as ffprobe prints it (`4:3`; `N/A` or `0:1` when unknown).
@@ -515,7 +564,7 @@ impl FfmpegSource {
     /// keyframe and drops frames before the seek time), stopping after `end` if given.
     pub(crate) fn start(
         info: &SourceInfo,
-        filters: &Filters,
+        plan: &Plan,
         start: u64,
         end: Option<u64>,
         keep_8bit: bool,
@@ -528,9 +577,12 @@ impl FfmpegSource {
             cmd.seek(format!("{:.6}", at.max(0.0)));
         }
         cmd.args(PROTOCOL_WHITELIST);
+        if let Plan(_, Some(decoder)) = plan {
+            cmd.args(["-c:v", decoder]);
+        }
         cmd.input(file_url(&info.path)?);
         cmd.args(["-map", "0:v:0", "-an", "-sn", "-dn"]);
-        if let Filters(Some(chain)) = filters {
+        if let Plan(Some(chain), _) = plan {
             cmd.args(["-vf", chain]);
         }
         cmd.args(passthrough_args());
@@ -648,9 +700,9 @@ mod tests {
             (None, None, None),
             (Some("bt470bg"), Some("smpte170m"), Some("unknown")),
         ] {
-            assert_eq!(conversion(col(t, p), f, all), (Filters(None), vec![]));
+            assert_eq!(conversion(col(t, p), f, all), (Plan(None, None), vec![]));
         }
-        let (Filters(Some(c)), n) =
+        let (Plan(Some(c), _), n) =
             conversion(col(Some("arib-std-b67"), Some("bt2020")), None, all)
         else {
             panic!("HLG needs a conversion")
@@ -667,7 +719,7 @@ mod tests {
             matrix: Some("bt2020c"),
             range: Some("pc"),
         };
-        let (Filters(Some(f)), _) = conversion(tagged, None, all) else {
+        let (Plan(Some(f), _), _) = conversion(tagged, None, all) else {
             panic!()
         };
         assert!(
@@ -675,27 +727,27 @@ mod tests {
             "{f}"
         );
         assert_eq!(n, ["HDR HLG (read as SDR BT.709, highlights clipped)"]);
-        let (Filters(Some(c)), n) = conversion(col(Some("smpte2084"), Some("bt2020")), None, all)
+        let (Plan(Some(c), _), n) = conversion(col(Some("smpte2084"), Some("bt2020")), None, all)
         else {
             panic!("PQ needs a conversion")
         };
         assert!(c.contains("tin=smpte2084"));
         assert!(n[0].starts_with("HDR PQ"));
         // BT.2020 SDR: primaries only, no tone mapping.
-        let (Filters(Some(c)), _) = conversion(col(Some("bt2020-10"), Some("bt2020")), None, all)
+        let (Plan(Some(c), _), _) = conversion(col(Some("bt2020-10"), Some("bt2020")), None, all)
         else {
             panic!("BT.2020 needs a conversion")
         };
         assert!(c.contains("p=bt709") && c.contains("tin=bt2020-10"), "{c}");
         // Interlaced, both field orders; deinterlaced first.
         for f in ["tt", "bb", "tb", "bt"] {
-            let (Filters(Some(c)), n) = conversion(col(None, None), Some(f), all) else {
+            let (Plan(Some(c), _), n) = conversion(col(None, None), Some(f), all) else {
                 panic!("{f}")
             };
             assert!(c.starts_with("bwdif="), "{c}");
             assert_eq!(n, ["interlaced (deinterlaced)"]);
         }
-        let (Filters(Some(c)), n) =
+        let (Plan(Some(c), _), n) =
             conversion(col(Some("arib-std-b67"), Some("bt2020")), Some("tt"), all)
         else {
             panic!()
@@ -704,11 +756,29 @@ mod tests {
         assert_eq!(n.len(), 2);
         // Without the filters: read as decoded, and the note says so.
         let (f, n) = conversion(col(Some("arib-std-b67"), Some("bt2020")), Some("tt"), none);
-        assert_eq!(f, Filters(None));
+        assert_eq!(f, Plan(None, None));
         assert!(
             n[0].contains("no bwdif") && n[1].contains("no zscale"),
             "{n:?}"
         );
+    }
+
+    #[test]
+    fn vp8_and_vp9_with_alpha_get_libvpx() {
+        let all = |_: &str| true;
+        let none = |_: &str| false;
+        assert_eq!(alpha_decoder("vp8", Some("1"), all).0, Some("libvpx"));
+        assert_eq!(alpha_decoder("vp9", Some("1"), all).0, Some("libvpx-vp9"));
+        for (codec, mode) in [("vp8", None), ("vp8", Some("0")), ("h264", Some("1"))] {
+            assert_eq!(
+                alpha_decoder(codec, mode, all),
+                (None, None),
+                "{codec} {mode:?}"
+            );
+        }
+        let (d, note) = alpha_decoder("vp9", Some("1"), none);
+        assert_eq!(d, None);
+        assert!(note.unwrap().contains("no libvpx-vp9"));
     }
 
     #[test]
@@ -784,9 +854,9 @@ mod tests {
             std::fs::copy(&src, &p).unwrap();
             // Relative to the directory, exactly as a user would type it.
             let rel = Path::new(name);
-            let (info, filters) = probe(&p, None).unwrap_or_else(|e| panic!("{name}: {e}"));
+            let (info, plan) = probe(&p, None).unwrap_or_else(|e| panic!("{name}: {e}"));
             assert_eq!(info.size, size, "{name}");
-            let mut s = FfmpegSource::start(&info, &filters, 0, Some(1), false).unwrap();
+            let mut s = FfmpegSource::start(&info, &plan, 0, Some(1), false).unwrap();
             let f = s.next_frame().expect("one frame").unwrap();
             assert_eq!(f.size(), size);
             assert!(file_url(rel)

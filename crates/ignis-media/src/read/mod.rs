@@ -293,7 +293,7 @@ impl DecodedFrame {
 /// The result of probing: the info plus what the opener needs.
 pub(crate) enum Probed {
     Mp4(SourceInfo, h264::Mp4Probe),
-    Ffmpeg(SourceInfo, ffmpeg::Filters),
+    Ffmpeg(SourceInfo, ffmpeg::Plan),
     Sequence(SourceInfo, Vec<PathBuf>),
     Image(SourceInfo),
     Gif(SourceInfo),
@@ -423,8 +423,8 @@ pub(crate) fn open_inner(
     }
     let source: Box<dyn FrameSource> = match probed {
         Probed::Mp4(info, p) => Box::new(h264::Openh264Source::start(&info, p, start, !keep_8bit)?),
-        Probed::Ffmpeg(info, filters) => Box::new(ffmpeg::FfmpegSource::start(
-            &info, &filters, start, end, keep_8bit,
+        Probed::Ffmpeg(info, plan) => Box::new(ffmpeg::FfmpegSource::start(
+            &info, &plan, start, end, keep_8bit,
         )?),
         Probed::Sequence(_, files) => Box::new(sequence::SequenceSource::new(files, start)),
         Probed::Image(info) => Box::new(sequence::SequenceSource::new(
