@@ -792,6 +792,67 @@ mod probing {
         f
     }
 
+    /// Baseline clips tagged BT.709 or full range (HD cameras, some phones) are read with
+    /// their own matrix and range on the pure path too, as ffmpeg reads them: an orange
+    /// comes back orange.
+    #[test]
+    fn pure_path_follows_the_streams_matrix_and_range() {
+        if !have_ffmpeg() {
+            return;
+        }
+        let dir = tempfile::tempdir().unwrap();
+        let inputs = [
+            "-f",
+            "lavfi",
+            "-i",
+            "color=c=0xFF8020:s=64x48:r=10,format=rgb24",
+            "-frames:v",
+            "2",
+        ];
+        let cases = [
+            ("709.mp4", "bt709", "tv", "yuv420p"),
+            ("full.mp4", "bt601", "pc", "yuvj420p"),
+            ("601.mp4", "bt601", "tv", "yuv420p"),
+        ];
+        for (name, matrix, range, fmt) in cases {
+            let vf = format!("scale=out_color_matrix={matrix}:out_range={range},format={fmt}");
+            let space = if matrix == "bt709" {
+                "bt709"
+            } else {
+                "smpte170m"
+            };
+            let args = [
+                "-vf",
+                &vf,
+                "-c:v",
+                "libx264",
+                "-profile:v",
+                "baseline",
+                "-qp",
+                "1",
+                "-colorspace",
+                space,
+                "-color_range",
+                range,
+            ];
+            let Some(clip) = make_from(dir.path(), name, &inputs, &args) else {
+                return;
+            };
+            assert_eq!(probe(&clip).unwrap().decoder, Decoder::Openh264, "{name}");
+            let f = &read_all(&clip)[0];
+            let p = f.get(32, 24);
+            let e = |v: f32| ignis_core::palette::linear_to_srgb(v) * 255.0;
+            let got = [e(p[0]), e(p[1]), e(p[2])];
+            let off = got
+                .iter()
+                .zip([255.0, 128.0, 32.0])
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0f32, f32::max);
+            println!("{name}: {got:?}");
+            assert!(off < 3.0, "{name}: read {got:?} for (255, 128, 32)");
+        }
+    }
+
     /// HDR footage (HLG and PQ, BT.2020: phones record it by default) is read as the SDR
     /// picture it shows, not the washed-out one its raw code values give: a clip made
     /// from an SDR picture with SDR white at the HDR reference white (203 cd/m²) reads

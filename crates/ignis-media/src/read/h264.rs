@@ -44,6 +44,8 @@ pub fn avc_profile_name(profile_idc: u8, constraints: u8) -> &'static str {
 pub(crate) struct Mp4Probe {
     track_id: u32,
     len: u64,
+    /// How the stream's Y'CbCr become R'G'B' (its SPS's VUI).
+    signal: Signal,
 }
 
 type Mp4File = mp4::Mp4Reader<BufReader<File>>;
@@ -147,13 +149,14 @@ pub(crate) fn probe_mp4(path: &Path, len: u64, have_ffmpeg: bool) -> Result<Prob
     let size = Size::new(track.width() as u32, track.height() as u32).map_err(|e| {
         MediaError::decode(path, None, format!("bad frame size in the MP4 header: {e}"))
     })?;
-    // Non-square pixels, as the stream's sequence parameter set says (what ffmpeg and
-    // players honour); read at square-pixel size like the ffmpeg path.
-    let aspect = stsd
+    // Non-square pixels, matrix and range, as the stream's sequence parameter set says (what
+    // ffmpeg and players honour); read at square-pixel size like the ffmpeg path.
+    let vui = stsd
         .avc1
         .as_ref()
         .and_then(|a| a.avcc.sequence_parameter_sets.first())
-        .and_then(|sps| sps_pixel_aspect(&sps.bytes));
+        .and_then(|sps| sps_vui(&sps.bytes));
+    let aspect = vui.and_then(|v| v.pixel_aspect);
     let (anamorphic, size) = match aspect.and_then(|(n, d)| super::anamorphic(size, n, d)) {
         Some((a, shown)) => (Some(a), shown),
         None => (None, size),
@@ -172,6 +175,7 @@ pub(crate) fn probe_mp4(path: &Path, len: u64, have_ffmpeg: bool) -> Result<Prob
         Mp4Probe {
             track_id: track.track_id(),
             len,
+            signal: vui.map_or(Signal::default(), |v| v.signal),
         },
     ))
 }
@@ -299,6 +303,7 @@ impl Openh264Source {
             count,
             decoder,
             linear,
+            signal: probe.signal,
         };
         std::thread::Builder::new()
             .name("ignis-h264".into())
@@ -325,6 +330,8 @@ struct Job {
     decoder: H264Decoder,
     /// Send linear-light frames ([`Picture::Linear`]).
     linear: bool,
+    /// The stream's Y'CbCr → R'G'B' conversion.
+    signal: Signal,
 }
 
 impl Job {
@@ -371,7 +378,12 @@ impl Job {
                 DecodeOptions::new().flush_after_decode(Flush::NoFlush),
             ) {
                 Ok(Some(yuv)) => {
-                    if want && !send(Ok((picture - 1, picture_of(&yuv, self.linear)))) {
+                    if want
+                        && !send(Ok((
+                            picture - 1,
+                            picture_of(&yuv, self.linear, self.signal),
+                        )))
+                    {
                         return;
                     }
                     picture += 1;
@@ -391,7 +403,10 @@ impl Job {
             Ok(rest) => {
                 for yuv in rest {
                     if picture >= self.target
-                        && !send(Ok((picture - 1, picture_of(&yuv, self.linear))))
+                        && !send(Ok((
+                            picture - 1,
+                            picture_of(&yuv, self.linear, self.signal),
+                        )))
                     {
                         return;
                     }
@@ -410,8 +425,11 @@ impl Job {
 }
 
 /// What is sent for a decoded picture (see [`Job::linear`]).
-fn picture_of(yuv: &openh264::decoder::DecodedYUV<'_>, linear: bool) -> Picture {
-    let (rgba, size) = rgba8_of(yuv);
+fn picture_of(yuv: &openh264::decoder::DecodedYUV<'_>, linear: bool, signal: Signal) -> Picture {
+    let (rgba, size) = match signal == Signal::default() {
+        true => rgba8_of(yuv),
+        false => rgba8_with(yuv, signal),
+    };
     if linear && size.width > 0 && size.height > 0 {
         Picture::Linear(convert::from_srgba8(size, &rgba))
     } else {
@@ -479,14 +497,103 @@ fn rgba8_of(yuv: &openh264::decoder::DecodedYUV<'_>) -> (Vec<u8>, Size) {
     (rgba, size)
 }
 
-/// The sample aspect ratio (width : height of one pixel) an H.264 sequence parameter set
-/// (`sps`: the NAL unit, header byte first, as stored in `avcC`) gives in its VUI, ITU-T
-/// H.264 §7.3.2.1.1 and Table E-1; `None` when it says nothing, says "unspecified", or
-/// the unit is cut short or malformed. Written here because the `mp4` and `openh264`
-/// crates parse the SPS but do not expose its VUI; only the fields before the aspect are
-/// read (skipped), every read is bounds-checked and every loop consumes bits, so a damaged
-/// unit ends with `None`.
-pub(crate) fn sps_pixel_aspect(sps: &[u8]) -> Option<(u32, u32)> {
+/// How a stream's Y'CbCr code values become R'G'B': the matrix (H.264 Table E-5
+/// `matrix_coefficients`) and whether the values use the full 0–255 range. The default,
+/// BT.601 limited range, is what OpenH264's converter does and what ffmpeg assumes for a
+/// stream that does not say.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub(crate) struct Signal {
+    pub matrix: Matrix,
+    pub full_range: bool,
+}
+
+/// The luma weights of a Y'CbCr matrix.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub(crate) enum Matrix {
+    /// BT.601 (also FCC and SMPTE 240M's near neighbours; and unspecified).
+    #[default]
+    Bt601,
+    /// BT.709: HD cameras and encoders.
+    Bt709,
+    /// BT.2020 (non-constant luminance).
+    Bt2020,
+}
+
+impl Matrix {
+    /// `matrix_coefficients` → the matrix; codes that are not one of the three read as
+    /// BT.601, as ffmpeg's converter does.
+    fn of_code(code: u32) -> Matrix {
+        match code {
+            1 => Matrix::Bt709,
+            9 | 10 => Matrix::Bt2020,
+            _ => Matrix::Bt601,
+        }
+    }
+    /// (Kr, Kb).
+    fn weights(self) -> (f32, f32) {
+        match self {
+            Matrix::Bt601 => (0.299, 0.114),
+            Matrix::Bt709 => (0.2126, 0.0722),
+            Matrix::Bt2020 => (0.2627, 0.0593),
+        }
+    }
+}
+
+/// [`rgba8_of`] for a [`Signal`] other than the default: 4:2:0 chroma taken from the
+/// sample of each 2×2 block (as OpenH264's converter does), the matrix and range applied in
+/// `f32`, rounded to the nearest level. Written here because OpenH264's converter knows
+/// only BT.601 limited range: an HD clip tagged BT.709 read as BT.601 was 11 levels off
+/// in red on an orange (255, 128, 32), a full-range one 9 in blue.
+fn rgba8_with(yuv: &impl YUVSource, signal: Signal) -> (Vec<u8>, Size) {
+    let (w, h) = yuv.dimensions();
+    let (ys, us, vs) = yuv.strides();
+    let (kr, kb) = signal.matrix.weights();
+    let kg = 1.0 - kr - kb;
+    let (y_off, y_mul, c_mul) = match signal.full_range {
+        true => (0.0, 1.0, 1.0),
+        false => (16.0, 255.0 / 219.0, 255.0 / 224.0),
+    };
+    let rv = c_mul * 2.0 * (1.0 - kr);
+    let bu = c_mul * 2.0 * (1.0 - kb);
+    let gu = -c_mul * 2.0 * (1.0 - kb) * kb / kg;
+    let gv = -c_mul * 2.0 * (1.0 - kr) * kr / kg;
+    let (yp, up, vp) = (yuv.y(), yuv.u(), yuv.v());
+    let mut rgba = vec![0u8; w * h * 4];
+    let q = |v: f32| v.round().clamp(0.0, 255.0) as u8;
+    for (y, row) in rgba.chunks_exact_mut(w * 4).enumerate() {
+        let (yr, ur, vr) = (&yp[y * ys..], &up[(y / 2) * us..], &vp[(y / 2) * vs..]);
+        for (x, px) in row.chunks_exact_mut(4).enumerate() {
+            let l = (yr[x] as f32 - y_off) * y_mul;
+            let (u, v) = (ur[x / 2] as f32 - 128.0, vr[x / 2] as f32 - 128.0);
+            px.copy_from_slice(&[q(l + rv * v), q(l + gu * u + gv * v), q(l + bu * u), 255]);
+        }
+    }
+    (
+        rgba,
+        Size {
+            width: w as u32,
+            height: h as u32,
+        },
+    )
+}
+
+/// What an H.264 SPS's VUI says ([`sps_vui`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub(crate) struct Vui {
+    /// Width : height of one pixel, when stated and specified.
+    pub pixel_aspect: Option<(u32, u32)>,
+    /// Matrix and range ([`Signal::default`] when not stated).
+    pub signal: Signal,
+}
+
+/// What an H.264 sequence parameter set (`sps`: the NAL unit, header byte first, as stored
+/// in `avcC`) says in its VUI (ITU-T H.264 §7.3.2.1.1, E.1.1): the sample aspect ratio
+/// (Table E-1; `None` when unstated or "unspecified"), the matrix and the range. `None`
+/// when the unit has no VUI or is cut short or malformed before the end of what is read.
+/// Written here because the `mp4` and `openh264` crates parse the SPS but do not expose its
+/// VUI; the fields before it are read and skipped, every read is bounds-checked and every
+/// loop consumes bits, so a damaged unit ends with `None`.
+pub(crate) fn sps_vui(sps: &[u8]) -> Option<Vui> {
     // Emulation prevention: 00 00 03 → 00 00.
     let mut rbsp = Vec::with_capacity(sps.len());
     let mut zeros = 0;
@@ -561,9 +668,33 @@ pub(crate) fn sps_pixel_aspect(sps: &[u8]) -> Option<(u32, u32)> {
             r.ue()?; // cropping
         }
     }
-    if r.u(1)? == 0 || r.u(1)? == 0 {
-        return None; // no VUI, or no aspect ratio in it
+    if r.u(1)? == 0 {
+        return None; // no VUI
     }
+    let pixel_aspect = match r.u(1)? {
+        1 => aspect_ratio(&mut r)?,
+        _ => None,
+    };
+    if r.u(1)? == 1 {
+        r.u(1)?; // overscan_appropriate
+    }
+    let mut signal = Signal::default();
+    if r.u(1)? == 1 {
+        r.u(3)?; // video_format
+        signal.full_range = r.u(1)? == 1;
+        if r.u(1)? == 1 {
+            r.u(16)?; // colour_primaries, transfer_characteristics
+            signal.matrix = Matrix::of_code(r.u(8)?);
+        }
+    }
+    Some(Vui {
+        pixel_aspect,
+        signal,
+    })
+}
+
+/// `aspect_ratio_idc` and, for 255, the explicit ratio: `Some(None)` when unspecified.
+fn aspect_ratio(r: &mut Bits<'_>) -> Option<Option<(u32, u32)>> {
     const TABLE: [(u32, u32); 17] = [
         (0, 0),
         (1, 1),
@@ -583,13 +714,13 @@ pub(crate) fn sps_pixel_aspect(sps: &[u8]) -> Option<(u32, u32)> {
         (3, 2),
         (2, 1),
     ];
-    match r.u(8)? {
+    Some(match r.u(8)? {
         255 => {
             let (w, h) = (r.u(16)?, r.u(16)?);
             (w > 0 && h > 0).then_some((w, h))
         }
         i => TABLE.get(i as usize).copied().filter(|&(w, _)| w > 0),
-    }
+    })
 }
 
 /// An MSB-first bit reader over an RBSP.
@@ -675,15 +806,14 @@ mod tests {
                 Some((1, 1)),
             ),
         ];
+        let aspect = |u: &[u8]| sps_vui(u).and_then(|v| v.pixel_aspect);
         for (sps, want) in cases {
-            assert_eq!(sps_pixel_aspect(&hex(sps)), want, "{sps}");
+            assert_eq!(aspect(&hex(sps)), want, "{sps}");
         }
-        // Cut short anywhere, or empty: no panic; before the aspect's last bit no answer,
-        // after it the right one (the VUI's aspect comes before its other fields).
+        // Cut short anywhere, or empty: no panic; before the end of the VUI's colour fields
+        // no answer, after them the right one.
         let full = hex(cases[1].0);
-        let answers: Vec<_> = (0..full.len())
-            .map(|n| sps_pixel_aspect(&full[..n]))
-            .collect();
+        let answers: Vec<_> = (0..full.len()).map(|n| aspect(&full[..n])).collect();
         let first = answers.iter().position(Option::is_some).unwrap();
         assert!(first > 8, "answered from {first} bytes");
         assert!(answers[..first].iter().all(Option::is_none));
@@ -695,7 +825,7 @@ mod tests {
             for bit in 0..unit.len() * 8 {
                 let mut u = unit.clone();
                 u[bit / 8] ^= 0x80 >> (bit % 8);
-                let _ = sps_pixel_aspect(&u);
+                let _ = sps_vui(&u);
             }
         }
         let mut x = 0x9E37_79B9_7F4A_7C15u64;
@@ -708,8 +838,48 @@ mod tests {
                     x as u8
                 })
                 .collect();
-            let _ = sps_pixel_aspect(&noise);
+            let _ = sps_vui(&noise);
         }
+    }
+
+    /// The matrix and range in the VUI's video signal type (x264 Baseline units tagged
+    /// BT.709 limited, BT.601 full and BT.601 limited), and the conversion each gives.
+    #[test]
+    fn vui_signals_and_their_conversion() {
+        let signal = |h: &str| sps_vui(&hex(h)).unwrap().signal;
+        let bt709 = signal("6742c00ad90426c05a808080a0000003002000000641e244c9");
+        let full = signal("6742c00ad90426c05b81010320000003002000000641e244c9");
+        let bt601 = signal("6742c00ad90426c05a81010320000003002000000641e244c9");
+        assert_eq!((bt709.matrix, bt709.full_range), (Matrix::Bt709, false));
+        assert_eq!((full.matrix, full.full_range), (Matrix::Bt601, true));
+        assert_eq!(bt601, Signal::default());
+        // candle.mp4 states no signal type: the default, OpenH264's own converter.
+        assert_eq!(
+            signal("6742c01ed901e0f684000003000400000300f03c58b920"),
+            Signal::default()
+        );
+        // An orange (255, 128, 32) as ffmpeg's converter writes it (BT.709 limited: Y 143,
+        // Cb 73, Cr 188; BT.601 full: Y 155, Cb 59, Cr 199), back within two levels.
+        let orange = |y: u8, cb: u8, cr: u8, s: Signal| {
+            let (yp, up, vp) = ([y; 16], [cb; 4], [cr; 4]);
+            let src = openh264::formats::YUVSlices::new((&yp, &up, &vp), (4, 4), (4, 2, 2));
+            rgba8_with(&src, s).0[..4].to_vec()
+        };
+        for (got, name) in [
+            (orange(143, 73, 188, bt709), "BT.709 limited"),
+            (orange(155, 59, 199, full), "BT.601 full"),
+        ] {
+            let want = [255i32, 128, 32, 255];
+            let off = got
+                .iter()
+                .zip(want)
+                .map(|(a, b)| (*a as i32 - b).abs())
+                .max();
+            assert!(off <= Some(2), "{name}: {got:?}");
+        }
+        // Read as BT.601 limited, the BT.709 orange is visibly off.
+        let wrong = orange(143, 73, 188, Signal::default());
+        assert!((wrong[0] as i32 - 255).abs() > 8 || (wrong[1] as i32 - 128).abs() > 8);
     }
 
     #[test]

@@ -19,7 +19,10 @@
 //! Pixel conventions of the inputs: 8- and 16-bit images and video are taken as
 //! sRGB-encoded (converted to linear here); float images (EXR, float TIFF) as linear light.
 //! EXR files are read as premultiplied (the OpenEXR convention) and un-premultiplied.
-//! Video is decoded with BT.601 limited-range matrices (what OpenH264 and our MP4 writer use).
+//! Video is decoded with the stream's own matrix and range (its SPS's VUI on the pure path,
+//! ffmpeg's reading of it otherwise), BT.601 limited range when it says nothing (what
+//! OpenH264 and our MP4 writer use); non-square pixels are resampled to square ones here
+//! ([`SourceInfo::anamorphic`]).
 
 mod ffmpeg;
 mod h264;
