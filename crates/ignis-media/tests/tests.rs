@@ -792,6 +792,45 @@ mod probing {
         f
     }
 
+    /// A file whose first video stream is a still (a cover or a poster frame muxed as a
+    /// one-frame stream) reads as the clip, the stream ffmpeg itself would pick.
+    #[test]
+    fn the_clip_is_read_not_a_still_before_it() {
+        if !have_ffmpeg() {
+            return;
+        }
+        let dir = tempfile::tempdir().unwrap();
+        let x264 = ["-pix_fmt", "yuv420p", "-c:v", "libx264"];
+        let poster_in = ["-f", "lavfi", "-i", "color=red:s=32x32", "-frames:v", "1"];
+        let (Some(clip), Some(poster)) = (
+            make(dir.path(), "clip.mp4", &x264),
+            make_from(dir.path(), "poster.png", &poster_in, &[]),
+        ) else {
+            return;
+        };
+        let inputs = ["-i", poster.to_str().unwrap(), "-i", clip.to_str().unwrap()];
+        let args = [
+            "-map", "0:v", "-map", "1:v", "-c:v:0", "mjpeg", "-c:v:1", "copy", "-f", "matroska",
+        ];
+        let Some(mkv) = make_from(dir.path(), "poster.mkv", &inputs, &args) else {
+            return;
+        };
+        let info = probe(&mkv).unwrap();
+        assert_eq!(info.size, Size::new(64, 48).unwrap(), "{info:?}");
+        assert!(info.codec.starts_with("h264"), "{}", info.codec);
+        let frames = read_all(&mkv);
+        assert_eq!(frames.len(), 12);
+        assert!(frames.iter().all(|f| f.size() == info.size));
+        // A ranged read seeks in the clip's own timestamps.
+        let opts = ReadOptions {
+            range: Some(FrameRange::frames(5, Some(8))),
+            ..Default::default()
+        };
+        let part: Vec<_> = open(&mkv, &opts).unwrap().map(Result::unwrap).collect();
+        assert_eq!(part.len(), 3);
+        assert!(mae_srgb8(&part[0], &frames[5]) < 0.5);
+    }
+
     /// Baseline clips tagged BT.709 or full range (HD cameras, some phones) are read with
     /// their own matrix and range on the pure path too, as ffmpeg reads them: an orange
     /// comes back orange.

@@ -96,6 +96,7 @@ struct ProbeOut {
 
 #[derive(serde::Deserialize)]
 struct ProbeStream {
+    index: Option<u32>,
     codec_name: Option<String>,
     profile: Option<String>,
     width: Option<u32>,
@@ -178,9 +179,9 @@ pub(crate) fn probed(path: &Path) -> Result<super::Probed> {
 pub(crate) fn probe(path: &Path, _hint: Option<&str>) -> Result<(SourceInfo, Plan)> {
     let url = file_url(path)?;
     let out = Command::new(ffmpeg_sidecar::ffprobe::ffprobe_path())
-        .args(["-v", "error", "-select_streams", "v:0", "-show_entries"])
+        .args(["-v", "error", "-select_streams", "V", "-show_entries"])
         .arg(
-            "stream=codec_name,profile,width,height,avg_frame_rate,r_frame_rate,nb_frames,\
+            "stream=index,codec_name,profile,width,height,avg_frame_rate,r_frame_rate,nb_frames,\
              sample_aspect_ratio,color_transfer,color_primaries,color_space,color_range,\
              field_order\
              :stream_side_data=rotation:stream_tags=rotate,alpha_mode",
@@ -207,9 +208,18 @@ pub(crate) fn probe(path: &Path, _hint: Option<&str>) -> Result<(SourceInfo, Pla
     }
     let parsed: ProbeOut = serde_json::from_slice(&out.stdout)
         .map_err(|e| MediaError::decode(path, None, format!("unexpected ffprobe output: {e}")))?;
-    let Some(s) = parsed.streams.into_iter().next() else {
+    // The video ffmpeg itself would pick: of the streams that are not attached pictures
+    // (cover art, thumbnails: `V`), the largest, the first of equals. A file whose first
+    // video stream is a one-frame still before the clip reads as the clip.
+    let Some(s) = parsed
+        .streams
+        .into_iter()
+        .rev()
+        .max_by_key(|s| s.width.unwrap_or(0) as u64 * s.height.unwrap_or(0) as u64)
+    else {
         return Err(MediaError::decode(path, None, "no video stream"));
     };
+    let stream = s.index.unwrap_or(0);
     let (Some(w), Some(h)) = (s.width, s.height) else {
         return Err(MediaError::decode(
             path,
@@ -245,15 +255,19 @@ pub(crate) fn probe(path: &Path, _hint: Option<&str>) -> Result<(SourceInfo, Pla
         matrix: s.color_space.as_deref(),
         range: s.color_range.as_deref(),
     };
-    let (Plan(filters, _), notes) = conversion(colour, s.field_order.as_deref(), has_filter);
+    let (filters, notes) = conversion(colour, s.field_order.as_deref(), has_filter);
     let codec = alpha_note
         .iter()
         .chain(&notes)
         .fold(codec, |c, n| format!("{c}, {n}"));
-    let plan = Plan(filters, decoder);
+    let plan = Plan {
+        filters,
+        decoder,
+        stream,
+    };
     let frame_count = match s.nb_frames.and_then(|n| n.parse().ok()).filter(|&n| n > 0) {
         Some(n) => Some(n),
-        None => counted_packets(path)?,
+        None => counted_packets(path, stream)?,
     };
     let info = SourceInfo {
         size,
@@ -271,7 +285,12 @@ pub(crate) fn probe(path: &Path, _hint: Option<&str>) -> Result<(SourceInfo, Pla
 /// progressive pictures the rest of Ignis reads (`-vf`; `None`: none), and the decoder it
 /// needs when ffmpeg's default would lose something (`-c:v`; `None`: the default).
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
-pub(crate) struct Plan(Option<String>, Option<&'static str>);
+pub(crate) struct Plan {
+    filters: Option<String>,
+    decoder: Option<&'static str>,
+    /// The index of the video stream read (`-map 0:N`).
+    stream: u32,
+}
 
 /// Whether this ffmpeg has the decoder `name` (`ffmpeg -decoders`, once per process).
 fn has_decoder(name: &str) -> bool {
@@ -357,7 +376,7 @@ fn conversion(
     colour: Colour<'_>,
     field_order: Option<&str>,
     have: impl Fn(&str) -> bool,
-) -> (Plan, Vec<String>) {
+) -> (Option<String>, Vec<String>) {
     let mut chain = Vec::new();
     let mut notes = Vec::new();
     if matches!(field_order, Some("tt" | "bb" | "tb" | "bt")) {
@@ -416,7 +435,7 @@ fn conversion(
         }
     }
     let chain = (!chain.is_empty()).then(|| chain.join(","));
-    (Plan(chain, None), notes)
+    (chain, notes)
 }
 
 /// A sample aspect ratio as ffprobe prints it (`4:3`; `N/A` or `0:1` when unknown).
@@ -430,8 +449,8 @@ fn parse_aspect(r: Option<&str>) -> Option<(u32, u32)> {
 /// ([`packets`]). One packet is one frame for the video codecs ffmpeg muxes (H.264, HEVC,
 /// ProRes, VP8 with alt-ref frames, VP9 superframes, AV1 temporal units; checked against
 /// `-count_frames` on each). `None` when ffprobe lists none.
-fn counted_packets(path: &Path) -> Result<Option<u64>> {
-    Ok(packets(path)?.map(|p| p.count))
+fn counted_packets(path: &Path, stream: u32) -> Result<Option<u64>> {
+    Ok(packets(path, stream)?.map(|p| p.count))
 }
 
 /// Presentation times of the first video stream's frames, in order, in seconds from the
@@ -439,8 +458,8 @@ fn counted_packets(path: &Path) -> Result<Option<u64>> {
 /// ([`packets`]); `None` when a packet has no timestamp. A variable-frame-rate clip (a
 /// phone's, slowing down in low light) has no fixed frame duration, so frame `k` is not at
 /// `k / fps`: a seek by the average rate landed up to several frames off.
-fn frame_times(path: &Path) -> Result<Option<Arc<Vec<f64>>>> {
-    Ok(packets(path)?.and_then(|p| p.times.clone()))
+fn frame_times(path: &Path, stream: u32) -> Result<Option<Arc<Vec<f64>>>> {
+    Ok(packets(path, stream)?.and_then(|p| p.times.clone()))
 }
 
 /// What the first video stream's packets say: how many, and their presentation times
@@ -454,17 +473,17 @@ struct Packets {
 /// a few ms for a short clip, about a disk read of the file for a long one); once per file,
 /// length and modification time in a process (a command opens its input several times).
 /// `None` when ffprobe lists no packet.
-fn packets(path: &Path) -> Result<Option<Arc<Packets>>> {
-    type Key = (std::path::PathBuf, u64, Option<std::time::SystemTime>);
+fn packets(path: &Path, stream: u32) -> Result<Option<Arc<Packets>>> {
+    type Key = (std::path::PathBuf, u64, Option<std::time::SystemTime>, u32);
     static CACHE: OnceLock<Mutex<HashMap<Key, Option<Arc<Packets>>>>> = OnceLock::new();
     let meta = std::fs::metadata(path).map_err(|e| MediaError::io(path, e))?;
-    let key = (path.to_path_buf(), meta.len(), meta.modified().ok());
+    let key = (path.to_path_buf(), meta.len(), meta.modified().ok(), stream);
     let cache = CACHE.get_or_init(Default::default);
     if let Some(v) = cache.lock().ok().and_then(|c| c.get(&key).cloned()) {
         return Ok(v);
     }
     let out = Command::new(ffmpeg_sidecar::ffprobe::ffprobe_path())
-        .args(["-v", "error", "-select_streams", "v:0"])
+        .args(["-v", "error", "-select_streams", &stream.to_string()])
         .args([
             "-show_entries",
             "packet=pts_time:format=start_time",
@@ -572,17 +591,17 @@ impl FfmpegSource {
         let mut cmd = FfmpegCommand::new();
         cmd.hide_banner();
         if start > 0 {
-            let times = frame_times(&info.path)?;
+            let times = frame_times(&info.path, plan.stream)?;
             let at = seek_seconds(times.as_deref().map(|t| &t[..]), start, info.fps);
             cmd.seek(format!("{:.6}", at.max(0.0)));
         }
         cmd.args(PROTOCOL_WHITELIST);
-        if let Plan(_, Some(decoder)) = plan {
+        if let Some(decoder) = plan.decoder {
             cmd.args(["-c:v", decoder]);
         }
         cmd.input(file_url(&info.path)?);
-        cmd.args(["-map", "0:v:0", "-an", "-sn", "-dn"]);
-        if let Plan(Some(chain), _) = plan {
+        cmd.args(["-map", &format!("0:{}", plan.stream), "-an", "-sn", "-dn"]);
+        if let Some(chain) = &plan.filters {
             cmd.args(["-vf", chain]);
         }
         cmd.args(passthrough_args());
@@ -700,11 +719,9 @@ mod tests {
             (None, None, None),
             (Some("bt470bg"), Some("smpte170m"), Some("unknown")),
         ] {
-            assert_eq!(conversion(col(t, p), f, all), (Plan(None, None), vec![]));
+            assert_eq!(conversion(col(t, p), f, all), (None, vec![]));
         }
-        let (Plan(Some(c), _), n) =
-            conversion(col(Some("arib-std-b67"), Some("bt2020")), None, all)
-        else {
+        let (Some(c), n) = conversion(col(Some("arib-std-b67"), Some("bt2020")), None, all) else {
             panic!("HLG needs a conversion")
         };
         assert!(c.contains("t=linear") && c.contains("npl=203") && c.ends_with("gbrp"));
@@ -719,7 +736,7 @@ mod tests {
             matrix: Some("bt2020c"),
             range: Some("pc"),
         };
-        let (Plan(Some(f), _), _) = conversion(tagged, None, all) else {
+        let (Some(f), _) = conversion(tagged, None, all) else {
             panic!()
         };
         assert!(
@@ -727,28 +744,25 @@ mod tests {
             "{f}"
         );
         assert_eq!(n, ["HDR HLG (read as SDR BT.709, highlights clipped)"]);
-        let (Plan(Some(c), _), n) = conversion(col(Some("smpte2084"), Some("bt2020")), None, all)
-        else {
+        let (Some(c), n) = conversion(col(Some("smpte2084"), Some("bt2020")), None, all) else {
             panic!("PQ needs a conversion")
         };
         assert!(c.contains("tin=smpte2084"));
         assert!(n[0].starts_with("HDR PQ"));
         // BT.2020 SDR: primaries only, no tone mapping.
-        let (Plan(Some(c), _), _) = conversion(col(Some("bt2020-10"), Some("bt2020")), None, all)
-        else {
+        let (Some(c), _) = conversion(col(Some("bt2020-10"), Some("bt2020")), None, all) else {
             panic!("BT.2020 needs a conversion")
         };
         assert!(c.contains("p=bt709") && c.contains("tin=bt2020-10"), "{c}");
         // Interlaced, both field orders; deinterlaced first.
         for f in ["tt", "bb", "tb", "bt"] {
-            let (Plan(Some(c), _), n) = conversion(col(None, None), Some(f), all) else {
+            let (Some(c), n) = conversion(col(None, None), Some(f), all) else {
                 panic!("{f}")
             };
             assert!(c.starts_with("bwdif="), "{c}");
             assert_eq!(n, ["interlaced (deinterlaced)"]);
         }
-        let (Plan(Some(c), _), n) =
-            conversion(col(Some("arib-std-b67"), Some("bt2020")), Some("tt"), all)
+        let (Some(c), n) = conversion(col(Some("arib-std-b67"), Some("bt2020")), Some("tt"), all)
         else {
             panic!()
         };
@@ -756,7 +770,7 @@ mod tests {
         assert_eq!(n.len(), 2);
         // Without the filters: read as decoded, and the note says so.
         let (f, n) = conversion(col(Some("arib-std-b67"), Some("bt2020")), Some("tt"), none);
-        assert_eq!(f, Plan(None, None));
+        assert_eq!(f, None);
         assert!(
             n[0].contains("no bwdif") && n[1].contains("no zscale"),
             "{n:?}"
