@@ -1036,6 +1036,22 @@ zscale=p=bt2020:t={trc}:m=bt2020nc:r=tv:npl=203,format=yuv444p10le"
                 64,
             );
         }
+        // A ranged read (a loop's, a window's) gives the same frames as the whole read, not
+        // frames a field or a frame apart (the bar moves 8 px a field).
+        let opts = ReadOptions {
+            range: Some(FrameRange::frames(7, Some(11))),
+            ..Default::default()
+        };
+        let part: Vec<_> = open(&clip, &opts).unwrap().map(Result::unwrap).collect();
+        assert_eq!(part.len(), 4);
+        for (k, f) in part.iter().enumerate() {
+            let e = mae_srgb8(f, &ours[7 + k]);
+            assert!(
+                e < 0.5,
+                "ranged frame {}: {e:.3} levels from the whole read",
+                7 + k
+            );
+        }
         println!("combing: read {c_ours:.3}, plain decode {c_plain:.3}");
         assert!(
             c_plain > 4.0 * c_ours,

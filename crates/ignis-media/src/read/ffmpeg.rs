@@ -171,7 +171,7 @@ pub(crate) const PROTOCOL_WHITELIST: [&str; 2] = ["-protocol_whitelist", "file"]
 
 /// [`probe`], as the reader's [`Probed`](super::Probed).
 pub(crate) fn probed(path: &Path) -> Result<super::Probed> {
-    probe(path, None).map(|(info, filters)| super::Probed::Ffmpeg(info, filters))
+    probe(path, None).map(|(info, plan)| super::Probed::Ffmpeg(info, plan))
 }
 
 /// Probes `path` with `ffprobe` (container headers only): what the source is, and the
@@ -295,9 +295,15 @@ pub(crate) struct Plan {
 /// Whether this ffmpeg has the decoder `name` (`ffmpeg -decoders`, once per process).
 fn has_decoder(name: &str) -> bool {
     static LIST: OnceLock<String> = OnceLock::new();
-    let list = LIST.get_or_init(|| {
+    listed(&LIST, "-decoders", name)
+}
+
+/// Whether `ffmpeg -hide_banner LIST_OPTION` (`-filters`, `-decoders`: one entry a line,
+/// flags then name) names `name`; the list is read once into `cache`.
+fn listed(cache: &OnceLock<String>, list_option: &str, name: &str) -> bool {
+    let list = cache.get_or_init(|| {
         Command::new(ffmpeg_sidecar::paths::ffmpeg_path())
-            .args(["-hide_banner", "-decoders"])
+            .args(["-hide_banner", list_option])
             .output()
             .map(|o| String::from_utf8_lossy(&o.stdout).into_owned())
             .unwrap_or_default()
@@ -333,15 +339,7 @@ fn alpha_decoder(
 /// Whether this ffmpeg has the filter `name` (`ffmpeg -filters`, once per process).
 fn has_filter(name: &str) -> bool {
     static LIST: OnceLock<String> = OnceLock::new();
-    let list = LIST.get_or_init(|| {
-        Command::new(ffmpeg_sidecar::paths::ffmpeg_path())
-            .args(["-hide_banner", "-filters"])
-            .output()
-            .map(|o| String::from_utf8_lossy(&o.stdout).into_owned())
-            .unwrap_or_default()
-    });
-    list.lines()
-        .any(|l| l.split_whitespace().nth(1) == Some(name))
+    listed(&LIST, "-filters", name)
 }
 
 /// A stream's colour properties as ffprobe names them (`None`: not stated).
@@ -445,7 +443,7 @@ fn parse_aspect(r: Option<&str>) -> Option<(u32, u32)> {
 }
 
 /// The video frames of a file whose container does not say how many it holds (Matroska
-/// and WebM never do; some MOV and AVI files do not): the first video stream's packets
+/// and WebM never do; some MOV and AVI files do not): video stream `stream`'s packets
 /// ([`packets`]). One packet is one frame for the video codecs ffmpeg muxes (H.264, HEVC,
 /// ProRes, VP8 with alt-ref frames, VP9 superframes, AV1 temporal units; checked against
 /// `-count_frames` on each). `None` when ffprobe lists none.
@@ -453,7 +451,7 @@ fn counted_packets(path: &Path, stream: u32) -> Result<Option<u64>> {
     Ok(packets(path, stream)?.map(|p| p.count))
 }
 
-/// Presentation times of the first video stream's frames, in order, in seconds from the
+/// Presentation times of the frames of video stream `stream` (the one read), in order, in seconds from the
 /// file's start (what an input `-ss` counts from), from its packets' timestamps
 /// ([`packets`]); `None` when a packet has no timestamp. A variable-frame-rate clip (a
 /// phone's, slowing down in low light) has no fixed frame duration, so frame `k` is not at
@@ -462,14 +460,14 @@ fn frame_times(path: &Path, stream: u32) -> Result<Option<Arc<Vec<f64>>>> {
     Ok(packets(path, stream)?.and_then(|p| p.times.clone()))
 }
 
-/// What the first video stream's packets say: how many, and their presentation times
+/// What the read video stream's packets say: how many, and their presentation times
 /// ([`frame_times`]).
 struct Packets {
     count: u64,
     times: Option<Arc<Vec<f64>>>,
 }
 
-/// The first video stream's [`Packets`], listed by `ffprobe` demuxing only (no decoding:
+/// Video stream `stream`'s [`Packets`], listed by `ffprobe` demuxing only (no decoding:
 /// a few ms for a short clip, about a disk read of the file for a long one); once per file,
 /// length and modification time in a process (a command opens its input several times).
 /// `None` when ffprobe lists no packet.

@@ -183,7 +183,7 @@ impl fmt::Display for Decoder {
 /// What [`probe`] learns about a source without decoding it.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SourceInfo {
-    /// Frame size in pixels.
+    /// Frame size in pixels, as read: upright and with square pixels ([`Self::anamorphic`]).
     pub size: Size,
     /// Frames per second (image sequences and stills: [`DEFAULT_SEQUENCE_FPS`]).
     pub fps: f64,
