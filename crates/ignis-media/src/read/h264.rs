@@ -541,9 +541,10 @@ impl Matrix {
 
 /// [`rgba8_of`] for a [`Signal`] other than the default: 4:2:0 chroma taken from the
 /// sample of each 2×2 block (as OpenH264's converter does), the matrix and range applied in
-/// `f32`, rounded to the nearest level. Written here because OpenH264's converter knows
-/// only BT.601 limited range: an HD clip tagged BT.709 read as BT.601 was 11 levels off
-/// in red on an orange (255, 128, 32), a full-range one 9 in blue.
+/// 16.16 fixed point from per-code tables, rounded to the nearest level. Written here
+/// because OpenH264's converter knows only BT.601 limited range: an HD clip tagged BT.709
+/// read as BT.601 was 11 levels off in red on an orange (255, 128, 32), a full-range one 9
+/// in blue.
 fn rgba8_with(yuv: &impl YUVSource, signal: Signal) -> (Vec<u8>, Size) {
     let (w, h) = yuv.dimensions();
     let (ys, us, vs) = yuv.strides();
@@ -553,19 +554,32 @@ fn rgba8_with(yuv: &impl YUVSource, signal: Signal) -> (Vec<u8>, Size) {
         true => (0.0, 1.0, 1.0),
         false => (16.0, 255.0 / 219.0, 255.0 / 224.0),
     };
-    let rv = c_mul * 2.0 * (1.0 - kr);
-    let bu = c_mul * 2.0 * (1.0 - kb);
-    let gu = -c_mul * 2.0 * (1.0 - kb) * kb / kg;
-    let gv = -c_mul * 2.0 * (1.0 - kr) * kr / kg;
+    // Each code's contribution, in 1/65536 levels; luma carries the rounding half.
+    let table = |f: &dyn Fn(f32) -> f32| -> [i32; 256] {
+        std::array::from_fn(|c| (f(c as f32) * 65536.0).round() as i32)
+    };
+    let ty = table(&|y| (y - y_off) * y_mul + 0.5);
+    let trv = table(&|v| c_mul * 2.0 * (1.0 - kr) * (v - 128.0));
+    let tbu = table(&|u| c_mul * 2.0 * (1.0 - kb) * (u - 128.0));
+    let tgu = table(&|u| -c_mul * 2.0 * (1.0 - kb) * kb / kg * (u - 128.0));
+    let tgv = table(&|v| -c_mul * 2.0 * (1.0 - kr) * kr / kg * (v - 128.0));
+    let q = |v: i32| (v >> 16).clamp(0, 255) as u8;
     let (yp, up, vp) = (yuv.y(), yuv.u(), yuv.v());
     let mut rgba = vec![0u8; w * h * 4];
-    let q = |v: f32| v.round().clamp(0.0, 255.0) as u8;
     for (y, row) in rgba.chunks_exact_mut(w * 4).enumerate() {
-        let (yr, ur, vr) = (&yp[y * ys..], &up[(y / 2) * us..], &vp[(y / 2) * vs..]);
-        for (x, px) in row.chunks_exact_mut(4).enumerate() {
-            let l = (yr[x] as f32 - y_off) * y_mul;
-            let (u, v) = (ur[x / 2] as f32 - 128.0, vr[x / 2] as f32 - 128.0);
-            px.copy_from_slice(&[q(l + rv * v), q(l + gu * u + gv * v), q(l + bu * u), 255]);
+        let yr = &yp[y * ys..][..w];
+        let (ur, vr) = (&up[(y / 2) * us..], &vp[(y / 2) * vs..]);
+        // Two pixels share each chroma sample; an odd last column has one.
+        for ((px, ly), (&u, &v)) in row.chunks_mut(8).zip(yr.chunks(2)).zip(ur.iter().zip(vr)) {
+            let (cr, cg, cb) = (
+                trv[v as usize],
+                tgu[u as usize] + tgv[v as usize],
+                tbu[u as usize],
+            );
+            for (p, &l) in px.chunks_exact_mut(4).zip(ly) {
+                let l = ty[l as usize];
+                p.copy_from_slice(&[q(l + cr), q(l + cg), q(l + cb), 255]);
+            }
         }
     }
     (
