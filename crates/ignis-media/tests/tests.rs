@@ -590,6 +590,19 @@ mod probing {
         }
     }
 
+    /// Copies the clip `from` to `to` with a quarter-turn display rotation, as a phone
+    /// records a portrait clip (the stream copy's display matrix, ffmpeg ≥ 5); false if
+    /// this ffmpeg cannot.
+    fn turned_copy(from: &Path, to: &Path) -> bool {
+        std::process::Command::new("ffmpeg")
+            .args(["-nostdin", "-y", "-v", "error", "-i"])
+            .arg(from)
+            .args(["-c", "copy", "-metadata:s:v:0", "rotate=90"])
+            .arg(to)
+            .status()
+            .is_ok_and(|s| s.success())
+    }
+
     /// A phone's portrait clip: stored 64x48 with a quarter-turn display rotation. It is
     /// read upright (48x64, through ffmpeg, whose frames match the same picture encoded
     /// upright), never sideways through the built-in decoder.
@@ -614,16 +627,8 @@ mod probing {
         ) else {
             return;
         };
-        // The rotation goes in as the stream copy's display matrix (ffmpeg ≥ 5).
         let turned = dir.path().join("turned.mp4");
-        let ok = std::process::Command::new("ffmpeg")
-            .args(["-nostdin", "-y", "-v", "error", "-i"])
-            .arg(&stored)
-            .args(["-c", "copy", "-metadata:s:v:0", "rotate=90"])
-            .arg(&turned)
-            .status()
-            .is_ok_and(|s| s.success());
-        if !ok {
+        if !turned_copy(&stored, &turned) {
             println!("skipped: this ffmpeg cannot set a display rotation");
             return;
         }
@@ -690,13 +695,7 @@ mod probing {
             return;
         };
         let turned = dir.path().join("turned.mp4");
-        let ok = std::process::Command::new("ffmpeg")
-            .args(["-nostdin", "-y", "-v", "error", "-i"])
-            .arg(&high)
-            .args(["-c", "copy", "-metadata:s:v:0", "rotate=90"])
-            .arg(&turned)
-            .status()
-            .is_ok_and(|s| s.success());
+        let ok = turned_copy(&high, &turned);
         let stored = Size::new(96, 72).unwrap();
         let mut cases = vec![
             (
