@@ -217,11 +217,17 @@ pub struct Anamorphic {
 /// frame up sixteenfold.
 const MAX_PIXEL_ASPECT: f64 = 4.0;
 
+/// Pixel aspects within this of 1 are read as square. ffmpeg's `scale` after a crop
+/// writes such ratios (a 405-px crop of 4:2:0 footage, rounded to 404, scaled to 540×960,
+/// is tagged 404:405): resampling every frame for a shape change nobody can see (0.25 %)
+/// only softens it. The nearest real anamorphic formats are 6 % off (DV's 16:15, 10:11).
+const SQUARE_ENOUGH: f64 = 0.01;
+
 /// What a source with stored pictures of `stored` and a sample aspect ratio `num:den`
 /// is read as: the stored size widened (pixels wider than tall) or heightened (taller
 /// than wide) to square pixels, so that no stored detail is lost. `None` when the
-/// pixels are square, the ratio is unknown (`0:1`, `0:0`), or it is outside
-/// 1:[`MAX_PIXEL_ASPECT`] … [`MAX_PIXEL_ASPECT`]:1.
+/// pixels are square or within [`SQUARE_ENOUGH`] of it, the ratio is unknown (`0:1`,
+/// `0:0`), or it is outside 1:[`MAX_PIXEL_ASPECT`] … [`MAX_PIXEL_ASPECT`]:1.
 pub(crate) fn anamorphic(stored: Size, num: u32, den: u32) -> Option<(Anamorphic, Size)> {
     if num == 0 || den == 0 || num == den {
         return None;
@@ -229,7 +235,8 @@ pub(crate) fn anamorphic(stored: Size, num: u32, den: u32) -> Option<(Anamorphic
     let g = gcd(num, den);
     let (num, den) = (num / g, den / g);
     let r = num as f64 / den as f64;
-    if !(1.0 / MAX_PIXEL_ASPECT..=MAX_PIXEL_ASPECT).contains(&r) {
+    if !(1.0 / MAX_PIXEL_ASPECT..=MAX_PIXEL_ASPECT).contains(&r) || (r - 1.0).abs() < SQUARE_ENOUGH
+    {
         return None;
     }
     let (w, h) = (stored.width as f64, stored.height as f64);
@@ -615,8 +622,11 @@ mod tests {
         ] {
             assert_eq!(anamorphic(s(720, 540), n, d), None, "{n}:{d}");
         }
-        // A ratio too close to 1 to change a one-pixel side.
-        assert_eq!(anamorphic(s(1, 1), 101, 100), None);
+        // Within 1 % of square (what ffmpeg's scale after an odd crop tags): as stored.
+        assert_eq!(anamorphic(s(540, 960), 404, 405), None);
+        assert_eq!(anamorphic(s(1920, 1080), 201, 200), None);
+        // DV PAL widescreen's 16:15 (6.7 % off) is not.
+        assert_eq!(anamorphic(s(720, 576), 16, 15).unwrap().1, s(768, 576));
     }
 
     #[test]
