@@ -28,8 +28,10 @@ use crate::global::Global;
 /// Version of the cache layout and of what training stores; part of the key (2: still
 /// lights left out of the masks; 3: colourless parts left out of them; 4: windows read
 /// through ffmpeg from a frame after 0 no longer start with a doubled frame, and footage
-/// over 1080p is trained at [`TRAIN_MAX_SIDE`]).
-const CACHE_VERSION: u32 = 4;
+/// over 1080p is trained at [`TRAIN_MAX_SIDE`]; 5: footage read as players show it —
+/// square pixels, HDR and BT.2020 as SDR BT.709, deinterlaced, the stream's own matrix and
+/// range on the pure path, the largest video stream that is not an attached picture).
+const CACHE_VERSION: u32 = 5;
 
 #[derive(clap::Args, Debug)]
 #[command(
