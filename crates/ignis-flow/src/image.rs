@@ -92,7 +92,7 @@ pub(crate) fn area_resize_luma(src: &[[f32; 4]], sw: usize, sh: usize, w: usize,
 
 /// The area resize of an `sw × sh` source to `w × h`, where `add_row(y, wt, out)` adds
 /// `wt ×` source row `y` to `out`.
-fn resize_with(
+pub(crate) fn resize_with(
     sw: usize,
     sh: usize,
     w: usize,

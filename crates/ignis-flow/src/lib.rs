@@ -32,6 +32,7 @@
 //! files, video or generators.
 
 pub mod bench;
+pub mod camera;
 pub mod dis;
 pub mod error;
 mod field;

@@ -125,7 +125,7 @@ fn matte_row(
         .matte
         .as_ref()
         .context("a cached clip has its matte")?
-        .matted_metric(&c.metric)?;
+        .matted_metric(&c.metric, None)?;
     let xf = loopq::loop_quality(&xfade(&mm, a, a + length + K, K))?;
     let vt = video_texture(&mm, length, K)
         .map(|(f, _, _)| loopq::loop_quality(&f))

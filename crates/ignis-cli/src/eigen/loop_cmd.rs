@@ -21,6 +21,7 @@ use ignis_core::loopq::{self, LoopQuality};
 use ignis_core::{GrayFrame, RgbaFrame, Size};
 use ignis_eigen::loops::{self, Candidate, Closing, Evaluated, PairMorph, Planned, SearchParams};
 use ignis_eigen::{ClipInput, ClipSpec, EigenfireDb, PreprocessParams, Progress as _, TrainParams};
+use ignis_flow::camera::{CameraPath, Steadying, Track, TrackGray, Tracker};
 use sha2::{Digest, Sha256};
 
 use crate::global::Global;
@@ -30,12 +31,13 @@ use crate::global::Global;
 /// through ffmpeg from a frame after 0 no longer start with a doubled frame, and footage
 /// over 1080p is trained at [`TRAIN_MAX_SIDE`]; 5: footage read as players show it —
 /// square pixels, HDR and BT.2020 as SDR BT.709, deinterlaced, the stream's own matrix and
-/// range on the pure path, the largest video stream that is not an attached picture).
-const CACHE_VERSION: u32 = 5;
+/// range on the pure path, the largest video stream that is not an attached picture; 6: the
+/// camera's track of every frame, `camera.f32`, for `--stabilise`).
+const CACHE_VERSION: u32 = 6;
 
 #[derive(clap::Args, Debug)]
 #[command(
-    after_help = "Examples:\n  ignis loop campfire.mp4 --length 4s -o loop.png\n  ignis loop candle.mp4 --length 120 -o loop.mp4\n  ignis loop fire.mov --length 2s --range 100..400 --method morph -o frames/%04d.png\n  ignis loop fire.mp4 --length 3s --cache /tmp/ignis-cache -o loop.gif\n  ignis loop plates/%04d.exr --length 96 -o loop.png    (an image sequence: a frame count, as it has no frame rate)\n  ignis loop campfire.mp4 --length 4s --every 2 --motion-vectors --engine unity -o loop.png    (half the cells; the engine's motion-vector blend fills in)\n  ignis loop fireball.mp4 --length 2s --alpha emissive -o loop.png    (to composite over light backgrounds: the fire adds its light)\n  ignis loop campfire.mp4 --length 4s -o loop.mov    (ProRes 4444 with the matte as alpha, for compositing tools; needs ffmpeg)\n\nThe first run on a clip trains an Eigenfire database on it (about 20 s for 500 frames of 960x540 on 2 cores, 2 to 3 min for a minute of 1080p; footage over 1080p is trained at 1920 px on its longest side) and keeps it in the cache ($XDG_CACHE_HOME/ignis or ~/.cache/ignis, or --cache); later runs reuse it. The output has the footage's own size, colours and frame rate (1/N of it with --every N; --fps is refused), with the pre-processing mask's matte as alpha (--alpha opaque: none; --alpha emissive: the matted flame's own light as alpha, no dark fringe over light backgrounds); a .png flipbook's JSON records the measured loop_quality."
+    after_help = "Examples:\n  ignis loop campfire.mp4 --length 4s -o loop.png\n  ignis loop candle.mp4 --length 120 -o loop.mp4\n  ignis loop fire.mov --length 2s --range 100..400 --method morph -o frames/%04d.png\n  ignis loop fire.mp4 --length 3s --cache /tmp/ignis-cache -o loop.gif\n  ignis loop plates/%04d.exr --length 96 -o loop.png    (an image sequence: a frame count, as it has no frame rate)\n  ignis loop campfire.mp4 --length 4s --every 2 --motion-vectors --engine unity -o loop.png    (half the cells; the engine's motion-vector blend fills in)\n  ignis loop fireball.mp4 --length 2s --alpha emissive -o loop.png    (to composite over light backgrounds: the fire adds its light)\n  ignis loop campfire.mp4 --length 4s -o loop.mov    (ProRes 4444 with the matte as alpha, for compositing tools; needs ffmpeg)\n  ignis loop handheld.mp4 --length 3s --stabilise on -o loop.png    (hold the camera still even where auto would not; auto steadies a clear shake)\n\nThe first run on a clip trains an Eigenfire database on it (about 20 s for 500 frames of 960x540 on 2 cores, 2 to 3 min for a minute of 1080p; footage over 1080p is trained at 1920 px on its longest side) and keeps it in the cache ($XDG_CACHE_HOME/ignis or ~/.cache/ignis, or --cache); later runs reuse it. The output has the footage's own size, colours and frame rate (1/N of it with --every N; --fps is refused), with the pre-processing mask's matte as alpha (--alpha opaque: none; --alpha emissive: the matted flame's own light as alpha, no dark fringe over light backgrounds); a .png flipbook's JSON records the measured loop_quality."
 )]
 pub struct Args {
     /// The footage (any video or frame sequence `ignis info` reads).
@@ -82,6 +84,13 @@ pub struct Args {
     /// ones (as `volume render` does). Example: --every 2
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=16))]
     pub every: u32,
+    /// Hold a hand-held camera still: `auto` (default) when the whole view shifts with the
+    /// camera (tracked against the clip's first frame, translation only) by more than a
+    /// pixel or a quarter of a percent of the frame; `on` whenever the camera can be
+    /// tracked; `off` never. A steadied loop is zoomed just enough (at most ×1.25) that no
+    /// frame shows past its edge.
+    #[arg(long, alias = "stabilize", default_value = "auto", value_parser = ["auto", "on", "off"])]
+    pub stabilise: String,
     #[command(flatten)]
     pub out: crate::output::OutputArgs,
 }
@@ -138,6 +147,13 @@ struct EntryMeta {
     metric_height: u32,
     metric_frames: usize,
     metric_sha256: String,
+    /// SHA-256 of `camera.f32`: per window frame the camera's track against the window's
+    /// first frame (`ignis_flow::camera::Track`: offset x, y, peak, explains; 4 × f32 LE).
+    camera_sha256: String,
+    /// SHA-256 of `aligned.f32`: the metric frames of the window each moved by the whole
+    /// pixels of its camera track (`ignis_flow::camera::whole_pixels`), the frames a
+    /// steadied loop is chosen on without resampling them.
+    aligned_sha256: String,
     fps: f64,
     source_size: String,
 }
@@ -147,6 +163,10 @@ pub struct Cached {
     pub dir: PathBuf,
     pub db: EigenfireDb,
     pub metric: Vec<GrayFrame>,
+    /// The camera's track over the window (`--stabilise`).
+    pub camera: CameraPath,
+    /// The metric frames moved by their tracks' whole pixels (`--stabilise`).
+    pub aligned: Vec<GrayFrame>,
     pub fps: f64,
     /// Whether this run built it.
     pub built: bool,
@@ -173,6 +193,31 @@ pub fn source_sha256(path: &Path) -> Result<String> {
 
 fn hex(b: &[u8]) -> String {
     b.iter().map(|x| format!("{x:02x}")).collect()
+}
+
+fn camera_bytes(tracks: &[Track]) -> Vec<u8> {
+    tracks
+        .iter()
+        .flat_map(|t| [t.offset[0], t.offset[1], t.peak, t.explains])
+        .flat_map(f32::to_le_bytes)
+        .collect()
+}
+
+fn camera_from_bytes(bytes: &[u8]) -> Vec<Track> {
+    bytes
+        .chunks_exact(16)
+        .map(|c| {
+            let v: Vec<f32> = c
+                .chunks_exact(4)
+                .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+                .collect();
+            Track {
+                offset: [v[0], v[1]],
+                peak: v[2],
+                explains: v[3],
+            }
+        })
+        .collect()
 }
 
 fn metric_bytes(frames: &[GrayFrame]) -> Vec<u8> {
@@ -260,28 +305,50 @@ fn open_entry(dir: &Path, sha: &str, settings: &CacheSettings) -> Result<Cached>
     }
     let size = Size::new(meta.metric_width, meta.metric_height)?;
     let per = size.pixels() * 4;
-    // the length entry.json gives, checked before anything is read
-    let metric_path = dir.join("metric.f32");
-    let len = std::fs::metadata(&metric_path)
-        .context("reading metric.f32")?
+    // each file's length, from entry.json, checked before anything is read
+    let read_frames = |name: &str, sha: &str| -> Result<Vec<GrayFrame>> {
+        let p = dir.join(name);
+        let len = std::fs::metadata(&p)
+            .with_context(|| format!("reading {name}"))?
+            .len();
+        if per.checked_mul(meta.metric_frames).map(|n| n as u64) != Some(len) {
+            bail!("{name} has the wrong length");
+        }
+        let bytes = std::fs::read(&p).with_context(|| format!("reading {name}"))?;
+        if hex(&Sha256::digest(&bytes)) != sha {
+            bail!("{name} does not match its checksum");
+        }
+        Ok(bytes
+            .chunks_exact(per)
+            .map(|c| {
+                let v = c
+                    .chunks_exact(4)
+                    .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+                    .collect();
+                GrayFrame::from_vec(size, v).expect("length checked")
+            })
+            .collect())
+    };
+    let metric = read_frames("metric.f32", &meta.metric_sha256)?;
+    let aligned = read_frames("aligned.f32", &meta.aligned_sha256)?;
+    let camera_path = dir.join("camera.f32");
+    let clen = std::fs::metadata(&camera_path)
+        .context("reading camera.f32")?
         .len();
-    if per.checked_mul(meta.metric_frames).map(|n| n as u64) != Some(len) {
-        bail!("metric.f32 has the wrong length");
+    if meta.metric_frames.checked_mul(16).map(|n| n as u64) != Some(clen) {
+        bail!("camera.f32 has the wrong length");
     }
-    let bytes = std::fs::read(&metric_path).context("reading metric.f32")?;
-    if hex(&Sha256::digest(&bytes)) != meta.metric_sha256 {
-        bail!("metric.f32 does not match its checksum");
+    let cbytes = std::fs::read(&camera_path).context("reading camera.f32")?;
+    if hex(&Sha256::digest(&cbytes)) != meta.camera_sha256 {
+        bail!("camera.f32 does not match its checksum");
     }
-    let metric: Vec<GrayFrame> = bytes
-        .chunks_exact(per)
-        .map(|c| {
-            let v = c
-                .chunks_exact(4)
-                .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-                .collect();
-            GrayFrame::from_vec(size, v).expect("length checked")
-        })
-        .collect();
+    let camera = CameraPath {
+        tracks: camera_from_bytes(&cbytes),
+        source: meta
+            .source_size
+            .parse()
+            .context("entry.json's source_size")?,
+    };
     let db = EigenfireDb::open(&dir.join("fire.db")).context("opening the cached database")?;
     let problems = db.verify();
     if let Some((f, why)) = problems.first() {
@@ -303,6 +370,8 @@ fn open_entry(dir: &Path, sha: &str, settings: &CacheSettings) -> Result<Cached>
         dir: dir.to_path_buf(),
         db,
         metric,
+        camera,
+        aligned,
         fps: meta.fps,
         built: false,
     })
@@ -328,8 +397,8 @@ fn build_entry(
     let result = (|| -> Result<()> {
         // Metric frames of every frame of the window, as a writer would measure them.
         let info = ignis_media::probe(path)?;
-        let metric = metric_frames(path, &window, g)?;
-        if metric.len() != window.len() {
+        let (metric, aligned, tracks) = metric_frames(path, &window, true, g)?;
+        if metric.len() != window.len() || tracks.len() != window.len() {
             bail!(
                 "read {} frames of {}..{}",
                 metric.len(),
@@ -339,6 +408,10 @@ fn build_entry(
         }
         let bytes = metric_bytes(&metric);
         std::fs::write(tmp.join("metric.f32"), &bytes)?;
+        let cbytes = camera_bytes(&tracks);
+        std::fs::write(tmp.join("camera.f32"), &cbytes)?;
+        let abytes = metric_bytes(&aligned);
+        std::fs::write(tmp.join("aligned.f32"), &abytes)?;
         // The database.
         let mut spec = ClipSpec::new("clip");
         spec.path = Some(path.to_path_buf());
@@ -375,6 +448,8 @@ fn build_entry(
             metric_height: ms.height,
             metric_frames: metric.len(),
             metric_sha256: hex(&Sha256::digest(&bytes)),
+            camera_sha256: hex(&Sha256::digest(&cbytes)),
+            aligned_sha256: hex(&Sha256::digest(&abytes)),
             fps: info.fps,
             source_size: info.size.to_string(),
         };
@@ -783,13 +858,14 @@ pub fn planned_frames(best: &Evaluated) -> usize {
 /// decoded (before the closing's blend or morph), passing each output frame to `sink` in
 /// order. Decodes only source frames `start..end + m`; keeps the m head frames in memory.
 /// With `matte`, every source frame's alpha is its pre-processing matte before it is
-/// blended or morphed.
+/// blended or morphed; with `steady`, the frame (matte and all) is then held still.
 pub fn render(
     path: &Path,
     first: usize,
     best: &Evaluated,
     scale: Option<Size>,
     matte: Option<&FootageMatte>,
+    steady: Option<&Steadying>,
     sink: &mut dyn FnMut(&RgbaFrame) -> Result<()>,
 ) -> Result<()> {
     let c = best.candidate;
@@ -832,6 +908,7 @@ pub fn render(
                     if let Some(m) = matte {
                         m.apply(want, &mut f, &mut masks)?;
                     }
+                    steady_frame(steady, want, &mut f);
                     return Ok(f);
                 }
             }
@@ -886,6 +963,7 @@ pub fn verify_closings(
     metric: &[GrayFrame],
     scale: Option<Size>,
     matte: Option<&FootageMatte>,
+    steady: Option<&Steadying>,
     g: &Global,
 ) -> Result<()> {
     let t = Instant::now();
@@ -924,7 +1002,15 @@ pub fn verify_closings(
                 .copied()
                 .collect();
             let closings: Vec<Closing> = group.iter().map(|x| x.closing).collect();
-            let mids = rendered_mids(path, first, &e.candidate, &closings, scale, matte, size)?;
+            let mids = rendered_mids(
+                path,
+                first,
+                &e.candidate,
+                &closings,
+                scale,
+                (matte, steady),
+                size,
+            )?;
             pb.inc(1);
             rendered += group.len();
             group
@@ -999,7 +1085,7 @@ fn rendered_mids(
     c: &Candidate,
     closings: &[Closing],
     scale: Option<Size>,
-    matte: Option<&FootageMatte>,
+    (matte, steady): (Option<&FootageMatte>, Option<&Steadying>),
     size: Size,
 ) -> Result<Vec<Vec<GrayFrame>>> {
     let n = closings.iter().map(Closing::frames).max().unwrap_or(0);
@@ -1033,6 +1119,8 @@ fn rendered_mids(
             m.apply(from, &mut a, &mut tail_masks)?;
             m.apply(to, &mut b, &mut head_masks)?;
         }
+        steady_frame(steady, from, &mut a);
+        steady_frame(steady, to, &mut b);
         let morphs = closings
             .iter()
             .any(|k| matches!(k, Closing::Morph(m) if *m > t));
@@ -1151,6 +1239,18 @@ pub struct LoopFootage<'a> {
     pub matte: Option<FootageMatte<'a>>,
     /// The matted frames' light as alpha (`--alpha emissive`, [`emissive`]).
     pub emissive: bool,
+    /// How each window frame is held still (`--stabilise`); `None` leaves the footage as
+    /// it is.
+    pub steady: Option<Held<'a>>,
+}
+
+/// A window held still: the steadying of each frame, and what the cache keeps for it (the
+/// camera's tracks, the metric frames moved by their whole pixels).
+#[derive(Clone, Copy)]
+pub struct Held<'a> {
+    pub steady: &'a Steadying,
+    pub aligned: &'a [GrayFrame],
+    pub tracks: &'a [Track],
 }
 
 impl<'a> LoopFootage<'a> {
@@ -1167,6 +1267,19 @@ impl<'a> LoopFootage<'a> {
             fps: c.fps,
             matte: Some(FootageMatte::new(&c.db, 0, c.metric.len())),
             emissive: false,
+            steady: None,
+        }
+    }
+
+    /// The same footage held still by `steady` (one shift per window frame of `c`).
+    pub fn steadied(self, steady: &'a Steadying, c: &'a Cached) -> LoopFootage<'a> {
+        LoopFootage {
+            steady: Some(Held {
+                steady,
+                aligned: &c.aligned,
+                tracks: &c.camera.tracks,
+            }),
+            ..self
         }
     }
 
@@ -1186,6 +1299,39 @@ impl<'a> LoopFootage<'a> {
             ..self
         }
     }
+}
+
+/// Window frame `i` held still by `steady` (its shift scaled to the frame's size, the
+/// run's zoom); nothing without.
+fn steady_frame(steady: Option<&Steadying>, i: usize, f: &mut RgbaFrame) {
+    if let Some(s) = steady {
+        let shift = s.shifts.get(i).copied().unwrap_or_default();
+        let at = ignis_flow::camera::shift_at(shift, s.source, f.size());
+        *f = ignis_flow::camera::steady_rgba(f, at, s.zoom);
+    }
+}
+
+/// The window's metric frames held still as [`steady_frame`] holds the footage, from
+/// `aligned` (the metric frames moved by their tracks' whole pixels, so what is left to
+/// move is under a pixel and the run's common centre and zoom: every frame is resampled
+/// alike, none softer than its neighbours).
+fn steady_metric(held: &Held, aligned: &[GrayFrame]) -> Vec<GrayFrame> {
+    use rayon::prelude::*;
+    let s = held.steady;
+    aligned
+        .par_iter()
+        .enumerate()
+        .map(|(i, m)| {
+            let shift = s.shifts.get(i).copied().unwrap_or_default();
+            let whole = held
+                .tracks
+                .get(i)
+                .map_or([0, 0], ignis_flow::camera::whole_pixels);
+            let rest = [shift[0] - whole[0] as f32, shift[1] - whole[1] as f32];
+            let at = ignis_flow::camera::shift_at(rest, s.source, m.size());
+            ignis_flow::camera::steady_gray(m, at, s.zoom)
+        })
+        .collect()
 }
 
 /// `--alpha`: the pre-processing matte (default) or opaque footage.
@@ -1337,10 +1483,24 @@ impl<'a> FootageMatte<'a> {
     /// the source size), area-averaged to the metric size — so the loop is chosen on what
     /// it writes, the feather's band of lit surroundings included. Runs of frames are
     /// done in parallel, each mask decoded once per run.
-    pub fn matted_metric(&self, metric: &[GrayFrame]) -> Result<Vec<GrayFrame>> {
+    /// With `tracks`, each mask is first moved by its track's whole pixels, as the aligned
+    /// metric frames were (`--stabilise`).
+    pub fn matted_metric(
+        &self,
+        metric: &[GrayFrame],
+        tracks: Option<&[Track]>,
+    ) -> Result<Vec<GrayFrame>> {
         self.by_runs(metric.len(), |i, mask| {
-            let full =
+            let mut full =
                 ignis_eigen::preprocess::feather_half_in(&mask, mask.width().max(mask.height())).0;
+            if let Some(t) = tracks.and_then(|t| t.get(i)) {
+                let d = ignis_flow::camera::whole_pixels(t);
+                if d != [0, 0] {
+                    let (w, h) = (full.width() as usize, full.height() as usize);
+                    let moved = ignis_flow::camera::shift_whole(full.data(), w, h, d);
+                    full = GrayFrame::from_vec(full.size(), moved).expect("same size");
+                }
+            }
             let soft = ignis_core::loopq::area_resize(&full, metric[i].size());
             let mut out = metric[i].clone();
             for (o, &a) in out.data_mut().iter_mut().zip(soft.data()) {
@@ -1433,6 +1593,7 @@ pub fn make_loop_sized(
         fps,
         matte,
         emissive: light_alpha,
+        steady,
     } = *src;
     let LoopAsk {
         length,
@@ -1442,17 +1603,28 @@ pub fn make_loop_sized(
     } = *ask;
     let every = every.max(1);
     let (matted, lit);
+    let base = steady.map_or(metric, |h| h.aligned);
     let (metric, lit) = match &matte {
         Some(m) => {
-            matted = m.matted_metric(metric)?;
+            matted = m.matted_metric(base, steady.map(|h| h.tracks))?;
             lit = matted
                 .iter()
                 .map(|f| f.data().iter().any(|&v| v > 0.0))
                 .collect::<Vec<bool>>();
             (&matted[..], Some(&lit[..]))
         }
-        None => (metric, None),
+        None => (base, None),
     };
+    // held still as the footage will be: the loop is chosen on what is written
+    let held;
+    let metric = match &steady {
+        Some(h) => {
+            held = steady_metric(h, metric);
+            &held[..]
+        }
+        None => metric,
+    };
+    let steady = steady.map(|h| h.steady);
     let mut chosen = search_and_choose(first, weights, k, e, metric, lit, length, method)?;
     chosen.keep_multiples_of(every, first)?;
     g.say("best candidates (predicted on the footage's 128-px frames):");
@@ -1474,7 +1646,16 @@ pub fn make_loop_sized(
     };
     let mut fitted = fit(planned_frames(&chosen.best) / every, &mut opts.clone())?;
     let scale = (fitted.size != info.size).then_some(fitted.size);
-    verify_closings(&mut chosen, path, first, metric, scale, matte.as_ref(), g)?;
+    verify_closings(
+        &mut chosen,
+        path,
+        first,
+        metric,
+        scale,
+        matte.as_ref(),
+        steady,
+        g,
+    )?;
     let n = planned_frames(&chosen.best);
     fitted = fit(n / every, &mut opts)?;
     // --every with an even step: the frame half-way between two written ones is rendered
@@ -1494,23 +1675,31 @@ pub fn make_loop_sized(
     let mut w = out.create_with(fitted.size, &opts)?;
     let pb = g.progress(n as u64, "rendering");
     let mut i = 0;
-    render(path, first, &chosen.best, scale, matte.as_ref(), &mut |f| {
-        pb.inc(1);
-        i += 1;
-        // the frame as written (with --alpha emissive, its light as alpha), made only for
-        // the frames written or kept as in-between frames
-        let written = |f: &RgbaFrame| if light_alpha { emissive(f) } else { f.clone() };
-        match (i - 1) % every {
-            0 if light_alpha => out.push(&mut w, &emissive(f)),
-            0 => out.push(&mut w, f),
-            j => {
-                if let Some(m) = in_between.as_ref().filter(|_| 2 * j == every) {
-                    m.record(written(f));
+    render(
+        path,
+        first,
+        &chosen.best,
+        scale,
+        matte.as_ref(),
+        steady,
+        &mut |f| {
+            pb.inc(1);
+            i += 1;
+            // the frame as written (with --alpha emissive, its light as alpha), made only for
+            // the frames written or kept as in-between frames
+            let written = |f: &RgbaFrame| if light_alpha { emissive(f) } else { f.clone() };
+            match (i - 1) % every {
+                0 if light_alpha => out.push(&mut w, &emissive(f)),
+                0 => out.push(&mut w, f),
+                j => {
+                    if let Some(m) = in_between.as_ref().filter(|_| 2 * j == every) {
+                        m.record(written(f));
+                    }
+                    Ok(())
                 }
-                Ok(())
             }
-        }
-    })?;
+        },
+    )?;
     pb.finish_and_clear();
     let measured = w
         .loop_quality()
@@ -1626,6 +1815,10 @@ pub fn run(a: &Args, g: &Global) -> Result<()> {
         every: a.every as usize,
     };
     let mut src = LoopFootage::cached(&a.input, window.start, &c);
+    let steadying = steadying(&c.camera, &a.stabilise, g)?;
+    if let Some(s) = &steadying {
+        src = src.steadied(s, &c);
+    }
     match a.alpha.as_str() {
         "opaque" => src = src.opaque(),
         "emissive" => src = src.emissive(),
@@ -1657,6 +1850,36 @@ pub fn run(a: &Args, g: &Global) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// `--stabilise`: how the window is held still, if at all, said in a line (`auto` says
+/// nothing of a still camera); `on` refuses a camera it cannot steady.
+fn steadying(camera: &CameraPath, mode: &str, g: &Global) -> Result<Option<Steadying>> {
+    let n = camera.tracks.len();
+    if mode == "off" || n == 0 {
+        return Ok(None);
+    }
+    match camera.decide(0..n, mode == "on") {
+        Ok(s) => {
+            let most = s
+                .shifts
+                .iter()
+                .map(|v| v[0].hypot(v[1]))
+                .fold(0.0f32, f32::max);
+            g.say(format!(
+                "camera: hand-held, the view shifts up to {most:.1} px; held still (zoomed ×{:.3}; --stabilise off keeps it as shot)",
+                s.zoom
+            ));
+            Ok(Some(s))
+        }
+        Err(why) if mode == "on" => bail!("--stabilise on: {why}; use --stabilise auto or off"),
+        Err(why) => {
+            if !why.starts_with("the camera is still") {
+                g.say(format!("camera: left as shot ({why})"));
+            }
+            Ok(None)
+        }
+    }
 }
 
 /// `ignis eigen loop DB --clip C --length L [--range A..B]`: the search over a trained
@@ -1717,7 +1940,7 @@ pub fn eigen_length_loop(a: &crate::eigen::LoopArgs, g: &Global) -> Result<()> {
         .checked_path(&c)
         .context("a --length loop is rendered from the clip's source footage (give its place with --relink; reconstructed frames with --from-database need --range instead of --length)")?;
     // Metric frames of the window, as the writer will measure them.
-    let metric = metric_frames(&source, &window, g)
+    let (metric, _, _) = metric_frames(&source, &window, false, g)
         .with_context(|| format!("reading {}", source.display()))?;
     if metric.len() != window.len() {
         bail!(
@@ -1739,6 +1962,7 @@ pub fn eigen_length_loop(a: &crate::eigen::LoopArgs, g: &Global) -> Result<()> {
         fps: c.fps,
         matte: (a.alpha == "matte").then(|| FootageMatte::new(&db, rows.start, rows.len())),
         emissive: false,
+        steady: None,
     };
     let ask = LoopAsk {
         length,
@@ -1793,9 +2017,12 @@ fn beside_db(recorded: &str, db: &Path) -> Option<PathBuf> {
 }
 
 /// Metric frames ([`loopq::metric_frame_rgba`], as a writer measures them) of the source
-/// frames in `window`, with a progress bar. May return fewer frames than asked when the
-/// video is shorter.
-fn metric_frames(path: &Path, window: &Range<usize>, g: &Global) -> Result<Vec<GrayFrame>> {
+/// frames in `window`, with a progress bar, and with `track` the camera's track of each
+/// against the window's first frame (`ignis_flow::camera`) and the metric frame of each
+/// moved by its track's whole pixels (both empty without). May return fewer frames than
+/// asked when the video is shorter.
+type Measured = (Vec<GrayFrame>, Vec<GrayFrame>, Vec<Track>);
+fn metric_frames(path: &Path, window: &Range<usize>, track: bool, g: &Global) -> Result<Measured> {
     let opts = ignis_media::ReadOptions {
         range: Some(ignis_media::FrameRange::frames(
             window.start as u64,
@@ -1806,34 +2033,93 @@ fn metric_frames(path: &Path, window: &Range<usize>, g: &Global) -> Result<Vec<G
     let pb = g.progress(window.len() as u64, "measuring");
     // reserved up to a bound: the window's length comes from the container's word
     let mut metric = Vec::with_capacity(window.len().min(1 << 14));
+    let mut tracks = Vec::with_capacity(if track { window.len().min(1 << 14) } else { 0 });
+    let mut aligned = Vec::with_capacity(tracks.capacity());
     // 8-bit decoders hand over their bytes: the metric straight from them is the same
     // grey, bit for bit, without a 16-byte linear pixel per pixel (`metric_frame_srgba8`).
     let mut reader = ignis_media::open_keeping_8bit(path, &opts)?;
     let batch = ignis_core::stream::batch_len(reader.info().size.pixels() * 16, 256 << 20);
-    let frames = std::iter::from_fn(move || reader.next_decoded());
+    let gray = |f: &ignis_media::DecodedFrame| match f {
+        ignis_media::DecodedFrame::Srgba8 { size, bytes } => TrackGray::from_srgba8(*size, bytes),
+        ignis_media::DecodedFrame::Linear(f) => Some(TrackGray::from_rgba(f)),
+    };
+    // the reference is the first frame, decoded before the rest
+    let head = reader.next_decoded().transpose()?;
+    let tracker = match (&head, track) {
+        (Some(f), true) => gray(f).map(|r| Tracker::new(&r)),
+        _ => None,
+    };
+    let frames = head
+        .map(Ok)
+        .into_iter()
+        .chain(std::iter::from_fn(move || reader.next_decoded()));
     ignis_core::stream::map_in_order(
         frames.map(|f| f.map_err(anyhow::Error::from)),
         batch,
-        |f| match f {
-            ignis_media::DecodedFrame::Srgba8 { size, bytes } => {
-                loopq::metric_frame_srgba8(*size, bytes).with_context(|| {
-                    format!(
-                        "{} decoded {} bytes for a {size} frame",
-                        path.display(),
-                        bytes.len()
-                    )
-                })
-            }
-            ignis_media::DecodedFrame::Linear(f) => Ok(loopq::metric_frame_rgba(f, [0.0; 3])),
+        |f| {
+            let measure = |f: &ignis_media::DecodedFrame| match f {
+                ignis_media::DecodedFrame::Srgba8 { size, bytes } => {
+                    loopq::metric_frame_srgba8(*size, bytes).with_context(|| {
+                        format!(
+                            "{} decoded {} bytes for a {size} frame",
+                            path.display(),
+                            bytes.len()
+                        )
+                    })
+                }
+                ignis_media::DecodedFrame::Linear(f) => Ok(loopq::metric_frame_rgba(f, [0.0; 3])),
+            };
+            let m = measure(f)?;
+            let Some(tr) = &tracker else {
+                return Ok((m, None));
+            };
+            let t = gray(f).map_or(Track::LOST, |g| tr.track(&g));
+            let d = ignis_flow::camera::whole_pixels(&t);
+            let a = if d == [0, 0] {
+                m.clone()
+            } else {
+                measure(&moved(f, d))?
+            };
+            Ok((m, Some((a, t))))
         },
-        |_, m| {
-            metric.push(m?);
+        |_, m: Result<(GrayFrame, Option<(GrayFrame, Track)>)>| {
+            let (m, at) = m?;
+            metric.push(m);
+            if let Some((a, t)) = at {
+                aligned.push(a);
+                tracks.push(t);
+            }
             pb.inc(1);
             Ok(())
         },
     )?;
     pb.finish_and_clear();
-    Ok(metric)
+    Ok((metric, aligned, tracks))
+}
+
+/// A decoded frame moved by whole pixels (`out(x) = f(x + d)`, edge-clamped).
+fn moved(f: &ignis_media::DecodedFrame, d: [i32; 2]) -> ignis_media::DecodedFrame {
+    use ignis_flow::camera::shift_whole;
+    match f {
+        ignis_media::DecodedFrame::Srgba8 { size, bytes } => {
+            let px: Vec<[u8; 4]> = bytes
+                .chunks_exact(4)
+                .map(|c| [c[0], c[1], c[2], c[3]])
+                .collect();
+            let (w, h) = (size.width as usize, size.height as usize);
+            ignis_media::DecodedFrame::Srgba8 {
+                size: *size,
+                bytes: shift_whole(&px, w, h, d).into_iter().flatten().collect(),
+            }
+        }
+        ignis_media::DecodedFrame::Linear(fr) => {
+            let (w, h) = (fr.width() as usize, fr.height() as usize);
+            let data = shift_whole(fr.data(), w, h, d);
+            ignis_media::DecodedFrame::Linear(
+                RgbaFrame::from_vec(fr.size(), data).expect("same size"),
+            )
+        }
+    }
 }
 
 #[cfg(test)]
@@ -1874,6 +2160,130 @@ mod tests {
             return None;
         }
         Some(p)
+    }
+
+    /// A hand-held shot made from `campfire.mp4` (a 440×240 window moved by known whole
+    /// pixels each frame, written as a PNG sequence) is tracked in the cache within a
+    /// fraction of a pixel, steadied by `auto`, and its loop written with the view still;
+    /// the same frames unmoved are left as shot.
+    #[test]
+    fn a_hand_held_shot_loops_with_the_camera_held_still() {
+        let Some(src) = clip("campfire.mp4") else {
+            return;
+        };
+        let quiet = Global { quiet: true };
+        let dir = tempfile::tempdir().unwrap();
+        let opts = ignis_media::ReadOptions {
+            range: Some(ignis_media::FrameRange::frames(200, Some(260))),
+            scale: Some(Size::new(480, 270).unwrap()),
+            ..Default::default()
+        };
+        let frames: Vec<RgbaFrame> = ignis_media::open(&src, &opts)
+            .unwrap()
+            .map(|f| f.unwrap())
+            .collect();
+        let shake = |i: usize| {
+            let t = i as f32 / 25.0;
+            [
+                (20.0 + 9.0 * (t * 4.4).sin() + 4.0 * (t * 11.9 + 1.0).sin()).round() as i32,
+                (15.0 + 6.0 * (t * 3.1 + 2.0).sin() + 3.0 * (t * 14.5).sin()).round() as i32,
+            ]
+        };
+        let crop = |f: &RgbaFrame, o: [i32; 2]| {
+            RgbaFrame::from_vec(
+                Size::new(440, 240).unwrap(),
+                (0..240)
+                    .flat_map(|y| (0..440).map(move |x| (x, y)))
+                    .map(|(x, y)| f.get(x + o[0] as u32, y + o[1] as u32))
+                    .collect(),
+            )
+            .unwrap()
+        };
+        for (name, moving) in [("shaky", true), ("still", false)] {
+            let seq = dir.path().join(name);
+            std::fs::create_dir_all(&seq).unwrap();
+            for (i, f) in frames.iter().enumerate() {
+                let o = if moving { shake(i) } else { [20, 15] };
+                ignis_media::write_png(&seq.join(format!("{i:04}.png")), &crop(f, o)).unwrap();
+            }
+            let input = seq.join("%04d.png");
+            let c = cached(
+                &input,
+                0..60,
+                "32x48".parse().unwrap(),
+                20,
+                dir.path(),
+                &quiet,
+            )
+            .unwrap();
+            let decided = c.camera.decide(0..60, false);
+            if !moving {
+                let why = decided.unwrap_err();
+                assert!(why.contains("still"), "{why}");
+                assert!(steadying(&c.camera, "auto", &quiet).unwrap().is_none());
+                continue;
+            }
+            // content moved by minus the window's move since frame 0
+            let mut errs: Vec<f32> = (0..60)
+                .map(|i| {
+                    let (o, o0, t) = (shake(i), shake(0), c.camera.tracks[i].offset);
+                    (t[0] + (o[0] - o0[0]) as f32).hypot(t[1] + (o[1] - o0[1]) as f32)
+                })
+                .collect();
+            errs.sort_by(f32::total_cmp);
+            assert!(errs[30] < 0.25 && errs[59] < 0.8, "track errors {errs:?}");
+            let s = decided.unwrap();
+            assert!(s.zoom > 1.02 && s.zoom < 1.15, "zoom {}", s.zoom);
+            // reopened from the cache, the same tracks
+            let again = cached(
+                &input,
+                0..60,
+                "32x48".parse().unwrap(),
+                20,
+                dir.path(),
+                &quiet,
+            )
+            .unwrap();
+            assert!(!again.built && again.camera == c.camera && again.aligned == c.aligned);
+            let held = steadying(&c.camera, "auto", &quiet).unwrap().unwrap();
+            let src = LoopFootage::cached(&input, 0, &c)
+                .opaque()
+                .steadied(&held, &c);
+            let ask = LoopAsk {
+                length: 36,
+                method: Method::Auto,
+                top: 1,
+                every: 1,
+            };
+            let out = dir.path().join("loop");
+            std::fs::create_dir_all(&out).unwrap();
+            let d = make_loop(&src, &ask, &out_args(out.join("%04d.png")), &quiet).unwrap();
+            // the written loop tracked against its first frame: the view stays put
+            let read = |i: usize| {
+                let f =
+                    ignis_media::open(&out.join(format!("{:04}.png", i + 1)), &Default::default())
+                        .or_else(|_| {
+                            ignis_media::open(&out.join(format!("{i:04}.png")), &Default::default())
+                        })
+                        .unwrap()
+                        .next()
+                        .unwrap()
+                        .unwrap();
+                ignis_flow::camera::TrackGray::from_rgba(&f)
+            };
+            let tracker = Tracker::new(&read(0));
+            let tracks: Vec<Track> = (0..d.frames).map(|i| tracker.track(&read(i))).collect();
+            let wander = CameraPath {
+                tracks,
+                source: Size::new(440, 240).unwrap(),
+            }
+            .wander(0..d.frames);
+            let shot = c.camera.wander(0..60);
+            assert!(
+                shot > 8.0 && wander < 0.75,
+                "view wanders {wander} px steadied, {shot} px as shot"
+            );
+        }
     }
 
     fn out_args(path: PathBuf) -> crate::output::OutputArgs {
@@ -2287,7 +2697,7 @@ mod tests {
         )
         .unwrap();
         let matte = FootageMatte::new(&c.db, 0, c.metric.len());
-        let matted = matte.matted_metric(&c.metric).unwrap();
+        let matted = matte.matted_metric(&c.metric, None).unwrap();
         let source = ignis_media::probe(&path).unwrap().size;
         let mut band = 0;
         for i in [0, 1, 17, 38, 39] {

@@ -303,7 +303,7 @@ fn write_peer(
     opts.loop_ = true;
     let mut w = out.create_with(size, &opts)?;
     let mut frames = Vec::new();
-    loop_cmd::render(path, first, &e, Some(size), None, &mut |f| {
+    loop_cmd::render(path, first, &e, Some(size), None, None, &mut |f| {
         frames.push(f.clone());
         out.push(&mut w, f)
     })?;
@@ -317,7 +317,7 @@ fn write_peer(
 /// The frames of a chosen loop, opaque, at `size`.
 fn frames_of(path: &Path, first: usize, e: &Evaluated, size: Size) -> Result<Vec<RgbaFrame>> {
     let mut frames = Vec::new();
-    loop_cmd::render(path, first, e, Some(size), None, &mut |f| {
+    loop_cmd::render(path, first, e, Some(size), None, None, &mut |f| {
         frames.push(f.clone());
         Ok(())
     })?;

@@ -1,0 +1,1129 @@
+//! Camera shake: where a hand-held shot's view sits in each frame against a reference
+//! frame, and the warp that holds the view still (`ignis loop --stabilise`).
+//!
+//! A loop of hand-held footage repeats its shake, and at the wrap the view jumps from
+//! where the camera was at the loop's end to where it was at its start. What moves the
+//! whole view is the camera; the fire moves on its own. So each frame's translation
+//! against the reference is estimated where the picture is rigid:
+//!
+//! 1. **Phase correlation** (Kuglin & Hines 1975) of the frame and the reference, on grey
+//!    frames halved from the tracking size ([`TRACK_SIDE`]), Hann-windowed and
+//!    zero-padded to powers of two: the normalised cross-power spectrum's inverse is a
+//!    peak at the shift the rigid parts share, whatever the fire does (its content
+//!    changes from frame to frame and adds no coherent peak). The peak's height, the share
+//!    of the spectrum that agrees on one shift, is the track's confidence ([`Track::peak`]):
+//!    1 for a copy, about `4/√pixels` for unrelated pictures.
+//! 2. **Robust refinement** at the tracking size: Gauss–Newton on the translation with a
+//!    gain and an offset (fire light brightens the whole scene from frame to frame),
+//!    reweighted by Tukey's biweight of the residual so the flame's pixels, which no
+//!    shift explains, drop out (iteratively reweighted least squares).
+//!
+//! Only translation is modelled: a hand-held camera over a few seconds mostly shifts the
+//! view; roll and zoom are left in. A camera that pans away from the reference (the view
+//! no longer shares enough with it) fails the confidence test, and the caller leaves the
+//! footage as it is.
+//!
+//! Why hand-written: no well-kept crate does robust global registration on our frames
+//! (`opencv`'s would need the system library the README keeps optional); the FFT is the
+//! radix-2 FFT below is `ignis_core::realism::fft` with its twiddles tabled (that one
+//! computes a sine and cosine per butterfly, most of a frame's time here).
+
+use ignis_core::{GrayFrame, RgbaFrame, Size};
+use rayon::prelude::*;
+
+use crate::image::{resize_with, Img};
+
+/// Longest side of the grey frames a camera is tracked on (the refinement's size; phase
+/// correlation runs at half of it). Sub-pixel at this size is a fraction of a pixel at
+/// 1080p.
+pub const TRACK_SIDE: usize = 384;
+
+/// The least phase-correlation peak a track is trusted at: five times the height
+/// unrelated pictures reach at the coarse size (`4/√pixels`, ≈ 0.02 for 192×108).
+pub const PEAK_MIN: f32 = 0.1;
+
+/// Share of a run's frames that must be tracked for it to be steadied.
+pub const TRACKED_MIN: f32 = 0.9;
+
+/// How much better, at the median over the frames whose view moved a pixel or more, the
+/// shift must explain a frame than no shift ([`Track::explains`]) before `auto` calls it
+/// the camera's. A hand-held shot's textured surroundings give 1.4–2; a flame's light
+/// moving over a still candle jar, its reflections, give 1.0–1.1.
+pub const EXPLAINS_MIN: f32 = 1.25;
+
+/// The most a steadied loop is zoomed to keep its frames inside the picture.
+pub const ZOOM_MAX: f32 = 1.25;
+
+/// The least wander (source pixels) `auto` steadies: a pixel, or a quarter of a percent
+/// of the shorter side, whichever is more (below it a shake is invisible and the
+/// resampling would only soften the frames).
+pub fn wander_min(source: Size) -> f32 {
+    (0.0025 * source.width.min(source.height) as f32).max(1.0)
+}
+
+/// Grey levels (of 1) per pixel below which the picture is flat: one 8-bit level.
+const TEXTURE: f32 = 1.0 / 255.0;
+
+/// The least scale of the residuals (of 1): 8-bit footage's quantisation and codec noise,
+/// a couple of levels, so a clean match does not reject its own noise.
+const NOISE: f32 = 2.0 / 255.0;
+
+/// A frame's grey as it is tracked: sRGB-encoded luma, area-averaged to fit
+/// [`TRACK_SIDE`], with the size of the frame it came from.
+#[derive(Clone, Debug)]
+pub struct TrackGray {
+    img: Img,
+    source: Size,
+}
+
+/// The tracking size of a `source`-sized frame.
+fn track_size(source: Size) -> (usize, usize) {
+    let (w, h) = (source.width as usize, source.height as usize);
+    let long = w.max(h);
+    if long <= TRACK_SIDE {
+        return (w.max(1), h.max(1));
+    }
+    let k = TRACK_SIDE as f64 / long as f64;
+    let side = |v: usize| ((v as f64 * k).round() as usize).max(1);
+    (side(w), side(h))
+}
+
+impl TrackGray {
+    /// From 8-bit sRGB RGBA bytes of a `size` frame (`None` when the length is wrong).
+    pub fn from_srgba8(size: Size, bytes: &[u8]) -> Option<TrackGray> {
+        if bytes.len() != size.pixels() * 4 || size.pixels() == 0 {
+            return None;
+        }
+        let (sw, sh) = (size.width as usize, size.height as usize);
+        let (w, h) = track_size(size);
+        let img = resize_with(sw, sh, w, h, |y, wt, out| {
+            let row = &bytes[y * sw * 4..(y + 1) * sw * 4];
+            for (o, p) in out.iter_mut().zip(row.chunks_exact(4)) {
+                let l = 0.299 * f32::from(p[0]) + 0.587 * f32::from(p[1]) + 0.114 * f32::from(p[2]);
+                *o += l * (wt / 255.0);
+            }
+        });
+        Some(TrackGray { img, source: size })
+    }
+
+    /// From a linear frame (each channel sRGB-encoded first, as 8-bit footage is).
+    pub fn from_rgba(frame: &RgbaFrame) -> TrackGray {
+        let size = frame.size();
+        let (sw, sh) = (size.width as usize, size.height as usize);
+        let (w, h) = track_size(size);
+        let enc = ignis_core::palette::linear_to_srgb;
+        let data = frame.data();
+        let img = resize_with(sw, sh, w, h, |y, wt, out| {
+            for (o, p) in out.iter_mut().zip(&data[y * sw..(y + 1) * sw]) {
+                let l = 0.299 * enc(p[0]) + 0.587 * enc(p[1]) + 0.114 * enc(p[2]);
+                *o += l * wt;
+            }
+        });
+        TrackGray { img, source: size }
+    }
+
+    /// The size of the frame it came from.
+    pub fn source(&self) -> Size {
+        self.source
+    }
+}
+
+/// One frame's track: its view's shift against the reference, in pixels of the source
+/// frame (`frame(x) ≈ reference(x − offset)`: content moved by `offset`), and the
+/// confidence of the coarse match.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Track {
+    pub offset: [f32; 2],
+    pub peak: f32,
+    /// The robust cost of the picture unshifted over its cost at `offset` (≥ 1 when the
+    /// shift explains the frame better than none).
+    pub explains: f32,
+}
+
+impl Track {
+    /// The track of a frame that could not be read for tracking.
+    pub const LOST: Track = Track {
+        offset: [0.0; 2],
+        peak: 0.0,
+        explains: 1.0,
+    };
+
+    /// Whether the match is trusted ([`PEAK_MIN`]).
+    pub fn tracked(&self) -> bool {
+        self.peak >= PEAK_MIN && self.offset.iter().all(|v| v.is_finite())
+    }
+}
+
+/// Tracks frames against one reference frame (see the module doc).
+pub struct Tracker {
+    reference: Img,
+    gx: Img,
+    gy: Img,
+    /// Coarse grid: the halved reference's size and the power-of-two box it is padded to.
+    coarse: (usize, usize),
+    pw: usize,
+    ph: usize,
+    /// The windowed, padded coarse reference's spectrum.
+    spec: (Vec<f64>, Vec<f64>),
+    source: Size,
+    /// The reference's pixels with detail (a gradient of at least [`TEXTURE`]), off the
+    /// one-pixel border: the refinement's equations.
+    textured: Vec<u32>,
+}
+
+impl Tracker {
+    pub fn new(reference: &TrackGray) -> Tracker {
+        let img = reference.img.clone();
+        let (gx, gy) = img.gradients();
+        let coarse = ((img.w / 2).max(1), (img.h / 2).max(1));
+        let (pw, ph) = (coarse.0.next_power_of_two(), coarse.1.next_power_of_two());
+        let spec = spectrum(&img.area_resize(coarse.0, coarse.1), pw, ph);
+        let (w, h) = (img.w, img.h);
+        let textured = (1..h.saturating_sub(1))
+            .flat_map(|y| (1..w.saturating_sub(1)).map(move |x| y * w + x))
+            .filter(|&i| gx.data[i].abs().max(gy.data[i].abs()) >= TEXTURE)
+            .map(|i| i as u32)
+            .collect();
+        Tracker {
+            reference: img,
+            gx,
+            gy,
+            coarse,
+            pw,
+            ph,
+            spec,
+            source: reference.source,
+            textured,
+        }
+    }
+
+    /// `frame`'s track against the reference. A frame of another size is refused with a
+    /// zero-confidence track.
+    pub fn track(&self, frame: &TrackGray) -> Track {
+        let r = &self.reference;
+        if frame.img.w != r.w || frame.img.h != r.h {
+            return Track::LOST;
+        }
+        let small = frame.img.area_resize(self.coarse.0, self.coarse.1);
+        let (fr, fi) = spectrum(&small, self.pw, self.ph);
+        let (d, peak) = correlate(&self.spec, (&fr, &fi), self.pw, self.ph);
+        // coarse pixels to tracking pixels
+        let kx = r.w as f32 / self.coarse.0 as f32;
+        let ky = r.h as f32 / self.coarse.1 as f32;
+        let (d, explains) = self.refine(&frame.img, [d[0] * kx, d[1] * ky]);
+        let sx = self.source.width as f32 / r.w as f32;
+        let sy = self.source.height as f32 / r.h as f32;
+        Track {
+            offset: [d[0] * sx, d[1] * sy],
+            peak,
+            explains,
+        }
+    }
+
+    /// Gauss–Newton with gain and offset, Tukey-reweighted (see the module doc), from `d`
+    /// (tracking pixels); returns `d` itself when the system is singular (a blank frame).
+    fn refine(&self, f: &Img, mut d: [f32; 2]) -> ([f32; 2], f32) {
+        let r = &self.reference;
+        let (w, h) = (r.w, r.h);
+        let mut gain = [0.0f64; 2];
+        let mut c = 4.685 * NOISE;
+        let mut resid: Vec<f32> = Vec::with_capacity(self.textured.len());
+        let mut rows: Vec<(usize, f32, f32)> = Vec::with_capacity(self.textured.len());
+        for _ in 0..10 {
+            // residuals of the current model at the pixels with detail whose match lies
+            // inside (flat pixels, a dark sky, fit any shift: they say nothing of it and
+            // would make the residuals' scale zero)
+            rows.clear();
+            resid.clear();
+            let (xmax, ymax) = ((w - 1) as f32, (h - 1) as f32);
+            for &i in &self.textured {
+                let i = i as usize;
+                let (sx, sy) = ((i % w) as f32 + d[0], (i / w) as f32 + d[1]);
+                if !(0.0..=xmax).contains(&sx) || !(0.0..=ymax).contains(&sy) {
+                    continue;
+                }
+                let e = bilinear(f, sx, sy) - r.data[i];
+                let res = e - (gain[0] as f32 * r.data[i] + gain[1] as f32);
+                rows.push((i, e, res));
+                resid.push(res.abs());
+            }
+            if rows.len() < 16 {
+                return (d, 1.0);
+            }
+            let mid = resid.len() / 2;
+            let med = *resid.select_nth_unstable_by(mid, f32::total_cmp).1;
+            c = 4.685 * (1.4826 * med).max(NOISE);
+            // weighted normal equations of e = J·p, J = [gx, gy, ref, 1]
+            let mut a = [[0.0f64; 4]; 4];
+            let mut b = [0.0f64; 4];
+            for &(i, e, res) in &rows {
+                let u = res / c;
+                if u.abs() >= 1.0 {
+                    continue;
+                }
+                let wt = f64::from((1.0 - u * u) * (1.0 - u * u));
+                let j = [
+                    f64::from(self.gx.data[i]),
+                    f64::from(self.gy.data[i]),
+                    f64::from(r.data[i]),
+                    1.0,
+                ];
+                for p in 0..4 {
+                    for q in 0..4 {
+                        a[p][q] += wt * j[p] * j[q];
+                    }
+                    b[p] += wt * j[p] * f64::from(e);
+                }
+            }
+            let Some(p) = solve4(a, b).filter(|p| p.iter().all(|v| v.is_finite())) else {
+                break;
+            };
+            let step = [p[0] as f32, p[1] as f32];
+            // a Gauss–Newton step beyond a few pixels means the linearisation broke
+            let step = step.map(|s| s.clamp(-2.0, 2.0));
+            d = [d[0] - step[0], d[1] - step[1]];
+            gain = [p[2], p[3]];
+            if step[0].hypot(step[1]) < 0.01 {
+                break;
+            }
+        }
+        let explains = self.cost(f, [0.0; 2], d, gain, c) / self.cost(f, d, d, gain, c).max(1e-9);
+        (d, explains as f32)
+    }
+
+    /// Tukey's cost (scale `c`) of matching the frame at `x + at` under the gain and
+    /// offset, over the pixels with detail whose match at `x + inside` lies in the frame.
+    fn cost(&self, f: &Img, at: [f32; 2], inside: [f32; 2], gain: [f64; 2], c: f32) -> f64 {
+        let r = &self.reference;
+        let (w, h) = (r.w, r.h);
+        let (xmax, ymax) = ((w - 1) as f32, (h - 1) as f32);
+        let mut sum = 0.0f64;
+        for &i in &self.textured {
+            let i = i as usize;
+            let (x, y) = ((i % w) as f32, (i / w) as f32);
+            let (ix, iy) = (x + inside[0], y + inside[1]);
+            if !(0.0..=xmax).contains(&ix) || !(0.0..=ymax).contains(&iy) {
+                continue;
+            }
+            let (sx, sy) = ((x + at[0]).clamp(0.0, xmax), (y + at[1]).clamp(0.0, ymax));
+            let e = bilinear(f, sx, sy) - r.data[i];
+            let u = (e - (gain[0] as f32 * r.data[i] + gain[1] as f32)) / c;
+            let v = 1.0 - u * u;
+            sum += if u.abs() >= 1.0 {
+                1.0
+            } else {
+                f64::from(1.0 - v * v * v)
+            };
+        }
+        sum
+    }
+}
+
+/// Bilinear sample of `img` at `(x, y)` inside `[0, w−1] × [0, h−1]`.
+fn bilinear(img: &Img, x: f32, y: f32) -> f32 {
+    let x0 = (x.floor() as usize).min(img.w - 1);
+    let y0 = (y.floor() as usize).min(img.h - 1);
+    let x1 = (x0 + 1).min(img.w - 1);
+    let y1 = (y0 + 1).min(img.h - 1);
+    let (fx, fy) = (x - x0 as f32, y - y0 as f32);
+    let r0 = img.row(y0);
+    let r1 = img.row(y1);
+    let top = r0[x0] + (r0[x1] - r0[x0]) * fx;
+    let bot = r1[x0] + (r1[x1] - r1[x0]) * fx;
+    top + (bot - top) * fy
+}
+
+/// Solves the symmetric 4×4 system by Gaussian elimination with partial pivoting; `None`
+/// when it is singular.
+fn solve4(mut a: [[f64; 4]; 4], mut b: [f64; 4]) -> Option<[f64; 4]> {
+    let scale = (0..4).map(|i| a[i][i].abs()).fold(0.0, f64::max);
+    if scale <= 0.0 {
+        return None;
+    }
+    for col in 0..4 {
+        let piv = (col..4).max_by(|&i, &j| a[i][col].abs().total_cmp(&a[j][col].abs()))?;
+        if a[piv][col].abs() <= scale * 1e-12 {
+            return None;
+        }
+        a.swap(col, piv);
+        b.swap(col, piv);
+        let pivot = a[col];
+        for row in col + 1..4 {
+            let k = a[row][col] / pivot[col];
+            for (v, p) in a[row][col..].iter_mut().zip(&pivot[col..]) {
+                *v -= k * p;
+            }
+            b[row] -= k * b[col];
+        }
+    }
+    let mut x = [0.0; 4];
+    for row in (0..4).rev() {
+        let s: f64 = (row + 1..4).map(|c| a[row][c] * x[c]).sum();
+        x[row] = (b[row] - s) / a[row][row];
+    }
+    Some(x)
+}
+
+/// The 2-D spectrum of `img` less its mean, Hann-windowed, zero-padded to `pw × ph`.
+fn spectrum(img: &Img, pw: usize, ph: usize) -> (Vec<f64>, Vec<f64>) {
+    let mean = img.data.iter().map(|&v| f64::from(v)).sum::<f64>() / img.data.len() as f64;
+    let hann = |i: usize, n: usize| {
+        if n < 2 {
+            1.0
+        } else {
+            0.5 - 0.5 * (std::f64::consts::TAU * i as f64 / (n - 1) as f64).cos()
+        }
+    };
+    let wx: Vec<f64> = (0..img.w).map(|x| hann(x, img.w)).collect();
+    let mut re = vec![0.0; pw * ph];
+    for y in 0..img.h {
+        let wy = hann(y, img.h);
+        for (x, &v) in img.row(y).iter().enumerate() {
+            re[y * pw + x] = (f64::from(v) - mean) * wx[x] * wy;
+        }
+    }
+    let mut im = vec![0.0; pw * ph];
+    fft_2d(&mut re, &mut im, pw, ph);
+    (re, im)
+}
+
+/// An in-place radix-2 FFT (forward, unnormalised) of one power-of-two length, its
+/// twiddles tabled.
+struct Fft {
+    n: usize,
+    tw: Vec<(f64, f64)>,
+}
+
+impl Fft {
+    fn new(n: usize) -> Fft {
+        debug_assert!(n.is_power_of_two());
+        let tw = (0..n / 2)
+            .map(|k| {
+                let (s, c) = (-std::f64::consts::TAU * k as f64 / n as f64).sin_cos();
+                (c, s)
+            })
+            .collect();
+        Fft { n, tw }
+    }
+
+    fn run(&self, re: &mut [f64], im: &mut [f64]) {
+        let n = self.n;
+        let mut j = 0;
+        for i in 1..n {
+            let mut bit = n >> 1;
+            while j & bit != 0 {
+                j ^= bit;
+                bit >>= 1;
+            }
+            j |= bit;
+            if i < j {
+                re.swap(i, j);
+                im.swap(i, j);
+            }
+        }
+        let mut len = 2;
+        while len <= n {
+            let stride = n / len;
+            for start in (0..n).step_by(len) {
+                for k in 0..len / 2 {
+                    let (c, s) = self.tw[k * stride];
+                    let (a, b) = (start + k, start + k + len / 2);
+                    let tr = re[b] * c - im[b] * s;
+                    let ti = re[b] * s + im[b] * c;
+                    re[b] = re[a] - tr;
+                    im[b] = im[a] - ti;
+                    re[a] += tr;
+                    im[a] += ti;
+                }
+            }
+            len <<= 1;
+        }
+    }
+}
+
+/// In-place 2-D FFT of a `pw × ph` complex image (both powers of two), rows then columns.
+fn fft_2d(re: &mut [f64], im: &mut [f64], pw: usize, ph: usize) {
+    let (fx, fy) = (Fft::new(pw), Fft::new(ph));
+    for (r, i) in re.chunks_exact_mut(pw).zip(im.chunks_exact_mut(pw)) {
+        fx.run(r, i);
+    }
+    let (mut cr, mut ci) = (vec![0.0; ph], vec![0.0; ph]);
+    for x in 0..pw {
+        for y in 0..ph {
+            cr[y] = re[y * pw + x];
+            ci[y] = im[y * pw + x];
+        }
+        fy.run(&mut cr, &mut ci);
+        for y in 0..ph {
+            re[y * pw + x] = cr[y];
+            im[y * pw + x] = ci[y];
+        }
+    }
+}
+
+/// Phase correlation of a frame's spectrum `f` against the reference's `r`: the shift of
+/// the frame's content (coarse pixels, sub-pixel by a parabola through the peak and its
+/// neighbours) and the peak's height.
+fn correlate(
+    r: &(Vec<f64>, Vec<f64>),
+    f: (&[f64], &[f64]),
+    pw: usize,
+    ph: usize,
+) -> ([f32; 2], f32) {
+    let n = pw * ph;
+    // normalised cross-power F · conj(R) / |F · conj(R)|, conjugated for the inverse
+    let mut re = vec![0.0; n];
+    let mut im = vec![0.0; n];
+    let mut top = 0.0f64;
+    for k in 0..n {
+        let (a, b) = (f.0[k], f.1[k]);
+        let (c, d) = (r.0[k], r.1[k]);
+        let (x, y) = (a * c + b * d, b * c - a * d);
+        top = top.max(x.hypot(y));
+    }
+    let floor = top * 1e-9;
+    for k in 0..n {
+        let (a, b) = (f.0[k], f.1[k]);
+        let (c, d) = (r.0[k], r.1[k]);
+        let (x, y) = (a * c + b * d, b * c - a * d);
+        let m = x.hypot(y);
+        if m > floor {
+            re[k] = x / m;
+            im[k] = -y / m;
+        }
+    }
+    // inverse by the forward transform of the conjugate (the real part is all we need)
+    fft_2d(&mut re, &mut im, pw, ph);
+    let at = |x: isize, y: isize| {
+        let xi = x.rem_euclid(pw as isize) as usize;
+        let yi = y.rem_euclid(ph as isize) as usize;
+        re[yi * pw + xi] / n as f64
+    };
+    let (mut best, mut bx, mut by) = (f64::NEG_INFINITY, 0isize, 0isize);
+    for y in 0..ph {
+        for x in 0..pw {
+            let v = re[y * pw + x];
+            if v > best {
+                (best, bx, by) = (v, x as isize, y as isize);
+            }
+        }
+    }
+    let peak = best / n as f64;
+    let sub = |m: f64, c: f64, p: f64| {
+        let den = m - 2.0 * c + p;
+        if den.abs() < 1e-12 {
+            0.0
+        } else {
+            (0.5 * (m - p) / den).clamp(-0.5, 0.5)
+        }
+    };
+    let dx = sub(at(bx - 1, by), peak, at(bx + 1, by));
+    let dy = sub(at(bx, by - 1), peak, at(bx, by + 1));
+    let signed = |i: isize, n: usize| {
+        if i > n as isize / 2 {
+            i - n as isize
+        } else {
+            i
+        }
+    };
+    (
+        [
+            (signed(bx, pw) as f64 + dx) as f32,
+            (signed(by, ph) as f64 + dy) as f32,
+        ],
+        peak as f32,
+    )
+}
+
+// ---------------------------------------------------------------------------------------
+// The path of a shot's camera, and holding it still
+// ---------------------------------------------------------------------------------------
+
+/// The tracks of a run of frames against one reference.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CameraPath {
+    pub tracks: Vec<Track>,
+    /// The size the offsets are in (the source frames').
+    pub source: Size,
+}
+
+/// How a run of frames is held still: each frame `i` read at `x + shift(i)`, scaled by
+/// `zoom` about the frame's centre so no frame shows past its edge.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Steadying {
+    /// Per frame of the path, in source pixels.
+    pub shifts: Vec<[f32; 2]>,
+    pub zoom: f32,
+    pub source: Size,
+}
+
+impl CameraPath {
+    /// Whether frame `i`'s track is used: trusted ([`Track::tracked`]) and not an outlier,
+    /// i.e. within 2 % of the frame's diagonal of the median of its trusted neighbours two
+    /// frames either side (a camera does not jump there and back in a frame; a blurred or
+    /// flash frame's match does).
+    pub fn usable(&self, i: usize) -> bool {
+        let Some(t) = self.tracks.get(i).filter(|t| t.tracked()) else {
+            return false;
+        };
+        let near: Vec<[f32; 2]> = (i.saturating_sub(2)..(i + 3).min(self.tracks.len()))
+            .filter(|&j| j != i && self.tracks[j].tracked())
+            .map(|j| self.tracks[j].offset)
+            .collect();
+        if near.len() < 2 {
+            return true;
+        }
+        let m = median_point(&near);
+        let diag = (self.source.width as f32).hypot(self.source.height as f32);
+        (t.offset[0] - m[0]).hypot(t.offset[1] - m[1]) <= 0.02 * diag
+    }
+
+    /// The share of frames tracked with confidence ([`CameraPath::usable`]).
+    pub fn tracked_share(&self) -> f32 {
+        if self.tracks.is_empty() {
+            return 0.0;
+        }
+        (0..self.tracks.len()).filter(|&i| self.usable(i)).count() as f32 / self.tracks.len() as f32
+    }
+
+    /// Whether `auto` steadies frames `range`, and how (see [`CameraPath::steadying`]);
+    /// `forced` (`--stabilise on`) skips the tests that the camera moves and that the
+    /// shifts are the camera's. `Err` says why not, in words.
+    pub fn decide(&self, range: std::ops::Range<usize>, forced: bool) -> Result<Steadying, String> {
+        let sub = CameraPath {
+            tracks: self.tracks
+                [range.start.min(self.tracks.len())..range.end.min(self.tracks.len())]
+                .to_vec(),
+            source: self.source,
+        };
+        let n = sub.tracks.len();
+        let share = sub.tracked_share();
+        if n == 0 || share < TRACKED_MIN {
+            return Err(format!(
+                "the camera could not be tracked: {:.0} % of the frames match the first (at least {:.0} % needed; a pan, a cut, or a shot with little still detail)",
+                share * 100.0,
+                TRACKED_MIN * 100.0
+            ));
+        }
+        let wander = sub.wander(0..n);
+        if !forced {
+            let least = wander_min(self.source);
+            if wander < least {
+                return Err(format!(
+                    "the camera is still: the view wanders {wander:.1} px at most (under {least:.1} px)"
+                ));
+            }
+            let mut ex: Vec<f32> = (0..n)
+                .filter(|&i| {
+                    sub.usable(i) && sub.tracks[i].offset[0].hypot(sub.tracks[i].offset[1]) >= 1.0
+                })
+                .map(|i| sub.tracks[i].explains)
+                .collect();
+            ex.sort_by(f32::total_cmp);
+            let med = ex.get(ex.len() / 2).copied().unwrap_or(1.0);
+            if med < EXPLAINS_MIN {
+                return Err(format!(
+                    "the view's shifts (up to {wander:.1} px) hardly explain the frames (×{med:.2}, at least ×{EXPLAINS_MIN} for a camera): what moves is the fire's light, not the camera"
+                ));
+            }
+        }
+        let s = sub.steadying(0..n).ok_or("no frame is tracked")?;
+        if s.zoom > ZOOM_MAX {
+            return Err(format!(
+                "the camera moves too far to steady: the frames would be zoomed ×{:.2} (at most ×{ZOOM_MAX})",
+                s.zoom
+            ));
+        }
+        Ok(s)
+    }
+
+    /// Offsets of every frame, the untracked ones interpolated linearly between their
+    /// tracked neighbours (held at the ends); `None` when no frame is tracked.
+    pub fn offsets(&self) -> Option<Vec<[f32; 2]>> {
+        let known: Vec<(usize, [f32; 2])> = self
+            .tracks
+            .iter()
+            .enumerate()
+            .filter(|&(i, _)| self.usable(i))
+            .map(|(i, t)| (i, t.offset))
+            .collect();
+        if known.is_empty() {
+            return None;
+        }
+        let mut k = 0;
+        Some(
+            (0..self.tracks.len())
+                .map(|i| {
+                    while k + 1 < known.len() && known[k + 1].0 <= i {
+                        k += 1;
+                    }
+                    let (ia, a) = known[k];
+                    match known.get(k + 1) {
+                        Some(&(ib, b)) if i > ia => {
+                            let t = (i - ia) as f32 / (ib - ia) as f32;
+                            [a[0] + (b[0] - a[0]) * t, a[1] + (b[1] - a[1]) * t]
+                        }
+                        _ => a,
+                    }
+                })
+                .collect(),
+        )
+    }
+
+    /// How far the view wanders over frames `range` (source pixels): the largest distance
+    /// of a frame's offset from their median position.
+    pub fn wander(&self, range: std::ops::Range<usize>) -> f32 {
+        let Some(o) = self.offsets() else {
+            return 0.0;
+        };
+        let o = &o[range.start.min(o.len())..range.end.min(o.len())];
+        if o.is_empty() {
+            return 0.0;
+        }
+        let c = median_point(o);
+        o.iter()
+            .map(|p| (p[0] - c[0]).hypot(p[1] - c[1]))
+            .fold(0.0, f32::max)
+    }
+
+    /// The steadying of frames `range` (indices into the path): every frame shifted onto
+    /// the median view of the run, and the zoom that keeps the shifted frames inside the
+    /// picture. `None` when no frame is tracked.
+    pub fn steadying(&self, range: std::ops::Range<usize>) -> Option<Steadying> {
+        let o = self.offsets()?;
+        let run = &o[range.start.min(o.len())..range.end.min(o.len())];
+        if run.is_empty() {
+            return None;
+        }
+        let c = median_point(run);
+        let shifts: Vec<[f32; 2]> = run.iter().map(|p| [p[0] - c[0], p[1] - c[1]]).collect();
+        let (mx, my) = shifts.iter().fold((0.0f32, 0.0f32), |(a, b), s| {
+            (a.max(s[0].abs()), b.max(s[1].abs()))
+        });
+        let (w, h) = (self.source.width as f32, self.source.height as f32);
+        let zoom = (w / (w - 2.0 * mx).max(1.0)).max(h / (h - 2.0 * my).max(1.0));
+        Some(Steadying {
+            shifts,
+            zoom,
+            source: self.source,
+        })
+    }
+}
+
+/// The per-axis median of points.
+fn median_point(p: &[[f32; 2]]) -> [f32; 2] {
+    let med = |k: usize| {
+        let mut v: Vec<f32> = p.iter().map(|q| q[k]).collect();
+        v.sort_by(f32::total_cmp);
+        let n = v.len();
+        if n % 2 == 1 {
+            v[n / 2]
+        } else {
+            0.5 * (v[n / 2 - 1] + v[n / 2])
+        }
+    };
+    [med(0), med(1)]
+}
+
+/// Catmull-Rom weights of the four taps around a sample at fraction `t`.
+#[inline]
+fn cubic(t: f32) -> [f32; 4] {
+    let t2 = t * t;
+    let t3 = t2 * t;
+    [
+        0.5 * (-t3 + 2.0 * t2 - t),
+        0.5 * (3.0 * t3 - 5.0 * t2 + 2.0),
+        0.5 * (-3.0 * t3 + 4.0 * t2 + t),
+        0.5 * (t3 - t2),
+    ]
+}
+
+/// Per output coordinate along one axis: the first of four source taps (clamped) and
+/// their Catmull-Rom weights, for `out(u) = src(c + (u − c)/zoom + shift)`.
+fn taps(n: usize, shift: f32, zoom: f32) -> Vec<([usize; 4], [f32; 4])> {
+    let c = (n as f32 - 1.0) * 0.5;
+    (0..n)
+        .map(|u| {
+            let s = c + (u as f32 - c) / zoom + shift;
+            let f = s.floor();
+            let t = s - f;
+            let i = f as isize;
+            let idx =
+                std::array::from_fn(|k| (i - 1 + k as isize).clamp(0, n as isize - 1) as usize);
+            (idx, cubic(t))
+        })
+        .collect()
+}
+
+/// `frame` held still: `out(x) = frame(c + (x − c)/zoom + shift)` (`shift` in this frame's
+/// pixels, `c` its centre), Catmull-Rom, edge-clamped, colour kept ≥ 0 and alpha in
+/// `0..=1`. An integer shift at zoom 1 copies pixels exactly.
+pub fn steady_rgba(frame: &RgbaFrame, shift: [f32; 2], zoom: f32) -> RgbaFrame {
+    let size = frame.size();
+    let (w, h) = (size.width as usize, size.height as usize);
+    if w == 0 || h == 0 {
+        return frame.clone();
+    }
+    let tx = taps(w, shift[0], zoom);
+    let ty = taps(h, shift[1], zoom);
+    let src = frame.data();
+    // horizontal pass over every source row, then vertical
+    let mut mid = vec![[0.0f32; 4]; w * h];
+    mid.par_chunks_mut(w).enumerate().for_each(|(y, out)| {
+        let row = &src[y * w..(y + 1) * w];
+        for (o, (idx, wt)) in out.iter_mut().zip(&tx) {
+            let mut s = [0.0f32; 4];
+            for k in 0..4 {
+                let p = row[idx[k]];
+                for c in 0..4 {
+                    s[c] += wt[k] * p[c];
+                }
+            }
+            *o = s;
+        }
+    });
+    let mut data = vec![[0.0f32; 4]; w * h];
+    data.par_chunks_mut(w).enumerate().for_each(|(y, out)| {
+        let (idx, wt) = ty[y];
+        for (x, o) in out.iter_mut().enumerate() {
+            let mut s = [0.0f32; 4];
+            for k in 0..4 {
+                let p = mid[idx[k] * w + x];
+                for c in 0..4 {
+                    s[c] += wt[k] * p[c];
+                }
+            }
+            *o = [
+                s[0].max(0.0),
+                s[1].max(0.0),
+                s[2].max(0.0),
+                s[3].clamp(0.0, 1.0),
+            ];
+        }
+    });
+    RgbaFrame::from_vec(size, data).expect("same size")
+}
+
+/// [`steady_rgba`] of a grey frame (the metric frames a loop is chosen on, held still as
+/// the render will be).
+pub fn steady_gray(frame: &GrayFrame, shift: [f32; 2], zoom: f32) -> GrayFrame {
+    let f = steady_rgba(&frame.to_rgba(), shift, zoom);
+    GrayFrame::from_vec(frame.size(), f.data().iter().map(|p| p[0]).collect()).expect("same size")
+}
+
+/// The whole-pixel part of a track (`[0, 0]` for an untrusted one): what the cached
+/// aligned metric frames were moved by ([`shift_whole`]).
+pub fn whole_pixels(t: &Track) -> [i32; 2] {
+    if t.tracked() {
+        t.offset.map(|v| v.round().clamp(-1e6, 1e6) as i32)
+    } else {
+        [0, 0]
+    }
+}
+
+/// `out(x, y) = src(x + dx, y + dy)`, edge-clamped, on a row-major `w × h` image of `T`
+/// pixels (8-bit RGBA as `[u8; 4]`, grey as `f32`): a whole-pixel move, no resampling.
+pub fn shift_whole<T: Copy>(src: &[T], w: usize, h: usize, d: [i32; 2]) -> Vec<T> {
+    let mut out = Vec::with_capacity(src.len());
+    if w == 0 || h == 0 || src.len() != w * h {
+        return src.to_vec();
+    }
+    let col = |x: usize| (x as i64 + i64::from(d[0])).clamp(0, w as i64 - 1) as usize;
+    for y in 0..h {
+        let sy = (y as i64 + i64::from(d[1])).clamp(0, h as i64 - 1) as usize;
+        let row = &src[sy * w..(sy + 1) * w];
+        out.extend((0..w).map(|x| row[col(x)]));
+    }
+    out
+}
+
+/// The steadying of one source frame at another frame size: its shift in that size's
+/// pixels.
+pub fn shift_at(shift: [f32; 2], source: Size, size: Size) -> [f32; 2] {
+    [
+        shift[0] * size.width as f32 / source.width.max(1) as f32,
+        shift[1] * size.height as f32 / source.height.max(1) as f32,
+    ]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A textured scene (sum of a few blobs and ridges), `w × h`, sampled at `(x − dx, y − dy)`.
+    fn scene(w: u32, h: u32, dx: f32, dy: f32) -> RgbaFrame {
+        let size = Size::new(w, h).unwrap();
+        let data = (0..h)
+            .flat_map(|y| {
+                (0..w).map(move |x| {
+                    let (u, v) = (x as f32 - dx, y as f32 - dy);
+                    let g = 0.3
+                        + 0.15 * (u * 0.11).sin() * (v * 0.07).cos()
+                        + 0.1 * (u * 0.031 + v * 0.023).sin()
+                        + 0.1
+                            * ((u - 60.0).powi(2) + (v - 40.0).powi(2))
+                                .sqrt()
+                                .mul_add(0.2, 0.0)
+                                .cos()
+                        + 0.08 * (u * 0.19 + v * 0.05).sin();
+                    let g = g.clamp(0.0, 1.0);
+                    [g, g * 0.9, g * 0.8, 1.0]
+                })
+            })
+            .collect();
+        RgbaFrame::from_vec(size, data).unwrap()
+    }
+
+    /// `f` with a "flame": a bright region in the middle whose content changes with `phase`.
+    fn with_flame(mut f: RgbaFrame, phase: f32) -> RgbaFrame {
+        let (w, h) = (f.width(), f.height());
+        for y in 0..h {
+            for x in 0..w {
+                let (u, v) = (x as f32 / w as f32 - 0.5, y as f32 / h as f32 - 0.6);
+                if u.abs() < 0.15 && v.abs() < 0.25 {
+                    let t = (0.5
+                        + 0.5
+                            * (x as f32 * 0.3 + phase * 2.1).sin()
+                            * (y as f32 * 0.17 - phase).cos())
+                    .powi(2);
+                    f.set(x, y, [1.0, 0.6 * t + 0.2, 0.1 * t, 1.0]);
+                }
+            }
+        }
+        f
+    }
+
+    #[test]
+    fn sub_pixel_shifts_are_recovered_past_a_flame() {
+        let reference = with_flame(scene(480, 270, 0.0, 0.0), 0.0);
+        let tracker = Tracker::new(&TrackGray::from_rgba(&reference));
+        for (i, &(dx, dy)) in [
+            (0.0, 0.0),
+            (3.0, -2.0),
+            (-7.4, 5.3),
+            (12.25, 0.5),
+            (-0.3, -9.8),
+        ]
+        .iter()
+        .enumerate()
+        {
+            let f = with_flame(scene(480, 270, dx, dy), 1.0 + i as f32);
+            let t = tracker.track(&TrackGray::from_rgba(&f));
+            assert!(t.tracked(), "{dx},{dy}: peak {}", t.peak);
+            let err = (t.offset[0] - dx).hypot(t.offset[1] - dy);
+            assert!(err < 0.1, "{dx},{dy}: found {:?} (error {err})", t.offset);
+        }
+    }
+
+    #[test]
+    fn unrelated_pictures_are_not_tracked() {
+        let reference = scene(320, 240, 0.0, 0.0);
+        let tracker = Tracker::new(&TrackGray::from_rgba(&reference));
+        // noise: nothing in common with the reference
+        let mut s = 12345u32;
+        let size = Size::new(320, 240).unwrap();
+        let noise = RgbaFrame::from_vec(
+            size,
+            (0..size.pixels())
+                .map(|_| {
+                    s = s.wrapping_mul(1664525).wrapping_add(1013904223);
+                    let g = (s >> 8) as f32 / (1u32 << 24) as f32;
+                    [g, g, g, 1.0]
+                })
+                .collect(),
+        )
+        .unwrap();
+        let t = tracker.track(&TrackGray::from_rgba(&noise));
+        assert!(!t.tracked(), "peak {}", t.peak);
+        let same = tracker.track(&TrackGray::from_rgba(&reference));
+        assert!(
+            same.peak > 0.9 && same.offset.iter().all(|v| v.abs() < 1e-3),
+            "{same:?}"
+        );
+    }
+
+    #[test]
+    fn srgba8_and_linear_greys_agree() {
+        let f = scene(200, 120, 0.0, 0.0);
+        let bytes: Vec<u8> = f
+            .data()
+            .iter()
+            .flat_map(|p| {
+                let e = |v: f32| (ignis_core::palette::linear_to_srgb(v) * 255.0).round() as u8;
+                [e(p[0]), e(p[1]), e(p[2]), 255]
+            })
+            .collect();
+        let a = TrackGray::from_srgba8(f.size(), &bytes).unwrap();
+        let b = TrackGray::from_rgba(&f);
+        let worst = a
+            .img
+            .data
+            .iter()
+            .zip(&b.img.data)
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0, f32::max);
+        assert!(worst < 0.003, "{worst}");
+        assert!(TrackGray::from_srgba8(f.size(), &bytes[4..]).is_none());
+    }
+
+    #[test]
+    fn steadying_undoes_the_shifts_and_zooms_past_the_edges() {
+        let shifts = [[0.0, 0.0], [4.0, -2.0], [-2.0, 6.0], [1.0, 1.0], [8.0, 0.0]];
+        let size = Size::new(2000, 1000).unwrap();
+        let path = CameraPath {
+            tracks: shifts
+                .iter()
+                .map(|&offset| Track {
+                    offset,
+                    peak: 1.0,
+                    explains: 2.0,
+                })
+                .collect(),
+            source: size,
+        };
+        let s = path.steadying(0..5).unwrap();
+        // median view (1, 0); widest x shift 7, y 6
+        assert_eq!(s.shifts[4], [7.0, 0.0]);
+        let want = (2000.0f32 / 1986.0).max(1000.0 / 988.0);
+        assert!((s.zoom - want).abs() < 1e-6, "{}", s.zoom);
+        assert!((path.wander(0..5) - 7.0).abs() < 1e-6);
+        // an integer shift at zoom 1 copies pixels
+        let f = scene(64, 48, 0.0, 0.0);
+        let moved = steady_rgba(&f, [3.0, -2.0], 1.0);
+        assert_eq!(moved.get(10, 10), f.get(13, 8));
+        assert_eq!(moved.get(0, 47), f.get(3, 45));
+        // a frame whose content moved by d, read at x + d, matches the reference inside
+        let d = [2.5f32, -1.5];
+        let shifted = scene(64, 48, d[0], d[1]);
+        let back = steady_rgba(&shifted, d, 1.0);
+        let worst = (8..40)
+            .flat_map(|y| (8..56).map(move |x| (x, y)))
+            .map(|(x, y)| (back.get(x, y)[0] - f.get(x, y)[0]).abs())
+            .fold(0.0, f32::max);
+        assert!(worst < 0.01, "{worst}");
+        let g = steady_gray(&f.luminance(), [1.0, 0.0], 1.0);
+        assert_eq!(g.get(5, 5), f.luminance().get(6, 5));
+    }
+
+    #[test]
+    fn auto_steadies_only_a_camera_that_moves_the_picture() {
+        let size = Size::new(400, 300).unwrap();
+        let path = |f: &dyn Fn(usize) -> Track| CameraPath {
+            tracks: (0..50).map(f).collect(),
+            source: size,
+        };
+        let shake = |i: usize| [6.0 * (i as f32 * 0.7).sin(), 4.0 * (i as f32 * 0.4).cos()];
+        let camera = path(&|i| Track {
+            offset: shake(i),
+            peak: 0.4,
+            explains: 1.6,
+        });
+        let s = camera.decide(0..50, false).unwrap();
+        assert!(
+            s.zoom > 1.0 && s.zoom < 1.1 && s.shifts.len() == 50,
+            "{s:?}"
+        );
+        let light = path(&|i| Track {
+            offset: shake(i),
+            peak: 0.4,
+            explains: 1.05,
+        });
+        let why = light.decide(0..50, false).unwrap_err();
+        assert!(why.contains("fire's light"), "{why}");
+        assert!(light.decide(0..50, true).is_ok());
+        let still = path(&|i| Track {
+            offset: [0.1 * (i % 3) as f32, 0.0],
+            peak: 0.5,
+            explains: 1.0,
+        });
+        assert!(still.decide(0..50, false).unwrap_err().contains("still"));
+        let lost = path(&|i| Track {
+            offset: shake(i),
+            peak: if i % 4 == 0 { 0.02 } else { 0.4 },
+            explains: 1.6,
+        });
+        assert!(lost
+            .decide(0..50, true)
+            .unwrap_err()
+            .contains("could not be tracked"));
+        let far = path(&|i| Track {
+            offset: [2.0 * i as f32 - 50.0, 0.0],
+            peak: 0.4,
+            explains: 1.6,
+        });
+        assert!(far.decide(0..50, false).unwrap_err().contains("too far"));
+        // one wild match among steady ones is an outlier, not a shake
+        let blip = path(&|i| Track {
+            offset: if i == 20 { [80.0, 60.0] } else { [0.0, 0.0] },
+            peak: 0.3,
+            explains: 1.0,
+        });
+        assert!(!blip.usable(20) && blip.usable(19));
+        assert!(blip.decide(0..50, false).unwrap_err().contains("still"));
+    }
+
+    #[test]
+    fn whole_pixel_moves_clamp_at_the_edges() {
+        let src: Vec<u8> = (0..12).collect();
+        assert_eq!(
+            shift_whole(&src, 4, 3, [1, 0]),
+            vec![1, 2, 3, 3, 5, 6, 7, 7, 9, 10, 11, 11]
+        );
+        assert_eq!(
+            shift_whole(&src, 4, 3, [0, -1]),
+            vec![0, 1, 2, 3, 0, 1, 2, 3, 4, 5, 6, 7]
+        );
+        let t = Track {
+            offset: [2.6, -0.4],
+            peak: 0.5,
+            explains: 1.0,
+        };
+        assert_eq!(whole_pixels(&t), [3, 0]);
+        assert_eq!(whole_pixels(&Track::LOST), [0, 0]);
+    }
+
+    #[test]
+    fn tabled_fft_equals_the_workspaces() {
+        for n in [1usize, 2, 8, 256] {
+            let re0: Vec<f64> = (0..n).map(|i| ((i * 7 + 3) % 11) as f64 - 4.0).collect();
+            let im0: Vec<f64> = (0..n).map(|i| ((i * 5) % 3) as f64).collect();
+            let (mut a, mut b) = (re0.clone(), im0.clone());
+            ignis_core::realism::fft(&mut a, &mut b);
+            let (mut c, mut d) = (re0, im0);
+            Fft::new(n).run(&mut c, &mut d);
+            for k in 0..n {
+                assert!(
+                    (a[k] - c[k]).abs() < 1e-9 && (b[k] - d[k]).abs() < 1e-9,
+                    "{n} {k}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn untracked_frames_are_filled_from_their_neighbours() {
+        let t = |x: f32, peak: f32| Track {
+            offset: [x, 0.0],
+            peak,
+            explains: 1.0,
+        };
+        let path = CameraPath {
+            tracks: vec![
+                t(9.0, 0.0),
+                t(2.0, 1.0),
+                t(5.0, 0.01),
+                t(6.0, 1.0),
+                t(1.0, 0.0),
+            ],
+            source: Size::new(10, 10).unwrap(),
+        };
+        let o: Vec<f32> = path.offsets().unwrap().iter().map(|p| p[0]).collect();
+        assert_eq!(o, vec![2.0, 2.0, 4.0, 6.0, 6.0]);
+        assert!((path.tracked_share() - 0.4).abs() < 1e-6);
+        let none = CameraPath {
+            tracks: vec![t(1.0, 0.0)],
+            source: Size::new(10, 10).unwrap(),
+        };
+        assert!(none.offsets().is_none() && none.steadying(0..1).is_none());
+    }
+}
