@@ -7,16 +7,24 @@
 //! against the reference is estimated where the picture is rigid:
 //!
 //! 1. **Phase correlation** (Kuglin & Hines 1975) of the frame and the reference, on grey
-//!    frames halved from the tracking size ([`TRACK_SIDE`]), Hann-windowed and
-//!    zero-padded to powers of two: the normalised cross-power spectrum's inverse is a
-//!    peak at the shift the rigid parts share, whatever the fire does (its content
-//!    changes from frame to frame and adds no coherent peak). The peak's height, the share
-//!    of the spectrum that agrees on one shift, is the track's confidence ([`Track::peak`]):
-//!    1 for a copy, about `4/√pixels` for unrelated pictures.
-//! 2. **Robust refinement** at the tracking size: Gauss–Newton on the translation with a
-//!    gain and an offset (fire light brightens the whole scene from frame to frame),
-//!    reweighted by Tukey's biweight of the residual so the flame's pixels, which no
-//!    shift explains, drop out (iteratively reweighted least squares).
+//!    frames area-averaged to [`TRACK_SIDE`], Hann-windowed and zero-padded to powers of
+//!    two: the normalised cross-power spectrum's inverse is a peak at the shift the rigid
+//!    parts share, whatever the fire does (its content changes from frame to frame and
+//!    adds no coherent peak; a flame's light moving over a still candle jar does, but
+//!    weakly, where an intensity fit is pulled by it). Sub-pixel from the peak's larger
+//!    neighbour on each axis (Foroosh, Zerubia & Berthod 2002: the peak of a sub-pixel
+//!    shift is a sampled sinc). The peak's height over the height unrelated pictures reach
+//!    (`4/√pixels`) is the track's confidence ([`Track::peak`]).
+//! 2. **Is it the camera?** The frame's robust cost against the reference unshifted over
+//!    its cost at the shift ([`Track::explains`]; Tukey's biweight of the residuals, a gain
+//!    and an offset fitted because fire light brightens the whole scene from frame to
+//!    frame): a camera's shift explains the whole textured picture, a flame's does not.
+//!
+//! Measured (`cargo run --release -p ignis-flow --example camera_track -- CLIP 1` on
+//! clips moved by known whole pixels, ±25 px): a campfire 0.20 px median error, 0.43 px at
+//! the 95th percentile; a candle in a glass jar 0.35 / 1.0 px (its flame's reflections).
+//! An intensity (Gauss–Newton) refinement after the correlation was tried: 0.14 px on the
+//! campfire but 1.2 px on the candle, pulled by the reflections.
 //!
 //! Only translation is modelled: a hand-held camera over a few seconds mostly shifts the
 //! view; roll and zoom are left in. A camera that pans away from the reference (the view
@@ -24,31 +32,32 @@
 //! footage as it is.
 //!
 //! Why hand-written: no well-kept crate does robust global registration on our frames
-//! (`opencv`'s would need the system library the README keeps optional); the FFT is the
-//! radix-2 FFT below is `ignis_core::realism::fft` with its twiddles tabled (that one
-//! computes a sine and cosine per butterfly, most of a frame's time here).
+//! (`opencv`'s would need the system library the README keeps optional); the radix-2 FFT
+//! below is `ignis_core::realism::fft` with its twiddles tabled (that one computes a sine
+//! and cosine per butterfly, most of a frame's time here).
 
 use ignis_core::{GrayFrame, RgbaFrame, Size};
 use rayon::prelude::*;
 
 use crate::image::{resize_with, Img};
 
-/// Longest side of the grey frames a camera is tracked on (the refinement's size; phase
-/// correlation runs at half of it). Sub-pixel at this size is a fraction of a pixel at
-/// 1080p.
-pub const TRACK_SIDE: usize = 384;
+/// Longest side of the grey frames a camera is tracked on: a power of two, so a square
+/// frame pads to nothing. At 384 the campfire's error fell from 0.20 to 0.14 px for four
+/// times the time; the candle's did not fall.
+pub const TRACK_SIDE: usize = 256;
 
-/// The least phase-correlation peak a track is trusted at: five times the height
-/// unrelated pictures reach at the coarse size (`4/√pixels`, ≈ 0.02 for 192×108).
-pub const PEAK_MIN: f32 = 0.1;
+/// The least phase-correlation peak ([`Track::peak`], in units of the height unrelated
+/// pictures reach, `4/√pixels`) a track is trusted at.
+pub const PEAK_MIN: f32 = 5.0;
 
 /// Share of a run's frames that must be tracked for it to be steadied.
 pub const TRACKED_MIN: f32 = 0.9;
 
 /// How much better, at the median over the frames whose view moved a pixel or more, the
 /// shift must explain a frame than no shift ([`Track::explains`]) before `auto` calls it
-/// the camera's. A hand-held shot's textured surroundings give 1.4–2; a flame's light
-/// moving over a still candle jar, its reflections, give 1.0–1.1.
+/// the camera's. Measured: clips moved by known shifts give 1.48 (a candle in a jar) and
+/// 1.63 (a campfire); the still candle's few frames that seem to move a pixel (its
+/// flame's reflections in the jar) give 0.97.
 pub const EXPLAINS_MIN: f32 = 1.25;
 
 /// The most a steadied loop is zoomed to keep its frames inside the picture.
@@ -129,8 +138,8 @@ impl TrackGray {
 }
 
 /// One frame's track: its view's shift against the reference, in pixels of the source
-/// frame (`frame(x) ≈ reference(x − offset)`: content moved by `offset`), and the
-/// confidence of the coarse match.
+/// frame (`frame(x) ≈ reference(x − offset)`: content moved by `offset`), the match's
+/// confidence and whether the shift is the camera's.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Track {
     pub offset: [f32; 2],
@@ -157,13 +166,10 @@ impl Track {
 /// Tracks frames against one reference frame (see the module doc).
 pub struct Tracker {
     reference: Img,
-    gx: Img,
-    gy: Img,
-    /// Coarse grid: the halved reference's size and the power-of-two box it is padded to.
-    coarse: (usize, usize),
+    /// The power-of-two box the frames are padded to.
     pw: usize,
     ph: usize,
-    /// The windowed, padded coarse reference's spectrum.
+    /// The windowed, padded reference's spectrum.
     spec: (Vec<f64>, Vec<f64>),
     source: Size,
     /// The reference's pixels with detail (a gradient of at least [`TEXTURE`]), off the
@@ -175,9 +181,8 @@ impl Tracker {
     pub fn new(reference: &TrackGray) -> Tracker {
         let img = reference.img.clone();
         let (gx, gy) = img.gradients();
-        let coarse = ((img.w / 2).max(1), (img.h / 2).max(1));
-        let (pw, ph) = (coarse.0.next_power_of_two(), coarse.1.next_power_of_two());
-        let spec = spectrum(&img.area_resize(coarse.0, coarse.1), pw, ph);
+        let (pw, ph) = (img.w.next_power_of_two(), img.h.next_power_of_two());
+        let spec = spectrum(&img, pw, ph);
         let (w, h) = (img.w, img.h);
         let textured = (1..h.saturating_sub(1))
             .flat_map(|y| (1..w.saturating_sub(1)).map(move |x| y * w + x))
@@ -186,9 +191,6 @@ impl Tracker {
             .collect();
         Tracker {
             reference: img,
-            gx,
-            gy,
-            coarse,
             pw,
             ph,
             spec,
@@ -204,13 +206,10 @@ impl Tracker {
         if frame.img.w != r.w || frame.img.h != r.h {
             return Track::LOST;
         }
-        let small = frame.img.area_resize(self.coarse.0, self.coarse.1);
-        let (fr, fi) = spectrum(&small, self.pw, self.ph);
+        let (fr, fi) = spectrum(&frame.img, self.pw, self.ph);
         let (d, peak) = correlate(&self.spec, (&fr, &fi), self.pw, self.ph);
-        // coarse pixels to tracking pixels
-        let kx = r.w as f32 / self.coarse.0 as f32;
-        let ky = r.h as f32 / self.coarse.1 as f32;
-        let (d, explains) = self.refine(&frame.img, [d[0] * kx, d[1] * ky]);
+        let peak = peak * ((r.w * r.h) as f32).sqrt() / 4.0;
+        let explains = self.explains(&frame.img, d);
         let sx = self.source.width as f32 / r.w as f32;
         let sy = self.source.height as f32 / r.h as f32;
         Track {
@@ -220,75 +219,62 @@ impl Tracker {
         }
     }
 
-    /// Gauss–Newton with gain and offset, Tukey-reweighted (see the module doc), from `d`
-    /// (tracking pixels); returns `d` itself when the system is singular (a blank frame).
-    fn refine(&self, f: &Img, mut d: [f32; 2]) -> ([f32; 2], f32) {
+    /// How much better the frame matches the reference at `d` (tracking pixels) than at
+    /// no shift: the ratio of Tukey's costs, with a gain and an offset fitted (fire light
+    /// brightens the whole scene from frame to frame) and the residuals' scale estimated
+    /// at `d` (iteratively reweighted least squares), over the reference's pixels with
+    /// detail whose match lies inside. A flame's pixels, which no shift explains, cost the
+    /// same both ways.
+    fn explains(&self, f: &Img, d: [f32; 2]) -> f32 {
         let r = &self.reference;
-        let (w, h) = (r.w, r.h);
+        let (xmax, ymax) = ((r.w - 1) as f32, (r.h - 1) as f32);
+        let rows: Vec<(usize, f32)> = self
+            .textured
+            .iter()
+            .filter_map(|&i| {
+                let i = i as usize;
+                let (sx, sy) = ((i % r.w) as f32 + d[0], (i / r.w) as f32 + d[1]);
+                ((0.0..=xmax).contains(&sx) && (0.0..=ymax).contains(&sy))
+                    .then(|| (i, bilinear(f, sx, sy) - r.data[i]))
+            })
+            .collect();
+        if rows.len() < 16 {
+            return 1.0;
+        }
         let mut gain = [0.0f64; 2];
         let mut c = 4.685 * NOISE;
-        let mut resid: Vec<f32> = Vec::with_capacity(self.textured.len());
-        let mut rows: Vec<(usize, f32, f32)> = Vec::with_capacity(self.textured.len());
-        for _ in 0..10 {
-            // residuals of the current model at the pixels with detail whose match lies
-            // inside (flat pixels, a dark sky, fit any shift: they say nothing of it and
-            // would make the residuals' scale zero)
-            rows.clear();
+        let mut resid: Vec<f32> = Vec::with_capacity(rows.len());
+        for _ in 0..3 {
             resid.clear();
-            let (xmax, ymax) = ((w - 1) as f32, (h - 1) as f32);
-            for &i in &self.textured {
-                let i = i as usize;
-                let (sx, sy) = ((i % w) as f32 + d[0], (i / w) as f32 + d[1]);
-                if !(0.0..=xmax).contains(&sx) || !(0.0..=ymax).contains(&sy) {
-                    continue;
-                }
-                let e = bilinear(f, sx, sy) - r.data[i];
-                let res = e - (gain[0] as f32 * r.data[i] + gain[1] as f32);
-                rows.push((i, e, res));
-                resid.push(res.abs());
-            }
-            if rows.len() < 16 {
-                return (d, 1.0);
-            }
+            resid.extend(
+                rows.iter()
+                    .map(|&(i, e)| (e - (gain[0] as f32 * r.data[i] + gain[1] as f32)).abs()),
+            );
             let mid = resid.len() / 2;
             let med = *resid.select_nth_unstable_by(mid, f32::total_cmp).1;
             c = 4.685 * (1.4826 * med).max(NOISE);
-            // weighted normal equations of e = J·p, J = [gx, gy, ref, 1]
-            let mut a = [[0.0f64; 4]; 4];
-            let mut b = [0.0f64; 4];
-            for &(i, e, res) in &rows {
-                let u = res / c;
+            // weighted least squares of e = a·ref + b
+            let (mut s00, mut s01, mut s11, mut b0, mut b1) = (0.0f64, 0.0, 0.0, 0.0, 0.0);
+            for &(i, e) in &rows {
+                let u = (e - (gain[0] as f32 * r.data[i] + gain[1] as f32)) / c;
                 if u.abs() >= 1.0 {
                     continue;
                 }
-                let wt = f64::from((1.0 - u * u) * (1.0 - u * u));
-                let j = [
-                    f64::from(self.gx.data[i]),
-                    f64::from(self.gy.data[i]),
-                    f64::from(r.data[i]),
-                    1.0,
-                ];
-                for p in 0..4 {
-                    for q in 0..4 {
-                        a[p][q] += wt * j[p] * j[q];
-                    }
-                    b[p] += wt * j[p] * f64::from(e);
-                }
+                let w = f64::from((1.0 - u * u) * (1.0 - u * u));
+                let x = f64::from(r.data[i]);
+                s00 += w * x * x;
+                s01 += w * x;
+                s11 += w;
+                b0 += w * x * f64::from(e);
+                b1 += w * f64::from(e);
             }
-            let Some(p) = solve4(a, b).filter(|p| p.iter().all(|v| v.is_finite())) else {
-                break;
-            };
-            let step = [p[0] as f32, p[1] as f32];
-            // a Gauss–Newton step beyond a few pixels means the linearisation broke
-            let step = step.map(|s| s.clamp(-2.0, 2.0));
-            d = [d[0] - step[0], d[1] - step[1]];
-            gain = [p[2], p[3]];
-            if step[0].hypot(step[1]) < 0.01 {
+            let det = s00 * s11 - s01 * s01;
+            if det.abs() <= 1e-12 * (s00 * s11).max(1e-300) {
                 break;
             }
+            gain = [(b0 * s11 - b1 * s01) / det, (s00 * b1 - s01 * b0) / det];
         }
-        let explains = self.cost(f, [0.0; 2], d, gain, c) / self.cost(f, d, d, gain, c).max(1e-9);
-        (d, explains as f32)
+        (self.cost(f, [0.0; 2], d, gain, c) / self.cost(f, d, d, gain, c).max(1e-9)) as f32
     }
 
     /// Tukey's cost (scale `c`) of matching the frame at `x + at` under the gain and
@@ -331,37 +317,6 @@ fn bilinear(img: &Img, x: f32, y: f32) -> f32 {
     let top = r0[x0] + (r0[x1] - r0[x0]) * fx;
     let bot = r1[x0] + (r1[x1] - r1[x0]) * fx;
     top + (bot - top) * fy
-}
-
-/// Solves the symmetric 4×4 system by Gaussian elimination with partial pivoting; `None`
-/// when it is singular.
-fn solve4(mut a: [[f64; 4]; 4], mut b: [f64; 4]) -> Option<[f64; 4]> {
-    let scale = (0..4).map(|i| a[i][i].abs()).fold(0.0, f64::max);
-    if scale <= 0.0 {
-        return None;
-    }
-    for col in 0..4 {
-        let piv = (col..4).max_by(|&i, &j| a[i][col].abs().total_cmp(&a[j][col].abs()))?;
-        if a[piv][col].abs() <= scale * 1e-12 {
-            return None;
-        }
-        a.swap(col, piv);
-        b.swap(col, piv);
-        let pivot = a[col];
-        for row in col + 1..4 {
-            let k = a[row][col] / pivot[col];
-            for (v, p) in a[row][col..].iter_mut().zip(&pivot[col..]) {
-                *v -= k * p;
-            }
-            b[row] -= k * b[col];
-        }
-    }
-    let mut x = [0.0; 4];
-    for row in (0..4).rev() {
-        let s: f64 = (row + 1..4).map(|c| a[row][c] * x[c]).sum();
-        x[row] = (b[row] - s) / a[row][row];
-    }
-    Some(x)
 }
 
 /// The 2-D spectrum of `img` less its mean, Hann-windowed, zero-padded to `pw × ph`.
@@ -462,8 +417,8 @@ fn fft_2d(re: &mut [f64], im: &mut [f64], pw: usize, ph: usize) {
 }
 
 /// Phase correlation of a frame's spectrum `f` against the reference's `r`: the shift of
-/// the frame's content (coarse pixels, sub-pixel by a parabola through the peak and its
-/// neighbours) and the peak's height.
+/// the frame's content (pixels, sub-pixel from the peak's larger neighbour on each axis)
+/// and the peak's height.
 fn correlate(
     r: &(Vec<f64>, Vec<f64>),
     f: (&[f64], &[f64]),
@@ -509,13 +464,16 @@ fn correlate(
         }
     }
     let peak = best / n as f64;
+    // Foroosh, Zerubia & Berthod 2002: the correlation of a sub-pixel shift δ is a
+    // sampled sinc, so a neighbour over itself plus the peak is |δ| on its side; both
+    // sides are taken (the far one is ≤ 0 for a pure shift), so a peak spread evenly by
+    // the window stays centred
     let sub = |m: f64, c: f64, p: f64| {
-        let den = m - 2.0 * c + p;
-        if den.abs() < 1e-12 {
-            0.0
-        } else {
-            (0.5 * (m - p) / den).clamp(-0.5, 0.5)
+        if c <= 0.0 {
+            return 0.0;
         }
+        let side = |v: f64| if v > 0.0 { v / (v + c) } else { 0.0 };
+        (side(p) - side(m)).clamp(-0.5, 0.5)
     };
     let dx = sub(at(bx - 1, by), peak, at(bx + 1, by));
     let dy = sub(at(bx, by - 1), peak, at(bx, by + 1));
@@ -874,20 +832,31 @@ mod tests {
         RgbaFrame::from_vec(size, data).unwrap()
     }
 
-    /// `f` with a "flame": a bright region in the middle whose content changes with `phase`.
-    fn with_flame(mut f: RgbaFrame, phase: f32) -> RgbaFrame {
+    /// `f` with a "flame" standing on the scene at `d` (it moves with the camera): a soft
+    /// bright tongue whose inside changes with `phase`.
+    fn with_flame(mut f: RgbaFrame, phase: f32, d: (f32, f32)) -> RgbaFrame {
         let (w, h) = (f.width(), f.height());
         for y in 0..h {
             for x in 0..w {
-                let (u, v) = (x as f32 / w as f32 - 0.5, y as f32 / h as f32 - 0.6);
-                if u.abs() < 0.15 && v.abs() < 0.25 {
-                    let t = (0.5
-                        + 0.5
-                            * (x as f32 * 0.3 + phase * 2.1).sin()
-                            * (y as f32 * 0.17 - phase).cos())
-                    .powi(2);
-                    f.set(x, y, [1.0, 0.6 * t + 0.2, 0.1 * t, 1.0]);
-                }
+                let u = (x as f32 - d.0) / w as f32 - 0.5;
+                let v = (y as f32 - d.1) / h as f32 - 0.6;
+                let a = (-(u / 0.1).powi(2) - (v / 0.2).powi(2)).exp();
+                let t = (0.5
+                    + 0.5 * (x as f32 * 0.3 + phase * 2.1).sin() * (y as f32 * 0.17 - phase).cos())
+                .powi(2);
+                let p = f.get(x, y);
+                let flame = [1.0, 0.6 * t + 0.2, 0.1 * t];
+                f.set(
+                    x,
+                    y,
+                    std::array::from_fn(|c| {
+                        if c == 3 {
+                            1.0
+                        } else {
+                            p[c] + (flame[c] - p[c]) * a
+                        }
+                    }),
+                );
             }
         }
         f
@@ -895,7 +864,7 @@ mod tests {
 
     #[test]
     fn sub_pixel_shifts_are_recovered_past_a_flame() {
-        let reference = with_flame(scene(480, 270, 0.0, 0.0), 0.0);
+        let reference = with_flame(scene(480, 270, 0.0, 0.0), 0.0, (0.0, 0.0));
         let tracker = Tracker::new(&TrackGray::from_rgba(&reference));
         for (i, &(dx, dy)) in [
             (0.0, 0.0),
@@ -907,11 +876,12 @@ mod tests {
         .iter()
         .enumerate()
         {
-            let f = with_flame(scene(480, 270, dx, dy), 1.0 + i as f32);
+            let f = with_flame(scene(480, 270, dx, dy), 1.0 + i as f32, (dx, dy));
             let t = tracker.track(&TrackGray::from_rgba(&f));
             assert!(t.tracked(), "{dx},{dy}: peak {}", t.peak);
             let err = (t.offset[0] - dx).hypot(t.offset[1] - dy);
-            assert!(err < 0.1, "{dx},{dy}: found {:?} (error {err})", t.offset);
+            // a quarter of a tracking pixel (1.9 px here: 480 px tracked at 256)
+            assert!(err < 0.45, "{dx},{dy}: found {:?} (error {err})", t.offset);
         }
     }
 
@@ -975,7 +945,7 @@ mod tests {
                 .iter()
                 .map(|&offset| Track {
                     offset,
-                    peak: 1.0,
+                    peak: 12.0,
                     explains: 2.0,
                 })
                 .collect(),
@@ -1015,7 +985,7 @@ mod tests {
         let shake = |i: usize| [6.0 * (i as f32 * 0.7).sin(), 4.0 * (i as f32 * 0.4).cos()];
         let camera = path(&|i| Track {
             offset: shake(i),
-            peak: 0.4,
+            peak: 12.0,
             explains: 1.6,
         });
         let s = camera.decide(0..50, false).unwrap();
@@ -1025,7 +995,7 @@ mod tests {
         );
         let light = path(&|i| Track {
             offset: shake(i),
-            peak: 0.4,
+            peak: 12.0,
             explains: 1.05,
         });
         let why = light.decide(0..50, false).unwrap_err();
@@ -1033,13 +1003,13 @@ mod tests {
         assert!(light.decide(0..50, true).is_ok());
         let still = path(&|i| Track {
             offset: [0.1 * (i % 3) as f32, 0.0],
-            peak: 0.5,
+            peak: 12.0,
             explains: 1.0,
         });
         assert!(still.decide(0..50, false).unwrap_err().contains("still"));
         let lost = path(&|i| Track {
             offset: shake(i),
-            peak: if i % 4 == 0 { 0.02 } else { 0.4 },
+            peak: if i % 4 == 0 { 2.0 } else { 12.0 },
             explains: 1.6,
         });
         assert!(lost
@@ -1048,14 +1018,14 @@ mod tests {
             .contains("could not be tracked"));
         let far = path(&|i| Track {
             offset: [2.0 * i as f32 - 50.0, 0.0],
-            peak: 0.4,
+            peak: 12.0,
             explains: 1.6,
         });
         assert!(far.decide(0..50, false).unwrap_err().contains("too far"));
         // one wild match among steady ones is an outlier, not a shake
         let blip = path(&|i| Track {
             offset: if i == 20 { [80.0, 60.0] } else { [0.0, 0.0] },
-            peak: 0.3,
+            peak: 12.0,
             explains: 1.0,
         });
         assert!(!blip.usable(20) && blip.usable(19));
@@ -1075,7 +1045,7 @@ mod tests {
         );
         let t = Track {
             offset: [2.6, -0.4],
-            peak: 0.5,
+            peak: 12.0,
             explains: 1.0,
         };
         assert_eq!(whole_pixels(&t), [3, 0]);
@@ -1110,9 +1080,9 @@ mod tests {
         let path = CameraPath {
             tracks: vec![
                 t(9.0, 0.0),
-                t(2.0, 1.0),
-                t(5.0, 0.01),
-                t(6.0, 1.0),
+                t(2.0, 10.0),
+                t(5.0, 1.0),
+                t(6.0, 10.0),
                 t(1.0, 0.0),
             ],
             source: Size::new(10, 10).unwrap(),
