@@ -152,7 +152,9 @@ struct EntryMeta {
     camera_sha256: String,
     /// SHA-256 of `aligned.f32`: the metric frames of the window each moved by the whole
     /// pixels of its camera track (`ignis_flow::camera::whole_pixels`), the frames a
-    /// steadied loop is chosen on without resampling them.
+    /// steadied loop is chosen on without resampling them. Empty, and no file, when no
+    /// frame moved a whole pixel or the camera could not be tracked (they would be the
+    /// metric frames, or never used).
     aligned_sha256: String,
     fps: f64,
     source_size: String,
@@ -165,8 +167,9 @@ pub struct Cached {
     pub metric: Vec<GrayFrame>,
     /// The camera's track over the window (`--stabilise`).
     pub camera: CameraPath,
-    /// The metric frames moved by their tracks' whole pixels (`--stabilise`).
-    pub aligned: Vec<GrayFrame>,
+    /// The metric frames moved by their tracks' whole pixels (`--stabilise`); `None` when
+    /// they are the metric frames or the camera was not tracked.
+    pub aligned: Option<Vec<GrayFrame>>,
     pub fps: f64,
     /// Whether this run built it.
     pub built: bool,
@@ -330,7 +333,11 @@ fn open_entry(dir: &Path, sha: &str, settings: &CacheSettings) -> Result<Cached>
             .collect())
     };
     let metric = read_frames("metric.f32", &meta.metric_sha256)?;
-    let aligned = read_frames("aligned.f32", &meta.aligned_sha256)?;
+    let aligned = if meta.aligned_sha256.is_empty() {
+        None
+    } else {
+        Some(read_frames("aligned.f32", &meta.aligned_sha256)?)
+    };
     let camera_path = dir.join("camera.f32");
     let clen = std::fs::metadata(&camera_path)
         .context("reading camera.f32")?
@@ -410,8 +417,24 @@ fn build_entry(
         std::fs::write(tmp.join("metric.f32"), &bytes)?;
         let cbytes = camera_bytes(&tracks);
         std::fs::write(tmp.join("camera.f32"), &cbytes)?;
-        let abytes = metric_bytes(&aligned);
-        std::fs::write(tmp.join("aligned.f32"), &abytes)?;
+        let tracked = CameraPath {
+            tracks: tracks.clone(),
+            source: info.size,
+        }
+        .tracked_share()
+            >= ignis_flow::camera::TRACKED_MIN;
+        let aligned_sha256 = if tracked && aligned.iter().any(Option::is_some) {
+            let frames: Vec<GrayFrame> = aligned
+                .into_iter()
+                .zip(&metric)
+                .map(|(a, m)| a.unwrap_or_else(|| m.clone()))
+                .collect();
+            let abytes = metric_bytes(&frames);
+            std::fs::write(tmp.join("aligned.f32"), &abytes)?;
+            hex(&Sha256::digest(&abytes))
+        } else {
+            String::new()
+        };
         // The database.
         let mut spec = ClipSpec::new("clip");
         spec.path = Some(path.to_path_buf());
@@ -449,7 +472,7 @@ fn build_entry(
             metric_frames: metric.len(),
             metric_sha256: hex(&Sha256::digest(&bytes)),
             camera_sha256: hex(&Sha256::digest(&cbytes)),
-            aligned_sha256: hex(&Sha256::digest(&abytes)),
+            aligned_sha256,
             fps: info.fps,
             source_size: info.size.to_string(),
         };
@@ -1276,7 +1299,7 @@ impl<'a> LoopFootage<'a> {
         LoopFootage {
             steady: Some(Held {
                 steady,
-                aligned: &c.aligned,
+                aligned: c.aligned.as_deref().unwrap_or(&c.metric),
                 tracks: &c.camera.tracks,
             }),
             ..self
@@ -1867,7 +1890,7 @@ fn steadying(camera: &CameraPath, mode: &str, g: &Global) -> Result<Option<Stead
                 .map(|v| v[0].hypot(v[1]))
                 .fold(0.0f32, f32::max);
             g.say(format!(
-                "camera: hand-held, the view shifts up to {most:.1} px; held still (zoomed ×{:.3}; --stabilise off keeps it as shot)",
+                "camera: the view shifts up to {most:.1} px with the camera; held still (zoomed ×{:.3}; --stabilise off keeps it as shot)",
                 s.zoom
             ));
             Ok(Some(s))
@@ -2019,9 +2042,12 @@ fn beside_db(recorded: &str, db: &Path) -> Option<PathBuf> {
 /// Metric frames ([`loopq::metric_frame_rgba`], as a writer measures them) of the source
 /// frames in `window`, with a progress bar, and with `track` the camera's track of each
 /// against the window's first frame (`ignis_flow::camera`) and the metric frame of each
-/// moved by its track's whole pixels (both empty without). May return fewer frames than
-/// asked when the video is shorter.
-type Measured = (Vec<GrayFrame>, Vec<GrayFrame>, Vec<Track>);
+/// moved by its track's whole pixels (`None` where that is no move; both empty without).
+/// May return fewer frames than asked when the video is shorter.
+type Measured = (Vec<GrayFrame>, Vec<Option<GrayFrame>>, Vec<Track>);
+/// One frame's part of [`Measured`]: its metric frame, and with tracking its aligned frame
+/// (if moved) and track.
+type MeasuredFrame = (GrayFrame, Option<(Option<GrayFrame>, Track)>);
 fn metric_frames(path: &Path, window: &Range<usize>, track: bool, g: &Global) -> Result<Measured> {
     let opts = ignis_media::ReadOptions {
         range: Some(ignis_media::FrameRange::frames(
@@ -2076,13 +2102,13 @@ fn metric_frames(path: &Path, window: &Range<usize>, track: bool, g: &Global) ->
             let t = gray(f).map_or(Track::LOST, |g| tr.track(&g));
             let d = ignis_flow::camera::whole_pixels(&t);
             let a = if d == [0, 0] {
-                m.clone()
+                None
             } else {
-                measure(&moved(f, d))?
+                Some(measure(&moved(f, d))?)
             };
             Ok((m, Some((a, t))))
         },
-        |_, m: Result<(GrayFrame, Option<(GrayFrame, Track)>)>| {
+        |_, m: Result<MeasuredFrame>| {
             let (m, at) = m?;
             metric.push(m);
             if let Some((a, t)) = at {
@@ -2218,6 +2244,10 @@ mod tests {
             .unwrap();
             let decided = c.camera.decide(0..60, false);
             if !moving {
+                assert!(
+                    c.aligned.is_none(),
+                    "a still camera keeps no aligned frames"
+                );
                 let why = decided.unwrap_err();
                 assert!(why.contains("still"), "{why}");
                 assert!(steadying(&c.camera, "auto", &quiet).unwrap().is_none());
@@ -2234,6 +2264,7 @@ mod tests {
             assert!(errs[30] < 0.25 && errs[59] < 0.8, "track errors {errs:?}");
             let s = decided.unwrap();
             assert!(s.zoom > 1.02 && s.zoom < 1.15, "zoom {}", s.zoom);
+            assert!(c.aligned.is_some());
             // reopened from the cache, the same tracks
             let again = cached(
                 &input,
