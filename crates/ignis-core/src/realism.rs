@@ -283,7 +283,7 @@ pub fn spectral_slope(frame: &GrayFrame) -> Result<Spectrum> {
         .map(|(i, &v)| (v - mean) * hann[i % n] * hann[i / n])
         .collect();
     let mut im = vec![0.0; n * n];
-    fft_2d(&mut re, &mut im, n);
+    fft_2d(&mut re, &mut im, n, n);
     let half = n / 2;
     let mut ring = vec![(0.0f64, 0usize); half + 1];
     for y in 0..n {
@@ -368,21 +368,23 @@ fn resample_crop(frame: &GrayFrame, x0: f64, y0: f64, side: f64, n: usize) -> Ve
     out
 }
 
-/// In-place 2-D DFT of an `n`×`n` complex image (`n` a power of two), rows then columns.
-fn fft_2d(re: &mut [f64], im: &mut [f64], n: usize) {
-    let (mut cr, mut ci) = (vec![0.0; n], vec![0.0; n]);
-    for y in 0..n {
-        fft(&mut re[y * n..(y + 1) * n], &mut im[y * n..(y + 1) * n]);
+/// In-place 2-D DFT of a `w`×`h` complex image, row-major (both powers of two), rows then
+/// columns.
+pub fn fft_2d(re: &mut [f64], im: &mut [f64], w: usize, h: usize) {
+    let (fx, fy) = (Fft::new(w), Fft::new(h));
+    for (r, i) in re.chunks_exact_mut(w).zip(im.chunks_exact_mut(w)) {
+        fx.run(r, i);
     }
-    for x in 0..n {
-        for y in 0..n {
-            cr[y] = re[y * n + x];
-            ci[y] = im[y * n + x];
+    let (mut cr, mut ci) = (vec![0.0; h], vec![0.0; h]);
+    for x in 0..w {
+        for y in 0..h {
+            cr[y] = re[y * w + x];
+            ci[y] = im[y * w + x];
         }
-        fft(&mut cr, &mut ci);
-        for y in 0..n {
-            re[y * n + x] = cr[y];
-            im[y * n + x] = ci[y];
+        fy.run(&mut cr, &mut ci);
+        for y in 0..h {
+            re[y * w + x] = cr[y];
+            im[y * w + x] = ci[y];
         }
     }
 }
@@ -394,35 +396,63 @@ pub fn fft(re: &mut [f64], im: &mut [f64]) {
         n.is_power_of_two() && im.len() == n,
         "fft needs a power-of-two length"
     );
-    let mut j = 0;
-    for i in 1..n {
-        let mut bit = n >> 1;
-        while j & bit != 0 {
-            j ^= bit;
-            bit >>= 1;
-        }
-        j |= bit;
-        if i < j {
-            re.swap(i, j);
-            im.swap(i, j);
-        }
+    Fft::new(n).run(re, im);
+}
+
+/// [`fft`] of one power-of-two length with its twiddles tabled, for many transforms of
+/// that length (a sine and cosine per butterfly would be most of the time).
+pub struct Fft {
+    n: usize,
+    tw: Vec<(f64, f64)>,
+}
+
+impl Fft {
+    /// A plan for length `n` (a power of two).
+    pub fn new(n: usize) -> Fft {
+        assert!(n.is_power_of_two(), "fft needs a power-of-two length");
+        let tw = (0..n / 2)
+            .map(|k| {
+                let (s, c) = (-std::f64::consts::TAU * k as f64 / n as f64).sin_cos();
+                (c, s)
+            })
+            .collect();
+        Fft { n, tw }
     }
-    let mut len = 2;
-    while len <= n {
-        let ang = -std::f64::consts::TAU / len as f64;
-        for start in (0..n).step_by(len) {
-            for k in 0..len / 2 {
-                let (s, c) = (ang * k as f64).sin_cos();
-                let (a, b) = (start + k, start + k + len / 2);
-                let tr = re[b] * c - im[b] * s;
-                let ti = re[b] * s + im[b] * c;
-                re[b] = re[a] - tr;
-                im[b] = im[a] - ti;
-                re[a] += tr;
-                im[a] += ti;
+
+    /// Transforms `re`, `im` (each of the plan's length) in place.
+    pub fn run(&self, re: &mut [f64], im: &mut [f64]) {
+        let n = self.n;
+        assert!(re.len() == n && im.len() == n, "fft of the wrong length");
+        let mut j = 0;
+        for i in 1..n {
+            let mut bit = n >> 1;
+            while j & bit != 0 {
+                j ^= bit;
+                bit >>= 1;
+            }
+            j |= bit;
+            if i < j {
+                re.swap(i, j);
+                im.swap(i, j);
             }
         }
-        len <<= 1;
+        let mut len = 2;
+        while len <= n {
+            let stride = n / len;
+            for start in (0..n).step_by(len) {
+                for k in 0..len / 2 {
+                    let (c, s) = self.tw[k * stride];
+                    let (a, b) = (start + k, start + k + len / 2);
+                    let tr = re[b] * c - im[b] * s;
+                    let ti = re[b] * s + im[b] * c;
+                    re[b] = re[a] - tr;
+                    im[b] = im[a] - ti;
+                    re[a] += tr;
+                    im[a] += ti;
+                }
+            }
+            len <<= 1;
+        }
     }
 }
 
@@ -497,7 +527,7 @@ mod tests {
         }
         // inverse via the forward transform of the conjugate
         im.iter_mut().for_each(|v| *v = -*v);
-        fft_2d(&mut re, &mut im, n);
+        fft_2d(&mut re, &mut im, n, n);
         let sd = (re.iter().map(|v| v * v).sum::<f64>() / (n * n) as f64).sqrt();
         GrayFrame::from_fn(Size::new(n as u32, n as u32).unwrap(), |x, y| {
             (0.5 + 0.15 * re[y as usize * n + x as usize] / sd) as f32

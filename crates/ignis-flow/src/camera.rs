@@ -21,10 +21,11 @@
 //!    frame): a camera's shift explains the whole textured picture, a flame's does not.
 //!
 //! Measured (`cargo run --release -p ignis-flow --example camera_track -- CLIP 1` on
-//! clips moved by known whole pixels, ±25 px): a campfire 0.20 px median error, 0.43 px at
-//! the 95th percentile; a candle in a glass jar 0.35 / 1.0 px (its flame's reflections).
-//! An intensity (Gauss–Newton) refinement after the correlation was tried: 0.14 px on the
-//! campfire but 1.2 px on the candle, pulled by the reflections.
+//! `campfire.mp4` and `candle.mp4` moved by known whole pixels, up to ±25 px): the
+//! campfire 0.18 px median error, 0.39 px at the 95th percentile; the candle in its glass
+//! jar 0.33 / 0.90 px (its flame's reflections). An intensity (Gauss–Newton) refinement
+//! after a correlation at half this size was tried: 0.14 px on the campfire but 1.2 px on
+//! the candle, pulled by the reflections; the one-sided Foroosh estimate gave 0.20 / 0.35.
 //!
 //! Only translation is modelled: a hand-held camera over a few seconds mostly shifts the
 //! view; roll and zoom are left in. A camera that pans away from the reference (the view
@@ -32,10 +33,10 @@
 //! footage as it is.
 //!
 //! Why hand-written: no well-kept crate does robust global registration on our frames
-//! (`opencv`'s would need the system library the README keeps optional); the radix-2 FFT
-//! below is `ignis_core::realism::fft` with its twiddles tabled (that one computes a sine
-//! and cosine per butterfly, most of a frame's time here).
+//! (`opencv`'s would need the system library the README keeps optional); the FFT is the
+//! workspace's own ([`ignis_core::realism::fft_2d`]).
 
+use ignis_core::realism::fft_2d;
 use ignis_core::{GrayFrame, RgbaFrame, Size};
 use rayon::prelude::*;
 
@@ -340,80 +341,6 @@ fn spectrum(img: &Img, pw: usize, ph: usize) -> (Vec<f64>, Vec<f64>) {
     let mut im = vec![0.0; pw * ph];
     fft_2d(&mut re, &mut im, pw, ph);
     (re, im)
-}
-
-/// An in-place radix-2 FFT (forward, unnormalised) of one power-of-two length, its
-/// twiddles tabled.
-struct Fft {
-    n: usize,
-    tw: Vec<(f64, f64)>,
-}
-
-impl Fft {
-    fn new(n: usize) -> Fft {
-        debug_assert!(n.is_power_of_two());
-        let tw = (0..n / 2)
-            .map(|k| {
-                let (s, c) = (-std::f64::consts::TAU * k as f64 / n as f64).sin_cos();
-                (c, s)
-            })
-            .collect();
-        Fft { n, tw }
-    }
-
-    fn run(&self, re: &mut [f64], im: &mut [f64]) {
-        let n = self.n;
-        let mut j = 0;
-        for i in 1..n {
-            let mut bit = n >> 1;
-            while j & bit != 0 {
-                j ^= bit;
-                bit >>= 1;
-            }
-            j |= bit;
-            if i < j {
-                re.swap(i, j);
-                im.swap(i, j);
-            }
-        }
-        let mut len = 2;
-        while len <= n {
-            let stride = n / len;
-            for start in (0..n).step_by(len) {
-                for k in 0..len / 2 {
-                    let (c, s) = self.tw[k * stride];
-                    let (a, b) = (start + k, start + k + len / 2);
-                    let tr = re[b] * c - im[b] * s;
-                    let ti = re[b] * s + im[b] * c;
-                    re[b] = re[a] - tr;
-                    im[b] = im[a] - ti;
-                    re[a] += tr;
-                    im[a] += ti;
-                }
-            }
-            len <<= 1;
-        }
-    }
-}
-
-/// In-place 2-D FFT of a `pw × ph` complex image (both powers of two), rows then columns.
-fn fft_2d(re: &mut [f64], im: &mut [f64], pw: usize, ph: usize) {
-    let (fx, fy) = (Fft::new(pw), Fft::new(ph));
-    for (r, i) in re.chunks_exact_mut(pw).zip(im.chunks_exact_mut(pw)) {
-        fx.run(r, i);
-    }
-    let (mut cr, mut ci) = (vec![0.0; ph], vec![0.0; ph]);
-    for x in 0..pw {
-        for y in 0..ph {
-            cr[y] = re[y * pw + x];
-            ci[y] = im[y * pw + x];
-        }
-        fy.run(&mut cr, &mut ci);
-        for y in 0..ph {
-            re[y * pw + x] = cr[y];
-            im[y * pw + x] = ci[y];
-        }
-    }
 }
 
 /// Phase correlation of a frame's spectrum `f` against the reference's `r`: the shift of
@@ -1050,24 +977,6 @@ mod tests {
         };
         assert_eq!(whole_pixels(&t), [3, 0]);
         assert_eq!(whole_pixels(&Track::LOST), [0, 0]);
-    }
-
-    #[test]
-    fn tabled_fft_equals_the_workspaces() {
-        for n in [1usize, 2, 8, 256] {
-            let re0: Vec<f64> = (0..n).map(|i| ((i * 7 + 3) % 11) as f64 - 4.0).collect();
-            let im0: Vec<f64> = (0..n).map(|i| ((i * 5) % 3) as f64).collect();
-            let (mut a, mut b) = (re0.clone(), im0.clone());
-            ignis_core::realism::fft(&mut a, &mut b);
-            let (mut c, mut d) = (re0, im0);
-            Fft::new(n).run(&mut c, &mut d);
-            for k in 0..n {
-                assert!(
-                    (a[k] - c[k]).abs() < 1e-9 && (b[k] - d[k]).abs() < 1e-9,
-                    "{n} {k}"
-                );
-            }
-        }
     }
 
     #[test]

@@ -2233,15 +2233,17 @@ mod tests {
                 ignis_media::write_png(&seq.join(format!("{i:04}.png")), &crop(f, o)).unwrap();
             }
             let input = seq.join("%04d.png");
-            let c = cached(
-                &input,
-                0..60,
-                "32x48".parse().unwrap(),
-                20,
-                dir.path(),
-                &quiet,
-            )
-            .unwrap();
+            let open = || {
+                cached(
+                    &input,
+                    0..60,
+                    "32x48".parse().unwrap(),
+                    20,
+                    dir.path(),
+                    &quiet,
+                )
+            };
+            let c = open().unwrap();
             let decided = c.camera.decide(0..60, false);
             if !moving {
                 assert!(
@@ -2266,15 +2268,7 @@ mod tests {
             assert!(s.zoom > 1.02 && s.zoom < 1.15, "zoom {}", s.zoom);
             assert!(c.aligned.is_some());
             // reopened from the cache, the same tracks
-            let again = cached(
-                &input,
-                0..60,
-                "32x48".parse().unwrap(),
-                20,
-                dir.path(),
-                &quiet,
-            )
-            .unwrap();
+            let again = open().unwrap();
             assert!(!again.built && again.camera == c.camera && again.aligned == c.aligned);
             let held = steadying(&c.camera, "auto", &quiet).unwrap().unwrap();
             let src = LoopFootage::cached(&input, 0, &c)
