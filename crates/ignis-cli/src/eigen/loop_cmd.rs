@@ -1273,7 +1273,7 @@ pub struct LoopFootage<'a> {
 pub struct Held<'a> {
     pub steady: &'a Steadying,
     pub aligned: &'a [GrayFrame],
-    pub tracks: &'a [Track],
+    pub camera: &'a CameraPath,
 }
 
 impl<'a> LoopFootage<'a> {
@@ -1300,7 +1300,7 @@ impl<'a> LoopFootage<'a> {
             steady: Some(Held {
                 steady,
                 aligned: c.aligned.as_deref().unwrap_or(&c.metric),
-                tracks: &c.camera.tracks,
+                camera: &c.camera,
             }),
             ..self
         }
@@ -1347,6 +1347,7 @@ fn steady_metric(held: &Held, aligned: &[GrayFrame]) -> Vec<GrayFrame> {
         .map(|(i, m)| {
             let shift = s.shifts.get(i).copied().unwrap_or_default();
             let whole = held
+                .camera
                 .tracks
                 .get(i)
                 .map_or([0, 0], ignis_flow::camera::whole_pixels);
@@ -1506,18 +1507,25 @@ impl<'a> FootageMatte<'a> {
     /// the source size), area-averaged to the metric size — so the loop is chosen on what
     /// it writes, the feather's band of lit surroundings included. Runs of frames are
     /// done in parallel, each mask decoded once per run.
-    /// With `tracks`, each mask is first moved by its track's whole pixels, as the aligned
-    /// metric frames were (`--stabilise`).
+    /// With `camera`, each mask is first moved by its track's whole pixels (scaled to the
+    /// mask's size: footage over 1080p is trained smaller), as the aligned metric frames
+    /// were (`--stabilise`).
     pub fn matted_metric(
         &self,
         metric: &[GrayFrame],
-        tracks: Option<&[Track]>,
+        camera: Option<&CameraPath>,
     ) -> Result<Vec<GrayFrame>> {
         self.by_runs(metric.len(), |i, mask| {
             let mut full =
                 ignis_eigen::preprocess::feather_half_in(&mask, mask.width().max(mask.height())).0;
-            if let Some(t) = tracks.and_then(|t| t.get(i)) {
-                let d = ignis_flow::camera::whole_pixels(t);
+            if let Some((t, cam)) = camera.and_then(|c| Some((c.tracks.get(i)?, c))) {
+                let w = ignis_flow::camera::whole_pixels(t);
+                let d = ignis_flow::camera::shift_at(
+                    [w[0] as f32, w[1] as f32],
+                    cam.source,
+                    full.size(),
+                )
+                .map(|v| v.round() as i32);
                 if d != [0, 0] {
                     let (w, h) = (full.width() as usize, full.height() as usize);
                     let moved = ignis_flow::camera::shift_whole(full.data(), w, h, d);
@@ -1629,7 +1637,7 @@ pub fn make_loop_sized(
     let base = steady.map_or(metric, |h| h.aligned);
     let (metric, lit) = match &matte {
         Some(m) => {
-            matted = m.matted_metric(base, steady.map(|h| h.tracks))?;
+            matted = m.matted_metric(base, steady.map(|h| h.camera))?;
             lit = matted
                 .iter()
                 .map(|f| f.data().iter().any(|&v| v > 0.0))
@@ -2283,6 +2291,14 @@ mod tests {
             let out = dir.path().join("loop");
             std::fs::create_dir_all(&out).unwrap();
             let d = make_loop(&src, &ask, &out_args(out.join("%04d.png")), &quiet).unwrap();
+            // matted (the default), the masks are moved with the frames
+            let matted = LoopFootage::cached(&input, 0, &c).steadied(&held, &c);
+            let m = make_loop(&matted, &ask, &out_args(dir.path().join("m.png")), &quiet).unwrap();
+            assert!(
+                m.measured.seam.is_finite() && m.frames > 20,
+                "{:?}",
+                m.measured
+            );
             // the written loop tracked against its first frame: the view stays put
             let read = |i: usize| {
                 let f =
