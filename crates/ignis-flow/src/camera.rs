@@ -588,27 +588,74 @@ impl CameraPath {
     }
 
     /// The steadying of frames `range` (indices into the path): every frame shifted onto
-    /// the median view of the run, and the zoom that keeps the shifted frames inside the
-    /// picture. `None` when no frame is tracked.
+    /// the middle of the run's views, and the zoom that keeps the shifted frames inside
+    /// the picture. `None` when no frame is tracked.
     pub fn steadying(&self, range: std::ops::Range<usize>) -> Option<Steadying> {
         let o = self.offsets()?;
         let run = &o[range.start.min(o.len())..range.end.min(o.len())];
         if run.is_empty() {
             return None;
         }
-        let c = median_point(run);
+        let c = middle_point(run);
         let shifts: Vec<[f32; 2]> = run.iter().map(|p| [p[0] - c[0], p[1] - c[1]]).collect();
-        let (mx, my) = shifts.iter().fold((0.0f32, 0.0f32), |(a, b), s| {
-            (a.max(s[0].abs()), b.max(s[1].abs()))
-        });
-        let (w, h) = (self.source.width as f32, self.source.height as f32);
-        let zoom = (w / (w - 2.0 * mx).max(1.0)).max(h / (h - 2.0 * my).max(1.0));
+        let zoom = zoom_for(&shifts, self.source);
         Some(Steadying {
             shifts,
             zoom,
             source: self.source,
         })
     }
+}
+
+/// The zoom about the centre that keeps frames shifted by `shifts` inside the picture.
+fn zoom_for(shifts: &[[f32; 2]], source: Size) -> f32 {
+    let (mx, my) = shifts.iter().fold((0.0f32, 0.0f32), |(a, b), s| {
+        (a.max(s[0].abs()), b.max(s[1].abs()))
+    });
+    let (w, h) = (source.width as f32, source.height as f32);
+    (w / (w - 2.0 * mx).max(1.0)).max(h / (h - 2.0 * my).max(1.0))
+}
+
+impl Steadying {
+    /// The same steadying re-centred on the middle of frames `run`'s views (indices into
+    /// its shifts), zoomed only as far as those frames need: what a loop made of them is
+    /// written with (a slow pan over a long window would otherwise zoom every loop for the
+    /// whole window's drift). Frames outside `run` keep their shifts, re-centred alike.
+    pub fn for_run(&self, run: std::ops::Range<usize>) -> Steadying {
+        let part = &self.shifts[run.start.min(self.shifts.len())..run.end.min(self.shifts.len())];
+        if part.is_empty() {
+            return self.clone();
+        }
+        let c = middle_point(part);
+        let shifts: Vec<[f32; 2]> = self
+            .shifts
+            .iter()
+            .map(|p| [p[0] - c[0], p[1] - c[1]])
+            .collect();
+        let zoom = zoom_for(
+            &shifts[run.start.min(shifts.len())..run.end.min(shifts.len())],
+            self.source,
+        );
+        Steadying {
+            shifts,
+            zoom,
+            source: self.source,
+        }
+    }
+}
+
+/// The middle of points' extent on each axis: the view that needs the least zoom to hold
+/// them all (the outliers are out already, [`CameraPath::usable`]).
+fn middle_point(p: &[[f32; 2]]) -> [f32; 2] {
+    let ext = |k: usize| {
+        let (lo, hi) = p
+            .iter()
+            .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), q| {
+                (a.min(q[k]), b.max(q[k]))
+            });
+        0.5 * (lo + hi)
+    };
+    [ext(0), ext(1)]
 }
 
 /// The per-axis median of points.
@@ -896,10 +943,21 @@ mod tests {
             source: size,
         };
         let s = path.steadying(0..5).unwrap();
-        // median view (1, 0); widest x shift 7, y 6
-        assert_eq!(s.shifts[4], [7.0, 0.0]);
-        let want = (2000.0f32 / 1986.0).max(1000.0 / 988.0);
+        // middle view (3, 2); widest x shift 5, y 4
+        assert_eq!(s.shifts[4], [5.0, -2.0]);
+        let want = (2000.0f32 / 1990.0).max(1000.0 / 992.0);
         assert!((s.zoom - want).abs() < 1e-6, "{}", s.zoom);
+        // a run of frames 0..2 is centred on its own middle view (2, -1) and zoomed for
+        // its own widest shift (2 across, 1 down) only
+        let run = s.for_run(0..2);
+        assert_eq!(run.shifts[0], [-2.0, 1.0]);
+        assert_eq!(run.shifts[4], [6.0, 1.0]);
+        let want = (2000.0f32 / 1996.0).max(1000.0 / 998.0);
+        assert!(
+            (run.zoom - want).abs() < 1e-6 && run.zoom < s.zoom,
+            "{}",
+            run.zoom
+        );
         assert!((path.wander(0..5) - 7.0).abs() < 1e-6);
         // an integer shift at zoom 1 copies pixels
         let f = scene(64, 48, 0.0, 0.0);

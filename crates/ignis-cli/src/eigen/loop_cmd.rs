@@ -1702,6 +1702,17 @@ pub fn make_loop_sized(
         g.say(note);
     }
     let scale = (fitted.size != info.size).then_some(fitted.size);
+    // the chosen loop is written centred on the middle of its own frames' views and zoomed only
+    // as far as they need (the search and the checks used the window's)
+    let c = chosen.best.candidate;
+    let run = steady.map(|s| s.for_run(c.start..loops::plan_end(&c, chosen.best.closing)));
+    if let Some(r) = &run {
+        g.say(format!(
+            "camera: the loop's frames held still, zoomed ×{:.3} (the window needed ×{:.3})",
+            r.zoom,
+            steady.map_or(1.0, |s| s.zoom)
+        ));
+    }
     let t = Instant::now();
     let mut w = out.create_with(fitted.size, &opts)?;
     let pb = g.progress(n as u64, "rendering");
@@ -1712,7 +1723,7 @@ pub fn make_loop_sized(
         &chosen.best,
         scale,
         matte.as_ref(),
-        steady,
+        run.as_ref(),
         &mut |f| {
             pb.inc(1);
             i += 1;
