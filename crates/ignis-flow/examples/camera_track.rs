@@ -41,10 +41,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         path.tracked_share(),
         sorted[0],
         sorted[n / 2],
-        path.wander(0..n),
+        path.wander(),
         secs * 1e3 / n as f64
     );
-    match path.decide(0..n, false) {
+    match path.decide(false) {
         Ok(s) => println!("auto: steadied, zoom {:.3}", s.zoom),
         Err(why) => println!("auto: left as it is: {why}"),
     }

@@ -124,12 +124,13 @@ impl TrackGray {
         Some(TrackGray { img, source: size })
     }
 
-    /// From a linear frame (each channel sRGB-encoded first, as 8-bit footage is).
+    /// From a linear frame (each channel sRGB-encoded first, as 8-bit footage is, by the
+    /// metric's table).
     pub fn from_rgba(frame: &RgbaFrame) -> TrackGray {
         let size = frame.size();
         let (sw, sh) = (size.width as usize, size.height as usize);
         let (w, h) = track_size(size);
-        let enc = ignis_core::palette::linear_to_srgb;
+        let enc = ignis_core::loopq::srgb_encode;
         let data = frame.data();
         let img = resize_with(sw, sh, w, h, |y, wt, out| {
             for (o, p) in out.iter_mut().zip(&data[y * sw..(y + 1) * sw]) {
@@ -479,34 +480,30 @@ impl CameraPath {
         (t.offset[0] - m[0]).hypot(t.offset[1] - m[1]) <= 0.02 * diag
     }
 
-    /// The share of frames tracked with confidence ([`CameraPath::usable`]).
-    pub fn tracked_share(&self) -> f32 {
-        if self.tracks.is_empty() {
-            return 0.0;
-        }
-        (0..self.tracks.len()).filter(|&i| self.usable(i)).count() as f32 / self.tracks.len() as f32
+    /// [`CameraPath::usable`] of every frame.
+    fn usable_all(&self) -> Vec<bool> {
+        (0..self.tracks.len()).map(|i| self.usable(i)).collect()
     }
 
-    /// Whether `auto` steadies frames `range`, and how (see [`CameraPath::steadying`]);
-    /// `forced` (`--stabilise on`) skips the tests that the camera moves and that the
-    /// shifts are the camera's. `Err` says why not, in words.
-    pub fn decide(&self, range: std::ops::Range<usize>, forced: bool) -> Result<Steadying, String> {
-        let sub = CameraPath {
-            tracks: self.tracks
-                [range.start.min(self.tracks.len())..range.end.min(self.tracks.len())]
-                .to_vec(),
-            source: self.source,
-        };
-        let n = sub.tracks.len();
-        let share = sub.tracked_share();
-        if n == 0 || share < TRACKED_MIN {
+    /// The share of frames tracked with confidence ([`CameraPath::usable`]).
+    pub fn tracked_share(&self) -> f32 {
+        share(&self.usable_all())
+    }
+
+    /// Whether `auto` steadies the path's frames, and how (see
+    /// [`CameraPath::steadying`]); `forced` (`--stabilise on`) skips the tests that the
+    /// camera moves and that the shifts are the camera's. `Err` says why not, in words.
+    pub fn decide(&self, forced: bool) -> Result<Steadying, String> {
+        let usable = self.usable_all();
+        let share = share(&usable);
+        let Some(offsets) = self.offsets_of(&usable).filter(|_| share >= TRACKED_MIN) else {
             return Err(format!(
                 "the camera could not be tracked: {:.0} % of the frames match the first (at least {:.0} % needed; a pan, a cut, or a shot with little still detail)",
                 share * 100.0,
                 TRACKED_MIN * 100.0
             ));
-        }
-        let wander = sub.wander(0..n);
+        };
+        let wander = wander_of(&offsets);
         if !forced {
             let least = wander_min(self.source);
             if wander < least {
@@ -514,11 +511,12 @@ impl CameraPath {
                     "the camera is still: the view wanders {wander:.1} px at most (under {least:.1} px)"
                 ));
             }
-            let mut ex: Vec<f32> = (0..n)
-                .filter(|&i| {
-                    sub.usable(i) && sub.tracks[i].offset[0].hypot(sub.tracks[i].offset[1]) >= 1.0
-                })
-                .map(|i| sub.tracks[i].explains)
+            let mut ex: Vec<f32> = self
+                .tracks
+                .iter()
+                .zip(&usable)
+                .filter(|(t, &u)| u && t.offset[0].hypot(t.offset[1]) >= 1.0)
+                .map(|(t, _)| t.explains)
                 .collect();
             ex.sort_by(f32::total_cmp);
             let med = ex.get(ex.len() / 2).copied().unwrap_or(1.0);
@@ -528,7 +526,7 @@ impl CameraPath {
                 ));
             }
         }
-        let s = sub.steadying(0..n).ok_or("no frame is tracked")?;
+        let s = steadying_of(&offsets, self.source);
         if s.zoom > ZOOM_MAX {
             return Err(format!(
                 "the camera moves too far to steady: the frames would be zoomed ×{:.2} (at most ×{ZOOM_MAX})",
@@ -541,11 +539,16 @@ impl CameraPath {
     /// Offsets of every frame, the untracked ones interpolated linearly between their
     /// tracked neighbours (held at the ends); `None` when no frame is tracked.
     pub fn offsets(&self) -> Option<Vec<[f32; 2]>> {
+        self.offsets_of(&self.usable_all())
+    }
+
+    /// [`CameraPath::offsets`] given each frame's [`CameraPath::usable`].
+    fn offsets_of(&self, usable: &[bool]) -> Option<Vec<[f32; 2]>> {
         let known: Vec<(usize, [f32; 2])> = self
             .tracks
             .iter()
             .enumerate()
-            .filter(|&(i, _)| self.usable(i))
+            .filter(|&(i, _)| usable[i])
             .map(|(i, t)| (i, t.offset))
             .collect();
         if known.is_empty() {
@@ -571,39 +574,48 @@ impl CameraPath {
         )
     }
 
-    /// How far the view wanders over frames `range` (source pixels): the largest distance
-    /// of a frame's offset from their median position.
-    pub fn wander(&self, range: std::ops::Range<usize>) -> f32 {
-        let Some(o) = self.offsets() else {
-            return 0.0;
-        };
-        let o = &o[range.start.min(o.len())..range.end.min(o.len())];
-        if o.is_empty() {
-            return 0.0;
-        }
-        let c = median_point(o);
-        o.iter()
-            .map(|p| (p[0] - c[0]).hypot(p[1] - c[1]))
-            .fold(0.0, f32::max)
+    /// How far the view wanders (source pixels): the largest distance of a frame's
+    /// offset from their median position; 0 when no frame is tracked.
+    pub fn wander(&self) -> f32 {
+        self.offsets().map_or(0.0, |o| wander_of(&o))
     }
 
-    /// The steadying of frames `range` (indices into the path): every frame shifted onto
-    /// the middle of the run's views, and the zoom that keeps the shifted frames inside
-    /// the picture. `None` when no frame is tracked.
-    pub fn steadying(&self, range: std::ops::Range<usize>) -> Option<Steadying> {
-        let o = self.offsets()?;
-        let run = &o[range.start.min(o.len())..range.end.min(o.len())];
-        if run.is_empty() {
-            return None;
-        }
-        let c = middle_point(run);
-        let shifts: Vec<[f32; 2]> = run.iter().map(|p| [p[0] - c[0], p[1] - c[1]]).collect();
-        let zoom = zoom_for(&shifts, self.source);
-        Some(Steadying {
-            shifts,
-            zoom,
-            source: self.source,
-        })
+    /// The steadying of the path's frames: every frame shifted onto the middle of their
+    /// views, and the zoom that keeps the shifted frames inside the picture. `None` when
+    /// no frame is tracked.
+    pub fn steadying(&self) -> Option<Steadying> {
+        Some(steadying_of(&self.offsets()?, self.source))
+    }
+}
+
+/// The share of `true`s (0 for none).
+fn share(flags: &[bool]) -> f32 {
+    if flags.is_empty() {
+        return 0.0;
+    }
+    flags.iter().filter(|&&u| u).count() as f32 / flags.len() as f32
+}
+
+/// [`CameraPath::wander`] of offsets.
+fn wander_of(o: &[[f32; 2]]) -> f32 {
+    if o.is_empty() {
+        return 0.0;
+    }
+    let c = median_point(o);
+    o.iter()
+        .map(|p| (p[0] - c[0]).hypot(p[1] - c[1]))
+        .fold(0.0, f32::max)
+}
+
+/// [`CameraPath::steadying`] of (non-empty) offsets.
+fn steadying_of(o: &[[f32; 2]], source: Size) -> Steadying {
+    let c = middle_point(o);
+    let shifts: Vec<[f32; 2]> = o.iter().map(|p| [p[0] - c[0], p[1] - c[1]]).collect();
+    let zoom = zoom_for(&shifts, source);
+    Steadying {
+        shifts,
+        zoom,
+        source,
     }
 }
 
@@ -769,18 +781,22 @@ pub fn whole_pixels(t: &Track) -> [i32; 2] {
     }
 }
 
-/// `out(x, y) = src(x + dx, y + dy)`, edge-clamped, on a row-major `w × h` image of `T`
-/// pixels (8-bit RGBA as `[u8; 4]`, grey as `f32`): a whole-pixel move, no resampling.
-pub fn shift_whole<T: Copy>(src: &[T], w: usize, h: usize, d: [i32; 2]) -> Vec<T> {
-    let mut out = Vec::with_capacity(src.len());
-    if w == 0 || h == 0 || src.len() != w * h {
+/// `out(x, y) = src(x + dx, y + dy)`, edge-clamped, on a row-major `w × h` image of
+/// pixels of `channels` values each (8-bit RGBA bytes: 4; grey `f32`s or `[f32; 4]`s: 1):
+/// a whole-pixel move, no resampling.
+pub fn shift_whole<T: Copy>(src: &[T], w: usize, h: usize, channels: usize, d: [i32; 2]) -> Vec<T> {
+    if w == 0 || h == 0 || channels == 0 || src.len() != w * h * channels {
         return src.to_vec();
     }
+    let mut out = Vec::with_capacity(src.len());
     let col = |x: usize| (x as i64 + i64::from(d[0])).clamp(0, w as i64 - 1) as usize;
     for y in 0..h {
         let sy = (y as i64 + i64::from(d[1])).clamp(0, h as i64 - 1) as usize;
-        let row = &src[sy * w..(sy + 1) * w];
-        out.extend((0..w).map(|x| row[col(x)]));
+        let row = &src[sy * w * channels..(sy + 1) * w * channels];
+        for x in 0..w {
+            let c = col(x) * channels;
+            out.extend_from_slice(&row[c..c + channels]);
+        }
     }
     out
 }
@@ -942,7 +958,7 @@ mod tests {
                 .collect(),
             source: size,
         };
-        let s = path.steadying(0..5).unwrap();
+        let s = path.steadying().unwrap();
         // middle view (3, 2); widest x shift 5, y 4
         assert_eq!(s.shifts[4], [5.0, -2.0]);
         let want = (2000.0f32 / 1990.0).max(1000.0 / 992.0);
@@ -958,7 +974,7 @@ mod tests {
             "{}",
             run.zoom
         );
-        assert!((path.wander(0..5) - 7.0).abs() < 1e-6);
+        assert!((path.wander() - 7.0).abs() < 1e-6);
         // an integer shift at zoom 1 copies pixels
         let f = scene(64, 48, 0.0, 0.0);
         let moved = steady_rgba(&f, [3.0, -2.0], 1.0);
@@ -990,7 +1006,7 @@ mod tests {
             peak: 12.0,
             explains: 1.6,
         });
-        let s = camera.decide(0..50, false).unwrap();
+        let s = camera.decide(false).unwrap();
         assert!(
             s.zoom > 1.0 && s.zoom < 1.1 && s.shifts.len() == 50,
             "{s:?}"
@@ -1000,22 +1016,22 @@ mod tests {
             peak: 12.0,
             explains: 1.05,
         });
-        let why = light.decide(0..50, false).unwrap_err();
+        let why = light.decide(false).unwrap_err();
         assert!(why.contains("fire's light"), "{why}");
-        assert!(light.decide(0..50, true).is_ok());
+        assert!(light.decide(true).is_ok());
         let still = path(&|i| Track {
             offset: [0.1 * (i % 3) as f32, 0.0],
             peak: 12.0,
             explains: 1.0,
         });
-        assert!(still.decide(0..50, false).unwrap_err().contains("still"));
+        assert!(still.decide(false).unwrap_err().contains("still"));
         let lost = path(&|i| Track {
             offset: shake(i),
             peak: if i % 4 == 0 { 2.0 } else { 12.0 },
             explains: 1.6,
         });
         assert!(lost
-            .decide(0..50, true)
+            .decide(true)
             .unwrap_err()
             .contains("could not be tracked"));
         let far = path(&|i| Track {
@@ -1023,7 +1039,7 @@ mod tests {
             peak: 12.0,
             explains: 1.6,
         });
-        assert!(far.decide(0..50, false).unwrap_err().contains("too far"));
+        assert!(far.decide(false).unwrap_err().contains("too far"));
         // one wild match among steady ones is an outlier, not a shake
         let blip = path(&|i| Track {
             offset: if i == 20 { [80.0, 60.0] } else { [0.0, 0.0] },
@@ -1031,19 +1047,24 @@ mod tests {
             explains: 1.0,
         });
         assert!(!blip.usable(20) && blip.usable(19));
-        assert!(blip.decide(0..50, false).unwrap_err().contains("still"));
+        assert!(blip.decide(false).unwrap_err().contains("still"));
     }
 
     #[test]
     fn whole_pixel_moves_clamp_at_the_edges() {
         let src: Vec<u8> = (0..12).collect();
         assert_eq!(
-            shift_whole(&src, 4, 3, [1, 0]),
+            shift_whole(&src, 4, 3, 1, [1, 0]),
             vec![1, 2, 3, 3, 5, 6, 7, 7, 9, 10, 11, 11]
         );
         assert_eq!(
-            shift_whole(&src, 4, 3, [0, -1]),
+            shift_whole(&src, 4, 3, 1, [0, -1]),
             vec![0, 1, 2, 3, 0, 1, 2, 3, 4, 5, 6, 7]
+        );
+        // pixels of two values move whole
+        assert_eq!(
+            shift_whole(&src, 2, 3, 2, [-1, 1]),
+            vec![4, 5, 4, 5, 8, 9, 8, 9, 8, 9, 8, 9]
         );
         let t = Track {
             offset: [2.6, -0.4],
@@ -1078,6 +1099,6 @@ mod tests {
             tracks: vec![t(1.0, 0.0)],
             source: Size::new(10, 10).unwrap(),
         };
-        assert!(none.offsets().is_none() && none.steadying(0..1).is_none());
+        assert!(none.offsets().is_none() && none.steadying().is_none());
     }
 }

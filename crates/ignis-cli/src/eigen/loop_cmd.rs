@@ -206,19 +206,21 @@ fn camera_bytes(tracks: &[Track]) -> Vec<u8> {
         .collect()
 }
 
-fn camera_from_bytes(bytes: &[u8]) -> Vec<Track> {
+/// Little-endian `f32`s of `bytes` (a trailing partial value is dropped).
+fn f32s_le(bytes: &[u8]) -> Vec<f32> {
     bytes
-        .chunks_exact(16)
-        .map(|c| {
-            let v: Vec<f32> = c
-                .chunks_exact(4)
-                .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-                .collect();
-            Track {
-                offset: [v[0], v[1]],
-                peak: v[2],
-                explains: v[3],
-            }
+        .chunks_exact(4)
+        .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+        .collect()
+}
+
+fn camera_from_bytes(bytes: &[u8]) -> Vec<Track> {
+    f32s_le(bytes)
+        .chunks_exact(4)
+        .map(|v| Track {
+            offset: [v[0], v[1]],
+            peak: v[2],
+            explains: v[3],
         })
         .collect()
 }
@@ -323,13 +325,7 @@ fn open_entry(dir: &Path, sha: &str, settings: &CacheSettings) -> Result<Cached>
         }
         Ok(bytes
             .chunks_exact(per)
-            .map(|c| {
-                let v = c
-                    .chunks_exact(4)
-                    .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-                    .collect();
-                GrayFrame::from_vec(size, v).expect("length checked")
-            })
+            .map(|c| GrayFrame::from_vec(size, f32s_le(c)).expect("length checked"))
             .collect())
     };
     let metric = read_frames("metric.f32", &meta.metric_sha256)?;
@@ -418,7 +414,7 @@ fn build_entry(
         let cbytes = camera_bytes(&tracks);
         std::fs::write(tmp.join("camera.f32"), &cbytes)?;
         let tracked = CameraPath {
-            tracks: tracks.clone(),
+            tracks,
             source: info.size,
         }
         .tracked_share()
@@ -1528,7 +1524,7 @@ impl<'a> FootageMatte<'a> {
                 .map(|v| v.round() as i32);
                 if d != [0, 0] {
                     let (w, h) = (full.width() as usize, full.height() as usize);
-                    let moved = ignis_flow::camera::shift_whole(full.data(), w, h, d);
+                    let moved = ignis_flow::camera::shift_whole(full.data(), w, h, 1, d);
                     full = GrayFrame::from_vec(full.size(), moved).expect("same size");
                 }
             }
@@ -1897,11 +1893,10 @@ pub fn run(a: &Args, g: &Global) -> Result<()> {
 /// `--stabilise`: how the window is held still, if at all, said in a line (`auto` says
 /// nothing of a still camera); `on` refuses a camera it cannot steady.
 fn steadying(camera: &CameraPath, mode: &str, g: &Global) -> Result<Option<Steadying>> {
-    let n = camera.tracks.len();
-    if mode == "off" || n == 0 {
+    if mode == "off" || camera.tracks.is_empty() {
         return Ok(None);
     }
-    match camera.decide(0..n, mode == "on") {
+    match camera.decide(mode == "on") {
         Ok(s) => {
             let most = s
                 .shifts
@@ -2147,19 +2142,15 @@ fn moved(f: &ignis_media::DecodedFrame, d: [i32; 2]) -> ignis_media::DecodedFram
     use ignis_flow::camera::shift_whole;
     match f {
         ignis_media::DecodedFrame::Srgba8 { size, bytes } => {
-            let px: Vec<[u8; 4]> = bytes
-                .chunks_exact(4)
-                .map(|c| [c[0], c[1], c[2], c[3]])
-                .collect();
             let (w, h) = (size.width as usize, size.height as usize);
             ignis_media::DecodedFrame::Srgba8 {
                 size: *size,
-                bytes: shift_whole(&px, w, h, d).into_iter().flatten().collect(),
+                bytes: shift_whole(bytes, w, h, 4, d),
             }
         }
         ignis_media::DecodedFrame::Linear(fr) => {
             let (w, h) = (fr.width() as usize, fr.height() as usize);
-            let data = shift_whole(fr.data(), w, h, d);
+            let data = shift_whole(fr.data(), w, h, 1, d);
             ignis_media::DecodedFrame::Linear(
                 RgbaFrame::from_vec(fr.size(), data).expect("same size"),
             )
@@ -2263,7 +2254,7 @@ mod tests {
                 )
             };
             let c = open().unwrap();
-            let decided = c.camera.decide(0..60, false);
+            let decided = c.camera.decide(false);
             if !moving {
                 assert!(
                     c.aligned.is_none(),
@@ -2329,8 +2320,8 @@ mod tests {
                 tracks,
                 source: Size::new(440, 240).unwrap(),
             }
-            .wander(0..d.frames);
-            let shot = c.camera.wander(0..60);
+            .wander();
+            let shot = c.camera.wander();
             assert!(
                 shot > 8.0 && wander < 0.75,
                 "view wanders {wander} px steadied, {shot} px as shot"
