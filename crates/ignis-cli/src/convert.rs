@@ -6,13 +6,16 @@ use crate::global::Global;
 use crate::output::OutputArgs;
 use anyhow::{anyhow, Context, Result};
 use ignis_core::Size;
-use ignis_media::{FrameRange, ReadOptions};
+use ignis_media::{FrameRange, RangeUnit, ReadOptions};
 use std::path::PathBuf;
 
 #[derive(clap::Args, Debug)]
 #[command(
     after_help = "Examples:\n  ignis convert candle.mp4 --range 100..160 --scale 128x128 -o candle.png   # flipbook\n  \
-ignis convert campfire.mp4 --seconds 2..4 -o frames/%04d.exr\n  ignis convert 'frames/%04d.png' --fps 24 -o clip.mp4"
+ignis convert campfire.mp4 --seconds 2..4 -o frames/%04d.exr\n  ignis convert 'frames/%04d.png' --fps 24 -o clip.mp4\n\n\
+Footage is written at its own frame rate (--fps sets another). A variable-frame-rate clip (a phone's, \
+slowing down in low light) is written at its nominal rate with each frame shown for as long as it was shot, \
+and --seconds counts by the frames' own times."
 )]
 pub struct Args {
     /// A video, an image, a directory of frames or a printf pattern.
@@ -61,21 +64,68 @@ impl Args {
 
 pub fn run(args: &Args, g: &Global) -> Result<Vec<PathBuf>> {
     let input = &args.input;
-    let mut reader = ignis_media::open(input, &args.read_options()?)
-        .with_context(|| format!("reading {}", input.display()))?;
-    let info = reader.info().clone();
-    let first = reader
-        .next()
-        .with_context(|| format!("{}: no frames in the requested range", input.display()))?;
-    let first = first.with_context(|| format!("decoding {}", input.display()))?;
-    let mut writer = args.out.create(first.size())?;
+    let mut read = args.read_options()?;
+    let info = ignis_media::probe(input).with_context(|| format!("reading {}", input.display()))?;
+    let timing = ignis_media::frame_timing(input)
+        .with_context(|| format!("reading {}'s frame times", input.display()))?
+        .filter(|t| t.is_variable());
+    // A variable frame rate: --seconds by the frames' own times, and every frame written
+    // for as long as it is shown, at the nominal rate (or --fps), as a player shows it.
+    if let (Some(t), Some(r)) = (&timing, read.range) {
+        if r.unit == RangeUnit::Seconds {
+            read.range = Some(FrameRange::frames(
+                t.frame_at(r.start),
+                r.end.map(|e| t.frame_at(e)),
+            ));
+        }
+    }
+    let fps = args.out.fps.unwrap_or(match &timing {
+        Some(t) => t.nominal_fps(),
+        None => info.fps,
+    });
+    let out = OutputArgs {
+        fps: Some(fps),
+        ..args.out.clone()
+    };
+    let holds = match &timing {
+        Some(t) => {
+            let (a, b) = read
+                .range
+                .unwrap_or(FrameRange::frames(0, None))
+                .resolve(info.fps, info.frame_count)?;
+            let b = b.map_or(t.len(), |b| b as usize);
+            let holds = t.holds(a as usize..b, fps);
+            let held = holds.iter().filter(|&&n| n > 1).count();
+            let dropped = holds.iter().filter(|&&n| n == 0).count();
+            g.say(format!(
+                "timing: the frame rate varies ({:.3} fps nominal, {:.3} on average); written at {fps:.3} fps \
+                 with each frame shown for as long as it was shot ({held} held longer, {dropped} left out); \
+                 --fps sets another rate",
+                t.nominal_fps(),
+                t.average_fps()
+            ));
+            Some(holds)
+        }
+        None => None,
+    };
+    let times = |i: usize| holds.as_ref().map_or(1, |h| h.get(i).copied().unwrap_or(1));
+    let reader =
+        ignis_media::open(input, &read).with_context(|| format!("reading {}", input.display()))?;
     let pb = g.progress(info.frame_count.unwrap_or(0), "converting");
-    args.out.push(&mut writer, &first)?;
-    for frame in reader {
+    let mut writer = None;
+    for (i, frame) in reader.enumerate() {
         let frame = frame.with_context(|| format!("decoding {}", input.display()))?;
-        args.out.push(&mut writer, &frame)?;
+        let w = match &mut writer {
+            Some(w) => w,
+            None => writer.insert(out.create(frame.size())?),
+        };
+        for _ in 0..times(i) {
+            out.push(w, &frame)?;
+        }
         pb.inc(1);
     }
     pb.finish_and_clear();
-    args.out.finish(writer, g)
+    let writer =
+        writer.with_context(|| format!("{}: no frames in the requested range", input.display()))?;
+    out.finish(writer, g)
 }

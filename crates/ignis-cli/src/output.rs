@@ -28,8 +28,8 @@ pub struct OutputArgs {
     /// Force the format: mp4, gif, flipbook, png-seq, exr-seq, mov, webm.
     #[arg(long, value_parser = ["mp4", "gif", "flipbook", "png-seq", "exr-seq", "mov", "webm"])]
     pub format: Option<String>,
-    /// Frames per second stored in the output (default 30; `ignis eigen animate` and
-    /// `eigen loop`: the rate of the footage the frames come from).
+    /// Frames per second stored in the output (default 30; `ignis convert`, `eigen
+    /// animate` and `eigen loop`: the rate of the footage the frames come from).
     #[arg(long)]
     pub fps: Option<f64>,
     /// Flipbook: columns (default near-square).

@@ -441,6 +441,36 @@ mod convert {
         assert_fails(&convert("900..950", &[]), "range");
         assert_fails(&convert("50..50", &[]), "empty");
     }
+
+    /// Footage is written at its own rate (`campfire.mp4` is 25 fps: at the generators'
+    /// default 30 it played 20 % fast), `--fps` still sets another.
+    #[test]
+    fn footage_keeps_its_frame_rate() {
+        let Some(p) = data("campfire.mp4") else {
+            return;
+        };
+        if !has_ffmpeg() {
+            return;
+        }
+        let t = tempfile::tempdir().unwrap();
+        let out = t.path().join("c.png");
+        let run = |extra: &[&str]| {
+            let mut a = vec![
+                "convert",
+                p.to_str().unwrap(),
+                "--range",
+                "0..6",
+                "--scale",
+                "48x27",
+            ];
+            a.extend_from_slice(extra);
+            a.extend(["-q", "-o", out.to_str().unwrap()]);
+            ignis_ok(&a);
+            read_json(&t.path().join("c.json"))
+        };
+        assert_eq!(run(&[])["fps"], 25.0);
+        assert_eq!(run(&["--fps", "12"])["fps"], 12.0);
+    }
 }
 
 mod eigen {
@@ -3337,4 +3367,168 @@ fn loop_alpha_emissive_adds_light_without_a_dark_fringe() {
     assert!(lit > 1000, "the loop shows fire");
     assert!(fringe > 100, "the matte's dark pixels darken grey");
     assert_eq!(darker, 0, "emissive frames only add light");
+}
+
+/// A phone's clip that slows down in low light: `campfire.mp4` with every other frame of a
+/// stretch dropped and the timestamps kept (a variable frame rate: 25 fps, 12.5 fps for
+/// a second, 25 fps again), read by `info` and looped by `loop` at the rate it was shot.
+mod variable_frame_rate {
+    use super::*;
+
+    /// Window frames 0..61 and 85..145 are 40 ms apart; steps 60..=84 are 80 ms.
+    fn phone_clip(dir: &Path) -> Option<PathBuf> {
+        let src = data("campfire.mp4")?;
+        if !has_ffmpeg() {
+            return None;
+        }
+        let out = dir.join("phone.mp4");
+        let ok = Command::new("ffmpeg")
+            .args(["-v", "error", "-y", "-i"])
+            .arg(&src)
+            .args([
+                "-vf",
+                "trim=end_frame=170,select='lt(n\\,60)+gte(n\\,110)+not(mod(n\\,2))',scale=320:-2",
+                "-fps_mode",
+                "vfr",
+                "-an",
+                "-c:v",
+                "libx264",
+                "-crf",
+                "20",
+                "-pix_fmt",
+                "yuv420p",
+            ])
+            .arg(&out)
+            .status()
+            .unwrap()
+            .success();
+        assert!(ok, "ffmpeg made the clip");
+        Some(out)
+    }
+
+    #[test]
+    fn info_says_the_rate_varies_and_loop_plays_evenly_timed_frames_at_their_rate() {
+        let t = tempfile::tempdir().unwrap();
+        let Some(clip) = phone_clip(t.path()) else {
+            return;
+        };
+        let info: serde_json::Value =
+            serde_json::from_slice(&ignis_ok(&["info", "--json", clip.to_str().unwrap()]).stdout)
+                .unwrap();
+        assert_eq!(info["frames"], 145);
+        let v = &info["variable_frame_rate"];
+        assert_eq!(v["nominal_fps"], 25.0, "{info}");
+        assert_eq!(v["uneven_steps"], 25, "{info}");
+        assert!((info["fps"].as_f64().unwrap() - 21.5).abs() < 0.5, "{info}");
+        let text = String::from_utf8_lossy(&ignis_ok(&["info", clip.to_str().unwrap()]).stdout)
+            .to_string();
+        assert!(text.contains("variable: 25.000 nominal"), "{text}");
+
+        let cache = t.path().join("cache");
+        let run = |length: &str, out: &Path| {
+            ignis_ok(&[
+                "loop",
+                clip.to_str().unwrap(),
+                "--length",
+                length,
+                "--train-size",
+                "16x24",
+                "--keep",
+                "12",
+                "--alpha",
+                "opaque",
+                "--cache",
+                cache.to_str().unwrap(),
+                "-o",
+                out.to_str().unwrap(),
+            ])
+        };
+        // 1.6 s = 40 frames at 25 fps: fits either even stretch
+        let out = t.path().join("even.png");
+        let said = String::from_utf8_lossy(&run("1.6s", &out).stdout).to_string();
+        assert!(said.contains("timing: the frame rate varies"), "{said}");
+        let meta = read_json(&t.path().join("even.json"));
+        assert_eq!(meta["fps"], 25.0, "{meta}");
+        let frames = meta["frame_count"].as_u64().unwrap();
+        assert!((32..=48).contains(&frames), "{meta}");
+        // the loop's source frames (and the two before it) lie in one even stretch
+        let line = said
+            .lines()
+            .find(|l| l.starts_with("loop: source frames"))
+            .unwrap();
+        let span = line["loop: source frames ".len()..]
+            .split(',')
+            .next()
+            .unwrap();
+        let (a, b) = span.split_once("..").unwrap();
+        let (a, b): (usize, usize) = (a.parse().unwrap(), b.parse().unwrap());
+        assert!(
+            (a >= 2 && b + 1 < 61) || (a >= 87 && b + 1 < 145),
+            "loop {a}..{b} crosses the 12.5-fps stretch: {said}"
+        );
+        // 3 s (75 frames, at least 60 and 3 around them) fits no even stretch: said, and
+        // the whole window is searched at the average rate as before
+        let out = t.path().join("any.png");
+        let said = String::from_utf8_lossy(&run("3s", &out).stdout).to_string();
+        assert!(
+            said.contains("no evenly timed stretch holds a loop of about 75 frames"),
+            "{said}"
+        );
+        let meta = read_json(&t.path().join("any.json"));
+        assert!((meta["fps"].as_f64().unwrap() - 21.5).abs() < 0.5, "{meta}");
+    }
+
+    /// `convert` plays the clip as it was shot: at 25 fps, each frame of the 12.5-fps
+    /// stretch held for two, and `--seconds` counted by the frames' own times.
+    #[test]
+    fn convert_holds_each_frame_as_long_as_it_was_shown() {
+        let t = tempfile::tempdir().unwrap();
+        let Some(clip) = phone_clip(t.path()) else {
+            return;
+        };
+        let out = t.path().join("c.png");
+        let run = |extra: &[&str]| {
+            let mut a = vec!["convert", clip.to_str().unwrap(), "--scale", "32x18"];
+            a.extend_from_slice(extra);
+            a.extend(["-o", out.to_str().unwrap()]);
+            let said = String::from_utf8_lossy(&ignis_ok(&a).stdout).to_string();
+            (read_json(&t.path().join("c.json")), said)
+        };
+        // 145 frames over 5.8 s: 60 + 25 × 2 + 60 = 170 at 25 fps
+        let (meta, said) = run(&[]);
+        assert_eq!(meta["fps"], 25.0, "{meta}");
+        assert_eq!(meta["frame_count"], 170, "{meta}");
+        assert!(said.contains("25 held longer, 0 left out"), "{said}");
+        // 2..3.02 s is frames 50..68 (frame 60 at 2.4 s, then one every 80 ms: frame 67
+        // from 2.96 s to 3.04 s): 1.04 s, 26 frames at 25 fps
+        let (meta, _) = run(&["--seconds", "2..3.02"]);
+        assert_eq!(meta["frame_count"], 26, "{meta}");
+        // --fps 12.5: one frame in two of the even stretches, each slow one once
+        let (meta, _) = run(&["--fps", "12.5"]);
+        assert_eq!(meta["fps"], 12.5, "{meta}");
+        assert_eq!(meta["frame_count"], 85, "{meta}");
+    }
+
+    #[test]
+    fn a_constant_rate_has_no_variable_timing() {
+        let Some(clip) = data("campfire.mp4") else {
+            return;
+        };
+        if !has_ffmpeg() {
+            return;
+        }
+        let info: serde_json::Value =
+            serde_json::from_slice(&ignis_ok(&["info", "--json", clip.to_str().unwrap()]).stdout)
+                .unwrap();
+        assert!(info["variable_frame_rate"].is_null(), "{info}");
+        let Some(candle) = data("candle.mp4") else {
+            return;
+        };
+        // the built-in decoder's timing (the MP4's sample table)
+        let info: serde_json::Value =
+            serde_json::from_slice(&ignis_ok(&["info", "--json", candle.to_str().unwrap()]).stdout)
+                .unwrap();
+        assert_eq!(info["decoder"], "openh264", "{info}");
+        assert!(info["variable_frame_rate"].is_null(), "{info}");
+    }
 }

@@ -422,6 +422,96 @@ mod probing {
         ok.then_some(out)
     }
 
+    /// Frame times come from the MP4 sample table on the built-in path and from the
+    /// packets through ffmpeg: a 30-fps clip with frames 10..20 held twice as long (every
+    /// other one dropped, timestamps kept, as a phone in low light; 40 frames written) is variable at 30 fps
+    /// nominal by both, with exactly the 5 long steps uneven; its constant-rate original is
+    /// not, in MP4 and in Matroska's 1-ms time base (29.97 fps: 33- and 34-ms steps).
+    #[test]
+    fn frame_times_find_a_variable_rate_on_both_paths() {
+        if !have_ffmpeg() {
+            return;
+        }
+        let dir = tempfile::tempdir().unwrap();
+        let src = [
+            "-f",
+            "lavfi",
+            "-i",
+            "testsrc=size=64x48:rate=30",
+            "-frames:v",
+            "40",
+        ];
+        let vfr = [
+            "-vf",
+            "select='lt(n\\,10)+gte(n\\,20)+not(mod(n\\,2))'",
+            "-fps_mode",
+            "vfr",
+            "-c:v",
+            "libx264",
+            "-pix_fmt",
+            "yuv420p",
+        ];
+        for (name, profile, decoder) in [
+            ("base.mp4", "baseline", Decoder::Openh264),
+            ("high.mp4", "high", Decoder::Ffmpeg),
+        ] {
+            let mut args = vfr.to_vec();
+            args.extend(["-profile:v", profile]);
+            let Some(p) = make_from(dir.path(), name, &src, &args) else {
+                continue;
+            };
+            assert_eq!(probe(&p).unwrap().decoder, decoder, "{name}");
+            let t = frame_timing(&p).unwrap().expect("frame times");
+            assert_eq!(t.len(), 40, "{name}");
+            assert_eq!(t.nominal_fps(), 30.0, "{name}");
+            assert_eq!(
+                t.uneven_steps(),
+                vec![10, 11, 12, 13, 14],
+                "{name}: {:?}",
+                t.steps()
+            );
+            // 39 steps over source frames 0..=44
+            assert!(
+                (t.average_fps() - 39.0 * 30.0 / 44.0).abs() < 0.01,
+                "{name}"
+            );
+        }
+        for (name, rate) in [("cfr.mp4", "30"), ("cfr.mkv", "30000/1001")] {
+            let Some(p) = make_from(
+                dir.path(),
+                name,
+                &[
+                    "-f",
+                    "lavfi",
+                    "-i",
+                    &format!("testsrc=size=64x48:rate={rate}"),
+                    "-frames:v",
+                    "40",
+                ],
+                &["-c:v", "libx264", "-pix_fmt", "yuv420p"],
+            ) else {
+                continue;
+            };
+            let t = frame_timing(&p).unwrap().expect("frame times");
+            assert_eq!(t.len(), 40, "{name}");
+            assert!(!t.is_variable(), "{name}: {:?}", t.steps());
+        }
+        // no times to read: a PNG sequence and a GIF
+        let seq = dir.path().join("seq");
+        std::fs::create_dir_all(&seq).unwrap();
+        for i in 0..3 {
+            write_png(
+                &seq.join(format!("{i:02}.png")),
+                &test_frame(Size::new(8, 8).unwrap(), i, false),
+            )
+            .unwrap();
+        }
+        assert!(frame_timing(&seq).unwrap().is_none());
+        if let Some(g) = make(dir.path(), "x.gif", &[]) {
+            assert!(frame_timing(&g).unwrap().is_none());
+        }
+    }
+
     #[test]
     fn decoder_is_chosen_by_content_not_extension() {
         if !have_ffmpeg() {

@@ -42,8 +42,9 @@ const CACHE_VERSION: u32 = 6;
 pub struct Args {
     /// The footage (any video or frame sequence `ignis info` reads).
     pub input: PathBuf,
-    /// Loop length: seconds (`4s`, at the clip's fps) or frames (`120`); the loop found is
-    /// within ±20% of it.
+    /// Loop length: seconds (`4s`, at the clip's fps; for a variable-frame-rate clip, at
+    /// the nominal rate `ignis info` prints, from stretches of frames at that rate) or
+    /// frames (`120`); the loop found is within ±20% of it.
     #[arg(long)]
     pub length: String,
     /// Only look in source frames START..END (END excluded).
@@ -640,6 +641,10 @@ fn same_loop(a: &Evaluated, b: &Evaluated) -> bool {
 /// stretch of the footage is a calm, perfectly even "loop" of nothing, which the search
 /// would otherwise rank first. Errors, naming the stretches, when no lit stretch holds a
 /// loop of that length.
+///
+/// With `uneven` steps (a variable frame rate: [`WindowTiming::uneven`]), a loop is looked
+/// for only inside stretches without one (and lit, with `lit`), and kept only when none
+/// is among the frames its closing reads; an [`Uneven`] error when no such loop exists.
 #[allow(clippy::too_many_arguments)]
 pub fn search_and_choose(
     first: usize,
@@ -648,6 +653,7 @@ pub fn search_and_choose(
     e: usize,
     metric: &[GrayFrame],
     lit: Option<&[bool]>,
+    uneven: &[usize],
     length: usize,
     method: Method,
 ) -> Result<Chosen> {
@@ -661,12 +667,27 @@ pub fn search_and_choose(
             n.saturating_sub(3) * 10 / 12
         );
     }
+    if let Some(lit) = lit.filter(|l| l.len() != n) {
+        bail!("{} lit flags for {n} frames", lit.len());
+    }
     let win = loops::MetricWindow::new(metric)?;
     let t = Instant::now();
     let params = SearchParams::new(length, e);
-    let cands = match lit {
-        None => loops::search(weights, n, k, &params, Some(win.body_stats()))?,
-        Some(lit) => search_lit(weights, k, &win, metric, lit, &params, first)?,
+    // a variable frame rate: the stretches (lit, for a matte) at the nominal rate
+    let timed = (!uneven.is_empty()).then(|| {
+        let runs = lit.map_or_else(|| std::iter::once(0..n).collect(), lit_runs);
+        even_runs(runs, uneven)
+    });
+    let cands = match (lit, &timed) {
+        (None, None) => loops::search(weights, n, k, &params, Some(win.body_stats()))?,
+        (Some(lit), None) => search_lit(weights, k, &win, metric, lit, &params, first)?,
+        (_, Some(runs)) => {
+            let found = search_runs(weights, k, &win, metric, runs, &params)?;
+            if found.is_empty() {
+                return Err(Uneven::new(runs, n, first, &params).into());
+            }
+            found
+        }
     };
     let search_s = t.elapsed().as_secs_f64();
     let min_len = cands.iter().map(Candidate::len).min().unwrap_or(0);
@@ -675,7 +696,11 @@ pub fn search_and_choose(
     let evaluated: Vec<Evaluated> = loops::evaluate(&win, &cands, m.as_ref(), MORPH_CANDIDATES)
         .into_iter()
         .filter(|e| method.admits(&e.closing))
+        .filter(|e| evenly_timed(e, uneven))
         .collect();
+    if let Some(runs) = timed.as_ref().filter(|_| evaluated.is_empty()) {
+        return Err(Uneven::new(runs, n, first, &params).into());
+    }
     let evaluate_s = t.elapsed().as_secs_f64();
     let (best, why) = loops::choose(&evaluated, first).ok_or_else(|| {
         anyhow::anyhow!(
@@ -728,13 +753,34 @@ fn search_lit(
     first: usize,
 ) -> Result<Vec<Candidate>> {
     let n = metric.len();
-    if lit.len() != n {
-        bail!("{} lit flags for {n} frames", lit.len());
-    }
     if lit.iter().all(|&l| l) {
         return Ok(loops::search(weights, n, k, p, Some(win.body_stats()))?);
     }
     let runs = lit_runs(lit);
+    let out = search_runs(weights, k, win, metric, &runs, p)?;
+    if out.is_empty() {
+        let ask = Keyed::Length {
+            length: p.length,
+            need: loops::min_window(p),
+        };
+        bail!("{}", keyed_out_message(&runs, n, &|i| first + i, ask));
+    }
+    Ok(out)
+}
+
+/// The whole window's [`loops::search`] candidates that lie inside one of `runs` (their
+/// filter taps included), then each long enough run's own search (its own body
+/// statistics: where candidates outside the runs crowd the window's ranked list, this
+/// still finds those inside), in window indices; empty when no run is long enough.
+fn search_runs(
+    weights: &[f32],
+    k: usize,
+    win: &loops::MetricWindow,
+    metric: &[GrayFrame],
+    runs: &[Range<usize>],
+    p: &SearchParams,
+) -> Result<Vec<Candidate>> {
+    let n = metric.len();
     let need = loops::min_window(p);
     let inside = |c: &Candidate| {
         runs.iter()
@@ -759,15 +805,71 @@ fn search_lit(
             }
         }
     }
-    if out.is_empty() {
-        let ask = Keyed::Length {
-            length: p.length,
-            need,
-        };
-        bail!("{}", keyed_out_message(&runs, n, &|i| first + i, ask));
-    }
     Ok(out)
 }
+
+/// `runs` split at the `uneven` steps (step `i` joins window frames `i` and `i + 1`,
+/// which end up in different runs).
+fn even_runs(runs: Vec<Range<usize>>, uneven: &[usize]) -> Vec<Range<usize>> {
+    let mut out = Vec::new();
+    for r in runs {
+        let mut start = r.start;
+        for &i in uneven.iter().filter(|&&i| i >= r.start && i + 1 < r.end) {
+            out.push(start..i + 1);
+            start = i + 1;
+        }
+        out.push(start..r.end);
+    }
+    out
+}
+
+/// Whether `e` reads only evenly timed footage: no `uneven` step among the frames its
+/// search filter, its body and its closing read (two before its start to one past its
+/// end, and the closing's tail).
+fn evenly_timed(e: &Evaluated, uneven: &[usize]) -> bool {
+    let c = &e.candidate;
+    let last = loops::plan_end(c, e.closing).max(c.end + 2);
+    let steps = c.start.saturating_sub(2)..last - 1;
+    !uneven.iter().any(|i| steps.contains(i))
+}
+
+/// No stretch of evenly timed frames (of a variable-frame-rate clip) holds the loop asked
+/// for: the caller looks in the whole window instead ([`make_loop_sized`]).
+#[derive(Debug)]
+pub struct Uneven {
+    /// Source frames of the longest evenly timed stretch (with fire, for a matted loop).
+    pub longest: Range<usize>,
+    pub length: usize,
+}
+
+impl Uneven {
+    fn new(runs: &[Range<usize>], n: usize, first: usize, p: &SearchParams) -> Uneven {
+        let r = runs
+            .iter()
+            .max_by_key(|r| (r.len(), std::cmp::Reverse(r.start)))
+            .cloned()
+            .unwrap_or(0..n.min(1));
+        Uneven {
+            longest: first + r.start..first + r.end,
+            length: p.length,
+        }
+    }
+}
+
+impl std::fmt::Display for Uneven {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "no evenly timed stretch holds a loop of about {} frames (the longest is source frames {}..{}, {} frames)",
+            self.length,
+            self.longest.start,
+            self.longest.end,
+            self.longest.len()
+        )
+    }
+}
+
+impl std::error::Error for Uneven {}
 
 /// What a matted loop that would show frames of nothing was asked for.
 #[derive(Clone, Copy)]
@@ -1261,6 +1363,56 @@ pub struct LoopFootage<'a> {
     /// How each window frame is held still (`--stabilise`); `None` leaves the footage as
     /// it is.
     pub steady: Option<Held<'a>>,
+    /// A variable frame rate in the window: the loop comes from evenly timed frames and
+    /// is written at their rate; `None` for a constant rate (or no frame times).
+    pub timing: Option<&'a WindowTiming>,
+}
+
+/// A window whose frame rate varies ([`ignis_media::FrameTiming`]): a phone's clip that
+/// slows down in low light or drops frames.
+#[derive(Clone, Debug, PartialEq)]
+pub struct WindowTiming {
+    /// The rate most of the window plays at.
+    pub nominal_fps: f64,
+    /// Frames over the time they span.
+    pub average_fps: f64,
+    /// The steps not at the nominal rate (window indices: step `i` joins window frames `i`
+    /// and `i + 1`), ascending.
+    pub uneven: Vec<usize>,
+    /// The shortest and longest step, seconds.
+    pub steps: (f64, f64),
+}
+
+impl WindowTiming {
+    /// `path`'s frame timing over `window` when its rate varies there; `None` for a
+    /// constant rate or a source without frame times (image sequences, GIFs).
+    pub fn of(path: &Path, window: Range<usize>) -> Result<Option<WindowTiming>> {
+        let timing = ignis_media::frame_timing(path)
+            .with_context(|| format!("reading {}'s frame times", path.display()))?;
+        let Some(t) = timing.and_then(|t| t.window(window)) else {
+            return Ok(None);
+        };
+        let uneven = t.uneven_steps();
+        Ok((!uneven.is_empty()).then(|| WindowTiming {
+            nominal_fps: t.nominal_fps(),
+            average_fps: t.average_fps(),
+            uneven,
+            steps: t.step_range(),
+        }))
+    }
+
+    /// What the timing is, said in a clause.
+    fn describe(&self, frames: usize) -> String {
+        format!(
+            "the frame rate varies ({:.3} fps nominal, {:.3} on average; {} of {} steps off it, frames {:.1}–{:.1} ms apart)",
+            self.nominal_fps,
+            self.average_fps,
+            self.uneven.len(),
+            frames.saturating_sub(1),
+            self.steps.0 * 1e3,
+            self.steps.1 * 1e3
+        )
+    }
 }
 
 /// A window held still: the steadying of each frame, and what the cache keeps for it (the
@@ -1287,7 +1439,13 @@ impl<'a> LoopFootage<'a> {
             matte: Some(FootageMatte::new(&c.db, 0, c.metric.len())),
             emissive: false,
             steady: None,
+            timing: None,
         }
+    }
+
+    /// The same footage with its variable frame rate (`None`: a constant one).
+    pub fn timed(self, timing: Option<&'a WindowTiming>) -> LoopFootage<'a> {
+        LoopFootage { timing, ..self }
     }
 
     /// The same footage held still by `steady` (one shift per window frame of `c`).
@@ -1621,6 +1779,7 @@ pub fn make_loop_sized(
         matte,
         emissive: light_alpha,
         steady,
+        timing,
     } = *src;
     let LoopAsk {
         length,
@@ -1652,7 +1811,50 @@ pub fn make_loop_sized(
         None => metric,
     };
     let steady = steady.map(|h| h.steady);
-    let mut chosen = search_and_choose(first, weights, k, e, metric, lit, length, method)?;
+    let (mut chosen, fps) = match timing {
+        None => (
+            search_and_choose(first, weights, k, e, metric, lit, &[], length, method)?,
+            fps,
+        ),
+        Some(t) => {
+            let even =
+                search_and_choose(first, weights, k, e, metric, lit, &t.uneven, length, method);
+            match even {
+                Ok(c) => {
+                    g.say(format!(
+                        "timing: {}; the loop comes from evenly timed frames and is written at {:.3} fps",
+                        t.describe(metric.len()),
+                        t.nominal_fps
+                    ));
+                    (c, t.nominal_fps)
+                }
+                Err(err) => match err.downcast_ref::<Uneven>() {
+                    Some(u) => {
+                        g.say(format!(
+                            "warning: {}, and {u}; looking in the whole window, written at the average {:.3} fps, \
+                             so parts of the loop may play faster or slower than they were shot (a shorter --length \
+                             fits an even stretch)",
+                            t.describe(metric.len()),
+                            fps
+                        ));
+                        let any = search_and_choose(
+                            first,
+                            weights,
+                            k,
+                            e,
+                            metric,
+                            lit,
+                            &[],
+                            length,
+                            method,
+                        )?;
+                        (any, fps)
+                    }
+                    None => return Err(err),
+                },
+            }
+        }
+    };
     chosen.keep_multiples_of(every, first)?;
     g.say("best candidates (predicted on the footage's 128-px frames):");
     for (i, c) in top_candidates(&chosen.evaluated, top).iter().enumerate() {
@@ -1818,6 +2020,9 @@ fn seam_warning(seam: f64) -> Option<String> {
 pub fn run(a: &Args, g: &Global) -> Result<()> {
     let method = Method::parse(&a.method)?;
     let (window, fps) = resolve_window(&a.input, a.range.clone())?;
+    // a variable rate: seconds are counted at the rate the loop will be written at
+    let timing = WindowTiming::of(&a.input, window.clone())?;
+    let fps = timing.as_ref().map_or(fps, |t| t.nominal_fps);
     let length = loops::parse_length(&a.length, fps)?;
     let need = loops::min_window(&SearchParams::new(length, 1));
     if length > window.len() || window.len() < need {
@@ -1852,7 +2057,7 @@ pub fn run(a: &Args, g: &Global) -> Result<()> {
         top: a.top,
         every: a.every as usize,
     };
-    let mut src = LoopFootage::cached(&a.input, window.start, &c);
+    let mut src = LoopFootage::cached(&a.input, window.start, &c).timed(timing.as_ref());
     let steadying = steadying(&c.camera, &a.stabilise, g)?;
     if let Some(s) = &steadying {
         src = src.steadied(s, &c);
@@ -2000,6 +2205,7 @@ pub fn eigen_length_loop(a: &crate::eigen::LoopArgs, g: &Global) -> Result<()> {
         matte: (a.alpha == "matte").then(|| FootageMatte::new(&db, rows.start, rows.len())),
         emissive: false,
         steady: None,
+        timing: None,
     };
     let ask = LoopAsk {
         length,
@@ -2666,13 +2872,13 @@ mod tests {
         // (even, calm, of nothing); with the lit flags it refuses, naming the fire's stretch.
         let lit: Vec<bool> = (0..120).map(|i| i < 20).collect();
         let (w, m) = window(&lit);
-        let blind = search_and_choose(100, &w, 3, 3, &m, None, 40, Method::Auto).unwrap();
+        let blind = search_and_choose(100, &w, 3, 3, &m, None, &[], 40, Method::Auto).unwrap();
         assert!(
             blind.best.candidate.start >= 20,
             "{:?}",
             blind.best.candidate
         );
-        let err = search_and_choose(100, &w, 3, 3, &m, Some(&lit), 40, Method::Auto)
+        let err = search_and_choose(100, &w, 3, 3, &m, Some(&lit), &[], 40, Method::Auto)
             .err()
             .expect("a loop of keyed-out frames was chosen");
         let msg = format!("{err:#}");
@@ -2686,7 +2892,7 @@ mod tests {
         // No fire at all.
         let none = vec![false; 120];
         let (w, m) = window(&none);
-        let err = search_and_choose(0, &w, 3, 3, &m, Some(&none), 40, Method::Auto)
+        let err = search_and_choose(0, &w, 3, 3, &m, Some(&none), &[], 40, Method::Auto)
             .err()
             .expect("a loop of a window without fire was chosen");
         assert!(
@@ -2701,7 +2907,7 @@ mod tests {
         // loop is found inside one stretch, its taps included.
         let lit: Vec<bool> = (0..200).map(|i| i < 70 || (90..160).contains(&i)).collect();
         let (w, m) = window(&lit);
-        let c = search_and_choose(0, &w, 3, 3, &m, Some(&lit), 40, Method::Auto).unwrap();
+        let c = search_and_choose(0, &w, 3, 3, &m, Some(&lit), &[], 40, Method::Auto).unwrap();
         for e in &c.evaluated {
             let (s, t) = (e.candidate.start, e.candidate.end);
             assert!(
@@ -2717,10 +2923,58 @@ mod tests {
         // Every frame lit: the window's own search, unchanged.
         let all = vec![true; 200];
         let (w, m) = window(&all);
-        let a = search_and_choose(0, &w, 3, 3, &m, Some(&all), 40, Method::Auto).unwrap();
-        let b = search_and_choose(0, &w, 3, 3, &m, None, 40, Method::Auto).unwrap();
+        let a = search_and_choose(0, &w, 3, 3, &m, Some(&all), &[], 40, Method::Auto).unwrap();
+        let b = search_and_choose(0, &w, 3, 3, &m, None, &[], 40, Method::Auto).unwrap();
         assert_eq!(a.best.candidate, b.best.candidate);
         assert_eq!(a.evaluated.len(), b.evaluated.len());
+    }
+
+    #[test]
+    #[allow(clippy::single_range_in_vec_init)] // one run of frames, as `lit_runs` gives
+    fn even_runs_split_at_the_uneven_steps() {
+        // step 4 joins frames 4 and 5; step 9 lies outside the run 5..9; step 0 at its start
+        assert_eq!(even_runs(vec![0..12], &[4, 7]), vec![0..5, 5..8, 8..12]);
+        assert_eq!(
+            even_runs(vec![1..3, 5..9], &[0, 4, 6, 9]),
+            vec![1..3, 5..7, 7..9]
+        );
+        assert_eq!(even_runs(vec![0..6], &[]), vec![0..6]);
+    }
+
+    #[test]
+    fn a_variable_rate_loop_reads_only_evenly_timed_frames() {
+        // Steps 60..=84 are off the nominal rate (a stretch shot at half the rate): every
+        // evaluated loop, its taps and its closing's tail included, lies on one side.
+        let all = vec![true; 200];
+        let (w, m) = window(&all);
+        let uneven: Vec<usize> = (60..85).collect();
+        for lit in [None, Some(&all[..])] {
+            let c = search_and_choose(0, &w, 3, 3, &m, lit, &uneven, 40, Method::Auto).unwrap();
+            assert!(!c.evaluated.is_empty());
+            for e in &c.evaluated {
+                let (s, t) = (e.candidate.start, e.candidate.end);
+                let last = loops::plan_end(&e.candidate, e.closing).max(t + 2);
+                assert!(
+                    last <= 61 || s >= 87,
+                    "{s}..{t} ({}) reads frames up to {last} across steps 60..=84",
+                    e.closing
+                );
+            }
+        }
+        // the whole window unrestricted finds loops across the uneven steps
+        let any = search_and_choose(0, &w, 3, 3, &m, None, &[], 40, Method::Auto).unwrap();
+        assert!(any.evaluated.iter().any(|e| {
+            let c = &e.candidate;
+            c.start < 87 && loops::plan_end(c, e.closing).max(c.end + 2) > 61
+        }));
+        // no even stretch long enough: an `Uneven` error naming the longest
+        let every_30th: Vec<usize> = (0..199).filter(|i| i % 30 == 29).collect();
+        let err = search_and_choose(0, &w, 3, 3, &m, None, &every_30th, 40, Method::Auto)
+            .err()
+            .expect("a loop across uneven steps");
+        let u = err.downcast_ref::<Uneven>().expect("an Uneven error");
+        assert_eq!(u.longest.len(), 30, "{u}");
+        assert!(format!("{u}").contains("about 40 frames"), "{u}");
     }
 
     #[test]

@@ -460,6 +460,18 @@ fn frame_times(path: &Path, stream: u32) -> Result<Option<Arc<Vec<f64>>>> {
     Ok(packets(path, stream)?.and_then(|p| p.times.clone()))
 }
 
+/// The presentation times of the frames ffmpeg reads from `path` ([`frame_times`]), when
+/// there is one packet per frame read (`frames`, the probe's count); `None` otherwise.
+pub(crate) fn timed_frames(
+    path: &Path,
+    plan: &Plan,
+    frames: Option<u64>,
+) -> Result<Option<Vec<f64>>> {
+    Ok(frame_times(path, plan.stream)?
+        .filter(|t| frames == Some(t.len() as u64))
+        .map(|t| t.to_vec()))
+}
+
 /// What the read video stream's packets say: how many, and their presentation times
 /// ([`frame_times`]).
 struct Packets {

@@ -180,6 +180,59 @@ pub(crate) fn probe_mp4(path: &Path, len: u64, have_ffmpeg: bool) -> Result<Prob
     ))
 }
 
+/// The presentation times (seconds, in sample order) of the probed track's samples, from
+/// its sample table: decoding times (`stts`) plus composition offsets (`ctts`, B-frames),
+/// over the media's time scale. `None` when the table does not give one time per frame
+/// (`frames`, the probe's count) or its time scale is 0.
+pub(crate) fn sample_times(
+    path: &Path,
+    probe: &Mp4Probe,
+    frames: Option<u64>,
+) -> Result<Option<Vec<f64>>> {
+    let reader = read_header(path, probe.len)?;
+    let Some(track) = reader.tracks().get(&probe.track_id) else {
+        return Ok(None);
+    };
+    let n = track.sample_count() as usize;
+    let scale = track.trak.mdia.mdhd.timescale;
+    if scale == 0 || frames != Some(n as u64) || n > super::timing::MAX_TIMED_FRAMES {
+        return Ok(None);
+    }
+    let stbl = &track.trak.mdia.minf.stbl;
+    let mut decode = Vec::with_capacity(n);
+    let mut t = 0u64;
+    'table: for e in &stbl.stts.entries {
+        for _ in 0..e.sample_count {
+            if decode.len() == n {
+                break 'table;
+            }
+            decode.push(t as i64);
+            t = t.saturating_add(u64::from(e.sample_delta));
+        }
+    }
+    if decode.len() != n {
+        return Ok(None);
+    }
+    if let Some(ctts) = &stbl.ctts {
+        let mut i = 0;
+        'offsets: for e in &ctts.entries {
+            for _ in 0..e.sample_count {
+                if i == n {
+                    break 'offsets;
+                }
+                decode[i] += i64::from(e.sample_offset);
+                i += 1;
+            }
+        }
+    }
+    Ok(Some(
+        decode
+            .into_iter()
+            .map(|t| t as f64 / f64::from(scale))
+            .collect(),
+    ))
+}
+
 /// Length-prefixed (AVCC) NAL units → Annex B (start codes), appended to `out`.
 fn avcc_to_annexb(
     sample: &[u8],

@@ -27,6 +27,7 @@
 mod ffmpeg;
 mod h264;
 pub(crate) mod sequence;
+mod timing;
 
 use std::fmt;
 use std::io::Read;
@@ -43,6 +44,7 @@ pub use h264::avc_profile_name;
 pub use h264::decode_rgba8_count;
 pub(crate) use sequence::Pattern;
 pub use sequence::DEFAULT_SEQUENCE_FPS;
+pub use timing::{frame_timing, FrameTiming};
 
 /// Unit of a [`FrameRange`].
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
