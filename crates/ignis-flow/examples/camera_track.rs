@@ -1,10 +1,12 @@
-//! Tracks a clip's camera against its first frame and prints each frame's view offset
+//! Tracks a clip's camera against its reference frame (the first, unless a fade in or a
+//! soft first frame makes `choose_reference` take a later one, as `ignis loop` does) and
+//! prints each frame's view offset
 //! (source pixels) and the match's confidence, then a summary: how much of the clip is
 //! tracked and how far the view wanders.
 //!
 //! `cargo run --release -p ignis-flow --example camera_track -- CLIP [EVERY]`
 
-use ignis_flow::camera::{CameraPath, TrackGray, Tracker};
+use ignis_flow::camera::{choose_reference, CameraPath, TrackGray, Tracker, REFERENCE_FRAMES};
 use ignis_media::DecodedFrame;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -17,13 +19,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         DecodedFrame::Linear(f) => TrackGray::from_rgba(&f),
     };
     let t0 = std::time::Instant::now();
-    let first = gray(reader.next_decoded().ok_or("no frames")??);
-    let source = first.source();
-    let tracker = Tracker::new(&first);
-    let mut tracks = vec![tracker.track(&first)];
+    let mut grays = Vec::new();
     while let Some(f) = reader.next_decoded() {
-        tracks.push(tracker.track(&gray(f?)));
+        grays.push(gray(f?));
     }
+    let head = &grays[..grays.len().min(REFERENCE_FRAMES)];
+    let r = choose_reference(head).ok_or("no frames")?;
+    println!("reference: frame {r}");
+    let source = grays[r].source();
+    let tracker = Tracker::new(&grays[r]);
+    let tracks: Vec<_> = grays.iter().map(|g| tracker.track(g)).collect();
     let secs = t0.elapsed().as_secs_f64();
     for (i, t) in tracks.iter().enumerate().filter(|(i, _)| i % every == 0) {
         println!(

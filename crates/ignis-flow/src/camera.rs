@@ -28,6 +28,10 @@
 //! refinement after a correlation at half the size, 0.14 px on the campfire but 1.2 px on
 //! the candle, pulled by the reflections; the one-sided Foroosh estimate, 0.20 / 0.35 px.
 //!
+//! The reference is the window's first frame unless it has less than half the detail of
+//! the best of the next [`REFERENCE_FRAMES`] ([`choose_reference`]): a clip that fades in
+//! from black has nothing to match in its first frame, and no frame was tracked against it.
+//!
 //! Only translation is modelled: a hand-held camera over a few seconds mostly shifts the
 //! view; roll and zoom are left in. A camera that pans away from the reference (the view
 //! no longer shares enough with it) fails the confidence test, and the caller leaves the
@@ -188,18 +192,43 @@ pub struct Tracker {
     textured: Vec<u32>,
 }
 
+/// The pixels of `img` with detail (a gradient of at least [`TEXTURE`]), off the one-pixel
+/// border, as indices.
+fn textured_pixels(img: &Img) -> Vec<u32> {
+    let (gx, gy) = img.gradients();
+    let (w, h) = (img.w, img.h);
+    (1..h.saturating_sub(1))
+        .flat_map(|y| (1..w.saturating_sub(1)).map(move |x| y * w + x))
+        .filter(|&i| gx.data[i].abs().max(gy.data[i].abs()) >= TEXTURE)
+        .map(|i| i as u32)
+        .collect()
+}
+
+/// Frames at the start of a window among which [`choose_reference`] looks: about two
+/// seconds at 24 fps, the length of a fade in from black.
+pub const REFERENCE_FRAMES: usize = 48;
+
+/// Which of a window's first frames (`heads`, in order; [`REFERENCE_FRAMES`] of them) to
+/// track the camera against: the first whose detail (pixels with a gradient of an 8-bit
+/// level or more) is at least half the most any of them has. That is the first frame,
+/// unless it is flat or soft next to those after it — a fade in from black (nothing to
+/// match, so no frame would be tracked), a blurred or flashed first frame. `None` when
+/// `heads` is empty.
+pub fn choose_reference(heads: &[TrackGray]) -> Option<usize> {
+    let detail: Vec<usize> = heads
+        .iter()
+        .map(|g| textured_pixels(&g.img).len())
+        .collect();
+    let most = *detail.iter().max()?;
+    detail.iter().position(|&d| 2 * d >= most)
+}
+
 impl Tracker {
     pub fn new(reference: &TrackGray) -> Tracker {
         let img = reference.img.clone();
-        let (gx, gy) = img.gradients();
         let (pw, ph) = (img.w, img.h);
         let spec = spectrum(&img, pw, ph);
-        let (w, h) = (img.w, img.h);
-        let textured = (1..h.saturating_sub(1))
-            .flat_map(|y| (1..w.saturating_sub(1)).map(move |x| y * w + x))
-            .filter(|&i| gx.data[i].abs().max(gy.data[i].abs()) >= TEXTURE)
-            .map(|i| i as u32)
-            .collect();
+        let textured = textured_pixels(&img);
         Tracker {
             reference: img,
             pw,
@@ -890,6 +919,49 @@ mod tests {
             // across, 2.1 px down)
             assert!(err < 0.6, "{dx},{dy}: found {:?} (error {err})", t.offset);
         }
+    }
+
+    /// `f`'s colours times `k` (a fade from black).
+    fn faded(mut f: RgbaFrame, k: f32) -> RgbaFrame {
+        for p in f.data_mut() {
+            for c in &mut p[..3] {
+                *c *= k;
+            }
+        }
+        f
+    }
+
+    #[test]
+    fn the_reference_is_the_first_frame_unless_a_fade_hides_it() {
+        let shot = |i: usize| {
+            with_flame(
+                scene(320, 180, i as f32, 0.5 * i as f32),
+                i as f32,
+                (0.0, 0.0),
+            )
+        };
+        // as shot: the first frame
+        let heads: Vec<TrackGray> = (0..8).map(|i| TrackGray::from_rgba(&shot(i))).collect();
+        assert_eq!(choose_reference(&heads), Some(0));
+        // a fade in from black over 8 frames: black frames have no detail to match
+        let fade: Vec<TrackGray> = (0..12)
+            .map(|i| TrackGray::from_rgba(&faded(shot(i), (i as f32 / 8.0).min(1.0))))
+            .collect();
+        let r = choose_reference(&fade).unwrap();
+        assert!((1..8).contains(&r), "reference {r}");
+        // tracked against it, the frames after the fade find the camera; against the
+        // black first frame, none does
+        for (i, g) in fade.iter().enumerate().skip(8) {
+            let t = Tracker::new(&fade[r]).track(g);
+            assert!(t.tracked(), "frame {i}: {t:?}");
+            let want = [i as f32 - r as f32, 0.5 * (i as f32 - r as f32)];
+            assert!(
+                (t.offset[0] - want[0]).hypot(t.offset[1] - want[1]) < 0.6,
+                "frame {i}: {t:?} against {want:?}"
+            );
+            assert!(!Tracker::new(&fade[0]).track(g).tracked());
+        }
+        assert_eq!(choose_reference(&[]), None);
     }
 
     #[test]

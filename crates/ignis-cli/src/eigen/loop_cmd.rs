@@ -32,8 +32,9 @@ use crate::global::Global;
 /// over 1080p is trained at [`TRAIN_MAX_SIDE`]; 5: footage read as players show it —
 /// square pixels, HDR and BT.2020 as SDR BT.709, deinterlaced, the stream's own matrix and
 /// range on the pure path, the largest video stream that is not an attached picture; 6: the
-/// camera's track of every frame, `camera.f32`, for `--stabilise`).
-const CACHE_VERSION: u32 = 6;
+/// camera's track of every frame, `camera.f32`, for `--stabilise`; 7: tracked against the
+/// first of the window's first frames with detail, not a fade's black first frame).
+const CACHE_VERSION: u32 = 7;
 
 #[derive(clap::Args, Debug)]
 #[command(
@@ -86,7 +87,7 @@ pub struct Args {
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=16))]
     pub every: u32,
     /// Hold a hand-held camera still: `auto` (default) when the whole view shifts with the
-    /// camera (tracked against the clip's first frame, translation only) by more than a
+    /// camera (tracked against one of the clip's first frames, translation only) by more than a
     /// pixel or a quarter of a percent of the frame; `on` whenever the camera can be
     /// tracked; `off` never. A steadied loop is zoomed just enough (at most ×1.25) that no
     /// frame shows past its edge.
@@ -149,7 +150,8 @@ struct EntryMeta {
     metric_frames: usize,
     metric_sha256: String,
     /// SHA-256 of `camera.f32`: per window frame the camera's track against the window's
-    /// first frame (`ignis_flow::camera::Track`: offset x, y, peak, explains; 4 × f32 LE).
+    /// reference frame ([`ignis_flow::camera::choose_reference`]; `Track`: offset x, y,
+    /// peak, explains; 4 × f32 LE).
     camera_sha256: String,
     /// SHA-256 of `aligned.f32`: the metric frames of the window each moved by the whole
     /// pixels of its camera track (`ignis_flow::camera::whole_pixels`), the frames a
@@ -2261,7 +2263,8 @@ fn beside_db(recorded: &str, db: &Path) -> Option<PathBuf> {
 
 /// Metric frames ([`loopq::metric_frame_rgba`], as a writer measures them) of the source
 /// frames in `window`, with a progress bar, and with `track` the camera's track of each
-/// against the window's first frame (`ignis_flow::camera`) and the metric frame of each
+/// against a reference among the window's first frames
+/// ([`ignis_flow::camera::choose_reference`]) and the metric frame of each
 /// moved by its track's whole pixels (`None` where that is no move; both empty without).
 /// May return fewer frames than asked when the video is shorter.
 type Measured = (Vec<GrayFrame>, Vec<Option<GrayFrame>>, Vec<Track>);
@@ -2283,22 +2286,33 @@ fn metric_frames(path: &Path, window: &Range<usize>, track: bool, g: &Global) ->
     let mut aligned = Vec::with_capacity(tracks.capacity());
     // 8-bit decoders hand over their bytes: the metric straight from them is the same
     // grey, bit for bit, without a 16-byte linear pixel per pixel (`metric_frame_srgba8`).
-    let mut reader = ignis_media::open_keeping_8bit(path, &opts)?;
-    let batch = ignis_core::stream::batch_len(reader.info().size.pixels() * 16, 256 << 20);
     let gray = |f: &ignis_media::DecodedFrame| match f {
         ignis_media::DecodedFrame::Srgba8 { size, bytes } => TrackGray::from_srgba8(*size, bytes),
         ignis_media::DecodedFrame::Linear(f) => Some(TrackGray::from_rgba(f)),
     };
-    // the reference is the first frame, decoded before the rest
-    let head = reader.next_decoded().transpose()?;
-    let tracker = match (&head, track) {
-        (Some(f), true) => gray(f).map(|r| Tracker::new(&r)),
-        _ => None,
+    // the reference: one of the first frames (the first, unless it is flat or soft next
+    // to those after it: a fade in from black)
+    let tracker = if track {
+        let n = window.len().min(ignis_flow::camera::REFERENCE_FRAMES);
+        let head = ignis_media::ReadOptions {
+            range: Some(ignis_media::FrameRange::frames(
+                window.start as u64,
+                Some((window.start + n) as u64),
+            )),
+            ..Default::default()
+        };
+        let mut first = ignis_media::open_keeping_8bit(path, &head)?;
+        let mut heads = Vec::with_capacity(n);
+        while let Some(f) = first.next_decoded() {
+            heads.extend(gray(&f?));
+        }
+        ignis_flow::camera::choose_reference(&heads).map(|r| Tracker::new(&heads[r]))
+    } else {
+        None
     };
-    let frames = head
-        .map(Ok)
-        .into_iter()
-        .chain(std::iter::from_fn(move || reader.next_decoded()));
+    let mut reader = ignis_media::open_keeping_8bit(path, &opts)?;
+    let batch = ignis_core::stream::batch_len(reader.info().size.pixels() * 16, 256 << 20);
+    let frames = std::iter::from_fn(move || reader.next_decoded());
     ignis_core::stream::map_in_order(
         frames.map(|f| f.map_err(anyhow::Error::from)),
         batch,
@@ -2407,7 +2421,8 @@ mod tests {
     /// A hand-held shot made from `campfire.mp4` (a 440×240 window moved by known whole
     /// pixels each frame, written as a PNG sequence) is tracked in the cache within a
     /// fraction of a pixel, steadied by `auto`, and its loop written with the view still;
-    /// the same frames unmoved are left as shot.
+    /// the same shot fading in from black is tracked and steadied too; the same frames
+    /// unmoved are left as shot.
     #[test]
     fn a_hand_held_shot_loops_with_the_camera_held_still() {
         let Some(src) = clip("campfire.mp4") else {
@@ -2441,12 +2456,21 @@ mod tests {
             )
             .unwrap()
         };
-        for (name, moving) in [("shaky", true), ("still", false)] {
+        // `faded`: the shaky shot fading in from black over its first 6 frames
+        for (name, moving, fade) in [("shaky", true, 0), ("faded", true, 6), ("still", false, 0)] {
             let seq = dir.path().join(name);
             std::fs::create_dir_all(&seq).unwrap();
             for (i, f) in frames.iter().enumerate() {
                 let o = if moving { shake(i) } else { [20, 15] };
-                ignis_media::write_png(&seq.join(format!("{i:04}.png")), &crop(f, o)).unwrap();
+                let mut f = crop(f, o);
+                if i < fade {
+                    for p in f.data_mut() {
+                        for c in &mut p[..3] {
+                            *c *= i as f32 / fade as f32;
+                        }
+                    }
+                }
+                ignis_media::write_png(&seq.join(format!("{i:04}.png")), &f).unwrap();
             }
             let input = seq.join("%04d.png");
             let open = || {
@@ -2469,6 +2493,27 @@ mod tests {
                 let why = decided.unwrap_err();
                 assert!(why.contains("still"), "{why}");
                 assert!(steadying(&c.camera, "auto", &quiet).unwrap().is_none());
+                continue;
+            }
+            if fade > 0 {
+                // tracked against a frame of the fade with detail, not the black first
+                // one (against which no frame matched): the moves since frame 30 as shot
+                assert!(
+                    c.camera.tracked_share() >= 0.9,
+                    "{}",
+                    c.camera.tracked_share()
+                );
+                let t30 = c.camera.tracks[30].offset;
+                let mut errs: Vec<f32> = (fade..60)
+                    .map(|i| {
+                        let (o, o30, t) = (shake(i), shake(30), c.camera.tracks[i].offset);
+                        (t[0] - t30[0] + (o[0] - o30[0]) as f32)
+                            .hypot(t[1] - t30[1] + (o[1] - o30[1]) as f32)
+                    })
+                    .collect();
+                errs.sort_by(f32::total_cmp);
+                assert!(errs[errs.len() / 2] < 0.4, "track errors {errs:?}");
+                assert!(decided.is_ok(), "{decided:?}");
                 continue;
             }
             // content moved by minus the window's move since frame 0
