@@ -66,8 +66,10 @@ pub fn run(args: &Args, g: &Global) -> Result<Vec<PathBuf>> {
     let input = &args.input;
     let mut read = args.read_options()?;
     let info = ignis_media::probe(input).with_context(|| format!("reading {}", input.display()))?;
+    // timestamps that cannot be read: every frame once, at the probe's average rate
     let timing = ignis_media::frame_timing(input)
-        .with_context(|| format!("reading {}'s frame times", input.display()))?
+        .ok()
+        .flatten()
         .filter(|t| t.is_variable());
     // A variable frame rate: --seconds by the frames' own times, and every frame written
     // for as long as it is shown, at the nominal rate (or --fps), as a player shows it.
@@ -87,14 +89,28 @@ pub fn run(args: &Args, g: &Global) -> Result<Vec<PathBuf>> {
         fps: Some(fps),
         ..args.out.clone()
     };
+    out.check_with(&out.write_options())?;
     let holds = match &timing {
         Some(t) => {
             let (a, b) = read
                 .range
                 .unwrap_or(FrameRange::frames(0, None))
                 .resolve(info.fps, info.frame_count)?;
-            let b = b.map_or(t.len(), |b| b as usize);
-            let holds = t.holds(a as usize..b, fps);
+            let (a, b) = (a as usize, b.map_or(t.len(), |b| b as usize));
+            // a gap in the timestamps is held as a player holds it, up to a bound
+            let most = 100 * (b - a) as u64 + 1000;
+            let holds = t.holds(a..b, fps, most).map_err(|n| {
+                let gap = t.longest_step(a..b).map_or(String::new(), |(i, s)| {
+                    format!(" (the longest gap: {s:.3} s after frame {i})")
+                });
+                anyhow!(
+                    "{}: its frames' timestamps span {:.1} s, {n} frames at {fps} fps for {} frames read{gap}; \
+                     give --range to leave a gap out, or a lower --fps",
+                    input.display(),
+                    n / fps,
+                    b - a
+                )
+            })?;
             let held = holds.iter().filter(|&&n| n > 1).count();
             let dropped = holds.iter().filter(|&&n| n == 0).count();
             g.say(format!(

@@ -18,8 +18,8 @@ pub struct Args {
 pub fn run(args: &Args) -> Result<()> {
     let info = ignis_media::probe(&args.input)
         .with_context(|| format!("reading {}", args.input.display()))?;
-    let timing = ignis_media::frame_timing(&args.input)
-        .with_context(|| format!("reading {}'s frame times", args.input.display()))?;
+    // timestamps that cannot be read say nothing of the rate: the probe's average stands
+    let timing = ignis_media::frame_timing(&args.input).ok().flatten();
     let variable = timing.as_ref().and_then(variable_rate);
     if args.json {
         let v = serde_json::json!({

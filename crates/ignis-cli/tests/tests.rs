@@ -3500,13 +3500,65 @@ mod variable_frame_rate {
         assert_eq!(meta["frame_count"], 170, "{meta}");
         assert!(said.contains("25 held longer, 0 left out"), "{said}");
         // 2..3.02 s is frames 50..68 (frame 60 at 2.4 s, then one every 80 ms: frame 67
-        // from 2.96 s to 3.04 s): 1.04 s, 26 frames at 25 fps
+        // from 2.96 s, held a nominal step, as the range ends): 1 s, 25 frames at 25 fps
         let (meta, _) = run(&["--seconds", "2..3.02"]);
-        assert_eq!(meta["frame_count"], 26, "{meta}");
+        assert_eq!(meta["frame_count"], 25, "{meta}");
         // --fps 12.5: one frame in two of the even stretches, each slow one once
         let (meta, _) = run(&["--fps", "12.5"]);
         assert_eq!(meta["fps"], 12.5, "{meta}");
         assert_eq!(meta["frame_count"], 85, "{meta}");
+    }
+
+    /// A clip whose timestamps jump an hour after frame 9 (a damaged file, a paused
+    /// recording) would be 90,020 held frames: refused up front, naming the gap, nothing
+    /// written; the frames before the gap convert.
+    #[test]
+    fn convert_refuses_an_hour_long_gap() {
+        if !has_ffmpeg() {
+            return;
+        }
+        let t = tempfile::tempdir().unwrap();
+        let clip = t.path().join("gap.mp4");
+        let ok = Command::new("ffmpeg")
+            .args([
+                "-v",
+                "error",
+                "-y",
+                "-f",
+                "lavfi",
+                "-i",
+                "testsrc=size=64x48:rate=25",
+            ])
+            .args(["-frames:v", "20", "-vf", "setpts='PTS+gte(N\\,10)*3600/TB'"])
+            .args(["-fps_mode", "vfr", "-c:v", "libx264", "-pix_fmt", "yuv420p"])
+            .arg(&clip)
+            .status()
+            .unwrap()
+            .success();
+        assert!(ok, "ffmpeg made the clip");
+        let out = t.path().join("g.png");
+        let r = ignis(&[
+            "convert",
+            clip.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+        ]);
+        assert_fails(&r, "the longest gap: 3600.040 s after frame 9");
+        assert_fails(&r, "--range");
+        assert!(!out.exists() && !t.path().join("g.json").exists());
+        ignis_ok(&[
+            "convert",
+            clip.to_str().unwrap(),
+            "--range",
+            "0..10",
+            "-o",
+            out.to_str().unwrap(),
+        ]);
+        let meta = read_json(&t.path().join("g.json"));
+        assert_eq!(
+            (meta["frame_count"].as_u64(), meta["fps"].as_f64()),
+            (Some(10), Some(25.0))
+        );
     }
 
     #[test]

@@ -423,9 +423,9 @@ mod probing {
     }
 
     /// Frame times come from the MP4 sample table on the built-in path and from the
-    /// packets through ffmpeg: a 30-fps clip with frames 10..20 held twice as long (every
-    /// other one dropped, timestamps kept, as a phone in low light; 40 frames written) is variable at 30 fps
-    /// nominal by both, with exactly the 5 long steps uneven; its constant-rate original is
+    /// packets through ffmpeg: 40 frames of a 30-fps clip with frames 10..20 held twice as
+    /// long (every other one dropped, timestamps kept, as a phone in low light) are variable
+    /// at 30 fps nominal by both, with exactly the 5 long steps uneven; a constant rate is
     /// not, in MP4 and in Matroska's 1-ms time base (29.97 fps: 33- and 34-ms steps).
     #[test]
     fn frame_times_find_a_variable_rate_on_both_paths() {

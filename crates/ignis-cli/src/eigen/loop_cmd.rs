@@ -1387,20 +1387,20 @@ pub struct WindowTiming {
 
 impl WindowTiming {
     /// `path`'s frame timing over `window` when its rate varies there; `None` for a
-    /// constant rate or a source without frame times (image sequences, GIFs).
-    pub fn of(path: &Path, window: Range<usize>) -> Result<Option<WindowTiming>> {
-        let timing = ignis_media::frame_timing(path)
-            .with_context(|| format!("reading {}'s frame times", path.display()))?;
-        let Some(t) = timing.and_then(|t| t.window(window)) else {
-            return Ok(None);
-        };
+    /// constant rate or a source without frame times (image sequences, GIFs) or whose
+    /// times cannot be read (the loop is then looked for as before, at the average rate).
+    pub fn of(path: &Path, window: Range<usize>) -> Option<WindowTiming> {
+        let t = ignis_media::frame_timing(path)
+            .ok()
+            .flatten()?
+            .window(window)?;
         let uneven = t.uneven_steps();
-        Ok((!uneven.is_empty()).then(|| WindowTiming {
+        (!uneven.is_empty()).then(|| WindowTiming {
             nominal_fps: t.nominal_fps(),
             average_fps: t.average_fps(),
             uneven,
             steps: t.step_range(),
-        }))
+        })
     }
 
     /// What the timing is, said in a clause.
@@ -2023,7 +2023,7 @@ pub fn run(a: &Args, g: &Global) -> Result<()> {
     let method = Method::parse(&a.method)?;
     let (window, fps) = resolve_window(&a.input, a.range.clone())?;
     // a variable rate: seconds are counted at the rate the loop will be written at
-    let timing = WindowTiming::of(&a.input, window.clone())?;
+    let timing = WindowTiming::of(&a.input, window.clone());
     let fps = timing.as_ref().map_or(fps, |t| t.nominal_fps);
     let length = loops::parse_length(&a.length, fps)?;
     let need = loops::min_window(&SearchParams::new(length, 1));

@@ -206,7 +206,7 @@ pub(crate) fn sample_times(
             if decode.len() == n {
                 break 'table;
             }
-            decode.push(t as i64);
+            decode.push(i64::try_from(t).unwrap_or(i64::MAX));
             t = t.saturating_add(u64::from(e.sample_delta));
         }
     }
@@ -220,7 +220,7 @@ pub(crate) fn sample_times(
                 if i == n {
                     break 'offsets;
                 }
-                decode[i] += i64::from(e.sample_offset);
+                decode[i] = decode[i].saturating_add(i64::from(e.sample_offset));
                 i += 1;
             }
         }

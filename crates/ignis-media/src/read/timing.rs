@@ -163,20 +163,33 @@ impl FrameTiming {
     /// How many times each of frames `range` is written to play at `fps` as a player shows
     /// them (each frame held until the next one's time: written at every tick
     /// `times[start] + k / fps` from its own time to the next frame's, 0 times when the
-    /// ticks step over it); the last frame of the clip is held for a nominal step.
-    pub fn holds(&self, range: Range<usize>, fps: f64) -> Vec<u32> {
+    /// ticks step over it); the range's last frame is held until the next frame's time,
+    /// at most one nominal step (its end cuts there). `Err`
+    /// with the number of frames that would be written when that is more than `most` (a
+    /// gap of hours in the timestamps, a damaged file), before any is counted.
+    pub fn holds(
+        &self,
+        range: Range<usize>,
+        fps: f64,
+        most: u64,
+    ) -> std::result::Result<Vec<u32>, f64> {
         let r = range.start.min(self.len())..range.end.min(self.len());
         let mut out = vec![0u32; r.len()];
-        if r.is_empty() || !(fps > 0.0) {
-            return out;
+        if r.is_empty() || fps.is_nan() || fps <= 0.0 {
+            return Ok(out);
         }
         let t0 = self.times[r.start];
-        let end = match self.times.get(r.end) {
-            Some(&t) => t,
-            None => self.times[self.len() - 1] + self.nominal_step(),
-        };
+        // the last frame is held until the next one, at most a nominal step (a range's
+        // end cuts there: the next frame may come an hour later)
+        let last = self.times[r.end - 1];
+        let next = self.times.get(r.end).map_or(f64::INFINITY, |&t| t - last);
+        let end = last + next.min(self.nominal_step());
         // a tick within a microsecond of a frame's time shows that frame
         const EPS: f64 = 1e-6;
+        let written = ((end - EPS - t0) * fps).ceil();
+        if written.is_nan() || written > most as f64 {
+            return Err(written);
+        }
         let mut i = r.start;
         for k in 0u64.. {
             let tick = t0 + k as f64 / fps;
@@ -188,7 +201,15 @@ impl FrameTiming {
             }
             out[i - r.start] += 1;
         }
-        out
+        Ok(out)
+    }
+
+    /// The longest step among frames `range` (seconds) and the frame it starts at.
+    pub fn longest_step(&self, range: Range<usize>) -> Option<(usize, f64)> {
+        let r = range.start.min(self.len())..range.end.min(self.len());
+        (r.start..r.end.saturating_sub(1))
+            .map(|i| (i, self.times[i + 1] - self.times[i]))
+            .max_by(|a, b| a.1.total_cmp(&b.1))
     }
 
     /// The shortest and the longest step, seconds.
@@ -227,7 +248,8 @@ fn median(v: &mut [f64]) -> f64 {
     }
 }
 
-/// When `path`'s frames are shown, from its container's timestamps: an MP4's sample table
+/// When `path`'s frames are shown, from its container's timestamps (callers treat an
+/// error as no timing: the frames still read, at the average rate): an MP4's sample table
 /// on the built-in path, the packets' timestamps (`ffprobe`, demuxing only) for what
 /// ffmpeg reads. `None` where there are none to read or they do not match the frames
 /// read: image sequences and stills (one rate for all), GIFs (their delays are whole
@@ -320,39 +342,44 @@ mod tests {
         steps.extend([0.04; 10]);
         let t = at(&steps);
         assert_eq!(t.len(), 26);
-        assert_eq!(t.frame_at(0.0), 0);
-        assert_eq!(t.frame_at(0.4), 10);
-        assert_eq!(t.frame_at(0.59), 12);
-        assert_eq!(
-            t.frame_at(0.6),
-            13,
-            "half way between frames 12 and 13 rounds up"
-        );
-        assert_eq!(t.frame_at(0.81), 15);
-        assert_eq!(t.frame_at(1.2), 25);
-        assert_eq!(
-            t.frame_at(1.23),
-            26,
-            "past the last frame by more than half a step: the count"
-        );
-        assert_eq!(t.frame_at(1.4), 30);
+        // half way between frames 12 and 13 (0.6 s) rounds up; past the last frame by
+        // more than half a step (1.23 s), the count
+        for (secs, frame) in [
+            (0.0, 0),
+            (0.4, 10),
+            (0.59, 12),
+            (0.6, 13),
+            (0.81, 15),
+            (1.2, 25),
+            (1.23, 26),
+            (1.4, 30),
+        ] {
+            assert_eq!(t.frame_at(secs), frame, "{secs} s");
+        }
         // a constant rate: round(seconds × fps)
         let c = at(&[0.04; 50]);
         for s in [0.0, 0.31, 0.52, 0.69, 1.0, 1.99, 2.0, 2.13] {
             assert_eq!(c.frame_at(s), (s * 25.0f64).round() as u64, "{s}");
         }
         // written at 25 fps: the slow frames twice, the rest once
-        let h = t.holds(0..26, 25.0);
+        let h = t.holds(0..26, 25.0, 1000).unwrap();
         assert_eq!(&h[..10], &[1; 10]);
         assert_eq!(&h[10..15], &[2; 5]);
         assert_eq!(&h[15..], &[1; 11]);
         assert_eq!(h.iter().sum::<u32>(), 31, "1.24 s at 25 fps");
         // at 12.5 fps from frame 1: every other fast frame dropped, slow ones once
-        let h = t.holds(1..20, 12.5);
+        let h = t.holds(1..20, 12.5, 1000).unwrap();
         assert_eq!(h.iter().sum::<u32>(), 12, "0.96 s at 12.5 fps");
         assert!(h[10..14].iter().all(|&n| n == 1), "{h:?}");
         // a constant rate at its own rate: every frame once
-        assert!(c.holds(5..40, 25.0).iter().all(|&n| n == 1));
+        assert!(c.holds(5..40, 25.0, 1000).unwrap().iter().all(|&n| n == 1));
+        // more frames than allowed (a gap of an hour): refused before counting
+        assert_eq!(t.holds(0..26, 25.0, 30), Err(31.0));
+        let mut gap = vec![0.04; 10];
+        gap.push(3600.0);
+        let g = at(&gap);
+        assert!(g.holds(0..12, 30.0, 100_000).is_err());
+        assert_eq!(g.longest_step(0..12), Some((10, 3600.0)));
     }
 
     #[test]
