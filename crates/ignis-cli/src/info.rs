@@ -1,6 +1,8 @@
 //! `ignis info`: what a source is and which decoder will read it.
 
 use anyhow::{Context, Result};
+
+use crate::eigen::loop_cmd::WindowTiming;
 use std::path::PathBuf;
 
 #[derive(clap::Args, Debug)]
@@ -18,9 +20,7 @@ pub struct Args {
 pub fn run(args: &Args) -> Result<()> {
     let info = ignis_media::probe(&args.input)
         .with_context(|| format!("reading {}", args.input.display()))?;
-    // timestamps that cannot be read say nothing of the rate: the probe's average stands
-    let timing = ignis_media::frame_timing(&args.input).ok().flatten();
-    let variable = timing.as_ref().and_then(variable_rate);
+    let variable = WindowTiming::of(&args.input, 0..usize::MAX);
     if args.json {
         let v = serde_json::json!({
             "path": info.path,
@@ -36,10 +36,10 @@ pub fn run(args: &Args) -> Result<()> {
             "variable_frame_rate": variable.as_ref().map(|v| serde_json::json!({
                 "nominal_fps": v.nominal_fps,
                 "average_fps": v.average_fps,
-                "uneven_steps": v.uneven,
-                "steps": v.steps,
-                "shortest_step_s": v.shortest,
-                "longest_step_s": v.longest,
+                "uneven_steps": v.uneven.len(),
+                "steps": v.frames - 1,
+                "shortest_step_s": v.steps.0,
+                "longest_step_s": v.steps.1,
             })),
         });
         outln!("{}", serde_json::to_string_pretty(&v)?)?;
@@ -56,10 +56,10 @@ pub fn run(args: &Args) -> Result<()> {
                 "fps:     {} on average; variable: {:.3} nominal, {} of {} frame steps off it ({:.1}–{:.1} ms apart; `ignis loop` loops evenly timed stretches at {:.3} fps)",
                 info.fps,
                 v.nominal_fps,
-                v.uneven,
-                v.steps,
-                v.shortest * 1e3,
-                v.longest * 1e3,
+                v.uneven.len(),
+                v.frames - 1,
+                v.steps.0 * 1e3,
+                v.steps.1 * 1e3,
                 v.nominal_fps
             )?,
             None => outln!("fps:     {}", info.fps)?,
@@ -78,31 +78,4 @@ pub fn run(args: &Args) -> Result<()> {
         outln!("decoder: {}", info.decoder)?;
     }
     Ok(())
-}
-
-/// What `info` says of a variable frame rate.
-struct VariableRate {
-    nominal_fps: f64,
-    average_fps: f64,
-    /// Steps between frames not at the nominal rate, of `steps`.
-    uneven: usize,
-    steps: usize,
-    shortest: f64,
-    longest: f64,
-}
-
-/// The variable rate of `t`, `None` when its rate holds.
-fn variable_rate(t: &ignis_media::FrameTiming) -> Option<VariableRate> {
-    let uneven = t.uneven_steps().len();
-    (uneven > 0).then(|| {
-        let (shortest, longest) = t.step_range();
-        VariableRate {
-            nominal_fps: t.nominal_fps(),
-            average_fps: t.average_fps(),
-            uneven,
-            steps: t.len() - 1,
-            shortest,
-            longest,
-        }
-    })
 }

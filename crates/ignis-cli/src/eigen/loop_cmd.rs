@@ -1383,34 +1383,36 @@ pub struct WindowTiming {
     pub uneven: Vec<usize>,
     /// The shortest and longest step, seconds.
     pub steps: (f64, f64),
+    /// Frames in the window (at least two).
+    pub frames: usize,
 }
 
 impl WindowTiming {
-    /// `path`'s frame timing over `window` when its rate varies there; `None` for a
-    /// constant rate or a source without frame times (image sequences, GIFs) or whose
-    /// times cannot be read (the loop is then looked for as before, at the average rate).
+    /// `path`'s frame timing over `window` (clamped to the clip) when its rate varies
+    /// there; `None` for a constant rate or a source without frame times (image sequences,
+    /// GIFs) or whose times cannot be read (the frames then play at the average rate).
     pub fn of(path: &Path, window: Range<usize>) -> Option<WindowTiming> {
         let t = ignis_media::frame_timing(path)
             .ok()
             .flatten()?
             .window(window)?;
-        let uneven = t.uneven_steps();
-        (!uneven.is_empty()).then(|| WindowTiming {
+        t.is_variable().then(|| WindowTiming {
             nominal_fps: t.nominal_fps(),
             average_fps: t.average_fps(),
-            uneven,
+            uneven: t.uneven_steps().to_vec(),
             steps: t.step_range(),
+            frames: t.len(),
         })
     }
 
     /// What the timing is, said in a clause.
-    fn describe(&self, frames: usize) -> String {
+    fn describe(&self) -> String {
         format!(
             "the frame rate varies ({:.3} fps nominal, {:.3} on average; {} of {} steps off it, frames {:.1}–{:.1} ms apart)",
             self.nominal_fps,
             self.average_fps,
             self.uneven.len(),
-            frames.saturating_sub(1),
+            self.frames - 1,
             self.steps.0 * 1e3,
             self.steps.1 * 1e3
         )
@@ -1825,7 +1827,7 @@ pub fn make_loop_sized(
                 Ok(c) => {
                     g.say(format!(
                         "timing: {}; the loop comes from evenly timed frames and is written at {:.3} fps",
-                        t.describe(metric.len()),
+                        t.describe(),
                         t.nominal_fps
                     ));
                     (c, t.nominal_fps)
@@ -1836,7 +1838,7 @@ pub fn make_loop_sized(
                             "warning: {}, and {u}; looking in the whole window, written at the average {:.3} fps, \
                              so parts of the loop may play faster or slower than they were shot (a shorter --length \
                              fits an even stretch)",
-                            t.describe(metric.len()),
+                            t.describe(),
                             fps
                         ));
                         let any = search_and_choose(

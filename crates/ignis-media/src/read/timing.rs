@@ -10,6 +10,8 @@
 use std::ops::Range;
 use std::path::Path;
 
+use ignis_core::loopq::median;
+
 use crate::error::Result;
 
 /// A step longer than this many nominal frame durations (or shorter than its inverse) is
@@ -28,10 +30,13 @@ pub const LOCAL_STEPS: usize = 9;
 /// frames gets no timing, not an allocation of its claim.
 pub const MAX_TIMED_FRAMES: usize = 1 << 24;
 
-/// The presentation times of a clip's frames (seconds, ascending; at least two).
+/// The presentation times of a clip's frames (seconds, ascending; at least two), with
+/// its uneven steps and nominal step worked out once.
 #[derive(Clone, Debug, PartialEq)]
 pub struct FrameTiming {
     times: Vec<f64>,
+    uneven: Vec<usize>,
+    nominal_step: f64,
 }
 
 impl FrameTiming {
@@ -44,7 +49,14 @@ impl FrameTiming {
             return None;
         }
         times.sort_by(f64::total_cmp);
-        Some(FrameTiming { times })
+        let steps: Vec<f64> = times.windows(2).map(|w| w[1] - w[0]).collect();
+        let uneven = uneven_steps(&steps);
+        let nominal_step = nominal_step(&steps, &uneven);
+        Some(FrameTiming {
+            times,
+            uneven,
+            nominal_step,
+        })
     }
 
     /// The frame times, ascending.
@@ -78,22 +90,7 @@ impl FrameTiming {
     /// 29.97-fps clip in a 1-ms time base steps 33 or 34 ms, and its median step, 33 ms,
     /// is 1 % fast.
     pub fn nominal_step(&self) -> f64 {
-        let steps = self.steps();
-        let uneven = self.uneven_steps();
-        let mut skip = uneven.iter().peekable();
-        let (mut sum, mut n) = (0.0, 0usize);
-        for (i, s) in steps.iter().enumerate() {
-            if skip.next_if_eq(&&i).is_some() {
-                continue;
-            }
-            sum += s;
-            n += 1;
-        }
-        if n == 0 {
-            steps.iter().sum::<f64>() / steps.len() as f64
-        } else {
-            sum / n as f64
-        }
+        self.nominal_step
     }
 
     /// The nominal frame rate, `1 / nominal_step` (the rate most of the clip plays at),
@@ -113,33 +110,13 @@ impl FrameTiming {
     /// nominal rate: a jump ([`JUMP_RATIO`]: a dropped frame, a held one, two frames at one
     /// time) or a stretch at another rate ([`RATE_TOLERANCE`] on the local median). Empty
     /// for a clip at a constant rate, however its timestamps are rounded.
-    pub fn uneven_steps(&self) -> Vec<usize> {
-        let steps = self.steps();
-        let nominal = median(&mut steps.clone());
-        if nominal.is_nan() || nominal <= 0.0 {
-            // most frames share a time: no rate to hold
-            return (0..steps.len()).collect();
-        }
-        let half = LOCAL_STEPS / 2;
-        let mut local = Vec::with_capacity(LOCAL_STEPS);
-        (0..steps.len())
-            .filter(|&i| {
-                let r = steps[i] / nominal;
-                if !(1.0 / JUMP_RATIO..=JUMP_RATIO).contains(&r) {
-                    return true;
-                }
-                local.clear();
-                local.extend_from_slice(
-                    &steps[i.saturating_sub(half)..(i + half + 1).min(steps.len())],
-                );
-                (median(&mut local) / nominal - 1.0).abs() > RATE_TOLERANCE
-            })
-            .collect()
+    pub fn uneven_steps(&self) -> &[usize] {
+        &self.uneven
     }
 
     /// Whether some step does not play at the nominal rate ([`Self::uneven_steps`]).
     pub fn is_variable(&self) -> bool {
-        !self.uneven_steps().is_empty()
+        !self.uneven.is_empty()
     }
 
     /// The frame shown nearest `seconds` after the first frame (the first frame at 0):
@@ -151,7 +128,7 @@ impl FrameTiming {
         let n = self.len();
         let last = self.times[n - 1];
         if at >= last {
-            let beyond = ((at - last) / self.nominal_step()).round();
+            let beyond = ((at - last) / self.nominal_step).round();
             return (n - 1) as u64 + if beyond.is_finite() { beyond as u64 } else { 0 };
         }
         self.times
@@ -183,7 +160,7 @@ impl FrameTiming {
         // end cuts there: the next frame may come an hour later)
         let last = self.times[r.end - 1];
         let next = self.times.get(r.end).map_or(f64::INFINITY, |&t| t - last);
-        let end = last + next.min(self.nominal_step());
+        let end = last + next.min(self.nominal_step);
         // a tick within a microsecond of a frame's time shows that frame
         const EPS: f64 = 1e-6;
         let written = ((end - EPS - t0) * fps).ceil();
@@ -234,17 +211,45 @@ fn standard_rate(fps: f64) -> f64 {
         .unwrap_or(fps)
 }
 
-/// The median of `v` (the mean of the middle two for an even count); NaN when empty.
-fn median(v: &mut [f64]) -> f64 {
-    if v.is_empty() {
-        return f64::NAN;
+/// [`FrameTiming::uneven_steps`] of `steps` (at least one).
+fn uneven_steps(steps: &[f64]) -> Vec<usize> {
+    let nominal = median(&mut steps.to_vec());
+    if nominal <= 0.0 {
+        // most frames share a time: no rate to hold
+        return (0..steps.len()).collect();
     }
-    v.sort_by(f64::total_cmp);
-    let m = v.len() / 2;
-    if v.len() % 2 == 1 {
-        v[m]
+    let half = LOCAL_STEPS / 2;
+    let mut local = Vec::with_capacity(LOCAL_STEPS);
+    (0..steps.len())
+        .filter(|&i| {
+            let r = steps[i] / nominal;
+            if !(1.0 / JUMP_RATIO..=JUMP_RATIO).contains(&r) {
+                return true;
+            }
+            local.clear();
+            local
+                .extend_from_slice(&steps[i.saturating_sub(half)..(i + half + 1).min(steps.len())]);
+            (median(&mut local) / nominal - 1.0).abs() > RATE_TOLERANCE
+        })
+        .collect()
+}
+
+/// [`FrameTiming::nominal_step`]: the mean of `steps` less the `uneven` ones (ascending),
+/// of all when every step is uneven.
+fn nominal_step(steps: &[f64], uneven: &[usize]) -> f64 {
+    let mut skip = uneven.iter().peekable();
+    let (mut sum, mut n) = (0.0, 0usize);
+    for (i, s) in steps.iter().enumerate() {
+        if skip.next_if_eq(&&i).is_some() {
+            continue;
+        }
+        sum += s;
+        n += 1;
+    }
+    if n == 0 {
+        steps.iter().sum::<f64>() / steps.len() as f64
     } else {
-        0.5 * (v[m - 1] + v[m])
+        sum / n as f64
     }
 }
 
