@@ -329,6 +329,7 @@ mod media {
     #[derive(Clone, Debug)]
     pub struct MediaFootage {
         path: PathBuf,
+        crop: Option<ignis_media::Rect>,
         scale: Option<Size>,
         info: FootageInfo,
         /// How errors name the footage (default: its path).
@@ -373,6 +374,7 @@ mod media {
             let abs = std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf());
             Ok(MediaFootage {
                 path: path.to_path_buf(),
+                crop: None,
                 scale: None,
                 label: path.display().to_string(),
                 cursor: Cursor::default(),
@@ -383,6 +385,20 @@ mod media {
                     frame_count: probed.frame_count.map(|n| n as usize),
                 },
             })
+        }
+
+        /// Only `rect` of every frame (a region of interest: `ignis loop --crop`), in
+        /// source pixels; a [`MediaFootage::scaled`] after it scales the cut (one before it
+        /// is dropped). A rectangle that does not fit inside the frame is refused, naming
+        /// the frame's size.
+        pub fn cropped(mut self, rect: ignis_media::Rect) -> Result<MediaFootage> {
+            let cut =
+                ignis_media::check_crop(&rect, self.info.size).map_err(|e| self.fail(None, e))?;
+            self.crop = Some(rect);
+            self.scale = None;
+            self.cursor = Cursor::default();
+            self.info.size = cut;
+            Ok(self)
         }
 
         /// Every frame resized to `size` as it is decoded (tests and previews).
@@ -414,8 +430,8 @@ mod media {
                     start as u64,
                     end.map(|e| e as u64),
                 )),
+                crop: self.crop,
                 scale: self.scale,
-                ..Default::default()
             };
             let open = if keep_8bit {
                 ignis_media::open_keeping_8bit

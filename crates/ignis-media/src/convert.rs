@@ -196,8 +196,8 @@ pub(crate) fn unpremultiply(frame: &mut RgbaFrame) {
     }
 }
 
-/// Checks that `rect` lies inside a frame of `size`.
-pub(crate) fn check_crop(rect: &Rect, size: Size) -> Result<Size> {
+/// Checks that `rect` lies inside a frame of `size` and is not empty; its size.
+pub fn check_crop(rect: &Rect, size: Size) -> Result<Size> {
     let ok = rect.width > 0
         && rect.height > 0
         && rect
@@ -238,6 +238,11 @@ pub(crate) fn crop_values<T: Copy>(data: &[T], width: u32, rect: &Rect) -> Vec<T
         out.extend_from_slice(&data[start..start + rect.width as usize]);
     }
     out
+}
+
+/// Cuts `rect` (already checked) out of 8-bit RGBA `bytes` of a `width`-wide frame.
+pub(crate) fn crop_srgba8(bytes: &[u8], width: u32, rect: &Rect) -> Vec<u8> {
+    crop_values(bytes.as_chunks::<4>().0, width, rect).into_flattened()
 }
 
 /// One output sample's source taps: first source index and normalised weights.

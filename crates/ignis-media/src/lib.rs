@@ -21,6 +21,7 @@ mod fingerprint;
 pub mod read;
 pub mod write;
 
+pub use convert::check_crop;
 pub use error::{MediaError, Result};
 pub use fingerprint::source_fingerprint;
 pub use ignis_core::{RgbaFrame, Size};

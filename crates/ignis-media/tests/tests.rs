@@ -182,8 +182,9 @@ mod footage {
     }
 
     /// `open_keeping_8bit` + `next_decoded`: the OpenH264 path hands over its 8-bit sRGB
-    /// bytes, which convert to exactly the frames `open`'s iterator yields; with a crop
-    /// the frame comes linear (cropped), equal to `open` with the same crop.
+    /// bytes, which convert to exactly the frames `open`'s iterator yields; a crop is cut
+    /// from the bytes (equal to `open` with the same crop); with a scale the frame comes
+    /// linear.
     #[test]
     fn candle_kept_8bit_converts_to_the_linear_frames() {
         let Some(path) = data("candle.mp4") else {
@@ -227,12 +228,30 @@ mod footage {
             .unwrap();
         let mut r = open_keeping_8bit(&path, &opts).unwrap();
         for w in &want {
-            match r.next_decoded().unwrap().unwrap() {
-                DecodedFrame::Linear(f) => assert_eq!(&f, w),
-                DecodedFrame::Srgba8 { .. } => panic!("a cropped frame stayed 8-bit"),
-            }
+            let f = r.next_decoded().unwrap().unwrap();
+            assert!(
+                matches!(&f, DecodedFrame::Srgba8 { size, bytes } if *size == w.size() && bytes.len() == size.pixels() * 4),
+                "a cropped frame was converted, or cut to the wrong size"
+            );
+            assert_eq!(&f.into_linear(), w);
         }
         assert!(r.next_decoded().is_none());
+        // with a scale as well it comes linear, equal to `open`'s
+        let opts = ReadOptions {
+            scale: Some(Size::new(15, 20).unwrap()),
+            ..opts
+        };
+        let want: Vec<RgbaFrame> = open(&path, &opts)
+            .unwrap()
+            .collect::<Result<_, _>>()
+            .unwrap();
+        let mut r = open_keeping_8bit(&path, &opts).unwrap();
+        for w in &want {
+            match r.next_decoded().unwrap().unwrap() {
+                DecodedFrame::Linear(f) => assert_eq!(&f, w),
+                DecodedFrame::Srgba8 { .. } => panic!("a scaled frame stayed 8-bit"),
+            }
+        }
     }
 
     /// The same through ffmpeg (a clip the built-in decoder does not take): ffmpeg pipes

@@ -186,7 +186,14 @@ pub fn bench(clips: &[PathBuf], cache: Option<&Path>, g: &Global) -> Result<Valu
         }
         let (window, _) = loop_cmd::resolve_window(clip, None)?;
         let t = Instant::now();
-        let c = loop_cmd::cached(clip, window.clone(), "32x48".parse()?, 40, &cache_dir, g)?;
+        let c = loop_cmd::cached(
+            loop_cmd::Clip::whole(clip),
+            window.clone(),
+            "32x48".parse()?,
+            40,
+            &cache_dir,
+            g,
+        )?;
         let cache_s = t.elapsed().as_secs_f64();
         let info = ignis_media::probe(clip)?;
         for secs in [2.0f64, 4.0] {

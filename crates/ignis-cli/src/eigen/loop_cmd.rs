@@ -38,7 +38,7 @@ const CACHE_VERSION: u32 = 7;
 
 #[derive(clap::Args, Debug)]
 #[command(
-    after_help = "Examples:\n  ignis loop campfire.mp4 --length 4s -o loop.png\n  ignis loop candle.mp4 --length 120 -o loop.mp4\n  ignis loop fire.mov --length 2s --range 100..400 --method morph -o frames/%04d.png\n  ignis loop fire.mp4 --length 3s --cache /tmp/ignis-cache -o loop.gif\n  ignis loop plates/%04d.exr --length 96 -o loop.png    (an image sequence: a frame count, as it has no frame rate)\n  ignis loop campfire.mp4 --length 4s --every 2 --motion-vectors --engine unity -o loop.png    (half the cells; the engine's motion-vector blend fills in)\n  ignis loop fireball.mp4 --length 2s --alpha emissive -o loop.png    (to composite over light backgrounds: the fire adds its light)\n  ignis loop campfire.mp4 --length 4s -o loop.mov    (ProRes 4444 with the matte as alpha, for compositing tools; needs ffmpeg)\n  ignis loop handheld.mp4 --length 3s --stabilise on -o loop.png    (hold the camera still even where auto would not; auto steadies a clear shake)\n\nThe first run on a clip trains an Eigenfire database on it (about 20 s for 500 frames of 960x540 on 2 cores, 2 to 3 min for a minute of 1080p; footage over 1080p is trained at 1920 px on its longest side) and keeps it in the cache ($XDG_CACHE_HOME/ignis or ~/.cache/ignis, or --cache); later runs reuse it. The output has the footage's own size, colours and frame rate (1/N of it with --every N; --fps is refused), with the pre-processing mask's matte as alpha (--alpha opaque: none; --alpha emissive: the matted flame's own light as alpha, no dark fringe over light backgrounds); a .png flipbook's JSON records the measured loop_quality."
+    after_help = "Examples:\n  ignis loop campfire.mp4 --length 4s -o loop.png\n  ignis loop candle.mp4 --length 120 -o loop.mp4\n  ignis loop fire.mov --length 2s --range 100..400 --method morph -o frames/%04d.png\n  ignis loop fire.mp4 --length 3s --cache /tmp/ignis-cache -o loop.gif\n  ignis loop plates/%04d.exr --length 96 -o loop.png    (an image sequence: a frame count, as it has no frame rate)\n  ignis loop campfire.mp4 --length 4s --every 2 --motion-vectors --engine unity -o loop.png    (half the cells; the engine's motion-vector blend fills in)\n  ignis loop fireball.mp4 --length 2s --alpha emissive -o loop.png    (to composite over light backgrounds: the fire adds its light)\n  ignis loop campfire.mp4 --length 4s -o loop.mov    (ProRes 4444 with the matte as alpha, for compositing tools; needs ffmpeg)\n  ignis loop handheld.mp4 --length 3s --stabilise on -o loop.png    (hold the camera still even where auto would not; auto steadies a clear shake)\n  ignis loop bonfire.mp4 --length 4s --crop 640,120,720,900 -o loop.png    (only that part of the frame: one fire of several, or a picture inside letterbox bars)\n\nThe first run on a clip trains an Eigenfire database on it (about 20 s for 500 frames of 960x540 on 2 cores, 2 to 3 min for a minute of 1080p; footage over 1080p is trained at 1920 px on its longest side) and keeps it in the cache ($XDG_CACHE_HOME/ignis or ~/.cache/ignis, or --cache); later runs reuse it. The output has the footage's own size (or --crop's), colours and frame rate (1/N of it with --every N; --fps is refused), with the pre-processing mask's matte as alpha (--alpha opaque: none; --alpha emissive: the matted flame's own light as alpha, no dark fringe over light backgrounds); a .png flipbook's JSON records the measured loop_quality."
 )]
 pub struct Args {
     /// The footage (any video or frame sequence `ignis info` reads).
@@ -61,13 +61,20 @@ pub struct Args {
     /// Cache directory (default $XDG_CACHE_HOME/ignis or ~/.cache/ignis).
     #[arg(long)]
     pub cache: Option<PathBuf>,
+    /// Loop only this rectangle X,Y,WIDTH,HEIGHT of the frame (source pixels, top-left
+    /// origin): one fire of several, a flame away from a lit wall or a timecode, a picture
+    /// without its letterbox bars. Everything (the database, the search, the matte, the
+    /// camera's steadying) works on that part alone, and it is the output's own size.
+    /// Example: --crop 240,60,480,420
+    #[arg(long, value_parser = crate::args::crop)]
+    pub crop: Option<ignis_media::Rect>,
     /// Training size of the cached database (modest: the search only needs the weights).
     #[arg(long, default_value = "32x48")]
     pub train_size: Size,
     /// Eigenfires kept in the cached database.
     #[arg(long, default_value_t = 40)]
     pub keep: usize,
-    /// Output frame size WIDTHxHEIGHT (default: the footage's own; for a .png flipbook
+    /// Output frame size WIDTHxHEIGHT (default: the footage's own, or --crop's; for a .png flipbook
     /// whose full-size cells do not fit the sheet limit, the largest size with the
     /// footage's aspect that fits). Example: --size 960x540
     #[arg(long, value_parser = crate::eigen::animate::parse_size)]
@@ -139,6 +146,10 @@ pub struct CacheSettings {
     /// Source frames of the window.
     pub start: usize,
     pub end: usize,
+    /// `--crop` as `X,Y,WIDTH,HEIGHT`; left out of the key when the whole frame is used
+    /// (so entries made before it existed still match).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub crop: Option<String>,
 }
 
 #[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
@@ -176,6 +187,8 @@ pub struct Cached {
     pub fps: f64,
     /// Whether this run built it.
     pub built: bool,
+    /// The part of the frame it was made of (`--crop`; `None`: the whole frame).
+    pub crop: Option<ignis_media::Rect>,
 }
 
 /// The default cache directory.
@@ -235,6 +248,59 @@ fn metric_bytes(frames: &[GrayFrame]) -> Vec<u8> {
         .collect()
 }
 
+/// The footage a loop is cut from: a file, and the part of its frame used (`--crop`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Clip<'a> {
+    pub path: &'a Path,
+    pub crop: Option<ignis_media::Rect>,
+}
+
+impl<'a> Clip<'a> {
+    /// The whole frame of `path`.
+    pub fn whole(path: &'a Path) -> Clip<'a> {
+        Clip { path, crop: None }
+    }
+
+    /// The file as probed, its size the crop's (checked against the frame).
+    pub fn probe(&self) -> Result<ignis_media::SourceInfo> {
+        let mut info = ignis_media::probe(self.path)
+            .with_context(|| format!("reading {}", self.path.display()))?;
+        if let Some(r) = &self.crop {
+            let (w, h) = (info.size.width, info.size.height);
+            info.size = ignis_media::check_crop(r, info.size).map_err(|_| {
+                anyhow::anyhow!(
+                    "--crop {},{},{},{} reaches past the {w}x{h} frame of {}; give X,Y,WIDTH,HEIGHT \
+                     with X + WIDTH ≤ {w} and Y + HEIGHT ≤ {h}",
+                    r.x,
+                    r.y,
+                    r.width,
+                    r.height,
+                    self.path.display()
+                )
+            })?;
+        }
+        Ok(info)
+    }
+
+    /// Reading source frames `frames` of it, scaled to `scale` after the crop.
+    fn read(&self, frames: Range<usize>, scale: Option<Size>) -> ignis_media::ReadOptions {
+        ignis_media::ReadOptions {
+            range: Some(ignis_media::FrameRange::frames(
+                frames.start as u64,
+                Some(frames.end as u64),
+            )),
+            crop: self.crop,
+            scale,
+        }
+    }
+
+    /// `--crop` as given (`X,Y,WIDTH,HEIGHT`), for the cache key.
+    fn crop_key(&self) -> Option<String> {
+        self.crop
+            .map(|r| format!("{},{},{},{}", r.x, r.y, r.width, r.height))
+    }
+}
+
 /// The window of source frames: `range` checked against the source's frame count.
 pub fn resolve_window(path: &Path, range: Option<Range<usize>>) -> Result<(Range<usize>, f64)> {
     let info = ignis_media::probe(path).with_context(|| format!("reading {}", path.display()))?;
@@ -258,13 +324,14 @@ pub fn resolve_window(path: &Path, range: Option<Range<usize>>) -> Result<(Range
 
 /// Opens (verifying) or builds the cache entry of `path` over `window`.
 pub fn cached(
-    path: &Path,
+    clip: Clip,
     window: Range<usize>,
     train_size: Size,
     keep: usize,
     cache_dir: &Path,
     g: &Global,
 ) -> Result<Cached> {
+    let path = clip.path;
     let sp = g.spinner("hashing the footage");
     let sha = source_sha256(path)?;
     sp.finish_and_clear();
@@ -274,12 +341,18 @@ pub fn cached(
         keep,
         start: window.start,
         end: window.end,
+        crop: clip.crop_key(),
     };
     let skey = hex(&Sha256::digest(serde_json::to_vec(&settings)?))[..12].to_string();
     let dir = cache_dir.join(format!("{}-{skey}", &sha[..24]));
     if dir.exists() {
         match open_entry(&dir, &sha, &settings) {
-            Ok(c) => return Ok(c),
+            Ok(c) => {
+                return Ok(Cached {
+                    crop: clip.crop,
+                    ..c
+                })
+            }
             Err(e) => {
                 eprintln!(
                     "cache entry {} is unusable ({e:#}); rebuilding it",
@@ -290,10 +363,11 @@ pub fn cached(
             }
         }
     }
-    build_entry(path, &sha, &settings, window, train_size, keep, &dir, g)?;
+    build_entry(clip, &sha, &settings, window, train_size, keep, &dir, g)?;
     let mut c = open_entry(&dir, &sha, &settings)
         .with_context(|| format!("re-opening the cache entry just built at {}", dir.display()))?;
     c.built = true;
+    c.crop = clip.crop;
     Ok(c)
 }
 
@@ -380,11 +454,12 @@ fn open_entry(dir: &Path, sha: &str, settings: &CacheSettings) -> Result<Cached>
         aligned,
         fps: meta.fps,
         built: false,
+        crop: None,
     })
 }
 
 fn build_entry(
-    path: &Path,
+    clip: Clip,
     sha: &str,
     settings: &CacheSettings,
     window: Range<usize>,
@@ -393,6 +468,7 @@ fn build_entry(
     dir: &Path,
     g: &Global,
 ) -> Result<()> {
+    let path = clip.path;
     std::fs::create_dir_all(dir.parent().unwrap_or(Path::new(".")))
         .with_context(|| format!("creating the cache directory {}", dir.display()))?;
     // Built in a hidden staging directory beside the entry (removed if anything fails) and
@@ -402,8 +478,8 @@ fn build_entry(
     let tmp = staging.path().to_path_buf();
     let result = (|| -> Result<()> {
         // Metric frames of every frame of the window, as a writer would measure them.
-        let info = ignis_media::probe(path)?;
-        let (metric, aligned, tracks) = metric_frames(path, &window, true, g)?;
+        let info = clip.probe()?;
+        let (metric, aligned, tracks) = metric_frames(clip, &window, true, g)?;
         if metric.len() != window.len() || tracks.len() != window.len() {
             bail!(
                 "read {} frames of {}..{}",
@@ -441,6 +517,9 @@ fn build_entry(
         spec.end = Some(window.end);
         spec.stride = 1;
         let mut footage = ignis_eigen::MediaFootage::open(path)?;
+        if let Some(r) = clip.crop {
+            footage = footage.cropped(r)?;
+        }
         let work = training_size(info.size);
         if work != info.size {
             g.say(format!(
@@ -983,7 +1062,7 @@ pub fn planned_frames(best: &Evaluated) -> usize {
 /// With `matte`, every source frame's alpha is its pre-processing matte before it is
 /// blended or morphed; with `steady`, the frame (matte and all) is then held still.
 pub fn render(
-    path: &Path,
+    clip: Clip,
     first: usize,
     best: &Evaluated,
     scale: Option<Size>,
@@ -995,14 +1074,8 @@ pub fn render(
     let m = best.closing.frames();
     let plan = loops::plan_with(&c, best.closing, &best.skips);
     let end = loops::plan_end(&c, best.closing);
-    let opts = ignis_media::ReadOptions {
-        range: Some(ignis_media::FrameRange::frames(
-            (first + c.start) as u64,
-            Some((first + end) as u64),
-        )),
-        scale,
-        ..Default::default()
-    };
+    let path = clip.path;
+    let opts = clip.read(first + c.start..first + end, scale);
     let reader =
         ignis_media::open(path, &opts).with_context(|| format!("reading {}", path.display()))?;
     // Decoding (and resizing) runs on its own thread, a few frames ahead of the blends and
@@ -1081,7 +1154,7 @@ pub const MORPHS_PER_LOOP: usize = 2;
 /// frames the search ranked (matted when `matte` is).
 pub fn verify_closings(
     chosen: &mut Chosen,
-    path: &Path,
+    clip: Clip,
     first: usize,
     metric: &[GrayFrame],
     scale: Option<Size>,
@@ -1126,7 +1199,7 @@ pub fn verify_closings(
                 .collect();
             let closings: Vec<Closing> = group.iter().map(|x| x.closing).collect();
             let mids = rendered_mids(
-                path,
+                clip,
                 first,
                 &e.candidate,
                 &closings,
@@ -1203,7 +1276,7 @@ pub fn verify_closings(
 /// at `scale`, matted, blended or morphed (one flow per frame pair, shared by the morphs).
 /// The head and the tail are read side by side, two frames held at a time.
 fn rendered_mids(
-    path: &Path,
+    clip: Clip,
     first: usize,
     c: &Candidate,
     closings: &[Closing],
@@ -1219,15 +1292,9 @@ fn rendered_mids(
     if n == 0 {
         return Ok(out);
     }
+    let path = clip.path;
     let reader = |start: usize| -> Result<_> {
-        let opts = ignis_media::ReadOptions {
-            range: Some(ignis_media::FrameRange::frames(
-                (first + start) as u64,
-                Some((first + start + n) as u64),
-            )),
-            scale,
-            ..Default::default()
-        };
+        let opts = clip.read(first + start..first + start + n, scale);
         ignis_media::open(path, &opts).with_context(|| format!("reading {}", path.display()))
     };
     let (mut tails, mut heads) = (reader(c.end)?, reader(c.start)?);
@@ -1351,7 +1418,7 @@ pub struct Done {
 /// its metric frames and frame rate.
 #[derive(Clone, Copy)]
 pub struct LoopFootage<'a> {
-    pub path: &'a Path,
+    pub clip: Clip<'a>,
     pub first: usize,
     pub weights: &'a [f32],
     pub k: usize,
@@ -1431,9 +1498,10 @@ pub struct Held<'a> {
 impl<'a> LoopFootage<'a> {
     /// A cached clip's window (its database holds exactly the window's frames), with its
     /// pre-processing matte as alpha.
+    /// The cache entry's `--crop`, if any, is the part of the frame looped.
     pub fn cached(path: &'a Path, first: usize, c: &'a Cached) -> LoopFootage<'a> {
         LoopFootage {
-            path,
+            clip: Clip { path, crop: c.crop },
             first,
             weights: c.db.weights_row_major(),
             k: c.db.n_components(),
@@ -1773,7 +1841,7 @@ pub fn make_loop_sized(
     g: &Global,
 ) -> Result<Done> {
     let LoopFootage {
-        path,
+        clip,
         first,
         weights,
         k,
@@ -1864,7 +1932,7 @@ pub fn make_loop_sized(
     for (i, c) in top_candidates(&chosen.evaluated, top).iter().enumerate() {
         g.say(format!("  {}. {}", i + 1, describe(c, first)));
     }
-    let info = ignis_media::probe(path)?;
+    let info = clip.probe()?;
     let mut opts = out.write_options();
     opts.fps = fps / every as f64;
     opts.loop_ = true;
@@ -1881,7 +1949,7 @@ pub fn make_loop_sized(
     let scale = (fitted.size != info.size).then_some(fitted.size);
     verify_closings(
         &mut chosen,
-        path,
+        clip,
         first,
         metric,
         scale,
@@ -1920,7 +1988,7 @@ pub fn make_loop_sized(
     let pb = g.progress(n as u64, "rendering");
     let mut i = 0;
     render(
-        path,
+        clip,
         first,
         &chosen.best,
         scale,
@@ -2024,6 +2092,12 @@ fn seam_warning(seam: f64) -> Option<String> {
 pub fn run(a: &Args, g: &Global) -> Result<()> {
     let method = Method::parse(&a.method)?;
     let (window, fps) = resolve_window(&a.input, a.range.clone())?;
+    let clip = Clip {
+        path: &a.input,
+        crop: a.crop,
+    };
+    // a crop past the frame is refused before anything is read
+    clip.probe()?;
     // a variable rate: seconds are counted at the rate the loop will be written at
     let timing = WindowTiming::of(&a.input, window.clone());
     let fps = timing.as_ref().map_or(fps, |t| t.nominal_fps);
@@ -2044,14 +2118,7 @@ pub fn run(a: &Args, g: &Global) -> Result<()> {
         Some(d) => d.clone(),
         None => default_cache_dir()?,
     };
-    let c = cached(
-        &a.input,
-        window.clone(),
-        a.train_size,
-        a.keep,
-        &cache_dir,
-        g,
-    )?;
+    let c = cached(clip, window.clone(), a.train_size, a.keep, &cache_dir, g)?;
     if c.built {
         g.say(format!("cached the clip's database in {}", c.dir.display()));
     }
@@ -2186,7 +2253,7 @@ pub fn eigen_length_loop(a: &crate::eigen::LoopArgs, g: &Global) -> Result<()> {
         .checked_path(&c)
         .context("a --length loop is rendered from the clip's source footage (give its place with --relink; reconstructed frames with --from-database need --range instead of --length)")?;
     // Metric frames of the window, as the writer will measure them.
-    let (metric, _, _) = metric_frames(&source, &window, false, g)
+    let (metric, _, _) = metric_frames(Clip::whole(&source), &window, false, g)
         .with_context(|| format!("reading {}", source.display()))?;
     if metric.len() != window.len() {
         bail!(
@@ -2199,7 +2266,7 @@ pub fn eigen_length_loop(a: &crate::eigen::LoopArgs, g: &Global) -> Result<()> {
     let weights = &db.weights_row_major()[rows.start * k..rows.end * k];
     let e = db.manifest().e_detect.max(1);
     let src = LoopFootage {
-        path: &source,
+        clip: Clip::whole(&source),
         first: window.start,
         weights,
         k,
@@ -2273,14 +2340,9 @@ type Measured = (Vec<GrayFrame>, Vec<Option<GrayFrame>>, Vec<Track>);
 /// One frame's part of [`Measured`]: its metric frame, and with tracking its aligned frame
 /// (if moved) and track.
 type MeasuredFrame = (GrayFrame, Option<(Option<GrayFrame>, Track)>);
-fn metric_frames(path: &Path, window: &Range<usize>, track: bool, g: &Global) -> Result<Measured> {
-    let opts = ignis_media::ReadOptions {
-        range: Some(ignis_media::FrameRange::frames(
-            window.start as u64,
-            Some(window.end as u64),
-        )),
-        ..Default::default()
-    };
+fn metric_frames(clip: Clip, window: &Range<usize>, track: bool, g: &Global) -> Result<Measured> {
+    let path = clip.path;
+    let opts = clip.read(window.clone(), None);
     let pb = g.progress(window.len() as u64, "measuring");
     // reserved up to a bound: the window's length comes from the container's word
     let mut metric = Vec::with_capacity(window.len().min(1 << 14));
@@ -2296,13 +2358,7 @@ fn metric_frames(path: &Path, window: &Range<usize>, track: bool, g: &Global) ->
     // to those after it: a fade in from black)
     let tracker = if track {
         let n = window.len().min(ignis_flow::camera::REFERENCE_FRAMES);
-        let head = ignis_media::ReadOptions {
-            range: Some(ignis_media::FrameRange::frames(
-                window.start as u64,
-                Some((window.start + n) as u64),
-            )),
-            ..Default::default()
-        };
+        let head = clip.read(window.start..window.start + n, None);
         let mut first = ignis_media::open_keeping_8bit(path, &head)?;
         let mut heads = Vec::with_capacity(n);
         while let Some(f) = first.next_decoded() {
@@ -2477,7 +2533,7 @@ mod tests {
             let input = seq.join("%04d.png");
             let open = || {
                 cached(
-                    &input,
+                    Clip::whole(&input),
                     0..60,
                     "32x48".parse().unwrap(),
                     20,
@@ -2582,6 +2638,122 @@ mod tests {
         }
     }
 
+    /// `--crop`: the cache entry, the search and the render use only that part of the
+    /// frame (a key of its own beside the whole frame's), the loop is written at its size,
+    /// and a footage frame of the loop is that frame's crop; a rectangle past the frame is
+    /// refused, naming the frame's size.
+    #[test]
+    fn a_cropped_loop_is_made_of_that_part_of_the_frame() {
+        let Some(path) = clip("campfire.mp4") else {
+            return;
+        };
+        let quiet = Global { quiet: true };
+        let cache = tempfile::tempdir().unwrap();
+        let rect = ignis_media::Rect {
+            x: 240,
+            y: 60,
+            width: 480,
+            height: 420,
+        };
+        let cropped = Clip {
+            path: &path,
+            crop: Some(rect),
+        };
+        let past = Clip {
+            path: &path,
+            crop: Some(ignis_media::Rect { y: 130, ..rect }),
+        };
+        let e = past.probe().unwrap_err().to_string();
+        assert!(
+            e.contains("--crop 240,130,480,420 reaches past the 960x540 frame"),
+            "{e}"
+        );
+        assert_eq!(cropped.probe().unwrap().size, Size::new(480, 420).unwrap());
+        let window = 200..280;
+        let c = cached(
+            cropped,
+            window.clone(),
+            "32x48".parse().unwrap(),
+            40,
+            cache.path(),
+            &quiet,
+        )
+        .unwrap();
+        assert_eq!(c.crop, Some(rect));
+        // the metric frames have the crop's shape, not the frame's
+        let m = c.metric[0].size();
+        assert_eq!((m.width, m.height), (128, 112), "metric frames {m}");
+        let whole = cached(
+            Clip::whole(&path),
+            window.clone(),
+            "32x48".parse().unwrap(),
+            40,
+            cache.path(),
+            &quiet,
+        )
+        .unwrap();
+        assert_ne!(
+            whole.dir, c.dir,
+            "the crop shares the whole frame's cache entry"
+        );
+        assert!(whole.crop.is_none() && whole.metric[0].size() != m);
+        // the entry is found again with its crop
+        let again = cached(
+            cropped,
+            window.clone(),
+            "32x48".parse().unwrap(),
+            40,
+            cache.path(),
+            &quiet,
+        )
+        .unwrap();
+        assert!(!again.built && again.crop == Some(rect) && again.dir == c.dir);
+        let out = cache.path().join("frames");
+        let ask = LoopAsk {
+            length: 40,
+            method: Method::Cut,
+            top: 1,
+            every: 1,
+        };
+        let src = LoopFootage::cached(&path, window.start, &c).opaque();
+        let d = make_loop(&src, &ask, &out_args(out.join("%04d.png")), &quiet).unwrap();
+        assert_eq!(d.size, Size::new(480, 420).unwrap());
+        let b = d.chosen.best;
+        let Some(&Planned::Src(i)) = loops::plan_with(&b.candidate, b.closing, &b.skips).first()
+        else {
+            panic!("a cut's loop starts with a blend");
+        };
+        let written = ignis_media::open(&out, &Default::default())
+            .unwrap()
+            .next()
+            .unwrap()
+            .unwrap();
+        let opts = ignis_media::ReadOptions {
+            range: Some(ignis_media::FrameRange::frames(
+                (window.start + i) as u64,
+                Some((window.start + i + 1) as u64),
+            )),
+            crop: Some(rect),
+            ..Default::default()
+        };
+        let want = ignis_media::open(&path, &opts)
+            .unwrap()
+            .next()
+            .unwrap()
+            .unwrap();
+        assert_eq!(written.size(), want.size());
+        let worst = written
+            .data()
+            .iter()
+            .zip(want.data())
+            .flat_map(|(a, b)| (0..3).map(move |k| (a[k] - b[k]).abs()))
+            .fold(0.0f32, f32::max);
+        assert!(
+            worst < 0.01,
+            "the written frame is {worst} off the source's crop"
+        );
+    }
+
     fn out_args(path: PathBuf) -> crate::output::OutputArgs {
         crate::output::OutputArgs::for_path(path)
     }
@@ -2601,7 +2773,7 @@ mod tests {
         ] {
             let Some(path) = clip(name) else { continue };
             let c = cached(
-                &path,
+                Clip::whole(&path),
                 window.clone(),
                 "32x48".parse().unwrap(),
                 40,
@@ -2809,11 +2981,11 @@ mod tests {
         let quiet = Global { quiet: true };
         let cache = tempfile::tempdir().unwrap();
         let size: Size = "16x24".parse().unwrap();
-        let c = cached(&path, 0..30, size, 8, cache.path(), &quiet).unwrap();
+        let c = cached(Clip::whole(&path), 0..30, size, 8, cache.path(), &quiet).unwrap();
         assert!(c.built);
         let dir = c.dir.clone();
         drop(c);
-        let again = cached(&path, 0..30, size, 8, cache.path(), &quiet).unwrap();
+        let again = cached(Clip::whole(&path), 0..30, size, 8, cache.path(), &quiet).unwrap();
         assert!(!again.built, "a good entry is reused");
         let metric = dir.join("metric.f32");
         let mut bytes = std::fs::read(&metric).unwrap();
@@ -2825,12 +2997,13 @@ mod tests {
             keep: 8,
             start: 0,
             end: 30,
+            crop: None,
         };
         match open_entry(&dir, &source_sha256(&path).unwrap(), &settings) {
             Ok(_) => panic!("a damaged metric.f32 was accepted"),
             Err(e) => assert!(e.to_string().contains("checksum"), "{e}"),
         }
-        let rebuilt = cached(&path, 0..30, size, 8, cache.path(), &quiet).unwrap();
+        let rebuilt = cached(Clip::whole(&path), 0..30, size, 8, cache.path(), &quiet).unwrap();
         assert!(rebuilt.built, "the damaged entry was rebuilt");
         assert_eq!(rebuilt.metric.len(), 30);
         // Grown files are refused by their length, before they are read whole.
@@ -3032,7 +3205,7 @@ mod tests {
         let quiet = Global { quiet: true };
         let cache = tempfile::tempdir().unwrap();
         let c = cached(
-            &path,
+            Clip::whole(&path),
             0..40,
             "16x24".parse().unwrap(),
             8,

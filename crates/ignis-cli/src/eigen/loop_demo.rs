@@ -114,7 +114,7 @@ fn clip(
         "  {name}.mp4: the clip's database (cached for `ignis loop`)"
     ));
     let c = loop_cmd::cached(
-        path,
+        loop_cmd::Clip::whole(path),
         window.clone(),
         "32x48".parse()?,
         40,
@@ -303,10 +303,18 @@ fn write_peer(
     opts.loop_ = true;
     let mut w = out.create_with(size, &opts)?;
     let mut frames = Vec::new();
-    loop_cmd::render(path, first, &e, Some(size), None, None, &mut |f| {
-        frames.push(f.clone());
-        out.push(&mut w, f)
-    })?;
+    loop_cmd::render(
+        loop_cmd::Clip::whole(path),
+        first,
+        &e,
+        Some(size),
+        None,
+        None,
+        &mut |f| {
+            frames.push(f.clone());
+            out.push(&mut w, f)
+        },
+    )?;
     let q = w
         .loop_quality()
         .context("the peer's loop has fewer than two frames")?;
@@ -317,10 +325,18 @@ fn write_peer(
 /// The frames of a chosen loop, opaque, at `size`.
 fn frames_of(path: &Path, first: usize, e: &Evaluated, size: Size) -> Result<Vec<RgbaFrame>> {
     let mut frames = Vec::new();
-    loop_cmd::render(path, first, e, Some(size), None, None, &mut |f| {
-        frames.push(f.clone());
-        Ok(())
-    })?;
+    loop_cmd::render(
+        loop_cmd::Clip::whole(path),
+        first,
+        e,
+        Some(size),
+        None,
+        None,
+        &mut |f| {
+            frames.push(f.clone());
+            Ok(())
+        },
+    )?;
     Ok(frames)
 }
 

@@ -407,9 +407,10 @@ pub fn open(path: &Path, opts: &ReadOptions) -> Result<FrameReader> {
 }
 
 /// [`open`], for a reader read with [`FrameReader::next_decoded`]: an 8-bit decoder (the
-/// OpenH264 path, and ffmpeg, which pipes 8-bit RGBA) hands over its sRGB bytes uncropped and unscaled instead of converting
-/// them to linear light on its thread (a renderer working from 8-bit values saves the
-/// conversion and a frame 4× the size). The iterator still yields linear frames.
+/// OpenH264 path, and ffmpeg, which pipes 8-bit RGBA) hands over its sRGB bytes, cropped
+/// if asked, instead of converting them to linear light on its thread (a renderer working
+/// from 8-bit values saves the conversion and a frame 4× the size); a scale or non-square
+/// pixels still give linear frames. The iterator always yields linear frames.
 pub fn open_keeping_8bit(path: &Path, opts: &ReadOptions) -> Result<FrameReader> {
     open_inner(path, opts, ffmpeg_available(), true)
 }
@@ -495,8 +496,8 @@ impl FrameReader {
 
 impl FrameReader {
     /// The next frame as the decoder made it ([`DecodedFrame::Srgba8`] from an 8-bit
-    /// decoder opened with [`open_keeping_8bit`] when no crop or scale is asked; linear
-    /// otherwise). The same checks and errors as the iterator.
+    /// decoder opened with [`open_keeping_8bit`] when no scale is asked and the pixels are
+    /// square, cropped if asked; linear otherwise). The same checks and errors as the iterator.
     pub fn next_decoded(&mut self) -> Option<Result<DecodedFrame>> {
         if self.done || self.end.is_some_and(|e| self.index >= e) {
             return None;
@@ -537,10 +538,25 @@ impl FrameReader {
         }
         self.index += 1;
         let square = self.source_info.anamorphic.is_none();
-        if square && self.crop.is_none() && self.scale.is_none() {
-            return Some(Ok(frame));
-        }
-        let frame = frame.into_linear();
+        let frame = match (square && self.scale.is_none(), self.crop, frame) {
+            (true, None, f) => return Some(Ok(f)),
+            // an 8-bit frame's crop is cut from its bytes (no conversion to linear first)
+            (true, Some(r), DecodedFrame::Srgba8 { bytes, .. }) => {
+                return Some(Ok(DecodedFrame::Srgba8 {
+                    size: Size {
+                        width: r.width,
+                        height: r.height,
+                    },
+                    bytes: convert::crop_srgba8(&bytes, stored.width, &r),
+                }));
+            }
+            (_, _, f) => f.into_linear(),
+        };
+        Some(Ok(self.finish_linear(frame, square)))
+    }
+
+    /// A linear frame as read: square pixels, cropped, scaled.
+    fn finish_linear(&self, frame: RgbaFrame, square: bool) -> DecodedFrame {
         // Non-square pixels first, so that crop rectangles are in the size `probe` reports.
         let frame = match square {
             true => frame,
@@ -554,7 +570,7 @@ impl FrameReader {
             Some(s) => convert::resize(&frame, s),
             None => frame,
         };
-        Some(Ok(DecodedFrame::Linear(frame)))
+        DecodedFrame::Linear(frame)
     }
 }
 
