@@ -3478,6 +3478,65 @@ mod variable_frame_rate {
         assert!((meta["fps"].as_f64().unwrap() - 21.5).abs() < 0.5, "{meta}");
     }
 
+    /// `loop --seconds` counts by the frames' own times: from 4.4 s is frame 85 (the
+    /// average rate's frame 95 would be 0.4 s later), and the loop lies in that stretch.
+    #[test]
+    fn loop_seconds_count_by_the_frames_own_times() {
+        let t = tempfile::tempdir().unwrap();
+        let Some(clip) = phone_clip(t.path()) else {
+            return;
+        };
+        let out = t.path().join("late.png");
+        let cache = t.path().join("cache");
+        let said = String::from_utf8_lossy(
+            &ignis_ok(&[
+                "loop",
+                clip.to_str().unwrap(),
+                "--length",
+                "1.6s",
+                "--seconds",
+                "4.4..",
+                "--train-size",
+                "16x24",
+                "--keep",
+                "12",
+                "--cache",
+                cache.to_str().unwrap(),
+                "-o",
+                out.to_str().unwrap(),
+            ])
+            .stdout,
+        )
+        .to_string();
+        assert!(said.contains("--seconds 4.4..: frames 85..145"), "{said}");
+        let line = said
+            .lines()
+            .find(|l| l.starts_with("loop: source frames"))
+            .unwrap();
+        let (a, _) = line["loop: source frames ".len()..]
+            .split_once("..")
+            .unwrap();
+        assert!(a.parse::<usize>().unwrap() >= 85, "{said}");
+        // past the clip's 6.8 s: refused in seconds, nothing written
+        let bad = t.path().join("bad.png");
+        let o = ignis(&[
+            "loop",
+            clip.to_str().unwrap(),
+            "--length",
+            "1s",
+            "--seconds",
+            "5..7.5",
+            "-o",
+            bad.to_str().unwrap(),
+        ]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success() && !bad.exists());
+        assert!(
+            err.contains("--seconds 5..7.5 ends past the clip's end (6.80 s, 145 frames)"),
+            "{err}"
+        );
+    }
+
     /// `convert` plays the clip as it was shot: at 25 fps, each frame of the 12.5-fps
     /// stretch held for two, and `--seconds` counted by the frames' own times.
     #[test]
@@ -3494,7 +3553,7 @@ mod variable_frame_rate {
             let said = String::from_utf8_lossy(&ignis_ok(&a).stdout).to_string();
             (read_json(&t.path().join("c.json")), said)
         };
-        // 145 frames over 5.8 s: 60 + 25 × 2 + 60 = 170 at 25 fps
+        // 145 frames over 6.8 s: 60 + 25 × 2 + 60 = 170 at 25 fps
         let (meta, said) = run(&[]);
         assert_eq!(meta["fps"], 25.0, "{meta}");
         assert_eq!(meta["frame_count"], 170, "{meta}");

@@ -38,7 +38,7 @@ const CACHE_VERSION: u32 = 7;
 
 #[derive(clap::Args, Debug)]
 #[command(
-    after_help = "Examples:\n  ignis loop campfire.mp4 --length 4s -o loop.png\n  ignis loop candle.mp4 --length 120 -o loop.mp4\n  ignis loop fire.mov --length 2s --range 100..400 --method morph -o frames/%04d.png\n  ignis loop fire.mp4 --length 3s --cache /tmp/ignis-cache -o loop.gif\n  ignis loop plates/%04d.exr --length 96 -o loop.png    (an image sequence: a frame count, as it has no frame rate)\n  ignis loop campfire.mp4 --length 4s --every 2 --motion-vectors --engine unity -o loop.png    (half the cells; the engine's motion-vector blend fills in)\n  ignis loop fireball.mp4 --length 2s --alpha emissive -o loop.png    (to composite over light backgrounds: the fire adds its light)\n  ignis loop campfire.mp4 --length 4s -o loop.mov    (ProRes 4444 with the matte as alpha, for compositing tools; needs ffmpeg)\n  ignis loop handheld.mp4 --length 3s --stabilise on -o loop.png    (hold the camera still even where auto would not; auto steadies a clear shake)\n  ignis loop bonfire.mp4 --length 4s --crop 640,120,720,900 -o loop.png    (only that part of the frame: one fire of several, or a picture inside letterbox bars)\n\nThe first run on a clip trains an Eigenfire database on it (about 20 s for 500 frames of 960x540 on 2 cores, 2 to 3 min for a minute of 1080p; footage over 1080p is trained at 1920 px on its longest side) and keeps it in the cache ($XDG_CACHE_HOME/ignis or ~/.cache/ignis, or --cache); later runs reuse it. The output has the footage's own size (or --crop's), colours and frame rate (1/N of it with --every N; --fps is refused), with the pre-processing mask's matte as alpha (--alpha opaque: none; --alpha emissive: the matted flame's own light as alpha, no dark fringe over light backgrounds); a .png flipbook's JSON records the measured loop_quality."
+    after_help = "Examples:\n  ignis loop campfire.mp4 --length 4s -o loop.png\n  ignis loop candle.mp4 --length 120 -o loop.mp4\n  ignis loop fire.mov --length 2s --range 100..400 --method morph -o frames/%04d.png\n  ignis loop fire.mp4 --length 3s --cache /tmp/ignis-cache -o loop.gif\n  ignis loop bonfire.mp4 --length 4s --seconds 12..20.5 -o loop.png    (only that stretch of the clip, as a player's clock shows it)\n  ignis loop plates/%04d.exr --length 96 -o loop.png    (an image sequence: a frame count, as it has no frame rate)\n  ignis loop campfire.mp4 --length 4s --every 2 --motion-vectors --engine unity -o loop.png    (half the cells; the engine's motion-vector blend fills in)\n  ignis loop fireball.mp4 --length 2s --alpha emissive -o loop.png    (to composite over light backgrounds: the fire adds its light)\n  ignis loop campfire.mp4 --length 4s -o loop.mov    (ProRes 4444 with the matte as alpha, for compositing tools; needs ffmpeg)\n  ignis loop handheld.mp4 --length 3s --stabilise on -o loop.png    (hold the camera still even where auto would not; auto steadies a clear shake)\n  ignis loop bonfire.mp4 --length 4s --crop 640,120,720,900 -o loop.png    (only that part of the frame: one fire of several, or a picture inside letterbox bars)\n\nThe first run on a clip trains an Eigenfire database on it (about 20 s for 500 frames of 960x540 on 2 cores, 2 to 3 min for a minute of 1080p; footage over 1080p is trained at 1920 px on its longest side) and keeps it in the cache ($XDG_CACHE_HOME/ignis or ~/.cache/ignis, or --cache); later runs reuse it. The output has the footage's own size (or --crop's), colours and frame rate (1/N of it with --every N; --fps is refused), with the pre-processing mask's matte as alpha (--alpha opaque: none; --alpha emissive: the matted flame's own light as alpha, no dark fringe over light backgrounds); a .png flipbook's JSON records the measured loop_quality."
 )]
 pub struct Args {
     /// The footage (any video or frame sequence `ignis info` reads).
@@ -51,6 +51,11 @@ pub struct Args {
     /// Only look in source frames START..END (END excluded).
     #[arg(long, value_parser = crate::args::frame_span)]
     pub range: Option<Range<usize>>,
+    /// Only look in this stretch of the clip, in seconds as a player's clock shows them:
+    /// START..END (END excluded), START.. or ..END; for a variable-frame-rate clip, by the
+    /// frames' own timestamps. Example: --seconds 12..20.5
+    #[arg(long, value_parser = crate::args::seconds_range, conflicts_with = "range")]
+    pub seconds: Option<(f64, Option<f64>)>,
     /// How to close the loop: auto (the best of the others by measured seam and ghost),
     /// cut, crossfade or morph (motion-compensated).
     #[arg(long, default_value = "auto", value_parser = ["auto", "cut", "crossfade", "morph"])]
@@ -320,6 +325,48 @@ pub fn resolve_window(path: &Path, range: Option<Range<usize>>) -> Result<(Range
         ),
     };
     Ok((window, info.fps))
+}
+
+/// The frames of `path` shown from `start` to `end` seconds (`None`: to its end), as a
+/// player's clock counts them: at its rate, or by its frames' own timestamps when the rate
+/// varies ([`ignis_media::FrameTiming::frame_at`]). An end up to a frame past the clip's
+/// last is its end; further, or a stretch holding no frame, is refused in seconds.
+pub fn seconds_window(path: &Path, start: f64, end: Option<f64>) -> Result<Range<usize>> {
+    let info = ignis_media::probe(path).with_context(|| format!("reading {}", path.display()))?;
+    let timing = ignis_media::frame_timing(path)
+        .ok()
+        .flatten()
+        .filter(|t| t.is_variable());
+    let frame = |s: f64| match &timing {
+        Some(t) => t.frame_at(s),
+        None => (s * info.fps).round() as u64,
+    } as usize;
+    let Some(n) = info.frame_count.map(|n| n as usize) else {
+        bail!(
+            "{} does not say how many frames it has; give --range START..END in frames",
+            path.display()
+        );
+    };
+    let length = match &timing {
+        Some(t) => t.times()[t.len() - 1] - t.times()[0] + t.nominal_step(),
+        None => n as f64 / info.fps,
+    };
+    let a = frame(start);
+    let b = end.map_or(n, frame);
+    let span = format!(
+        "--seconds {start}..{}",
+        end.map_or(String::new(), |e| e.to_string())
+    );
+    if a >= n {
+        bail!("{span} starts past the clip's end ({length:.2} s, {n} frames); use a START below {length:.2}");
+    }
+    if b > n + 1 {
+        bail!("{span} ends past the clip's end ({length:.2} s, {n} frames); use an END of at most {length:.2}");
+    }
+    if b.min(n) <= a {
+        bail!("{span} holds no frame (frames {a}..{b}); give a longer stretch");
+    }
+    Ok(a..b.min(n))
 }
 
 /// Opens (verifying) or builds the cache entry of `path` over `window`.
@@ -2091,7 +2138,20 @@ fn seam_warning(seam: f64) -> Option<String> {
 /// `ignis loop`.
 pub fn run(a: &Args, g: &Global) -> Result<()> {
     let method = Method::parse(&a.method)?;
-    let (window, fps) = resolve_window(&a.input, a.range.clone())?;
+    let range = match a.seconds {
+        Some((start, end)) => {
+            let r = seconds_window(&a.input, start, end)?;
+            g.say(format!(
+                "--seconds {start}..{}: frames {}..{}",
+                end.map_or(String::new(), |e| e.to_string()),
+                r.start,
+                r.end
+            ));
+            Some(r)
+        }
+        None => a.range.clone(),
+    };
+    let (window, fps) = resolve_window(&a.input, range.clone())?;
     let clip = Clip {
         path: &a.input,
         crop: a.crop,
@@ -2107,10 +2167,14 @@ pub fn run(a: &Args, g: &Global) -> Result<()> {
         bail!(
             "--length {} ({length} frames) does not fit in {} frames {}..{}: a loop of about {length} frames needs at least {need}; {}",
             a.length,
-            if a.range.is_some() { "the window's" } else { "the clip's" },
+            if range.is_some() { "the window's" } else { "the clip's" },
             window.start,
             window.end,
-            longest_hint(window.len(), fps, if a.range.is_some() { "a longer --range" } else { "a longer clip" })
+            longest_hint(window.len(), fps, match (a.seconds, &a.range) {
+                (Some(_), _) => "a longer --seconds",
+                (None, Some(_)) => "a longer --range",
+                _ => "a longer clip",
+            })
         );
     }
     check_output_early(&a.out, fps)?;
@@ -2752,6 +2816,35 @@ mod tests {
             worst < 0.01,
             "the written frame is {worst} off the source's crop"
         );
+    }
+
+    /// `--seconds` at a constant rate: the frame shown at each time (25 fps), an end up
+    /// to a frame past the clip is its end, and a start or end past it, or a stretch
+    /// between two frames, is refused in seconds.
+    #[test]
+    fn seconds_are_the_frames_shown_then() {
+        let Some(path) = clip("campfire.mp4") else {
+            return;
+        };
+        assert_eq!(seconds_window(&path, 8.0, Some(9.0)).unwrap(), 200..225);
+        assert_eq!(seconds_window(&path, 12.0, None).unwrap(), 300..512);
+        assert_eq!(seconds_window(&path, 0.0, Some(20.5)).unwrap(), 0..512);
+        for (a, b, says) in [
+            (
+                0.0,
+                Some(20.6),
+                "ends past the clip's end (20.48 s, 512 frames)",
+            ),
+            (
+                21.0,
+                None,
+                "starts past the clip's end (20.48 s, 512 frames)",
+            ),
+            (8.01, Some(8.015), "holds no frame (frames 200..200)"),
+        ] {
+            let e = seconds_window(&path, a, b).unwrap_err().to_string();
+            assert!(e.contains(says), "{a}..{b:?}: {e}");
+        }
     }
 
     fn out_args(path: PathBuf) -> crate::output::OutputArgs {
