@@ -76,6 +76,27 @@ pub fn seconds_range(s: &str) -> Result<(f64, Option<f64>), String> {
     Ok((start, b))
 }
 
+/// `rect`'s size when it lies inside `path`'s frame of `size`; else an error naming the
+/// frame's size and what fits.
+pub fn crop_inside(
+    rect: &Rect,
+    size: ignis_media::Size,
+    path: &std::path::Path,
+) -> anyhow::Result<ignis_media::Size> {
+    ignis_media::check_crop(rect, size).map_err(|_| {
+        let (w, h) = (size.width, size.height);
+        anyhow::anyhow!(
+            "crop {},{},{},{} reaches past the {w}x{h} frame of {}; give X,Y,WIDTH,HEIGHT with \
+             X + WIDTH ≤ {w} and Y + HEIGHT ≤ {h}",
+            rect.x,
+            rect.y,
+            rect.width,
+            rect.height,
+            path.display()
+        )
+    })
+}
+
 /// A frame span `A..B` with both bounds and A < B (eigen's and `ignis loop`'s `--range`).
 pub fn frame_span(s: &str) -> Result<Range<usize>, String> {
     let (a, b) = closed_range::<usize>(s, FRAME)?;

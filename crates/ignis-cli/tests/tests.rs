@@ -2859,6 +2859,83 @@ mod loop_matte_dark_stretch {
 /// fire refused, and the 3-frame voted matte in the footage render. The footage is a
 /// synthetic 64×48 PNG sequence (no ffmpeg needed): an orange flame, and on frame 10 alone
 /// a bright tongue above it (a mask that flares on one frame).
+/// `eigen train --crop` and a config's `crop = [x, y, w, h]`: the clips are those parts of
+/// the frame (two parts of one video here), recorded in the database; `eigen loop` and
+/// `eigen animate` read the footage cut the same way; a rectangle past the frame is refused.
+#[test]
+fn eigen_clips_cut_from_part_of_the_frame() {
+    let t = tempfile::tempdir().unwrap();
+    let video = t.path().join("fire.mp4");
+    classic_ok("64x48", "60", &["--seed", "3", "--no-loop"], &video);
+    let v = video.to_str().unwrap();
+    let bad = t.path().join("bad.db");
+    let r = ignis(&[
+        "eigen",
+        "train",
+        v,
+        "--crop",
+        "40,8,32,32",
+        "-q",
+        "-o",
+        bad.to_str().unwrap(),
+    ]);
+    assert_fails(&r, "crop 40,8,32,32 reaches past the 64x48 frame");
+    assert!(!bad.exists());
+    let config = t.path().join("clips.toml");
+    std::fs::write(
+        &config,
+        "[[clip]]\nname = \"left\"\npath = \"fire.mp4\"\ncrop = [0, 8, 24, 40]\n\n\
+         [[clip]]\nname = \"right\"\npath = \"fire.mp4\"\ncrop = [32, 16, 32, 32]\n",
+    )
+    .unwrap();
+    let db = t.path().join("fire.db");
+    let d = db.to_str().unwrap();
+    ignis_ok(&["eigen", "train", config.to_str().unwrap(), "-q", "-o", d]);
+    let info: serde_json::Value =
+        serde_json::from_slice(&ignis_ok(&["eigen", "info", d, "--json"]).stdout).unwrap();
+    let clips = info["clips"].as_array().unwrap();
+    assert_eq!(
+        clips[0]["crop"],
+        serde_json::json!([0, 8, 24, 40]),
+        "{info}"
+    );
+    assert_eq!(
+        clips[1]["crop"],
+        serde_json::json!([32, 16, 32, 32]),
+        "{info}"
+    );
+    let text = String::from_utf8_lossy(&ignis_ok(&["eigen", "info", d]).stdout).to_string();
+    assert!(text.contains("32x32 cut at 32,16"), "{text}");
+    // a loop of each clip is its part's size
+    for (clip, w, h) in [("left", 24, 40), ("right", 32, 32)] {
+        let out = t.path().join(format!("{clip}.png"));
+        let o = out.to_str().unwrap();
+        ignis_ok(&[
+            "eigen", "loop", d, "--clip", clip, "--length", "16", "--alpha", "opaque", "-q", "-o",
+            o,
+        ]);
+        let m = read_json(&out.with_extension("json"));
+        assert_eq!(
+            (m["frame_width"].as_u64(), m["frame_height"].as_u64()),
+            (Some(w), Some(h)),
+            "{clip}: {m}"
+        );
+    }
+    // a scenario over both clips renders each from its own part of the one video
+    let scenario = t.path().join("scene.toml");
+    std::fs::write(&scenario, ignis_ok(&["eigen", "scenario", d]).stdout).unwrap();
+    let out = t.path().join("anim");
+    ignis_ok(&[
+        "eigen",
+        "animate",
+        scenario.to_str().unwrap(),
+        "-q",
+        "-o",
+        out.join("%04d.png").to_str().unwrap(),
+    ]);
+    assert!(out.join("0000.png").exists());
+}
+
 mod eigen_db_footage {
     use super::*;
 

@@ -51,6 +51,13 @@ pub struct ClipSpec {
     /// Overrides the automatic centring and scaling (§3.4).
     #[serde(default)]
     pub pose: Option<ClipPose>,
+    /// Only this rectangle `[x, y, width, height]` of every frame (source pixels, top-left
+    /// origin): one fire of several, a flame away from a lit wall. The clip's footage must
+    /// already be cut to it (`MediaFootage::cropped`; `ignis eigen train --crop` and a
+    /// config's `crop = [x, y, w, h]` do that); it is recorded in the database, so renders
+    /// from the footage cut it again.
+    #[serde(default)]
+    pub crop: Option<[u32; 4]>,
 }
 
 fn one() -> usize {
@@ -68,6 +75,7 @@ impl ClipSpec {
             end: None,
             stride: 1,
             pose: None,
+            crop: None,
         }
     }
 }
@@ -121,6 +129,7 @@ impl Default for TrainParams {
 /// start = 0
 /// end = 400
 /// stride = 2
+/// crop = [100, 40, 280, 400]   # optional: x, y, width, height of the part used
 ///
 /// [preprocess]
 /// train_size = "102x168"
@@ -290,6 +299,18 @@ fn plan_range(c: &ClipInput<'_>) -> Result<(usize, usize)> {
     let s = &c.spec;
     if s.stride == 0 {
         return Err(EigenError::clip(&s.name, "stride must be at least 1"));
+    }
+    if let Some([x, y, w, h]) = s.crop {
+        let size = c.footage.info().size;
+        if (size.width, size.height) != (w, h) {
+            return Err(EigenError::clip(
+                &s.name,
+                format!(
+                    "crop = [{x}, {y}, {w}, {h}] is {w}x{h}, but its footage is {size}; cut the \
+                     footage to the crop (MediaFootage::cropped) before training"
+                ),
+            ));
+        }
     }
     if c.footage.info().frame_count == Some(0) {
         return Err(EigenError::clip(
@@ -883,6 +904,7 @@ fn write_model(
             source_check: db::source_check(&info.source, info.frame_count)?,
             static_lit: Some(plan.static_lit),
             flame_colour: ff.flame_colour,
+            crop: c.spec.crop,
         });
         first_row += plan.frames;
     }

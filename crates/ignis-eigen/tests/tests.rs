@@ -491,6 +491,15 @@ mod bad_input {
         assert!(m.contains("startpast") && m.contains("past the end"), "{m}");
         let m = err_of(&[clip("nothing", FlameStyle::Candle, 0)], &pre, &p).to_string();
         assert!(m.contains("nothing") && m.contains("zero frames"), "{m}");
+        // A crop the footage was not cut to (48x64 frames).
+        let mut c = clip("uncut", FlameStyle::Candle, 8);
+        c.spec.crop = Some([4, 8, 24, 32]);
+        let m = err_of(&[c], &pre, &p).to_string();
+        assert!(
+            m.contains("uncut")
+                && m.contains("crop = [4, 8, 24, 32] is 24x32, but its footage is 48x64"),
+            "{m}"
+        );
         // A source that reports no count and yields nothing.
         struct EmptyStream(FootageInfo);
         impl Footage for EmptyStream {

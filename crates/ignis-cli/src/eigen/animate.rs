@@ -351,8 +351,9 @@ pub struct ScenarioArgs {
 pub struct MediaSources {
     pub relink: std::collections::HashMap<String, PathBuf>,
     pub checked: std::collections::HashSet<String>,
-    /// Footage opened so far (probed once per file).
-    opened: std::collections::HashMap<PathBuf, MediaFootage>,
+    /// Footage opened so far (probed once per file and crop: two clips may be two parts
+    /// of one video).
+    opened: std::collections::HashMap<(PathBuf, Option<[u32; 4]>), MediaFootage>,
 }
 
 impl MediaSources {
@@ -392,6 +393,12 @@ impl MediaSources {
             source: Box::new(e),
         })?;
         let frames = info.frame_count.map(|n| n as usize);
+        // a clip trained on part of the frame is that part of it
+        let mut info = info;
+        if let Some(c) = clip.crop {
+            info.size = crate::args::crop_inside(&crate::eigen::rect(c), info.size, p)
+                .map_err(|e| EigenError::clip(&clip.name, e.to_string()))?;
+        }
         if relinked {
             let count_ok = match (
                 clip.source_check.as_ref().and_then(|c| c.frame_count),
@@ -456,7 +463,8 @@ impl FootageOpener for MediaSources {
         if path.is_none() {
             self.check(clip, &p)?;
         }
-        if !self.opened.contains_key(&p) {
+        let key = (p.clone(), clip.crop);
+        if !self.opened.contains_key(&key) {
             let label = format!(
                 "clip `{}` ({}{})",
                 clip.name,
@@ -467,12 +475,16 @@ impl FootageOpener for MediaSources {
                     ""
                 }
             );
-            let f = MediaFootage::open(&p)
-                .map_err(|e| e.in_clip(&clip.name))?
-                .labelled(label);
-            self.opened.insert(p.clone(), f);
+            let mut f = MediaFootage::open(&p).map_err(|e| e.in_clip(&clip.name))?;
+            if let Some(c) = clip.crop {
+                f = f
+                    .cropped(crate::eigen::rect(c))
+                    .map_err(|e| e.in_clip(&clip.name))?;
+            }
+            let f = f.labelled(label);
+            self.opened.insert(key.clone(), f);
         }
-        Ok(Box::new(&self.opened[&p]))
+        Ok(Box::new(&self.opened[&key]))
     }
 }
 

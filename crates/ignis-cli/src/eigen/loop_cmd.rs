@@ -271,18 +271,7 @@ impl<'a> Clip<'a> {
         let mut info = ignis_media::probe(self.path)
             .with_context(|| format!("reading {}", self.path.display()))?;
         if let Some(r) = &self.crop {
-            let (w, h) = (info.size.width, info.size.height);
-            info.size = ignis_media::check_crop(r, info.size).map_err(|_| {
-                anyhow::anyhow!(
-                    "--crop {},{},{},{} reaches past the {w}x{h} frame of {}; give X,Y,WIDTH,HEIGHT \
-                     with X + WIDTH ≤ {w} and Y + HEIGHT ≤ {h}",
-                    r.x,
-                    r.y,
-                    r.width,
-                    r.height,
-                    self.path.display()
-                )
-            })?;
+            info.size = crate::args::crop_inside(r, info.size, self.path)?;
         }
         Ok(info)
     }
@@ -2316,8 +2305,13 @@ pub fn eigen_length_loop(a: &crate::eigen::LoopArgs, g: &Global) -> Result<()> {
     let source = sources
         .checked_path(&c)
         .context("a --length loop is rendered from the clip's source footage (give its place with --relink; reconstructed frames with --from-database need --range instead of --length)")?;
+    // the part of the frame the clip was trained on
+    let footage = Clip {
+        path: &source,
+        crop: c.crop.map(crate::eigen::rect),
+    };
     // Metric frames of the window, as the writer will measure them.
-    let (metric, _, _) = metric_frames(Clip::whole(&source), &window, false, g)
+    let (metric, _, _) = metric_frames(footage, &window, false, g)
         .with_context(|| format!("reading {}", source.display()))?;
     if metric.len() != window.len() {
         bail!(
@@ -2330,7 +2324,7 @@ pub fn eigen_length_loop(a: &crate::eigen::LoopArgs, g: &Global) -> Result<()> {
     let weights = &db.weights_row_major()[rows.start * k..rows.end * k];
     let e = db.manifest().e_detect.max(1);
     let src = LoopFootage {
-        clip: Clip::whole(&source),
+        clip: footage,
         first: window.start,
         weights,
         k,
@@ -2729,7 +2723,7 @@ mod tests {
         };
         let e = past.probe().unwrap_err().to_string();
         assert!(
-            e.contains("--crop 240,130,480,420 reaches past the 960x540 frame"),
+            e.contains("crop 240,130,480,420 reaches past the 960x540 frame"),
             "{e}"
         );
         assert_eq!(cropped.probe().unwrap().size, Size::new(480, 420).unwrap());

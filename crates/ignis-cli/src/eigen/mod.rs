@@ -246,6 +246,12 @@ pub struct FrameSelect {
     /// Common pre-processed frame size, e.g. 410x670 (overrides the config).
     #[arg(long)]
     pub frame_size: Option<Size>,
+    /// Only this rectangle X,Y,WIDTH,HEIGHT of every video input's frames (source pixels,
+    /// top-left origin): one fire of several, a flame away from a lit wall. Recorded in
+    /// the database, so renders from the footage cut it again. A config's clips take
+    /// `crop = [x, y, width, height]`. Example: --crop 240,60,480,420
+    #[arg(long, value_parser = crate::args::crop)]
+    pub crop: Option<ignis_media::Rect>,
 }
 
 impl FrameSelect {
@@ -256,6 +262,7 @@ impl FrameSelect {
         s.start = self.start;
         s.end = self.end;
         s.stride = self.stride;
+        s.crop = self.crop.map(|r| [r.x, r.y, r.width, r.height]);
         s
     }
 
@@ -335,6 +342,30 @@ fn clip_name(path: &Path, taken: &[String]) -> String {
     name
 }
 
+/// A clip's crop (`[x, y, width, height]`, as databases and configs record it) as a
+/// rectangle.
+pub fn rect([x, y, width, height]: [u32; 4]) -> ignis_media::Rect {
+    ignis_media::Rect {
+        x,
+        y,
+        width,
+        height,
+    }
+}
+
+/// `path`'s footage, cut to `crop` when given; a rectangle past the frame is refused,
+/// naming the frame's size.
+pub fn media_footage(path: &Path, crop: Option<[u32; 4]>) -> Result<MediaFootage> {
+    let f = MediaFootage::open(path)?;
+    match crop.map(rect) {
+        None => Ok(f),
+        Some(r) => {
+            crate::args::crop_inside(&r, ignis_eigen::Footage::info(&f).size, path)?;
+            Ok(f.cropped(r)?)
+        }
+    }
+}
+
 fn read_preprocess(config: Option<&Path>) -> Result<PreprocessParams> {
     match config {
         None => Ok(PreprocessParams::default()),
@@ -390,7 +421,7 @@ pub fn train(a: TrainArgs, g: &Global) -> Result<()> {
     for s in specs {
         let footage: Box<dyn ignis_eigen::Footage> = match (&s.path, s.synthetic) {
             (Some(p), _) => {
-                Box::new(MediaFootage::open(p).with_context(|| format!("clip `{}`", s.name))?)
+                Box::new(media_footage(p, s.crop).with_context(|| format!("clip `{}`", s.name))?)
             }
             (None, Some(style)) => Box::new(SyntheticFootage::new(
                 ignis_eigen::synthetic::SyntheticParams {
@@ -493,7 +524,7 @@ fn info(a: InfoArgs, g: &Global) -> Result<()> {
     outln!("  size on disk {:.2} MB", db.bytes_on_disk() as f64 / 1e6)?;
     for c in &m.clips {
         outln!(
-            "  clip {:<12} {} frames {}..{} step {} @ {:.2} fps, {} → scale {:.3}{}; θ_min {:.4}, θ_average {:.4} (E={}, {} peaks)",
+            "  clip {:<12} {} frames {}..{} step {} @ {:.2} fps, {}{} → scale {:.3}{}; θ_min {:.4}, θ_average {:.4} (E={}, {} peaks)",
             c.name,
             c.frames,
             c.start,
@@ -501,6 +532,7 @@ fn info(a: InfoArgs, g: &Global) -> Result<()> {
             c.stride,
             c.fps,
             c.source_size,
+            c.crop.map_or(String::new(), |[x, y, _, _]| format!(" cut at {x},{y}")),
             c.pose.scale,
             match (c.pose.isolate, c.static_lit) {
                 (true, Some(f)) => format!(", flame isolated ({:.0}% of the lit pixels static: lit surroundings)", f * 100.0),
@@ -746,7 +778,8 @@ fn preprocess(a: PreprocessArgs, g: &Global) -> Result<()> {
         bail!("give an input and -o DIR")
     };
     let spec = a.frames_from.clip(&clip_name(&input, &[]), &input);
-    let clip = ClipInput::new(spec, MediaFootage::open(&input)?);
+    let footage = media_footage(&input, spec.crop)?;
+    let clip = ClipInput::new(spec, footage);
     let mut bars = StageBars::new(g);
     let stages = ignis_eigen::train::preprocess_clip(&clip, &pre, &a.frames, &mut bars)
         .with_context(|| format!("pre-processing {}", input.display()))?;

@@ -133,6 +133,11 @@ pub struct ClipEntry {
     /// default tint) and for clips with no lit pixel.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub flame_colour: Option<[f32; 3]>,
+    /// The rectangle `[x, y, width, height]` of the source's frames the clip was trained
+    /// on ([`crate::ClipSpec::crop`]; `source_size` is its size); `None`: the whole frame.
+    /// Renders from the footage cut the same rectangle.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub crop: Option<[u32; 4]>,
 }
 
 /// A source file's fingerprint.
@@ -404,6 +409,17 @@ impl Manifest {
                 return bad(format!("fps is {}, expected a finite number > 0", c.fps));
             }
             size_ok("source_size", c.source_size).or_else(&bad)?;
+            if let Some([x, y, w, h]) = c.crop {
+                let s = c.source_size;
+                if (w, h) != (s.width, s.height)
+                    || x.checked_add(w).is_none()
+                    || y.checked_add(h).is_none()
+                {
+                    return bad(format!(
+                        "crop = [{x}, {y}, {w}, {h}] does not match source_size {s}"
+                    ));
+                }
+            }
             let p = c.pose;
             if !(p.fuel_x.is_finite()
                 && p.base_y.is_finite()
