@@ -180,7 +180,23 @@ pub fn train(a: &TrainArgs, g: &Global) -> Result<FlameModel> {
     let reader =
         ignis_media::open(path, &opts).with_context(|| format!("reading {}", path.display()))?;
     let total = reader.info().frame_count;
-    let footage_fps = reader.info().fps;
+    let mut footage_fps = reader.info().fps;
+    // a variable frame rate: the process steps once per frame, as if they were evenly
+    // spaced; most steps are at the nominal rate, which is what it learns
+    let first = reader.position() as usize;
+    let window = first..total.map_or(usize::MAX, |n| first + n as usize);
+    if let Some(t) = crate::eigen::loop_cmd::WindowTiming::of(path, window) {
+        let w = t.warning(
+            first,
+            &format!(
+                "the model steps once per frame as if they were evenly spaced, at the nominal {:.3} fps",
+                t.nominal_fps
+            ),
+            |r| format!("--range {}..{}", r.start, r.end),
+        );
+        g.say(format!("warning: {w}"));
+        footage_fps = t.nominal_fps;
+    }
     let p = TrainParams {
         shape: ShapeParams {
             n_path: a.path_params,

@@ -3614,6 +3614,65 @@ mod variable_frame_rate {
         );
     }
 
+    /// `eigen train` and `learned train` take every frame once: they say the rate varies
+    /// and name the longest evenly timed stretch (frames 0..61) as the argument that asks
+    /// for it; the learned model records the nominal rate (its steps are mostly 40 ms),
+    /// not the average; over an even stretch nothing is said.
+    #[test]
+    fn training_says_the_rate_varies_and_names_the_even_stretch() {
+        let t = tempfile::tempdir().unwrap();
+        let Some(clip) = phone_clip(t.path()) else {
+            return;
+        };
+        let c = clip.to_str().unwrap();
+        let db = t.path().join("fire.db");
+        let said = String::from_utf8_lossy(
+            &ignis_ok(&[
+                "eigen",
+                "train",
+                c,
+                "--train-size",
+                "16x24",
+                "-o",
+                db.to_str().unwrap(),
+            ])
+            .stdout,
+        )
+        .to_string();
+        assert!(
+            said.contains("warning: clip `phone`: the frame rate varies (25.000 fps nominal")
+                && said
+                    .contains("--start 0 --end 61 (the longest evenly timed stretch, 61 frames)"),
+            "{said}"
+        );
+        let model = t.path().join("m.flame");
+        let learn = |extra: &[&str]| {
+            let mut a = vec![
+                "learned",
+                "train",
+                c,
+                "--keep-multiple",
+                "--max-iterations",
+                "2",
+            ];
+            a.extend_from_slice(extra);
+            a.extend(["-o", model.to_str().unwrap()]);
+            String::from_utf8_lossy(&ignis_ok(&a).stdout).to_string()
+        };
+        let said = learn(&[]);
+        assert!(
+            said.contains("at the nominal 25.000 fps; --range 0..61 (the longest"),
+            "{said}"
+        );
+        let inspect: serde_json::Value = serde_json::from_slice(
+            &ignis_ok(&["learned", "inspect", model.to_str().unwrap(), "--json"]).stdout,
+        )
+        .unwrap();
+        assert_eq!(inspect["summary"]["fps"], 25.0, "{inspect}");
+        let said = learn(&["--range", "85.."]);
+        assert!(!said.contains("varies"), "{said}");
+    }
+
     /// `convert` plays the clip as it was shot: at 25 fps, each frame of the 12.5-fps
     /// stretch held for two, and `--seconds` counted by the frames' own times.
     #[test]

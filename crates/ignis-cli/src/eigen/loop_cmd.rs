@@ -1508,6 +1508,34 @@ impl WindowTiming {
         })
     }
 
+    /// The longest stretch of window frames joined by nominal steps alone (the first of
+    /// the longest).
+    pub fn longest_even(&self) -> Range<usize> {
+        even_runs(std::iter::once(0..self.frames).collect(), &self.uneven)
+            .into_iter()
+            .min_by_key(|r| (std::cmp::Reverse(r.len()), r.start))
+            .unwrap_or(0..self.frames)
+    }
+
+    /// A warning (without its `warning: `) for a command that takes every frame once, as if
+    /// evenly spaced (`eigen train`, `learned train`): what varies, `effect`, and the longest evenly timed
+    /// stretch of source frames (the window starting at source frame `first`) as `fix`
+    /// writes the argument that asks for it.
+    pub fn warning(
+        &self,
+        first: usize,
+        effect: &str,
+        fix: impl Fn(Range<usize>) -> String,
+    ) -> String {
+        let r = self.longest_even();
+        format!(
+            "{}; {effect}; {} (the longest evenly timed stretch, {} frames) avoids it",
+            self.describe(),
+            fix(first + r.start..first + r.end),
+            r.len()
+        )
+    }
+
     /// What the timing is, said in a clause.
     fn describe(&self) -> String {
         format!(

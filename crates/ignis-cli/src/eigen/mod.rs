@@ -400,6 +400,29 @@ pub fn train(a: TrainArgs, g: &Global) -> Result<()> {
         )
     };
     a.frames_from.apply_sizes(&mut pre);
+    // a variable frame rate: every frame is taken once, as if evenly spaced
+    for s in &specs {
+        let Some(path) = &s.path else { continue };
+        let window = s.start..s.end.unwrap_or(usize::MAX);
+        if let Some(t) = loop_cmd::WindowTiming::of(path, window) {
+            g.say(format!(
+                "warning: clip `{}`: {}",
+                s.name,
+                t.warning(
+                    s.start,
+                    &format!(
+                        "its frames are taken as if evenly spaced and played at the average {:.3} fps \
+                         (eigen loop, eigen animate)",
+                        t.average_fps
+                    ),
+                    |r| match is_toml {
+                        true => format!("start = {}, end = {}", r.start, r.end),
+                        false => format!("--start {} --end {}", r.start, r.end),
+                    },
+                )
+            ));
+        }
+    }
     if a.keep.is_some() {
         tp.keep = a.keep;
     }
