@@ -2859,6 +2859,87 @@ mod loop_matte_dark_stretch {
 /// fire refused, and the 3-frame voted matte in the footage render. The footage is a
 /// synthetic 64×48 PNG sequence (no ffmpeg needed): an orange flame, and on frame 10 alone
 /// a bright tongue above it (a mask that flares on one frame).
+/// A keyed element (a PNG sequence with its own alpha, bright grey under alpha 0 where the
+/// key left the plate): `--alpha auto`, the default, keeps the element's alpha as it is
+/// (every cell of a cut loop has one of its frames' alphas exactly); `--alpha matte` keys
+/// within it and never shows what it hides.
+#[test]
+fn a_keyed_element_keeps_its_own_alpha() {
+    let t = tempfile::tempdir().unwrap();
+    let frames = t.path().join("frames");
+    std::fs::create_dir(&frames).unwrap();
+    let (w, h) = (64u32, 48u32);
+    let alphas: Vec<Vec<u8>> = (0..60usize)
+        .map(|i| {
+            let (rx, ry) = (8.0 + (i % 5) as f32 * 0.6, 12.0 + (i % 7) as f32 * 0.7);
+            let img = image::RgbaImage::from_fn(w, h, |x, y| {
+                let d = ((x as f32 - 32.0) / rx).powi(2) + ((y as f32 - 30.0) / ry).powi(2);
+                image::Rgba(match () {
+                    _ if d < 0.4 => [255, 230, 180, 255],
+                    _ if d < 1.0 => [255, 140, 40, 160],
+                    _ => [200, 200, 200, 0],
+                })
+            });
+            img.save(frames.join(format!("f{i:04}.png"))).unwrap();
+            img.pixels().map(|p| p[3]).collect()
+        })
+        .collect();
+    let pattern = frames.join("f%04d.png");
+    let cache = t.path().join("cache");
+    let run = |alpha: &[&str], out: &Path| {
+        let mut a = vec![
+            "loop",
+            pattern.to_str().unwrap(),
+            "--length",
+            "16",
+            "--method",
+            "cut",
+            "--cache",
+            cache.to_str().unwrap(),
+        ];
+        a.extend_from_slice(alpha);
+        a.extend(["-o", out.to_str().unwrap()]);
+        String::from_utf8_lossy(&ignis_ok(&a).stdout).to_string()
+    };
+    let cells = |dir: &Path| -> Vec<Vec<u8>> {
+        let mut names = files_in(dir);
+        names.sort();
+        names
+            .iter()
+            .map(|n| {
+                let img = image::open(dir.join(n)).unwrap().to_rgba8();
+                img.pixels().map(|p| p[3]).collect()
+            })
+            .collect()
+    };
+    let own = t.path().join("own");
+    let said = run(&[], &own.join("%04d.png"));
+    assert!(said.contains("alpha: the footage has its own"), "{said}");
+    let written = cells(&own);
+    assert!(written.len() >= 12, "{} cells", written.len());
+    for (j, a) in written.iter().enumerate() {
+        assert!(
+            alphas.contains(a),
+            "cell {j}'s alpha is none of the element's"
+        );
+    }
+    let matte = t.path().join("matte");
+    let said = run(&["--alpha", "matte"], &matte.join("%04d.png"));
+    assert!(!said.contains("has its own"), "{said}");
+    // what any frame's own alpha shows
+    let shown: Vec<bool> = (0..(w * h) as usize)
+        .map(|k| alphas.iter().any(|a| a[k] > 0))
+        .collect();
+    for (j, a) in cells(&matte).iter().enumerate() {
+        let leaked = a.iter().zip(&shown).filter(|(&v, &s)| v > 0 && !s).count();
+        assert_eq!(
+            leaked, 0,
+            "cell {j}: the matte shows {leaked} pixels the key hides"
+        );
+        assert!(a.iter().any(|&v| v > 0), "cell {j} is empty");
+    }
+}
+
 /// `eigen train --crop` and a config's `crop = [x, y, w, h]`: the clips are those parts of
 /// the frame (two parts of one video here), recorded in the database; `eigen loop` and
 /// `eigen animate` read the footage cut the same way; a rectangle past the frame is refused.

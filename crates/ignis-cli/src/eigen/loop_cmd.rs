@@ -33,12 +33,13 @@ use crate::global::Global;
 /// square pixels, HDR and BT.2020 as SDR BT.709, deinterlaced, the stream's own matrix and
 /// range on the pure path, the largest video stream that is not an attached picture; 6: the
 /// camera's track of every frame, `camera.f32`, for `--stabilise`; 7: tracked against the
-/// first of the window's first frames with detail, not a fade's black first frame).
-const CACHE_VERSION: u32 = 7;
+/// first of the window's first frames with detail, not a fade's black first frame; 8:
+/// whether the footage has its own alpha, for `--alpha auto`).
+const CACHE_VERSION: u32 = 8;
 
 #[derive(clap::Args, Debug)]
 #[command(
-    after_help = "Examples:\n  ignis loop campfire.mp4 --length 4s -o loop.png\n  ignis loop candle.mp4 --length 120 -o loop.mp4\n  ignis loop fire.mov --length 2s --range 100..400 --method morph -o frames/%04d.png\n  ignis loop fire.mp4 --length 3s --cache /tmp/ignis-cache -o loop.gif\n  ignis loop bonfire.mp4 --length 4s --seconds 12..20.5 -o loop.png    (only that stretch of the clip, as a player's clock shows it)\n  ignis loop plates/%04d.exr --length 96 -o loop.png    (an image sequence: a frame count, as it has no frame rate)\n  ignis loop campfire.mp4 --length 4s --every 2 --motion-vectors --engine unity -o loop.png    (half the cells; the engine's motion-vector blend fills in)\n  ignis loop fireball.mp4 --length 2s --alpha emissive -o loop.png    (to composite over light backgrounds: the fire adds its light)\n  ignis loop campfire.mp4 --length 4s -o loop.mov    (ProRes 4444 with the matte as alpha, for compositing tools; needs ffmpeg)\n  ignis loop handheld.mp4 --length 3s --stabilise on -o loop.png    (hold the camera still even where auto would not; auto steadies a clear shake)\n  ignis loop bonfire.mp4 --length 4s --crop 640,120,720,900 -o loop.png    (only that part of the frame: one fire of several, or a picture inside letterbox bars)\n\nThe first run on a clip trains an Eigenfire database on it (about 20 s for 500 frames of 960x540 on 2 cores, 2 to 3 min for a minute of 1080p; footage over 1080p is trained at 1920 px on its longest side) and keeps it in the cache ($XDG_CACHE_HOME/ignis or ~/.cache/ignis, or --cache); later runs reuse it. The output has the footage's own size (or --crop's), colours and frame rate (1/N of it with --every N; --fps is refused), with the pre-processing mask's matte as alpha (--alpha opaque: none; --alpha emissive: the matted flame's own light as alpha, no dark fringe over light backgrounds); a .png flipbook's JSON records the measured loop_quality."
+    after_help = "Examples:\n  ignis loop campfire.mp4 --length 4s -o loop.png\n  ignis loop candle.mp4 --length 120 -o loop.mp4\n  ignis loop fire.mov --length 2s --range 100..400 --method morph -o frames/%04d.png\n  ignis loop fire.mp4 --length 3s --cache /tmp/ignis-cache -o loop.gif\n  ignis loop bonfire.mp4 --length 4s --seconds 12..20.5 -o loop.png    (only that stretch of the clip, as a player's clock shows it)\n  ignis loop plates/%04d.exr --length 96 -o loop.png    (an image sequence: a frame count, as it has no frame rate)\n  ignis loop campfire.mp4 --length 4s --every 2 --motion-vectors --engine unity -o loop.png    (half the cells; the engine's motion-vector blend fills in)\n  ignis loop fireball.mp4 --length 2s --alpha emissive -o loop.png    (to composite over light backgrounds: the fire adds its light)\n  ignis loop campfire.mp4 --length 4s -o loop.mov    (ProRes 4444 with the matte as alpha, for compositing tools; needs ffmpeg)\n  ignis loop handheld.mp4 --length 3s --stabilise on -o loop.png    (hold the camera still even where auto would not; auto steadies a clear shake)\n  ignis loop bonfire.mp4 --length 4s --crop 640,120,720,900 -o loop.png    (only that part of the frame: one fire of several, or a picture inside letterbox bars)\n\nThe first run on a clip trains an Eigenfire database on it (about 20 s for 500 frames of 960x540 on 2 cores, 2 to 3 min for a minute of 1080p; footage over 1080p is trained at 1920 px on its longest side) and keeps it in the cache ($XDG_CACHE_HOME/ignis or ~/.cache/ignis, or --cache); later runs reuse it. The output has the footage's own size (or --crop's), colours and frame rate (1/N of it with --every N; --fps is refused), with the pre-processing mask's matte as alpha (a keyed element with its own alpha keeps that; --alpha opaque: none; --alpha emissive: the matted flame's own light as alpha, no dark fringe over light backgrounds); a .png flipbook's JSON records the measured loop_quality."
 )]
 pub struct Args {
     /// The footage (any video or frame sequence `ignis info` reads).
@@ -84,12 +85,14 @@ pub struct Args {
     /// footage's aspect that fits). Example: --size 960x540
     #[arg(long, value_parser = crate::eigen::animate::parse_size)]
     pub size: Option<Size>,
-    /// Alpha: `matte` (the pre-processing mask of each frame, feathered: the flame keyed
-    /// out of its surroundings), `emissive` (the matted flame's own light as alpha, the
-    /// "unmultiply" of compositing tools: over black the same picture, over a light
-    /// background no dark fringe; what a fire shot on black needs over anything else) or
-    /// `opaque` (the footage as it is).
-    #[arg(long, default_value = "matte", value_parser = LOOP_ALPHA_CHOICES)]
+    /// Alpha: `auto` (default: the footage's own alpha when it has one, a keyed element
+    /// from a PNG, EXR or ProRes 4444; else `matte`), `matte` (the pre-processing mask of
+    /// each frame, feathered: the flame keyed out of its surroundings; times the footage's
+    /// own alpha, so it never shows what that hides), `emissive` (the matted flame's own
+    /// light as alpha, the "unmultiply" of compositing tools: over black the same picture,
+    /// over a light background no dark fringe; what a fire shot on black needs over
+    /// anything else) or `opaque` (the footage as it is, its own alpha included).
+    #[arg(long, default_value = "auto", value_parser = LOOP_ALPHA_CHOICES)]
     pub alpha: String,
     /// Write every Nth frame of the loop, at 1/N of the clip's frame rate (a flipbook of
     /// fewer cells for an engine to blend between); the loop is chosen among those whose
@@ -177,6 +180,9 @@ struct EntryMeta {
     aligned_sha256: String,
     fps: f64,
     source_size: String,
+    /// Whether some frame of the window has its own alpha below 1 (`--alpha auto` keeps it).
+    #[serde(default)]
+    translucent: bool,
 }
 
 /// A verified cache entry: the database, the metric frames of the window, its fps.
@@ -194,6 +200,8 @@ pub struct Cached {
     pub built: bool,
     /// The part of the frame it was made of (`--crop`; `None`: the whole frame).
     pub crop: Option<ignis_media::Rect>,
+    /// Whether the footage has its own alpha (a keyed element) in the window.
+    pub translucent: bool,
 }
 
 /// The default cache directory.
@@ -491,6 +499,7 @@ fn open_entry(dir: &Path, sha: &str, settings: &CacheSettings) -> Result<Cached>
         fps: meta.fps,
         built: false,
         crop: None,
+        translucent: meta.translucent,
     })
 }
 
@@ -515,7 +524,12 @@ fn build_entry(
     let result = (|| -> Result<()> {
         // Metric frames of every frame of the window, as a writer would measure them.
         let info = clip.probe()?;
-        let (metric, aligned, tracks) = metric_frames(clip, &window, true, g)?;
+        let Measured {
+            metric,
+            aligned,
+            tracks,
+            translucent,
+        } = metric_frames(clip, &window, true, g)?;
         if metric.len() != window.len() || tracks.len() != window.len() {
             bail!(
                 "read {} frames of {}..{}",
@@ -589,6 +603,7 @@ fn build_entry(
             aligned_sha256,
             fps: info.fps,
             source_size: info.size.to_string(),
+            translucent,
         };
         ignis_core::atomic::write_bytes(
             &tmp.join("entry.json"),
@@ -1651,8 +1666,9 @@ fn steady_metric(held: &Held, aligned: &[GrayFrame]) -> Vec<GrayFrame> {
 /// `--alpha`: the pre-processing matte (default) or opaque footage.
 pub const ALPHA_CHOICES: [&str; 2] = ["matte", "opaque"];
 
-/// `ignis loop --alpha`: also `emissive`.
-pub const LOOP_ALPHA_CHOICES: [&str; 3] = ["matte", "emissive", "opaque"];
+/// `ignis loop --alpha`: also `emissive`, and `auto` (the footage's own alpha if it has
+/// one, else the matte).
+pub const LOOP_ALPHA_CHOICES: [&str; 4] = ["auto", "matte", "emissive", "opaque"];
 
 /// A matted frame with its light as alpha (`--alpha emissive`), the "unmultiply" of
 /// compositing tools for fire shot on black: per pixel the premultiplied light `P = c·a`
@@ -1839,11 +1855,13 @@ impl<'a> FootageMatte<'a> {
         })
     }
 
-    /// Sets `f`'s alpha to the matte of window frame `i` (see [`FootageMatte::at`]).
+    /// Multiplies `f`'s alpha by the matte of window frame `i` (see [`FootageMatte::at`]):
+    /// the matte itself for opaque footage; footage with its own alpha keeps hidden what
+    /// that hides.
     pub fn apply(&self, i: usize, f: &mut RgbaFrame, cache: &mut MaskCache) -> Result<()> {
         let m = self.at(i, f.size(), cache)?;
         for (p, &a) in f.data_mut().iter_mut().zip(m.data()) {
-            p[3] = a;
+            p[3] *= a;
         }
         Ok(())
     }
@@ -2214,14 +2232,25 @@ pub fn run(a: &Args, g: &Global) -> Result<()> {
     if let Some(s) = &steadying {
         src = src.steadied(s, &c);
     }
-    match a.alpha.as_str() {
+    let alpha = match a.alpha.as_str() {
+        "auto" if c.translucent => {
+            g.say(
+                "alpha: the footage has its own (a keyed element), kept as it is; --alpha matte keys \
+                 the flame out of its colours instead (within that alpha)",
+            );
+            "opaque"
+        }
+        "auto" => "matte",
+        other => other,
+    };
+    match alpha {
         "opaque" => src = src.opaque(),
         "emissive" => src = src.emissive(),
         _ => {}
     }
     let d = make_loop_sized(&src, &ask, a.size, &a.out, g)?;
     report(&d, window.start, g);
-    if a.alpha != "opaque" {
+    if alpha != "opaque" {
         if matches!(
             a.out.output_format(),
             Some(ignis_media::Format::Mp4 | ignis_media::Format::Gif)
@@ -2339,8 +2368,9 @@ pub fn eigen_length_loop(a: &crate::eigen::LoopArgs, g: &Global) -> Result<()> {
         crop: c.crop.map(crate::eigen::rect),
     };
     // Metric frames of the window, as the writer will measure them.
-    let (metric, _, _) = metric_frames(footage, &window, false, g)
-        .with_context(|| format!("reading {}", source.display()))?;
+    let metric = metric_frames(footage, &window, false, g)
+        .with_context(|| format!("reading {}", source.display()))?
+        .metric;
     if metric.len() != window.len() {
         bail!(
             "{} has fewer frames than the database says",
@@ -2422,7 +2452,14 @@ fn beside_db(recorded: &str, db: &Path) -> Option<PathBuf> {
 /// ([`ignis_flow::camera::choose_reference`]) and the metric frame of each
 /// moved by its track's whole pixels (`None` where that is no move; both empty without).
 /// May return fewer frames than asked when the video is shorter.
-type Measured = (Vec<GrayFrame>, Vec<Option<GrayFrame>>, Vec<Track>);
+struct Measured {
+    metric: Vec<GrayFrame>,
+    aligned: Vec<Option<GrayFrame>>,
+    tracks: Vec<Track>,
+    /// Whether some frame has its own alpha below 1 (a keyed element: a PNG, EXR or
+    /// ProRes 4444 with alpha).
+    translucent: bool,
+}
 /// One frame's part of [`Measured`]: its metric frame, and with tracking its aligned frame
 /// (if moved) and track.
 type MeasuredFrame = (GrayFrame, Option<(Option<GrayFrame>, Track)>);
@@ -2430,6 +2467,7 @@ fn metric_frames(clip: Clip, window: &Range<usize>, track: bool, g: &Global) -> 
     let path = clip.path;
     let opts = clip.read(window.clone(), None);
     let pb = g.progress(window.len() as u64, "measuring");
+    let translucent = std::sync::atomic::AtomicBool::new(false);
     // reserved up to a bound: the window's length comes from the container's word
     let mut metric = Vec::with_capacity(window.len().min(1 << 14));
     let mut tracks = Vec::with_capacity(if track { window.len().min(1 << 14) } else { 0 });
@@ -2474,6 +2512,15 @@ fn metric_frames(clip: Clip, window: &Range<usize>, track: bool, g: &Global) -> 
                 ignis_media::DecodedFrame::Linear(f) => Ok(loopq::metric_frame_rgba(f, [0.0; 3])),
             };
             let m = measure(f)?;
+            let see_through = match f {
+                ignis_media::DecodedFrame::Srgba8 { bytes, .. } => {
+                    bytes.iter().skip(3).step_by(4).any(|&a| a != 255)
+                }
+                ignis_media::DecodedFrame::Linear(f) => f.data().iter().any(|p| p[3] < 1.0),
+            };
+            if see_through {
+                translucent.store(true, std::sync::atomic::Ordering::Relaxed);
+            }
             let Some(tr) = &tracker else {
                 return Ok((m, None));
             };
@@ -2498,7 +2545,12 @@ fn metric_frames(clip: Clip, window: &Range<usize>, track: bool, g: &Global) -> 
         },
     )?;
     pb.finish_and_clear();
-    Ok((metric, aligned, tracks))
+    Ok(Measured {
+        metric,
+        aligned,
+        tracks,
+        translucent: translucent.into_inner(),
+    })
 }
 
 /// A decoded frame moved by whole pixels (`out(x) = f(x + d)`, edge-clamped).
