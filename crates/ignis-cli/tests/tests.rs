@@ -2674,16 +2674,19 @@ mod loop_output_checks {
     }
 
     /// A keyed loop written where there is no alpha says so, and names the outputs that
-    /// keep it; an opaque loop, or a flipbook, does not.
+    /// keep it; an opaque loop of opaque footage, or a flipbook, does not; footage with its
+    /// own alpha loses it in a GIF whatever `--alpha` says.
     #[test]
     fn a_keyed_loop_without_alpha_says_where_the_alpha_went() {
         let t = tempfile::tempdir().unwrap();
+        // the classic fire as an MP4 (opaque) and as PNGs (with its own alpha)
+        let video = t.path().join("fire.mp4");
+        classic_ok("48x40", "40", &["--seed", "3", "--no-loop"], &video);
         let pattern = t.path().join("frames/%04d.png");
-        let o = classic("48x40", "40", &["--seed", "3", "--no-loop"], &pattern);
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        classic_ok("48x40", "40", &["--seed", "3", "--no-loop"], &pattern);
         let cache = t.path().join("cache");
-        let run = |out: &str, extra: &[&str]| {
-            let mut a = vec!["loop", pattern.to_str().unwrap(), "--length", "16"];
+        let run = |input: &Path, out: &str, extra: &[&str]| {
+            let mut a = vec!["loop", input.to_str().unwrap(), "--length", "16"];
             a.extend_from_slice(extra);
             let out = t.path().join(out);
             a.extend([
@@ -2696,10 +2699,18 @@ mod loop_output_checks {
             String::from_utf8_lossy(&o.stdout).into_owned()
         };
         let note = "composited over black";
-        let said = run("loop.gif", &[]);
+        let said = run(&video, "loop.gif", &[]);
         assert!(said.contains(note) && said.contains("loop.mov"), "{said}");
-        assert!(!run("opaque.gif", &["--alpha", "opaque"]).contains(note));
-        assert!(!run("loop.png", &[]).contains(note));
+        assert!(!run(&video, "opaque.gif", &["--alpha", "opaque"]).contains(note));
+        assert!(!run(&video, "loop.png", &[]).contains(note));
+        // the PNGs' own alpha is kept, and a GIF loses it too, whatever --alpha says
+        let said = run(&pattern, "own.gif", &[]);
+        assert!(
+            said.contains("has its own") && said.contains(note),
+            "{said}"
+        );
+        assert!(run(&pattern, "own-opaque.gif", &["--alpha", "opaque"]).contains(note));
+        assert!(!run(&pattern, "own.png", &[]).contains(note));
     }
 }
 

@@ -2250,17 +2250,20 @@ pub fn run(a: &Args, g: &Global) -> Result<()> {
     }
     let d = make_loop_sized(&src, &ask, a.size, &a.out, g)?;
     report(&d, window.start, g);
-    if alpha != "opaque" {
-        if matches!(
+    // keyed by the matte, or by the footage's own alpha
+    if (alpha != "opaque" || c.translucent)
+        && matches!(
             a.out.output_format(),
             Some(ignis_media::Format::Mp4 | ignis_media::Format::Gif)
-        ) {
-            g.say(
-                "alpha: MP4 and GIF have none, so the keyed flame is composited over black; \
-                 -o loop.mov (ProRes 4444), loop.webm, loop.png (flipbook) or frames/%04d.png \
-                 keep the matte as alpha",
-            );
-        }
+        )
+    {
+        g.say(
+            "alpha: MP4 and GIF have none, so the keyed flame is composited over black; \
+             -o loop.mov (ProRes 4444), loop.webm, loop.png (flipbook) or frames/%04d.png \
+             keep it as alpha",
+        );
+    }
+    if alpha != "opaque" {
         if let Some(clip) = c.db.manifest().clips.first() {
             let n = clip.pose.still_lights.boxes().len();
             if n > 0 {
@@ -2808,43 +2811,30 @@ mod tests {
         );
         assert_eq!(cropped.probe().unwrap().size, Size::new(480, 420).unwrap());
         let window = 200..280;
-        let c = cached(
-            cropped,
-            window.clone(),
-            "32x48".parse().unwrap(),
-            40,
-            cache.path(),
-            &quiet,
-        )
-        .unwrap();
+        let entry = |clip| {
+            cached(
+                clip,
+                window.clone(),
+                "32x48".parse().unwrap(),
+                40,
+                cache.path(),
+                &quiet,
+            )
+            .unwrap()
+        };
+        let c = entry(cropped);
         assert_eq!(c.crop, Some(rect));
         // the metric frames have the crop's shape, not the frame's
         let m = c.metric[0].size();
         assert_eq!((m.width, m.height), (128, 112), "metric frames {m}");
-        let whole = cached(
-            Clip::whole(&path),
-            window.clone(),
-            "32x48".parse().unwrap(),
-            40,
-            cache.path(),
-            &quiet,
-        )
-        .unwrap();
+        let whole = entry(Clip::whole(&path));
         assert_ne!(
             whole.dir, c.dir,
             "the crop shares the whole frame's cache entry"
         );
         assert!(whole.crop.is_none() && whole.metric[0].size() != m);
         // the entry is found again with its crop
-        let again = cached(
-            cropped,
-            window.clone(),
-            "32x48".parse().unwrap(),
-            40,
-            cache.path(),
-            &quiet,
-        )
-        .unwrap();
+        let again = entry(cropped);
         assert!(!again.built && again.crop == Some(rect) && again.dir == c.dir);
         let out = cache.path().join("frames");
         let ask = LoopAsk {
