@@ -2951,6 +2951,47 @@ fn a_keyed_element_keeps_its_own_alpha() {
     }
 }
 
+/// Pre-processing sees a keyed element as it shows over black: the bright plate its key
+/// hides (grey under alpha 0, most of the frame) is in no frame's flame mask, while the
+/// flame (an ellipse of about 12 % of the frame) is.
+#[test]
+fn a_keyed_element_is_preprocessed_over_black() {
+    let t = tempfile::tempdir().unwrap();
+    let frames = t.path().join("frames");
+    std::fs::create_dir(&frames).unwrap();
+    for i in 0..12u32 {
+        let img = image::RgbaImage::from_fn(64, 48, |x, y| {
+            let d = ((x as f32 - 32.0) / 9.0).powi(2)
+                + ((y as f32 - 30.0 + (i % 3) as f32) / 13.0).powi(2);
+            image::Rgba(if d < 1.0 {
+                [255, 170, 60, 255]
+            } else {
+                [200, 200, 200, 0]
+            })
+        });
+        img.save(frames.join(format!("f{i:04}.png"))).unwrap();
+    }
+    let stages = t.path().join("stages");
+    ignis_ok(&[
+        "eigen",
+        "preprocess",
+        frames.join("f%04d.png").to_str().unwrap(),
+        "--frames",
+        "0,6",
+        "-q",
+        "-o",
+        stages.to_str().unwrap(),
+    ]);
+    for f in ["frame00000-2-mask.png", "frame00006-2-mask.png"] {
+        let m = image::open(stages.join(f)).unwrap().to_luma8();
+        let share = m.pixels().filter(|v| v[0] > 127).count() as f64 / m.len() as f64;
+        assert!(
+            (0.08..0.2).contains(&share),
+            "{f}: {share:.3} of the frame masked"
+        );
+    }
+}
+
 /// `eigen train --crop` and a config's `crop = [x, y, w, h]`: the clips are those parts of
 /// the frame (two parts of one video here), recorded in the database; `eigen loop` and
 /// `eigen animate` read the footage cut the same way; a rectangle past the frame is refused.
