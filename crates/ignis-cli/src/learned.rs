@@ -216,8 +216,15 @@ pub fn train(a: &TrainArgs, g: &Global) -> Result<FlameModel> {
         },
     };
     let read_error: RefCell<Option<ignis_media::MediaError>> = RefCell::new(None);
+    // a keyed element as it shows over black: a flame on a dark background
+    let seen = |f: ignis_core::RgbaFrame| {
+        ignis_media::DecodedFrame::Linear(f)
+            .over_black()
+            .into_linear()
+            .luminance()
+    };
     let frames = reader.map_while(|f| match f {
-        Ok(f) => Some(f.luminance()),
+        Ok(f) => Some(seen(f)),
         Err(e) => {
             *read_error.borrow_mut() = Some(e);
             None
@@ -251,9 +258,7 @@ pub fn train(a: &TrainArgs, g: &Global) -> Result<FlameModel> {
         let mut out = Vec::new();
         for (i, f) in reader.enumerate() {
             if let Some(&j) = wanted.get(&i) {
-                let f = f
-                    .with_context(|| format!("reading {}", path.display()))?
-                    .luminance()
+                let f = seen(f.with_context(|| format!("reading {}", path.display()))?)
                     .map(|v| (v - a.black_level).max(0.0));
                 out.push(ignis_learned::psnr(&f, &training.render_fitted(j)));
             }

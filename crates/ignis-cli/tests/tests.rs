@@ -2951,13 +2951,11 @@ fn a_keyed_element_keeps_its_own_alpha() {
     }
 }
 
-/// Pre-processing sees a keyed element as it shows over black: the bright plate its key
-/// hides (grey under alpha 0, most of the frame) is in no frame's flame mask, while the
-/// flame (an ellipse of about 12 % of the frame) is.
-#[test]
-fn a_keyed_element_is_preprocessed_over_black() {
-    let t = tempfile::tempdir().unwrap();
-    let frames = t.path().join("frames");
+/// Twelve 64×48 frames of a keyed element: an orange ellipse (about 12 % of the frame,
+/// moving a pixel a frame) at alpha 1 over a bright grey plate at alpha 0. Returns the
+/// sequence's pattern.
+fn keyed_ellipse(dir: &Path) -> PathBuf {
+    let frames = dir.join("keyed");
     std::fs::create_dir(&frames).unwrap();
     for i in 0..12u32 {
         let img = image::RgbaImage::from_fn(64, 48, |x, y| {
@@ -2971,11 +2969,20 @@ fn a_keyed_element_is_preprocessed_over_black() {
         });
         img.save(frames.join(format!("f{i:04}.png"))).unwrap();
     }
+    frames.join("f%04d.png")
+}
+
+/// Pre-processing sees a keyed element as it shows over black: the bright plate its key
+/// hides (most of the frame) is in no frame's flame mask, while the flame is.
+#[test]
+fn a_keyed_element_is_preprocessed_over_black() {
+    let t = tempfile::tempdir().unwrap();
+    let pattern = keyed_ellipse(t.path());
     let stages = t.path().join("stages");
     ignis_ok(&[
         "eigen",
         "preprocess",
-        frames.join("f%04d.png").to_str().unwrap(),
+        pattern.to_str().unwrap(),
         "--frames",
         "0,6",
         "-q",
@@ -2990,6 +2997,47 @@ fn a_keyed_element_is_preprocessed_over_black() {
             "{f}: {share:.3} of the frame masked"
         );
     }
+}
+
+/// `learned train` on a keyed element learns the flame, not the plate its key hides: a
+/// frame synthesised from the model lights a third of the frame (the plate's model lit
+/// all of it).
+#[test]
+fn a_keyed_element_trains_a_learned_flame_over_black() {
+    let t = tempfile::tempdir().unwrap();
+    let pattern = keyed_ellipse(t.path());
+    let model = t.path().join("m.flame");
+    ignis_ok(&[
+        "learned",
+        "train",
+        pattern.to_str().unwrap(),
+        "--max-iterations",
+        "2",
+        "-q",
+        "-o",
+        model.to_str().unwrap(),
+    ]);
+    let out = t.path().join("synth");
+    ignis_ok(&[
+        "learned",
+        "synth",
+        model.to_str().unwrap(),
+        "--frames",
+        "4",
+        "--size",
+        "64x48",
+        "-q",
+        "-o",
+        out.join("%04d.png").to_str().unwrap(),
+    ]);
+    let f = image::open(out.join("0002.png")).unwrap().to_rgba8();
+    let lit = f
+        .pixels()
+        .filter(|p| (p[0] as u32 + p[1] as u32 + p[2] as u32) * p[3] as u32 > 90 * 255)
+        .count() as f64
+        / (f.width() * f.height()) as f64;
+    assert!(lit < 0.6, "{lit:.3} of the synthesised frame is lit");
+    assert!(lit > 0.05, "{lit:.3} of the synthesised frame is lit");
 }
 
 /// `eigen train --crop` and a config's `crop = [x, y, w, h]`: the clips are those parts of

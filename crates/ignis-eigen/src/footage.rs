@@ -457,8 +457,12 @@ mod media {
         fn frames(&self, start: usize) -> Result<Frames<'_>> {
             let r = self.read(start, None, false)?;
             Ok(Box::new(r.enumerate().map(move |(i, f)| {
-                f.map(|f| over_black(ignis_media::DecodedFrame::Linear(f)).into_linear())
-                    .map_err(|e| self.fail(Some(start + i), e))
+                f.map(|f| {
+                    ignis_media::DecodedFrame::Linear(f)
+                        .over_black()
+                        .into_linear()
+                })
+                .map_err(|e| self.fail(Some(start + i), e))
             })))
         }
         /// Reads `indices[0]..=indices[last]` in one forward pass, continuing the reader
@@ -477,31 +481,6 @@ mod media {
                 }
             })
         }
-    }
-
-    /// A frame as it shows over black: a keyed element's colour times its own alpha
-    /// (linear light; the alpha kept), so pre-processing sees it as footage shot on black
-    /// and never the plate its key hides. An opaque frame (every alpha 1, or 255) is
-    /// returned as it is, bit for bit.
-    pub(super) fn over_black(f: ignis_media::DecodedFrame) -> ignis_media::DecodedFrame {
-        use ignis_media::DecodedFrame;
-        let opaque = match &f {
-            DecodedFrame::Srgba8 { bytes, .. } => {
-                bytes.iter().skip(3).step_by(4).all(|&a| a == 255)
-            }
-            DecodedFrame::Linear(f) => f.data().iter().all(|p| p[3] >= 1.0),
-        };
-        if opaque {
-            return f;
-        }
-        let mut f = f.into_linear();
-        for p in f.data_mut() {
-            let a = p[3];
-            for c in &mut p[..3] {
-                *c *= a;
-            }
-        }
-        DecodedFrame::Linear(f)
     }
 
     impl MediaFootage {
@@ -531,7 +510,7 @@ mod media {
                 let Some(f) = reader.next_decoded() else {
                     break;
                 };
-                let f = take(over_black(f.map_err(|e| self.fail(Some(n), e))?));
+                let f = take(f.map_err(|e| self.fail(Some(n), e))?.over_black());
                 n += 1;
                 let mut hits = Vec::new();
                 while let Some((j, _)) = want.next_if(|(_, &w)| w == n - 1) {
@@ -606,38 +585,6 @@ mod tests {
             }
             assert!(f.frames_at(&[]).unwrap().is_empty());
         }
-    }
-
-    /// Over black: an opaque frame is itself, bit for bit (8-bit bytes stay bytes); a
-    /// translucent one is its colour times its alpha, the alpha kept.
-    #[cfg(feature = "media")]
-    #[test]
-    fn a_keyed_frame_is_seen_over_black() {
-        use ignis_media::DecodedFrame;
-        let size = Size::new(2, 1).unwrap();
-        let bytes = vec![10, 200, 30, 255, 250, 128, 0, 255];
-        let f = DecodedFrame::Srgba8 {
-            size,
-            bytes: bytes.clone(),
-        };
-        assert_eq!(media::over_black(f.clone()), f);
-        let lin =
-            RgbaFrame::from_vec(size, vec![[0.5, 0.25, 1.0, 1.0], [0.2, 0.4, 0.8, 1.0]]).unwrap();
-        assert_eq!(
-            media::over_black(DecodedFrame::Linear(lin.clone())),
-            DecodedFrame::Linear(lin)
-        );
-        let keyed =
-            RgbaFrame::from_vec(size, vec![[0.5, 0.25, 1.0, 0.5], [0.8, 0.8, 0.8, 0.0]]).unwrap();
-        let seen = media::over_black(DecodedFrame::Linear(keyed)).into_linear();
-        assert_eq!(
-            seen.data(),
-            &[[0.25, 0.125, 0.5, 0.5], [0.0, 0.0, 0.0, 0.0]]
-        );
-        let mut half = bytes;
-        half[7] = 0;
-        let seen = media::over_black(DecodedFrame::Srgba8 { size, bytes: half }).into_linear();
-        assert_eq!(seen.data()[1], [0.0; 4]);
     }
 
     #[cfg(feature = "media")]

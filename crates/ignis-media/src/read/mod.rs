@@ -293,6 +293,25 @@ impl DecodedFrame {
             DecodedFrame::Srgba8 { size, .. } => *size,
         }
     }
+    /// The frame as it shows over black: a keyed element's colour times its own alpha
+    /// (linear light; the alpha kept), so analysis sees it as footage shot on black and
+    /// never the plate its key hides. An opaque frame (every alpha 1, or 255) is returned
+    /// as it is, bit for bit (8-bit bytes stay bytes).
+    pub fn over_black(self) -> DecodedFrame {
+        let opaque = match &self {
+            DecodedFrame::Srgba8 { bytes, .. } => {
+                bytes.iter().skip(3).step_by(4).all(|&a| a == 255)
+            }
+            DecodedFrame::Linear(f) => f.data().iter().all(|p| p[3] >= 1.0),
+        };
+        if opaque {
+            return self;
+        }
+        let mut f = self.into_linear();
+        convert::premultiply(&mut f);
+        DecodedFrame::Linear(f)
+    }
+
     /// The linear-light frame (the same values [`FrameReader`]'s iterator yields).
     pub fn into_linear(self) -> RgbaFrame {
         match self {
@@ -609,6 +628,37 @@ pub fn read_image(path: &Path) -> Result<RgbaFrame> {
 
 #[cfg(test)]
 mod tests {
+    /// Over black: an opaque frame is itself, bit for bit (8-bit bytes stay bytes); a
+    /// translucent one is its colour times its alpha, the alpha kept.
+    #[test]
+    fn a_keyed_frame_is_seen_over_black() {
+        let size = Size::new(2, 1).unwrap();
+        let bytes = vec![10, 200, 30, 255, 250, 128, 0, 255];
+        let f = DecodedFrame::Srgba8 {
+            size,
+            bytes: bytes.clone(),
+        };
+        assert_eq!(DecodedFrame::over_black(f.clone()), f);
+        let lin =
+            RgbaFrame::from_vec(size, vec![[0.5, 0.25, 1.0, 1.0], [0.2, 0.4, 0.8, 1.0]]).unwrap();
+        assert_eq!(
+            DecodedFrame::over_black(DecodedFrame::Linear(lin.clone())),
+            DecodedFrame::Linear(lin)
+        );
+        let keyed =
+            RgbaFrame::from_vec(size, vec![[0.5, 0.25, 1.0, 0.5], [0.8, 0.8, 0.8, 0.0]]).unwrap();
+        let seen = DecodedFrame::over_black(DecodedFrame::Linear(keyed)).into_linear();
+        assert_eq!(
+            seen.data(),
+            &[[0.25, 0.125, 0.5, 0.5], [0.0, 0.0, 0.0, 0.0]]
+        );
+        let mut half = bytes;
+        half[7] = 0;
+        let seen =
+            DecodedFrame::over_black(DecodedFrame::Srgba8 { size, bytes: half }).into_linear();
+        assert_eq!(seen.data()[1], [0.0; 4]);
+    }
+
     use super::*;
 
     #[test]
