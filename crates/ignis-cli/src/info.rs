@@ -53,14 +53,10 @@ pub fn run(args: &Args) -> Result<()> {
         )?;
         match &variable {
             Some(v) => outln!(
-                "fps:     {} on average; variable: {:.3} nominal, {} of {} frame steps off it ({:.1}–{:.1} ms apart; `ignis loop` loops evenly timed stretches at {:.3} fps)",
+                "fps:     {} on average; variable: {:.3} nominal, {}; `ignis loop` loops evenly timed stretches at that rate",
                 info.fps,
                 v.nominal_fps,
-                v.uneven.len(),
-                v.frames - 1,
-                v.steps.0 * 1e3,
-                v.steps.1 * 1e3,
-                v.nominal_fps
+                v.steps_off()
             )?,
             None => outln!("fps:     {}", info.fps)?,
         }

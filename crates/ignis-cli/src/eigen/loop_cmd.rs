@@ -154,10 +154,10 @@ pub struct CacheSettings {
     /// Source frames of the window.
     pub start: usize,
     pub end: usize,
-    /// `--crop` as `X,Y,WIDTH,HEIGHT`; left out of the key when the whole frame is used
-    /// (so entries made before it existed still match).
+    /// `--crop` as `[x, y, width, height]`; left out of the key when the whole frame is
+    /// used.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub crop: Option<String>,
+    pub crop: Option<[u32; 4]>,
 }
 
 #[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
@@ -295,12 +295,6 @@ impl<'a> Clip<'a> {
             scale,
         }
     }
-
-    /// `--crop` as given (`X,Y,WIDTH,HEIGHT`), for the cache key.
-    fn crop_key(&self) -> Option<String> {
-        self.crop
-            .map(|r| format!("{},{},{},{}", r.x, r.y, r.width, r.height))
-    }
 }
 
 /// The window of source frames: `range` checked against the source's frame count.
@@ -385,18 +379,13 @@ pub fn cached(
         keep,
         start: window.start,
         end: window.end,
-        crop: clip.crop_key(),
+        crop: clip.crop.map(|r| [r.x, r.y, r.width, r.height]),
     };
     let skey = hex(&Sha256::digest(serde_json::to_vec(&settings)?))[..12].to_string();
     let dir = cache_dir.join(format!("{}-{skey}", &sha[..24]));
     if dir.exists() {
         match open_entry(&dir, &sha, &settings) {
-            Ok(c) => {
-                return Ok(Cached {
-                    crop: clip.crop,
-                    ..c
-                })
-            }
+            Ok(c) => return Ok(c),
             Err(e) => {
                 eprintln!(
                     "cache entry {} is unusable ({e:#}); rebuilding it",
@@ -411,7 +400,6 @@ pub fn cached(
     let mut c = open_entry(&dir, &sha, &settings)
         .with_context(|| format!("re-opening the cache entry just built at {}", dir.display()))?;
     c.built = true;
-    c.crop = clip.crop;
     Ok(c)
 }
 
@@ -498,7 +486,7 @@ fn open_entry(dir: &Path, sha: &str, settings: &CacheSettings) -> Result<Cached>
         aligned,
         fps: meta.fps,
         built: false,
-        crop: None,
+        crop: settings.crop.map(crate::eigen::rect),
         translucent: meta.translucent,
     })
 }
@@ -955,6 +943,13 @@ fn even_runs(runs: Vec<Range<usize>>, uneven: &[usize]) -> Vec<Range<usize>> {
     out
 }
 
+/// The longest of `runs` (the first of the longest).
+fn longest_run(runs: &[Range<usize>]) -> Option<Range<usize>> {
+    runs.iter()
+        .max_by_key(|r| (r.len(), std::cmp::Reverse(r.start)))
+        .cloned()
+}
+
 /// Whether `e` reads only evenly timed footage: no `uneven` step among the frames its
 /// search filter, its body and its closing read (two before its start to one past its
 /// end, and the closing's tail).
@@ -976,11 +971,7 @@ pub struct Uneven {
 
 impl Uneven {
     fn new(runs: &[Range<usize>], n: usize, first: usize, p: &SearchParams) -> Uneven {
-        let r = runs
-            .iter()
-            .max_by_key(|r| (r.len(), std::cmp::Reverse(r.start)))
-            .cloned()
-            .unwrap_or(0..n.min(1));
+        let r = longest_run(runs).unwrap_or(0..n.min(1));
         Uneven {
             longest: first + r.start..first + r.end,
             length: p.length,
@@ -1526,10 +1517,11 @@ impl WindowTiming {
     /// The longest stretch of window frames joined by nominal steps alone (the first of
     /// the longest).
     pub fn longest_even(&self) -> Range<usize> {
-        even_runs(std::iter::once(0..self.frames).collect(), &self.uneven)
-            .into_iter()
-            .min_by_key(|r| (std::cmp::Reverse(r.len()), r.start))
-            .unwrap_or(0..self.frames)
+        longest_run(&even_runs(
+            std::iter::once(0..self.frames).collect(),
+            &self.uneven,
+        ))
+        .unwrap_or(0..self.frames)
     }
 
     /// A warning (without its `warning: `) for a command that takes every frame once, as if
@@ -1554,9 +1546,17 @@ impl WindowTiming {
     /// What the timing is, said in a clause.
     fn describe(&self) -> String {
         format!(
-            "the frame rate varies ({:.3} fps nominal, {:.3} on average; {} of {} steps off it, frames {:.1}–{:.1} ms apart)",
+            "the frame rate varies ({:.3} fps nominal, {:.3} on average; {})",
             self.nominal_fps,
             self.average_fps,
+            self.steps_off()
+        )
+    }
+
+    /// How many steps are off the nominal rate, and how far apart the frames are.
+    pub fn steps_off(&self) -> String {
+        format!(
+            "{} of {} steps off it, frames {:.1}–{:.1} ms apart",
             self.uneven.len(),
             self.frames - 1,
             self.steps.0 * 1e3,
