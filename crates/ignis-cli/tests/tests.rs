@@ -7,11 +7,30 @@ use std::process::{Command, Output};
 /// times) in this test run's own temporary directory, never the user's.
 fn ignis_cmd() -> Command {
     let mut c = Command::new(env!("CARGO_BIN_EXE_ignis"));
-    c.env(
-        "XDG_CACHE_HOME",
-        std::env::temp_dir().join(format!("ignis-tests-cache-{}", std::process::id())),
-    );
+    c.env("XDG_CACHE_HOME", run_cache());
     c
+}
+
+/// This test run's own cache directory: new and uniquely named (a directory named after
+/// the process id could be one an earlier run with the same id left, with its entries),
+/// removed when the run exits.
+fn run_cache() -> &'static Path {
+    static DIR: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
+    extern "C" fn remove() {
+        if let Some(d) = DIR.get() {
+            let _ = std::fs::remove_dir_all(d);
+        }
+    }
+    DIR.get_or_init(|| {
+        let d = tempfile::Builder::new()
+            .prefix("ignis-tests-cache-")
+            .tempdir()
+            .expect("a temporary directory")
+            .keep();
+        // SAFETY: registers a plain function, run once at exit.
+        unsafe { libc::atexit(remove) };
+        d
+    })
 }
 
 fn ignis(args: &[&str]) -> Output {
@@ -2865,11 +2884,6 @@ mod loop_matte_dark_stretch {
     }
 }
 
-/// `ignis eigen loop DB --range` on footage nobody tuned for (hfoot, brief 6): the flipbook
-/// scaled to the sheet limit as `ignis loop` scales it, a window whose matte keys out the
-/// fire refused, and the 3-frame voted matte in the footage render. The footage is a
-/// synthetic 64×48 PNG sequence (no ffmpeg needed): an orange flame, and on frame 10 alone
-/// a bright tongue above it (a mask that flares on one frame).
 /// A keyed element (a PNG sequence with its own alpha, bright grey under alpha 0 where the
 /// key left the plate): `--alpha auto`, the default, keeps the element's alpha as it is
 /// (every cell of a cut loop has one of its frames' alphas exactly); `--alpha matte` keys
@@ -3117,6 +3131,11 @@ fn eigen_clips_cut_from_part_of_the_frame() {
     assert!(out.join("0000.png").exists());
 }
 
+/// `ignis eigen loop DB --range` on footage nobody tuned for (hfoot, brief 6): the flipbook
+/// scaled to the sheet limit as `ignis loop` scales it, a window whose matte keys out the
+/// fire refused, and the 3-frame voted matte in the footage render. The footage is a
+/// synthetic 64×48 PNG sequence (no ffmpeg needed): an orange flame, and on frame 10 alone
+/// a bright tongue above it (a mask that flares on one frame).
 mod eigen_db_footage {
     use super::*;
 

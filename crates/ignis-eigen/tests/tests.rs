@@ -636,9 +636,20 @@ mod animate {
     fn db_dir() -> &'static Path {
         static DIR: OnceLock<PathBuf> = OnceLock::new();
         DIR.get_or_init(|| {
-            let dir =
-                std::env::temp_dir().join(format!("ignis-animate-test-{}", std::process::id()));
-            std::fs::create_dir_all(&dir).unwrap();
+            // new and uniquely named (not after the process id, which an earlier run's
+            // leftover directory may share), removed when the run exits
+            let dir = tempfile::Builder::new()
+                .prefix("ignis-animate-test-")
+                .tempdir()
+                .unwrap()
+                .keep();
+            extern "C" fn remove() {
+                if let Some(d) = DIR.get() {
+                    let _ = std::fs::remove_dir_all(d);
+                }
+            }
+            // SAFETY: registers a plain function, run once at exit.
+            unsafe { libc::atexit(remove) };
             let clips = synthetic_clips(Size::new(48, 64).unwrap(), 40, 7);
             let mut pre = PreprocessParams::with_sizes(
                 Size::new(40, 64).unwrap(),

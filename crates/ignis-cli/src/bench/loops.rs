@@ -171,7 +171,12 @@ pub fn bench(clips: &[PathBuf], cache: Option<&Path>, g: &Global) -> Result<Valu
         Some(d) => d.to_path_buf(),
         None => loop_cmd::default_cache_dir()?,
     };
-    let tmp = tempfile_dir()?;
+    // the loops written (removed on return, an error's too)
+    let tmp_dir = tempfile::Builder::new()
+        .prefix("ignis-bench-loops-")
+        .tempdir()
+        .context("creating a temporary directory for the loops")?;
+    let tmp = tmp_dir.path();
     let mut results = Vec::new();
     for clip in clips {
         if !clip.exists() {
@@ -287,17 +292,10 @@ pub fn bench(clips: &[PathBuf], cache: Option<&Path>, g: &Global) -> Result<Valu
             results.push(entry);
         }
     }
-    let _ = std::fs::remove_dir_all(&tmp);
     Ok(json!({
         "target": "loops",
         "peers": "xfade (middle range, K=10) and vt (Video Textures + K=10 crossfade) as shared/tools/loop_metrics.py",
         "search_2000": search_timing(2000)?,
         "clips": results,
     }))
-}
-
-fn tempfile_dir() -> Result<PathBuf> {
-    let d = std::env::temp_dir().join(format!("ignis-bench-loops-{}", std::process::id()));
-    std::fs::create_dir_all(&d)?;
-    Ok(d)
 }

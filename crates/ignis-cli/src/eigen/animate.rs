@@ -968,65 +968,66 @@ pub fn bench_footage(quick: bool, keep: Option<&std::path::Path>) -> Result<serd
             120,
         )
     };
+    // without `keep`, a new temporary directory (removed on return, an error's too)
+    let temp;
     let dir = match keep {
         Some(k) => k.join(if quick { "footage-quick" } else { "footage" }),
-        None => std::env::temp_dir().join(format!("ignis-bench-footage-{}", std::process::id())),
+        None => {
+            temp = tempfile::Builder::new()
+                .prefix("ignis-bench-footage-")
+                .tempdir()
+                .context("creating a temporary directory for the clip")?;
+            temp.path().to_path_buf()
+        }
     };
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
-    let run = || -> Result<serde_json::Value> {
-        let clip = dir.join("fire.mp4");
-        let dbp = dir.join("fire.db");
-        let reuse = keep.is_some() && clip.is_file() && dbp.join("manifest.json").is_file();
-        let t_train = Instant::now();
-        if !reuse {
-            train_footage_case(&clip, &dbp, size, frames)?;
-        }
-        let train_s = t_train.elapsed().as_secs_f64();
-        let db = EigenfireDb::open(&dbp)?;
-        let (mut plan, _) = render::loop_plan(
-            &db,
-            "fire",
-            4..4 + loop_len,
-            ignis_eigen::transition::Transition::Auto,
-            db.manifest().e_render,
-            0,
-        )?;
-        // The case is about database frames: the range itself, every frame from the footage.
-        plan.frames
-            .retain(|f| matches!(f.source, ignis_eigen::transition::FrameRef::Db(_)));
-        let look = default_look();
-        let mut n = 0usize;
-        let t = Instant::now();
-        render::render_plan_with(
-            &db,
-            &plan,
-            &look,
-            &render::RenderOptions::default(),
-            &mut MediaSources::default(),
-            &mut |f| {
-                n += (f.width() == size.width) as usize;
-                Ok(())
-            },
-            &mut |_| {},
-        )?;
-        let s = t.elapsed().as_secs_f64();
-        let fps = n as f64 / s;
-        Ok(serde_json::json!({
-            "case": format!("{size} loop of {n} database frames, original colouring + bloom + alpha, reading the source MP4 (decode included)"),
-            "frames": n,
-            "seconds": s,
-            "frames_per_s": fps,
-            "goal": if quick { "judged at full size (1920x1080)".to_string() } else { ">= 60 frames/s".to_string() },
-            "met": !quick && fps >= 60.0,
-            "train_s": train_s,
-            "threads": rayon::current_num_threads(),
-        }))
-    };
-    let r = run();
-    if keep.is_none() {
-        let _ = std::fs::remove_dir_all(&dir);
+    let clip = dir.join("fire.mp4");
+    let dbp = dir.join("fire.db");
+    let reuse = keep.is_some() && clip.is_file() && dbp.join("manifest.json").is_file();
+    let t_train = Instant::now();
+    if !reuse {
+        train_footage_case(&clip, &dbp, size, frames)?;
     }
-    r
+    let train_s = t_train.elapsed().as_secs_f64();
+    let db = EigenfireDb::open(&dbp)?;
+    let (mut plan, _) = render::loop_plan(
+        &db,
+        "fire",
+        4..4 + loop_len,
+        ignis_eigen::transition::Transition::Auto,
+        db.manifest().e_render,
+        0,
+    )?;
+    // The case is about database frames: the range itself, every frame from the footage.
+    plan.frames
+        .retain(|f| matches!(f.source, ignis_eigen::transition::FrameRef::Db(_)));
+    let look = default_look();
+    let mut n = 0usize;
+    let t = Instant::now();
+    render::render_plan_with(
+        &db,
+        &plan,
+        &look,
+        &render::RenderOptions::default(),
+        &mut MediaSources::default(),
+        &mut |f| {
+            n += (f.width() == size.width) as usize;
+            Ok(())
+        },
+        &mut |_| {},
+    )?;
+    let s = t.elapsed().as_secs_f64();
+    let fps = n as f64 / s;
+    Ok(serde_json::json!({
+        "case": format!("{size} loop of {n} database frames, original colouring + bloom + alpha, reading the source MP4 (decode included)"),
+        "frames": n,
+        "seconds": s,
+        "frames_per_s": fps,
+        "goal": if quick { "judged at full size (1920x1080)".to_string() } else { ">= 60 frames/s".to_string() },
+        "met": !quick && fps >= 60.0,
+        "train_s": train_s,
+        "threads": rayon::current_num_threads(),
+    }))
 }
 
 /// [`bench_footage`]'s clip (Ignis's synthetic campfire, `frames` frames of `size`,
