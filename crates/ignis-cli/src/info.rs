@@ -21,6 +21,9 @@ pub fn run(args: &Args) -> Result<()> {
     let info = ignis_media::probe(&args.input)
         .with_context(|| format!("reading {}", args.input.display()))?;
     let variable = WindowTiming::of(&args.input, 0..usize::MAX);
+    // a header that reads but a first frame that does not (a cut-off download) is said,
+    // after what the header says
+    let see_through = first_frame_see_through(&args.input);
     if args.json {
         let v = serde_json::json!({
             "path": info.path,
@@ -33,6 +36,8 @@ pub fn run(args: &Args) -> Result<()> {
             "stored_width": info.anamorphic.map(|a| a.stored.width),
             "stored_height": info.anamorphic.map(|a| a.stored.height),
             "pixel_aspect": info.anamorphic.map(|a| format!("{}:{}", a.pixel_aspect.0, a.pixel_aspect.1)),
+            "see_through_first_frame": see_through.as_ref().ok(),
+            "first_frame_error": see_through.as_ref().err().map(|e| format!("{e:#}")),
             "variable_frame_rate": variable.as_ref().map(|v| serde_json::json!({
                 "nominal_fps": v.nominal_fps,
                 "average_fps": v.average_fps,
@@ -72,6 +77,30 @@ pub fn run(args: &Args) -> Result<()> {
         }
         outln!("codec:   {}", info.codec)?;
         outln!("decoder: {}", info.decoder)?;
+        match &see_through {
+            Ok(s) if *s > 0.0 => outln!(
+                "alpha:   its own (a keyed element: {:.0} % of the first frame see-through); `ignis loop` keeps it",
+                s * 100.0
+            )?,
+            Ok(_) => {}
+            Err(e) => outln!("warning: {e:#}")?,
+        }
     }
     Ok(())
+}
+
+/// The share of the first frame's pixels that are see-through (alpha below 1): 0 for
+/// opaque footage, more for a keyed element with its own alpha.
+fn first_frame_see_through(path: &std::path::Path) -> Result<f64> {
+    let opts = ignis_media::ReadOptions {
+        range: Some(ignis_media::FrameRange::frames(0, Some(1))),
+        ..Default::default()
+    };
+    let mut r = ignis_media::open_keeping_8bit(path, &opts)
+        .with_context(|| format!("reading {}", path.display()))?;
+    let f = r
+        .next_decoded()
+        .with_context(|| format!("{} has no frame to read", path.display()))?
+        .with_context(|| format!("the first frame of {} cannot be decoded", path.display()))?;
+    Ok(f.see_through() as f64 / f.size().pixels() as f64)
 }

@@ -331,6 +331,11 @@ mod info {
         assert_eq!(v["width"], 480);
         assert_eq!(v["height"], 480);
         assert_eq!(v["decoder"], "openh264");
+        // opaque footage: no alpha of its own, and no line about one
+        assert_eq!(v["see_through_first_frame"], 0.0);
+        let human =
+            String::from_utf8_lossy(&ignis(&["info", p.to_str().unwrap()]).stdout).to_string();
+        assert!(!human.contains("alpha"), "{human}");
     }
 
     #[test]
@@ -390,6 +395,50 @@ mod info {
         assert!(
             human.contains("128x72 (stored 96x72 with 4:3 pixels"),
             "{human}"
+        );
+    }
+
+    /// A download cut off just after its header: what the header says, and a warning that
+    /// the first frame cannot be decoded (not a failure: the header is what `info` is for).
+    #[test]
+    fn a_clip_cut_off_after_its_header_says_what_it_can() {
+        if !has_ffmpeg() {
+            return;
+        }
+        let t = tempfile::tempdir().unwrap();
+        let whole = t.path().join("whole.mp4");
+        let ok = std::process::Command::new("ffmpeg")
+            .args(["-nostdin", "-y", "-v", "error", "-f", "lavfi", "-i"])
+            .arg("testsrc=size=320x240:rate=25")
+            .args(["-frames:v", "10", "-pix_fmt", "yuv420p", "-c:v", "libx264"])
+            .args(["-movflags", "+faststart"])
+            .arg(&whole)
+            .status()
+            .is_ok_and(|s| s.success());
+        if !ok {
+            println!("skipped: this ffmpeg cannot encode H.264");
+            return;
+        }
+        // the header (moov, first with +faststart) and 64 bytes of the first frame
+        let bytes = std::fs::read(&whole).unwrap();
+        let mdat = bytes.windows(4).position(|w| w == b"mdat").unwrap();
+        let cut = t.path().join("cut.mp4");
+        std::fs::write(&cut, &bytes[..mdat + 4 + 64]).unwrap();
+        let c = cut.to_str().unwrap();
+        let human = String::from_utf8_lossy(&ignis_ok(&["info", c]).stdout).to_string();
+        assert!(
+            human.contains("size:    320x240")
+                && human.contains("warning: the first frame of")
+                && human.contains("cannot be decoded"),
+            "{human}"
+        );
+        let v = info_json(&cut);
+        assert!(v["see_through_first_frame"].is_null(), "{v}");
+        assert!(
+            v["first_frame_error"]
+                .as_str()
+                .is_some_and(|e| e.contains("cannot be decoded")),
+            "{v}"
         );
     }
 
@@ -2910,6 +2959,20 @@ fn a_keyed_element_keeps_its_own_alpha() {
         })
         .collect();
     let pattern = frames.join("f%04d.png");
+    // `ignis info` says the element has its own alpha, and how much of it is see-through
+    let p = pattern.to_str().unwrap();
+    let share = alphas[0].iter().filter(|&&a| a < 255).count() as f64 / (w * h) as f64;
+    let v: serde_json::Value =
+        serde_json::from_slice(&ignis_ok(&["info", "--json", p]).stdout).unwrap();
+    assert_eq!(v["see_through_first_frame"], share, "{v}");
+    let human = String::from_utf8_lossy(&ignis_ok(&["info", p]).stdout).to_string();
+    assert!(
+        human.contains(&format!(
+            "alpha:   its own (a keyed element: {:.0} % of the first frame see-through)",
+            share * 100.0
+        )),
+        "{human}"
+    );
     let cache = t.path().join("cache");
     let run = |alpha: &[&str], out: &Path| {
         let mut a = vec![

@@ -2515,13 +2515,7 @@ fn metric_frames(clip: Clip, window: &Range<usize>, track: bool, g: &Global) -> 
                 ignis_media::DecodedFrame::Linear(f) => Ok(loopq::metric_frame_rgba(f, [0.0; 3])),
             };
             let m = measure(f)?;
-            let see_through = match f {
-                ignis_media::DecodedFrame::Srgba8 { bytes, .. } => {
-                    bytes.iter().skip(3).step_by(4).any(|&a| a != 255)
-                }
-                ignis_media::DecodedFrame::Linear(f) => f.data().iter().any(|p| p[3] < 1.0),
-            };
-            if see_through {
+            if f.see_through() > 0 {
                 translucent.store(true, std::sync::atomic::Ordering::Relaxed);
             }
             let Some(tr) = &tracker else {

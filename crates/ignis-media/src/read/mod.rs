@@ -293,18 +293,26 @@ impl DecodedFrame {
             DecodedFrame::Srgba8 { size, .. } => *size,
         }
     }
+    /// How many of its pixels are see-through (alpha below 1, or 255): 0 for an opaque
+    /// frame, more for a keyed element with its own alpha.
+    pub fn see_through(&self) -> usize {
+        match self {
+            DecodedFrame::Srgba8 { bytes, .. } => bytes
+                .iter()
+                .skip(3)
+                .step_by(4)
+                .filter(|&&a| a != 255)
+                .count(),
+            DecodedFrame::Linear(f) => f.data().iter().filter(|p| p[3] < 1.0).count(),
+        }
+    }
+
     /// The frame as it shows over black: a keyed element's colour times its own alpha
     /// (linear light; the alpha kept), so analysis sees it as footage shot on black and
     /// never the plate its key hides. An opaque frame (every alpha 1, or 255) is returned
     /// as it is, bit for bit (8-bit bytes stay bytes).
     pub fn over_black(self) -> DecodedFrame {
-        let opaque = match &self {
-            DecodedFrame::Srgba8 { bytes, .. } => {
-                bytes.iter().skip(3).step_by(4).all(|&a| a == 255)
-            }
-            DecodedFrame::Linear(f) => f.data().iter().all(|p| p[3] >= 1.0),
-        };
-        if opaque {
+        if self.see_through() == 0 {
             return self;
         }
         let mut f = self.into_linear();
@@ -628,8 +636,8 @@ pub fn read_image(path: &Path) -> Result<RgbaFrame> {
 
 #[cfg(test)]
 mod tests {
-    /// Over black: an opaque frame is itself, bit for bit (8-bit bytes stay bytes); a
-    /// translucent one is its colour times its alpha, the alpha kept.
+    /// Over black: an opaque frame (no pixel see-through) is itself, bit for bit (8-bit
+    /// bytes stay bytes); a translucent one is its colour times its alpha, the alpha kept.
     #[test]
     fn a_keyed_frame_is_seen_over_black() {
         let size = Size::new(2, 1).unwrap();
@@ -638,6 +646,7 @@ mod tests {
             size,
             bytes: bytes.clone(),
         };
+        assert_eq!(f.see_through(), 0);
         assert_eq!(DecodedFrame::over_black(f.clone()), f);
         let lin =
             RgbaFrame::from_vec(size, vec![[0.5, 0.25, 1.0, 1.0], [0.2, 0.4, 0.8, 1.0]]).unwrap();
@@ -647,6 +656,7 @@ mod tests {
         );
         let keyed =
             RgbaFrame::from_vec(size, vec![[0.5, 0.25, 1.0, 0.5], [0.8, 0.8, 0.8, 0.0]]).unwrap();
+        assert_eq!(DecodedFrame::Linear(keyed.clone()).see_through(), 2);
         let seen = DecodedFrame::over_black(DecodedFrame::Linear(keyed)).into_linear();
         assert_eq!(
             seen.data(),
@@ -654,6 +664,14 @@ mod tests {
         );
         let mut half = bytes;
         half[7] = 0;
+        assert_eq!(
+            DecodedFrame::Srgba8 {
+                size,
+                bytes: half.clone()
+            }
+            .see_through(),
+            1
+        );
         let seen =
             DecodedFrame::over_black(DecodedFrame::Srgba8 { size, bytes: half }).into_linear();
         assert_eq!(seen.data()[1], [0.0; 4]);
