@@ -361,6 +361,21 @@ mod info {
         );
     }
 
+    /// `frames` frames of ffmpeg's test card (`testsrc=size=SPEC`) as H.264 at `out`, with
+    /// `extra` output options; false when this ffmpeg cannot encode H.264.
+    fn test_card_h264(spec: &str, frames: u32, extra: &[&str], out: &Path) -> bool {
+        std::process::Command::new("ffmpeg")
+            .args(["-nostdin", "-y", "-v", "error", "-f", "lavfi", "-i"])
+            .arg(format!("testsrc=size={spec}"))
+            .arg("-frames:v")
+            .arg(frames.to_string())
+            .args(["-pix_fmt", "yuv420p", "-c:v", "libx264"])
+            .args(extra)
+            .arg(out)
+            .status()
+            .is_ok_and(|s| s.success())
+    }
+
     /// An anamorphic clip (4:3 pixels) says what it is stored at and what it is read at.
     #[test]
     fn anamorphic_clips_say_both_sizes() {
@@ -369,14 +384,7 @@ mod info {
         }
         let t = tempfile::tempdir().unwrap();
         let p = t.path().join("dv.mp4");
-        let ok = std::process::Command::new("ffmpeg")
-            .args(["-nostdin", "-y", "-v", "error", "-f", "lavfi", "-i"])
-            .arg("testsrc=size=96x72:rate=10,setsar=4/3")
-            .args(["-frames:v", "3", "-pix_fmt", "yuv420p", "-c:v", "libx264"])
-            .arg(&p)
-            .status()
-            .is_ok_and(|s| s.success());
-        if !ok {
+        if !test_card_h264("96x72:rate=10,setsar=4/3", 3, &[], &p) {
             println!("skipped: this ffmpeg cannot encode H.264");
             return;
         }
@@ -407,15 +415,7 @@ mod info {
         }
         let t = tempfile::tempdir().unwrap();
         let whole = t.path().join("whole.mp4");
-        let ok = std::process::Command::new("ffmpeg")
-            .args(["-nostdin", "-y", "-v", "error", "-f", "lavfi", "-i"])
-            .arg("testsrc=size=320x240:rate=25")
-            .args(["-frames:v", "10", "-pix_fmt", "yuv420p", "-c:v", "libx264"])
-            .args(["-movflags", "+faststart"])
-            .arg(&whole)
-            .status()
-            .is_ok_and(|s| s.success());
-        if !ok {
+        if !test_card_h264("320x240:rate=25", 10, &["-movflags", "+faststart"], &whole) {
             println!("skipped: this ffmpeg cannot encode H.264");
             return;
         }
