@@ -7,7 +7,7 @@ use std::path::PathBuf;
 
 #[derive(clap::Args, Debug)]
 #[command(
-    after_help = "Examples:\n  ignis info candle.mp4\n  ignis info campfire.mp4 --json\n  ignis info 'frames/%04d.png'"
+    after_help = "Examples:\n  ignis info candle.mp4\n  ignis info campfire.mp4 --json\n  ignis info 'frames/%04d.png'    (a keyed element says how much of its first frame is see-through)"
 )]
 pub struct Args {
     /// A video, an image, a directory of frames or a printf pattern.
