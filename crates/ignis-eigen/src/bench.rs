@@ -20,7 +20,7 @@
 //! warm-up that maps and verifies the packs (a one-off per opened database).
 
 use std::ops::Range;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::time::Instant;
 
 use ignis_core::colour::{synthetic_colour, Tint};
@@ -29,7 +29,7 @@ use ignis_core::Size;
 use serde_json::{json, Value};
 
 use crate::db::EigenfireDb;
-use crate::error::Result;
+use crate::error::{EigenError, Result};
 use crate::preprocess::PreprocessParams;
 use crate::train::{self, NoProgress, TrainParams};
 use crate::transition::{transition, LowPassParams, RecognitionParams, Transition, WeightSpace};
@@ -44,15 +44,6 @@ pub const GOAL_BATCH_FPS: f64 = 50.0;
 /// Seed of the synthetic training clips.
 const SEED: u64 = 7;
 
-/// Removes a directory when dropped (the temporary database).
-struct TempDir(PathBuf);
-
-impl Drop for TempDir {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
-
 /// Headline figures as one JSON object (see the module docs).
 ///
 /// `db_dir`: where to keep the trained database so that later runs reuse it (it is trained
@@ -64,12 +55,20 @@ pub fn animate_figures(quick: bool, db_dir: Option<&Path>) -> Result<Value> {
     let dir = match db_dir {
         Some(d) => d.to_path_buf(),
         None => {
-            let d = std::env::temp_dir().join(format!(
-                "ignis-bench-eigen-animate-{}-{}",
-                std::process::id(),
-                if quick { "quick" } else { "full" }
-            ));
-            _temp = TempDir(d.clone());
+            // A new, uniquely named directory (not one named after the process id, which a
+            // later run can reuse and so inherit a stale database), removed when dropped,
+            // on an error too.
+            let temp = std::env::temp_dir();
+            let t = tempfile::Builder::new()
+                .prefix(if quick {
+                    "ignis-bench-eigen-animate-quick-"
+                } else {
+                    "ignis-bench-eigen-animate-full-"
+                })
+                .tempdir_in(&temp)
+                .map_err(|e| EigenError::io(&temp, e))?;
+            let d = t.path().to_path_buf();
+            _temp = t;
             d
         }
     };
