@@ -286,7 +286,7 @@ fn main() -> ExitCode {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e}");
-            for cause in e.chain().skip(1) {
+            for cause in causes_to_print(&e) {
                 eprintln!("  caused by: {cause}");
             }
             ExitCode::FAILURE
@@ -294,8 +294,42 @@ fn main() -> ExitCode {
     }
 }
 
+/// The causes of `e` worth printing under its message: those whose text is not already in
+/// a line above (an I/O error's message quotes its source, which the chain then gives
+/// again).
+fn causes_to_print(e: &anyhow::Error) -> Vec<String> {
+    let mut shown = e.to_string();
+    let mut out = Vec::new();
+    for cause in e.chain().skip(1) {
+        let c = cause.to_string();
+        if !c.is_empty() && !shown.contains(&c) {
+            shown.push('\n');
+            shown.push_str(&c);
+            out.push(c);
+        }
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn a_cause_already_quoted_above_is_not_printed_again() {
+        let io = std::io::Error::new(std::io::ErrorKind::NotFound, "no such file");
+        let e = anyhow::Error::new(io)
+            .context("I/O error on a.mp4: no such file")
+            .context("reading a.mp4");
+        assert_eq!(
+            super::causes_to_print(&e),
+            vec!["I/O error on a.mp4: no such file".to_string()]
+        );
+        let e = anyhow::anyhow!("the size is wrong").context("--size");
+        assert_eq!(
+            super::causes_to_print(&e),
+            vec!["the size is wrong".to_string()]
+        );
+    }
+
     #[test]
     fn cli_is_well_formed() {
         <super::Cli as clap::CommandFactory>::command().debug_assert();

@@ -2782,6 +2782,76 @@ mod loop_output_checks {
     }
 }
 
+/// `ignis bench loops` on clips the user names: a frame pattern (no file of that name) is
+/// measured against the peers, not skipped as "not found"; a clip that is not there is an
+/// error naming it (the default clips of `../shared/data` are skipped when missing).
+#[test]
+fn bench_loops_measures_a_named_pattern_and_refuses_a_missing_clip() {
+    let t = tempfile::tempdir().unwrap();
+    std::fs::create_dir(t.path().join("f")).unwrap();
+    let pattern = t.path().join("f/%04d.png");
+    classic_ok("48x40", "150", &["--seed", "3", "--no-loop"], &pattern);
+    let cache = t.path().join("cache");
+    let (p, c) = (pattern.to_str().unwrap(), cache.to_str().unwrap());
+    let o = ignis(&["-q", "bench", "loops", p, "--cache", c]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let rows = v["clips"].as_array().unwrap();
+    assert_eq!(rows.len(), 2, "{v}"); // 2-s and 4-s loops of the 150 frames at 30 fps
+    for r in rows {
+        assert!(r["skipped"].is_null(), "{r}");
+        assert_eq!(r["clip_frames"], 150, "{r}");
+        for who in ["ignis", "xfade", "vt"] {
+            let seam = r[who]["quality"]["seam"].as_f64().unwrap_or(f64::NAN);
+            assert!(seam.is_finite() && seam > 0.0, "{who}: {r}");
+        }
+    }
+    let missing = t.path().join("no-such-clip.mp4");
+    let o = ignis(&[
+        "-q",
+        "bench",
+        "loops",
+        missing.to_str().unwrap(),
+        "--cache",
+        c,
+    ]);
+    assert_fails(&o, "no-such-clip.mp4");
+    assert!(
+        o.stdout.is_empty(),
+        "{}",
+        String::from_utf8_lossy(&o.stdout)
+    );
+}
+
+/// Footage that is not there: the error names the path and what footage can be, once (not
+/// again as a "caused by" line), exit 1, nothing written.
+#[test]
+fn missing_footage_is_named_once_with_what_footage_can_be() {
+    let t = tempfile::tempdir().unwrap();
+    let missing = t.path().join("no-such-clip.mp4");
+    let out = t.path().join("loop.png");
+    for args in [
+        vec!["info", missing.to_str().unwrap()],
+        vec![
+            "loop",
+            missing.to_str().unwrap(),
+            "--length",
+            "16",
+            "-o",
+            out.to_str().unwrap(),
+        ],
+    ] {
+        let r = ignis(&args);
+        assert_fails(&r, "no-such-clip.mp4");
+        let err = String::from_utf8_lossy(&r.stderr);
+        assert_eq!(r.status.code(), Some(1), "{err}");
+        assert_eq!(err.matches("no such file or directory").count(), 1, "{err}");
+        assert!(err.contains("check the path"), "{err}");
+        assert!(!err.contains("panicked"), "{err}");
+    }
+    assert!(files_in(t.path()).is_empty());
+}
+
 /// `ignis loop --fps` is refused, not silently ignored: the loop is the footage's frames at
 /// the footage's rate.
 #[test]

@@ -165,8 +165,15 @@ pub fn default_clips() -> Vec<PathBuf> {
         .collect()
 }
 
-/// Runs the benchmark; one JSON object.
-pub fn bench(clips: &[PathBuf], cache: Option<&Path>, g: &Global) -> Result<Value> {
+/// Runs the benchmark; one JSON object. `skip_unreadable`: a clip that is not there, or
+/// that needs the ffmpeg this machine lacks, is reported as skipped (the default clips of
+/// `../shared/data`); otherwise it is an error (clips the user named).
+pub fn bench(
+    clips: &[PathBuf],
+    skip_unreadable: bool,
+    cache: Option<&Path>,
+    g: &Global,
+) -> Result<Value> {
     let cache_dir = match cache {
         Some(d) => d.to_path_buf(),
         None => loop_cmd::default_cache_dir()?,
@@ -179,13 +186,17 @@ pub fn bench(clips: &[PathBuf], cache: Option<&Path>, g: &Global) -> Result<Valu
     let tmp = tmp_dir.path();
     let mut results = Vec::new();
     for clip in clips {
-        if !clip.exists() {
+        if !skip_unreadable {
+            // A clip named on the command line (a file, a directory of frames or a pattern
+            // like frames/%04d.png, which is no file itself) must be readable.
+            ignis_media::probe(clip)
+                .with_context(|| format!("bench loops: reading {}", clip.display()))?;
+        } else if !clip.exists() {
             results.push(
                 json!({"clip": clip, "skipped": format!("skipped: {} not found", clip.display())}),
             );
             continue;
-        }
-        if !ignis_media::ffmpeg_available() && ignis_media::probe(clip).is_err() {
+        } else if !ignis_media::ffmpeg_available() && ignis_media::probe(clip).is_err() {
             results.push(json!({"clip": clip, "skipped": "skipped: ffmpeg not found"}));
             continue;
         }

@@ -33,8 +33,9 @@ pub struct BenchArgs {
     /// puffing law and ../shared/data footage).
     #[arg(value_parser = ["classic", "eigen-train", "eigen-animate", "eigen-footage", "learned", "volume", "flow", "export", "loops", "realism"])]
     pub target: String,
-    /// loops: the clips (default ../shared/data/{candle,campfire,fireball}.mp4; missing
-    /// ones are reported as skipped).
+    /// loops: the clips: videos, directories of frames or patterns like frames/%04d.png
+    /// (default ../shared/data/{candle,campfire,fireball}.mp4, reported as skipped when
+    /// missing; a clip named here must be readable).
     pub clips: Vec<PathBuf>,
     /// loops: the cache of clip databases (default as `ignis loop`).
     #[arg(long, value_name = "DIR")]
@@ -81,12 +82,12 @@ pub fn run(a: &BenchArgs, g: &Global) -> Result<()> {
             v
         }
         "loops" => {
-            let clips = if a.clips.is_empty() {
-                crate::bench::loops::default_clips()
+            let (clips, defaults) = if a.clips.is_empty() {
+                (crate::bench::loops::default_clips(), true)
             } else {
-                a.clips.clone()
+                (a.clips.clone(), false)
             };
-            crate::bench::loops::bench(&clips, a.cache.as_deref(), g)?
+            crate::bench::loops::bench(&clips, defaults, a.cache.as_deref(), g)?
         }
         other => anyhow::bail!("unknown bench target `{other}`"),
     };

@@ -377,7 +377,20 @@ pub(crate) fn probe_inner(path: &Path, have_ffmpeg: bool) -> Result<Probed> {
     if is_pattern(path) {
         return sequence::probe_pattern(path);
     }
-    let meta = std::fs::metadata(path).map_err(|e| MediaError::io(path, e))?;
+    let meta = std::fs::metadata(path).map_err(|e| {
+        if e.kind() == std::io::ErrorKind::NotFound {
+            MediaError::io(
+                path,
+                std::io::Error::new(
+                    e.kind(),
+                    "there is no such file or directory; check the path (footage is a video \
+                     file, a directory of frames, or a pattern such as frames/%04d.png)",
+                ),
+            )
+        } else {
+            MediaError::io(path, e)
+        }
+    })?;
     if meta.is_dir() {
         return sequence::probe_dir(path);
     }
