@@ -2824,9 +2824,9 @@ fn bench_loops_measures_a_named_pattern_and_refuses_a_missing_clip() {
 }
 
 /// Footage that is not there: the error names the path and what footage can be, once (not
-/// again as a "caused by" line), exit 1, nothing written.
+/// again as a "caused by" line), exit 1, nothing written; so do a database and a fire file.
 #[test]
-fn missing_footage_is_named_once_with_what_footage_can_be() {
+fn missing_inputs_are_named_once_with_what_to_give() {
     let t = tempfile::tempdir().unwrap();
     let missing = t.path().join("no-such-clip.mp4");
     let out = t.path().join("loop.png");
@@ -2848,6 +2848,32 @@ fn missing_footage_is_named_once_with_what_footage_can_be() {
         assert_eq!(err.matches("no such file or directory").count(), 1, "{err}");
         assert!(err.contains("check the path"), "{err}");
         assert!(!err.contains("panicked"), "{err}");
+    }
+    // A database or a fire file that is not there: said once, with what to do instead.
+    let db = t.path().join("no-such.db");
+    let fire = t.path().join("no-such-fire.toml");
+    for (args, fix) in [
+        (
+            vec!["eigen", "info", db.to_str().unwrap()],
+            "ignis eigen train",
+        ),
+        (
+            vec![
+                "volume",
+                "render",
+                fire.to_str().unwrap(),
+                "-o",
+                out.to_str().unwrap(),
+            ],
+            "--preset torch",
+        ),
+    ] {
+        let r = ignis(&args);
+        assert_fails(&r, fix);
+        let err = String::from_utf8_lossy(&r.stderr);
+        assert_eq!(r.status.code(), Some(1), "{err}");
+        assert!(err.contains("no-such"), "{err}");
+        assert!(!err.contains("os error 2"), "{err}");
     }
     assert!(files_in(t.path()).is_empty());
 }

@@ -147,6 +147,18 @@ impl EigenfireDb {
             file: file.into(),
             reason,
         };
+        if let Err(e) = std::fs::metadata(dir) {
+            if e.kind() == std::io::ErrorKind::NotFound {
+                return Err(EigenError::Io {
+                    path: dir.to_path_buf(),
+                    source: std::io::Error::new(
+                        e.kind(),
+                        "there is no such database; check the path (a database is the \
+                         directory `ignis eigen train ... -o DIR` writes)",
+                    ),
+                });
+            }
+        }
         // Read with a bound (a manifest is a few kB; 16 MiB allows thousands of clips).
         let read_small = |name: &str| -> Result<Vec<u8>> {
             use std::io::Read;
