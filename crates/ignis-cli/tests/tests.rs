@@ -2824,7 +2824,8 @@ fn bench_loops_measures_a_named_pattern_and_refuses_a_missing_clip() {
 }
 
 /// Footage that is not there: the error names the path and what footage can be, once (not
-/// again as a "caused by" line), exit 1, nothing written; so do a database and a fire file.
+/// again as a "caused by" line), exit 1, nothing written; so do a database, a flame model
+/// and a fire file.
 #[test]
 fn missing_inputs_are_named_once_with_what_to_give() {
     let t = tempfile::tempdir().unwrap();
@@ -2852,7 +2853,18 @@ fn missing_inputs_are_named_once_with_what_to_give() {
     // A database or a fire file that is not there: said once, with what to do instead.
     let db = t.path().join("no-such.db");
     let fire = t.path().join("no-such-fire.toml");
+    let model = t.path().join("no-such.flame");
     for (args, fix) in [
+        (
+            vec![
+                "learned",
+                "synth",
+                model.to_str().unwrap(),
+                "-o",
+                out.to_str().unwrap(),
+            ],
+            "ignis learned train",
+        ),
         (
             vec!["eigen", "info", db.to_str().unwrap()],
             "ignis eigen train",

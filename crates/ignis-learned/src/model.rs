@@ -447,7 +447,17 @@ impl FlameModel {
             use std::os::unix::fs::OpenOptionsExt;
             o.custom_flags(libc::O_NONBLOCK);
         }
-        let file = o.open(path).map_err(ioerr)?;
+        let file = o.open(path).map_err(|e| {
+            if e.kind() == std::io::ErrorKind::NotFound {
+                ioerr(std::io::Error::new(
+                    e.kind(),
+                    "there is no such model; check the path (a model is the .flame file \
+                     `ignis learned train ... -o FILE` writes)",
+                ))
+            } else {
+                ioerr(e)
+            }
+        })?;
         let md = file.metadata().map_err(ioerr)?;
         if !md.is_file() {
             return Err(bad(
