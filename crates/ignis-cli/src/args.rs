@@ -76,6 +76,22 @@ pub fn seconds_range(s: &str) -> Result<(f64, Option<f64>), String> {
     Ok((start, b))
 }
 
+/// Reads a text file the user named (`what`: "fire file", "clips file", ...) with a bound
+/// and without blocking ([`ignis_core::textfile::read_text`]); a path that is not there
+/// says so, and `instead`, what to give instead.
+pub fn read_user_text(path: &std::path::Path, what: &str, instead: &str) -> anyhow::Result<String> {
+    ignis_core::textfile::read_text(path).map_err(|e| {
+        if e.kind() == std::io::ErrorKind::NotFound {
+            anyhow::anyhow!(
+                "{what} {} does not exist; check the path, or {instead}",
+                path.display()
+            )
+        } else {
+            anyhow::anyhow!("{what} {}: {e}", path.display())
+        }
+    })
+}
+
 /// `rect`'s size when it lies inside `path`'s frame of `size`; else an error naming the
 /// frame's size and what fits.
 pub fn crop_inside(

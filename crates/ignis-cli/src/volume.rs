@@ -105,17 +105,11 @@ fn parse_noise(s: &str) -> NoiseKind {
 
 /// Reads a fire file, loading profile images with `ignis-media`.
 pub fn load_fire_file(path: &Path) -> Result<FireScene> {
-    let text = std::fs::read_to_string(path).map_err(|e| {
-        if e.kind() == std::io::ErrorKind::NotFound {
-            anyhow::anyhow!(
-                "fire file {} does not exist; check the path, or render a built-in scene \
-                 with --preset torch, candle, campfire or wall",
-                path.display()
-            )
-        } else {
-            anyhow::Error::new(e).context(format!("reading {}", path.display()))
-        }
-    })?;
+    let text = crate::args::read_user_text(
+        path,
+        "fire file",
+        "render a built-in scene with --preset torch, candle, campfire or wall",
+    )?;
     let base = path.parent().unwrap_or(Path::new("."));
     FireScene::from_toml(&text, base, &mut |p| {
         ignis_media::read_image(p).map_err(|e| e.to_string())

@@ -2825,7 +2825,7 @@ fn bench_loops_measures_a_named_pattern_and_refuses_a_missing_clip() {
 
 /// Footage that is not there: the error names the path and what footage can be, once (not
 /// again as a "caused by" line), exit 1, nothing written; so do a database, a flame model
-/// and a fire file.
+/// and a fire file. A device given as footage or a text file is refused without reading it.
 #[test]
 fn missing_inputs_are_named_once_with_what_to_give() {
     let t = tempfile::tempdir().unwrap();
@@ -2886,6 +2886,14 @@ fn missing_inputs_are_named_once_with_what_to_give() {
         assert_eq!(r.status.code(), Some(1), "{err}");
         assert!(err.contains("no-such"), "{err}");
         assert!(!err.contains("os error 2"), "{err}");
+    }
+    // A device named by mistake (it never ends): refused at once, not read into memory.
+    for args in [
+        vec!["info", "/dev/zero"],
+        vec!["volume", "render", "/dev/zero", "-o", out.to_str().unwrap()],
+        vec!["eigen", "animate", "/dev/zero", "-o", out.to_str().unwrap()],
+    ] {
+        assert_fails(&ignis(&args), "not a regular file");
     }
     assert!(files_in(t.path()).is_empty());
 }

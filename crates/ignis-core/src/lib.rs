@@ -13,11 +13,13 @@
 //! - [`golden`]: golden float images for tests (stored frames compared within a tolerance).
 //! - [`realism`]: flicker frequency and spectral slope, measured on renders and footage alike.
 //! - [`stream`]: per-frame work on a decoded stream, in parallel and in stream order.
+//! - [`textfile`]: the bounded, non-blocking read of the text files a user names.
 //!
 //! **Invariant:** this crate knows no file formats (it only names, writes atomically and
-//! removes the writers' temporaries: [`tempfiles`], [`atomic`]; the one exception is the
-//! raw float layout of the tests' goldens, [`golden`]), codecs, clap or GPUs. Pixel data is
-//! linear light everywhere; only `ignis-media` converts to 8-bit sRGB.
+//! removes the writers' temporaries: [`tempfiles`], [`atomic`], and reads text with a
+//! bound: [`textfile`]; the one exception is the raw float layout of the tests' goldens,
+//! [`golden`]), codecs, clap or GPUs. Pixel data is linear light everywhere; only
+//! `ignis-media` converts to 8-bit sRGB.
 
 pub mod atomic;
 pub mod colour;
@@ -32,6 +34,7 @@ pub mod realism;
 pub mod rng;
 pub mod stream;
 pub mod tempfiles;
+pub mod textfile;
 
 pub use error::{CoreError, Result};
 pub use frame::{GrayFrame, RgbaFrame, Size};

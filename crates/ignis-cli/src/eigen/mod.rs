@@ -370,8 +370,11 @@ fn read_preprocess(config: Option<&Path>) -> Result<PreprocessParams> {
     match config {
         None => Ok(PreprocessParams::default()),
         Some(p) => {
-            let text =
-                std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?;
+            let text = crate::args::read_user_text(
+                p,
+                "pre-processing settings",
+                "write them with `ignis eigen preprocess CLIP --print-config > pre.toml`",
+            )?;
             PreprocessParams::from_toml(&text).with_context(|| format!("reading {}", p.display()))
         }
     }
@@ -381,8 +384,11 @@ pub fn train(a: TrainArgs, g: &Global) -> Result<()> {
     let is_toml = a.inputs.len() == 1 && a.inputs[0].extension().is_some_and(|e| e == "toml");
     let (specs, mut pre, mut tp) = if is_toml {
         let p = &a.inputs[0];
-        let text =
-            std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?;
+        let text = crate::args::read_user_text(
+            p,
+            "clips file",
+            "give the videos themselves (`ignis eigen train --help` shows a clips file)",
+        )?;
         let base = p.parent().unwrap_or(Path::new("."));
         let c = TrainConfig::from_toml(&text, base)
             .with_context(|| format!("reading {}", p.display()))?;

@@ -394,6 +394,14 @@ pub(crate) fn probe_inner(path: &Path, have_ffmpeg: bool) -> Result<Probed> {
     if meta.is_dir() {
         return sequence::probe_dir(path);
     }
+    if !meta.is_file() {
+        return Err(MediaError::decode(
+            path,
+            None,
+            "not a regular file (a FIFO or a device); footage is a video file, a directory \
+             of frames, or a pattern such as frames/%04d.png",
+        ));
+    }
     if meta.len() == 0 {
         return Err(MediaError::decode(
             path,

@@ -252,7 +252,15 @@ impl Default for Look {
 impl Scenario {
     /// Reads and parses a scenario file.
     pub fn from_file(path: &Path) -> Result<Scenario> {
-        let text = std::fs::read_to_string(path).map_err(|e| EigenError::io(path, e))?;
+        let text = ignis_core::textfile::read_text(path).map_err(|e| {
+            if e.kind() == std::io::ErrorKind::NotFound {
+                let why = "there is no such scenario; check the path \
+                           (`ignis eigen scenario DB > scene.toml` writes one for a database)";
+                EigenError::io(path, std::io::Error::new(e.kind(), why))
+            } else {
+                EigenError::io(path, e)
+            }
+        })?;
         Scenario::parse(&text, path)
     }
 
