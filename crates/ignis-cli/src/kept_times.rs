@@ -99,7 +99,7 @@ fn entry_bytes_at_most(n: usize) -> u64 {
 
 fn write(path: &Path, what: &str, times: &[f64]) -> Result<()> {
     let dir = path.parent().context("a cache file has a directory")?;
-    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    crate::eigen::loop_cmd::create_cache_dir(dir)?;
     let bits: Vec<String> = times
         .iter()
         .map(|t| format!("{:016x}", t.to_bits()))

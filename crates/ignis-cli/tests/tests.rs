@@ -2823,6 +2823,33 @@ fn bench_loops_measures_a_named_pattern_and_refuses_a_missing_clip() {
     );
 }
 
+/// `--cache` given a file: the error says the cache must be a directory (the system's own
+/// "File exists" said nothing useful), nothing written, the file untouched.
+#[test]
+fn a_cache_that_is_a_file_is_named() {
+    let t = tempfile::tempdir().unwrap();
+    std::fs::create_dir(t.path().join("f")).unwrap();
+    let pattern = t.path().join("f/%04d.png");
+    classic_ok("48x40", "60", &["--seed", "3", "--no-loop"], &pattern);
+    let file = t.path().join("not-a-dir");
+    std::fs::write(&file, "mine").unwrap();
+    let out = t.path().join("loop.gif");
+    let r = ignis(&[
+        "-q",
+        "loop",
+        pattern.to_str().unwrap(),
+        "--length",
+        "24",
+        "--cache",
+        file.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert_fails(&r, "is not a directory; give --cache a directory");
+    assert!(!out.exists());
+    assert_eq!(std::fs::read_to_string(&file).unwrap(), "mine");
+}
+
 /// Footage that is not there: the error names the path and what footage can be, once (not
 /// again as a "caused by" line), exit 1, nothing written; so do a database, a flame model
 /// and a fire file. A device given as footage or a text file is refused without reading it.

@@ -215,6 +215,31 @@ pub fn default_cache_dir() -> Result<PathBuf> {
     bail!("no cache directory: set XDG_CACHE_HOME or HOME, or give --cache DIR")
 }
 
+/// Creates the cache directory `dir` and its parents. When a file is in the way (`--cache`
+/// given a file, or a file where a parent should be) the error names it and the fix; the
+/// system's own "File exists" would not.
+pub fn create_cache_dir(dir: &Path) -> Result<()> {
+    let Err(e) = std::fs::create_dir_all(dir) else {
+        return Ok(());
+    };
+    let mut p = Some(dir);
+    while let Some(q) = p.filter(|q| !q.as_os_str().is_empty()) {
+        if let Ok(m) = std::fs::metadata(q) {
+            if !m.is_dir() {
+                bail!(
+                    "cannot make the cache directory {}: {} is not a directory; give --cache a \
+                     directory (or leave it out for $XDG_CACHE_HOME/ignis or ~/.cache/ignis)",
+                    dir.display(),
+                    q.display()
+                );
+            }
+            break;
+        }
+        p = q.parent();
+    }
+    Err(e).with_context(|| format!("creating the cache directory {}", dir.display()))
+}
+
 /// SHA-256 of a source, hex (`ignis_media::source_fingerprint`: a file's content, or an
 /// image sequence's frames in order).
 pub fn source_sha256(path: &Path) -> Result<String> {
@@ -502,8 +527,7 @@ fn build_entry(
     g: &Global,
 ) -> Result<()> {
     let path = clip.path;
-    std::fs::create_dir_all(dir.parent().unwrap_or(Path::new(".")))
-        .with_context(|| format!("creating the cache directory {}", dir.display()))?;
+    create_cache_dir(dir.parent().unwrap_or(Path::new(".")))?;
     // Built in a hidden staging directory beside the entry (removed if anything fails) and
     // swapped in whole, so a reader never sees half an entry.
     let mut staging = ignis_core::atomic::StagingDir::create(dir)
