@@ -64,6 +64,15 @@ fn volume_render(preset: &str, extra: &[&str], out: &Path) -> Output {
     ignis(&a)
 }
 
+/// `FRAMES` frames of a 48×40 classic fire written as the PNG sequence `DIR/f/%04d.png`:
+/// small footage for the loop commands; returns the pattern.
+fn classic_frames(dir: &Path, frames: &str) -> PathBuf {
+    std::fs::create_dir(dir.join("f")).unwrap();
+    let pattern = dir.join("f/%04d.png");
+    classic_ok("48x40", frames, &["--seed", "3", "--no-loop"], &pattern);
+    pattern
+}
+
 /// [`classic`], asserting it succeeded (showing its stderr otherwise).
 fn classic_ok(size: &str, frames: &str, extra: &[&str], out: &Path) -> Output {
     let o = classic(size, frames, extra, out);
@@ -2788,9 +2797,7 @@ mod loop_output_checks {
 #[test]
 fn bench_loops_measures_a_named_pattern_and_refuses_a_missing_clip() {
     let t = tempfile::tempdir().unwrap();
-    std::fs::create_dir(t.path().join("f")).unwrap();
-    let pattern = t.path().join("f/%04d.png");
-    classic_ok("48x40", "150", &["--seed", "3", "--no-loop"], &pattern);
+    let pattern = classic_frames(t.path(), "150");
     let cache = t.path().join("cache");
     let (p, c) = (pattern.to_str().unwrap(), cache.to_str().unwrap());
     let o = ignis(&["-q", "bench", "loops", p, "--cache", c]);
@@ -2828,9 +2835,7 @@ fn bench_loops_measures_a_named_pattern_and_refuses_a_missing_clip() {
 #[test]
 fn a_cache_that_is_a_file_is_named() {
     let t = tempfile::tempdir().unwrap();
-    std::fs::create_dir(t.path().join("f")).unwrap();
-    let pattern = t.path().join("f/%04d.png");
-    classic_ok("48x40", "60", &["--seed", "3", "--no-loop"], &pattern);
+    let pattern = classic_frames(t.path(), "60");
     let file = t.path().join("not-a-dir");
     std::fs::write(&file, "mine").unwrap();
     let out = t.path().join("loop.gif");
