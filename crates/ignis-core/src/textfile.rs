@@ -2,7 +2,8 @@
 //! bounded in size and never blocking, so that a device, a FIFO or a huge file named by
 //! mistake (`/dev/zero`, a video given where a TOML was meant) is refused with a clear
 //! error instead of filling memory or waiting for a writer that never comes.
-//! (`std::fs::read_to_string` does neither.)
+//! (`std::fs::read_to_string` does neither.) [`explain_missing`] gives a missing path's
+//! error its reader's own fix (footage, models and databases use it too).
 
 use std::io::{Error, ErrorKind, Read};
 use std::path::Path;
@@ -10,6 +11,17 @@ use std::path::Path;
 /// The largest text file [`read_text`] reads: far above any settings file (a scenario of
 /// thousands of motions is a few hundred kB), far below what would strain memory.
 pub const MAX_TEXT_BYTES: u64 = 16 << 20;
+
+/// `e`, or, when it says a path is not there, the same kind of error saying `why` instead
+/// (what the path should have been and how to get one): the readers of footage, models,
+/// databases and text files each name their own fix this way.
+pub fn explain_missing(e: Error, why: &str) -> Error {
+    if e.kind() == ErrorKind::NotFound {
+        Error::new(ErrorKind::NotFound, why.to_string())
+    } else {
+        e
+    }
+}
 
 /// Reads `path` as UTF-8 text of at most [`MAX_TEXT_BYTES`]. Refuses, with an error of
 /// the kind shown and a message that says why: a path that is not there (`NotFound`), a
@@ -25,10 +37,9 @@ pub fn read_text(path: &Path) -> std::io::Result<String> {
         // once and is refused below as not a regular file.
         o.custom_flags(libc::O_NONBLOCK);
     }
-    let file = o.open(path).map_err(|e| match e.kind() {
-        ErrorKind::NotFound => Error::new(ErrorKind::NotFound, "there is no such file"),
-        _ => e,
-    })?;
+    let file = o
+        .open(path)
+        .map_err(|e| explain_missing(e, "there is no such file"))?;
     let md = file.metadata()?;
     if md.is_dir() {
         return Err(Error::new(
@@ -80,6 +91,9 @@ mod tests {
         assert_eq!(read_text(&ok).unwrap(), "size = 3\n");
 
         let kind = |p: &Path| read_text(p).unwrap_err().kind();
+        let other = explain_missing(Error::from(ErrorKind::PermissionDenied), "x");
+        assert_eq!(other.kind(), ErrorKind::PermissionDenied);
+        assert_ne!(other.to_string(), "x");
         assert_eq!(kind(&t.path().join("missing.toml")), ErrorKind::NotFound);
         assert_eq!(kind(t.path()), ErrorKind::InvalidInput);
 

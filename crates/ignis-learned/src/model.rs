@@ -448,15 +448,11 @@ impl FlameModel {
             o.custom_flags(libc::O_NONBLOCK);
         }
         let file = o.open(path).map_err(|e| {
-            if e.kind() == std::io::ErrorKind::NotFound {
-                ioerr(std::io::Error::new(
-                    e.kind(),
-                    "there is no such model; check the path (a model is the .flame file \
-                     `ignis learned train ... -o FILE` writes)",
-                ))
-            } else {
-                ioerr(e)
-            }
+            ioerr(ignis_core::textfile::explain_missing(
+                e,
+                "there is no such model; check the path (a model is the .flame file \
+                 `ignis learned train ... -o FILE` writes)",
+            ))
         })?;
         let md = file.metadata().map_err(ioerr)?;
         if !md.is_file() {

@@ -186,20 +186,25 @@ pub fn bench(
     let tmp = tmp_dir.path();
     let mut results = Vec::new();
     for clip in clips {
-        if !skip_unreadable {
-            // A clip named on the command line (a file, a directory of frames or a pattern
-            // like frames/%04d.png, which is no file itself) must be readable.
-            ignis_media::probe(clip)
-                .with_context(|| format!("bench loops: reading {}", clip.display()))?;
-        } else if !clip.exists() {
+        // A clip named on the command line (a file, a directory of frames or a pattern like
+        // frames/%04d.png, which is no file itself) must be readable; a default one is
+        // skipped when it is not there or needs the ffmpeg this machine lacks.
+        if skip_unreadable && !clip.exists() {
             results.push(
                 json!({"clip": clip, "skipped": format!("skipped: {} not found", clip.display())}),
             );
             continue;
-        } else if !ignis_media::ffmpeg_available() && ignis_media::probe(clip).is_err() {
-            results.push(json!({"clip": clip, "skipped": "skipped: ffmpeg not found"}));
-            continue;
         }
+        let info = match ignis_media::probe(clip) {
+            Ok(info) => info,
+            Err(_) if skip_unreadable && !ignis_media::ffmpeg_available() => {
+                results.push(json!({"clip": clip, "skipped": "skipped: ffmpeg not found"}));
+                continue;
+            }
+            Err(e) => {
+                return Err(e).with_context(|| format!("bench loops: reading {}", clip.display()))
+            }
+        };
         let (window, _) = loop_cmd::resolve_window(clip, None)?;
         let t = Instant::now();
         let c = loop_cmd::cached(
@@ -211,7 +216,6 @@ pub fn bench(
             g,
         )?;
         let cache_s = t.elapsed().as_secs_f64();
-        let info = ignis_media::probe(clip)?;
         for secs in [2.0f64, 4.0] {
             let length = (secs * c.fps).round() as usize;
             let n = c.metric.len();

@@ -149,14 +149,12 @@ impl EigenfireDb {
         };
         if let Err(e) = std::fs::metadata(dir) {
             if e.kind() == std::io::ErrorKind::NotFound {
-                return Err(EigenError::Io {
-                    path: dir.to_path_buf(),
-                    source: std::io::Error::new(
-                        e.kind(),
-                        "there is no such database; check the path (a database is the \
-                         directory `ignis eigen train ... -o DIR` writes)",
-                    ),
-                });
+                let why = "there is no such database; check the path (a database is the \
+                           directory `ignis eigen train ... -o DIR` writes)";
+                return Err(EigenError::io(
+                    dir,
+                    ignis_core::textfile::explain_missing(e, why),
+                ));
             }
         }
         // Read with a bound (a manifest is a few kB; 16 MiB allows thousands of clips).

@@ -378,18 +378,9 @@ pub(crate) fn probe_inner(path: &Path, have_ffmpeg: bool) -> Result<Probed> {
         return sequence::probe_pattern(path);
     }
     let meta = std::fs::metadata(path).map_err(|e| {
-        if e.kind() == std::io::ErrorKind::NotFound {
-            MediaError::io(
-                path,
-                std::io::Error::new(
-                    e.kind(),
-                    "there is no such file or directory; check the path (footage is a video \
-                     file, a directory of frames, or a pattern such as frames/%04d.png)",
-                ),
-            )
-        } else {
-            MediaError::io(path, e)
-        }
+        let why = "there is no such file or directory; check the path (footage is a video \
+                   file, a directory of frames, or a pattern such as frames/%04d.png)";
+        MediaError::io(path, ignis_core::textfile::explain_missing(e, why))
     })?;
     if meta.is_dir() {
         return sequence::probe_dir(path);

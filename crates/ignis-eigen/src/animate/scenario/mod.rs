@@ -253,13 +253,9 @@ impl Scenario {
     /// Reads and parses a scenario file.
     pub fn from_file(path: &Path) -> Result<Scenario> {
         let text = ignis_core::textfile::read_text(path).map_err(|e| {
-            if e.kind() == std::io::ErrorKind::NotFound {
-                let why = "there is no such scenario; check the path \
-                           (`ignis eigen scenario DB > scene.toml` writes one for a database)";
-                EigenError::io(path, std::io::Error::new(e.kind(), why))
-            } else {
-                EigenError::io(path, e)
-            }
+            let why = "there is no such scenario; check the path \
+                       (`ignis eigen scenario DB > scene.toml` writes one for a database)";
+            EigenError::io(path, ignis_core::textfile::explain_missing(e, why))
         })?;
         Scenario::parse(&text, path)
     }
