@@ -6,6 +6,7 @@
 //! `START..` and `..END`. Frame numbers are whole numbers: `1.5..3` is refused, not
 //! truncated. Errors name the argument text and say how to write it.
 
+use ignis_core::atomic::AtomicFile;
 use ignis_media::Rect;
 use std::ops::Range;
 use std::str::FromStr;
@@ -90,6 +91,42 @@ pub fn read_user_text(path: &std::path::Path, what: &str, instead: &str) -> anyh
             anyhow::anyhow!("{what} {}: {e}", path.display())
         }
     })
+}
+
+/// Refuses a text output path below a file (checked before the work that fills it).
+pub fn check_text_output(path: &std::path::Path) -> anyhow::Result<()> {
+    let Some(dir) = path.parent() else {
+        return Ok(());
+    };
+    let in_the_way = dir
+        .ancestors()
+        .filter(|a| !a.as_os_str().is_empty())
+        .find(|a| a.metadata().is_ok_and(|m| !m.is_dir()));
+    if let Some(file) = in_the_way {
+        anyhow::bail!(
+            "{} is a file, not a folder, so {} cannot be written there; choose a path inside \
+             a folder",
+            file.display(),
+            path.display()
+        );
+    }
+    Ok(())
+}
+
+/// A text output the user named (`--collisions`, `volume scene -o`) as an atomic temporary
+/// holding `text`, to commit once everything else is written: its folder is made when
+/// missing, as every output's is, and a file standing where a folder must be is named.
+pub fn text_output(path: &std::path::Path, text: &str) -> anyhow::Result<AtomicFile> {
+    use anyhow::Context;
+    check_text_output(path)?;
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("creating the folder {}", dir.display()))?;
+    }
+    let mut f = AtomicFile::create(path).with_context(|| format!("writing {}", path.display()))?;
+    std::io::Write::write_all(f.writer(), text.as_bytes())
+        .with_context(|| format!("writing {}", path.display()))?;
+    Ok(f)
 }
 
 /// `rect`'s size when it lies inside `path`'s frame of `size`; else an error naming the

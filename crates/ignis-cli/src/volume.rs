@@ -21,7 +21,25 @@ ignis volume render fire.toml --collisions hits.jsonl -o fire.mp4            # r
 ignis volume render --preset torch --frames 64 --loop -o loop.mp4            # seamless loop as MP4\n  \
 ignis volume render --preset torch --frames 1000 --chunk 300..400 -o out/%04d.exr   # one farm job"
     )]
-    Render(RenderArgs),
+    Render(Box<RenderArgs>),
+    /// Print a preset as a commented fire file, to edit and render (`> fire.toml`).
+    #[command(
+        after_help = "Examples:\n  ignis volume scene --preset torch > torch.toml      # edit it, then:\n  \
+ignis volume render torch.toml --frames 64 -o torch.png\n  \
+ignis volume scene --preset campfire -o camp.toml\n\n\
+Rendered unedited, the file gives the same frames as the preset, byte for byte."
+    )]
+    Scene(SceneArgs),
+}
+
+#[derive(clap::Args, Debug)]
+pub struct SceneArgs {
+    /// The built-in scene to print: torch, candle, campfire or wall.
+    #[arg(long, default_value = "torch", value_parser = ["torch", "candle", "campfire", "wall"])]
+    pub preset: String,
+    /// Write the fire file here instead of printing it.
+    #[arg(short, long)]
+    pub output: Option<PathBuf>,
 }
 
 #[derive(clap::Args, Debug)]
@@ -165,13 +183,37 @@ impl RenderArgs {
 pub fn run(cmd: Command, g: &Global) -> Result<()> {
     match cmd {
         Command::Render(a) => render(&a, g).map(|_| ()),
+        Command::Scene(a) => scene(&a, g),
     }
+}
+
+/// Runs `ignis volume scene`: the preset as a commented fire file.
+fn scene(a: &SceneArgs, g: &Global) -> Result<()> {
+    let preset = a.preset.parse::<Preset>()?;
+    let text = FireScene::preset(preset).to_toml(&format!(
+        "the `{}` preset (`ignis volume scene --preset {}`)",
+        preset.name(),
+        preset.name()
+    ))?;
+    match &a.output {
+        None => out!("{text}")?,
+        Some(p) => {
+            crate::args::text_output(p, &text)?
+                .commit()
+                .with_context(|| format!("writing {}", p.display()))?;
+            g.say(format!("wrote {}", p.display()));
+        }
+    }
+    Ok(())
 }
 
 /// Runs `ignis volume render`; returns the files written.
 pub fn render(a: &RenderArgs, g: &Global) -> Result<Vec<PathBuf>> {
     let plan = a.frames_args.plan(a.frames, &a.out)?;
     let scene = a.scene()?;
+    if let Some(p) = &a.collisions {
+        crate::args::check_text_output(p)?;
+    }
     let mut opts = a.out.write_options();
     opts.fps = scene.fps as f64;
     opts.loop_ = plan.mark_loop;
@@ -238,13 +280,7 @@ pub fn render(a: &RenderArgs, g: &Global) -> Result<Vec<PathBuf>> {
     // The collision log is written to its atomic temporary first: if that fails, the
     // writer is dropped and nothing is written; then the frames, then the log renamed.
     let staged = match &a.collisions {
-        Some(p) => {
-            let mut f = ignis_core::atomic::AtomicFile::create(p)
-                .with_context(|| format!("writing {}", p.display()))?;
-            std::io::Write::write_all(f.writer(), hits.as_bytes())
-                .with_context(|| format!("writing {}", p.display()))?;
-            Some((f, p.clone()))
-        }
+        Some(p) => Some((crate::args::text_output(p, &hits)?, p.clone())),
         None => None,
     };
     // On an error the log's temporary is removed as `staged` drops.
@@ -302,7 +338,8 @@ pub fn demo(ctx: &mut crate::demo::Demo) -> Result<()> {
         "Procedural volumetric fire",
         "Fuller et al. (2007): a fire profile image swept into a volume, bent along a B-spline lattice moved by a \
          script or a particle simulation, animated by 4-D Improved Perlin noise and rendered by view-aligned slicing \
-         (CPU). Each preset as a seamlessly looping GIF and flipbook with alpha (a billboard).",
+         (CPU). Each preset as a seamlessly looping GIF and flipbook with alpha (a billboard); `ignis volume scene \
+         --preset NAME > fire.toml` prints one as a commented fire file to edit and render.",
     );
     let (size, frames) = if ctx.quick {
         (Size::new(48, 48)?, 8u32)

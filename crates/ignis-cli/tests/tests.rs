@@ -1431,6 +1431,83 @@ mod loops_and_chunks {
         ]);
     }
 
+    /// `ignis volume scene` prints a preset as a fire file (to stdout, or `-o`); rendered
+    /// unedited it gives the preset's frames byte for byte, and an edit takes effect.
+    #[test]
+    fn a_printed_preset_renders_as_the_preset() {
+        let t = tempfile::tempdir().unwrap();
+        let p = |name: &str| t.path().join(name).to_string_lossy().into_owned();
+        for preset in ["torch", "candle", "campfire", "wall"] {
+            let file = p(&format!("{preset}.toml"));
+            ignis_ok(&["-q", "volume", "scene", "--preset", preset, "-o", &file]);
+            let printed = ignis_ok(&["volume", "scene", "--preset", preset]).stdout;
+            assert_eq!(printed, std::fs::read(&file).unwrap(), "{preset}");
+            let small = ["--size", "32x24", "--frames", "6", "--no-loop", "-q"];
+            let a = p(&format!("{preset}-preset/%04d.png"));
+            let b = p(&format!("{preset}-file/%04d.png"));
+            let mut args = vec!["volume", "render", "--preset", preset, "-o", &a];
+            args.extend(small);
+            ignis_ok(&args);
+            let mut args = vec!["volume", "render", &file, "-o", &b];
+            args.extend(small);
+            ignis_ok(&args);
+            assert_same_files(
+                &t.path().join(format!("{preset}-preset")),
+                &t.path().join(format!("{preset}-file")),
+                6,
+            );
+        }
+        // an edit is seen: the torch twice as bright differs
+        let text = std::fs::read_to_string(p("torch.toml")).unwrap();
+        assert!(text.contains("intensity = 10.5 "), "{text}");
+        std::fs::write(
+            p("bright.toml"),
+            text.replace("intensity = 10.5 ", "intensity = 21.0 "),
+        )
+        .unwrap();
+        let c = p("bright/%04d.png");
+        ignis_ok(&[
+            "volume",
+            "render",
+            &p("bright.toml"),
+            "--size",
+            "32x24",
+            "--frames",
+            "6",
+            "--no-loop",
+            "-q",
+            "-o",
+            &c,
+        ]);
+        assert_ne!(
+            std::fs::read(t.path().join("bright/0003.png")).unwrap(),
+            std::fs::read(t.path().join("torch-file/0003.png")).unwrap()
+        );
+        // a missing folder is made; a file where a folder must be is named, before any
+        // rendering, and nothing is written
+        ignis_ok(&["-q", "volume", "scene", "-o", &p("new/sub/t.toml")]);
+        assert!(t.path().join("new/sub/t.toml").is_file());
+        let r = ignis(&["-q", "volume", "scene", "-o", &p("torch.toml/t.toml")]);
+        assert_fails(&r, "torch.toml is a file, not a folder");
+        let r = ignis(&[
+            "volume",
+            "render",
+            "--preset",
+            "torch",
+            "--size",
+            "32x24",
+            "--frames",
+            "6",
+            "--collisions",
+            &p("torch.toml/hits.jsonl"),
+            "-q",
+            "-o",
+            &p("hit.png"),
+        ]);
+        assert_fails(&r, "torch.toml is a file, not a folder");
+        assert!(!t.path().join("hit.png").exists());
+    }
+
     /// A looping render keeps its frames' loop times (`--cache`): a farm job rendering
     /// another chunk, or the same chunk again, reads them and writes the same bytes; a
     /// damaged entry is timed anew (same bytes, entry repaired); a cache that cannot be

@@ -28,6 +28,7 @@ pub mod noise;
 pub mod profile;
 pub mod render;
 pub mod scene;
+mod scene_file;
 pub mod spline;
 
 pub use error::{Result, VolumeError};
