@@ -12,13 +12,15 @@ use std::path::PathBuf;
 #[derive(clap::Args, Debug)]
 #[command(
     after_help = "Examples:\n  ignis convert candle.mp4 --range 100..160 --scale 128x128 -o candle.png   # flipbook\n  \
-ignis convert campfire.mp4 --seconds 2..4 -o frames/%04d.exr\n  ignis convert 'frames/%04d.png' --fps 24 -o clip.mp4\n\n\
+ignis convert campfire.mp4 --seconds 2..4 -o frames/%04d.exr\n  ignis convert 'frames/%04d.png' --fps 24 -o clip.mp4\n  \
+ignis convert loop.png -o loop.mp4                                         # a flipbook played as video\n\n\
 Footage is written at its own frame rate (--fps sets another). A variable-frame-rate clip (a phone's, \
 slowing down in low light) is written at its nominal rate with each frame shown for as long as it was shot, \
 and --seconds counts by the frames' own times."
 )]
 pub struct Args {
-    /// A video, an image, a directory of frames or a printf pattern.
+    /// A video, an image, a flipbook (its sheet or JSON), a directory of frames or a printf
+    /// pattern.
     pub input: PathBuf,
     /// Frame range START..END (END exclusive; either may be omitted).
     #[arg(long, conflicts_with = "seconds")]

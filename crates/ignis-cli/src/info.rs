@@ -7,10 +7,11 @@ use std::path::PathBuf;
 
 #[derive(clap::Args, Debug)]
 #[command(
-    after_help = "Examples:\n  ignis info candle.mp4\n  ignis info campfire.mp4 --json\n  ignis info 'frames/%04d.png'    (a keyed element says how much of its first frame is see-through)"
+    after_help = "Examples:\n  ignis info candle.mp4\n  ignis info campfire.mp4 --json\n  ignis info 'frames/%04d.png'    (a keyed element says how much of its first frame is see-through)\n  ignis info loop.png    (a flipbook: its frames, rate and measured loop quality)"
 )]
 pub struct Args {
-    /// A video, an image, a directory of frames or a printf pattern.
+    /// A video, an image, a flipbook (its sheet or JSON), a directory of frames or a printf
+    /// pattern.
     pub input: PathBuf,
     /// Print one JSON object (for scripts).
     #[arg(long)]
@@ -24,6 +25,7 @@ pub fn run(args: &Args) -> Result<()> {
     // a header that reads but a first frame that does not (a cut-off download) is said,
     // after what the header says
     let see_through = first_frame_see_through(&args.input);
+    let book = flipbook_meta(&info);
     if args.json {
         let v = serde_json::json!({
             "path": info.path,
@@ -37,6 +39,16 @@ pub fn run(args: &Args) -> Result<()> {
             "stored_height": info.anamorphic.map(|a| a.stored.height),
             "pixel_aspect": info.anamorphic.map(|a| format!("{}:{}", a.pixel_aspect.0, a.pixel_aspect.1)),
             "see_through_first_frame": see_through.as_ref().ok(),
+            "flipbook": book.as_ref().map(|m| serde_json::json!({
+                "columns": m.columns,
+                "rows": m.rows,
+                "variants": m.variants,
+                "loop": m.loop_,
+                "loop_quality": m.loop_quality,
+                "variant_loop_quality": m.variant_loop_quality,
+                "engine": m.engine,
+                "alpha": m.alpha,
+            })),
             "first_frame_error": see_through.as_ref().err().map(|e| format!("{e:#}")),
             "variable_frame_rate": variable.as_ref().map(|v| serde_json::json!({
                 "nominal_fps": v.nominal_fps,
@@ -77,6 +89,33 @@ pub fn run(args: &Args) -> Result<()> {
         }
         outln!("codec:   {}", info.codec)?;
         outln!("decoder: {}", info.decoder)?;
+        if let Some(m) = &book {
+            match (&m.loop_quality, m.loop_) {
+                (Some(q), true) => outln!(
+                    "loop:    yes; seam {:.2}, ghost {:.2} (measured on the sheet's frames: \
+                     largest step over the median, softest frame's sharpness)",
+                    q.seam,
+                    q.ghost
+                )?,
+                (None, true) => match &m.variant_loop_quality {
+                    Some(v) => {
+                        let seams: Vec<String> =
+                            v.iter().map(|q| format!("{:.2}", q.seam)).collect();
+                        let ghosts: Vec<String> =
+                            v.iter().map(|q| format!("{:.2}", q.ghost)).collect();
+                        outln!(
+                            "loop:    yes, {} loops as rows; seams {}, ghosts {} (measured on the \
+                             sheet's frames)",
+                            v.len(),
+                            seams.join(" / "),
+                            ghosts.join(" / ")
+                        )?
+                    }
+                    None => outln!("loop:    yes")?,
+                },
+                _ => outln!("loop:    no (a sequence that is not played as a loop)")?,
+            }
+        }
         match &see_through {
             Ok(s) if *s > 0.0 => outln!(
                 "alpha:   its own (a keyed element: {:.0} % of the first frame see-through); `ignis loop` keeps it",
@@ -87,6 +126,15 @@ pub fn run(args: &Args) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// A flipbook's sidecar (the source given as its sheet or as the sidecar itself).
+fn flipbook_meta(info: &ignis_media::SourceInfo) -> Option<ignis_media::FlipbookMeta> {
+    if info.decoder != ignis_media::Decoder::Flipbook {
+        return None;
+    }
+    let files = ignis_media::source_files(&info.path).ok()?;
+    ignis_media::read_flipbook_meta(files.last()?).ok()
 }
 
 /// The share of the first frame's pixels that are see-through (alpha below 1): 0 for

@@ -2350,9 +2350,10 @@ mod flipbook_fit {
         p.to_str().unwrap().to_string()
     }
 
+    /// The size of the image file `p` (a flipbook's whole sheet: `probe` reads a sheet
+    /// with its sidecar as footage, its frames' size).
     fn png_size(p: &Path) -> (u32, u32) {
-        let s = ignis_media::probe(p).unwrap().size;
-        (s.width, s.height)
+        image::image_dimensions(p).unwrap()
     }
 
     /// `ignis loop --every N` writes every Nth frame of a loop whose length is a multiple
@@ -3493,8 +3494,8 @@ mod eigen_db_footage {
             said.contains(&format!("cells {fw}x{fh}, scaled from 64x48")),
             "{said}"
         );
-        let s = ignis_media::probe(&png).unwrap().size;
-        assert!(s.width <= 200 && s.height <= 200, "sheet {s}");
+        let (sw, sh) = image::image_dimensions(&png).unwrap();
+        assert!(sw <= 200 && sh <= 200, "sheet {sw}x{sh}");
         // An explicit --size that does not fit stays a clear error; nothing is written.
         let before = files_in(&out);
         let r = eigen_loop(

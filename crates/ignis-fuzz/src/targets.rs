@@ -244,7 +244,7 @@ impl Target for Flame {
     }
 }
 
-/// Flipbook JSON sidecars (read back by `read_flipbook`).
+/// Flipbook JSON sidecars (read back by `read_flipbook`, and beside their sheet as footage).
 pub struct Flipbook {
     png: PathBuf,
     seeds: Vec<Vec<u8>>,
@@ -271,7 +271,15 @@ impl Target for Flipbook {
             return Outcome::Err("fixture copy".into());
         }
         let j = put(scratch, "fb.json", input);
-        out(ignis_media::read_flipbook(&j))
+        let book = out(ignis_media::read_flipbook(&j));
+        // the same sidecar beside its sheet makes the sheet footage (`ignis info`, `convert`)
+        let sheet = scratch.join("fb.png");
+        let footage = ignis_media::open(&sheet, &ignis_media::ReadOptions::default())
+            .and_then(|r| r.take(256).collect::<Result<Vec<_>, _>>());
+        match (book, out(footage)) {
+            (Outcome::Ok, f) => f,
+            (b, _) => b,
+        }
     }
 }
 

@@ -1706,6 +1706,72 @@ mod roundtrip {
         assert_eq!((c.meta.frame_width, c.meta.trimmed), (20, None));
     }
 
+    /// A flipbook reads as footage: its sheet (or its sidecar) gives its frames in order at
+    /// its fps, and a range applies; its fingerprint covers both files. An image whose JSON
+    /// names another sheet, or is not a sidecar, stays one still; a sidecar given as footage
+    /// that is not one, or that does not fit its sheet, is refused by name.
+    #[test]
+    fn a_flipbook_reads_as_footage() {
+        let dir = tempfile::tempdir().unwrap();
+        let frames: Vec<_> = (0..7).map(|t| test_frame(size(12, 10), t, true)).collect();
+        let path = dir.path().join("fire.png");
+        let opts = WriteOptions {
+            fps: 24.0,
+            flipbook: FlipbookOptions {
+                padding: 2,
+                ..Default::default()
+            },
+            ..Default::default()
+        };
+        write_all(&path, &frames, &opts);
+        let json = dir.path().join("fire.json");
+        for src in [&path, &json] {
+            let info = probe(src).unwrap();
+            assert_eq!(
+                (info.decoder, info.size, info.fps, info.frame_count),
+                (Decoder::Flipbook, size(12, 10), 24.0, Some(7))
+            );
+            assert!(info.codec.contains("flipbook"), "{}", info.codec);
+            assert_eq!(read_all(src), frames);
+            assert_eq!(source_files(src).unwrap(), [path.clone(), json.clone()]);
+        }
+        let range = ReadOptions {
+            range: Some(FrameRange::frames(2, Some(5))),
+            ..Default::default()
+        };
+        let part: Vec<_> = open(&path, &range).unwrap().map(|f| f.unwrap()).collect();
+        assert_eq!(part, frames[2..5]);
+        // the same sheet under another name, with a copy of the sidecar (naming fire.png)
+        let other = dir.path().join("other.png");
+        std::fs::copy(&path, &other).unwrap();
+        std::fs::copy(&json, dir.path().join("other.json")).unwrap();
+        let info = probe(&other).unwrap();
+        assert_eq!((info.decoder, info.frame_count), (Decoder::Image, Some(1)));
+        assert_eq!(source_files(&other).unwrap(), std::slice::from_ref(&other));
+        // a JSON beside an image that is not a sidecar
+        let plain = dir.path().join("plain.png");
+        std::fs::copy(&path, &plain).unwrap();
+        std::fs::write(dir.path().join("plain.json"), "{\"image\": 3}").unwrap();
+        assert_eq!(probe(&plain).unwrap().decoder, Decoder::Image);
+        let e = probe(&dir.path().join("plain.json"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("not an Ignis flipbook sidecar"), "{e}");
+        // a sidecar whose grid does not fit its sheet
+        let text = std::fs::read_to_string(&json).unwrap();
+        let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+        let mut v2 = v.clone();
+        v2["columns"] = 40.into();
+        std::fs::write(&json, v2.to_string()).unwrap();
+        let e = probe(&path).unwrap_err().to_string();
+        assert!(e.contains("do not fit"), "{e}");
+        v2 = v.clone();
+        v2["fps"] = 0.into();
+        std::fs::write(&json, v2.to_string()).unwrap();
+        let e = probe(&json).unwrap_err().to_string();
+        assert!(e.contains("fps"), "{e}");
+    }
+
     #[test]
     fn flipbook_premultiplied() {
         let dir = tempfile::tempdir().unwrap();

@@ -14,6 +14,8 @@
 //!   codec and the fix (set `IGNIS_NO_FFMPEG=1` to see this behaviour on a machine that
 //!   has ffmpeg);
 //! - PNG / JPEG / TIFF / EXR stills → [`Decoder::Image`]; GIF → [`Decoder::Gif`];
+//! - an Ignis flipbook — a sheet whose JSON sidecar (same name, `.json`) names it, or the
+//!   sidecar itself → [`Decoder::Flipbook`]: its frames in order, at its fps;
 //! - a directory or a printf pattern (`frames/%04d.png`) → [`Decoder::ImageSequence`].
 //!
 //! Pixel conventions of the inputs: 8- and 16-bit images and video are taken as
@@ -25,6 +27,7 @@
 //! ([`SourceInfo::anamorphic`]).
 
 mod ffmpeg;
+mod flipbook_src;
 mod h264;
 pub(crate) mod sequence;
 mod timing;
@@ -168,6 +171,8 @@ pub enum Decoder {
     Image,
     /// An animated (or single-frame) GIF, decoded with the `image` crate.
     Gif,
+    /// An Ignis flipbook: the frames cut from its sheet, as its JSON sidecar lays them out.
+    Flipbook,
 }
 
 impl fmt::Display for Decoder {
@@ -178,6 +183,7 @@ impl fmt::Display for Decoder {
             Decoder::ImageSequence => "image sequence",
             Decoder::Image => "image",
             Decoder::Gif => "gif",
+            Decoder::Flipbook => "flipbook",
         })
     }
 }
@@ -336,6 +342,8 @@ pub(crate) enum Probed {
     Sequence(SourceInfo, Vec<PathBuf>),
     Image(SourceInfo),
     Gif(SourceInfo),
+    /// The flipbook and its sidecar.
+    Flipbook(SourceInfo, PathBuf),
 }
 
 impl Probed {
@@ -345,7 +353,8 @@ impl Probed {
             | Probed::Ffmpeg(i, _)
             | Probed::Sequence(i, _)
             | Probed::Image(i)
-            | Probed::Gif(i) => i,
+            | Probed::Gif(i)
+            | Probed::Flipbook(i, _) => i,
         }
     }
 }
@@ -357,12 +366,16 @@ pub fn probe(path: &Path) -> Result<SourceInfo> {
 }
 
 /// The files `path` reads: a sequence's frames in playing order (a directory or a printf
-/// pattern, as [`open`] finds them), else the path itself — for fingerprinting a source.
+/// pattern, as [`open`] finds them), a flipbook's sheet and sidecar, else the path itself —
+/// for fingerprinting a source.
 pub fn source_files(path: &Path) -> Result<Vec<PathBuf>> {
     if is_pattern(path) || path.is_dir() {
         if let Probed::Sequence(_, files) = probe_inner(path, false)? {
             return Ok(files);
         }
+    }
+    if let Some(files) = flipbook_src::files(path) {
+        return Ok(files);
     }
     Ok(vec![path.to_path_buf()])
 }
@@ -416,7 +429,14 @@ pub(crate) fn probe_inner(path: &Path, have_ffmpeg: bool) -> Result<Probed> {
         return sequence::probe_gif(path);
     }
     if sequence::is_still_magic(magic) {
+        if let Some((json, meta)) = flipbook_src::sidecar_of_sheet(path) {
+            let sheet = path;
+            return flipbook_src::probe(path, sheet, &json, meta);
+        }
         return sequence::probe_image(path);
+    }
+    if flipbook_src::looks_like_json(magic) {
+        return flipbook_src::probe_sidecar(path);
     }
     if have_ffmpeg {
         return ffmpeg::probed(path);
@@ -484,6 +504,7 @@ pub(crate) fn open_inner(
             start,
         )),
         Probed::Gif(info) => Box::new(sequence::GifSource::start(&info.path, start)?),
+        Probed::Flipbook(_, json) => Box::new(flipbook_src::FlipbookSource::start(&json, start)?),
     };
     let info = SourceInfo {
         size: out_size,

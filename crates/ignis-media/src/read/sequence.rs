@@ -48,7 +48,7 @@ fn open_reader(path: &Path) -> Result<image::ImageReader<BufReader<File>>> {
         .map_err(|e| MediaError::io(path, e))
 }
 
-fn dimensions(path: &Path) -> Result<Size> {
+pub(crate) fn dimensions(path: &Path) -> Result<Size> {
     let (w, h) = open_reader(path)?
         .into_dimensions()
         .map_err(|e| MediaError::decode(path, None, format!("not a readable image: {e}")))?;

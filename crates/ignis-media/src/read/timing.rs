@@ -266,7 +266,7 @@ pub fn frame_timing(path: &Path) -> Result<Option<FrameTiming>> {
     let times = match &probed {
         Probed::Mp4(info, p) => super::h264::sample_times(path, p, info.frame_count)?,
         Probed::Ffmpeg(info, plan) => super::ffmpeg::timed_frames(path, plan, info.frame_count)?,
-        Probed::Sequence(..) | Probed::Image(_) | Probed::Gif(_) => None,
+        Probed::Sequence(..) | Probed::Image(_) | Probed::Gif(_) | Probed::Flipbook(..) => None,
     };
     Ok(times.and_then(FrameTiming::new))
 }

@@ -33,6 +33,7 @@ use super::motion::{self, MotionSource};
 use super::{encode_png, temp_file_for, Sink, WriteOptions};
 use crate::convert;
 use crate::error::{MediaError, Result};
+use crate::read::Rect;
 use ignis_core::atomic::AtomicFile;
 
 /// How colour relates to alpha in a flipbook sheet.
@@ -1184,15 +1185,35 @@ pub fn read_flipbook_meta(json_path: &Path) -> Result<FlipbookMeta> {
         .map_err(|e| MediaError::decode(json_path, None, format!("not a flipbook sidecar: {e}")))
 }
 
-/// Reads a flipbook back from its JSON sidecar: the metadata, every frame (linear light,
-/// straight alpha; a premultiplied sheet is un-premultiplied) and the motion vectors when
-/// the sheet has them (pixels, +y down).
-pub fn read_flipbook(json_path: &Path) -> Result<Flipbook> {
-    let meta = read_flipbook_meta(json_path)?;
-    let dir = super::parent_dir(json_path);
-    let sheet = crate::read::read_image(&dir.join(&meta.image))?;
-    let fw = meta.frame_width;
-    let fh = meta.frame_height;
+/// A flipbook's sheet, decoded, and where its frames lie on it: the frames are cut out one
+/// at a time ([`Cells::frame`]), so reading a sheet as footage holds the sheet only.
+pub(crate) struct Cells {
+    pub(crate) meta: FlipbookMeta,
+    sheet: RgbaFrame,
+    size: Size,
+    /// Cell size and the frame's offset inside its cell.
+    cell: (u64, u64, u64, u64),
+}
+
+/// Where frame `i` of a sheet laid out as `meta` says (cell `cw` × `ch`, frame at
+/// `fx, fy` inside it) lies.
+fn cell_rect(meta: &FlipbookMeta, (cw, ch, fx, fy): (u64, u64, u64, u64), i: u64) -> Rect {
+    Rect {
+        x: ((i % meta.columns as u64) * cw + fx) as u32,
+        y: ((i / meta.columns as u64) * ch + fy) as u32,
+        width: meta.frame_width,
+        height: meta.frame_height,
+    }
+}
+
+/// The cell size and the frame's offset inside its cell that `meta` gives, once checked
+/// against a sheet of `sheet` size (`json_path` names the sidecar in the error).
+pub(crate) fn checked_cells(
+    meta: &FlipbookMeta,
+    sheet: Size,
+    json_path: &Path,
+) -> Result<(u64, u64, u64, u64)> {
+    let (fw, fh) = (meta.frame_width, meta.frame_height);
     // Sidecars written before cells were recorded: cell = frame + 2 × padding.
     let (cw, ch, fx, fy) = if meta.cell_width == 0 {
         (
@@ -1211,10 +1232,11 @@ pub fn read_flipbook(json_path: &Path) -> Result<Flipbook> {
     };
     let fits = fw > 0
         && fh > 0
+        && meta.columns > 0
         && fx + fw as u64 <= cw
         && fy + fh as u64 <= ch
-        && meta.columns as u64 * cw <= sheet.width() as u64
-        && meta.rows as u64 * ch <= sheet.height() as u64
+        && (meta.columns as u64).saturating_mul(cw) <= sheet.width as u64
+        && (meta.rows as u64).saturating_mul(ch) <= sheet.height as u64
         && meta.frame_count as u64 <= meta.columns as u64 * meta.rows as u64;
     if !fits {
         return Err(MediaError::decode(
@@ -1222,28 +1244,61 @@ pub fn read_flipbook(json_path: &Path) -> Result<Flipbook> {
             None,
             format!(
                 "the sidecar describes {}×{} cells of {cw}x{ch} holding {fw}x{fh} frames, which do not fit the {} sheet",
-                meta.columns,
-                meta.rows,
-                sheet.size()
+                meta.columns, meta.rows, sheet
             ),
         ));
     }
-    let size = Size::new(fw, fh)?;
-    let rect = |i: u64| crate::read::Rect {
-        x: ((i % meta.columns as u64) * cw + fx) as u32,
-        y: ((i / meta.columns as u64) * ch + fy) as u32,
-        width: fw,
-        height: fh,
-    };
-    let mut frames = Vec::with_capacity(meta.frame_count as usize);
-    for i in 0..meta.frame_count as u64 {
-        let mut f = convert::crop(&sheet, &rect(i));
-        if meta.alpha == AlphaMode::Premultiplied {
+    Ok((cw, ch, fx, fy))
+}
+
+impl Cells {
+    /// Reads the sidecar at `json_path` and decodes its sheet.
+    pub(crate) fn open(json_path: &Path) -> Result<Cells> {
+        let meta = read_flipbook_meta(json_path)?;
+        let sheet = crate::read::read_image(&super::parent_dir(json_path).join(&meta.image))?;
+        let cell = checked_cells(&meta, sheet.size(), json_path)?;
+        let size = Size::new(meta.frame_width, meta.frame_height)?;
+        Ok(Cells {
+            meta,
+            sheet,
+            size,
+            cell,
+        })
+    }
+
+    /// Size of one frame.
+    pub(crate) fn size(&self) -> Size {
+        self.size
+    }
+
+    fn rect(&self, i: u64) -> Rect {
+        cell_rect(&self.meta, self.cell, i)
+    }
+
+    /// Frame `i` (linear light, straight alpha: a premultiplied sheet is un-premultiplied).
+    pub(crate) fn frame(&self, i: u64) -> RgbaFrame {
+        let mut f = convert::crop(&self.sheet, &self.rect(i));
+        if self.meta.alpha == AlphaMode::Premultiplied {
             convert::unpremultiply(&mut f);
         }
-        debug_assert_eq!(f.size(), size);
-        frames.push(f);
+        debug_assert_eq!(f.size(), self.size());
+        f
     }
+}
+
+/// Reads a flipbook back from its JSON sidecar: the metadata, every frame (linear light,
+/// straight alpha; a premultiplied sheet is un-premultiplied) and the motion vectors when
+/// the sheet has them (pixels, +y down).
+pub fn read_flipbook(json_path: &Path) -> Result<Flipbook> {
+    let cells = Cells::open(json_path)?;
+    let frames: Vec<RgbaFrame> = (0..cells.meta.frame_count as u64)
+        .map(|i| cells.frame(i))
+        .collect();
+    let (meta, sheet, (cw, ch, _, _)) = (&cells.meta, &cells.sheet, cells.cell);
+    let (fw, fh) = (meta.frame_width, meta.frame_height);
+    let size = cells.size();
+    let dir = super::parent_dir(json_path);
+    let rect = |i: u64| cells.rect(i);
     let motion = match &meta.motion_vectors {
         None => None,
         Some(mm) => {
@@ -1278,7 +1333,7 @@ pub fn read_flipbook(json_path: &Path) -> Result<Flipbook> {
         }
     };
     Ok(Flipbook {
-        meta,
+        meta: cells.meta.clone(),
         frames,
         motion,
     })

@@ -33,7 +33,7 @@
 
 pub mod engine;
 mod ffmpeg_out;
-mod flipbook;
+pub(crate) mod flipbook;
 mod gif_out;
 pub mod motion;
 mod mp4_out;
