@@ -332,6 +332,53 @@ mod info {
         serde_json::from_slice(&o.stdout).unwrap()
     }
 
+    /// A flipbook is footage: `info` gives its frames, rate and the loop quality its JSON
+    /// records; `convert` plays it out as a sequence equal to the sheet's cells.
+    #[test]
+    fn a_flipbook_is_described_and_converted_as_footage() {
+        let t = tempfile::tempdir().unwrap();
+        let sheet = t.path().join("fire.png");
+        classic_ok("40x30", "12", &["--fps", "24"], &sheet);
+        let v = info_json(&sheet);
+        assert_eq!(
+            (
+                &v["decoder"],
+                &v["frames"],
+                &v["fps"],
+                &v["width"],
+                &v["height"]
+            ),
+            (
+                &"flipbook".into(),
+                &12.into(),
+                &24.0.into(),
+                &40.into(),
+                &30.into()
+            )
+        );
+        let seam = v["flipbook"]["loop_quality"]["seam"].as_f64().unwrap();
+        assert!(seam > 0.0 && v["flipbook"]["loop"] == true, "{v}");
+        let human = ignis_ok(&["info", sheet.to_str().unwrap()]).stdout;
+        let human = String::from_utf8_lossy(&human);
+        assert!(
+            human.contains(&format!("loop:    yes; seam {seam:.2}")),
+            "{human}"
+        );
+        let seq = t.path().join("seq/%04d.png");
+        ignis_ok(&[
+            "-q",
+            "convert",
+            sheet.to_str().unwrap(),
+            "-o",
+            seq.to_str().unwrap(),
+        ]);
+        let frames = files_in(&t.path().join("seq"));
+        assert_eq!(frames.len(), 12);
+        let book = ignis_media::read_flipbook(&t.path().join("fire.json")).unwrap();
+        let first = ignis_media::read_image(&t.path().join("seq").join(&frames[0])).unwrap();
+        assert_eq!(first, book.frames[0]);
+    }
+
     #[test]
     fn candle_through_the_pure_cargo_path() {
         let Some(p) = data("candle.mp4") else { return };
