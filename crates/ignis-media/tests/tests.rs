@@ -1585,11 +1585,11 @@ mod roundtrip {
         );
     }
 
-    #[test]
-    fn flipbook_sheet_and_json_roundtrip() {
-        let dir = tempfile::tempdir().unwrap();
-        let frames: Vec<_> = (0..10).map(|t| test_frame(size(12, 10), t, true)).collect();
-        let path = dir.path().join("fire.png");
+    /// `n` test frames of 12×10 written as the 24-fps flipbook `dir/fire.png` with 2-px
+    /// padding: the frames, the sheet's path and the files written.
+    fn padded_flipbook(dir: &Path, n: u32) -> (Vec<RgbaFrame>, PathBuf, Vec<PathBuf>) {
+        let frames: Vec<_> = (0..n).map(|t| test_frame(size(12, 10), t, true)).collect();
+        let path = dir.join("fire.png");
         let opts = WriteOptions {
             fps: 24.0,
             flipbook: FlipbookOptions {
@@ -1599,6 +1599,13 @@ mod roundtrip {
             ..Default::default()
         };
         let written = write_all(&path, &frames, &opts);
+        (frames, path, written)
+    }
+
+    #[test]
+    fn flipbook_sheet_and_json_roundtrip() {
+        let dir = tempfile::tempdir().unwrap();
+        let (frames, path, written) = padded_flipbook(dir.path(), 10);
         let json = dir.path().join("fire.json");
         assert_eq!(written, [path.clone(), json.clone()]);
         assert_eq!(dir_entries(dir.path()), ["fire.json", "fire.png"]);
@@ -1713,17 +1720,7 @@ mod roundtrip {
     #[test]
     fn a_flipbook_reads_as_footage() {
         let dir = tempfile::tempdir().unwrap();
-        let frames: Vec<_> = (0..7).map(|t| test_frame(size(12, 10), t, true)).collect();
-        let path = dir.path().join("fire.png");
-        let opts = WriteOptions {
-            fps: 24.0,
-            flipbook: FlipbookOptions {
-                padding: 2,
-                ..Default::default()
-            },
-            ..Default::default()
-        };
-        write_all(&path, &frames, &opts);
+        let (frames, path, _) = padded_flipbook(dir.path(), 7);
         let json = dir.path().join("fire.json");
         for src in [&path, &json] {
             let info = probe(src).unwrap();
