@@ -3053,6 +3053,19 @@ fn missing_inputs_are_named_once_with_what_to_give() {
         assert_fails(&ignis(&args), "not a regular file");
     }
     assert!(files_in(t.path()).is_empty());
+    // One kind of input where another goes: said, with the command that takes it.
+    let clip = classic_frames(t.path(), "8");
+    let clip_file = t.path().join("f/0000.png");
+    let r = ignis(&["eigen", "info", clip_file.to_str().unwrap()]);
+    assert_fails(&r, "a file, not a database");
+    assert!(String::from_utf8_lossy(&r.stderr).contains("ignis loop"));
+    let db = t.path().join("f.db");
+    let p = clip.to_str().unwrap();
+    ignis_ok(&["-q", "eigen", "train", p, "-o", db.to_str().unwrap()]);
+    assert_fails(
+        &ignis(&["info", db.to_str().unwrap()]),
+        "an Eigenfire database (what `ignis eigen train` writes), not footage",
+    );
 }
 
 /// `ignis loop --fps` is refused, not silently ignored: the loop is the footage's frames at

@@ -1873,6 +1873,38 @@ mod bad_input {
         }
     }
 
+    /// Ignis's own non-footage outputs given as footage say what they are and which command
+    /// takes them (the layouts `ignis eigen train` and `ignis learned train` write; those
+    /// crates test the real files' commands).
+    #[test]
+    fn a_database_or_a_model_given_as_footage_says_what_it_is() {
+        let dir = tempfile::tempdir().unwrap();
+        let db = dir.path().join("fire.db");
+        std::fs::create_dir_all(db.join("packs")).unwrap();
+        std::fs::write(db.join("manifest.json"), "{}").unwrap();
+        let e = probe(&db).unwrap_err().to_string();
+        assert!(
+            e.contains("an Eigenfire database") && e.contains("ignis eigen info"),
+            "{e}"
+        );
+        // a directory with a manifest alone is just a directory without frames
+        std::fs::remove_dir(db.join("packs")).unwrap();
+        let e = probe(&db).unwrap_err().to_string();
+        assert!(e.contains("holds no PNG"), "{e}");
+        let model = dir.path().join("candle.flame");
+        std::fs::write(&model, "IGNIS-LEARNED-FLAME 1 sha256:00\n{}").unwrap();
+        for e in [
+            probe(&model).unwrap_err(),
+            open(&model, &ReadOptions::default()).err().unwrap(),
+        ] {
+            let e = e.to_string();
+            assert!(
+                e.contains("a learned-flame model") && e.contains("ignis learned synth"),
+                "{e}"
+            );
+        }
+    }
+
     #[test]
     fn garbage_file() {
         let dir = tempfile::tempdir().unwrap();

@@ -147,8 +147,8 @@ impl EigenfireDb {
             file: file.into(),
             reason,
         };
-        if let Err(e) = std::fs::metadata(dir) {
-            if e.kind() == std::io::ErrorKind::NotFound {
+        match std::fs::metadata(dir) {
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
                 let why = "there is no such database; check the path (a database is the \
                            directory `ignis eigen train ... -o DIR` writes)";
                 return Err(EigenError::io(
@@ -156,6 +156,19 @@ impl EigenfireDb {
                     ignis_core::textfile::explain_missing(e, why),
                 ));
             }
+            // footage (or any file) where the database goes
+            Ok(m) if !m.is_dir() => {
+                return Err(EigenError::io(
+                    dir,
+                    std::io::Error::new(
+                        std::io::ErrorKind::InvalidInput,
+                        "a file, not a database: a database is the directory `ignis eigen \
+                         train FOOTAGE -o DIR` writes (to loop footage as it is: `ignis loop \
+                         FOOTAGE --length 4s -o loop.png`)",
+                    ),
+                ));
+            }
+            _ => {}
         }
         // Read with a bound (a manifest is a few kB; 16 MiB allows thousands of clips).
         let read_small = |name: &str| -> Result<Vec<u8>> {

@@ -425,6 +425,18 @@ pub(crate) fn probe_inner(path: &Path, have_ffmpeg: bool) -> Result<Probed> {
             return h264::probe_mp4(path, meta.len(), have_ffmpeg);
         }
     }
+    if magic.starts_with(b"IGNIS-LEARNED-FL") {
+        return Err(MediaError::decode(
+            path,
+            None,
+            format!(
+                "this is a learned-flame model (what `ignis learned train` writes), not footage; \
+                 synthesise a flame from it with `ignis learned synth {0} -o flame.mp4`, or \
+                 describe it with `ignis learned inspect {0}`",
+                path.display()
+            ),
+        ));
+    }
     if magic.starts_with(b"GIF8") {
         return sequence::probe_gif(path);
     }

@@ -243,6 +243,19 @@ pub(crate) fn probe_dir(dir: &Path) -> Result<Probed> {
         .collect();
     files.sort_by(|a, b| natural_cmp(&a.0, &b.0));
     if files.is_empty() {
+        // the directory `ignis eigen train` writes, given where footage goes
+        if dir.join("manifest.json").is_file() && dir.join("packs").is_dir() {
+            return Err(MediaError::decode(
+                dir,
+                None,
+                format!(
+                    "this is an Eigenfire database (what `ignis eigen train` writes), not \
+                     footage; describe it with `ignis eigen info {0}`, or loop one of its clips \
+                     with `ignis eigen loop {0} --clip NAME`",
+                    dir.display()
+                ),
+            ));
+        }
         return Err(MediaError::io(
             dir,
             std::io::Error::new(
