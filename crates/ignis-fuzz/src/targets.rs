@@ -430,7 +430,16 @@ pub fn toml_targets(fx: &Fixtures) -> Vec<Arc<dyn Target>> {
     };
     let fire = Toml {
         name: "fire TOML",
-        seeds: vec![FIRE.as_bytes().to_vec()],
+        // a hand-written file, and every preset as `ignis volume scene` prints it (the
+        // files users start from: scripts, simulations, every field spelt out)
+        seeds: std::iter::once(FIRE.to_string())
+            .chain(ignis_volume::Preset::ALL.into_iter().map(|p| {
+                ignis_volume::FireScene::preset(p)
+                    .to_toml(p.name())
+                    .expect("a preset prints")
+            }))
+            .map(String::into_bytes)
+            .collect(),
         run: Box::new(|t, scratch| {
             let s = ignis_volume::scene::FireScene::from_toml(t, scratch, &mut |_| {
                 Err("no images while fuzzing".into())
