@@ -455,10 +455,15 @@ impl FlameModel {
             ))
         })?;
         let md = file.metadata().map_err(ioerr)?;
-        if !md.is_file() {
+        if md.is_dir() {
             return Err(bad(
-                "not a regular file (a FIFO, device or directory)".into()
+                "a directory, not a model: a model is the .flame file `ignis learned train \
+                 FOOTAGE -o FILE` writes"
+                    .into(),
             ));
+        }
+        if !md.is_file() {
+            return Err(bad("not a regular file (a FIFO or a device)".into()));
         }
         if md.len() > MAX_MODEL_BYTES {
             return Err(bad(format!(
@@ -481,7 +486,8 @@ impl FlameModel {
         let mut parts = head.split_whitespace();
         if parts.next() != Some(MAGIC) {
             return Err(bad(format!(
-                "not an Ignis learned-flame model (no `{MAGIC}` header)"
+                "not an Ignis learned-flame model (no `{MAGIC}` header); a model is the \
+                 .flame file `ignis learned train FOOTAGE -o FILE` writes from footage"
             )));
         }
         let version: u32 = parts

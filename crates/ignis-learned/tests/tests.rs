@@ -291,6 +291,18 @@ mod flame {
         std::fs::write(&bad, &file).unwrap();
         let e = FlameModel::load(&bad).unwrap_err().to_string();
         assert!(e.contains("order 0"), "{e}");
+        // footage or a folder where the model goes: said, with what makes a model
+        std::fs::write(&bad, b"\0\0\0\x18ftypisom").unwrap();
+        let e = FlameModel::load(&bad).unwrap_err().to_string();
+        assert!(
+            e.contains("not an Ignis learned-flame model") && e.contains("ignis learned train"),
+            "{e}"
+        );
+        let e = FlameModel::load(dir.path()).unwrap_err().to_string();
+        assert!(
+            e.contains("a directory, not a model") && e.contains("ignis learned train"),
+            "{e}"
+        );
         let mut names: Vec<_> = std::fs::read_dir(dir.path())
             .unwrap()
             .map(|e| e.unwrap().file_name().into_string().unwrap())

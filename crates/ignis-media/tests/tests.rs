@@ -1903,6 +1903,39 @@ mod bad_input {
                 "{e}"
             );
         }
+        // text files: a fire file, a scenario, a clips file, any other text
+        for (text, says) in [
+            (
+                "seed = 1\n[[fire]]\ncurve = {}\n",
+                "a fire file, not footage; render it with `ignis volume render",
+            ),
+            (
+                "database = \"x.db\"\nsequence = [\"a\"]\n[motions.a]\n",
+                "an Eigenfire scenario, not footage; render it with `ignis eigen animate",
+            ),
+            (
+                "[[clip]]\nname = \"c\"\n",
+                "a clips file, not footage; train a database from it with `ignis eigen train",
+            ),
+            (
+                "just some notes\n\twith a tab, ünïcödé\r\n",
+                "a text file, not footage (footage is",
+            ),
+        ] {
+            let p = dir.path().join("file.toml");
+            std::fs::write(&p, text).unwrap();
+            let e = probe(&p).unwrap_err().to_string();
+            assert!(e.contains(says), "{e}");
+        }
+        // text-like first bytes over binary data (a YUV4MPEG2 header, then 8-bit samples):
+        // not called text
+        let y4m = dir.path().join("clip.y4m");
+        let mut bytes = b"YUV4MPEG2 W2 H2 F30:1 Ip A1:1 C444\nFRAME\n".to_vec();
+        bytes.extend([16u8, 16, 16, 16, 1, 2, 3, 4, 5, 6, 7, 8]);
+        std::fs::write(&y4m, bytes).unwrap();
+        if let Err(e) = probe(&y4m) {
+            assert!(!e.to_string().contains("text file"), "{e}");
+        }
     }
 
     #[test]

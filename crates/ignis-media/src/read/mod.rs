@@ -450,6 +450,9 @@ pub(crate) fn probe_inner(path: &Path, have_ffmpeg: bool) -> Result<Probed> {
     if flipbook_src::looks_like_json(magic) {
         return flipbook_src::probe_sidecar(path);
     }
+    if let Some(e) = text_given_as_footage(path, magic) {
+        return Err(e);
+    }
     if have_ffmpeg {
         return ffmpeg::probed(path);
     }
@@ -458,6 +461,51 @@ pub(crate) fn probe_inner(path: &Path, have_ffmpeg: bool) -> Result<Probed> {
         "container or codec (not MP4/H.264 Baseline, not an image)",
         "install ffmpeg (it handles H.264 Main/High, HEVC, ProRes, MOV, WebM, AVI, …), \
          or convert to a PNG sequence elsewhere: ffmpeg -i INPUT frames/%04d.png",
+    ))
+}
+
+/// A text file given as footage (a fire file, a scenario, a clips file, ...), told apart
+/// from a video by its first bytes and then its whole content (bounded, UTF-8, no control
+/// characters but tabs and line ends): an error saying what it is and which command reads
+/// it. `None` for anything else.
+fn text_given_as_footage(path: &Path, magic: &[u8]) -> Option<MediaError> {
+    let texty = |b: &u8| matches!(b, b'\t' | b'\n' | b'\r' | 0x20..=0x7e | 0x80..);
+    if magic.is_empty() || !magic.iter().all(texty) {
+        return None;
+    }
+    let text = ignis_core::textfile::read_text(path).ok()?;
+    if text
+        .chars()
+        .any(|c| c.is_control() && !matches!(c, '\t' | '\n' | '\r'))
+    {
+        return None;
+    }
+    let p = path.display();
+    let (what, then) = if text.contains("[[fire]]") {
+        (
+            "a fire file",
+            format!("; render it with `ignis volume render {p} -o fire.mp4`"),
+        )
+    } else if text.contains("[motions.") || text.contains("sequence =") {
+        (
+            "an Eigenfire scenario",
+            format!("; render it with `ignis eigen animate {p} -o fire.mp4`"),
+        )
+    } else if text.contains("[[clip]]") {
+        (
+            "a clips file",
+            format!("; train a database from it with `ignis eigen train {p} -o fire.db`"),
+        )
+    } else {
+        ("a text file", String::new())
+    };
+    Some(MediaError::decode(
+        path,
+        None,
+        format!(
+            "this is {what}, not footage{then} (footage is a video, an image, a flipbook, a \
+             directory of frames or a pattern such as frames/%04d.png)"
+        ),
     ))
 }
 

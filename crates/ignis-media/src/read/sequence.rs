@@ -35,6 +35,13 @@ pub(crate) fn is_still_magic(m: &[u8]) -> bool {
 
 fn open_reader(path: &Path) -> Result<image::ImageReader<BufReader<File>>> {
     let meta = std::fs::metadata(path).map_err(|e| MediaError::io(path, e))?;
+    if !meta.is_file() {
+        return Err(MediaError::decode(
+            path,
+            None,
+            "not a regular file (a FIFO, a device or a directory); an image is a file",
+        ));
+    }
     if meta.len() == 0 {
         return Err(MediaError::decode(
             path,
