@@ -1927,6 +1927,12 @@ mod bad_input {
             let e = probe(&p).unwrap_err().to_string();
             assert!(e.contains(says), "{e}");
         }
+        // the text formats ffmpeg reads as video are left to it
+        let list = dir.path().join("list.ffconcat");
+        std::fs::write(&list, "ffconcat version 1.0\nfile 'nothing.mp4'\n").unwrap();
+        if let Err(e) = probe(&list) {
+            assert!(!e.to_string().contains("text file"), "{e}");
+        }
         // text-like first bytes over binary data (a YUV4MPEG2 header, then 8-bit samples):
         // not called text
         let y4m = dir.path().join("clip.y4m");

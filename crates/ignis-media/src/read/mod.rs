@@ -480,6 +480,13 @@ fn text_given_as_footage(path: &Path, magic: &[u8]) -> Option<MediaError> {
     {
         return None;
     }
+    // the text formats ffmpeg reads as video (a concat list, a playlist) go to ffmpeg
+    if ["ffconcat", "#EXTM3U"]
+        .iter()
+        .any(|h| text.trim_start().starts_with(h))
+    {
+        return None;
+    }
     let p = path.display();
     let (what, then) = if text.contains("[[fire]]") {
         (
