@@ -93,16 +93,18 @@ pub fn read_user_text(path: &std::path::Path, what: &str, instead: &str) -> anyh
     })
 }
 
+/// The file standing where `dir` or one of its parents should be a folder, if any (what
+/// makes creating `dir` fail with the system's unhelpful "File exists" / "Not a
+/// directory").
+pub fn file_in_the_way(dir: &std::path::Path) -> Option<&std::path::Path> {
+    dir.ancestors()
+        .filter(|a| !a.as_os_str().is_empty())
+        .find(|a| a.metadata().is_ok_and(|m| !m.is_dir()))
+}
+
 /// Refuses a text output path below a file (checked before the work that fills it).
 pub fn check_text_output(path: &std::path::Path) -> anyhow::Result<()> {
-    let Some(dir) = path.parent() else {
-        return Ok(());
-    };
-    let in_the_way = dir
-        .ancestors()
-        .filter(|a| !a.as_os_str().is_empty())
-        .find(|a| a.metadata().is_ok_and(|m| !m.is_dir()));
-    if let Some(file) = in_the_way {
+    if let Some(file) = path.parent().and_then(file_in_the_way) {
         anyhow::bail!(
             "{} is a file, not a folder, so {} cannot be written there; choose a path inside \
              a folder",

@@ -23,11 +23,12 @@ pub fn explain_missing(e: Error, why: &str) -> Error {
     }
 }
 
-/// Reads `path` as UTF-8 text of at most [`MAX_TEXT_BYTES`]. Refuses, with an error of
-/// the kind shown and a message that says why: a path that is not there (`NotFound`), a
-/// directory, a FIFO or a device (`InvalidInput`), a larger file or one that is not
-/// UTF-8 (`InvalidData`).
-pub fn read_text(path: &Path) -> std::io::Result<String> {
+/// Reads the regular file `path` if it holds at most `limit` bytes, opened without
+/// blocking. Refuses, with an error of the kind shown and a message that says why: a path
+/// that is not there (`NotFound`), a directory (`IsADirectory`), a FIFO or a device
+/// (`InvalidInput`), a larger file (`InvalidData`). The readers of the files a user names
+/// (text, `.flame` models) share it.
+pub fn read_bytes(path: &Path, limit: u64) -> std::io::Result<Vec<u8>> {
     let mut o = std::fs::OpenOptions::new();
     o.read(true);
     #[cfg(unix)]
@@ -43,7 +44,7 @@ pub fn read_text(path: &Path) -> std::io::Result<String> {
     let md = file.metadata()?;
     if md.is_dir() {
         return Err(Error::new(
-            ErrorKind::InvalidInput,
+            ErrorKind::IsADirectory,
             "this is a directory, not a file",
         ));
     }
@@ -56,19 +57,25 @@ pub fn read_text(path: &Path) -> std::io::Result<String> {
     let too_big = |n: u64| {
         Error::new(
             ErrorKind::InvalidData,
-            format!("{n} bytes is too large for a text file here (at most {MAX_TEXT_BYTES}); is this the right file?"),
+            format!("{n} bytes is too large (at most {limit} here); is this the right file?"),
         )
     };
-    if md.len() > MAX_TEXT_BYTES {
+    if md.len() > limit {
         return Err(too_big(md.len()));
     }
     let mut bytes = Vec::with_capacity(md.len() as usize);
     // A file that grows while it is read stops at the bound all the same.
-    file.take(MAX_TEXT_BYTES + 1).read_to_end(&mut bytes)?;
-    if bytes.len() as u64 > MAX_TEXT_BYTES {
+    file.take(limit.saturating_add(1)).read_to_end(&mut bytes)?;
+    if bytes.len() as u64 > limit {
         return Err(too_big(bytes.len() as u64));
     }
-    String::from_utf8(bytes).map_err(|e| {
+    Ok(bytes)
+}
+
+/// Reads `path` as UTF-8 text of at most [`MAX_TEXT_BYTES`] ([`read_bytes`], whose errors
+/// it gives), refusing text that is not UTF-8 (`InvalidData`).
+pub fn read_text(path: &Path) -> std::io::Result<String> {
+    String::from_utf8(read_bytes(path, MAX_TEXT_BYTES)?).map_err(|e| {
         Error::new(
             ErrorKind::InvalidData,
             format!(
@@ -95,7 +102,7 @@ mod tests {
         assert_eq!(other.kind(), ErrorKind::PermissionDenied);
         assert_ne!(other.to_string(), "x");
         assert_eq!(kind(&t.path().join("missing.toml")), ErrorKind::NotFound);
-        assert_eq!(kind(t.path()), ErrorKind::InvalidInput);
+        assert_eq!(kind(t.path()), ErrorKind::IsADirectory);
 
         let bin = t.path().join("b.toml");
         std::fs::write(&bin, [b'a', 0xff, 0xfe]).unwrap();

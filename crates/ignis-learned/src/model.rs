@@ -440,44 +440,23 @@ impl FlameModel {
         };
         // Only a regular file, opened without blocking (a FIFO would hang a read), and of
         // a bounded size.
-        let mut o = std::fs::OpenOptions::new();
-        o.read(true);
-        #[cfg(unix)]
-        {
-            use std::os::unix::fs::OpenOptionsExt;
-            o.custom_flags(libc::O_NONBLOCK);
-        }
-        let file = o.open(path).map_err(|e| {
-            ioerr(ignis_core::textfile::explain_missing(
-                e,
-                "there is no such model; check the path (a model is the .flame file \
-                 `ignis learned train ... -o FILE` writes)",
-            ))
+        let bytes = ignis_core::textfile::read_bytes(path, MAX_MODEL_BYTES).map_err(|e| {
+            use std::io::ErrorKind;
+            match e.kind() {
+                ErrorKind::NotFound => ioerr(ignis_core::textfile::explain_missing(
+                    e,
+                    "there is no such model; check the path (a model is the .flame file \
+                     `ignis learned train ... -o FILE` writes)",
+                )),
+                ErrorKind::IsADirectory => bad(
+                    "a directory, not a model: a model is the .flame file `ignis learned train \
+                     FOOTAGE -o FILE` writes"
+                        .into(),
+                ),
+                ErrorKind::InvalidInput | ErrorKind::InvalidData => bad(e.to_string()),
+                _ => ioerr(e),
+            }
         })?;
-        let md = file.metadata().map_err(ioerr)?;
-        if md.is_dir() {
-            return Err(bad(
-                "a directory, not a model: a model is the .flame file `ignis learned train \
-                 FOOTAGE -o FILE` writes"
-                    .into(),
-            ));
-        }
-        if !md.is_file() {
-            return Err(bad("not a regular file (a FIFO or a device)".into()));
-        }
-        if md.len() > MAX_MODEL_BYTES {
-            return Err(bad(format!(
-                "{} bytes; a model is at most {MAX_MODEL_BYTES} bytes",
-                md.len()
-            )));
-        }
-        let mut bytes = Vec::new();
-        {
-            use std::io::Read;
-            file.take(MAX_MODEL_BYTES + 1)
-                .read_to_end(&mut bytes)
-                .map_err(ioerr)?;
-        }
         let nl = bytes
             .iter()
             .position(|&b| b == b'\n')

@@ -222,20 +222,13 @@ pub fn create_cache_dir(dir: &Path) -> Result<()> {
     let Err(e) = std::fs::create_dir_all(dir) else {
         return Ok(());
     };
-    let mut p = Some(dir);
-    while let Some(q) = p.filter(|q| !q.as_os_str().is_empty()) {
-        if let Ok(m) = std::fs::metadata(q) {
-            if !m.is_dir() {
-                bail!(
-                    "cannot make the cache directory {}: {} is not a directory; give --cache a \
-                     directory (or leave it out for $XDG_CACHE_HOME/ignis or ~/.cache/ignis)",
-                    dir.display(),
-                    q.display()
-                );
-            }
-            break;
-        }
-        p = q.parent();
+    if let Some(q) = crate::args::file_in_the_way(dir) {
+        bail!(
+            "cannot make the cache directory {}: {} is not a directory; give --cache a \
+             directory (or leave it out for $XDG_CACHE_HOME/ignis or ~/.cache/ignis)",
+            dir.display(),
+            q.display()
+        );
     }
     Err(e).with_context(|| format!("creating the cache directory {}", dir.display()))
 }

@@ -12,7 +12,7 @@ use ignis_core::RgbaFrame;
 
 use super::{sequence, Decoder, FrameSource, Probed, SourceInfo};
 use crate::error::{MediaError, Result};
-use crate::write::flipbook::{checked_cells, Cells, FlipbookMeta};
+use crate::write::flipbook::{checked_cells, parse_sidecar, Cells, FlipbookMeta};
 
 /// The sidecar of the sheet `sheet`, when the JSON beside it describes it.
 pub(crate) fn sidecar_of_sheet(sheet: &Path) -> Option<(PathBuf, FlipbookMeta)> {
@@ -20,7 +20,7 @@ pub(crate) fn sidecar_of_sheet(sheet: &Path) -> Option<(PathBuf, FlipbookMeta)> 
     if json == sheet || !std::fs::metadata(&json).is_ok_and(|m| m.is_file()) {
         return None;
     }
-    let meta = read_meta(&json).ok()?;
+    let meta = parse_sidecar(&json).ok()?;
     let name = sheet.file_name()?.to_str()?;
     (meta.image == name).then_some((json, meta))
 }
@@ -38,15 +38,9 @@ pub(crate) fn files(path: &Path) -> Option<Vec<PathBuf>> {
     if !looks_like_json(&magic[..n]) {
         return None;
     }
-    let meta = read_meta(path).ok()?;
+    let meta = parse_sidecar(path).ok()?;
     let sheet = ignis_core::atomic::parent_dir(path).join(&meta.image);
     Some(vec![sheet, path.to_path_buf()])
-}
-
-/// `json` read as a flipbook sidecar (a bounded read of a regular file).
-fn read_meta(json: &Path) -> std::result::Result<FlipbookMeta, String> {
-    let text = ignis_core::textfile::read_text(json).map_err(|e| e.to_string())?;
-    serde_json::from_str(&text).map_err(|e| e.to_string())
 }
 
 /// Whether `magic`, a file's first bytes, can start a JSON object.
@@ -59,16 +53,16 @@ pub(crate) fn looks_like_json(magic: &[u8]) -> bool {
 
 /// Probes the sidecar `json` given as the source `path`.
 pub(crate) fn probe_sidecar(path: &Path) -> Result<Probed> {
-    let meta = read_meta(path).map_err(|e| {
-        MediaError::decode(
+    let meta = parse_sidecar(path).map_err(|e| match e {
+        MediaError::Decode { msg, .. } => MediaError::decode(
             path,
             None,
             format!(
-                "a JSON file that is not an Ignis flipbook sidecar ({e}); footage is a video, \
-                 an image, a flipbook, a directory of frames or a pattern such as \
-                 frames/%04d.png"
+                "{msg}; footage is a video, an image, a flipbook, a directory of frames or a \
+                 pattern such as frames/%04d.png"
             ),
-        )
+        ),
+        other => other,
     })?;
     let sheet = ignis_core::atomic::parent_dir(path).join(&meta.image);
     probe(path, &sheet, path, meta)

@@ -442,8 +442,7 @@ pub(crate) fn probe_inner(path: &Path, have_ffmpeg: bool) -> Result<Probed> {
     }
     if sequence::is_still_magic(magic) {
         if let Some((json, meta)) = flipbook_src::sidecar_of_sheet(path) {
-            let sheet = path;
-            return flipbook_src::probe(path, sheet, &json, meta);
+            return flipbook_src::probe(path, path, &json, meta);
         }
         return sequence::probe_image(path);
     }

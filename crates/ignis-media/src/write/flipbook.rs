@@ -1180,9 +1180,21 @@ impl Sink for FlipbookSink {
 pub fn read_flipbook_meta(json_path: &Path) -> Result<FlipbookMeta> {
     // Complete a commit of a flipbook's files that a killed writer left half done.
     ignis_core::tempfiles::recover_and_clean(&super::parent_dir(json_path));
-    let text = std::fs::read(json_path).map_err(|e| MediaError::io(json_path, e))?;
-    serde_json::from_slice(&text)
-        .map_err(|e| MediaError::decode(json_path, None, format!("not a flipbook sidecar: {e}")))
+    parse_sidecar(json_path)
+}
+
+/// The JSON file at `json_path` (a bounded read of a regular file) parsed as a flipbook
+/// sidecar, with nothing else done: what probing a source reads.
+pub(crate) fn parse_sidecar(json_path: &Path) -> Result<FlipbookMeta> {
+    let text =
+        ignis_core::textfile::read_text(json_path).map_err(|e| MediaError::io(json_path, e))?;
+    serde_json::from_str(&text).map_err(|e| {
+        MediaError::decode(
+            json_path,
+            None,
+            format!("not an Ignis flipbook sidecar ({e})"),
+        )
+    })
 }
 
 /// A flipbook's sheet, decoded, and where its frames lie on it: the frames are cut out one
@@ -1193,17 +1205,6 @@ pub(crate) struct Cells {
     size: Size,
     /// Cell size and the frame's offset inside its cell.
     cell: (u64, u64, u64, u64),
-}
-
-/// Where frame `i` of a sheet laid out as `meta` says (cell `cw` × `ch`, frame at
-/// `fx, fy` inside it) lies.
-fn cell_rect(meta: &FlipbookMeta, (cw, ch, fx, fy): (u64, u64, u64, u64), i: u64) -> Rect {
-    Rect {
-        x: ((i % meta.columns as u64) * cw + fx) as u32,
-        y: ((i / meta.columns as u64) * ch + fy) as u32,
-        width: meta.frame_width,
-        height: meta.frame_height,
-    }
 }
 
 /// The cell size and the frame's offset inside its cell that `meta` gives, once checked
@@ -1271,8 +1272,16 @@ impl Cells {
         self.size
     }
 
+    /// Where frame `i` lies on the sheet.
     fn rect(&self, i: u64) -> Rect {
-        cell_rect(&self.meta, self.cell, i)
+        let (cw, ch, fx, fy) = self.cell;
+        let columns = self.meta.columns as u64;
+        Rect {
+            x: ((i % columns) * cw + fx) as u32,
+            y: ((i / columns) * ch + fy) as u32,
+            width: self.meta.frame_width,
+            height: self.meta.frame_height,
+        }
     }
 
     /// Frame `i` (linear light, straight alpha: a premultiplied sheet is un-premultiplied).
@@ -1298,7 +1307,6 @@ pub fn read_flipbook(json_path: &Path) -> Result<Flipbook> {
     let (fw, fh) = (meta.frame_width, meta.frame_height);
     let size = cells.size();
     let dir = super::parent_dir(json_path);
-    let rect = |i: u64| cells.rect(i);
     let motion = match &meta.motion_vectors {
         None => None,
         Some(mm) => {
@@ -1316,7 +1324,7 @@ pub fn read_flipbook(json_path: &Path) -> Result<Flipbook> {
             let vsign = if mm.green == "up" { -1.0 } else { 1.0 };
             let mut all = Vec::with_capacity(frames.len());
             for i in 0..meta.frame_count as u64 {
-                let r = rect(i);
+                let r = cells.rect(i);
                 let mut f = Vec::with_capacity(size.pixels());
                 for y in r.y..r.y + fh {
                     for x in r.x..r.x + fw {
@@ -1333,7 +1341,7 @@ pub fn read_flipbook(json_path: &Path) -> Result<Flipbook> {
         }
     };
     Ok(Flipbook {
-        meta: cells.meta.clone(),
+        meta: cells.meta,
         frames,
         motion,
     })
