@@ -566,6 +566,60 @@ mod convert {
         assert_fails(&convert("50..50", &[]), "empty");
     }
 
+    /// A stretch of footage converted to a GIF or flipbook is marked as looping; when its
+    /// last frame does not lead back into its first, the user is told, with the command
+    /// that makes a seamless loop. A sequence that does loop, `--no-loop` and formats that
+    /// do not loop get no warning.
+    #[test]
+    fn footage_that_does_not_loop_is_called_out() {
+        let t = tempfile::tempdir().unwrap();
+        // a bright square crossing the frame once, or going round a circle
+        let clip = |name: &str, at: &dyn Fn(f64) -> (f64, f64)| {
+            let dir = t.path().join(name);
+            std::fs::create_dir(&dir).unwrap();
+            for i in 0..24 {
+                let (cx, cy) = at(f64::from(i) / 24.0);
+                let img = image::RgbImage::from_fn(48, 48, |x, y| {
+                    let on = (f64::from(x) - cx).abs() < 5.0 && (f64::from(y) - cy).abs() < 5.0;
+                    image::Rgb(if on { [255, 200, 80] } else { [0, 0, 0] })
+                });
+                img.save(dir.join(format!("f{i:03}.png"))).unwrap();
+            }
+            dir.join("f%03d.png")
+        };
+        let across = clip("across", &|s| (6.0 + 36.0 * s, 24.0));
+        let round = clip("round", &|s| {
+            let a = std::f64::consts::TAU * s;
+            (24.0 + 16.0 * a.cos(), 24.0 + 16.0 * a.sin())
+        });
+        let convert = |input: &Path, out: &str, extra: &[&str]| {
+            let out = t.path().join(out);
+            let mut a = vec!["convert", input.to_str().unwrap(), "--fps", "24"];
+            a.extend_from_slice(extra);
+            a.extend(["-o", out.to_str().unwrap()]);
+            String::from_utf8_lossy(&ignis_ok(&a).stdout).into_owned()
+        };
+        for out in ["a.png", "a.gif"] {
+            let said = convert(&across, out, &[]);
+            assert!(
+                said.contains("warning: these frames do not loop")
+                    && said.contains("--length 24")
+                    && said.contains("--no-loop"),
+                "{out}: {said}"
+            );
+        }
+        assert_eq!(read_json(&t.path().join("a.json"))["loop"], true);
+        for (input, out, extra) in [
+            (&round, "r.png", &[][..]),
+            (&round, "r.gif", &[]),
+            (&across, "n.png", &["--no-loop"]),
+            (&across, "s/%03d.png", &[]),
+        ] {
+            let said = convert(input, out, extra);
+            assert!(!said.contains("warning"), "{out}: {said}");
+        }
+    }
+
     /// Footage is written at its own rate (`campfire.mp4` is 25 fps: at the generators'
     /// default 30 it played 20 % fast), `--fps` still sets another.
     #[test]

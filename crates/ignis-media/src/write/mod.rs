@@ -216,6 +216,11 @@ impl Measure {
     fn sequence_quality(&self) -> Option<LoopQuality> {
         (self.sharp.len() >= 3).then(|| loopq::quality_of(&self.steps, &self.sharp))
     }
+
+    fn wrap_step(&self) -> Option<f64> {
+        let (first, last) = (self.first.as_ref()?, self.last.as_ref()?);
+        (self.sharp.len() >= 3).then(|| loopq::rms_diff(last, first))
+    }
 }
 
 /// Creates a writer for frames of `size` at `path`.
@@ -409,6 +414,14 @@ impl FrameWriter {
     /// fewer than three frames.
     pub fn sequence_quality(&self) -> Option<LoopQuality> {
         self.measure.sequence_quality()
+    }
+
+    /// The step from the last frame pushed back to the first (RMS difference of their
+    /// metric frames, as [`FrameWriter::loop_quality`]'s steps), to compare with the
+    /// steps within: [`FrameWriter::sequence_quality`]'s `median_step`. `None` with fewer
+    /// than three frames.
+    pub fn wrap_step(&self) -> Option<f64> {
+        self.measure.wrap_step()
     }
 
     /// Completes the output and moves it into place; returns every path written (for a
