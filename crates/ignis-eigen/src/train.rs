@@ -13,7 +13,7 @@ use crate::analysis::{thresholds, ESelect};
 use crate::db::{self, ClipEntry, DbWriter, FileEntry, Manifest};
 use crate::error::{EigenError, Result};
 use crate::footage::{Footage, SyntheticFootage};
-use crate::mask::{static_fraction, value8, Isolate, STATIC_LIT};
+use crate::mask::{clip_white, static_fraction, value8, Isolate, MaskParams, BLACK, STATIC_LIT};
 use crate::pose::{auto_framing, clip_pose, ClipPose};
 use crate::preprocess::{
     frame_mask, frame_mask_without, preprocess_frame, preprocess_stages, FrameStages,
@@ -224,6 +224,8 @@ struct Planned {
     pose: ClipPose,
     /// [`static_fraction`] of the sampled frames.
     static_lit: f64,
+    /// [`clip_white`] of the sampled frames.
+    white: f32,
 }
 
 /// Settings with the automatic sizes resolved for clips of `sizes`: the common frame
@@ -445,6 +447,7 @@ fn plan_clip(
             ));
         }
     }
+    let white = clip_white(&values);
     let static_lit = static_fraction(&values, pre.mask.isolate_floor);
     let isolate = match pre.mask.isolate {
         Isolate::On => true,
@@ -466,15 +469,20 @@ fn plan_clip(
     let mut pose = match (c.spec.pose, auto_pose) {
         (Some(p), _) => p,
         (None, Some(p)) => p,
-        (None, None) => clip_pose(
-            name,
-            if isolate && still.is_empty() {
+        (None, None) => {
+            let e = if isolate && still.is_empty() {
                 &extents_isolated
             } else {
                 &extents
-            },
-            &pre.pose,
-        )?,
+            };
+            if e.iter().all(Option::is_none) {
+                return Err(EigenError::clip(
+                    name,
+                    nothing_masked("sampled frame", white, &pre.mask),
+                ));
+            }
+            clip_pose(name, e, &pre.pose)?
+        }
     };
     pose.isolate = isolate;
     pose.still_lights = still;
@@ -484,7 +492,38 @@ fn plan_clip(
         frames: count,
         pose,
         static_lit,
+        white,
     })
+}
+
+/// Why the mask kept nothing in any frame (`which`: "frame", "sampled frame") of a clip whose sampled frames' white
+/// ([`clip_white`]) is `white`, and what to do: a black clip (the wrong footage or range),
+/// a clip too dark for the mask's `V` minimum (its brightest pixels under 1.5 times it:
+/// brighten it, with a command that maps its white to white), or a flame the mask's
+/// ranges do not cover.
+fn nothing_masked(which: &str, white: f32, mask: &MaskParams) -> String {
+    // the value the broadest layer starts at (by default 0.3, any hue)
+    let v_min = mask
+        .layers
+        .iter()
+        .map(|l| l.range.v[0])
+        .fold(0.0f32, f32::max);
+    let config = "with `ignis eigen train`, a config can widen the HSV ranges (e.g. lower the \
+                  V minimum of [[preprocess.mask.layers]])";
+    let why = if white < BLACK {
+        "a black clip: is it the right footage and range?".to_string()
+    } else if white < 1.5 * v_min {
+        format!(
+            "too dark for the mask, which keeps values from {v_min:.2}: brighten the clip so its \
+             brightest pixels reach white (e.g. `ffmpeg -i IN -vf \"curves=all='0/0 {white:.2}/1'\" OUT`), or {config}"
+        )
+    } else {
+        format!("not a flame the mask tells from its surroundings; {config}")
+    };
+    format!(
+        "the mask removes every pixel in every {which}; its brightest pixels reach {white:.2} \
+         (sRGB value): {why}"
+    )
 }
 
 /// The mask extents of the frames [`plan_clip`] samples (every `every`-th training frame
@@ -782,7 +821,10 @@ fn collect_clip(
         ));
     }
     if lit == 0 {
-        return Err(EigenError::clip(name, "the mask removes every pixel in every frame; widen the HSV ranges (e.g. lower the V minimum of [[preprocess.mask.layers]])"));
+        return Err(EigenError::clip(
+            name,
+            nothing_masked("frame", plan.white, &pre.mask),
+        ));
     }
     let frames = match fw {
         Some(w) => {

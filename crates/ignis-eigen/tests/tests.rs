@@ -543,6 +543,67 @@ mod bad_input {
         );
     }
 
+    /// A black clip and one too dark for the mask are told apart, with the clip's
+    /// brightest level and, for the dark one, a command that brightens it.
+    #[test]
+    fn black_and_dark_clips_say_which_they_are() {
+        let (w, h) = (48, 64);
+        // a flame-coloured disc whose sRGB value is `v`, swaying, on black
+        let frames = |v: f32| -> Vec<ignis_core::RgbaFrame> {
+            let lin = ignis_core::palette::srgb_to_linear(v);
+            (0..8)
+                .map(|i| {
+                    let data = (0..w * h)
+                        .map(|k| {
+                            let (x, y) = ((k % w) as f32, (k / w) as f32);
+                            let cx = 24.0 + (i as f32 * 0.8).sin() * 3.0;
+                            let on = (x - cx).powi(2) + (y - 40.0).powi(2) < 100.0;
+                            if on && v > 0.0 {
+                                [lin, lin * 0.45, lin * 0.1, 1.0]
+                            } else {
+                                [0.0, 0.0, 0.0, 1.0]
+                            }
+                        })
+                        .collect();
+                    ignis_core::RgbaFrame::from_vec(Size::new(w as u32, h as u32).unwrap(), data)
+                        .unwrap()
+                })
+                .collect()
+        };
+        let said = |v: f32| {
+            let f = frames(v);
+            let clips = [ClipInput::new(
+                ClipSpec::new("fire"),
+                ignis_eigen::FrameList::new("fire.mp4", &f, 30.0),
+            )];
+            err_of(&clips, &small_pre(), &TrainParams::default()).to_string()
+        };
+        let m = said(0.0);
+        assert!(
+            m.contains("fire") && m.contains("reach 0.00") && m.contains("a black clip"),
+            "{m}"
+        );
+        let m = said(0.2);
+        assert!(
+            m.contains("reach 0.20")
+                && m.contains("too dark for the mask")
+                && m.contains("curves=all='0/0 0.20/1'"),
+            "{m}"
+        );
+        // brightened as the message says, the same clip trains
+        let f = frames(1.0);
+        let dir = tempfile::tempdir().unwrap();
+        let src = ignis_eigen::FrameList::new("fire.mp4", &f, 30.0);
+        train(
+            &[ClipInput::new(ClipSpec::new("fire"), src)],
+            &small_pre(),
+            &TrainParams::default(),
+            &dir.path().join("fire.db"),
+            &mut NoProgress,
+        )
+        .unwrap();
+    }
+
     #[test]
     fn bad_settings_are_refused() {
         assert!(PreprocessParams::from_toml("[pose]\nfill = 5.0\n").is_err());

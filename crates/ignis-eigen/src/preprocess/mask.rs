@@ -648,6 +648,42 @@ pub fn value8(frame: &RgbaFrame) -> Vec<u8> {
         .collect()
 }
 
+/// Below this white ([`clip_white`], sRGB value: 15 of 255) a clip shows nothing but dark
+/// noise.
+pub const BLACK: f32 = 15.0 / 255.0;
+
+/// Pixels a frame's white is read at by [`clip_white`]: its 16th-brightest, so a hot pixel
+/// or a lone glint does not count.
+const WHITE_RANK: usize = 16;
+
+/// A clip's white, sRGB-encoded `0..1`: over sampled frames' 8-bit HSV values
+/// ([`value8`]), the brightest of each frame's 16th-brightest pixel (a clip dark but for a
+/// few frames of fire is judged by those; a hot pixel or a lone glint is not). Normally
+/// exposed fire clips its core to white: `candle.mp4`, `campfire.mp4` and `fireball.mp4`
+/// reach 1.0, the same clips two stops darker 0.56–0.59 (and still train). 0 for no frames.
+pub fn clip_white(values: &[Vec<u8>]) -> f32 {
+    let white = values
+        .iter()
+        .map(|v| {
+            let mut hist = [0usize; 256];
+            for &x in v {
+                hist[x as usize] += 1;
+            }
+            let rank = WHITE_RANK.min(v.len().max(1));
+            let mut seen = 0;
+            (0..=255u8)
+                .rev()
+                .find(|&l| {
+                    seen += hist[l as usize];
+                    seen >= rank
+                })
+                .unwrap_or(0)
+        })
+        .max()
+        .unwrap_or(0);
+    f32::from(white) / 255.0
+}
+
 /// Levels of luminance (8-bit) over which [`isolate_flame`] measures the region's growth.
 const GROWTH_STEP: usize = 12;
 /// Growth over [`GROWTH_STEP`] levels that marks the flame region merging into lit
@@ -1467,6 +1503,30 @@ mod tests {
                 "{x}"
             );
         }
+    }
+
+    #[test]
+    fn the_white_ignores_hot_pixels_and_dark_frames() {
+        let frame = |levels: &[(u8, usize)]| {
+            let mut v = vec![0u8; 10_000];
+            let mut i = 0;
+            for &(l, n) in levels {
+                v[i..i + n].fill(l);
+                i += n;
+            }
+            v
+        };
+        // 15 hot pixels at 255 and a flame of 100 pixels at 120: the white is 120
+        let flame = frame(&[(255, 15), (120, 100)]);
+        assert_eq!(clip_white(&[flame.clone()]), 120.0 / 255.0);
+        // dark frames and one with the flame: the flame's
+        let dark = frame(&[(40, 5000)]);
+        let mut frames = vec![dark.clone(); 8];
+        frames.extend([flame, dark]);
+        assert_eq!(clip_white(&frames), 120.0 / 255.0);
+        assert_eq!(clip_white(&[]), 0.0);
+        // a frame of fewer than 16 pixels is read at its darkest
+        assert_eq!(clip_white(&[vec![200, 50]]), 50.0 / 255.0);
     }
 
     #[test]
