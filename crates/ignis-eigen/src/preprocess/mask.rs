@@ -1518,7 +1518,7 @@ mod tests {
         };
         // 15 hot pixels at 255 and a flame of 100 pixels at 120: the white is 120
         let flame = frame(&[(255, 15), (120, 100)]);
-        assert_eq!(clip_white(&[flame.clone()]), 120.0 / 255.0);
+        assert_eq!(clip_white(std::slice::from_ref(&flame)), 120.0 / 255.0);
         // dark frames and one with the flame: the flame's
         let dark = frame(&[(40, 5000)]);
         let mut frames = vec![dark.clone(); 8];
