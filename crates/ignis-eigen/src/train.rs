@@ -496,11 +496,17 @@ fn plan_clip(
     })
 }
 
-/// Why the mask kept nothing in any frame (`which`: "frame", "sampled frame") of a clip whose sampled frames' white
-/// ([`clip_white`]) is `white`, and what to do: a black clip (the wrong footage or range),
-/// a clip too dark for the mask's `V` minimum (its brightest pixels under 1.5 times it:
-/// brighten it, with a command that maps its white to white), or a flame the mask's
-/// ranges do not cover.
+/// Why the mask kept nothing in any frame (`which`: "frame", "sampled frame") of a clip
+/// whose sampled frames' white ([`clip_white`]) is `white`, and what to do: a black clip
+/// (the wrong footage or range), a clip too dark for the mask's `V` minimum (its brightest
+/// pixels under 1.5 times it: brighten it, with a command that maps its white to white),
+/// or a flame the mask's ranges do not cover.
+///
+/// The clip is not brightened here: tried (a gain in linear light bringing the white to 1
+/// for the mask and the grey frames), the flame isolation's levels then depend on where
+/// that white lands — on `campfire.mp4` 4.4 stops darker and re-encoded, a gain to the
+/// 16th-brightest pixel isolated specks of the fire, twice that gain the fire but on
+/// `candle.mp4` as dark the lit jar with it — so the user brightens it and looks.
 fn nothing_masked(which: &str, white: f32, mask: &MaskParams) -> String {
     // the value the broadest layer starts at (by default 0.3, any hue)
     let v_min = mask
