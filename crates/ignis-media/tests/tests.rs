@@ -1198,6 +1198,31 @@ mod roundtrip {
         assert_eq!(read_all(&out), frames);
     }
 
+    /// A sequence with frames missing (a render farm's lost frame) is read without them,
+    /// and says which: the pattern's numbers and a directory's names alike.
+    #[test]
+    fn a_sequence_says_which_frames_are_missing() {
+        let dir = tempfile::tempdir().unwrap();
+        let frames: Vec<_> = (0..8).map(|t| test_frame(size(8, 6), t, false)).collect();
+        let seq = dir.path().join("seq");
+        write_all(&seq.join("f%04d.png"), &frames, &WriteOptions::default());
+        assert_eq!(probe(&seq).unwrap().codec, "png sequence");
+        for k in [3, 5, 6] {
+            std::fs::remove_file(seq.join(format!("f{k:04}.png"))).unwrap();
+        }
+        for path in [seq.clone(), seq.join("f%04d.png")] {
+            let info = probe(&path).unwrap();
+            assert_eq!(info.frame_count, Some(5));
+            assert_eq!(
+                info.codec,
+                "png sequence, 3 frames missing (3, 5, 6): read without them, a jump at each gap",
+                "{}",
+                path.display()
+            );
+            assert_eq!(read_all(&path).len(), 5);
+        }
+    }
+
     #[test]
     fn png_pattern_into_existing_directory_is_exact() {
         let dir = tempfile::tempdir().unwrap();

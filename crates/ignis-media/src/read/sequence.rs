@@ -234,7 +234,12 @@ pub(crate) fn probe_pattern(path: &Path) -> Result<Probed> {
             ),
         ));
     }
-    finish_sequence(path, files.into_iter().map(|(_, p)| p).collect())
+    let numbers: Vec<u64> = files.iter().map(|(k, _)| *k).collect();
+    finish_sequence(
+        path,
+        files.into_iter().map(|(_, p)| p).collect(),
+        Some(&numbers),
+    )
 }
 
 pub(crate) fn probe_dir(dir: &Path) -> Result<Probed> {
@@ -271,10 +276,70 @@ pub(crate) fn probe_dir(dir: &Path) -> Result<Probed> {
             ),
         ));
     }
-    finish_sequence(dir, files.into_iter().map(|(_, p)| p).collect())
+    let numbers = frame_numbers(files.iter().map(|(n, _)| n.as_str()));
+    finish_sequence(
+        dir,
+        files.into_iter().map(|(_, p)| p).collect(),
+        numbers.as_deref(),
+    )
 }
 
-fn finish_sequence(path: &Path, files: Vec<PathBuf>) -> Result<Probed> {
+/// The frame number of each name, in order, when every name is one prefix, a number and
+/// one suffix (`f0001.png`, `f0002.png`, …; the number is the last run of digits): what
+/// [`missing_frames`] reads a directory's gaps from. `None` for names of another form.
+fn frame_numbers<'a>(names: impl Iterator<Item = &'a str>) -> Option<Vec<u64>> {
+    let mut form: Option<(&str, &str)> = None;
+    let mut out = Vec::new();
+    for name in names {
+        let end = name.rfind(|c: char| c.is_ascii_digit())? + 1;
+        let start = name[..end]
+            .rfind(|c: char| !c.is_ascii_digit())
+            .map_or(0, |i| i + 1);
+        let (prefix, suffix) = (&name[..start], &name[end..]);
+        match form {
+            None => form = Some((prefix, suffix)),
+            Some(f) if f != (prefix, suffix) => return None,
+            Some(_) => {}
+        }
+        out.push(name[start..end].parse().ok()?);
+    }
+    Some(out)
+}
+
+/// How many frame numbers a sequence skips, and the first few of them: of `numbers`
+/// (ascending), those between the first and the last at the sequence's own step (the
+/// commonest difference between neighbours, the smaller on a tie: 1, or 2 for a render on
+/// twos) that have no file. A render farm's lost frame shows as a jump in the motion.
+pub(crate) fn missing_frames(numbers: &[u64]) -> (u64, Vec<u64>) {
+    let diffs: Vec<u64> = numbers
+        .windows(2)
+        .map(|w| w[1].saturating_sub(w[0]))
+        .filter(|&d| d > 0)
+        .collect();
+    let mut counts = std::collections::BTreeMap::new();
+    for &d in &diffs {
+        *counts.entry(d).or_insert(0usize) += 1;
+    }
+    let Some((&step, _)) = counts.iter().max_by(|a, b| a.1.cmp(b.1).then(b.0.cmp(a.0))) else {
+        return (0, Vec::new());
+    };
+    let (mut count, mut first) = (0u64, Vec::new());
+    for w in numbers.windows(2) {
+        let d = w[1].saturating_sub(w[0]);
+        if d > step {
+            let skipped = (d - 1) / step;
+            count = count.saturating_add(skipped);
+            let mut k = w[0] + step;
+            while k < w[1] && first.len() < 5 {
+                first.push(k);
+                k += step;
+            }
+        }
+    }
+    (count, first)
+}
+
+fn finish_sequence(path: &Path, files: Vec<PathBuf>, numbers: Option<&[u64]>) -> Result<Probed> {
     let size = dimensions(&files[0])?;
     for f in &files[1..] {
         let s = dimensions(f)?;
@@ -289,11 +354,22 @@ fn finish_sequence(path: &Path, files: Vec<PathBuf>) -> Result<Probed> {
             ));
         }
     }
+    let mut codec = format!("{} sequence", codec_of(&files[0]));
+    if let Some((n, first)) = numbers.map(missing_frames).filter(|m| m.0 > 0) {
+        let listed: Vec<String> = first.iter().map(u64::to_string).collect();
+        let more = if n > first.len() as u64 { ", …" } else { "" };
+        codec = format!(
+            "{codec}, {n} frame{} missing ({}{more}): read without {}, a jump at each gap",
+            if n == 1 { "" } else { "s" },
+            listed.join(", "),
+            if n == 1 { "it" } else { "them" },
+        );
+    }
     let info = SourceInfo {
         size,
         fps: DEFAULT_SEQUENCE_FPS,
         frame_count: Some(files.len() as u64),
-        codec: format!("{} sequence", codec_of(&files[0])),
+        codec,
         decoder: Decoder::ImageSequence,
         path: path.to_path_buf(),
         anamorphic: None,
@@ -512,6 +588,31 @@ mod tests {
         let mut v = vec!["f10.png", "f2.png", "f1.png", "f02.png"];
         v.sort_by(|a, b| natural_cmp(a, b));
         assert_eq!(v, ["f1.png", "f2.png", "f02.png", "f10.png"]);
+    }
+
+    #[test]
+    fn missing_frames_at_the_sequences_own_step() {
+        assert_eq!(missing_frames(&[1, 2, 3, 4]), (0, vec![]));
+        assert_eq!(missing_frames(&[1, 2, 4, 5, 9]), (4, vec![3, 6, 7, 8]));
+        // rendered on twos: every other number is not missing
+        assert_eq!(missing_frames(&[0, 2, 4, 8, 10]), (1, vec![6]));
+        // a huge gap is counted, a few listed
+        let (n, first) = missing_frames(&[1, 2, 3, 1_000_000]);
+        assert_eq!((n, first), (999_996, vec![4, 5, 6, 7, 8]));
+        assert_eq!(missing_frames(&[]), (0, vec![]));
+        assert_eq!(missing_frames(&[7]), (0, vec![]));
+    }
+
+    #[test]
+    fn frame_numbers_of_one_form_only() {
+        let names = ["f0001.png", "f0002.png", "f0010.png"];
+        assert_eq!(frame_numbers(names.into_iter()), Some(vec![1, 2, 10]));
+        assert_eq!(
+            frame_numbers(["shot2_001.exr", "shot2_002.exr"].into_iter()),
+            Some(vec![1, 2])
+        );
+        assert_eq!(frame_numbers(["a1.png", "b2.png"].into_iter()), None);
+        assert_eq!(frame_numbers(["plate.png"].into_iter()), None);
     }
 
     #[test]
