@@ -181,6 +181,24 @@ pub fn crop(s: &str) -> Result<Rect, String> {
 }
 
 /// An ordinal for messages: `2nd`, `3rd`, `4th`, `11th`, `21st`.
+/// A frame rate as people write it: a video rate of the NTSC family by its usual decimal and
+/// its exact fraction (`29.97 (30000/1001)`), any other with at most three decimals (`25`,
+/// `15.019`), where `{}` printed every digit of the `f64` (`29.97002997002997`).
+pub fn fps_text(fps: f64) -> String {
+    let short = |v: f64| {
+        let s = format!("{v:.3}");
+        let s = s.trim_end_matches('0').trim_end_matches('.');
+        s.to_string()
+    };
+    for n in [24u32, 30, 48, 60, 120, 240] {
+        let ntsc = f64::from(n) * 1000.0 / 1001.0;
+        if (fps - ntsc).abs() <= 1e-9 * ntsc {
+            return format!("{} ({}/1001)", short(ntsc), n * 1000);
+        }
+    }
+    short(fps)
+}
+
 pub fn nth(k: u32) -> String {
     let suffix = match (k % 10, k % 100) {
         (_, 11..=13) => "th",
@@ -211,6 +229,19 @@ mod tests {
         assert!(frame_range("9..3").unwrap_err().contains("empty"));
         assert!(frame_range("3-9").unwrap_err().contains("A..B"));
         assert!(frame_range("1..2..3").unwrap_err().contains("END `2..3`"));
+    }
+
+    #[test]
+    fn frame_rates_as_people_write_them() {
+        assert_eq!(fps_text(30000.0 / 1001.0), "29.97 (30000/1001)");
+        assert_eq!(fps_text(24000.0 / 1001.0), "23.976 (24000/1001)");
+        assert_eq!(fps_text(60000.0 / 1001.0), "59.94 (60000/1001)");
+        assert_eq!(fps_text(25.0), "25");
+        assert_eq!(fps_text(30.0), "30");
+        assert_eq!(fps_text(12.5), "12.5");
+        assert_eq!(fps_text(15.018773466833542), "15.019");
+        // an average near an NTSC rate is not one
+        assert_eq!(fps_text(29.971), "29.971");
     }
 
     #[test]

@@ -175,7 +175,7 @@ pub fn run(args: &Args, g: &Global) -> Result<Vec<PathBuf>> {
             "writing every {} of the {} frames: {written} frames at {} fps",
             crate::args::nth(every),
             args.frames,
-            opts.fps
+            crate::args::fps_text(opts.fps)
         ));
     }
     let pb = g.progress(plan.range.len() as u64 * variants as u64, "classic");

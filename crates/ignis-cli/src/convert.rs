@@ -108,10 +108,11 @@ pub fn run(args: &Args, g: &Global) -> Result<Vec<PathBuf>> {
                     format!(" (the longest gap: {s:.3} s after frame {i})")
                 });
                 anyhow!(
-                    "{}: its frames' timestamps span {:.1} s, {n} frames at {fps} fps for {} frames read{gap}; \
+                    "{}: its frames' timestamps span {:.1} s, {n} frames at {} fps for {} frames read{gap}; \
                      give --range to leave a gap out, or a lower --fps",
                     input.display(),
                     n / fps,
+                    crate::args::fps_text(fps),
                     b - a
                 )
             })?;

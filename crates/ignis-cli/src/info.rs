@@ -71,11 +71,11 @@ pub fn run(args: &Args) -> Result<()> {
         match &variable {
             Some(v) => outln!(
                 "fps:     {} on average; variable: {:.3} nominal, {}; `ignis loop` loops evenly timed stretches at that rate",
-                info.fps,
+                crate::args::fps_text(info.fps),
                 v.nominal_fps,
                 v.steps_off()
             )?,
-            None => outln!("fps:     {}", info.fps)?,
+            None => outln!("fps:     {}", crate::args::fps_text(info.fps))?,
         }
         match info.anamorphic {
             Some(a) => outln!(

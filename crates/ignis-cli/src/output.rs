@@ -373,7 +373,12 @@ impl OutputArgs {
                     if let Some(r) = &m.retimed {
                         g.say(format!(
                             "retimed {} frames at {} fps to {} frames at {} fps to fill the {}×{} grid",
-                            r.from_frames, r.from_fps, m.frame_count, m.fps, m.columns, m.rows
+                            r.from_frames,
+                            crate::args::fps_text(r.from_fps),
+                            m.frame_count,
+                            crate::args::fps_text(m.fps),
+                            m.columns,
+                            m.rows
                         ));
                     }
                 }

@@ -2437,8 +2437,9 @@ fn longest_length(n: usize) -> Option<usize> {
 fn longest_hint(n: usize, fps: f64, wider: &str) -> String {
     match longest_length(n) {
         Some(l) if fps.is_finite() && fps > 0.0 => format!(
-            "the longest that fits is --length {l} ({:.2} s at {fps} fps); ask for that or less, or use {wider}",
-            l as f64 / fps
+            "the longest that fits is --length {l} ({:.2} s at {} fps); ask for that or less, or use {wider}",
+            l as f64 / fps,
+            crate::args::fps_text(fps)
         ),
         Some(l) => format!("the longest that fits is --length {l}; ask for that or less, or use {wider}"),
         None => format!("{n} frames are too few for any loop; use {wider}"),
