@@ -31,6 +31,7 @@ pub fn run(args: &Args) -> Result<()> {
             "path": info.path,
             "frames": info.frame_count,
             "fps": info.fps,
+            "duration_s": duration(&info),
             "width": info.size.width,
             "height": info.size.height,
             "codec": info.codec,
@@ -64,9 +65,11 @@ pub fn run(args: &Args) -> Result<()> {
         outln!("file:    {}", info.path.display())?;
         outln!(
             "frames:  {}",
-            info.frame_count
-                .map(|n| n.to_string())
-                .unwrap_or_else(|| "unknown (container does not say)".into())
+            match (info.frame_count, duration(&info)) {
+                (Some(n), Some(d)) => format!("{n} ({d:.2} s)"),
+                (Some(n), None) => n.to_string(),
+                (None, _) => "unknown (container does not say)".into(),
+            }
         )?;
         match &variable {
             Some(v) => outln!(
@@ -126,6 +129,13 @@ pub fn run(args: &Args) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// How long the source plays: its frames at its (average) rate, as a player shows them.
+/// `None` when the frame count is unknown or the rate is not a positive number.
+fn duration(info: &ignis_media::SourceInfo) -> Option<f64> {
+    let n = info.frame_count?;
+    (info.fps.is_finite() && info.fps > 0.0).then(|| n as f64 / info.fps)
 }
 
 /// A flipbook's sidecar (the source given as its sheet or as the sidecar itself).

@@ -59,7 +59,8 @@ struct Cli {
 enum Cmd {
     /// The classic pixel-buffer fire (McNally 1999).
     Classic(classic::Args),
-    /// Frames, fps, size, codec and decoder of a video, image or frame sequence (and its alpha).
+    /// Frames and duration, fps, size, codec and decoder of a video, image or frame sequence (and
+    /// its alpha).
     Info(info::Args),
     /// Any source to any output (footage to a flipbook, MP4 to EXR frames, ...).
     Convert(convert::Args),

@@ -358,10 +358,14 @@ mod info {
         );
         let seam = v["flipbook"]["loop_quality"]["seam"].as_f64().unwrap();
         assert!(seam > 0.0 && v["flipbook"]["loop"] == true, "{v}");
+        // 12 frames at 24 fps play for half a second
+        assert_eq!(v["duration_s"], 0.5);
         let human = ignis_ok(&["info", sheet.to_str().unwrap()]).stdout;
         let human = String::from_utf8_lossy(&human);
         assert!(
-            human.contains(&format!("loop:    yes; seam {seam:.2}")),
+            human.contains(&format!("loop:    yes; seam {seam:.2}"))
+                && human.contains("frames:  12 (0.50 s)")
+                && human.contains("fps:     24\n"),
             "{human}"
         );
         let seq = t.path().join("seq/%04d.png");
