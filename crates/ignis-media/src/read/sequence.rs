@@ -293,8 +293,10 @@ fn frame_numbers<'a>(names: impl Iterator<Item = &'a str>) -> Option<Vec<u64>> {
     for name in names {
         let end = name.rfind(|c: char| c.is_ascii_digit())? + 1;
         let start = name[..end]
-            .rfind(|c: char| !c.is_ascii_digit())
-            .map_or(0, |i| i + 1);
+            .char_indices()
+            .rev()
+            .find(|(_, c)| !c.is_ascii_digit())
+            .map_or(0, |(i, c)| i + c.len_utf8());
         let (prefix, suffix) = (&name[..start], &name[end..]);
         match form {
             None => form = Some((prefix, suffix)),
@@ -332,7 +334,7 @@ pub(crate) fn missing_frames(numbers: &[u64]) -> (u64, Vec<u64>) {
             let mut k = w[0] + step;
             while k < w[1] && first.len() < 5 {
                 first.push(k);
-                k += step;
+                k = k.saturating_add(step);
             }
         }
     }
@@ -600,6 +602,11 @@ mod tests {
         let (n, first) = missing_frames(&[1, 2, 3, 1_000_000]);
         assert_eq!((n, first), (999_996, vec![4, 5, 6, 7, 8]));
         assert_eq!(missing_frames(&[]), (0, vec![]));
+        // numbers up to u64::MAX (a 20-digit field) do not overflow
+        assert_eq!(
+            missing_frames(&[0, u64::MAX - 1, u64::MAX]),
+            (u64::MAX - 2, vec![1, 2, 3, 4, 5])
+        );
         assert_eq!(missing_frames(&[7]), (0, vec![]));
     }
 
@@ -612,6 +619,15 @@ mod tests {
             Some(vec![1, 2])
         );
         assert_eq!(frame_numbers(["a1.png", "b2.png"].into_iter()), None);
+        // a name of more than ASCII: the number after a two-byte letter
+        assert_eq!(
+            frame_numbers(["é001.png", "é003.png"].into_iter()),
+            Some(vec![1, 3])
+        );
+        assert_eq!(
+            frame_numbers(["001é.png", "002é.png"].into_iter()),
+            Some(vec![1, 2])
+        );
         assert_eq!(frame_numbers(["plate.png"].into_iter()), None);
     }
 
