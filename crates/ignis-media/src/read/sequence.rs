@@ -610,6 +610,25 @@ mod tests {
         assert_eq!(missing_frames(&[7]), (0, vec![]));
     }
 
+    proptest::proptest! {
+        /// Any names, any numbers: no panic; a name's number is its last digit run; every
+        /// frame listed as missing lies inside the sequence and has no file.
+        #[test]
+        fn gaps_of_any_names(names in proptest::collection::vec(".{0,12}", 0..8),
+                             mut numbers in proptest::collection::vec(proptest::prelude::any::<u64>(), 0..8)) {
+            if let Some(n) = frame_numbers(names.iter().map(String::as_str)) {
+                proptest::prop_assert_eq!(n.len(), names.len());
+            }
+            numbers.sort_unstable();
+            let (count, listed) = missing_frames(&numbers);
+            proptest::prop_assert!(listed.len() <= 5 && listed.len() as u64 <= count);
+            for k in listed {
+                proptest::prop_assert!(!numbers.contains(&k));
+                proptest::prop_assert!(numbers[0] < k && k < numbers[numbers.len() - 1]);
+            }
+        }
+    }
+
     #[test]
     fn frame_numbers_of_one_form_only() {
         let names = ["f0001.png", "f0002.png", "f0010.png"];
