@@ -180,7 +180,6 @@ pub fn crop(s: &str) -> Result<Rect, String> {
     }
 }
 
-/// An ordinal for messages: `2nd`, `3rd`, `4th`, `11th`, `21st`.
 /// A frame rate as people write it: a video rate of the NTSC family by its usual decimal and
 /// its exact fraction (`29.97 (30000/1001)`), any other with at most three decimals (`25`,
 /// `15.019`), where `{}` printed every digit of the `f64` (`29.97002997002997`).
@@ -199,6 +198,7 @@ pub fn fps_text(fps: f64) -> String {
     short(fps)
 }
 
+/// An ordinal for messages: `2nd`, `3rd`, `4th`, `11th`, `21st`.
 pub fn nth(k: u32) -> String {
     let suffix = match (k % 10, k % 100) {
         (_, 11..=13) => "th",
