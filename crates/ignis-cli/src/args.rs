@@ -159,16 +159,49 @@ pub fn frame_span(s: &str) -> Result<Range<usize>, String> {
     Ok(a..b)
 }
 
-/// A crop rectangle `X,Y,WIDTH,HEIGHT` in pixels, WIDTH and HEIGHT above 0.
+/// A crop rectangle in pixels, WIDTH and HEIGHT above 0, in any of the forms people copy
+/// from other tools: `X,Y,WIDTH,HEIGHT` (ours), `WIDTHxHEIGHT+X+Y` (an X11 / ImageMagick
+/// geometry, as compositing and image tools print a region) or `WIDTH:HEIGHT:X:Y`, with
+/// or without `crop=` in front (what ffmpeg's `cropdetect` prints for letterbox bars,
+/// pasted as is).
 pub fn crop(s: &str) -> Result<Rect, String> {
     let bad = || {
-        format!("crop `{s}`: write X,Y,WIDTH,HEIGHT in pixels with WIDTH, HEIGHT > 0, e.g. 140,120,200,300")
+        format!(
+            "crop `{s}`: write X,Y,WIDTH,HEIGHT in pixels with WIDTH, HEIGHT > 0, e.g. \
+             140,120,200,300 (or the same as 200x300+140+120, or ffmpeg cropdetect's \
+             crop=200:300:140:120)"
+        )
     };
-    let v: Vec<u32> = s
-        .split(',')
-        .map(|x| x.trim().parse::<u32>())
-        .collect::<Result<_, _>>()
-        .map_err(|_| bad())?;
+    let t = s.trim();
+    let t = t.strip_prefix("crop=").unwrap_or(t);
+    let numbers = |parts: Vec<&str>| -> Option<Vec<u32>> {
+        parts.iter().map(|x| x.trim().parse::<u32>().ok()).collect()
+    };
+    let v = if t.contains(':') {
+        // ffmpeg: W:H:X:Y
+        numbers(t.split(':').collect()).map(|v| match v[..] {
+            [w, h, x, y] => vec![x, y, w, h],
+            _ => v,
+        })
+    } else if let Some((w, rest)) = t.split_once(['x', 'X']) {
+        // geometry: WxH+X+Y
+        let mut p = rest.split('+');
+        let h = p.next();
+        numbers(
+            [Some(w), h]
+                .into_iter()
+                .chain(p.map(Some))
+                .flatten()
+                .collect(),
+        )
+        .map(|v| match v[..] {
+            [w, h, x, y] => vec![x, y, w, h],
+            _ => v,
+        })
+    } else {
+        numbers(t.split(',').collect())
+    }
+    .ok_or_else(bad)?;
     match v[..] {
         [x, y, width, height] if width > 0 && height > 0 => Ok(Rect {
             x,
@@ -294,6 +327,35 @@ mod tests {
         ] {
             assert!(crop(bad).unwrap_err().contains("X,Y,WIDTH,HEIGHT"), "{bad}");
         }
+        // the forms other tools print: a geometry, and ffmpeg cropdetect's line
+        let r = Rect {
+            x: 140,
+            y: 120,
+            width: 200,
+            height: 300,
+        };
+        for form in [
+            "200x300+140+120",
+            "200X300+140+120",
+            "crop=200:300:140:120",
+            " 200:300:140:120 ",
+        ] {
+            assert_eq!(crop(form), Ok(r), "{form}");
+        }
+        for bad in [
+            "200x300",
+            "200x300+140",
+            "200x300+140+120+1",
+            "200x300-140-120",
+            "0x300+1+2",
+            "200:300:140",
+            "crop=200:0:1:2",
+            "x+1+2",
+            "200x300++120",
+        ] {
+            let e = crop(bad).unwrap_err();
+            assert!(e.contains("crop=200:300:140:120"), "{bad}: {e}");
+        }
     }
 
     proptest! {
@@ -323,8 +385,21 @@ mod tests {
 
         #[test]
         fn crops_round_trip(x: u32, y: u32, w in 1u32.., h in 1u32..) {
-            let r = crop(&format!("{x},{y},{w},{h}")).unwrap();
-            prop_assert_eq!((r.x, r.y, r.width, r.height), (x, y, w, h));
+            for form in [
+                format!("{x},{y},{w},{h}"),
+                format!("{w}x{h}+{x}+{y}"),
+                format!("crop={w}:{h}:{x}:{y}"),
+            ] {
+                let r = crop(&form).unwrap();
+                prop_assert_eq!((r.x, r.y, r.width, r.height), (x, y, w, h));
+            }
+        }
+
+        #[test]
+        fn crops_of_any_text_never_panic(s in "[0-9x+:,=a-z ]{0,20}") {
+            if let Ok(r) = crop(&s) {
+                prop_assert!(r.width > 0 && r.height > 0);
+            }
         }
     }
 }

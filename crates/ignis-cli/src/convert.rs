@@ -30,7 +30,8 @@ pub struct Args {
     /// Time range in seconds START..END.
     #[arg(long)]
     pub seconds: Option<String>,
-    /// Crop X,Y,WIDTH,HEIGHT (before scaling).
+    /// Crop X,Y,WIDTH,HEIGHT (before scaling; also as WIDTHxHEIGHT+X+Y, or ffmpeg
+    /// cropdetect's crop=W:H:X:Y).
     #[arg(long)]
     pub crop: Option<String>,
     /// Resize to WIDTHxHEIGHT (after cropping).
@@ -118,13 +119,24 @@ pub fn run(args: &Args, g: &Global) -> Result<Vec<PathBuf>> {
             })?;
             let held = holds.iter().filter(|&&n| n > 1).count();
             let dropped = holds.iter().filter(|&&n| n == 0).count();
-            g.say(format!(
-                "timing: the frame rate varies ({:.3} fps nominal, {:.3} on average); written at {fps:.3} fps \
-                 with each frame shown for as long as it was shot ({held} held longer, {dropped} left out); \
-                 --fps sets another rate",
-                t.nominal_fps(),
-                t.average_fps()
-            ));
+            g.say(if t.from_frame_numbers() {
+                format!(
+                    "timing: frames are missing from the sequence ({} of {} steps jump over them); \
+                     written at {fps:.3} fps with the frame before each gap held over it ({held} held \
+                     longer, {dropped} left out), so the rest keep their place in time; --fps sets \
+                     another rate",
+                    t.uneven_steps().len(),
+                    t.len() - 1
+                )
+            } else {
+                format!(
+                    "timing: the frame rate varies ({:.3} fps nominal, {:.3} on average); written at {fps:.3} fps \
+                     with each frame shown for as long as it was shot ({held} held longer, {dropped} left out); \
+                     --fps sets another rate",
+                    t.nominal_fps(),
+                    t.average_fps()
+                )
+            });
             Some(holds)
         }
         None => None,

@@ -58,6 +58,7 @@ pub fn run(args: &Args) -> Result<()> {
                 "steps": v.frames - 1,
                 "shortest_step_s": v.steps.0,
                 "longest_step_s": v.steps.1,
+                "from_frame_numbers": v.numbered,
             })),
         });
         outln!("{}", serde_json::to_string_pretty(&v)?)?;
@@ -72,6 +73,11 @@ pub fn run(args: &Args) -> Result<()> {
             }
         )?;
         match &variable {
+            Some(v) if v.numbered => outln!(
+                "fps:     {}; {}; `ignis loop` loops stretches without a gap",
+                crate::args::fps_text(info.fps),
+                v.steps_off()
+            )?,
             Some(v) => outln!(
                 "fps:     {} on average; variable: {:.3} nominal, {}; `ignis loop` loops evenly timed stretches at that rate",
                 crate::args::fps_text(info.fps),

@@ -78,7 +78,8 @@ pub struct TrainArgs {
     #[arg(long, default_value_t = 60)]
     pub max_iterations: usize,
     /// Cut this rectangle `X,Y,W,H` (source pixels, top-left origin) out of every frame
-    /// first, e.g. to leave out a lit candle holder.
+    /// first, e.g. to leave out a lit candle holder (also as WIDTHxHEIGHT+X+Y, or ffmpeg
+    /// cropdetect's crop=W:H:X:Y).
     #[arg(long)]
     pub crop: Option<String>,
     /// Linear intensity (0–1) subtracted from every pixel before fitting, to drop a lit

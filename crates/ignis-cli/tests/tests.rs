@@ -2659,6 +2659,157 @@ mod loop_sequence {
         assert_eq!(files_in(&cache).len(), 2, "two entries");
     }
 
+    /// A sequence with frames missing (a render farm's lost frames) is timed by its frame
+    /// numbers, as a video that dropped them: `info` says so, `loop` keeps to the frames
+    /// on one side of the gap, `eigen train` names the stretch without it, and `convert`
+    /// holds the frame before the gap so the rest keep their place in time.
+    #[test]
+    fn a_sequence_with_missing_frames_is_timed_by_its_numbers() {
+        let t = tempfile::tempdir().unwrap();
+        let frames = t.path().join("frames");
+        std::fs::create_dir(&frames).unwrap();
+        let pattern = frames.join("%04d.png");
+        classic_ok("48x40", "60", &["--seed", "5", "--no-loop"], &pattern);
+        let names = files_in(&frames);
+        assert_eq!(names.len(), 60);
+        // frames 20 and 21 lost: step 19 (from read frame 19 to 20) jumps over them
+        for n in &names[20..22] {
+            std::fs::remove_file(frames.join(n)).unwrap();
+        }
+        let (pat, dir) = (pattern.to_str().unwrap(), frames.to_str().unwrap());
+        for src in [pat, dir] {
+            let info: serde_json::Value =
+                serde_json::from_slice(&ignis_ok(&["info", "--json", src]).stdout).unwrap();
+            assert_eq!(info["frames"], 58, "{info}");
+            let v = &info["variable_frame_rate"];
+            assert_eq!(v["from_frame_numbers"], true, "{info}");
+            assert_eq!(
+                (v["uneven_steps"].as_u64(), v["steps"].as_u64()),
+                (Some(1), Some(57))
+            );
+            let text = String::from_utf8_lossy(&ignis_ok(&["info", src]).stdout).to_string();
+            assert!(
+                text.contains("1 of 57 steps jump over missing frames, at most 2 in a row"),
+                "{text}"
+            );
+        }
+        let out = t.path().join("loop.png");
+        let cache = t.path().join("cache");
+        let said = String::from_utf8_lossy(
+            &ignis_ok(&[
+                "loop",
+                pat,
+                "--length",
+                "16",
+                "--cache",
+                cache.to_str().unwrap(),
+                "-o",
+                out.to_str().unwrap(),
+            ])
+            .stdout,
+        )
+        .to_string();
+        assert!(
+            said.contains("timing: frames are missing from the sequence")
+                && said.contains("the loop comes from frames without a gap"),
+            "{said}"
+        );
+        let line = said
+            .lines()
+            .find(|l| l.starts_with("loop: source frames"))
+            .unwrap();
+        let span = line["loop: source frames ".len()..]
+            .split(',')
+            .next()
+            .unwrap();
+        let (a, b) = span.split_once("..").unwrap();
+        let (a, b): (usize, usize) = (a.parse().unwrap(), b.parse().unwrap());
+        assert!(b <= 20 || a >= 20, "loop {a}..{b} crosses the gap: {said}");
+        // training takes every frame once: said, with the longest stretch without a gap
+        let db = t.path().join("fire.db");
+        let said = String::from_utf8_lossy(
+            &ignis_ok(&["eigen", "train", pat, "-o", db.to_str().unwrap()]).stdout,
+        )
+        .to_string();
+        assert!(
+            said.contains("frames are missing from the sequence (1 of 57 steps")
+                && said
+                    .contains("--start 20 --end 58 (the longest evenly timed stretch, 38 frames)"),
+            "{said}"
+        );
+        // convert: 58 frames read, the one before the gap held for three
+        let c = t.path().join("c.png");
+        let said =
+            String::from_utf8_lossy(&ignis_ok(&["convert", dir, "-o", c.to_str().unwrap()]).stdout)
+                .to_string();
+        assert!(said.contains("(1 held longer, 0 left out)"), "{said}");
+        let meta = read_json(&t.path().join("c.json"));
+        assert_eq!(meta["frame_count"], 60, "{meta}");
+        // a whole sequence has no timing
+        let whole = t.path().join("whole");
+        std::fs::create_dir(&whole).unwrap();
+        for n in &names[..20] {
+            std::fs::copy(frames.join(n), whole.join(n)).unwrap();
+        }
+        let info: serde_json::Value =
+            serde_json::from_slice(&ignis_ok(&["info", "--json", whole.to_str().unwrap()]).stdout)
+                .unwrap();
+        assert!(info["variable_frame_rate"].is_null(), "{info}");
+    }
+
+    /// A range given by file numbers (`1001..1005` of shot.1001.png …, as a compositor
+    /// numbers frames) is refused as past the end, saying frames count from 0 in the order
+    /// read and which frames those numbers are, for every command that takes a range;
+    /// nothing is written.
+    #[test]
+    fn file_numbers_given_as_frames_are_translated_in_the_error() {
+        let t = tempfile::tempdir().unwrap();
+        let made = t.path().join("made");
+        std::fs::create_dir(&made).unwrap();
+        classic_ok(
+            "32x24",
+            "10",
+            &["--seed", "3", "--no-loop"],
+            &made.join("%04d.png"),
+        );
+        let shots = t.path().join("shots");
+        std::fs::create_dir(&shots).unwrap();
+        for (k, n) in files_in(&made).iter().enumerate() {
+            std::fs::rename(made.join(n), shots.join(format!("shot.{}.png", 1001 + k))).unwrap();
+        }
+        let pat = shots.join("shot.%04d.png");
+        let pat = pat.to_str().unwrap();
+        let out = t.path().join("o.png");
+        let o = out.to_str().unwrap();
+        let hint = "frames count from 0 in the order read, not by file number (shot.1001.png is \
+                    frame 0): file numbers 1001..1005 are frames 0..4";
+        for args in [
+            vec!["convert", pat, "--range", "1001..1005", "-o", o],
+            vec![
+                "loop",
+                pat,
+                "--range",
+                "1001..1005",
+                "--length",
+                "3",
+                "-o",
+                o,
+            ],
+            vec![
+                "eigen", "train", pat, "--start", "1001", "--end", "1005", "-o", o,
+            ],
+            vec!["learned", "train", pat, "--range", "1001..1005", "-o", o],
+        ] {
+            let r = ignis(&args);
+            assert_fails(&r, hint);
+            assert!(!out.exists(), "{args:?} wrote");
+        }
+        // a range of frames past the end: nothing more is said
+        let r = ignis(&["convert", pat, "--range", "8..12", "-o", o]);
+        assert_fails(&r, "it has 10 frames: 0..10");
+        assert!(!String::from_utf8_lossy(&r.stderr).contains("file number"));
+    }
+
     /// A database trained on an image sequence notices when a frame changes: a clear error
     /// naming the clip, and reconstructed frames still with `--from-database`.
     #[test]

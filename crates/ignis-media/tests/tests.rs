@@ -1220,6 +1220,13 @@ mod roundtrip {
                 path.display()
             );
             assert_eq!(read_all(&path).len(), 5);
+            // timed by the numbers (frames 0, 1, 2, 4, 7 left): the steps over 3 and over
+            // 5, 6 are the uneven ones
+            let t = frame_timing(&path).unwrap().expect("a gap's timing");
+            assert!(t.from_frame_numbers());
+            assert_eq!(t.uneven_steps(), [2, 3], "{:?}", t.steps());
+            assert_eq!(t.nominal_fps(), DEFAULT_SEQUENCE_FPS);
+            assert_eq!(t.len(), 5);
         }
     }
 

@@ -71,6 +71,7 @@ pub struct Args {
     /// origin): one fire of several, a flame away from a lit wall or a timecode, a picture
     /// without its letterbox bars. Everything (the database, the search, the matte, the
     /// camera's steadying) works on that part alone, and it is the output's own size.
+    /// Also as WIDTHxHEIGHT+X+Y, or ffmpeg cropdetect's crop=W:H:X:Y pasted as is.
     /// Example: --crop 240,60,480,420
     #[arg(long, value_parser = crate::args::crop)]
     pub crop: Option<ignis_media::Rect>,
@@ -322,9 +323,11 @@ pub fn resolve_window(path: &Path, range: Option<Range<usize>>) -> Result<(Range
     let window = match (range, count) {
         (Some(r), _) if r.start >= r.end => bail!("--range {}..{} is empty", r.start, r.end),
         (Some(r), Some(n)) if r.end > n => bail!(
-            "--range {}..{} ends past the clip's last frame ({n} frames: 0..{n}); use an END ≤ {n}",
+            "--range {}..{} ends past the clip's last frame ({n} frames: 0..{n}); use an END ≤ {n}{}",
             r.start,
-            r.end
+            r.end,
+            ignis_media::file_numbers_hint(path, r.start as u64, Some(r.end as u64))
+                .map_or(String::new(), |h| format!("; {h}"))
         ),
         (Some(r), _) => r,
         (None, Some(n)) => 0..n,
@@ -1511,12 +1514,16 @@ pub struct WindowTiming {
     pub steps: (f64, f64),
     /// Frames in the window (at least two).
     pub frames: usize,
+    /// The times are an image sequence's frame numbers, frames missing from it
+    /// ([`ignis_media::FrameTiming::from_frame_numbers`]): its uneven steps are gaps.
+    pub numbered: bool,
 }
 
 impl WindowTiming {
     /// `path`'s frame timing over `window` (clamped to the clip) when its rate varies
-    /// there; `None` for a constant rate or a source without frame times (image sequences,
-    /// GIFs) or whose times cannot be read (the frames then play at the average rate).
+    /// there, or an image sequence's when frames are missing there; `None` for a constant
+    /// rate, a sequence without gaps or a source without frame times (GIFs) or whose times
+    /// cannot be read (the frames then play at the average rate).
     pub fn of(path: &Path, window: Range<usize>) -> Option<WindowTiming> {
         let t = ignis_media::frame_timing(path)
             .ok()
@@ -1528,7 +1535,28 @@ impl WindowTiming {
             uneven: t.uneven_steps().to_vec(),
             steps: t.step_range(),
             frames: t.len(),
+            numbered: t.from_frame_numbers(),
         })
+    }
+
+    /// The rate the window's frames play at when taken one after another as if evenly
+    /// spaced: a video's average over the time they span (its container's rate), a
+    /// sequence's own rate.
+    pub fn played_fps(&self) -> f64 {
+        if self.numbered {
+            self.nominal_fps
+        } else {
+            self.average_fps
+        }
+    }
+
+    /// What a loop taken from the whole window, across its uneven steps, does wrong.
+    pub fn uneven_effect(&self) -> &'static str {
+        if self.numbered {
+            "so the loop may jump where frames are missing"
+        } else {
+            "so parts of the loop may play faster or slower than they were shot"
+        }
     }
 
     /// The longest stretch of window frames joined by nominal steps alone (the first of
@@ -1562,6 +1590,12 @@ impl WindowTiming {
 
     /// What the timing is, said in a clause.
     fn describe(&self) -> String {
+        if self.numbered {
+            return format!(
+                "frames are missing from the sequence ({})",
+                self.steps_off()
+            );
+        }
         format!(
             "the frame rate varies ({:.3} fps nominal, {:.3} on average; {})",
             self.nominal_fps,
@@ -1570,8 +1604,17 @@ impl WindowTiming {
         )
     }
 
-    /// How many steps are off the nominal rate, and how far apart the frames are.
+    /// How many steps are off the nominal rate, and how far apart the frames are (a
+    /// sequence: how many steps jump over missing frames, and the most in a row).
     pub fn steps_off(&self) -> String {
+        if self.numbered {
+            let most = ((self.steps.1 * self.nominal_fps).round() as u64).saturating_sub(1);
+            return format!(
+                "{} of {} steps jump over missing frames, at most {most} in a row",
+                self.uneven.len(),
+                self.frames - 1,
+            );
+        }
         format!(
             "{} of {} steps off it, frames {:.1}–{:.1} ms apart",
             self.uneven.len(),
@@ -1993,8 +2036,13 @@ pub fn make_loop_sized(
             match even {
                 Ok(c) => {
                     g.say(format!(
-                        "timing: {}; the loop comes from evenly timed frames and is written at {:.3} fps",
+                        "timing: {}; the loop comes from {} and is written at {:.3} fps",
                         t.describe(),
+                        if t.numbered {
+                            "frames without a gap"
+                        } else {
+                            "evenly timed frames"
+                        },
                         t.nominal_fps
                     ));
                     (c, t.nominal_fps)
@@ -2002,11 +2050,12 @@ pub fn make_loop_sized(
                 Err(err) => match err.downcast_ref::<Uneven>() {
                     Some(u) => {
                         g.say(format!(
-                            "warning: {}, and {u}; looking in the whole window, written at the average {:.3} fps, \
-                             so parts of the loop may play faster or slower than they were shot (a shorter --length \
-                             fits an even stretch)",
+                            "warning: {}, and {u}; looking in the whole window, written at {} {:.3} fps, \
+                             {} (a shorter --length fits an even stretch)",
                             t.describe(),
-                            fps
+                            if t.numbered { "its" } else { "the average" },
+                            fps,
+                            t.uneven_effect()
                         ));
                         let any = search_and_choose(
                             first,

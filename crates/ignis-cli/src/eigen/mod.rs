@@ -249,7 +249,8 @@ pub struct FrameSelect {
     /// Only this rectangle X,Y,WIDTH,HEIGHT of every video input's frames (source pixels,
     /// top-left origin): one fire of several, a flame away from a lit wall. Recorded in
     /// the database, so renders from the footage cut it again. A config's clips take
-    /// `crop = [x, y, width, height]`. Example: --crop 240,60,480,420
+    /// `crop = [x, y, width, height]`. Also as WIDTHxHEIGHT+X+Y, or ffmpeg cropdetect's
+    /// crop=W:H:X:Y. Example: --crop 240,60,480,420
     #[arg(long, value_parser = crate::args::crop)]
     pub crop: Option<ignis_media::Rect>,
 }
@@ -409,6 +410,22 @@ pub fn train(a: TrainArgs, g: &Global) -> Result<()> {
     // a variable frame rate: every frame is taken once, as if evenly spaced
     for s in &specs {
         let Some(path) = &s.path else { continue };
+        // a sequence's file numbers given as its frames (`--start 1001` of shot.1001.exr …)
+        let count = ignis_media::probe(path).ok().and_then(|i| i.frame_count);
+        if let Some(n) = count.map(|n| n as usize) {
+            if s.start >= n || s.end.is_some_and(|e| e > n) {
+                let end = s.end.map(|e| e as u64);
+                if let Some(h) = ignis_media::file_numbers_hint(path, s.start as u64, end) {
+                    bail!(
+                        "clip `{}`: the frames {}..{} go past the end of {} ({n} frames); {h}",
+                        s.name,
+                        s.start,
+                        s.end.map_or(String::new(), |e| e.to_string()),
+                        path.display()
+                    );
+                }
+            }
+        }
         let window = s.start..s.end.unwrap_or(usize::MAX);
         if let Some(t) = loop_cmd::WindowTiming::of(path, window) {
             g.say(format!(
@@ -417,9 +434,10 @@ pub fn train(a: TrainArgs, g: &Global) -> Result<()> {
                 t.warning(
                     s.start,
                     &format!(
-                        "its frames are taken as if evenly spaced and played at the average {:.3} fps \
+                        "its frames are taken as if evenly spaced and played at {} {:.3} fps \
                          (eigen loop, eigen animate)",
-                        t.average_fps
+                        if t.numbered { "its" } else { "the average" },
+                        t.played_fps()
                     ),
                     |r| match is_toml {
                         true => format!("start = {}, end = {}", r.start, r.end),

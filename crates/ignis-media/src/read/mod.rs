@@ -339,7 +339,9 @@ impl DecodedFrame {
 pub(crate) enum Probed {
     Mp4(SourceInfo, h264::Mp4Probe),
     Ffmpeg(SourceInfo, ffmpeg::Plan),
-    Sequence(SourceInfo, Vec<PathBuf>),
+    /// The frames' files in playing order, and their frame numbers when every name has
+    /// one (of one form).
+    Sequence(SourceInfo, Vec<PathBuf>, Option<Vec<u64>>),
     Image(SourceInfo),
     Gif(SourceInfo),
     /// The flipbook and its sidecar.
@@ -351,7 +353,7 @@ impl Probed {
         match self {
             Probed::Mp4(i, _)
             | Probed::Ffmpeg(i, _)
-            | Probed::Sequence(i, _)
+            | Probed::Sequence(i, ..)
             | Probed::Image(i)
             | Probed::Gif(i)
             | Probed::Flipbook(i, _) => i,
@@ -365,12 +367,30 @@ pub fn probe(path: &Path) -> Result<SourceInfo> {
     Ok(probe_inner(path, ffmpeg_available())?.info().clone())
 }
 
+/// When `path` is an image sequence whose files are numbered from above 0
+/// (`shot.1001.exr` …) and frames `start..end` were asked for by file number: the clause
+/// that says frames count from 0 in the order read, and which frames those file numbers
+/// are (`frames count from 0 in the order read, not by file number (shot.1001.exr is frame
+/// 0): file numbers 1001..1005 are frames 0..4`). `None` for anything else, or when no
+/// file has a number in the range.
+pub fn file_numbers_hint(path: &Path, start: u64, end: Option<u64>) -> Option<String> {
+    if !(is_pattern(path) || path.is_dir()) {
+        return None;
+    }
+    match probe_inner(path, false).ok()? {
+        Probed::Sequence(_, files, Some(numbers)) => {
+            sequence::numbers_hint(&numbers, &files, start, end)
+        }
+        _ => None,
+    }
+}
+
 /// The files `path` reads: a sequence's frames in playing order (a directory or a printf
 /// pattern, as [`open`] finds them), a flipbook's sheet and sidecar, else the path itself —
 /// for fingerprinting a source.
 pub fn source_files(path: &Path) -> Result<Vec<PathBuf>> {
     if is_pattern(path) || path.is_dir() {
-        if let Probed::Sequence(_, files) = probe_inner(path, false)? {
+        if let Probed::Sequence(_, files, _) = probe_inner(path, false)? {
             return Ok(files);
         }
     }
@@ -549,7 +569,31 @@ pub(crate) fn open_inner(
     let probed = probe_inner(path, have_ffmpeg)?;
     let source_info = probed.info().clone();
     let (start, end) = match &opts.range {
-        Some(r) => r.resolve(source_info.fps, source_info.frame_count)?,
+        Some(r) => r
+            .resolve(source_info.fps, source_info.frame_count)
+            .map_err(|e| match (&probed, r.unit, e) {
+                // a range of file numbers (`1001..1050` of `shot.1001.exr` …): said so
+                (
+                    Probed::Sequence(_, files, Some(numbers)),
+                    RangeUnit::Frames,
+                    MediaError::BadParameter { name, reason },
+                ) => {
+                    let hint = sequence::numbers_hint(
+                        numbers,
+                        files,
+                        r.start as u64,
+                        r.end.map(|e| e as u64),
+                    );
+                    MediaError::BadParameter {
+                        name,
+                        reason: match hint {
+                            Some(h) => format!("{reason}; {h}"),
+                            None => reason,
+                        },
+                    }
+                }
+                (_, _, e) => e,
+            })?,
         None => (0, source_info.frame_count),
     };
     let mut out_size = source_info.size;
@@ -564,7 +608,7 @@ pub(crate) fn open_inner(
         Probed::Ffmpeg(info, plan) => Box::new(ffmpeg::FfmpegSource::start(
             &info, &plan, start, end, keep_8bit,
         )?),
-        Probed::Sequence(_, files) => Box::new(sequence::SequenceSource::new(files, start)),
+        Probed::Sequence(_, files, _) => Box::new(sequence::SequenceSource::new(files, start)),
         Probed::Image(info) => Box::new(sequence::SequenceSource::new(
             vec![info.path.clone()],
             start,

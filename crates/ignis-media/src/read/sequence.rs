@@ -308,21 +308,87 @@ fn frame_numbers<'a>(names: impl Iterator<Item = &'a str>) -> Option<Vec<u64>> {
     Some(out)
 }
 
+/// A sequence's own step between frame numbers: the commonest difference between
+/// neighbours in `numbers` (ascending), the smaller on a tie (1, or 2 for a render on
+/// twos); `None` without two different numbers.
+fn own_step(numbers: &[u64]) -> Option<u64> {
+    let mut counts = std::collections::BTreeMap::new();
+    for w in numbers.windows(2) {
+        let d = w[1].saturating_sub(w[0]);
+        if d > 0 {
+            *counts.entry(d).or_insert(0usize) += 1;
+        }
+    }
+    counts
+        .into_iter()
+        .max_by(|a, b| a.1.cmp(&b.1).then(b.0.cmp(&a.0)))
+        .map(|(step, _)| step)
+}
+
+/// When a sequence's frames are shown, from their numbers, where frames are missing from
+/// it: one frame per number at the sequence's own step, at [`DEFAULT_SEQUENCE_FPS`], so
+/// that a lost frame is a step twice as long, as a dropped frame is in a video's
+/// timestamps ([`super::frame_timing`]; the commands that loop or learn from footage then
+/// keep to the stretches without a gap, and `ignis convert` holds the frame before one).
+/// `None` when nothing is missing, the numbers do not rise from file to file, or more
+/// numbers are missing than there are files: names that count something else (a
+/// timestamp), not a few lost frames.
+pub(crate) fn gap_times(numbers: &[u64]) -> Option<Vec<f64>> {
+    if numbers.windows(2).any(|w| w[1] <= w[0]) {
+        return None;
+    }
+    let (missing, _) = missing_frames(numbers);
+    if missing == 0 || missing > numbers.len() as u64 {
+        return None;
+    }
+    let step = own_step(numbers)? as f64;
+    let first = numbers[0];
+    Some(
+        numbers
+            .iter()
+            .map(|&n| (n - first) as f64 / step / DEFAULT_SEQUENCE_FPS)
+            .collect(),
+    )
+}
+
+/// [`super::file_numbers_hint`] for a sequence of `files` numbered `numbers` (ascending),
+/// frames `start..end` asked for.
+pub(crate) fn numbers_hint(
+    numbers: &[u64],
+    files: &[PathBuf],
+    start: u64,
+    end: Option<u64>,
+) -> Option<String> {
+    let first = *numbers.first()?;
+    if first == 0 || numbers.windows(2).any(|w| w[1] <= w[0]) {
+        return None;
+    }
+    let i = numbers.partition_point(|&n| n < start);
+    let j = end.map_or(numbers.len(), |e| numbers.partition_point(|&n| n < e));
+    if i >= j {
+        return None;
+    }
+    let name = files.first()?.file_name()?.to_string_lossy();
+    let asked = match end {
+        Some(e) => format!("{start}..{e}"),
+        None => format!("{start}.."),
+    };
+    let frames = match end {
+        Some(_) => format!("{i}..{j}"),
+        None => format!("{i}.."),
+    };
+    Some(format!(
+        "frames count from 0 in the order read, not by file number ({name} is frame 0): file \
+         numbers {asked} are frames {frames}"
+    ))
+}
+
 /// How many frame numbers a sequence skips, and the first few of them: of `numbers`
 /// (ascending), those between the first and the last at the sequence's own step (the
 /// commonest difference between neighbours, the smaller on a tie: 1, or 2 for a render on
 /// twos) that have no file. A render farm's lost frame shows as a jump in the motion.
 pub(crate) fn missing_frames(numbers: &[u64]) -> (u64, Vec<u64>) {
-    let diffs: Vec<u64> = numbers
-        .windows(2)
-        .map(|w| w[1].saturating_sub(w[0]))
-        .filter(|&d| d > 0)
-        .collect();
-    let mut counts = std::collections::BTreeMap::new();
-    for &d in &diffs {
-        *counts.entry(d).or_insert(0usize) += 1;
-    }
-    let Some((&step, _)) = counts.iter().max_by(|a, b| a.1.cmp(b.1).then(b.0.cmp(a.0))) else {
+    let Some(step) = own_step(numbers) else {
         return (0, Vec::new());
     };
     let (mut count, mut first) = (0u64, Vec::new());
@@ -376,7 +442,7 @@ fn finish_sequence(path: &Path, files: Vec<PathBuf>, numbers: Option<&[u64]>) ->
         path: path.to_path_buf(),
         anamorphic: None,
     };
-    Ok(Probed::Sequence(info, files))
+    Ok(Probed::Sequence(info, files, numbers.map(<[u64]>::to_vec)))
 }
 
 /// Decodes the files of a sequence in order, from frame `start`.
@@ -608,6 +674,58 @@ mod tests {
             (u64::MAX - 2, vec![1, 2, 3, 4, 5])
         );
         assert_eq!(missing_frames(&[7]), (0, vec![]));
+    }
+
+    #[test]
+    fn gaps_are_timed_by_the_frame_numbers() {
+        let fps = DEFAULT_SEQUENCE_FPS;
+        // nothing missing: no times (one rate for all)
+        assert_eq!(gap_times(&[1, 2, 3, 4]), None);
+        assert_eq!(gap_times(&[0, 2, 4, 6]), None);
+        // frame 3 lost: a step twice as long; on twos, counted in steps of two
+        assert_eq!(
+            gap_times(&[1, 2, 4, 5]),
+            Some(vec![0.0, 1.0 / fps, 3.0 / fps, 4.0 / fps])
+        );
+        assert_eq!(
+            gap_times(&[10, 12, 16, 18]),
+            Some(vec![0.0, 1.0 / fps, 3.0 / fps, 4.0 / fps])
+        );
+        // more missing than there are files (a timestamp, not lost frames); numbers that
+        // do not rise from file to file (`f1`, `f01`)
+        assert_eq!(gap_times(&[1, 2, 3, 1_000_000]), None);
+        assert_eq!(gap_times(&[1, 1, 2, 4]), None);
+        assert_eq!(gap_times(&[]), None);
+        assert_eq!(gap_times(&[7]), None);
+    }
+
+    #[test]
+    fn file_numbers_are_said_as_frames() {
+        let files: Vec<PathBuf> = (1001..1011)
+            .map(|n| PathBuf::from(format!("s/shot.{n}.exr")))
+            .collect();
+        let numbers: Vec<u64> = (1001..1011).collect();
+        assert_eq!(
+            numbers_hint(&numbers, &files, 1001, Some(1005)).as_deref(),
+            Some(
+                "frames count from 0 in the order read, not by file number (shot.1001.exr is \
+                 frame 0): file numbers 1001..1005 are frames 0..4"
+            )
+        );
+        assert!(numbers_hint(&numbers, &files, 1004, None)
+            .unwrap()
+            .ends_with("file numbers 1004.. are frames 3.."));
+        // with file 1003 missing, file numbers 1002..1006 are the three frames 1..4
+        let (mut numbers, mut files) = (numbers, files);
+        numbers.remove(2);
+        files.remove(2);
+        assert!(numbers_hint(&numbers, &files, 1002, Some(1006))
+            .unwrap()
+            .ends_with("file numbers 1002..1006 are frames 1..4"));
+        // numbers no file has, or a sequence numbered from 0: nothing to say
+        assert_eq!(numbers_hint(&numbers, &files, 5000, Some(6000)), None);
+        assert_eq!(numbers_hint(&numbers, &files, 10, Some(20)), None);
+        assert_eq!(numbers_hint(&[0, 1, 2], &files[..3], 5, None), None);
     }
 
     proptest::proptest! {

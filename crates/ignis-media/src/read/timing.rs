@@ -37,6 +37,7 @@ pub struct FrameTiming {
     times: Vec<f64>,
     uneven: Vec<usize>,
     nominal_step: f64,
+    numbered: bool,
 }
 
 impl FrameTiming {
@@ -56,7 +57,39 @@ impl FrameTiming {
             times,
             uneven,
             nominal_step,
+            numbered: false,
         })
+    }
+
+    /// Timing from an image sequence's frame times, one frame every `step` seconds but
+    /// where frames are missing ([`frame_timing`]): its uneven steps are exactly those
+    /// not `step` long (as [`JUMP_RATIO`] judges), with no local rate to estimate, since
+    /// the numbers say it. `None` as [`Self::new`], or for a `step` not above 0.
+    pub(crate) fn numbered(times: Vec<f64>, step: f64) -> Option<FrameTiming> {
+        let t = FrameTiming::new(times)?;
+        if !(step > 0.0 && step.is_finite()) {
+            return None;
+        }
+        let uneven = t
+            .steps()
+            .iter()
+            .enumerate()
+            .filter(|(_, &s)| !(1.0 / JUMP_RATIO..=JUMP_RATIO).contains(&(s / step)))
+            .map(|(i, _)| i)
+            .collect();
+        Some(FrameTiming {
+            uneven,
+            nominal_step: step,
+            numbered: true,
+            ..t
+        })
+    }
+
+    /// Whether the times come from an image sequence's frame numbers, where frames are
+    /// missing from it (its uneven steps are the gaps), rather than from a video's
+    /// timestamps.
+    pub fn from_frame_numbers(&self) -> bool {
+        self.numbered
     }
 
     /// The frame times, ascending.
@@ -77,7 +110,12 @@ impl FrameTiming {
     /// The timing of frames `range` alone (`None` when fewer than two of them exist).
     pub fn window(&self, range: Range<usize>) -> Option<FrameTiming> {
         let r = range.start.min(self.len())..range.end.min(self.len());
-        FrameTiming::new(self.times[r].to_vec())
+        let times = self.times[r].to_vec();
+        if self.numbered {
+            FrameTiming::numbered(times, self.nominal_step)
+        } else {
+            FrameTiming::new(times)
+        }
     }
 
     /// The steps between consecutive frames, seconds (`len() - 1` values).
@@ -257,16 +295,24 @@ fn nominal_step(steps: &[f64], uneven: &[usize]) -> f64 {
 /// error as no timing: the frames still read, at the average rate): an MP4's sample table
 /// on the built-in path, the packets' timestamps (`ffprobe`, demuxing only) for what
 /// ffmpeg reads. `None` where there are none to read or they do not match the frames
-/// read: image sequences and stills (one rate for all), GIFs (their delays are whole
-/// hundredths of a second, so 30 fps alternates 3- and 4-cs frames that are not a change
-/// of rate), files whose timestamps are missing or whose packets are not one per frame.
+/// read: stills, image sequences with every frame (one rate for all), GIFs (their delays
+/// are whole hundredths of a second, so 30 fps alternates 3- and 4-cs frames that are not
+/// a change of rate), files whose timestamps are missing or whose packets are not one per
+/// frame. A sequence with frames missing is timed by its frame numbers, each gap a longer
+/// step ([`FrameTiming::from_frame_numbers`]).
 pub fn frame_timing(path: &Path) -> Result<Option<FrameTiming>> {
     use super::Probed;
     let probed = super::probe_inner(path, super::ffmpeg_available())?;
     let times = match &probed {
         Probed::Mp4(info, p) => super::h264::sample_times(path, p, info.frame_count)?,
         Probed::Ffmpeg(info, plan) => super::ffmpeg::timed_frames(path, plan, info.frame_count)?,
-        Probed::Sequence(..) | Probed::Image(_) | Probed::Gif(_) | Probed::Flipbook(..) => None,
+        Probed::Sequence(info, _, numbers) => {
+            return Ok(numbers
+                .as_deref()
+                .and_then(super::sequence::gap_times)
+                .and_then(|t| FrameTiming::numbered(t, 1.0 / info.fps)))
+        }
+        Probed::Image(_) | Probed::Gif(_) | Probed::Flipbook(..) => None,
     };
     Ok(times.and_then(FrameTiming::new))
 }
@@ -324,6 +370,28 @@ mod tests {
         // a window of the even part is even
         assert!(!t.window(25..60).unwrap().is_variable());
         assert!(t.window(5..6).is_none());
+    }
+
+    /// A sequence's gaps are its uneven steps however many there are (the local medians
+    /// of a video's timing would take two gaps in four steps for its rate), in any window.
+    #[test]
+    fn numbered_timing_is_uneven_exactly_at_the_gaps() {
+        let times: Vec<f64> = [0.0, 1.0, 2.0, 4.0, 7.0].iter().map(|n| n / 30.0).collect();
+        assert_eq!(FrameTiming::new(times.clone()).unwrap().uneven_steps(), [3]);
+        let t = FrameTiming::numbered(times, 1.0 / 30.0).unwrap();
+        assert_eq!(t.uneven_steps(), [2, 3]);
+        assert_eq!(t.nominal_fps(), 30.0);
+        assert!(t.from_frame_numbers());
+        let w = t.window(1..5).unwrap();
+        assert_eq!(
+            (w.uneven_steps(), w.from_frame_numbers()),
+            (&[1, 2][..], true)
+        );
+        assert!(!t.window(0..3).unwrap().is_variable());
+        assert!(FrameTiming::numbered(vec![0.0, 1.0], 0.0).is_none());
+        assert!(!FrameTiming::new(vec![0.0, 1.0])
+            .unwrap()
+            .from_frame_numbers());
     }
 
     #[test]
