@@ -74,7 +74,7 @@ pub fn run(args: &Args) -> Result<()> {
         )?;
         match &variable {
             Some(v) if v.numbered => outln!(
-                "fps:     {}; {}; `ignis loop` loops stretches without a gap",
+                "fps:     {}; {}; `ignis convert` holds the frame before each gap",
                 crate::args::fps_text(info.fps),
                 v.steps_off()
             )?,

@@ -1228,6 +1228,21 @@ mod roundtrip {
             assert_eq!(t.nominal_fps(), DEFAULT_SEQUENCE_FPS);
             assert_eq!(t.len(), 5);
         }
+        // names whose numbers skip more than there are files count something else (a time
+        // of day): said, read one frame per file, no timing
+        let odd = dir.path().join("odd");
+        std::fs::create_dir(&odd).unwrap();
+        for (k, n) in [1, 2, 3, 1000].into_iter().enumerate() {
+            write_png(&odd.join(format!("t{n}.png")), &frames[k]).unwrap();
+        }
+        let info = probe(&odd).unwrap();
+        assert_eq!(
+            info.codec,
+            "png sequence, its numbers skip 996, more than it has files (times or takes, not \
+             lost frames): read one frame per file"
+        );
+        assert_eq!(read_all(&odd).len(), 4);
+        assert!(frame_timing(&odd).unwrap().is_none());
     }
 
     #[test]

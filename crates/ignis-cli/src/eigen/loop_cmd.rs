@@ -1550,15 +1550,6 @@ impl WindowTiming {
         }
     }
 
-    /// What a loop taken from the whole window, across its uneven steps, does wrong.
-    pub fn uneven_effect(&self) -> &'static str {
-        if self.numbered {
-            "so the loop may jump where frames are missing"
-        } else {
-            "so parts of the loop may play faster or slower than they were shot"
-        }
-    }
-
     /// The longest stretch of window frames joined by nominal steps alone (the first of
     /// the longest).
     pub fn longest_even(&self) -> Range<usize> {
@@ -2036,13 +2027,8 @@ pub fn make_loop_sized(
             match even {
                 Ok(c) => {
                     g.say(format!(
-                        "timing: {}; the loop comes from {} and is written at {:.3} fps",
+                        "timing: {}; the loop comes from evenly timed frames and is written at {:.3} fps",
                         t.describe(),
-                        if t.numbered {
-                            "frames without a gap"
-                        } else {
-                            "evenly timed frames"
-                        },
                         t.nominal_fps
                     ));
                     (c, t.nominal_fps)
@@ -2050,12 +2036,11 @@ pub fn make_loop_sized(
                 Err(err) => match err.downcast_ref::<Uneven>() {
                     Some(u) => {
                         g.say(format!(
-                            "warning: {}, and {u}; looking in the whole window, written at {} {:.3} fps, \
-                             {} (a shorter --length fits an even stretch)",
+                            "warning: {}, and {u}; looking in the whole window, written at the average {:.3} fps, \
+                             so parts of the loop may play faster or slower than they were shot (a shorter --length \
+                             fits an even stretch)",
                             t.describe(),
-                            if t.numbered { "its" } else { "the average" },
-                            fps,
-                            t.uneven_effect()
+                            fps
                         ));
                         let any = search_and_choose(
                             first,
@@ -2262,6 +2247,22 @@ pub fn run(a: &Args, g: &Global) -> Result<()> {
     // a variable rate: seconds are counted at the rate the loop will be written at
     let timing = WindowTiming::of(&a.input, window.clone());
     let fps = timing.as_ref().map_or(fps, |t| t.nominal_fps);
+    // A sequence's missing frames are single jumps, not stretches played at another
+    // speed: the search's own measure (the loop's largest step on the footage's frames)
+    // judges each gap by the jump it makes, where keeping to the stretches without one
+    // loses loops across gaps nobody sees (a slow flame's step over a lost frame can be
+    // smaller than its median step).
+    let timing = match timing {
+        Some(t) if t.numbered => {
+            g.say(format!(
+                "timing: {}; the loop is chosen by its frames' steps, a gap counting as the \
+                 jump it makes",
+                t.describe()
+            ));
+            None
+        }
+        t => t,
+    };
     let length = loops::parse_length(&a.length, fps)?;
     let need = loops::min_window(&SearchParams::new(length, 1));
     if length > window.len() || window.len() < need {

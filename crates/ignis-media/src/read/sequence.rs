@@ -338,7 +338,7 @@ pub(crate) fn gap_times(numbers: &[u64]) -> Option<Vec<f64>> {
         return None;
     }
     let (missing, _) = missing_frames(numbers);
-    if missing == 0 || missing > numbers.len() as u64 {
+    if missing == 0 || !lost_frames(missing, numbers.len()) {
         return None;
     }
     let step = own_step(numbers)? as f64;
@@ -383,6 +383,13 @@ pub(crate) fn numbers_hint(
     ))
 }
 
+/// Whether `missing` numbers skipped by a sequence of `files` files are frames lost from
+/// it (a render farm's failed frames, a few dropped ones) rather than names that count
+/// something else (times of day, take numbers): no more of them than there are files.
+fn lost_frames(missing: u64, files: usize) -> bool {
+    missing <= files as u64
+}
+
 /// How many frame numbers a sequence skips, and the first few of them: of `numbers`
 /// (ascending), those between the first and the last at the sequence's own step (the
 /// commonest difference between neighbours, the smaller on a tie: 1, or 2 for a render on
@@ -423,7 +430,16 @@ fn finish_sequence(path: &Path, files: Vec<PathBuf>, numbers: Option<&[u64]>) ->
         }
     }
     let mut codec = format!("{} sequence", codec_of(&files[0]));
-    if let Some((n, first)) = numbers.map(missing_frames).filter(|m| m.0 > 0) {
+    if let Some((n, _)) = numbers
+        .map(missing_frames)
+        .filter(|m| !lost_frames(m.0, files.len()))
+        .filter(|m| m.0 > 0)
+    {
+        codec = format!(
+            "{codec}, its numbers skip {n}, more than it has files (times or takes, not lost \
+             frames): read one frame per file"
+        );
+    } else if let Some((n, first)) = numbers.map(missing_frames).filter(|m| m.0 > 0) {
         let listed: Vec<String> = first.iter().map(u64::to_string).collect();
         let more = if n > first.len() as u64 { ", …" } else { "" };
         codec = format!(
