@@ -31,7 +31,7 @@ pub fn run(args: &Args) -> Result<()> {
             "path": info.path,
             "frames": info.frame_count,
             "fps": info.fps,
-            "duration_s": duration(&info),
+            "duration_s": duration(&info, variable.as_ref()),
             "width": info.size.width,
             "height": info.size.height,
             "codec": info.codec,
@@ -66,7 +66,7 @@ pub fn run(args: &Args) -> Result<()> {
         outln!("file:    {}", info.path.display())?;
         outln!(
             "frames:  {}",
-            match (info.frame_count, duration(&info)) {
+            match (info.frame_count, duration(&info, variable.as_ref())) {
                 (Some(n), Some(d)) => format!("{n} ({d:.2} s)"),
                 (Some(n), None) => n.to_string(),
                 (None, _) => "unknown (container does not say)".into(),
@@ -139,8 +139,13 @@ pub fn run(args: &Args) -> Result<()> {
 
 /// How long the source plays: its frames at its (average) rate, as a player shows them.
 /// `None` when the frame count is unknown or the rate is not a positive number.
-fn duration(info: &ignis_media::SourceInfo) -> Option<f64> {
+/// How long `info`'s frames play: at its rate, or for a sequence with frames missing
+/// (`timing`), from its first frame's number to one step past its last.
+fn duration(info: &ignis_media::SourceInfo, timing: Option<&WindowTiming>) -> Option<f64> {
     let n = info.frame_count?;
+    if let Some(t) = timing.filter(|t| t.numbered && t.frames as u64 == n) {
+        return Some((n - 1) as f64 / t.average_fps + 1.0 / t.nominal_fps);
+    }
     (info.fps.is_finite() && info.fps > 0.0).then(|| n as f64 / info.fps)
 }
 

@@ -2682,6 +2682,11 @@ mod loop_sequence {
             let info: serde_json::Value =
                 serde_json::from_slice(&ignis_ok(&["info", "--json", src]).stdout).unwrap();
             assert_eq!(info["frames"], 58, "{info}");
+            // numbers 0..=59 at 30 fps: 2 s, the lost frames' time included
+            assert!(
+                (info["duration_s"].as_f64().unwrap() - 2.0).abs() < 1e-9,
+                "{info}"
+            );
             let v = &info["variable_frame_rate"];
             assert_eq!(v["from_frame_numbers"], true, "{info}");
             assert_eq!(
