@@ -48,6 +48,11 @@ fn ignis_ok(args: &[&str]) -> Output {
     o
 }
 
+/// What `ignis ARGS…` printed on stdout, asserting it succeeded.
+fn said_ok(args: &[&str]) -> String {
+    String::from_utf8_lossy(&ignis_ok(args).stdout).into_owned()
+}
+
 /// `ignis classic --size SIZE --frames FRAMES EXTRA… -q -o OUT`.
 fn classic(size: &str, frames: &str, extra: &[&str], out: &Path) -> Output {
     let mut a = vec!["classic", "--size", size, "--frames", frames];
@@ -485,7 +490,7 @@ mod info {
         let cut = t.path().join("cut.mp4");
         std::fs::write(&cut, &bytes[..mdat + 4 + 64]).unwrap();
         let c = cut.to_str().unwrap();
-        let human = String::from_utf8_lossy(&ignis_ok(&["info", c]).stdout).to_string();
+        let human = said_ok(&["info", c]);
         assert!(
             human.contains("size:    320x240")
                 && human.contains("warning: the first frame of")
@@ -2693,7 +2698,7 @@ mod loop_sequence {
                 (v["uneven_steps"].as_u64(), v["steps"].as_u64()),
                 (Some(1), Some(57))
             );
-            let text = String::from_utf8_lossy(&ignis_ok(&["info", src]).stdout).to_string();
+            let text = said_ok(&["info", src]);
             assert!(
                 text.contains("1 of 57 steps jump over missing frames, at most 2 in a row"),
                 "{text}"
@@ -2701,20 +2706,16 @@ mod loop_sequence {
         }
         let out = t.path().join("loop.png");
         let cache = t.path().join("cache");
-        let said = String::from_utf8_lossy(
-            &ignis_ok(&[
-                "loop",
-                pat,
-                "--length",
-                "16",
-                "--cache",
-                cache.to_str().unwrap(),
-                "-o",
-                out.to_str().unwrap(),
-            ])
-            .stdout,
-        )
-        .to_string();
+        let said = said_ok(&[
+            "loop",
+            pat,
+            "--length",
+            "16",
+            "--cache",
+            cache.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+        ]);
         assert!(
             said.contains("timing: frames are missing from the sequence (1 of 57 steps")
                 && said.contains("the loop is chosen by its frames' steps"),
@@ -2722,10 +2723,7 @@ mod loop_sequence {
         );
         // training takes every frame once: said, with the longest stretch without a gap
         let db = t.path().join("fire.db");
-        let said = String::from_utf8_lossy(
-            &ignis_ok(&["eigen", "train", pat, "-o", db.to_str().unwrap()]).stdout,
-        )
-        .to_string();
+        let said = said_ok(&["eigen", "train", pat, "-o", db.to_str().unwrap()]);
         assert!(
             said.contains("frames are missing from the sequence (1 of 57 steps")
                 && said
@@ -2734,9 +2732,7 @@ mod loop_sequence {
         );
         // convert: 58 frames read, the one before the gap held for three
         let c = t.path().join("c.png");
-        let said =
-            String::from_utf8_lossy(&ignis_ok(&["convert", dir, "-o", c.to_str().unwrap()]).stdout)
-                .to_string();
+        let said = said_ok(&["convert", dir, "-o", c.to_str().unwrap()]);
         assert!(said.contains("(1 held longer, 0 left out)"), "{said}");
         let meta = read_json(&t.path().join("c.json"));
         assert_eq!(meta["frame_count"], 60, "{meta}");
@@ -3455,7 +3451,7 @@ fn a_keyed_element_keeps_its_own_alpha() {
     let v: serde_json::Value =
         serde_json::from_slice(&ignis_ok(&["info", "--json", p]).stdout).unwrap();
     assert_eq!(v["see_through_first_frame"], share, "{v}");
-    let human = String::from_utf8_lossy(&ignis_ok(&["info", p]).stdout).to_string();
+    let human = said_ok(&["info", p]);
     assert!(
         human.contains(&format!(
             "alpha:   its own (a keyed element: {:.0} % of the first frame see-through)",
@@ -3652,7 +3648,7 @@ fn eigen_clips_cut_from_part_of_the_frame() {
         serde_json::json!([32, 16, 32, 32]),
         "{info}"
     );
-    let text = String::from_utf8_lossy(&ignis_ok(&["eigen", "info", d]).stdout).to_string();
+    let text = said_ok(&["eigen", "info", d]);
     assert!(text.contains("32x32 cut at 32,16"), "{text}");
     // a loop of each clip is its part's size
     for (clip, w, h) in [("left", 24, 40), ("right", 32, 32)] {
@@ -4250,8 +4246,7 @@ mod variable_frame_rate {
         assert_eq!(v["nominal_fps"], 25.0, "{info}");
         assert_eq!(v["uneven_steps"], 25, "{info}");
         assert!((info["fps"].as_f64().unwrap() - 21.5).abs() < 0.5, "{info}");
-        let text = String::from_utf8_lossy(&ignis_ok(&["info", clip.to_str().unwrap()]).stdout)
-            .to_string();
+        let text = said_ok(&["info", clip.to_str().unwrap()]);
         assert!(text.contains("variable: 25.000 nominal"), "{text}");
 
         let cache = t.path().join("cache");
@@ -4318,26 +4313,22 @@ mod variable_frame_rate {
         };
         let out = t.path().join("late.png");
         let cache = t.path().join("cache");
-        let said = String::from_utf8_lossy(
-            &ignis_ok(&[
-                "loop",
-                clip.to_str().unwrap(),
-                "--length",
-                "1.6s",
-                "--seconds",
-                "4.4..",
-                "--train-size",
-                "16x24",
-                "--keep",
-                "12",
-                "--cache",
-                cache.to_str().unwrap(),
-                "-o",
-                out.to_str().unwrap(),
-            ])
-            .stdout,
-        )
-        .to_string();
+        let said = said_ok(&[
+            "loop",
+            clip.to_str().unwrap(),
+            "--length",
+            "1.6s",
+            "--seconds",
+            "4.4..",
+            "--train-size",
+            "16x24",
+            "--keep",
+            "12",
+            "--cache",
+            cache.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+        ]);
         assert!(said.contains("--seconds 4.4..: frames 85..145"), "{said}");
         let line = said
             .lines()
@@ -4379,19 +4370,15 @@ mod variable_frame_rate {
         };
         let c = clip.to_str().unwrap();
         let db = t.path().join("fire.db");
-        let said = String::from_utf8_lossy(
-            &ignis_ok(&[
-                "eigen",
-                "train",
-                c,
-                "--train-size",
-                "16x24",
-                "-o",
-                db.to_str().unwrap(),
-            ])
-            .stdout,
-        )
-        .to_string();
+        let said = said_ok(&[
+            "eigen",
+            "train",
+            c,
+            "--train-size",
+            "16x24",
+            "-o",
+            db.to_str().unwrap(),
+        ]);
         assert!(
             said.contains("warning: clip `phone`: the frame rate varies (25.000 fps nominal")
                 && said
