@@ -328,8 +328,8 @@ fn own_step(numbers: &[u64]) -> Option<u64> {
 /// When a sequence's frames are shown, from their numbers, where frames are missing from
 /// it: one frame per number at the sequence's own step, at [`DEFAULT_SEQUENCE_FPS`], so
 /// that a lost frame is a step twice as long, as a dropped frame is in a video's
-/// timestamps ([`super::frame_timing`]; the commands that loop or learn from footage then
-/// keep to the stretches without a gap, and `ignis convert` holds the frame before one).
+/// timestamps ([`super::frame_timing`]: `ignis convert` then holds the frame before each
+/// gap, `--seconds` counts by the numbers, and training names the stretches without one).
 /// `None` when nothing is missing, the numbers do not rise from file to file, or more
 /// numbers are missing than there are files: names that count something else (a
 /// timestamp), not a few lost frames.
@@ -430,24 +430,22 @@ fn finish_sequence(path: &Path, files: Vec<PathBuf>, numbers: Option<&[u64]>) ->
         }
     }
     let mut codec = format!("{} sequence", codec_of(&files[0]));
-    if let Some((n, _)) = numbers
-        .map(missing_frames)
-        .filter(|m| !lost_frames(m.0, files.len()))
-        .filter(|m| m.0 > 0)
-    {
-        codec = format!(
-            "{codec}, its numbers skip {n}, more than it has files (times or takes, not lost \
-             frames): read one frame per file"
-        );
-    } else if let Some((n, first)) = numbers.map(missing_frames).filter(|m| m.0 > 0) {
-        let listed: Vec<String> = first.iter().map(u64::to_string).collect();
-        let more = if n > first.len() as u64 { ", …" } else { "" };
-        codec = format!(
-            "{codec}, {n} frame{} missing ({}{more}): read without {}, a jump at each gap",
-            if n == 1 { "" } else { "s" },
-            listed.join(", "),
-            if n == 1 { "it" } else { "them" },
-        );
+    if let Some((n, first)) = numbers.map(missing_frames).filter(|m| m.0 > 0) {
+        codec = if lost_frames(n, files.len()) {
+            let listed: Vec<String> = first.iter().map(u64::to_string).collect();
+            let more = if n > first.len() as u64 { ", …" } else { "" };
+            format!(
+                "{codec}, {n} frame{} missing ({}{more}): read without {}, a jump at each gap",
+                if n == 1 { "" } else { "s" },
+                listed.join(", "),
+                if n == 1 { "it" } else { "them" },
+            )
+        } else {
+            format!(
+                "{codec}, its numbers skip {n}, more than it has files (times or takes, not \
+                 lost frames): read one frame per file"
+            )
+        };
     }
     let info = SourceInfo {
         size,
