@@ -410,8 +410,12 @@ pub fn train(a: TrainArgs, g: &Global) -> Result<()> {
     // a variable frame rate: every frame is taken once, as if evenly spaced
     for s in &specs {
         let Some(path) = &s.path else { continue };
-        // a sequence's file numbers given as its frames (`--start 1001` of shot.1001.exr …)
-        let count = ignis_media::probe(path).ok().and_then(|i| i.frame_count);
+        // a sequence's file numbers given as its frames (`--start 1001` of shot.1001.exr …);
+        // the whole clip (the usual case) needs no look
+        let bounded = s.start > 0 || s.end.is_some();
+        let count = bounded
+            .then(|| ignis_media::probe(path).ok().and_then(|i| i.frame_count))
+            .flatten();
         if let Some(n) = count.map(|n| n as usize) {
             if s.start >= n || s.end.is_some_and(|e| e > n) {
                 let end = s.end.map(|e| e as u64);

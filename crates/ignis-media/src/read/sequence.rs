@@ -334,7 +334,7 @@ fn own_step(numbers: &[u64]) -> Option<u64> {
 /// numbers are missing than there are files: names that count something else (a
 /// timestamp), not a few lost frames.
 pub(crate) fn gap_times(numbers: &[u64]) -> Option<Vec<f64>> {
-    if numbers.windows(2).any(|w| w[1] <= w[0]) {
+    if !rising(numbers) {
         return None;
     }
     let (missing, _) = missing_frames(numbers);
@@ -360,7 +360,7 @@ pub(crate) fn numbers_hint(
     end: Option<u64>,
 ) -> Option<String> {
     let first = *numbers.first()?;
-    if first == 0 || numbers.windows(2).any(|w| w[1] <= w[0]) {
+    if first == 0 || !rising(numbers) {
         return None;
     }
     let i = numbers.partition_point(|&n| n < start);
@@ -381,6 +381,11 @@ pub(crate) fn numbers_hint(
         "frames count from 0 in the order read, not by file number ({name} is frame 0): file \
          numbers {asked} are frames {frames}"
     ))
+}
+
+/// Whether every file's number is above the one before (not so for `f1`, `f01`).
+fn rising(numbers: &[u64]) -> bool {
+    numbers.windows(2).all(|w| w[0] < w[1])
 }
 
 /// Whether `missing` numbers skipped by a sequence of `files` files are frames lost from
