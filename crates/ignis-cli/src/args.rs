@@ -231,6 +231,74 @@ pub fn fps_text(fps: f64) -> String {
     short(fps)
 }
 
+/// `--sequence-fps`: a frame rate as `24`, `29.97` or `24000/1001`, within
+/// [`ignis_media::SEQUENCE_FPS_RANGE`].
+pub fn sequence_fps(s: &str) -> Result<f64, String> {
+    let (lo, hi) = (
+        *ignis_media::SEQUENCE_FPS_RANGE.start(),
+        *ignis_media::SEQUENCE_FPS_RANGE.end(),
+    );
+    let how = "write it as 24, 25, 29.97 or 24000/1001";
+    let number = |v: &str| v.trim().parse::<f64>().ok().filter(|v| v.is_finite());
+    let fps = match s.split_once('/') {
+        Some((n, d)) => match (number(n), number(d)) {
+            (Some(n), Some(d)) if d > 0.0 => n / d,
+            _ => return Err(format!("`{s}` is not a frame rate; {how}")),
+        },
+        None => number(s).ok_or_else(|| format!("`{s}` is not a frame rate; {how}"))?,
+    };
+    if !(lo..=hi).contains(&fps) {
+        return Err(format!(
+            "{s} fps is outside {lo}..{hi}; give the rate the sequence was shot or rendered at ({how})"
+        ));
+    }
+    Ok(fps)
+}
+
+/// The rate an image-sequence input is read at (`--sequence-fps`), for the commands that
+/// read footage.
+#[derive(clap::Args, Clone, Debug, Default)]
+pub struct SequenceFps {
+    /// Frame rate of an image-sequence input, which stores none (default 30), as an
+    /// editor's "interpret footage" or ffmpeg's -framerate: 24, 25, 29.97, 24000/1001.
+    /// Seconds, durations and the output's rate follow it; videos, GIFs and flipbooks keep
+    /// their own rates.
+    #[arg(long, value_name = "FPS", value_parser = sequence_fps)]
+    pub sequence_fps: Option<f64>,
+}
+
+impl SequenceFps {
+    /// Sets the rate for this process, before anything is read, and warns (stderr) for
+    /// each of `inputs` that has a rate of its own, which is kept.
+    pub fn apply(&self, inputs: &[&std::path::Path]) -> anyhow::Result<()> {
+        let Some(fps) = self.sequence_fps else {
+            return Ok(());
+        };
+        ignis_media::set_sequence_fps(fps)?;
+        for info in inputs.iter().filter_map(|p| ignis_media::probe(p).ok()) {
+            if let Some(w) = own_rate_warning(fps, &info) {
+                eprintln!("{w}");
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The warning for `--sequence-fps FPS` given with `info`'s source when it is not an image
+/// sequence or still (a video, GIF or flipbook keeps its own rate).
+fn own_rate_warning(fps: f64, info: &ignis_media::SourceInfo) -> Option<String> {
+    use ignis_media::Decoder;
+    (!matches!(info.decoder, Decoder::ImageSequence | Decoder::Image)).then(|| {
+        format!(
+            "warning: --sequence-fps {} is for image sequences; {} has its own rate, {} fps, \
+             which is kept (to store another, `ignis convert` it with --fps)",
+            fps_text(fps),
+            info.path.display(),
+            fps_text(info.fps)
+        )
+    })
+}
+
 /// An ordinal for messages: `2nd`, `3rd`, `4th`, `11th`, `21st`.
 pub fn nth(k: u32) -> String {
     let suffix = match (k % 10, k % 100) {

@@ -12,7 +12,7 @@ use std::path::PathBuf;
 #[derive(clap::Args, Debug)]
 #[command(
     after_help = "Examples:\n  ignis convert candle.mp4 --range 100..160 --scale 128x128 -o candle.png   # flipbook\n  \
-ignis convert campfire.mp4 --seconds 2..4 -o frames/%04d.exr\n  ignis convert 'frames/%04d.png' --fps 24 -o clip.mp4\n  \
+ignis convert campfire.mp4 --seconds 2..4 -o frames/%04d.exr\n  ignis convert 'frames/%04d.png' --sequence-fps 24 -o clip.mp4    (a 24-fps sequence; it stores no rate)\n  \
 ignis convert loop.png -o loop.mp4                                         # a flipbook played as video\n\n\
 Footage is written at its own frame rate (--fps sets another). A variable-frame-rate clip (a phone's, \
 slowing down in low light) is written at its nominal rate with each frame shown for as long as it was shot, \
@@ -37,6 +37,8 @@ pub struct Args {
     /// Resize to WIDTHxHEIGHT (after cropping).
     #[arg(long)]
     pub scale: Option<Size>,
+    #[command(flatten)]
+    pub sequence: crate::args::SequenceFps,
     #[command(flatten)]
     pub out: OutputArgs,
 }
@@ -69,6 +71,7 @@ impl Args {
 
 pub fn run(args: &Args, g: &Global) -> Result<Vec<PathBuf>> {
     let input = &args.input;
+    args.sequence.apply(&[input])?;
     let mut read = args.read_options()?;
     let info = ignis_media::probe(input).with_context(|| format!("reading {}", input.display()))?;
     // timestamps that cannot be read: every frame once, at the probe's average rate

@@ -16,9 +16,12 @@ pub struct Args {
     /// Print one JSON object (for scripts).
     #[arg(long)]
     pub json: bool,
+    #[command(flatten)]
+    pub sequence: crate::args::SequenceFps,
 }
 
 pub fn run(args: &Args) -> Result<()> {
+    args.sequence.apply(&[&args.input])?;
     let info = ignis_media::probe(&args.input)
         .with_context(|| format!("reading {}", args.input.display()))?;
     let variable = WindowTiming::of(&args.input, 0..usize::MAX);
@@ -72,9 +75,17 @@ pub fn run(args: &Args) -> Result<()> {
                 (None, _) => "unknown (container does not say)".into(),
             }
         )?;
+        // a sequence's files hold no rate: say where this one came from
+        let given = match (info.decoder, args.sequence.sequence_fps) {
+            (ignis_media::Decoder::ImageSequence, Some(_)) => " (--sequence-fps)",
+            (ignis_media::Decoder::ImageSequence, None) => {
+                " (a sequence stores none: --sequence-fps sets it)"
+            }
+            _ => "",
+        };
         match &variable {
             Some(v) if v.numbered => outln!(
-                "fps:     {}; {}; `ignis convert` holds the frame before each gap",
+                "fps:     {}{given}; {}; `ignis convert` holds the frame before each gap",
                 crate::args::fps_text(info.fps),
                 v.steps_off()
             )?,
@@ -84,7 +95,7 @@ pub fn run(args: &Args) -> Result<()> {
                 v.nominal_fps,
                 v.steps_off()
             )?,
-            None => outln!("fps:     {}", crate::args::fps_text(info.fps))?,
+            None => outln!("fps:     {}{given}", crate::args::fps_text(info.fps))?,
         }
         match info.anamorphic {
             Some(a) => outln!(

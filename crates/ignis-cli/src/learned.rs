@@ -49,6 +49,8 @@ in twice the frames (a frame between two process steps shows the state interpola
 pub struct TrainArgs {
     /// Flame video or image sequence (a single flame on a dark background).
     pub input: PathBuf,
+    #[command(flatten)]
+    pub sequence: crate::args::SequenceFps,
     /// Frames to use, `START..END` (END exclusive) or `START..`; default all.
     #[arg(long)]
     pub range: Option<String>,
@@ -169,6 +171,7 @@ fn parse_range(s: &str) -> Result<ignis_media::FrameRange> {
 /// Reads the video, trains, writes the model. Returns the model.
 pub fn train(a: &TrainArgs, g: &Global) -> Result<FlameModel> {
     let path = &a.input;
+    a.sequence.apply(&[path])?;
     let opts = ignis_media::ReadOptions {
         range: a.range.as_deref().map(parse_range).transpose()?,
         crop: a

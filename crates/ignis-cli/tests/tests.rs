@@ -2748,6 +2748,157 @@ mod loop_sequence {
         assert!(info["variable_frame_rate"].is_null(), "{info}");
     }
 
+    /// An image sequence is read at the rate `--sequence-fps` gives (a 24-fps plate), as
+    /// an editor's "interpret footage": `info`'s duration, `--seconds`, a loop's length in
+    /// seconds and the rate written all follow it; a cached loop entry serves any rate; a
+    /// video keeps its own rate, with a warning; a rate that is not one is refused.
+    #[test]
+    fn a_sequence_is_read_at_the_rate_given() {
+        let t = tempfile::tempdir().unwrap();
+        let frames = t.path().join("frames");
+        std::fs::create_dir(&frames).unwrap();
+        let pattern = frames.join("%04d.png");
+        classic_ok("48x40", "60", &["--seed", "5", "--no-loop"], &pattern);
+        let pat = pattern.to_str().unwrap();
+        let info = |extra: &[&str]| -> serde_json::Value {
+            let mut a = vec!["info", "--json", pat];
+            a.extend_from_slice(extra);
+            serde_json::from_slice(&ignis_ok(&a).stdout).unwrap()
+        };
+        assert_eq!(
+            (info(&[])["fps"].as_f64(), info(&[])["duration_s"].as_f64()),
+            (Some(30.0), Some(2.0))
+        );
+        let v = info(&["--sequence-fps", "24"]);
+        assert_eq!(
+            (v["fps"].as_f64(), v["duration_s"].as_f64()),
+            (Some(24.0), Some(2.5)),
+            "{v}"
+        );
+        let v = info(&["--sequence-fps", "24000/1001"]);
+        assert!(
+            (v["fps"].as_f64().unwrap() - 24000.0 / 1001.0).abs() < 1e-9,
+            "{v}"
+        );
+        let text = said_ok(&["info", pat]);
+        assert!(
+            text.contains("fps:     30 (a sequence stores none: --sequence-fps sets it)"),
+            "{text}"
+        );
+        let text = said_ok(&["info", pat, "--sequence-fps", "25"]);
+        assert!(
+            text.contains("fps:     25 (--sequence-fps)\n")
+                && text.contains("frames:  60 (2.40 s)"),
+            "{text}"
+        );
+        // --seconds at the rate given: 1 s is 24 frames, written at 24 fps
+        let c = t.path().join("c.png");
+        ignis_ok(&[
+            "-q",
+            "convert",
+            pat,
+            "--sequence-fps",
+            "24",
+            "--seconds",
+            "0..1",
+            "-o",
+            c.to_str().unwrap(),
+        ]);
+        let m = read_json(&c.with_extension("json"));
+        assert_eq!(
+            (m["frame_count"].as_u64(), m["fps"].as_f64()),
+            (Some(24), Some(24.0)),
+            "{m}"
+        );
+        // a loop of 1 s: about 24 frames at 24 fps; the same entry, read at 30, plays at 30
+        let cache = t.path().join("cache");
+        let looped = |fps: Option<&str>, name: &str| {
+            let out = t.path().join(name);
+            let mut a = vec![
+                "loop",
+                pat,
+                "--length",
+                "1s",
+                "--cache",
+                cache.to_str().unwrap(),
+                "-o",
+                out.to_str().unwrap(),
+            ];
+            if let Some(f) = fps {
+                a.extend(["--sequence-fps", f]);
+            }
+            let said = said_ok(&a);
+            (said, read_json(&out.with_extension("json")))
+        };
+        let (said, m) = looped(Some("24"), "l24.png");
+        assert!(said.contains("cached the clip's database"), "{said}");
+        let n = m["frame_count"].as_u64().unwrap();
+        assert!(
+            m["fps"].as_f64() == Some(24.0) && (19..=29).contains(&n),
+            "{m}"
+        );
+        let (said, m) = looped(None, "l30.png");
+        assert!(!said.contains("cached the clip's database"), "{said}");
+        let n = m["frame_count"].as_u64().unwrap();
+        assert!(
+            m["fps"].as_f64() == Some(30.0) && (24..=36).contains(&n),
+            "{m}"
+        );
+        // eigen train records the rate given
+        let db = t.path().join("fire.db");
+        ignis_ok(&[
+            "-q",
+            "eigen",
+            "train",
+            pat,
+            "--sequence-fps",
+            "25",
+            "-o",
+            db.to_str().unwrap(),
+        ]);
+        let manifest = read_json(&db.join("manifest.json"));
+        assert_eq!(
+            manifest["clips"][0]["fps"].as_f64(),
+            Some(25.0),
+            "{manifest}"
+        );
+        // a GIF has its own rate: kept, with a warning
+        let gif = t.path().join("f.gif");
+        classic_ok("32x24", "6", &["--seed", "2", "--fps", "20"], &gif);
+        let r = ignis_ok(&[
+            "info",
+            "--json",
+            gif.to_str().unwrap(),
+            "--sequence-fps",
+            "24",
+        ]);
+        let v: serde_json::Value = serde_json::from_slice(&r.stdout).unwrap();
+        assert_eq!(v["fps"].as_f64(), Some(20.0), "{v}");
+        let err = String::from_utf8_lossy(&r.stderr);
+        assert!(
+            err.contains("--sequence-fps 24 is for image sequences")
+                && err.contains("its own rate, 20 fps, which is kept"),
+            "{err}"
+        );
+        // not a rate
+        for (bad, says) in [
+            ("0", "0 fps is outside 1..1000"),
+            ("24/0", "`24/0` is not a frame rate"),
+            ("fast", "`fast` is not a frame rate"),
+            ("NaN", "`NaN` is not a frame rate"),
+        ] {
+            let r = ignis(&[
+                "convert",
+                pat,
+                "--sequence-fps",
+                bad,
+                "-o",
+                c.to_str().unwrap(),
+            ]);
+            assert_fails(&r, says);
+        }
+    }
+
     /// A range given by file numbers (`1001..1005` of shot.1001.png …, as a compositor
     /// numbers frames) is refused as past the end, saying frames count from 0 in the order
     /// read and which frames those numbers are, for every command that takes a range;

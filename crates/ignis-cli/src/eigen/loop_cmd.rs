@@ -39,11 +39,13 @@ const CACHE_VERSION: u32 = 8;
 
 #[derive(clap::Args, Debug)]
 #[command(
-    after_help = "Examples:\n  ignis loop campfire.mp4 --length 4s -o loop.png\n  ignis loop candle.mp4 --length 120 -o loop.mp4\n  ignis loop fire.mov --length 2s --range 100..400 --method morph -o frames/%04d.png\n  ignis loop fire.mp4 --length 3s --cache /tmp/ignis-cache -o loop.gif\n  ignis loop bonfire.mp4 --length 4s --seconds 12..20.5 -o loop.png    (only that stretch of the clip, as a player's clock shows it)\n  ignis loop plates/%04d.exr --length 96 -o loop.png    (an image sequence: a frame count, as it has no frame rate)\n  ignis loop campfire.mp4 --length 4s --every 2 --motion-vectors --engine unity -o loop.png    (half the cells; the engine's motion-vector blend fills in)\n  ignis loop fireball.mp4 --length 2s --alpha emissive -o loop.png    (to composite over light backgrounds: the fire adds its light)\n  ignis loop campfire.mp4 --length 4s -o loop.mov    (ProRes 4444 with the matte as alpha, for compositing tools; needs ffmpeg)\n  ignis loop handheld.mp4 --length 3s --stabilise on -o loop.png    (hold the camera still even where auto would not; auto steadies a clear shake)\n  ignis loop bonfire.mp4 --length 4s --crop 640,120,720,900 -o loop.png    (only that part of the frame: one fire of several, or a picture inside letterbox bars)\n\nThe first run on a clip trains an Eigenfire database on it (about 20 s for 500 frames of 960x540 on 2 cores, 2 to 3 min for a minute of 1080p; footage over 1080p is trained at 1920 px on its longest side) and keeps it in the cache ($XDG_CACHE_HOME/ignis or ~/.cache/ignis, or --cache); later runs reuse it. The output has the footage's own size (or --crop's), colours and frame rate (1/N of it with --every N; --fps is refused), with the pre-processing mask's matte as alpha (a keyed element with its own alpha keeps that; --alpha opaque: none; --alpha emissive: the matted flame's own light as alpha, no dark fringe over light backgrounds); a .png flipbook's JSON records the measured loop_quality."
+    after_help = "Examples:\n  ignis loop campfire.mp4 --length 4s -o loop.png\n  ignis loop candle.mp4 --length 120 -o loop.mp4\n  ignis loop fire.mov --length 2s --range 100..400 --method morph -o frames/%04d.png\n  ignis loop fire.mp4 --length 3s --cache /tmp/ignis-cache -o loop.gif\n  ignis loop bonfire.mp4 --length 4s --seconds 12..20.5 -o loop.png    (only that stretch of the clip, as a player's clock shows it)\n  ignis loop plates/%04d.exr --sequence-fps 24 --length 4s -o loop.png    (an image sequence stores no rate: give the one it was shot or rendered at, or it is read at 30)\n  ignis loop campfire.mp4 --length 4s --every 2 --motion-vectors --engine unity -o loop.png    (half the cells; the engine's motion-vector blend fills in)\n  ignis loop fireball.mp4 --length 2s --alpha emissive -o loop.png    (to composite over light backgrounds: the fire adds its light)\n  ignis loop campfire.mp4 --length 4s -o loop.mov    (ProRes 4444 with the matte as alpha, for compositing tools; needs ffmpeg)\n  ignis loop handheld.mp4 --length 3s --stabilise on -o loop.png    (hold the camera still even where auto would not; auto steadies a clear shake)\n  ignis loop bonfire.mp4 --length 4s --crop 640,120,720,900 -o loop.png    (only that part of the frame: one fire of several, or a picture inside letterbox bars)\n\nThe first run on a clip trains an Eigenfire database on it (about 20 s for 500 frames of 960x540 on 2 cores, 2 to 3 min for a minute of 1080p; footage over 1080p is trained at 1920 px on its longest side) and keeps it in the cache ($XDG_CACHE_HOME/ignis or ~/.cache/ignis, or --cache); later runs reuse it. The output has the footage's own size (or --crop's), colours and frame rate (1/N of it with --every N; --fps is refused), with the pre-processing mask's matte as alpha (a keyed element with its own alpha keeps that; --alpha opaque: none; --alpha emissive: the matted flame's own light as alpha, no dark fringe over light backgrounds); a .png flipbook's JSON records the measured loop_quality."
 )]
 pub struct Args {
     /// The footage (any video or frame sequence `ignis info` reads).
     pub input: PathBuf,
+    #[command(flatten)]
+    pub sequence: crate::args::SequenceFps,
     /// Loop length: seconds (`4s`, at the clip's fps; for a variable-frame-rate clip, at
     /// the nominal rate `ignis info` prints, from stretches of frames at that rate) or
     /// frames (`120`); the loop found is within ±20% of it.
@@ -381,8 +383,28 @@ pub fn seconds_window(path: &Path, start: f64, end: Option<f64>) -> Result<Range
     Ok(a..b.min(n))
 }
 
-/// Opens (verifying) or builds the cache entry of `path` over `window`.
+/// Opens (verifying) or builds the cache entry of `path` over `window`. An image
+/// sequence's entry plays at the rate the sequence is read at now (`--sequence-fps`): its
+/// files hold pictures, not times, so one entry serves every rate.
 pub fn cached(
+    clip: Clip,
+    window: Range<usize>,
+    train_size: Size,
+    keep: usize,
+    cache_dir: &Path,
+    g: &Global,
+) -> Result<Cached> {
+    let path = clip.path;
+    let mut c = cached_entry(clip, window, train_size, keep, cache_dir, g)?;
+    if let Ok(info) = ignis_media::probe(path) {
+        if info.decoder == ignis_media::Decoder::ImageSequence {
+            c.fps = info.fps;
+        }
+    }
+    Ok(c)
+}
+
+fn cached_entry(
     clip: Clip,
     window: Range<usize>,
     train_size: Size,
@@ -2224,6 +2246,7 @@ fn seam_warning(seam: f64) -> Option<String> {
 /// `ignis loop`.
 pub fn run(a: &Args, g: &Global) -> Result<()> {
     let method = Method::parse(&a.method)?;
+    a.sequence.apply(&[&a.input])?;
     let range = match a.seconds {
         Some((start, end)) => {
             let r = seconds_window(&a.input, start, end)?;

@@ -152,6 +152,8 @@ pub struct TrainArgs {
     /// training configuration.
     #[arg(required = true)]
     pub inputs: Vec<PathBuf>,
+    #[command(flatten)]
+    pub sequence: crate::args::SequenceFps,
     /// Output database directory (replaced atomically).
     #[arg(short, long)]
     pub output: PathBuf,
@@ -383,6 +385,8 @@ fn read_preprocess(config: Option<&Path>) -> Result<PreprocessParams> {
 
 pub fn train(a: TrainArgs, g: &Global) -> Result<()> {
     let is_toml = a.inputs.len() == 1 && a.inputs[0].extension().is_some_and(|e| e == "toml");
+    let videos: Vec<&Path> = a.inputs.iter().map(PathBuf::as_path).collect();
+    a.sequence.apply(if is_toml { &[] } else { &videos })?;
     let (specs, mut pre, mut tp) = if is_toml {
         let p = &a.inputs[0];
         let text = crate::args::read_user_text(

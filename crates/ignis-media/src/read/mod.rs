@@ -46,7 +46,7 @@ pub use h264::avc_profile_name;
 #[doc(hidden)]
 pub use h264::decode_rgba8_count;
 pub(crate) use sequence::Pattern;
-pub use sequence::DEFAULT_SEQUENCE_FPS;
+pub use sequence::{sequence_fps, set_sequence_fps, DEFAULT_SEQUENCE_FPS, SEQUENCE_FPS_RANGE};
 pub use timing::{frame_timing, FrameTiming};
 
 /// Unit of a [`FrameRange`].
@@ -193,7 +193,8 @@ impl fmt::Display for Decoder {
 pub struct SourceInfo {
     /// Frame size in pixels, as read: upright and with square pixels ([`Self::anamorphic`]).
     pub size: Size,
-    /// Frames per second (image sequences and stills: [`DEFAULT_SEQUENCE_FPS`]).
+    /// Frames per second (image sequences and stills: [`sequence_fps`], by default
+    /// [`DEFAULT_SEQUENCE_FPS`]).
     pub fps: f64,
     /// Number of frames, when the container says so (`None` for e.g. GIF or WebM without
     /// a frame count).

@@ -12,6 +12,7 @@ use std::cmp::Ordering;
 use std::fs::File;
 use std::io::BufReader;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering as AtomicOrdering};
 
 use ignis_core::{RgbaFrame, Size};
 use image::ImageFormat;
@@ -20,8 +21,44 @@ use super::{Decoder, FrameSource, Probed, SourceInfo};
 use crate::convert;
 use crate::error::{MediaError, Result};
 
-/// Frame rate assumed for image sequences and stills, which do not store one.
+/// Frame rate assumed for image sequences and stills, which do not store one, unless the
+/// process sets another ([`set_sequence_fps`]).
 pub const DEFAULT_SEQUENCE_FPS: f64 = 30.0;
+
+/// The bits of the rate [`set_sequence_fps`] set; 0 while it is unset.
+static SEQUENCE_FPS_BITS: AtomicU64 = AtomicU64::new(0);
+
+/// The rate image sequences and stills are read at in this process ([`SourceInfo::fps`],
+/// their frames' times): [`DEFAULT_SEQUENCE_FPS`] unless [`set_sequence_fps`] set another.
+pub fn sequence_fps() -> f64 {
+    match SEQUENCE_FPS_BITS.load(AtomicOrdering::Relaxed) {
+        0 => DEFAULT_SEQUENCE_FPS,
+        bits => f64::from_bits(bits),
+    }
+}
+
+/// Sets the rate image sequences and stills are read at for the rest of this process, as
+/// an editor's "interpret footage" or ffmpeg's `-framerate` does: a sequence's files hold
+/// pictures, not times, and a 24-fps plate read at 30 plays fast. Process-wide, for a
+/// command-line tool's one setting (`ignis --sequence-fps`); videos, GIFs and flipbooks keep
+/// their own rates. Refused unless finite and in [`SEQUENCE_FPS_RANGE`].
+pub fn set_sequence_fps(fps: f64) -> Result<()> {
+    if !(fps.is_finite() && SEQUENCE_FPS_RANGE.contains(&fps)) {
+        return Err(MediaError::BadParameter {
+            name: "sequence fps",
+            reason: format!(
+                "{fps} is outside {}..={} frames per second",
+                SEQUENCE_FPS_RANGE.start(),
+                SEQUENCE_FPS_RANGE.end()
+            ),
+        });
+    }
+    SEQUENCE_FPS_BITS.store(fps.to_bits(), AtomicOrdering::Relaxed);
+    Ok(())
+}
+
+/// The rates [`set_sequence_fps`] accepts: from one frame a second to high-speed footage.
+pub const SEQUENCE_FPS_RANGE: std::ops::RangeInclusive<f64> = 1.0..=1000.0;
 
 const STILL_EXTENSIONS: &[&str] = &["png", "jpg", "jpeg", "exr", "tif", "tiff"];
 
@@ -96,7 +133,7 @@ pub(crate) fn probe_image(path: &Path) -> Result<Probed> {
     let size = dimensions(path)?;
     Ok(Probed::Image(SourceInfo {
         size,
-        fps: DEFAULT_SEQUENCE_FPS,
+        fps: sequence_fps(),
         frame_count: Some(1),
         codec: codec_of(path),
         decoder: Decoder::Image,
@@ -326,14 +363,14 @@ fn own_step(numbers: &[u64]) -> Option<u64> {
 }
 
 /// When a sequence's frames are shown, from their numbers, where frames are missing from
-/// it: one frame per number at the sequence's own step, at [`DEFAULT_SEQUENCE_FPS`], so
+/// it: one frame per number at the sequence's own step, at `fps` ([`sequence_fps`]), so
 /// that a lost frame is a step twice as long, as a dropped frame is in a video's
 /// timestamps ([`super::frame_timing`]: `ignis convert` then holds the frame before each
 /// gap, `--seconds` counts by the numbers, and training names the stretches without one).
 /// `None` when nothing is missing, the numbers do not rise from file to file, or more
 /// numbers are missing than there are files: names that count something else (a
 /// timestamp), not a few lost frames.
-pub(crate) fn gap_times(numbers: &[u64]) -> Option<Vec<f64>> {
+pub(crate) fn gap_times(numbers: &[u64], fps: f64) -> Option<Vec<f64>> {
     if !rising(numbers) {
         return None;
     }
@@ -346,7 +383,7 @@ pub(crate) fn gap_times(numbers: &[u64]) -> Option<Vec<f64>> {
     Some(
         numbers
             .iter()
-            .map(|&n| (n - first) as f64 / step / DEFAULT_SEQUENCE_FPS)
+            .map(|&n| (n - first) as f64 / step / fps)
             .collect(),
     )
 }
@@ -454,7 +491,7 @@ fn finish_sequence(path: &Path, files: Vec<PathBuf>, numbers: Option<&[u64]>) ->
     }
     let info = SourceInfo {
         size,
-        fps: DEFAULT_SEQUENCE_FPS,
+        fps: sequence_fps(),
         frame_count: Some(files.len() as u64),
         codec,
         decoder: Decoder::ImageSequence,
@@ -699,23 +736,34 @@ mod tests {
     fn gaps_are_timed_by_the_frame_numbers() {
         let fps = DEFAULT_SEQUENCE_FPS;
         // nothing missing: no times (one rate for all)
-        assert_eq!(gap_times(&[1, 2, 3, 4]), None);
-        assert_eq!(gap_times(&[0, 2, 4, 6]), None);
-        // frame 3 lost: a step twice as long; on twos, counted in steps of two
+        assert_eq!(gap_times(&[1, 2, 3, 4], fps), None);
+        assert_eq!(gap_times(&[0, 2, 4, 6], fps), None);
+        // frame 3 lost: a step twice as long; on twos, counted in steps of two (at the
+        // rate given)
         assert_eq!(
-            gap_times(&[1, 2, 4, 5]),
+            gap_times(&[1, 2, 4, 5], fps),
             Some(vec![0.0, 1.0 / fps, 3.0 / fps, 4.0 / fps])
         );
         assert_eq!(
-            gap_times(&[10, 12, 16, 18]),
-            Some(vec![0.0, 1.0 / fps, 3.0 / fps, 4.0 / fps])
+            gap_times(&[10, 12, 16, 18], 24.0),
+            Some(vec![0.0, 1.0 / 24.0, 3.0 / 24.0, 4.0 / 24.0])
         );
         // more missing than there are files (a timestamp, not lost frames); numbers that
         // do not rise from file to file (`f1`, `f01`)
-        assert_eq!(gap_times(&[1, 2, 3, 1_000_000]), None);
-        assert_eq!(gap_times(&[1, 1, 2, 4]), None);
-        assert_eq!(gap_times(&[]), None);
-        assert_eq!(gap_times(&[7]), None);
+        assert_eq!(gap_times(&[1, 2, 3, 1_000_000], fps), None);
+        assert_eq!(gap_times(&[1, 1, 2, 4], fps), None);
+        assert_eq!(gap_times(&[], fps), None);
+        assert_eq!(gap_times(&[7], fps), None);
+    }
+
+    #[test]
+    fn a_sequence_rate_that_is_not_one_is_refused() {
+        for bad in [0.0, -24.0, 0.5, 1000.5, f64::NAN, f64::INFINITY] {
+            let e = set_sequence_fps(bad).unwrap_err().to_string();
+            assert!(e.contains("outside 1..=1000 frames per second"), "{e}");
+        }
+        // a refused rate changes nothing (no test in this crate sets one: it is process-wide)
+        assert_eq!(sequence_fps(), DEFAULT_SEQUENCE_FPS);
     }
 
     #[test]

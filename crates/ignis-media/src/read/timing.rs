@@ -309,7 +309,7 @@ pub fn frame_timing(path: &Path) -> Result<Option<FrameTiming>> {
         Probed::Sequence(info, _, numbers) => {
             return Ok(numbers
                 .as_deref()
-                .and_then(super::sequence::gap_times)
+                .and_then(|n| super::sequence::gap_times(n, info.fps))
                 .and_then(|t| FrameTiming::numbered(t, 1.0 / info.fps)))
         }
         Probed::Image(_) | Probed::Gif(_) | Probed::Flipbook(..) => None,
