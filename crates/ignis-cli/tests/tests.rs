@@ -2902,7 +2902,7 @@ mod loop_sequence {
     /// A range given by file numbers (`1001..1005` of shot.1001.png …, as a compositor
     /// numbers frames) is refused as past the end, saying frames count from 0 in the order
     /// read and which frames those numbers are, for every command that takes a range;
-    /// nothing is written.
+    /// nothing is written. The loop made of such a sequence names its files.
     #[test]
     fn file_numbers_given_as_frames_are_translated_in_the_error() {
         let t = tempfile::tempdir().unwrap();
@@ -2950,6 +2950,34 @@ mod loop_sequence {
         let r = ignis(&["convert", pat, "--range", "8..12", "-o", o]);
         assert_fails(&r, "it has 10 frames: 0..10");
         assert!(!String::from_utf8_lossy(&r.stderr).contains("file number"));
+        // the loop's frames are named by file too: frames A..B are shot.{1001+A} to
+        // shot.{1000+B}
+        let cache = t.path().join("cache");
+        let said = said_ok(&[
+            "loop",
+            pat,
+            "--length",
+            "6",
+            "--cache",
+            cache.to_str().unwrap(),
+            "-o",
+            o,
+        ]);
+        let line = said.lines().find(|l| l.starts_with("loop: ")).unwrap();
+        let span = line["loop: source frames ".len()..]
+            .split(' ')
+            .next()
+            .unwrap();
+        let (a, b) = span.split_once("..").unwrap();
+        let (a, b): (u64, u64) = (a.parse().unwrap(), b.trim_end_matches(',').parse().unwrap());
+        assert!(
+            line.contains(&format!(
+                "(files shot.{}.png to shot.{}.png)",
+                1001 + a,
+                1000 + b
+            )),
+            "{line}"
+        );
     }
 
     /// A database trained on an image sequence notices when a frame changes: a clear error

@@ -2183,9 +2183,25 @@ pub fn make_loop_sized(
     })
 }
 
-/// Prints what a loop did.
-pub fn report(d: &Done, first: usize, g: &Global) {
+/// Prints what a loop did. `files`: an image sequence's files in the order read, so the
+/// loop's frames are also named by file (`shot.1066.exr`), as a compositor numbers them.
+pub fn report(d: &Done, first: usize, files: Option<&[PathBuf]>, g: &Global) {
     let b = &d.chosen.best;
+    let (a, z) = (first + b.candidate.start, first + b.candidate.end);
+    let named = files
+        .and_then(|f| {
+            Some((
+                f.get(a)?.file_name()?,
+                f.get(z.checked_sub(1)?)?.file_name()?,
+            ))
+        })
+        .map_or(String::new(), |(x, y)| {
+            format!(
+                " (files {} to {})",
+                x.to_string_lossy(),
+                y.to_string_lossy()
+            )
+        });
     let every = match d.chosen.every {
         1 => String::new(),
         k => format!(
@@ -2195,12 +2211,8 @@ pub fn report(d: &Done, first: usize, g: &Global) {
         ),
     };
     g.say(format!(
-        "loop: source frames {}..{}, {} ({} frames at {}{every})",
-        first + b.candidate.start,
-        first + b.candidate.end,
-        b.closing,
-        d.frames,
-        d.size
+        "loop: source frames {a}..{z}{named}, {} ({} frames at {}{every})",
+        b.closing, d.frames, d.size
     ));
     g.say(format!("why: {}", d.chosen.why));
     let p = d.chosen.predicted_of(b).quality;
@@ -2266,7 +2278,7 @@ pub fn run(a: &Args, g: &Global) -> Result<()> {
         crop: a.crop,
     };
     // a crop past the frame is refused before anything is read
-    clip.probe()?;
+    let info = clip.probe()?;
     // a variable rate: seconds are counted at the rate the loop will be written at
     let timing = WindowTiming::of(&a.input, window.clone());
     let fps = timing.as_ref().map_or(fps, |t| t.nominal_fps);
@@ -2339,7 +2351,10 @@ pub fn run(a: &Args, g: &Global) -> Result<()> {
         _ => {}
     }
     let d = make_loop_sized(&src, &ask, a.size, &a.out, g)?;
-    report(&d, window.start, g);
+    let files = (info.decoder == ignis_media::Decoder::ImageSequence)
+        .then(|| ignis_media::source_files(&a.input).ok())
+        .flatten();
+    report(&d, window.start, files.as_deref(), g);
     // keyed by the matte, or by the footage's own alpha
     if (alpha != "opaque" || c.translucent)
         && matches!(
@@ -2494,7 +2509,7 @@ pub fn eigen_length_loop(a: &crate::eigen::LoopArgs, g: &Global) -> Result<()> {
         every: 1,
     };
     let d = make_loop_sized(&src, &ask, a.footage.size, &a.out, g)?;
-    report(&d, window.start, g);
+    report(&d, window.start, None, g);
     Ok(())
 }
 
