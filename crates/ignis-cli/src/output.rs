@@ -22,7 +22,7 @@ pub const DEFAULT_FPS: f64 = 30.0;
 pub struct OutputArgs {
     /// Output: `x.mp4`, `x.gif`, `x.png` (flipbook + `x.json`), `x.mov` (ProRes 4444 with
     /// alpha) or `x.webm` (VP8 with alpha) through the system ffmpeg, a directory `dir/` or
-    /// a pattern `dir/%04d.png` / `dir/%04d.exr` (sequence).
+    /// a pattern `dir/%04d.png` / `dir/%04d.exr` (sequence; also `dir/shot.####.exr`).
     #[arg(short, long)]
     pub output: PathBuf,
     /// Force the format: mp4, gif, flipbook, png-seq, exr-seq, mov, webm.

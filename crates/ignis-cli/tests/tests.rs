@@ -2950,6 +2950,35 @@ mod loop_sequence {
         let r = ignis(&["convert", pat, "--range", "8..12", "-o", o]);
         assert_fails(&r, "it has 10 frames: 0..10");
         assert!(!String::from_utf8_lossy(&r.stderr).contains("file number"));
+        // the same files named as compositors write a sequence, one `#` per digit, in and
+        // out; a file whose own name has `#`s is that file
+        let hashed = shots.join("shot.####.png");
+        let v: serde_json::Value =
+            serde_json::from_slice(&ignis_ok(&["info", "--json", hashed.to_str().unwrap()]).stdout)
+                .unwrap();
+        assert_eq!(v["frames"], 10, "{v}");
+        let outs = t.path().join("outs");
+        let to = outs.join("x.####.png");
+        ignis_ok(&[
+            "-q",
+            "convert",
+            hashed.to_str().unwrap(),
+            "--range",
+            "0..3",
+            "-o",
+            to.to_str().unwrap(),
+        ]);
+        assert_eq!(files_in(&outs), ["x.0000.png", "x.0001.png", "x.0002.png"]);
+        let odd = t.path().join("odd.##.png");
+        std::fs::copy(shots.join("shot.1001.png"), &odd).unwrap();
+        let v: serde_json::Value =
+            serde_json::from_slice(&ignis_ok(&["info", "--json", odd.to_str().unwrap()]).stdout)
+                .unwrap();
+        assert_eq!(
+            (v["frames"].as_u64(), v["decoder"].as_str()),
+            (Some(1), Some("image")),
+            "{v}"
+        );
         // the loop's frames are named by file too: frames A..B are shot.{1001+A} to
         // shot.{1000+B}
         let cache = t.path().join("cache");

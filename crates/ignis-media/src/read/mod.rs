@@ -401,10 +401,12 @@ pub fn source_files(path: &Path) -> Result<Vec<PathBuf>> {
     Ok(vec![path.to_path_buf()])
 }
 
+/// Whether `path` names a sequence by a pattern (`%04d`, or `####` unless a file of that
+/// very name exists: `#` is allowed in file names).
 fn is_pattern(path: &Path) -> bool {
-    path.file_name()
-        .and_then(|n| n.to_str())
-        .is_some_and(sequence::has_frame_number)
+    path.file_name().and_then(|n| n.to_str()).is_some_and(|n| {
+        sequence::has_frame_number(n) && !(sequence::is_hash_pattern(n) && path.exists())
+    })
 }
 
 pub(crate) fn probe_inner(path: &Path, have_ffmpeg: bool) -> Result<Probed> {
@@ -413,7 +415,7 @@ pub(crate) fn probe_inner(path: &Path, have_ffmpeg: bool) -> Result<Probed> {
     }
     let meta = std::fs::metadata(path).map_err(|e| {
         let why = "there is no such file or directory; check the path (footage is a video \
-                   file, a directory of frames, or a pattern such as frames/%04d.png)";
+                   file, a directory of frames, or a pattern such as frames/%04d.png or frames/####.png)";
         MediaError::io(path, ignis_core::textfile::explain_missing(e, why))
     })?;
     if meta.is_dir() {

@@ -187,8 +187,34 @@ pub(crate) struct Pattern {
     pub suffix: String,
 }
 
+/// Where a name holds its frame number as compositors and renderers write it, one `#` per
+/// digit (`shot.####.exr`: Nuke, Blender, RV, Deadline; `%04d` in ffmpeg's form), as the
+/// run's start and length: a single run of at most 20, directly before a `.`, not after a
+/// digit, in a name without `%`. Anything else (`take#2.mp4`) is no pattern.
+fn hash_run(name: &str) -> Option<(usize, usize)> {
+    let i = name.find('#')?;
+    let n = name[i..].bytes().take_while(|&b| b == b'#').count();
+    let rest = &name[i + n..];
+    let after_digit = name[..i].bytes().last().is_some_and(|b| b.is_ascii_digit());
+    (n <= 20 && rest.starts_with('.') && !after_digit && !rest.contains('#') && !name.contains('%'))
+        .then_some((i, n))
+}
+
+/// Whether `name` is a frame pattern written with `#`s ([`hash_run`]) rather than `%Nd`.
+pub(crate) fn is_hash_pattern(name: &str) -> bool {
+    hash_run(name).is_some()
+}
+
 impl Pattern {
+    /// `prefix%0Nd.suffix` (also `%d`, `%Nd`) or `prefix.####.suffix` ([`hash_run`]).
     pub(crate) fn parse(name: &str) -> Option<Pattern> {
+        if let Some((i, n)) = hash_run(name) {
+            return Some(Pattern {
+                prefix: name[..i].to_string(),
+                width: n,
+                suffix: name[i + n..].to_string(),
+            });
+        }
         let i = name.find('%')?;
         let rest = &name[i + 1..];
         let digits = rest.chars().take_while(|c| c.is_ascii_digit()).count();
@@ -250,7 +276,9 @@ pub(crate) fn probe_pattern(path: &Path) -> Result<Probed> {
     let pat = Pattern::parse(name).ok_or_else(|| {
         MediaError::bad(
             "path",
-            format!("`{name}` is not a frame pattern; write e.g. frames/%04d.png"),
+            format!(
+                "`{name}` is not a frame pattern; write e.g. frames/%04d.png or frames/####.png"
+            ),
         )
     })?;
     let dir = match path.parent() {
@@ -526,10 +554,11 @@ impl FrameSource for SequenceSource {
 /// Whether a file name holds a frame-number field, `%d` or `%0Nd`: a sequence pattern.
 /// A `%` otherwise (`100% fire.mp4`) is part of an ordinary name.
 pub(crate) fn has_frame_number(name: &str) -> bool {
-    name.match_indices('%').any(|(i, _)| {
-        let rest = name[i + 1..].trim_start_matches(|c: char| c.is_ascii_digit());
-        rest.starts_with('d')
-    })
+    is_hash_pattern(name)
+        || name.match_indices('%').any(|(i, _)| {
+            let rest = name[i + 1..].trim_start_matches(|c: char| c.is_ascii_digit());
+            rest.starts_with('d')
+        })
 }
 
 type GifDecoder = gif::Decoder<BufReader<File>>;
@@ -855,5 +884,43 @@ mod tests {
             Some(123)
         );
         assert!(Pattern::parse("f_%s.png").is_none());
+    }
+
+    #[test]
+    fn hash_patterns_as_compositors_write_them() {
+        let p = Pattern::parse("shot.####.exr").unwrap();
+        assert_eq!(
+            p,
+            Pattern {
+                prefix: "shot.".into(),
+                width: 4,
+                suffix: ".exr".into()
+            }
+        );
+        assert_eq!(p.format(1001), "shot.1001.exr");
+        assert_eq!(p.format(7), "shot.0007.exr");
+        assert_eq!(p.matches("shot.1001.exr"), Some(1001));
+        assert_eq!(p.matches("shot.12345.exr"), Some(12345));
+        assert_eq!(p.matches("shot.101.exr"), None);
+        assert_eq!(
+            Pattern::parse("f_#.png").unwrap().matches("f_123.png"),
+            Some(123)
+        );
+        assert_eq!(Pattern::parse("####.png").unwrap().format(3), "0003.png");
+        for name in [
+            "take#2.mp4",
+            "a#b.png",
+            "v2##.png",
+            "s.##.##.png",
+            "s.##x.png",
+            "plain.png",
+        ] {
+            assert!(
+                Pattern::parse(name).is_none() && !has_frame_number(name),
+                "{name}"
+            );
+        }
+        assert!(has_frame_number("shot.####.exr") && is_hash_pattern("shot_##.png"));
+        assert!(Pattern::parse(&format!("s.{}.png", "#".repeat(21))).is_none());
     }
 }

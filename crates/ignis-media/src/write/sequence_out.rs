@@ -37,24 +37,28 @@ pub(crate) fn destination(path: &Path, exr: bool) -> Result<(PathBuf, Pattern)> 
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_default();
-    let (final_dir, pattern) = if name.contains('%') {
-        let p = Pattern::parse(&name).ok_or_else(|| {
-            MediaError::bad(
-                "path",
-                format!("`{name}` is not a pattern like %04d.{ext} (one `%Nd`, N at most 20)"),
+    let (final_dir, pattern) =
+        if name.contains('%') || crate::read::sequence::is_hash_pattern(&name) {
+            let p = Pattern::parse(&name).ok_or_else(|| {
+                MediaError::bad(
+                    "path",
+                    format!(
+                    "`{name}` is not a pattern like %04d.{ext} or ####.{ext} (one `%Nd` or run \
+                     of `#`, at most 20 digits)"
+                ),
+                )
+            })?;
+            (parent_dir(path), p)
+        } else {
+            (
+                path.to_path_buf(),
+                Pattern {
+                    prefix: String::new(),
+                    width: 4,
+                    suffix: format!(".{ext}"),
+                },
             )
-        })?;
-        (parent_dir(path), p)
-    } else {
-        (
-            path.to_path_buf(),
-            Pattern {
-                prefix: String::new(),
-                width: 4,
-                suffix: format!(".{ext}"),
-            },
-        )
-    };
+        };
     if let Ok(m) = std::fs::metadata(&final_dir) {
         if !m.is_dir() {
             return Err(MediaError::bad(
