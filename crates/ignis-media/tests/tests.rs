@@ -1198,6 +1198,56 @@ mod roundtrip {
         assert_eq!(read_all(&out), frames);
     }
 
+    /// Frames in a format only ffmpeg reads (a DPX plate) are refused with the ffmpeg
+    /// command that converts them, keeping their numbers (and where ffmpeg would stop at a
+    /// gap); a directory of other files keeps its plain message.
+    #[test]
+    fn dpx_frames_are_refused_with_the_command_that_converts_them() {
+        let dir = tempfile::tempdir().unwrap();
+        let plate = dir.path().join("plate");
+        std::fs::create_dir(&plate).unwrap();
+        // DPX headers only: what matters is that no decoder here reads them
+        for n in [1001, 1002, 1004] {
+            std::fs::write(plate.join(format!("sh010.{n}.dpx")), b"SDPX\0\0\0\0").unwrap();
+        }
+        let d = plate.display();
+        let e = probe(&plate.join("sh010.####.dpx"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains(&format!(
+                "unsupported .dpx frames in {d}/sh010.####.dpx: Ignis reads PNG, JPEG, TIFF and EXR \
+                 frames; convert these with ffmpeg first: `ffmpeg -start_number 1001 -i \
+                 {d}/sh010.%04d.dpx -start_number 1001 {d}/sh010.%04d.png`; it stops before the \
+                 missing frame 1003: run it again with -start_number 1004 (both)"
+            )),
+            "{e}"
+        );
+        let e = probe(&plate).unwrap_err().to_string();
+        assert!(
+            e.contains(&format!(
+                "`ffmpeg -start_number 1001 -i {d}/sh010.%04d.dpx -start_number 1001 {d}/sh010.%04d.png`"
+            )),
+            "{e}"
+        );
+        let e = probe(&plate.join("sh010.%04d.dpx"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("-i ") && e.contains("sh010.%04d.dpx -start_number 1001"),
+            "{e}"
+        );
+        // not frames at all: nothing to convert
+        let notes = dir.path().join("notes");
+        std::fs::create_dir(&notes).unwrap();
+        std::fs::write(notes.join("a.txt"), b"x").unwrap();
+        let e = probe(&notes).unwrap_err().to_string();
+        assert!(
+            e.contains("holds no PNG, JPEG, EXR or TIFF frames") && !e.contains("ffmpeg"),
+            "{e}"
+        );
+    }
+
     /// A sequence with frames missing (a render farm's lost frame) is read without them,
     /// and says which: the pattern's numbers and a directory's names alike.
     #[test]

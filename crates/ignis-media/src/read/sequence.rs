@@ -300,6 +300,39 @@ pub(crate) fn probe_pattern(path: &Path) -> Result<Probed> {
         ));
     }
     let numbers: Vec<u64> = files.iter().map(|(k, _)| *k).collect();
+    // frames no decoder here reads (DPX, TGA, …): how to convert them, with the numbers
+    if let Err(e) = dimensions(&files[0].1) {
+        let ext = still_extension(&pat.suffix);
+        if !STILL_EXTENSIONS.contains(&ext.as_str()) {
+            let field = |suffix: &str| {
+                let n = match pat.width {
+                    0 | 1 => "%d".to_string(),
+                    w => format!("%0{w}d"),
+                };
+                dir.join(format!("{}{n}{suffix}", pat.prefix))
+            };
+            let png = match pat.suffix.rsplit_once('.') {
+                Some((stem, _)) => format!("{stem}.png"),
+                None => format!("{}.png", pat.suffix),
+            };
+            let start = start_number(numbers[0]);
+            let convert = format!(
+                "ffmpeg {start}-i {} {start}{}",
+                shell_word(&field(&pat.suffix)),
+                shell_word(&field(&png))
+            );
+            // ffmpeg reads a numbered sequence up to its first gap
+            let gap = missing_frames(&numbers).1.first().map(|&gap| {
+                let next = numbers.iter().find(|&&n| n > gap).copied().unwrap_or(gap);
+                format!(
+                    "; it stops before the missing frame {gap}: run it again with \
+                     -start_number {next} (both) for the frames from {next}"
+                )
+            });
+            return Err(unread_frames(path, &ext, &convert, gap.as_deref()));
+        }
+        return Err(e);
+    }
     finish_sequence(
         path,
         files.into_iter().map(|(_, p)| p).collect(),
@@ -307,16 +340,102 @@ pub(crate) fn probe_pattern(path: &Path) -> Result<Probed> {
     )
 }
 
+/// `path` as one shell word: as it is when it holds only characters no shell treats
+/// specially, else in single quotes.
+fn shell_word(path: &Path) -> String {
+    let s = path.display().to_string();
+    if s.bytes()
+        .all(|b| b.is_ascii_alphanumeric() || b"_./%-+,:@".contains(&b))
+    {
+        s
+    } else {
+        format!("'{}'", s.replace('\'', "'\\''"))
+    }
+}
+
+/// ffmpeg's `-start_number` option (and a space) for a sequence numbered from `n`, given
+/// to its input and its output alike so that the converted files keep their numbers
+/// (ffmpeg numbers what it writes from 1); empty for 1.
+fn start_number(n: u64) -> String {
+    match n {
+        1 => String::new(),
+        n => format!("-start_number {n} "),
+    }
+}
+
+/// The lower-case extension of a file name or suffix (`""` without one).
+fn still_extension(name: &str) -> String {
+    name.rsplit_once('.')
+        .map(|(_, e)| e.to_ascii_lowercase())
+        .unwrap_or_default()
+}
+
+/// A sequence of `.ext` frames, a format this crate does not decode (DPX, Cineon, TGA, …),
+/// with the ffmpeg command `convert` that turns them into frames it reads; `gap`: what to
+/// add about a missing frame, where ffmpeg stops.
+fn unread_frames(path: &Path, ext: &str, convert: &str, gap: Option<&str>) -> MediaError {
+    MediaError::Unsupported {
+        path: path.to_path_buf(),
+        what: format!(".{ext} frames"),
+        fix: format!(
+            "Ignis reads PNG, JPEG, TIFF and EXR frames; convert these with ffmpeg first: \
+             `{convert}`{} (a 16-bit PNG keeps a 10- or 12-bit DPX's levels, and the colours \
+             stay as they are, log or not)",
+            gap.unwrap_or_default()
+        ),
+    }
+}
+
+/// Still formats ffmpeg reads and this crate does not, for which a directory of frames gets
+/// a conversion command ([`other_frames`]).
+const FFMPEG_FRAME_EXTENSIONS: &[&str] = &[
+    "dpx", "cin", "tga", "bmp", "webp", "sgi", "jp2", "j2k", "jxl", "hdr", "ppm", "pnm", "qoi",
+];
+
+/// For a directory without frames this crate reads: the error naming its numbered frames in
+/// a format ffmpeg reads (DPX, …) and the command converting them, from the first of them
+/// in natural order (`s.1001.dpx`: `ffmpeg -start_number 1001 -i dir/s.%04d.dpx
+/// dir/s.%04d.png`). `None` when it holds none.
+fn other_frames(dir: &Path) -> Result<Option<MediaError>> {
+    let mut names: Vec<String> = list_dir(dir)?
+        .into_iter()
+        .map(|(n, _)| n)
+        .filter(|n| FFMPEG_FRAME_EXTENSIONS.contains(&still_extension(n).as_str()))
+        .collect();
+    names.sort_by(|a, b| natural_cmp(a, b));
+    let Some(first) = names.first() else {
+        return Ok(None);
+    };
+    let ext = still_extension(first);
+    let stem = &first[..first.len() - ext.len() - 1];
+    let digits = stem.bytes().rev().take_while(u8::is_ascii_digit).count();
+    let convert = match stem[stem.len() - digits..].parse::<u64>() {
+        Ok(n) => {
+            let prefix = &stem[..stem.len() - digits];
+            let field = match digits {
+                1 => "%d".to_string(),
+                d => format!("%0{d}d"),
+            };
+            let start = start_number(n);
+            format!(
+                "ffmpeg {start}-i {} {start}{}",
+                shell_word(&dir.join(format!("{prefix}{field}.{ext}"))),
+                shell_word(&dir.join(format!("{prefix}{field}.png")))
+            )
+        }
+        Err(_) => format!(
+            "ffmpeg -i {} {}",
+            shell_word(&dir.join(first)),
+            shell_word(&dir.join(format!("{stem}.png")))
+        ),
+    };
+    Ok(Some(unread_frames(dir, &ext, &convert, None)))
+}
+
 pub(crate) fn probe_dir(dir: &Path) -> Result<Probed> {
     let mut files: Vec<(String, PathBuf)> = list_dir(dir)?
         .into_iter()
-        .filter(|(n, _)| {
-            let ext = n
-                .rsplit_once('.')
-                .map(|(_, e)| e.to_ascii_lowercase())
-                .unwrap_or_default();
-            STILL_EXTENSIONS.contains(&ext.as_str())
-        })
+        .filter(|(n, _)| STILL_EXTENSIONS.contains(&still_extension(n).as_str()))
         .collect();
     files.sort_by(|a, b| natural_cmp(&a.0, &b.0));
     if files.is_empty() {
@@ -332,6 +451,9 @@ pub(crate) fn probe_dir(dir: &Path) -> Result<Probed> {
                     dir.display()
                 ),
             ));
+        }
+        if let Some(e) = other_frames(dir)? {
+            return Err(e);
         }
         return Err(MediaError::io(
             dir,
