@@ -3346,6 +3346,31 @@ fn bench_loops_measures_a_named_pattern_and_refuses_a_missing_clip() {
             assert!(seam.is_finite() && seam > 0.0, "{who}: {r}");
         }
     }
+    // read at 50 fps the same frames are 3 s: the 2-s loop is 100 frames, the 4-s one does
+    // not fit; the cached entry is reused
+    let o = ignis(&[
+        "-q",
+        "bench",
+        "loops",
+        p,
+        "--cache",
+        c,
+        "--sequence-fps",
+        "50",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let rows = v["clips"].as_array().unwrap();
+    assert_eq!(
+        (
+            rows[0]["fps"].as_f64(),
+            rows[0]["length"].as_u64(),
+            &rows[0]["cache"]
+        ),
+        (Some(50.0), Some(100), &serde_json::json!("reused")),
+        "{v}"
+    );
+    assert!(rows[1]["skipped"].is_string(), "{v}");
     let missing = t.path().join("no-such-clip.mp4");
     let o = ignis(&[
         "-q",

@@ -48,10 +48,19 @@ pub struct BenchArgs {
     /// 2,197 frames takes about half a minute).
     #[arg(long, value_name = "DIR")]
     pub keep_db: Option<PathBuf>,
+    // loops: the rate of clips that are image sequences
+    #[command(flatten)]
+    pub sequence: crate::args::SequenceFps,
 }
 
 /// Runs one benchmark target and prints its JSON object.
 pub fn run(a: &BenchArgs, g: &Global) -> Result<()> {
+    if a.sequence.sequence_fps.is_some() && a.target != "loops" {
+        anyhow::bail!(
+            "--sequence-fps sets the rate of `ignis bench loops`' image-sequence clips; `bench {}` reads none",
+            a.target
+        );
+    }
     let v = match a.target.as_str() {
         "classic" => classic::figures(a.quick)?,
         "eigen-train" => eigen_train::figures(a.quick),
@@ -87,6 +96,8 @@ pub fn run(a: &BenchArgs, g: &Global) -> Result<()> {
             } else {
                 (a.clips.clone(), false)
             };
+            a.sequence
+                .apply(&clips.iter().map(PathBuf::as_path).collect::<Vec<_>>())?;
             crate::bench::loops::bench(&clips, defaults, a.cache.as_deref(), g)?
         }
         other => anyhow::bail!("unknown bench target `{other}`"),
