@@ -396,9 +396,13 @@ pub fn cached(
 ) -> Result<Cached> {
     let path = clip.path;
     let mut c = cached_entry(clip, window, train_size, keep, cache_dir, g)?;
-    if let Ok(info) = ignis_media::probe(path) {
-        if info.decoder == ignis_media::Decoder::ImageSequence {
-            c.fps = info.fps;
+    // a video is a file (and keeps the rate it was cached with): only a directory or a
+    // pattern is probed again
+    if !path.is_file() {
+        if let Ok(info) = ignis_media::probe(path) {
+            if info.decoder == ignis_media::Decoder::ImageSequence {
+                c.fps = info.fps;
+            }
         }
     }
     Ok(c)
