@@ -29,6 +29,18 @@ pub fn run(args: &Args) -> Result<()> {
     // after what the header says
     let see_through = first_frame_see_through(&args.input);
     let book = flipbook_meta(&info);
+    // a sequence's first and last files: frames count from 0 in the order read, and a
+    // compositor's numbers (shot.1001.exr) are not those
+    let ends = (info.decoder == ignis_media::Decoder::ImageSequence)
+        .then(|| ignis_media::source_files(&args.input).ok())
+        .flatten()
+        .and_then(|f| {
+            let name = |p: &std::path::PathBuf| {
+                p.file_name()
+                    .map_or(String::new(), |n| n.to_string_lossy().into_owned())
+            };
+            Some((name(f.first()?), name(f.last()?)))
+        });
     if args.json {
         let v = serde_json::json!({
             "path": info.path,
@@ -43,6 +55,8 @@ pub fn run(args: &Args) -> Result<()> {
             "stored_height": info.anamorphic.map(|a| a.stored.height),
             "pixel_aspect": info.anamorphic.map(|a| format!("{}:{}", a.pixel_aspect.0, a.pixel_aspect.1)),
             "see_through_first_frame": see_through.as_ref().ok(),
+            "first_file": ends.as_ref().map(|e| &e.0),
+            "last_file": ends.as_ref().map(|e| &e.1),
             "flipbook": book.as_ref().map(|m| serde_json::json!({
                 "columns": m.columns,
                 "rows": m.rows,
@@ -75,6 +89,9 @@ pub fn run(args: &Args) -> Result<()> {
                 (None, _) => "unknown (container does not say)".into(),
             }
         )?;
+        if let (Some((first, last)), Some(n)) = (&ends, info.frame_count) {
+            outln!("files:   {first} to {last} (frames 0..{n} in --range, in the order read)")?;
+        }
         // a sequence's files hold no rate: say where this one came from
         let given = match (info.decoder, args.sequence.sequence_fps) {
             (ignis_media::Decoder::ImageSequence, Some(_)) => " (--sequence-fps)",

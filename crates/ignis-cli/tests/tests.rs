@@ -2957,6 +2957,16 @@ mod loop_sequence {
             serde_json::from_slice(&ignis_ok(&["info", "--json", hashed.to_str().unwrap()]).stdout)
                 .unwrap();
         assert_eq!(v["frames"], 10, "{v}");
+        assert_eq!(
+            (v["first_file"].as_str(), v["last_file"].as_str()),
+            (Some("shot.1001.png"), Some("shot.1010.png")),
+            "{v}"
+        );
+        let text = said_ok(&["info", pat]);
+        assert!(
+            text.contains("files:   shot.1001.png to shot.1010.png (frames 0..10 in --range"),
+            "{text}"
+        );
         let outs = t.path().join("outs");
         let to = outs.join("x.####.png");
         ignis_ok(&[
