@@ -395,28 +395,17 @@ pub fn cached(
     g: &Global,
 ) -> Result<Cached> {
     let path = clip.path;
-    let mut c = cached_entry(clip, window, train_size, keep, cache_dir, g)?;
-    // a video is a file (and keeps the rate it was cached with): only a directory or a
-    // pattern is probed again
-    if !path.is_file() {
-        if let Ok(info) = ignis_media::probe(path) {
-            if info.decoder == ignis_media::Decoder::ImageSequence {
-                c.fps = info.fps;
-            }
-        }
-    }
-    Ok(c)
-}
-
-fn cached_entry(
-    clip: Clip,
-    window: Range<usize>,
-    train_size: Size,
-    keep: usize,
-    cache_dir: &Path,
-    g: &Global,
-) -> Result<Cached> {
-    let path = clip.path;
+    // a video is a file and keeps the rate it was cached with: only a directory or a
+    // pattern is probed for it
+    let sequence_fps = (!path.is_file())
+        .then(|| ignis_media::probe(path).ok())
+        .flatten()
+        .filter(|i| i.decoder == ignis_media::Decoder::ImageSequence)
+        .map(|i| i.fps);
+    let at_todays_rate = |mut c: Cached| {
+        c.fps = sequence_fps.unwrap_or(c.fps);
+        c
+    };
     let sp = g.spinner("hashing the footage");
     let sha = source_sha256(path)?;
     sp.finish_and_clear();
@@ -432,7 +421,7 @@ fn cached_entry(
     let dir = cache_dir.join(format!("{}-{skey}", &sha[..24]));
     if dir.exists() {
         match open_entry(&dir, &sha, &settings) {
-            Ok(c) => return Ok(c),
+            Ok(c) => return Ok(at_todays_rate(c)),
             Err(e) => {
                 eprintln!(
                     "cache entry {} is unusable ({e:#}); rebuilding it",
@@ -447,7 +436,7 @@ fn cached_entry(
     let mut c = open_entry(&dir, &sha, &settings)
         .with_context(|| format!("re-opening the cache entry just built at {}", dir.display()))?;
     c.built = true;
-    Ok(c)
+    Ok(at_todays_rate(c))
 }
 
 /// The largest `entry.json` read (a real one is a few hundred bytes): a damaged or foreign
