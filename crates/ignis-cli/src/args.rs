@@ -259,10 +259,10 @@ pub fn sequence_fps(s: &str) -> Result<f64, String> {
 /// read footage.
 #[derive(clap::Args, Clone, Debug, Default)]
 pub struct SequenceFps {
-    /// Frame rate of an image-sequence input, which stores none (default 30), as an
-    /// editor's "interpret footage" or ffmpeg's -framerate: 24, 25, 29.97, 24000/1001.
-    /// Seconds, durations and the output's rate follow it; videos, GIFs and flipbooks keep
-    /// their own rates.
+    /// Frame rate of an image-sequence input (default: an EXR sequence's framesPerSecond,
+    /// else 30, as PNG, JPEG and TIFF store none), as an editor's "interpret footage" or
+    /// ffmpeg's -framerate: 24, 25, 29.97, 24000/1001. Seconds, durations and the output's
+    /// rate follow it; videos, GIFs and flipbooks keep their own rates.
     #[arg(long, value_name = "FPS", value_parser = sequence_fps)]
     pub sequence_fps: Option<f64>,
 }

@@ -92,11 +92,14 @@ pub fn run(args: &Args) -> Result<()> {
         if let (Some((first, last)), Some(n)) = (&ends, info.frame_count) {
             outln!("files:   {first} to {last} (frames 0..{n} in --range, in the order read)")?;
         }
-        // a sequence's files hold no rate: say where this one came from
+        // a sequence's files mostly hold no rate: say where this one came from
         let given = match (info.decoder, args.sequence.sequence_fps) {
             (ignis_media::Decoder::ImageSequence, Some(_)) => " (--sequence-fps)",
             (ignis_media::Decoder::ImageSequence, None) => {
-                " (a sequence stores none: --sequence-fps sets it)"
+                match ignis_media::stated_fps(&args.input) {
+                    Some(_) => " (its EXR headers' framesPerSecond; --sequence-fps sets another)",
+                    None => " (its files state none: --sequence-fps sets it)",
+                }
             }
             _ => "",
         };

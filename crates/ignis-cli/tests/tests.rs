@@ -2782,7 +2782,7 @@ mod loop_sequence {
         );
         let text = said_ok(&["info", pat]);
         assert!(
-            text.contains("fps:     30 (a sequence stores none: --sequence-fps sets it)"),
+            text.contains("fps:     30 (its files state none: --sequence-fps sets it)"),
             "{text}"
         );
         let text = said_ok(&["info", pat, "--sequence-fps", "25"]);
@@ -2862,6 +2862,41 @@ mod loop_sequence {
             Some(25.0),
             "{manifest}"
         );
+        // an EXR sequence states its rate in its headers: read back at it without the flag
+        let exr = t.path().join("exr");
+        ignis_ok(&[
+            "-q",
+            "convert",
+            pat,
+            "--sequence-fps",
+            "24",
+            "-o",
+            exr.join("f.####.exr").to_str().unwrap(),
+        ]);
+        let e = exr.join("f.####.exr");
+        let v: serde_json::Value =
+            serde_json::from_slice(&ignis_ok(&["info", "--json", e.to_str().unwrap()]).stdout)
+                .unwrap();
+        assert_eq!(v["fps"].as_f64(), Some(24.0), "{v}");
+        let text = said_ok(&["info", e.to_str().unwrap()]);
+        assert!(
+            text.contains(
+                "fps:     24 (its EXR headers' framesPerSecond; --sequence-fps sets another)"
+            ),
+            "{text}"
+        );
+        let v: serde_json::Value = serde_json::from_slice(
+            &ignis_ok(&[
+                "info",
+                "--json",
+                e.to_str().unwrap(),
+                "--sequence-fps",
+                "25",
+            ])
+            .stdout,
+        )
+        .unwrap();
+        assert_eq!(v["fps"].as_f64(), Some(25.0), "{v}");
         // a GIF has its own rate: kept, with a warning
         let gif = t.path().join("f.gif");
         classic_ok("32x24", "6", &["--seed", "2", "--fps", "20"], &gif);

@@ -1198,6 +1198,40 @@ mod roundtrip {
         assert_eq!(read_all(&out), frames);
     }
 
+    /// An EXR sequence states its rate in each frame's `framesPerSecond` and is read back at
+    /// it (NTSC rates exactly); a PNG sequence, which cannot, reads at the default.
+    #[test]
+    fn an_exr_sequence_keeps_its_rate() {
+        let dir = tempfile::tempdir().unwrap();
+        let frames: Vec<_> = (0..4).map(|t| test_frame(size(8, 6), t, false)).collect();
+        for (fps, codec) in [
+            (24.0, "exr sequence, 24 fps in its headers"),
+            (24000.0 / 1001.0, "exr sequence, 23.976 fps in its headers"),
+            (12.5, "exr sequence, 12.5 fps in its headers"),
+        ] {
+            let seq = dir.path().join(format!("e{fps}"));
+            let opts = WriteOptions {
+                fps,
+                ..WriteOptions::default()
+            };
+            write_all(&seq.join("f.####.exr"), &frames, &opts);
+            for path in [seq.clone(), seq.join("f.%04d.exr")] {
+                let info = probe(&path).unwrap();
+                assert_eq!(
+                    (info.fps, info.codec.as_str()),
+                    (fps, codec),
+                    "{}",
+                    path.display()
+                );
+                assert_eq!(ignis_media::stated_fps(&path), Some(fps));
+            }
+            let png = dir.path().join(format!("p{fps}"));
+            write_all(&png.join("%04d.png"), &frames, &opts);
+            assert_eq!(probe(&png).unwrap().fps, DEFAULT_SEQUENCE_FPS);
+            assert_eq!(ignis_media::stated_fps(&png), None);
+        }
+    }
+
     /// Frames in a format only ffmpeg reads (a DPX plate) are refused with the ffmpeg
     /// command that converts them, keeping their numbers (and where ffmpeg would stop at a
     /// gap); a directory of other files keeps its plain message.

@@ -401,6 +401,19 @@ pub fn source_files(path: &Path) -> Result<Vec<PathBuf>> {
     Ok(vec![path.to_path_buf()])
 }
 
+/// The frame rate an image sequence's own files state (an EXR's `framesPerSecond`), which
+/// it is read at unless [`set_sequence_fps`] set one; `None` for other sources and for
+/// sequences that state none.
+pub fn stated_fps(path: &Path) -> Option<f64> {
+    if !(is_pattern(path) || path.is_dir()) {
+        return None;
+    }
+    match probe_inner(path, false).ok()? {
+        Probed::Sequence(_, files, _) => sequence::exr_frames_per_second(files.first()?),
+        _ => None,
+    }
+}
+
 /// Whether `path` names a sequence by a pattern (`%04d`, or `####` unless a file of that
 /// very name exists: `#` is allowed in file names).
 fn is_pattern(path: &Path) -> bool {

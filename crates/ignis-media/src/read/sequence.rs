@@ -30,11 +30,31 @@ static SEQUENCE_FPS_BITS: AtomicU64 = AtomicU64::new(0);
 
 /// The rate image sequences and stills are read at in this process ([`SourceInfo::fps`],
 /// their frames' times): [`DEFAULT_SEQUENCE_FPS`] unless [`set_sequence_fps`] set another.
+/// (An EXR sequence whose headers state a rate is read at that rate unless one was set:
+/// [`super::stated_fps`].)
 pub fn sequence_fps() -> f64 {
+    given_sequence_fps().unwrap_or(DEFAULT_SEQUENCE_FPS)
+}
+
+/// The rate [`set_sequence_fps`] set, if it did.
+fn given_sequence_fps() -> Option<f64> {
     match SEQUENCE_FPS_BITS.load(AtomicOrdering::Relaxed) {
-        0 => DEFAULT_SEQUENCE_FPS,
-        bits => f64::from_bits(bits),
+        0 => None,
+        bits => Some(f64::from_bits(bits)),
     }
+}
+
+/// The rate an EXR file's header states in the standard `framesPerSecond` attribute (as
+/// Ignis's own EXR sequences, OpenImageIO and RV write it), when it is one
+/// [`set_sequence_fps`] would accept; `None` for other files.
+pub(crate) fn exr_frames_per_second(path: &Path) -> Option<f64> {
+    if !still_extension(&path.to_string_lossy()).eq("exr") {
+        return None;
+    }
+    let meta = exr::meta::MetaData::read_from_file(path, false).ok()?;
+    let (n, d) = meta.headers.first()?.own_attributes.frames_per_second?;
+    let fps = f64::from(n) / f64::from(d);
+    (d > 0 && fps.is_finite() && SEQUENCE_FPS_RANGE.contains(&fps)).then_some(fps)
 }
 
 /// Sets the rate image sequences and stills are read at for the rest of this process, as
@@ -639,9 +659,21 @@ fn finish_sequence(path: &Path, files: Vec<PathBuf>, numbers: Option<&[u64]>) ->
             )
         };
     }
+    // a rate set for this run, else the one its EXR headers state, else the default
+    let stated = match given_sequence_fps() {
+        Some(_) => None,
+        None => exr_frames_per_second(&files[0]),
+    };
+    if let Some(fps) = stated {
+        let fps = format!("{fps:.3}");
+        codec = format!(
+            "{codec}, {} fps in its headers",
+            fps.trim_end_matches('0').trim_end_matches('.')
+        );
+    }
     let info = SourceInfo {
         size,
-        fps: sequence_fps(),
+        fps: stated.unwrap_or_else(sequence_fps),
         frame_count: Some(files.len() as u64),
         codec,
         decoder: Decoder::ImageSequence,

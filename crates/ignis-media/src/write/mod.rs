@@ -111,7 +111,7 @@ impl Format {
                 format!(
                     "cannot tell the output format of `{s}`: use .mp4, .gif, .png (flipbook), .mov \
                      (ProRes 4444 with alpha), .webm (VP8 with alpha), a directory ending in / (PNG \
-                     sequence), a pattern like frames/%04d.png or frames/%04d.exr, or set the format"
+                     sequence), a pattern like frames/%04d.png or frames/shot.####.exr, or set the format"
                 ),
             )),
         }
@@ -233,6 +233,7 @@ pub fn create(path: &Path, size: Size, opts: &WriteOptions) -> Result<FrameWrite
             path,
             format == Format::ExrSequence,
             opts.first_frame,
+            opts.fps,
         )?),
         Format::Gif => Box::new(gif_out::GifSink::new(path, size, opts)?),
         Format::Mp4 => {

@@ -1,4 +1,6 @@
-//! PNG (8-bit sRGB, straight alpha) and EXR (linear f32, premultiplied) sequences.
+//! PNG (8-bit sRGB, straight alpha) and EXR (linear f32, premultiplied) sequences. An EXR
+//! frame states the sequence's rate in the standard `framesPerSecond` attribute (PNG has
+//! no such field), which reading it back takes ([`crate::read::sequence_fps`]).
 //!
 //! A directory destination is filled with `0000.png`, `0001.png`, … (or `.exr`); a pattern
 //! destination `frames/f_%04d.png` numbers from 0 the same way (or from
@@ -26,6 +28,21 @@ pub(crate) struct SequenceSink {
     written: Vec<(PathBuf, PathBuf)>,
     /// Number of the first frame's file.
     first: u64,
+    /// The rate stated in each EXR frame's `framesPerSecond` (`None`: one not stated).
+    fps: Option<(i32, u32)>,
+}
+
+/// `fps` as the rational an EXR header stores it as: exactly where a small denominator
+/// (or NTSC's 1001) gives it, as 24000/1001 or 2997/100; `None` otherwise.
+pub(crate) fn exr_rational(fps: f64) -> Option<(i32, u32)> {
+    [1u32, 1001, 2, 4, 5, 8, 10, 100, 1000]
+        .into_iter()
+        .find_map(|d| {
+            let n = fps * f64::from(d);
+            let r = n.round();
+            ((n - r).abs() <= 1e-6 * r.max(1.0) && r >= 1.0 && r <= f64::from(i32::MAX))
+                .then_some((r as i32, d))
+        })
 }
 
 /// The directory a sequence at `path` (a directory, or a pattern `dir/%04d.png`) fills and
@@ -75,7 +92,7 @@ pub(crate) fn destination(path: &Path, exr: bool) -> Result<(PathBuf, Pattern)> 
 }
 
 impl SequenceSink {
-    pub(crate) fn new(path: &Path, exr: bool, first: u64) -> Result<SequenceSink> {
+    pub(crate) fn new(path: &Path, exr: bool, first: u64, fps: f64) -> Result<SequenceSink> {
         let (final_dir, pattern) = destination(path, exr)?;
         // Frames always go into a fresh hidden directory beside the destination
         // (`.<dir>.ignis-tmp-<pid>.<n>.dir`, removed by a later run if this one is killed).
@@ -90,6 +107,7 @@ impl SequenceSink {
             temp_dir,
             written: Vec::new(),
             first,
+            fps: exr_rational(fps),
         })
     }
 
@@ -109,18 +127,20 @@ impl SequenceSink {
                 blocks: Blocks::ScanLines,
                 line_order: LineOrder::Increasing,
             };
-            Image::from_encoded_channels(
+            let mut image = Image::from_encoded_channels(
                 (fw, fh),
                 enc,
                 SpecificChannels::rgba(|p: Vec2<usize>| {
                     let [r, g, b, a] = px[p.y() * fw + p.x()];
                     (r, g, b, a)
                 }),
-            )
-            .write()
-            .non_parallel()
-            .to_buffered(&mut w)
-            .map_err(|e| MediaError::encode(staged, e.to_string()))?;
+            );
+            image.layer_data.attributes.frames_per_second = self.fps;
+            image
+                .write()
+                .non_parallel()
+                .to_buffered(&mut w)
+                .map_err(|e| MediaError::encode(staged, e.to_string()))?;
         } else {
             let rgba = convert::to_srgba8(frame);
             encode_png(&mut w, frame.size(), &rgba)
@@ -233,4 +253,21 @@ fn commit_sequence(
     }
     ignis_core::tempfiles::replace_dir(staged_dir, final_dir)
         .map_err(|e| MediaError::io(final_dir, e))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::exr_rational;
+
+    #[test]
+    fn rates_as_exr_rationals() {
+        assert_eq!(exr_rational(24.0), Some((24, 1)));
+        assert_eq!(exr_rational(24000.0 / 1001.0), Some((24000, 1001)));
+        assert_eq!(exr_rational(30000.0 / 1001.0), Some((30000, 1001)));
+        assert_eq!(exr_rational(29.97), Some((2997, 100)));
+        assert_eq!(exr_rational(12.5), Some((25, 2)));
+        assert_eq!(exr_rational(std::f64::consts::PI), None);
+        assert_eq!(exr_rational(0.0), None);
+        assert_eq!(exr_rational(f64::NAN), None);
+    }
 }
