@@ -1371,7 +1371,11 @@ mod roundtrip {
             .collect();
         let pattern = dir.path().join("exr/%04d.exr");
         write_all(&pattern, &frames, &WriteOptions::default());
-        assert_eq!(probe(&pattern).unwrap().codec, "exr sequence");
+        // the rate written (the default 30) is in every header
+        assert_eq!(
+            probe(&pattern).unwrap().codec,
+            "exr sequence, 30 fps in its headers"
+        );
         assert_eq!(read_all(&pattern), frames);
     }
 
