@@ -5,7 +5,7 @@
 //!   sequences (PNG, JPEG, TIFF, EXR), stills and GIFs, with a frame range, crop and
 //!   scale ([`ReadOptions`]). See [`read`] for how the decoder is chosen.
 //! - [`create`]: write PNG/EXR sequences, GIF, MP4 (OpenH264 + `mp4`, no ffmpeg) and
-//!   flipbooks (sprite sheet + JSON, [`read_flipbook`] reads them back). See [`write`] for
+//!   flipbooks (sprite sheet + JSON, [`read_flipbook`] reads them back). See [`mod@write`] for
 //!   the pixel and **alpha convention of each output** and for atomicity.
 //! - [`write_png`] / [`read_image`]: single stills.
 //!

@@ -43,7 +43,7 @@ pub struct FrameTiming {
 impl FrameTiming {
     /// Timing from frame times in any order (sorted here; decoding order differs from
     /// presentation order with B-frames); `None` with fewer than two, any not finite, or
-    /// more than [`MAX_TIMED_FRAMES`].
+    /// more than `MAX_TIMED_FRAMES`.
     pub fn new(mut times: Vec<f64>) -> Option<FrameTiming> {
         if times.len() < 2 || times.len() > MAX_TIMED_FRAMES || times.iter().any(|t| !t.is_finite())
         {
@@ -145,8 +145,8 @@ impl FrameTiming {
     }
 
     /// The steps (index `i`: from frame `i` to frame `i + 1`) that do not play at the
-    /// nominal rate: a jump ([`JUMP_RATIO`]: a dropped frame, a held one, two frames at one
-    /// time) or a stretch at another rate ([`RATE_TOLERANCE`] on the local median). Empty
+    /// nominal rate: a jump (`JUMP_RATIO`: a dropped frame, a held one, two frames at one
+    /// time) or a stretch at another rate (`RATE_TOLERANCE` on the local median). Empty
     /// for a clip at a constant rate, however its timestamps are rounded.
     pub fn uneven_steps(&self) -> &[usize] {
         &self.uneven

@@ -519,7 +519,7 @@ fn block_aligned(frame: Size, long: u32, pad: u32) -> Size {
 /// preset, `pot`, `max_size`): `frame` itself when its cells fit, otherwise the largest
 /// size with the same aspect (the longer side found by bisection; fitting is monotone in
 /// the size), shrunk by up to 3 pixels per side to whole 4×4 compression blocks
-/// per cell ([`block_aligned`]), and the [`ScaledFrom`] to record. Refused (`LimitExceeded`, naming the fixes)
+/// per cell (`block_aligned`), and the [`ScaledFrom`] to record. Refused (`LimitExceeded`, naming the fixes)
 /// when even cells whose shorter side is [`MIN_FIT_SIDE`] pixels do not fit.
 pub fn fit_frame(
     n: u32,
