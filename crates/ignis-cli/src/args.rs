@@ -282,6 +282,26 @@ impl SequenceFps {
         }
         Ok(())
     }
+
+    /// A line for a command whose output's timing follows the input's rate, when `info`
+    /// (of `path`) is an image sequence read at the default rate because neither
+    /// `--sequence-fps` nor its files gave one: a 24-fps plate read at 30 plays fast.
+    pub fn default_rate_note(
+        &self,
+        path: &std::path::Path,
+        info: &ignis_media::SourceInfo,
+    ) -> Option<String> {
+        (info.decoder == ignis_media::Decoder::ImageSequence
+            && self.sequence_fps.is_none()
+            && ignis_media::stated_fps(path).is_none())
+        .then(|| {
+            format!(
+                "rate: the sequence states no frame rate, so it is read at {} fps; \
+                 --sequence-fps gives the rate it was shot or rendered at",
+                fps_text(info.fps)
+            )
+        })
+    }
 }
 
 /// The warning for `--sequence-fps FPS` given with `info`'s source when it is not an image

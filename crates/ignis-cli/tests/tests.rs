@@ -2831,7 +2831,10 @@ mod loop_sequence {
             (said, read_json(&out.with_extension("json")))
         };
         let (said, m) = looped(Some("24"), "l24.png");
-        assert!(said.contains("cached the clip's database"), "{said}");
+        assert!(
+            said.contains("cached the clip's database") && !said.contains("rate: "),
+            "{said}"
+        );
         let n = m["frame_count"].as_u64().unwrap();
         assert!(
             m["fps"].as_f64() == Some(24.0) && (19..=29).contains(&n),
@@ -2839,6 +2842,10 @@ mod loop_sequence {
         );
         let (said, m) = looped(None, "l30.png");
         assert!(!said.contains("cached the clip's database"), "{said}");
+        assert!(
+            said.contains("rate: the sequence states no frame rate, so it is read at 30 fps"),
+            "{said}"
+        );
         let n = m["frame_count"].as_u64().unwrap();
         assert!(
             m["fps"].as_f64() == Some(30.0) && (24..=36).contains(&n),

@@ -2272,6 +2272,9 @@ pub fn run(a: &Args, g: &Global) -> Result<()> {
     };
     // a crop past the frame is refused before anything is read
     let info = clip.probe()?;
+    if let Some(note) = a.sequence.default_rate_note(&a.input, &info) {
+        g.say(note);
+    }
     // a variable rate: seconds are counted at the rate the loop will be written at
     let timing = WindowTiming::of(&a.input, window.clone());
     let fps = timing.as_ref().map_or(fps, |t| t.nominal_fps);
