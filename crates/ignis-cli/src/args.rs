@@ -174,34 +174,23 @@ pub fn crop(s: &str) -> Result<Rect, String> {
     };
     let t = s.trim();
     let t = t.strip_prefix("crop=").unwrap_or(t);
-    let numbers = |parts: Vec<&str>| -> Option<Vec<u32>> {
-        parts.iter().map(|x| x.trim().parse::<u32>().ok()).collect()
-    };
-    let v = if t.contains(':') {
-        // ffmpeg: W:H:X:Y
-        numbers(t.split(':').collect()).map(|v| match v[..] {
-            [w, h, x, y] => vec![x, y, w, h],
-            _ => v,
-        })
+    // ffmpeg's W:H:X:Y and a geometry's WxH+X+Y give the size first; ours the corner
+    let (parts, size_first): (Vec<&str>, bool) = if t.contains(':') {
+        (t.split(':').collect(), true)
     } else if let Some((w, rest)) = t.split_once(['x', 'X']) {
-        // geometry: WxH+X+Y
-        let mut p = rest.split('+');
-        let h = p.next();
-        numbers(
-            [Some(w), h]
-                .into_iter()
-                .chain(p.map(Some))
-                .flatten()
-                .collect(),
-        )
-        .map(|v| match v[..] {
-            [w, h, x, y] => vec![x, y, w, h],
-            _ => v,
-        })
+        (std::iter::once(w).chain(rest.split('+')).collect(), true)
     } else {
-        numbers(t.split(',').collect())
-    }
-    .ok_or_else(bad)?;
+        (t.split(',').collect(), false)
+    };
+    let v: Vec<u32> = parts
+        .iter()
+        .map(|x| x.trim().parse::<u32>().ok())
+        .collect::<Option<_>>()
+        .ok_or_else(bad)?;
+    let v = match (size_first, &v[..]) {
+        (true, &[w, h, x, y]) => vec![x, y, w, h],
+        _ => v,
+    };
     match v[..] {
         [x, y, width, height] if width > 0 && height > 0 => Ok(Rect {
             x,
@@ -284,23 +273,19 @@ impl SequenceFps {
     }
 
     /// A line for a command whose output's timing follows the input's rate, when `info`
-    /// (of `path`) is an image sequence read at the default rate because neither
-    /// `--sequence-fps` nor its files gave one: a 24-fps plate read at 30 plays fast.
-    pub fn default_rate_note(
-        &self,
-        path: &std::path::Path,
-        info: &ignis_media::SourceInfo,
-    ) -> Option<String> {
+    /// is an image sequence read at the default rate because neither `--sequence-fps` nor
+    /// its files gave one: a 24-fps plate read at 30 plays fast.
+    pub fn default_rate_note(&self, info: &ignis_media::SourceInfo) -> Option<String> {
         (info.decoder == ignis_media::Decoder::ImageSequence
             && self.sequence_fps.is_none()
-            && ignis_media::stated_fps(path).is_none())
-        .then(|| {
-            format!(
-                "rate: the sequence states no frame rate, so it is read at {} fps; \
+            && !info.rate_stated)
+            .then(|| {
+                format!(
+                    "rate: the sequence states no frame rate, so it is read at {} fps; \
                  --sequence-fps gives the rate it was shot or rendered at",
-                fps_text(info.fps)
-            )
-        })
+                    fps_text(info.fps)
+                )
+            })
     }
 }
 

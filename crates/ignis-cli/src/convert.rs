@@ -74,7 +74,7 @@ pub fn run(args: &Args, g: &Global) -> Result<Vec<PathBuf>> {
     args.sequence.apply(&[input])?;
     let mut read = args.read_options()?;
     let info = ignis_media::probe(input).with_context(|| format!("reading {}", input.display()))?;
-    if let Some(note) = args.sequence.default_rate_note(input, &info) {
+    if let Some(note) = args.sequence.default_rate_note(&info) {
         g.say(note);
     }
     // timestamps that cannot be read: every frame once, at the probe's average rate

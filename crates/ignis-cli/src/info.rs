@@ -95,11 +95,11 @@ pub fn run(args: &Args) -> Result<()> {
         // a sequence's files mostly hold no rate: say where this one came from
         let given = match (info.decoder, args.sequence.sequence_fps) {
             (ignis_media::Decoder::ImageSequence, Some(_)) => " (--sequence-fps)",
+            (ignis_media::Decoder::ImageSequence, None) if info.rate_stated => {
+                " (its EXR headers' framesPerSecond; --sequence-fps sets another)"
+            }
             (ignis_media::Decoder::ImageSequence, None) => {
-                match ignis_media::stated_fps(&args.input) {
-                    Some(_) => " (its EXR headers' framesPerSecond; --sequence-fps sets another)",
-                    None => " (its files state none: --sequence-fps sets it)",
-                }
+                " (its files state none: --sequence-fps sets it)"
             }
             _ => "",
         };
@@ -168,10 +168,10 @@ pub fn run(args: &Args) -> Result<()> {
     Ok(())
 }
 
-/// How long the source plays: its frames at its (average) rate, as a player shows them.
-/// `None` when the frame count is unknown or the rate is not a positive number.
-/// How long `info`'s frames play: at its rate, or for a sequence with frames missing
-/// (`timing`), from its first frame's number to one step past its last.
+/// How long the source plays, as a player shows it: its frames at its (average) rate, or
+/// for a sequence with frames missing (`timing`), from its first frame's number to one
+/// step past its last. `None` when the frame count is unknown or the rate is not a
+/// positive number.
 fn duration(info: &ignis_media::SourceInfo, timing: Option<&WindowTiming>) -> Option<f64> {
     let n = info.frame_count?;
     if let Some(t) = timing.filter(|t| t.numbered && t.frames as u64 == n) {

@@ -30,7 +30,7 @@ pub use read::{
     Anamorphic, DecodedFrame, Decoder, FrameRange, FrameReader, FrameTiming, RangeUnit,
     ReadOptions, Rect, SourceInfo, DEFAULT_SEQUENCE_FPS,
 };
-pub use read::{sequence_fps, set_sequence_fps, stated_fps, SEQUENCE_FPS_RANGE};
+pub use read::{sequence_fps, set_sequence_fps, SEQUENCE_FPS_RANGE};
 pub use write::{
     check_output, create, fit_frame, read_flipbook, read_flipbook_meta, write_png, AlphaMode,
     Engine, Flipbook, FlipbookMeta, FlipbookOptions, Format, FrameWriter, MotionSource, ScaledFrom,

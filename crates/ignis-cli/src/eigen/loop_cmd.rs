@@ -2272,7 +2272,7 @@ pub fn run(a: &Args, g: &Global) -> Result<()> {
     };
     // a crop past the frame is refused before anything is read
     let info = clip.probe()?;
-    if let Some(note) = a.sequence.default_rate_note(&a.input, &info) {
+    if let Some(note) = a.sequence.default_rate_note(&info) {
         g.say(note);
     }
     // a variable rate: seconds are counted at the rate the loop will be written at

@@ -277,6 +277,7 @@ pub(crate) fn probe(path: &Path, _hint: Option<&str>) -> Result<(SourceInfo, Pla
         decoder: Decoder::Ffmpeg,
         path: path.to_path_buf(),
         anamorphic,
+        rate_stated: true,
     };
     Ok((info, plan))
 }

@@ -106,6 +106,7 @@ pub(crate) fn probe(path: &Path, sheet: &Path, json: &Path, meta: FlipbookMeta) 
             decoder: Decoder::Flipbook,
             path: path.to_path_buf(),
             anamorphic: None,
+            rate_stated: true,
         },
         json.to_path_buf(),
     ))

@@ -169,6 +169,7 @@ pub(crate) fn probe_mp4(path: &Path, len: u64, have_ffmpeg: bool) -> Result<Prob
         decoder: Decoder::Openh264,
         path: path.to_path_buf(),
         anamorphic,
+        rate_stated: true,
     };
     Ok(Probed::Mp4(
         info,

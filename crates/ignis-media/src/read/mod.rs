@@ -194,8 +194,12 @@ pub struct SourceInfo {
     /// Frame size in pixels, as read: upright and with square pixels ([`Self::anamorphic`]).
     pub size: Size,
     /// Frames per second (image sequences and stills: [`sequence_fps`], by default
-    /// [`DEFAULT_SEQUENCE_FPS`]).
+    /// [`DEFAULT_SEQUENCE_FPS`], unless an EXR sequence's headers state one).
     pub fps: f64,
+    /// Whether the source states `fps` itself: a video's stream, a GIF's delays, a
+    /// flipbook's sidecar, an EXR sequence's `framesPerSecond`. `false` for a sequence or
+    /// still read at [`sequence_fps`].
+    pub rate_stated: bool,
     /// Number of frames, when the container says so (`None` for e.g. GIF or WebM without
     /// a frame count).
     pub frame_count: Option<u64>,
@@ -375,43 +379,38 @@ pub fn probe(path: &Path) -> Result<SourceInfo> {
 /// 0): file numbers 1001..1005 are frames 0..4`). `None` for anything else, or when no
 /// file has a number in the range.
 pub fn file_numbers_hint(path: &Path, start: u64, end: Option<u64>) -> Option<String> {
-    if !(is_pattern(path) || path.is_dir()) {
-        return None;
-    }
-    match probe_inner(path, false).ok()? {
-        Probed::Sequence(_, files, Some(numbers)) => {
-            sequence::numbers_hint(&numbers, &files, start, end)
-        }
+    match sequence_of(path).ok()?? {
+        (files, Some(numbers)) => sequence::numbers_hint(&numbers, &files, start, end),
         _ => None,
     }
+}
+
+/// An image sequence's files in playing order and their frame numbers, when every name
+/// has one ([`Probed::Sequence`]).
+type SequenceFiles = (Vec<PathBuf>, Option<Vec<u64>>);
+
+/// When `path` is an image sequence (a directory or a pattern): its [`SequenceFiles`].
+fn sequence_of(path: &Path) -> Result<Option<SequenceFiles>> {
+    if !(is_pattern(path) || path.is_dir()) {
+        return Ok(None);
+    }
+    Ok(match probe_inner(path, false)? {
+        Probed::Sequence(_, files, numbers) => Some((files, numbers)),
+        _ => None,
+    })
 }
 
 /// The files `path` reads: a sequence's frames in playing order (a directory or a printf
 /// pattern, as [`open`] finds them), a flipbook's sheet and sidecar, else the path itself —
 /// for fingerprinting a source.
 pub fn source_files(path: &Path) -> Result<Vec<PathBuf>> {
-    if is_pattern(path) || path.is_dir() {
-        if let Probed::Sequence(_, files, _) = probe_inner(path, false)? {
-            return Ok(files);
-        }
+    if let Some((files, _)) = sequence_of(path)? {
+        return Ok(files);
     }
     if let Some(files) = flipbook_src::files(path) {
         return Ok(files);
     }
     Ok(vec![path.to_path_buf()])
-}
-
-/// The frame rate an image sequence's own files state (an EXR's `framesPerSecond`), which
-/// it is read at unless [`set_sequence_fps`] set one; `None` for other sources and for
-/// sequences that state none.
-pub fn stated_fps(path: &Path) -> Option<f64> {
-    if !(is_pattern(path) || path.is_dir()) {
-        return None;
-    }
-    match probe_inner(path, false).ok()? {
-        Probed::Sequence(_, files, _) => sequence::exr_frames_per_second(files.first()?),
-        _ => None,
-    }
 }
 
 /// Whether `path` names a sequence by a pattern (`%04d`, or `####` unless a file of that

@@ -31,7 +31,7 @@ static SEQUENCE_FPS_BITS: AtomicU64 = AtomicU64::new(0);
 /// The rate image sequences and stills are read at in this process ([`SourceInfo::fps`],
 /// their frames' times): [`DEFAULT_SEQUENCE_FPS`] unless [`set_sequence_fps`] set another.
 /// (An EXR sequence whose headers state a rate is read at that rate unless one was set:
-/// [`super::stated_fps`].)
+/// [`SourceInfo::rate_stated`].)
 pub fn sequence_fps() -> f64 {
     given_sequence_fps().unwrap_or(DEFAULT_SEQUENCE_FPS)
 }
@@ -48,7 +48,7 @@ fn given_sequence_fps() -> Option<f64> {
 /// Ignis's own EXR sequences, OpenImageIO and RV write it), when it is one
 /// [`set_sequence_fps`] would accept; `None` for other files.
 pub(crate) fn exr_frames_per_second(path: &Path) -> Option<f64> {
-    if !still_extension(&path.to_string_lossy()).eq("exr") {
+    if still_extension(&path.to_string_lossy()) != "exr" {
         return None;
     }
     let meta = exr::meta::MetaData::read_from_file(path, false).ok()?;
@@ -159,6 +159,7 @@ pub(crate) fn probe_image(path: &Path) -> Result<Probed> {
         decoder: Decoder::Image,
         path: path.to_path_buf(),
         anamorphic: None,
+        rate_stated: false,
     }))
 }
 
@@ -324,23 +325,7 @@ pub(crate) fn probe_pattern(path: &Path) -> Result<Probed> {
     if let Err(e) = dimensions(&files[0].1) {
         let ext = still_extension(&pat.suffix);
         if !STILL_EXTENSIONS.contains(&ext.as_str()) {
-            let field = |suffix: &str| {
-                let n = match pat.width {
-                    0 | 1 => "%d".to_string(),
-                    w => format!("%0{w}d"),
-                };
-                dir.join(format!("{}{n}{suffix}", pat.prefix))
-            };
-            let png = match pat.suffix.rsplit_once('.') {
-                Some((stem, _)) => format!("{stem}.png"),
-                None => format!("{}.png", pat.suffix),
-            };
-            let start = start_number(numbers[0]);
-            let convert = format!(
-                "ffmpeg {start}-i {} {start}{}",
-                shell_word(&field(&pat.suffix)),
-                shell_word(&field(&png))
-            );
+            let convert = ffmpeg_to_png(&dir, &pat.prefix, pat.width, &pat.suffix, numbers[0]);
             // ffmpeg reads a numbered sequence up to its first gap
             let gap = missing_frames(&numbers).1.first().map(|&gap| {
                 let next = numbers.iter().find(|&&n| n > gap).copied().unwrap_or(gap);
@@ -357,6 +342,26 @@ pub(crate) fn probe_pattern(path: &Path) -> Result<Probed> {
         path,
         files.into_iter().map(|(_, p)| p).collect(),
         Some(&numbers),
+    )
+}
+
+/// The ffmpeg command converting the numbered frames `dir/{prefix}{number}{suffix}`, their
+/// numbers `width` digits wide (at most 1: not padded) from `first`, to PNGs of the same
+/// names and numbers.
+fn ffmpeg_to_png(dir: &Path, prefix: &str, width: usize, suffix: &str, first: u64) -> String {
+    let field = match width {
+        0 | 1 => "%d".to_string(),
+        w => format!("%0{w}d"),
+    };
+    let png = match suffix.rsplit_once('.') {
+        Some((stem, _)) => format!("{stem}.png"),
+        None => format!("{suffix}.png"),
+    };
+    let start = start_number(first);
+    format!(
+        "ffmpeg {start}-i {} {start}{}",
+        shell_word(&dir.join(format!("{prefix}{field}{suffix}"))),
+        shell_word(&dir.join(format!("{prefix}{field}{png}")))
     )
 }
 
@@ -430,19 +435,13 @@ fn other_frames(dir: &Path) -> Result<Option<MediaError>> {
     let stem = &first[..first.len() - ext.len() - 1];
     let digits = stem.bytes().rev().take_while(u8::is_ascii_digit).count();
     let convert = match stem[stem.len() - digits..].parse::<u64>() {
-        Ok(n) => {
-            let prefix = &stem[..stem.len() - digits];
-            let field = match digits {
-                1 => "%d".to_string(),
-                d => format!("%0{d}d"),
-            };
-            let start = start_number(n);
-            format!(
-                "ffmpeg {start}-i {} {start}{}",
-                shell_word(&dir.join(format!("{prefix}{field}.{ext}"))),
-                shell_word(&dir.join(format!("{prefix}{field}.png")))
-            )
-        }
+        Ok(n) => ffmpeg_to_png(
+            dir,
+            &stem[..stem.len() - digits],
+            digits,
+            &format!(".{ext}"),
+            n,
+        ),
         Err(_) => format!(
             "ffmpeg -i {} {}",
             shell_word(&dir.join(first)),
@@ -576,13 +575,9 @@ pub(crate) fn numbers_hint(
         return None;
     }
     let name = files.first()?.file_name()?.to_string_lossy();
-    let asked = match end {
-        Some(e) => format!("{start}..{e}"),
-        None => format!("{start}.."),
-    };
-    let frames = match end {
-        Some(_) => format!("{i}..{j}"),
-        None => format!("{i}.."),
+    let (asked, frames) = match end {
+        Some(e) => (format!("{start}..{e}"), format!("{i}..{j}")),
+        None => (format!("{start}.."), format!("{i}..")),
     };
     Some(format!(
         "frames count from 0 in the order read, not by file number ({name} is frame 0): file \
@@ -679,6 +674,7 @@ fn finish_sequence(path: &Path, files: Vec<PathBuf>, numbers: Option<&[u64]>) ->
         decoder: Decoder::ImageSequence,
         path: path.to_path_buf(),
         anamorphic: None,
+        rate_stated: stated.is_some(),
     };
     Ok(Probed::Sequence(info, files, numbers.map(<[u64]>::to_vec)))
 }
@@ -748,6 +744,7 @@ pub(crate) fn probe_gif(path: &Path) -> Result<Probed> {
         decoder: Decoder::Gif,
         path: path.to_path_buf(),
         anamorphic: None,
+        rate_stated: true,
     }))
 }
 

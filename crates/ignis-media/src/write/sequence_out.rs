@@ -1,6 +1,6 @@
 //! PNG (8-bit sRGB, straight alpha) and EXR (linear f32, premultiplied) sequences. An EXR
 //! frame states the sequence's rate in the standard `framesPerSecond` attribute (PNG has
-//! no such field), which reading it back takes ([`crate::read::stated_fps`]).
+//! no such field), which reading it back takes ([`crate::SourceInfo::rate_stated`]).
 //!
 //! A directory destination is filled with `0000.png`, `0001.png`, … (or `.exr`); a pattern
 //! destination `frames/f_%04d.png` numbers from 0 the same way (or from
