@@ -53,9 +53,13 @@ impl KeptTimes {
         if bits.len() != n {
             return None;
         }
-        bits.iter()
+        let times = bits
+            .iter()
             .map(|b| Some(f64::from_bits(u64::from_str_radix(b.as_str()?, 16).ok()?)))
-            .collect()
+            .collect::<Option<Vec<f64>>>()?;
+        // used now: `ignis cache` trims the least recently used first
+        crate::cache_cmd::touch(self.path.as_ref()?);
+        Some(times)
     }
 
     /// Keeps `times` (atomically); a failure is said, not returned.

@@ -20,6 +20,7 @@ macro_rules! out {
 
 mod args;
 mod bench;
+mod cache_cmd;
 mod classic;
 mod convert;
 mod demo;
@@ -81,6 +82,8 @@ enum Cmd {
     Loop(eigen::loop_cmd::Args),
     /// Headline performance figures of a method as one JSON object.
     Bench(bench::BenchArgs),
+    /// What `ignis loop`'s cache holds (clip databases, kept loop times), and trimming it.
+    Cache(cache_cmd::Args),
 }
 
 #[derive(clap::Args, Debug)]
@@ -134,6 +137,7 @@ fn run(cli: Cli) -> Result<()> {
             Ok(())
         }
         Cmd::Bench(a) => bench::run(&a, &g),
+        Cmd::Cache(a) => cache_cmd::run(&a, &g),
     }
 }
 

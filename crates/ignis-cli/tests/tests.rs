@@ -2664,6 +2664,114 @@ mod loop_sequence {
         assert_eq!(files_in(&cache).len(), 2, "two entries");
     }
 
+    /// `ignis cache` lists the clip databases by their sources, trims the least recently
+    /// used first (a loop reading an entry marks it used), leaves what is not Ignis's, and
+    /// a trimmed clip is trained again when it is next looped.
+    #[test]
+    fn the_cache_is_listed_and_trimmed_least_recently_used_first() {
+        let t = tempfile::tempdir().unwrap();
+        let cache = t.path().join("cache");
+        let c = cache.to_str().unwrap();
+        let clip = |name: &str, seed: &str| {
+            let dir = t.path().join(name);
+            std::fs::create_dir(&dir).unwrap();
+            classic_ok(
+                "48x40",
+                "40",
+                &["--seed", seed, "--no-loop"],
+                &dir.join("%04d.png"),
+            );
+            dir
+        };
+        let (a, b) = (clip("fire-a", "5"), clip("fire-b", "6"));
+        let looped = |src: &Path| -> bool {
+            let out = t.path().join("out.png");
+            let r = ignis_ok(&[
+                "loop",
+                src.to_str().unwrap(),
+                "--length",
+                "16",
+                "--cache",
+                c,
+                "-o",
+                out.to_str().unwrap(),
+            ]);
+            String::from_utf8_lossy(&r.stdout).contains("cached the clip's database")
+        };
+        assert!(looped(&a) && looped(&b));
+        std::fs::write(cache.join("notes.txt"), "mine").unwrap();
+        // a read marks a used: b is now the least recently used
+        assert!(!looped(&a));
+        let said = said_ok(&["cache", "--cache", c]);
+        assert!(said.contains("2 entries"), "{said}");
+        let (ia, ib) = (
+            said.find("fire-a").expect("a's source listed"),
+            said.find("fire-b").expect("b's source listed"),
+        );
+        assert!(ib < ia, "least recently used first: {said}");
+        assert!(said.contains("frames 0..40 at 30 fps, 48x40"), "{said}");
+        assert!(
+            said.contains("not Ignis's, left alone: notes.txt"),
+            "{said}"
+        );
+        let json = |args: &[&str]| -> serde_json::Value {
+            let mut all = vec!["cache", "--cache", c, "--json"];
+            all.extend_from_slice(args);
+            serde_json::from_slice(&ignis_ok(&all).stdout).unwrap()
+        };
+        let v = json(&[]);
+        let entries = v["entries"].as_array().unwrap();
+        assert_eq!(entries.len(), 2, "{v}");
+        assert_eq!(entries[0]["kind"], "clip");
+        assert!(
+            entries[0]["source"].as_str().unwrap().contains("fire-b"),
+            "{v}"
+        );
+        let keep = entries[1]["bytes"].as_u64().unwrap().to_string();
+        // a dry run removes nothing
+        let v = json(&["--max-size", &keep, "--dry-run"]);
+        assert_eq!(
+            (v["would_remove"].as_u64(), v["removed"].as_u64()),
+            (Some(1), Some(0))
+        );
+        assert_eq!(files_in(&cache).len(), 3);
+        let said = said_ok(&["cache", "--cache", c, "--max-size", &keep]);
+        assert!(said.contains("removed 1 entry"), "{said}");
+        assert!(cache.join("notes.txt").is_file());
+        let left = json(&[]);
+        let e = left["entries"].as_array().unwrap();
+        assert_eq!(e.len(), 1, "{left}");
+        assert!(
+            e[0]["source"].as_str().unwrap().contains("fire-a"),
+            "{left}"
+        );
+        assert!(!looped(&a), "a was kept");
+        assert!(looped(&b), "b was removed, so trained again");
+        // bad values are refused with the forms to use; nothing is removed
+        for (flag, bad, says) in [
+            ("--max-size", "5Q", "500M, 5G or 1.5T"),
+            ("--older-than", "30y", "12h, 30d or 2w"),
+        ] {
+            let r = ignis(&["cache", "--cache", c, flag, bad]);
+            assert!(!r.status.success());
+            let err = String::from_utf8_lossy(&r.stderr);
+            assert!(err.contains(says), "{err}");
+        }
+        assert_eq!(json(&[])["entries"].as_array().unwrap().len(), 2);
+        let said = said_ok(&["cache", "--cache", c, "--clear"]);
+        assert!(said.contains("removed 2 entries"), "{said}");
+        assert_eq!(files_in(&cache), ["notes.txt"]);
+        assert!(said_ok(&["cache", "--cache", c]).contains("holds no entries"));
+        // a file given as the cache
+        let file = cache.join("notes.txt");
+        let r = ignis(&["cache", "--cache", file.to_str().unwrap()]);
+        assert!(!r.status.success());
+        assert!(
+            String::from_utf8_lossy(&r.stderr).contains("is not a directory"),
+            "{r:?}"
+        );
+    }
+
     /// A sequence with frames missing (a render farm's lost frames) is timed by its frame
     /// numbers, as a video that dropped them: `info` says so, `loop` says the gap is judged
     /// by the jump it makes (its search's largest step), `eigen train` names the stretch

@@ -186,6 +186,10 @@ struct EntryMeta {
     /// Whether some frame of the window has its own alpha below 1 (`--alpha auto` keeps it).
     #[serde(default)]
     translucent: bool,
+    /// The source it was made of, as the path that built it (absolute where it can be
+    /// made so), for `ignis cache`'s listing; entries made before it was recorded have none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    source: Option<String>,
 }
 
 /// A verified cache entry: the database, the metric frames of the window, its fps.
@@ -427,8 +431,13 @@ pub fn cached(
                     "cache entry {} is unusable ({e:#}); rebuilding it",
                     dir.display()
                 );
-                std::fs::remove_dir_all(&dir)
-                    .with_context(|| format!("removing the bad cache entry {}", dir.display()))?;
+                match std::fs::remove_dir_all(&dir) {
+                    // gone meanwhile (`ignis cache` trimmed it): built anew below
+                    Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+                    r => r.with_context(|| {
+                        format!("removing the bad cache entry {}", dir.display())
+                    })?,
+                }
             }
         }
     }
@@ -436,6 +445,7 @@ pub fn cached(
     let mut c = open_entry(&dir, &sha, &settings)
         .with_context(|| format!("re-opening the cache entry just built at {}", dir.display()))?;
     c.built = true;
+    crate::cache_cmd::note_if_large(cache_dir, g);
     Ok(at_todays_rate(c))
 }
 
@@ -514,6 +524,8 @@ fn open_entry(dir: &Path, sha: &str, settings: &CacheSettings) -> Result<Cached>
             meta.metric_frames
         );
     }
+    // used now: `ignis cache` trims the least recently used first
+    crate::cache_cmd::touch(&dir.join("entry.json"));
     Ok(Cached {
         dir: dir.to_path_buf(),
         db,
@@ -627,6 +639,12 @@ fn build_entry(
             fps: info.fps,
             source_size: info.size.to_string(),
             translucent,
+            source: Some(
+                std::path::absolute(path)
+                    .unwrap_or_else(|_| path.to_path_buf())
+                    .display()
+                    .to_string(),
+            ),
         };
         ignis_core::atomic::write_bytes(
             &tmp.join("entry.json"),
