@@ -39,7 +39,7 @@ never removed."
 )]
 pub struct Args {
     /// Cache directory (default $XDG_CACHE_HOME/ignis or ~/.cache/ignis).
-    #[arg(long)]
+    #[arg(long, value_name = "DIR")]
     pub cache: Option<PathBuf>,
     /// Remove the least recently used entries until the cache holds at most this much:
     /// 500M, 5G, 1.5T (binary units, as `du -h` prints them; a plain number is bytes).
