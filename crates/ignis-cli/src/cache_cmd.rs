@@ -2,10 +2,10 @@
 //!
 //! The cache (`$XDG_CACHE_HOME/ignis`, `~/.cache/ignis` or `--cache DIR`) holds one entry
 //! per clip and window `ignis loop` (and `ignis bench loops`, the demo) has seen — a
-//! trained database with the window's metric frames, 5–200 MB each — and the loop times
-//! the looping generators keep (`volume-loop-times/`, `learned-loop-times/`: a few KB
-//! each, one per scene, size, length and build of `ignis`). Nothing removes them by
-//! itself, so the cache only grows. This command lists the entries (what each was made
+//! trained database with the window's metric frames, a few MB to a few hundred each — and
+//! the loop times the looping generators keep (`volume-loop-times/`, `learned-loop-times/`:
+//! a few KB each, one per scene, size, length and build of `ignis`). Nothing removes them
+//! by itself, so the cache only grows. This command lists the entries (what each was made
 //! of, its size, when it was last used) and removes them by age, by a size budget (least
 //! recently used first) or all, as the disk caches of compositing tools are trimmed.
 //!
@@ -32,7 +32,7 @@ ignis cache --older-than 30d        # remove what has not been used for 30 days\
 ignis cache --max-size 2G --dry-run # say what would go, remove nothing\n  \
 ignis cache --clear\n  \
 ignis cache --cache /tmp/ignis-cache --json\n\n\
-The cache holds `ignis loop`'s clip databases (the first run on a clip trains one: 5-200 MB) and the \
+The cache holds `ignis loop`'s clip databases (the first run on a clip trains one: a few MB to a few hundred) and the \
 loop times of looping volume and learned renders (a few KB each). A removed clip database is \
 trained again the next time that clip is looped. Files in the directory that are not Ignis's are \
 never removed."
