@@ -106,19 +106,26 @@ pub fn parse_age(s: &str) -> std::result::Result<Duration, String> {
     Duration::try_from_secs_f64(v * secs).map_err(|_| bad())
 }
 
-/// What one entry is.
-#[derive(Clone, Debug, PartialEq)]
+/// What one entry is (in `--json`: `"kind": "clip"` with `source`, `frames`, `fps`,
+/// `source_size`, or `"kind": "loop-times"` with `generator`).
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+#[serde(tag = "kind", rename_all = "kebab-case")]
 pub enum What {
     /// A clip's database (`ignis loop`): the source as recorded (`None`: built before
     /// sources were recorded), the window of source frames, the clip's rate and size.
     Clip {
         source: Option<String>,
+        #[serde(rename = "frames")]
         window: Option<(u64, u64)>,
         fps: Option<f64>,
+        #[serde(rename = "source_size")]
         size: Option<String>,
     },
     /// One loop's kept frame times (`volume`, `learned`).
-    LoopTimes { kind: String },
+    LoopTimes {
+        #[serde(rename = "generator")]
+        kind: String,
+    },
 }
 
 /// One entry of the cache.
@@ -403,29 +410,11 @@ fn entry_json(e: &Entry, removed: bool) -> serde_json::Value {
         .map(|d| d.as_secs())
         .ok()
         .filter(|&s| s > 0);
-    let mut v = serde_json::json!({
-        "path": e.path.display().to_string(),
-        "bytes": e.bytes,
-        "last_used_unix": unix,
-        "removed": removed,
-    });
-    match &e.what {
-        What::Clip {
-            source,
-            window,
-            fps,
-            size,
-        } => {
-            v["kind"] = "clip".into();
-            v["source"] = source.clone().into();
-            v["frames"] = window.map(|(a, b)| serde_json::json!([a, b])).into();
-            v["fps"] = (*fps).into();
-            v["source_size"] = size.clone().into();
-        }
-        What::LoopTimes { kind } => {
-            v["kind"] = format!("{kind}-loop-times").into();
-        }
-    }
+    let mut v = serde_json::to_value(&e.what).unwrap_or_default();
+    v["path"] = e.path.display().to_string().into();
+    v["bytes"] = e.bytes.into();
+    v["last_used_unix"] = unix.into();
+    v["removed"] = removed.into();
     v
 }
 
