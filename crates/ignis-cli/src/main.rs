@@ -46,7 +46,8 @@ use std::process::ExitCode;
     version,
     about = "Controllable fire animations for games, motion graphics and VFX",
     after_help = "Examples:\n  ignis demo -o ignis-demo                 # every method on built-in defaults, with a gallery\n  \
-ignis classic --size 320x200 --frames 300 -o fire.mp4\n  ignis info candle.mp4 --json\n  ignis bench classic"
+ignis classic --size 320x200 --frames 300 -o fire.mp4\n  ignis info candle.mp4 --json\n  ignis bench classic\n  \
+ignis cache --max-size 5G                # keep `ignis loop`'s cache of clip databases under 5 GiB"
 )]
 struct Cli {
     /// No progress bars or chatter (errors are still printed).
