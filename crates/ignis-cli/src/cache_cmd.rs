@@ -148,9 +148,20 @@ pub struct Listing {
     pub other: Vec<(String, u64)>,
     /// Temporaries of runs that were killed (removed by any trim).
     pub leftovers: usize,
+    /// Temporaries of runs still going (entries being built or replaced; never removed).
+    pub in_progress: usize,
 }
 
 impl Listing {
+    /// Counts a temporary of the run `pid`: in progress while it runs, else a leftover.
+    fn count_temporary(&mut self, pid: u32) {
+        if ignis_core::tempfiles::pid_alive(pid) {
+            self.in_progress += 1;
+        } else {
+            self.leftovers += 1;
+        }
+    }
+
     /// Bytes of Ignis's entries.
     pub fn bytes(&self) -> u64 {
         self.entries.iter().map(|e| e.bytes).sum()
@@ -229,8 +240,8 @@ pub fn list(dir: &Path) -> Result<Listing> {
     names.sort();
     for (name, path) in names {
         let is_dir = std::fs::symlink_metadata(&path).is_ok_and(|m| m.is_dir());
-        if ignis_core::tempfiles::owner(&name).is_some() {
-            out.leftovers += 1;
+        if let Some(pid) = ignis_core::tempfiles::owner(&name) {
+            out.count_temporary(pid);
         } else if is_dir && is_clip_entry_name(&name) && path.join("entry.json").is_file() {
             out.entries.push(Entry {
                 what: clip_what(&path),
@@ -248,8 +259,8 @@ pub fn list(dir: &Path) -> Result<Listing> {
             for f in files {
                 let n = f.file_name().map(|n| n.to_string_lossy().into_owned());
                 let Some(n) = n else { continue };
-                if ignis_core::tempfiles::owner(&n).is_some() {
-                    out.leftovers += 1;
+                if let Some(pid) = ignis_core::tempfiles::owner(&n) {
+                    out.count_temporary(pid);
                 } else if n.ends_with(".json") && f.is_file() {
                     out.entries.push(Entry {
                         what: What::LoopTimes {
@@ -570,7 +581,15 @@ pub fn run(a: &Args, g: &Global) -> Result<()> {
                 }
             )?;
         }
-    } else if listing.leftovers > 0 {
+    }
+    if listing.in_progress > 0 {
+        g.say(format!(
+            "{} entr{} being written by a running ignis (left alone)",
+            listing.in_progress,
+            if listing.in_progress == 1 { "y" } else { "ies" }
+        ));
+    }
+    if !trimming && listing.leftovers > 0 {
         g.say(format!(
             "{} leftover(s) of killed runs; any trim (e.g. --older-than 30d) removes them",
             listing.leftovers
@@ -701,6 +720,18 @@ mod tests {
         std::fs::write(d.join("my-notes.txt"), b"keep me").unwrap();
         // named like an entry, but no entry.json: not Ignis's
         std::fs::create_dir(d.join("0123456789abcdef01234567-ffffffffffff")).unwrap();
+        // temporaries: of a run that has exited, and of this (running) one
+        let mut child = std::process::Command::new("true").spawn().unwrap();
+        let dead = child.id();
+        child.wait().unwrap();
+        std::fs::create_dir(d.join(format!(".e.ignis-tmp-{dead}.0.dir"))).unwrap();
+        let live = ignis_core::tempfiles::temp_name("f", "0.dir");
+        std::fs::create_dir(d.join(&live)).unwrap();
+        let l = list(d).unwrap();
+        assert_eq!((l.leftovers, l.in_progress), (1, 1), "{l:?}");
+        assert_eq!(ignis_core::tempfiles::remove_stale(d), 1);
+        assert!(d.join(&live).is_dir());
+        std::fs::remove_dir(d.join(&live)).unwrap();
         let l = list(d).unwrap();
         assert_eq!(l.entries.len(), 2, "{l:?}");
         let c = l.entries.iter().find(|e| e.path == clip).unwrap();
@@ -734,7 +765,7 @@ mod tests {
         let after = list(d).unwrap();
         assert!(after.entries.is_empty());
         assert_eq!(after.other.len(), 3);
-        assert_eq!(after.leftovers, 0);
+        assert_eq!((after.leftovers, after.in_progress), (0, 0));
         assert!(d.join("my-notes.txt").is_file());
         // a missing cache is empty; a file given as the cache is refused
         assert!(list(&d.join("nothing")).unwrap().entries.is_empty());
