@@ -24,6 +24,7 @@
 pub mod atomic;
 pub mod colour;
 pub mod error;
+pub mod fireblend;
 pub mod frame;
 pub mod golden;
 pub mod loopq;

@@ -17,6 +17,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
+use ignis_core::fireblend::Ramp;
 use ignis_core::loopq::{self, LoopQuality};
 use ignis_core::{GrayFrame, RgbaFrame, Size};
 use ignis_eigen::loops::{self, Candidate, Closing, Evaluated, PairMorph, Planned, SearchParams};
@@ -1156,6 +1157,7 @@ pub fn planned_frames(best: &Evaluated) -> usize {
 /// order. Decodes only source frames `start..end + m`; keeps the m head frames in memory.
 /// With `matte`, every source frame's alpha is its pre-processing matte before it is
 /// blended or morphed; with `steady`, the frame (matte and all) is then held still.
+/// Crossfades and morphs blend on the fire's colour ramp ([`closing_frame`]).
 pub fn render(
     clip: Clip,
     first: usize,
@@ -1163,6 +1165,32 @@ pub fn render(
     scale: Option<Size>,
     matte: Option<&FootageMatte>,
     steady: Option<&Steadying>,
+    sink: &mut dyn FnMut(&RgbaFrame) -> Result<()>,
+) -> Result<()> {
+    render_with(clip, first, best, scale, (matte, steady), true, sink)
+}
+
+/// [`render`] of a crossfade peer's loop (Unity's, Houdini's, an ffmpeg script's): opaque,
+/// its crossfade the plain blend `(1 − w)·a + w·b` the peers make.
+pub fn render_peer(
+    clip: Clip,
+    first: usize,
+    peer: &Evaluated,
+    scale: Option<Size>,
+    sink: &mut dyn FnMut(&RgbaFrame) -> Result<()>,
+) -> Result<()> {
+    render_with(clip, first, peer, scale, (None, None), false, sink)
+}
+
+/// [`render`], its crossfades on the fire's colour ramp or plain (`on_ramp`; peers never
+/// morph).
+fn render_with(
+    clip: Clip,
+    first: usize,
+    best: &Evaluated,
+    scale: Option<Size>,
+    (matte, steady): (Option<&FootageMatte>, Option<&Steadying>),
+    on_ramp: bool,
     sink: &mut dyn FnMut(&RgbaFrame) -> Result<()>,
 ) -> Result<()> {
     let c = best.candidate;
@@ -1215,7 +1243,8 @@ pub fn render(
                     let a = next(from)?;
                     let b = &head[to - c.start];
                     let f = match best.closing {
-                        Closing::Morph(_) => morph_rgba(&a, b, w)?,
+                        Closing::Morph(_) => closing_frame(&a, b, Some(&render_flow(&a, b)?), w),
+                        _ if on_ramp => closing_frame(&a, b, None, w),
                         _ => blend_rgba(&a, b, w),
                     };
                     sink(&f)?;
@@ -1414,15 +1443,16 @@ fn rendered_mids(
         } else {
             None
         };
+        let ramp = Ramp::of(&[&a, &b]);
         for (k, mids) in closings.iter().zip(out.iter_mut()) {
             let m = k.frames();
             if t >= m {
                 continue;
             }
             let w = (t + 1) as f32 / (m + 1) as f32;
-            let f = match (k, &flow) {
-                (Closing::Morph(_), Some((f, g))) => ignis_flow::morph_rgba(&a, &b, f, g, w)?,
-                _ => blend_rgba(&a, &b, w),
+            let f = match k {
+                Closing::Morph(_) => closing_frame_on(ramp.as_ref(), &a, &b, flow.as_ref(), w),
+                _ => closing_frame_on(ramp.as_ref(), &a, &b, None, w),
             };
             let q = loopq::metric_frame_rgba(&f, [0.0; 3]);
             mids.push(if q.size() == size {
@@ -1465,11 +1495,62 @@ pub fn blend_rgba(a: &RgbaFrame, b: &RgbaFrame, w: f32) -> RgbaFrame {
     RgbaFrame::from_vec(a.size(), data).expect("same size")
 }
 
-/// The motion-compensated in-between `w` of the way from `a` to `b`, flow computed on the
-/// luma at most [`RENDER_FLOW_SIDE`] pixels on the longest side and resampled.
-fn morph_rgba(a: &RgbaFrame, b: &RgbaFrame, w: f32) -> Result<RgbaFrame> {
-    let (f, g) = render_flow(a, b)?;
-    Ok(ignis_flow::morph_rgba(a, b, &f, &g, w)?)
+/// A closing's frame `w` of the way from `a` to `b`: a crossfade, or with `flow` (a→b and
+/// b→a, from [`render_flow`]) the motion-compensated in-between (both frames warped toward
+/// it along the flow, as `ignis_flow::morph_rgba` with plain weights), blended on the fire's
+/// colour ramp (`ignis_core::fireblend`: a bright tongue fading into the dark cools to red
+/// instead of dimming to olive; luminance and alpha are the plain blend's). Keyed-out
+/// pixels and frames with no light blend as [`blend_rgba`].
+fn closing_frame(
+    a: &RgbaFrame,
+    b: &RgbaFrame,
+    flow: Option<&(ignis_flow::FlowField, ignis_flow::FlowField)>,
+    w: f32,
+) -> RgbaFrame {
+    closing_frame_on(Ramp::of(&[a, b]).as_ref(), a, b, flow, w)
+}
+
+/// [`closing_frame`] with the pair's ramp measured once (`Ramp::of` the two frames as they
+/// are: the warps move their light, they do not recolour it).
+fn closing_frame_on(
+    ramp: Option<&Ramp>,
+    a: &RgbaFrame,
+    b: &RgbaFrame,
+    flow: Option<&(ignis_flow::FlowField, ignis_flow::FlowField)>,
+    w: f32,
+) -> RgbaFrame {
+    use rayon::prelude::*;
+    let Some((f, g)) = flow else {
+        return ignis_core::fireblend::blend_with(ramp, a, b, w)
+            .unwrap_or_else(|| blend_rgba(a, b, w));
+    };
+    // Both warps row by row, premultiplied, blended as they are made: no warped frames.
+    let (wa, wb) = (
+        ignis_flow::WarpRows::new(a, f, -w),
+        ignis_flow::WarpRows::new(b, g, -(1.0 - w)),
+    );
+    let width = a.size().width as usize;
+    if width == 0 || b.size() != a.size() {
+        // a closing's frames share one size; an empty frame is its own in-between
+        return a.clone();
+    }
+    let mut out = vec![[0.0f32; 4]; a.data().len()];
+    {
+        out.par_chunks_mut(width).enumerate().for_each_init(
+            || {
+                let row = vec![[0.0f32; 4]; width];
+                (wa.scratch(), wb.scratch(), row.clone(), row)
+            },
+            |(sa, sb, ra, rb), (y, line)| {
+                wa.rows_with(sa, y, ra);
+                wb.rows_with(sb, y, rb);
+                for ((o, &p), &q) in line.iter_mut().zip(ra.iter()).zip(rb.iter()) {
+                    *o = ignis_core::fireblend::blend_pm_to_straight(ramp, p, q, w);
+                }
+            },
+        );
+    }
+    RgbaFrame::from_vec(a.size(), out).expect("sized from a")
 }
 
 /// The forward and backward flow between two full-size frames as the render's morph
@@ -3530,5 +3611,57 @@ mod tests {
         // Both keyed out: transparent.
         let z = RgbaFrame::from_vec(size, vec![[0.5, 0.5, 0.5, 0.0]; 2]).unwrap();
         assert_eq!(blend_rgba(&z, &z, 0.5).data()[0], [0.5, 0.5, 0.5, 0.0]);
+    }
+
+    /// A closing's frames blend on the fire's colour ramp: where a bright yellow tongue of
+    /// one frame meets the dark of the other, the crossfade and the morph (here with no
+    /// motion, so the same frame) are redder than the plain blend, with its luminance and
+    /// alpha; a keyed-out pixel stays as the plain crossfade makes it.
+    #[test]
+    fn closing_frames_cool_as_they_fade() {
+        let (w, h) = (64u32, 4u32);
+        let size = Size::new(w, h).unwrap();
+        // a fire ramp across the frame (dim red to bright yellow), the same in both frames
+        // but for pixel 0, bright yellow in `a` and dark in `b`, and pixel 1, keyed out
+        let fire = |y: f32| {
+            let t = (y / 0.8).clamp(0.0, 1.0);
+            let raw = [1.0, 0.15 + 0.75 * t, 0.02 + 0.2 * t * t];
+            let l = 0.2126 * raw[0] + 0.7152 * raw[1] + 0.0722 * raw[2];
+            [raw[0] * y / l, raw[1] * y / l, raw[2] * y / l, 1.0]
+        };
+        let ramp: Vec<[f32; 4]> = (0..w * h)
+            .map(|i| fire(0.002 * 1.025f32.powi(i as i32 % 256)))
+            .collect();
+        let (mut a, mut b) = (ramp.clone(), ramp);
+        a[0] = fire(0.8);
+        b[0] = [0.01, 0.01, 0.01, 1.0];
+        a[1] = [0.3, 0.2, 0.1, 0.0];
+        b[1] = [0.1, 0.2, 0.3, 0.0];
+        let (a, b) = (
+            RgbaFrame::from_vec(size, a).unwrap(),
+            RgbaFrame::from_vec(size, b).unwrap(),
+        );
+        let zero = ignis_flow::FlowField::from_vec(size, vec![[0.0; 2]; (w * h) as usize]).unwrap();
+        let luma = |p: [f32; 4]| 0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2];
+        for t in [0.3f32, 0.5, 0.7] {
+            let plain = blend_rgba(&a, &b, t).data()[0];
+            let cross = closing_frame(&a, &b, None, t);
+            let morph = closing_frame(&a, &b, Some(&(zero.clone(), zero.clone())), t);
+            // the same light and alpha (a keyed-out pixel's hidden colour aside: the morph,
+            // as `ignis_flow::morph_rgba`, leaves it black)
+            let pm = |p: &[f32; 4]| [p[0] * p[3], p[1] * p[3], p[2] * p[3], p[3]];
+            for (x, y) in cross.data().iter().zip(morph.data()) {
+                let (x, y) = (pm(x), pm(y));
+                assert!((0..4).all(|c| (x[c] - y[c]).abs() < 1e-5), "{x:?} {y:?}");
+            }
+            let p = cross.data()[0];
+            assert!((luma(p) - luma(plain)).abs() < 1e-4, "{p:?} {plain:?}");
+            assert_eq!(p[3], plain[3]);
+            assert!(
+                p[1] / p[0] < 0.9 * (plain[1] / plain[0]),
+                "t {t}: {p:?} is not redder than the plain blend {plain:?}"
+            );
+            assert_eq!(cross.data()[1], blend_rgba(&a, &b, t).data()[1]);
+        }
     }
 }

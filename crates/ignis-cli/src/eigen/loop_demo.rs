@@ -303,13 +303,11 @@ fn write_peer(
     opts.loop_ = true;
     let mut w = out.create_with(size, &opts)?;
     let mut frames = Vec::new();
-    loop_cmd::render(
+    loop_cmd::render_peer(
         loop_cmd::Clip::whole(path),
         first,
         &e,
         Some(size),
-        None,
-        None,
         &mut |f| {
             frames.push(f.clone());
             out.push(&mut w, f)
