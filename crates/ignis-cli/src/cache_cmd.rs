@@ -59,19 +59,25 @@ pub struct Args {
     pub json: bool,
 }
 
-/// A cache size as people write it: `500M`, `5G`, `1.5T`, `5GB`, `5GiB`, `1048576`.
-/// Binary units (K = 1024), as `du -h` and `ls -h` print them.
-pub fn parse_bytes(s: &str) -> std::result::Result<u64, String> {
+/// `5.5G` → `(5.5, "G")`: the leading decimal number and the unit after it (spaces
+/// around either trimmed); `None` when there is no number.
+fn number_and_unit(s: &str) -> Option<(f64, &str)> {
     let t = s.trim();
     let split = t
         .find(|c: char| !(c.is_ascii_digit() || c == '.'))
         .unwrap_or(t.len());
     let (num, unit) = t.split_at(split);
+    Some((num.parse().ok()?, unit.trim()))
+}
+
+/// A cache size as people write it: `500M`, `5G`, `1.5T`, `5GB`, `5GiB`, `1048576`.
+/// Binary units (K = 1024), as `du -h` and `ls -h` print them.
+pub fn parse_bytes(s: &str) -> std::result::Result<u64, String> {
     let bad = || {
         format!("`{s}` is not a size: write it as 500M, 5G or 1.5T (binary units, K = 1024), or a number of bytes")
     };
-    let v: f64 = num.parse().map_err(|_| bad())?;
-    let shift = match unit.trim().to_ascii_uppercase().as_str() {
+    let (v, unit) = number_and_unit(s).ok_or_else(bad)?;
+    let shift = match unit.to_ascii_uppercase().as_str() {
         "" | "B" => 0,
         "K" | "KB" | "KIB" => 10,
         "M" | "MB" | "MIB" => 20,
@@ -88,14 +94,9 @@ pub fn parse_bytes(s: &str) -> std::result::Result<u64, String> {
 
 /// An age as people write it: `12h`, `30d`, `2w`, `90min`, `45s`.
 pub fn parse_age(s: &str) -> std::result::Result<Duration, String> {
-    let t = s.trim();
-    let split = t
-        .find(|c: char| !(c.is_ascii_digit() || c == '.'))
-        .unwrap_or(t.len());
-    let (num, unit) = t.split_at(split);
     let bad = || format!("`{s}` is not an age: write it as 12h, 30d or 2w (also s, min)");
-    let v: f64 = num.parse().map_err(|_| bad())?;
-    let secs = match unit.trim().to_ascii_lowercase().as_str() {
+    let (v, unit) = number_and_unit(s).ok_or_else(bad)?;
+    let secs = match unit.to_ascii_lowercase().as_str() {
         "s" | "sec" => 1.0,
         "m" | "min" => 60.0,
         "h" => 3600.0,
