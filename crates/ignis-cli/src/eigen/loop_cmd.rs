@@ -1499,8 +1499,9 @@ pub fn blend_rgba(a: &RgbaFrame, b: &RgbaFrame, w: f32) -> RgbaFrame {
 /// b→a, from [`render_flow`]) the motion-compensated in-between (both frames warped toward
 /// it along the flow, as `ignis_flow::morph_rgba` with plain weights), blended on the fire's
 /// colour ramp (`ignis_core::fireblend`: a bright tongue fading into the dark cools to red
-/// instead of dimming to olive; luminance and alpha are the plain blend's). Keyed-out
-/// pixels and frames with no light blend as [`blend_rgba`].
+/// instead of dimming to olive; luminance and alpha are the plain blend's). A crossfade's
+/// keyed-out pixels, and frames with no light, blend as [`blend_rgba`]; a morph leaves its
+/// keyed-out pixels black, as `ignis_flow::morph_rgba` does.
 fn closing_frame(
     a: &RgbaFrame,
     b: &RgbaFrame,
@@ -1535,21 +1536,19 @@ fn closing_frame_on(
         return a.clone();
     }
     let mut out = vec![[0.0f32; 4]; a.data().len()];
-    {
-        out.par_chunks_mut(width).enumerate().for_each_init(
-            || {
-                let row = vec![[0.0f32; 4]; width];
-                (wa.scratch(), wb.scratch(), row.clone(), row)
-            },
-            |(sa, sb, ra, rb), (y, line)| {
-                wa.rows_with(sa, y, ra);
-                wb.rows_with(sb, y, rb);
-                for ((o, &p), &q) in line.iter_mut().zip(ra.iter()).zip(rb.iter()) {
-                    *o = ignis_core::fireblend::blend_pm_to_straight(ramp, p, q, w);
-                }
-            },
-        );
-    }
+    out.par_chunks_mut(width).enumerate().for_each_init(
+        || {
+            let row = vec![[0.0f32; 4]; width];
+            (wa.scratch(), wb.scratch(), row.clone(), row)
+        },
+        |(sa, sb, ra, rb), (y, line)| {
+            wa.rows_with(sa, y, ra);
+            wb.rows_with(sb, y, rb);
+            for ((o, &p), &q) in line.iter_mut().zip(ra.iter()).zip(rb.iter()) {
+                *o = ignis_core::fireblend::blend_pm_to_straight(ramp, p, q, w);
+            }
+        },
+    );
     RgbaFrame::from_vec(a.size(), out).expect("sized from a")
 }
 
