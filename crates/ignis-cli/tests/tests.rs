@@ -2621,6 +2621,22 @@ mod flipbook_fit {
 mod loop_sequence {
     use super::*;
 
+    /// `ignis loop SRC --length 16 --cache CACHE -o OUT`, asserted to succeed: its stdout.
+    fn loop16(src: &Path, cache: &str, out: &Path) -> String {
+        let r = ignis(&[
+            "loop",
+            src.to_str().unwrap(),
+            "--length",
+            "16",
+            "--cache",
+            cache,
+            "-o",
+            out.to_str().unwrap(),
+        ]);
+        assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+        String::from_utf8_lossy(&r.stdout).into_owned()
+    }
+
     #[test]
     fn loop_of_a_png_sequence_caches_by_content() {
         let t = tempfile::tempdir().unwrap();
@@ -2632,19 +2648,7 @@ mod loop_sequence {
         let c = cache.to_str().unwrap();
         let run = |src: &Path, name: &str| {
             let out = t.path().join(name);
-            let a = [
-                "loop",
-                src.to_str().unwrap(),
-                "--length",
-                "16",
-                "--cache",
-                c,
-                "-o",
-                out.to_str().unwrap(),
-            ];
-            let r = ignis(&a);
-            assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
-            (String::from_utf8_lossy(&r.stdout).into_owned(), out)
+            (loop16(src, c, &out), out)
         };
         let (said, out) = run(&pattern, "a.png");
         assert!(said.contains("cached the clip's database"), "{said}");
@@ -2685,18 +2689,7 @@ mod loop_sequence {
         };
         let (a, b) = (clip("fire-a", "5"), clip("fire-b", "6"));
         let looped = |src: &Path| -> bool {
-            let out = t.path().join("out.png");
-            let r = ignis_ok(&[
-                "loop",
-                src.to_str().unwrap(),
-                "--length",
-                "16",
-                "--cache",
-                c,
-                "-o",
-                out.to_str().unwrap(),
-            ]);
-            String::from_utf8_lossy(&r.stdout).contains("cached the clip's database")
+            loop16(src, c, &t.path().join("out.png")).contains("cached the clip's database")
         };
         assert!(looped(&a) && looped(&b));
         std::fs::write(cache.join("notes.txt"), "mine").unwrap();

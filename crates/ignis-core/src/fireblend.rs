@@ -27,10 +27,7 @@
 //! luminance between nodes. Pixels darker than [`Y_FLOOR`] have no measurable colour:
 //! offset 0.
 
-use crate::frame::RgbaFrame;
-
-/// Luminance weights of linear Rec. 709 / sRGB primaries.
-const LUMA: [f32; 3] = [0.2126, 0.7152, 0.0722];
+use crate::frame::{RgbaFrame, LUMA};
 
 /// Bins of log luminance the ramp is measured in.
 pub const RAMP_BINS: usize = 32;
@@ -52,14 +49,27 @@ fn luma(p: [f32; 3]) -> f32 {
 /// of log luminance, one node per measured bin.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Ramp {
-    /// Each node's log luminance (the light-weighted mean `ln Y` of its bin's pixels,
-    /// rising) and chromaticity.
-    nodes: Vec<(f32, [f32; 3])>,
     /// The ramp looked up by a luminance's top 16 bits (sign, exponent and 7 bits of
     /// mantissa: steps of at most 0.8 % in luminance), from [`Y_FLOOR`]'s up to the
     /// brightest pixel's; each entry the ramp at the middle of its step. No logarithm per
     /// pixel.
     table: Vec<[f32; 3]>,
+}
+
+/// The ramp through `nodes` (log luminance rising, chromaticity) at luminance `y`: linear
+/// in `ln y` between the nodes around it, the end node's beyond the ends.
+fn between_nodes(n: &[(f32, [f32; 3])], y: f32) -> [f32; 3] {
+    let ly = y.max(Y_FLOOR).ln();
+    let k = n.partition_point(|&(x, _)| x < ly);
+    if k == 0 {
+        return n[0].1;
+    }
+    if k == n.len() {
+        return n[k - 1].1;
+    }
+    let ((x0, a), (x1, b)) = (n[k - 1], n[k]);
+    let f = if x1 > x0 { (ly - x0) / (x1 - x0) } else { 0.0 };
+    std::array::from_fn(|c| a[c] + f * (b[c] - a[c]))
 }
 
 /// A luminance's key into [`Ramp::table`] (before the floor's is subtracted).
@@ -83,11 +93,11 @@ impl Ramp {
                 top = top.max(y);
             }
         }
-        // A 32-bin curve needs no more than about 65,536 pixels a frame: every `stride`-th.
-        let stride = |f: &RgbaFrame| f.data().len().div_ceil(SAMPLES).max(1);
         if top <= Y_FLOOR {
             return None;
         }
+        // A 32-bin curve needs no more than about 65,536 pixels a frame: every `stride`-th.
+        let stride = |f: &RgbaFrame| f.data().len().div_ceil(SAMPLES).max(1);
         let lo = Y_FLOOR.ln();
         let step = ((top.ln() - lo) / RAMP_BINS as f32).max(1e-6);
         // per bin: Σ light per channel, ΣY, ΣY·ln Y
@@ -121,38 +131,16 @@ impl Ramp {
         if nodes.is_empty() {
             return None;
         }
-        let mut r = Ramp {
-            nodes,
-            table: Vec::new(),
-        };
-        let (k0, k1) = (key(Y_FLOOR), key(top));
-        r.table = (k0..=k1)
-            .map(|k| r.exact(f32::from_bits((k << 16) | 0x8000)))
+        let table = (key(Y_FLOOR)..=key(top))
+            .map(|k| between_nodes(&nodes, f32::from_bits((k << 16) | 0x8000)))
             .collect();
-        Some(r)
+        Some(Ramp { table })
     }
 
-    /// The ramp's chromaticity at luminance `y` (> 0), from [`Ramp::table`]: linear in
-    /// `ln y` between the nodes around it, the end node's beyond the ends.
+    /// The ramp's chromaticity at luminance `y` (> 0), from [`Ramp::table`].
     pub fn at(&self, y: f32) -> [f32; 3] {
         let k = key(y.max(Y_FLOOR)) - key(Y_FLOOR);
         self.table[(k as usize).min(self.table.len() - 1)]
-    }
-
-    /// [`Ramp::at`] computed from the nodes.
-    fn exact(&self, y: f32) -> [f32; 3] {
-        let ly = y.max(Y_FLOOR).ln();
-        let n = &self.nodes;
-        let k = n.partition_point(|&(x, _)| x < ly);
-        if k == 0 {
-            return n[0].1;
-        }
-        if k == n.len() {
-            return n[k - 1].1;
-        }
-        let ((x0, a), (x1, b)) = (n[k - 1], n[k]);
-        let f = if x1 > x0 { (ly - x0) / (x1 - x0) } else { 0.0 };
-        std::array::from_fn(|c| a[c] + f * (b[c] - a[c]))
     }
 
     /// The blend `w` of the way from the premultiplied pixel `a` to `b` (RGB light and

@@ -1525,16 +1525,16 @@ fn closing_frame_on(
         return ignis_core::fireblend::blend_with(ramp, a, b, w)
             .unwrap_or_else(|| blend_rgba(a, b, w));
     };
-    // Both warps row by row, premultiplied, blended as they are made: no warped frames.
-    let (wa, wb) = (
-        ignis_flow::WarpRows::new(a, f, -w),
-        ignis_flow::WarpRows::new(b, g, -(1.0 - w)),
-    );
     let width = a.size().width as usize;
     if width == 0 || b.size() != a.size() {
         // a closing's frames share one size; an empty frame is its own in-between
         return a.clone();
     }
+    // Both warps row by row, premultiplied, blended as they are made: no warped frames.
+    let (wa, wb) = (
+        ignis_flow::WarpRows::new(a, f, -w),
+        ignis_flow::WarpRows::new(b, g, -(1.0 - w)),
+    );
     let mut out = vec![[0.0f32; 4]; a.data().len()];
     out.par_chunks_mut(width).enumerate().for_each_init(
         || {
@@ -3641,7 +3641,8 @@ mod tests {
             RgbaFrame::from_vec(size, b).unwrap(),
         );
         let zero = ignis_flow::FlowField::from_vec(size, vec![[0.0; 2]; (w * h) as usize]).unwrap();
-        let luma = |p: [f32; 4]| 0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2];
+        let l = ignis_core::frame::LUMA;
+        let luma = |p: [f32; 4]| l[0] * p[0] + l[1] * p[1] + l[2] * p[2];
         for t in [0.3f32, 0.5, 0.7] {
             let plain = blend_rgba(&a, &b, t).data()[0];
             let cross = closing_frame(&a, &b, None, t);
