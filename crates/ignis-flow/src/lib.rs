@@ -11,6 +11,8 @@
 //! - [`morph_gray`] / [`morph_rgba`]: the in-between frame along both flows;
 //!   [`morph_gray_with`] / [`morph_rgba_with`] add optional occlusion-aware weights from
 //!   forward–backward consistency ([`MorphParams`]).
+//! - [`fill_unseen`]: a field's vectors where its frame's alpha is 0 (a matted frame's
+//!   empty background, where DIS has nothing to match) filled smoothly from where it is seen.
 //! - [`luma`]: the grey input for flow from a colour frame; [`flow_pair_reduced_rgba`] takes
 //!   it inside the resize to the working size.
 //! - [`motion_vector_pair`]: both flows of a pair kept only where they are reliable
@@ -36,12 +38,14 @@ pub mod camera;
 pub mod dis;
 pub mod error;
 mod field;
+mod fill;
 mod image;
 mod vectors;
 mod warp;
 
 pub use error::{FlowError, Result};
 pub use field::FlowField;
+pub use fill::fill_unseen;
 pub use ignis_core::{GrayFrame, RgbaFrame, Size};
 pub use vectors::{motion_vector_pair, VectorParams};
 pub use warp::{
