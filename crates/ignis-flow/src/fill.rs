@@ -3,9 +3,9 @@
 //! A matted frame (a flame keyed out of its surroundings) is black wherever its alpha is 0,
 //! and DIS has nothing to match there: the vectors it leaves over the empty background are
 //! whatever the patches that overlap the flame's edge and the coarser pyramid levels
-//! carried in — piecewise constant over the patch grid, often large. A morph reads its
-//! frames along those vectors, so over a light plate the in-betweens show half-transparent
-//! patches with straight edges: the flame's dark fringe stretched over the background.
+//! carried in — piecewise constant over the patch grid, sometimes large. A morph reads its
+//! frames along those vectors, so its in-betweens can drag the flame's edge over the
+//! background in straight-edged blocks (seen over a light plate).
 //! [`fill_unseen`] keeps each vector in proportion to its frame's alpha there and takes the
 //! rest from a smooth fill of the seen vectors: a push–pull pyramid (Gortler et al., "The
 //! Lumigraph", SIGGRAPH 1996, §3.3): weighted 2×2 sums down to one pixel, then, going back
