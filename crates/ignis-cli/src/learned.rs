@@ -117,9 +117,13 @@ pub struct SynthArgs {
     /// Width multiplier (0.1–10).
     #[arg(long, default_value_t = 1.0)]
     pub width: f64,
-    /// Scale multiplier of the whole flame (0.1–10).
-    #[arg(long, default_value_t = 1.0)]
-    pub scale: f64,
+    /// Scale multiplier of the whole flame (0.1–10; 1 = the training footage's framing).
+    /// Default: the largest up to 1 at which the model's flame keeps its tip inside the
+    /// frame in 99 % of its states, so a model trained on a close crop does not draw its
+    /// tall flames through the top edge; --height and --wind act within that framing (a
+    /// note gives the scale that fits them). Printed unless -q.
+    #[arg(long)]
+    pub scale: Option<f64>,
     /// Intensity multiplier before the palette.
     #[arg(long, default_value_t = 1.0)]
     pub gain: f32,
@@ -346,11 +350,34 @@ fn loop_measure(palette: &Palette, gain: f32, background: [f32; 3]) -> Vec<f32> 
 pub fn synth(a: &SynthArgs, g: &Global) -> Result<Vec<PathBuf>> {
     let model =
         FlameModel::load(&a.model).with_context(|| format!("reading {}", a.model.display()))?;
-    let controls = Controls {
+    let mut controls = Controls {
         wind: Wind::parse(&a.wind)?,
         height: a.height,
         width: a.width,
-        scale: a.scale,
+        scale: 1.0,
+    };
+    controls.scale = match a.scale {
+        Some(s) => s,
+        None => {
+            // the model's own flame framed; --height and --wind then act within it
+            let s = ignis_learned::fit_scale(&model, &Controls::default(), a.size)?;
+            if s < 1.0 {
+                g.say(format!(
+                    "scale {s:.3}: at that scale the model's flame keeps its tip inside the \
+                     frame in 99 % of its states; --scale 1 keeps the footage's framing"
+                ));
+            }
+            if controls.height != 1.0 || controls.wind != Wind::default() {
+                let as_given = ignis_learned::fit_scale(&model, &controls, a.size)?;
+                if as_given < 0.95 * s {
+                    g.say(format!(
+                        "with --height and --wind as given the tip leaves the frame in more \
+                         than 1 % of the states; --scale {as_given:.3} keeps it inside"
+                    ));
+                }
+            }
+            s
+        }
     };
     if !(a.gain > 0.0 && a.gain.is_finite()) {
         bail!("--gain {} must be a positive number", a.gain);

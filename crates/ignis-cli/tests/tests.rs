@@ -2151,25 +2151,16 @@ mod realism {
 mod learned {
     use super::*;
 
-    /// `ignis learned train` on 90 frames of candle.mp4 (cropped as the demo crops it),
-    /// then `synth` at the footage's rate and at 60 fps: the model records the footage's
-    /// 30 fps, a 60 fps render's even frames are the 30 fps render's (the process steps
-    /// at the footage's rate), a 60 fps chunk equals the full render, and an `--fps` out
-    /// of range is refused with nothing written.
-    #[test]
-    fn synth_at_60_fps_runs_the_process_at_the_footage_rate() {
-        let Some(clip) = data("candle.mp4") else {
-            return;
-        };
-        let dir = tempfile::tempdir().unwrap();
-        let model = dir.path().join("c.flame");
-        let (clip, model_s) = (clip.to_str().unwrap(), model.to_str().unwrap());
+    /// A model of 90 frames of candle.mp4 cropped as the demo crops it (the flame's box,
+    /// the wax glow below a black level), trained briefly, in `dir`.
+    fn candle_model(clip: &Path, dir: &Path) -> PathBuf {
+        let model = dir.join("c.flame");
         ignis_ok(&[
             "learned",
             "train",
-            clip,
+            clip.to_str().unwrap(),
             "-o",
-            model_s,
+            model.to_str().unwrap(),
             "--range",
             "0..90",
             "--crop",
@@ -2183,6 +2174,88 @@ mod learned {
             "3",
             "-q",
         ]);
+        model
+    }
+
+    /// A model trained on a close crop draws its tall states through the frame's top at
+    /// `--scale 1` (the footage's framing); by default `synth` scales the flame so they
+    /// stay inside (`ignis_learned::fit_scale`), says so, and every chunk gets that scale;
+    /// `--height 1.5` acts within that framing and is told the scale that would fit it.
+    #[test]
+    fn a_closely_cropped_flame_is_scaled_to_stay_inside_the_frame() {
+        let Some(clip) = data("candle.mp4") else {
+            return;
+        };
+        let dir = tempfile::tempdir().unwrap();
+        let model = candle_model(&clip, dir.path());
+        let synth = |name: &str, extra: &[&str]| {
+            let out = dir.path().join(name);
+            let pat = out.join("%04d.png");
+            let mut a = vec![
+                "learned",
+                "synth",
+                model.to_str().unwrap(),
+                "--frames",
+                "150",
+                "--size",
+                "64x64",
+                "-o",
+                pat.to_str().unwrap(),
+            ];
+            a.extend_from_slice(extra);
+            (ignis_ok(&a), out)
+        };
+        // frames whose top row shows flame (a visible level of the candle palette)
+        let cut = |d: &Path| {
+            (0..150)
+                .filter(|n| {
+                    let f = image::open(d.join(format!("{n:04}.png")))
+                        .unwrap()
+                        .to_rgba8();
+                    (0..64).any(|x| f.get_pixel(x, 0)[0] > 40)
+                })
+                .count()
+        };
+        let (said, fitted) = synth("fit", &[]);
+        let (_, framed) = synth("one", &["--scale", "1", "-q"]);
+        let text = String::from_utf8_lossy(&said.stderr).to_string()
+            + &String::from_utf8_lossy(&said.stdout);
+        assert!(
+            text.contains("--scale 1 keeps the footage's framing"),
+            "{text}"
+        );
+        // a taller flame is drawn within that framing, with the scale that would fit it
+        let (taller, _) = synth("tall", &["--height", "1.5"]);
+        let text = String::from_utf8_lossy(&taller.stderr).to_string()
+            + &String::from_utf8_lossy(&taller.stdout);
+        assert!(text.contains("keeps it inside"), "{text}");
+        let (c_fit, c_one) = (cut(&fitted), cut(&framed));
+        assert!(c_one >= 10, "{c_one} of 150 frames cut at --scale 1");
+        assert!(c_fit <= 3, "{c_fit} of 150 frames cut at the fitted scale");
+        let (_, chunk) = synth("chunk", &["--chunk", "100..150", "-q"]);
+        for n in 100..150 {
+            let name = format!("{n:04}.png");
+            assert!(
+                std::fs::read(chunk.join(&name)).unwrap()
+                    == std::fs::read(fitted.join(&name)).unwrap(),
+                "chunk frame {n}"
+            );
+        }
+    }
+
+    /// `ignis learned train` on 90 frames of candle.mp4 (cropped as the demo crops it),
+    /// then `synth` at the footage's rate and at 60 fps: the model records the footage's
+    /// 30 fps, a 60 fps render's even frames are the 30 fps render's (the process steps
+    /// at the footage's rate), a 60 fps chunk equals the full render, and an `--fps` out
+    /// of range is refused with nothing written.
+    #[test]
+    fn synth_at_60_fps_runs_the_process_at_the_footage_rate() {
+        let Some(clip) = data("candle.mp4") else {
+            return;
+        };
+        let dir = tempfile::tempdir().unwrap();
+        let model = candle_model(&clip, dir.path());
+        let model_s = model.to_str().unwrap();
         let o = ignis_ok(&["learned", "inspect", model_s, "--json"]);
         let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
         assert_eq!(v["summary"]["fps"].as_f64(), Some(30.0), "{v}");

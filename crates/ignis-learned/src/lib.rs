@@ -31,7 +31,7 @@ pub use model::{
 };
 pub use moments::{Moments, Pose};
 pub use shape::{Placement, Shape, ShapeParams};
-pub use synth::{model_motion, Controls, Synthesiser, Warp, Wind};
+pub use synth::{fit_scale, model_motion, Controls, Synthesiser, Warp, Wind};
 
 use ignis_core::GrayFrame;
 

@@ -612,6 +612,73 @@ pub fn exposure(model: &FlameModel) -> f32 {
     }
 }
 
+/// Frames of the model's own process [`fit_scale`] renders (after [`FIT_WARM_UP`]), and
+/// the seed it draws them with (fixed: the fit depends on the model, the controls and the
+/// frame's shape, not on a render's seed or length, so every chunk of a render and every
+/// seed of a wedge gets the same framing).
+pub const FIT_FRAMES: usize = 400;
+/// Process steps [`fit_scale`] runs before it looks (the process forgets its start).
+pub const FIT_WARM_UP: usize = 100;
+const FIT_SEED: u64 = 0x6669_745f_7363_616c;
+/// Brightness (of the exposed grey frame, whose core is 1) above which [`fit_scale`]
+/// counts a pixel as flame: faint enough that what it leaves outside does not show as an
+/// edge.
+pub const FIT_LEVEL: f32 = 0.05;
+
+/// The largest scale (at most 1, at least 0.1) at which the flame stays inside a frame of
+/// `size` in 99 % of its states: a model trained on footage cropped close to the flame
+/// draws its taller states through the frame's top edge at scale 1 (the footage's own
+/// framing), a flipbook cell with a flat top. A flame is drawn with its base where the
+/// mean flame has it ([`FlameModel::placement_for`]) and grows up from there, so its reach
+/// above the base scales with the scale. [`FIT_FRAMES`] frames of the model's process
+/// (seed fixed, one step a frame) are rendered with `controls` on a frame of `size`'s
+/// shape 192 pixels tall, at scale 1/3 so that no state leaves it; each one's reach at
+/// scale 1 is three times the distance from the base to its highest pixel brighter than
+/// [`FIT_LEVEL`]; the scale returned puts the 99th percentile of those reaches at the
+/// placement's margin (4 % of the frame height) below the top. 1 when the flame fits as
+/// it is (or shows nothing).
+pub fn fit_scale(model: &FlameModel, controls: &Controls, size: Size) -> Result<f64> {
+    const SHRINK: f64 = 1.0 / 3.0;
+    let h = 192u32;
+    let w = ((u64::from(size.width) * u64::from(h) + u64::from(size.height) / 2)
+        / u64::from(size.height).max(1))
+    .clamp(8, 4 * u64::from(h)) as u32;
+    let small = Size::new(w, h).map_err(|e| LearnedError::bad("size", e.to_string()))?;
+    let mut c = controls.clone();
+    c.scale = SHRINK;
+    let mut synth = Synthesiser::new(model, c, FIT_SEED)?;
+    let (below, above) = model.mean_extent();
+    let place = model.placement_within(small, (below, above));
+    let i = model.shape.n_path + model.shape.n_width;
+    let hf = f64::from(h);
+    let base = place.cy + below * model.state_mean[i] * hf * place.tilt.cos();
+    let mut frame = GrayFrame::new(small);
+    let mut reach = Vec::with_capacity(FIT_FRAMES);
+    for k in 0..FIT_WARM_UP + FIT_FRAMES {
+        synth.next_frame_into(&mut frame);
+        if k < FIT_WARM_UP {
+            continue;
+        }
+        let top = frame
+            .data()
+            .chunks(w as usize)
+            .position(|row| row.iter().any(|&v| v > FIT_LEVEL));
+        if let Some(top) = top {
+            reach.push((base - top as f64) / hf / SHRINK);
+        }
+    }
+    if reach.is_empty() {
+        return Ok(1.0);
+    }
+    reach.sort_by(f64::total_cmp);
+    let p99 = reach[((reach.len() as f64 * 0.99).ceil() as usize).clamp(1, reach.len()) - 1];
+    let room = base / hf - 0.04;
+    if !(p99 > 0.0 && room.is_finite()) {
+        return Ok(1.0);
+    }
+    Ok((room / p99).clamp(0.1, 1.0))
+}
+
 /// Convenience: the default placement of a model for an output size (re-exported for
 /// callers who render states themselves).
 pub fn placement(model: &FlameModel, size: Size) -> Placement {

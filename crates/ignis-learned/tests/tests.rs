@@ -432,6 +432,48 @@ mod flame {
         assert!(s.measure_loop_through(vec![0.0, f32::NAN, 1.0]).is_err());
     }
 
+    /// A flame too tall for its frame at scale 1 (here `--height 2.5`) is fitted: at
+    /// [`fit_scale`] at most a few frames (the 99th percentile's tail, on another seed
+    /// than the fit's) light the top row, where many do at scale 1; a flame that fits
+    /// keeps scale 1, and the fit depends on the frame's shape, not its resolution.
+    #[test]
+    fn tall_flames_are_scaled_to_stay_inside_the_frame() {
+        let (_, t) = trained(60, 9);
+        let size = Size::new(96, 96).unwrap();
+        let top_lit = |c: &Controls| {
+            let frames = Synthesiser::new(&t.model, c.clone(), 5)
+                .unwrap()
+                .frames(size, 300)
+                .unwrap();
+            frames
+                .iter()
+                .skip(50)
+                .filter(|f| (0..96).any(|x| f.get(x, 0) > ignis_learned::synth::FIT_LEVEL))
+                .count()
+        };
+        let tall = Controls {
+            height: 2.5,
+            ..Controls::default()
+        };
+        let fit = ignis_learned::fit_scale(&t.model, &tall, size).unwrap();
+        assert!(fit < 0.9, "fit {fit}");
+        let unfitted = top_lit(&tall);
+        let fitted = top_lit(&Controls {
+            scale: fit,
+            ..tall.clone()
+        });
+        assert!(unfitted > 50, "{unfitted} of 250 frames cut at scale 1");
+        assert!(fitted <= 8, "{fitted} of 250 frames cut at scale {fit}");
+        let twice =
+            ignis_learned::fit_scale(&t.model, &tall, Size::new(192, 192).unwrap()).unwrap();
+        assert!((twice - fit).abs() < 0.02, "{twice} vs {fit}");
+        assert_eq!(
+            ignis_learned::fit_scale(&t.model, &Controls::default(), size).unwrap(),
+            1.0,
+            "the synthetic flame fits its frame as trained"
+        );
+    }
+
     #[test]
     fn wind_bends_the_flame_to_the_right() {
         let (_, t) = trained(60, 9);

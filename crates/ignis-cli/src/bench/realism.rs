@@ -249,8 +249,9 @@ pub fn bench(g: &Global, quick: bool) -> Result<Value> {
 pub const CANDLE_DIAMETER: f64 = 0.02;
 
 /// A learned flame trained from `candle.mp4` as the demo trains it (the flame cropped out of
-/// its glass, the wax glow below a black level), synthesised at [`FPS`] like every row: the
-/// process steps at the footage's rate, resampled in time for the output.
+/// its glass, the wax glow below a black level), synthesised at [`FPS`] like every row (the
+/// process steps at the footage's rate, resampled in time for the output) and at the scale
+/// `ignis learned synth` chooses by default ([`ignis_learned::fit_scale`]).
 fn learned_row(
     g: &Global,
     clip: &Path,
@@ -263,7 +264,10 @@ fn learned_row(
     let frames = if quick { frames.min(120) } else { frames };
     let palette = ignis_core::Palette::preset("candle")?;
     let size = Size::new(256, 256)?;
-    let mut synth = ignis_learned::Synthesiser::new_at(&model, Default::default(), 1, Some(fps))?;
+    // framed as `ignis learned synth` frames it by default (its tall states inside)
+    let mut controls = ignis_learned::Controls::default();
+    controls.scale = ignis_learned::fit_scale(&model, &controls, size)?;
+    let mut synth = ignis_learned::Synthesiser::new_at(&model, controls, 1, Some(fps))?;
     let mut images = Vec::with_capacity(frames);
     for _ in 0..frames {
         let mut f = GrayFrame::new(size);
