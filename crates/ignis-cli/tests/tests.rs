@@ -2152,9 +2152,12 @@ mod learned {
     use super::*;
 
     /// A model of 90 frames of candle.mp4 cropped as the demo crops it (the flame's box,
-    /// the wax glow below a black level), trained briefly, in `dir`.
-    fn candle_model(clip: &Path, dir: &Path) -> PathBuf {
-        let model = dir.join("c.flame");
+    /// the wax glow below a black level), trained briefly, in a new temporary directory;
+    /// `None` (the test skips) without ../shared/data.
+    fn candle_model() -> Option<(tempfile::TempDir, PathBuf)> {
+        let clip = data("candle.mp4")?;
+        let dir = tempfile::tempdir().unwrap();
+        let model = dir.path().join("c.flame");
         ignis_ok(&[
             "learned",
             "train",
@@ -2174,7 +2177,7 @@ mod learned {
             "3",
             "-q",
         ]);
-        model
+        Some((dir, model))
     }
 
     /// A model trained on a close crop draws its tall states through the frame's top at
@@ -2183,11 +2186,9 @@ mod learned {
     /// `--height 1.5` acts within that framing and is told the scale that would fit it.
     #[test]
     fn a_closely_cropped_flame_is_scaled_to_stay_inside_the_frame() {
-        let Some(clip) = data("candle.mp4") else {
+        let Some((dir, model)) = candle_model() else {
             return;
         };
-        let dir = tempfile::tempdir().unwrap();
-        let model = candle_model(&clip, dir.path());
         let synth = |name: &str, extra: &[&str]| {
             let out = dir.path().join(name);
             let pat = out.join("%04d.png");
@@ -2250,11 +2251,9 @@ mod learned {
     /// of range is refused with nothing written.
     #[test]
     fn synth_at_60_fps_runs_the_process_at_the_footage_rate() {
-        let Some(clip) = data("candle.mp4") else {
+        let Some((dir, model)) = candle_model() else {
             return;
         };
-        let dir = tempfile::tempdir().unwrap();
-        let model = candle_model(&clip, dir.path());
         let model_s = model.to_str().unwrap();
         let o = ignis_ok(&["learned", "inspect", model_s, "--json"]);
         let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
