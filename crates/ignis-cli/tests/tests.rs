@@ -2695,18 +2695,8 @@ mod loop_sequence {
 
     /// `ignis loop SRC --length 16 --cache CACHE -o OUT`, asserted to succeed: its stdout.
     fn loop16(src: &Path, cache: &str, out: &Path) -> String {
-        let r = ignis(&[
-            "loop",
-            src.to_str().unwrap(),
-            "--length",
-            "16",
-            "--cache",
-            cache,
-            "-o",
-            out.to_str().unwrap(),
-        ]);
-        assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
-        String::from_utf8_lossy(&r.stdout).into_owned()
+        let (src, out) = (src.to_str().unwrap(), out.to_str().unwrap());
+        said_ok(&["loop", src, "--length", "16", "--cache", cache, "-o", out])
     }
 
     #[test]

@@ -16,7 +16,7 @@
 //! crates' inpainting works on 8-bit images, not on vector fields with weights.
 
 use crate::field::FlowField;
-use crate::image::area_resize;
+use crate::image::resize_with;
 use ignis_core::{RgbaFrame, Size};
 
 /// One pyramid level: premultiplied vectors and their weights (each at most 1).
@@ -61,13 +61,13 @@ impl Level {
     }
 
     /// The vectors of a filled level (every weight 1) as a field.
-    fn field(&self) -> FlowField {
+    fn into_field(self) -> FlowField {
         FlowField::from_parts(
             Size {
                 width: self.w as u32,
                 height: self.h as u32,
             },
-            self.value.clone(),
+            self.value,
         )
     }
 
@@ -110,24 +110,21 @@ fn alpha_weights(size: Size, frame: &RgbaFrame) -> Option<Vec<f32>> {
     if w == 0 || h == 0 || fs.pixels() == 0 {
         return None;
     }
-    let alpha: Vec<f32> = frame
-        .data()
-        .iter()
-        .map(|p| {
-            if p[3].is_finite() {
-                p[3].clamp(0.0, 1.0)
-            } else {
-                0.0
-            }
-        })
-        .collect();
-    Some(
-        area_resize(&alpha, fs.width as usize, fs.height as usize, w, h)
-            .data
-            .into_iter()
-            .map(|a| a.clamp(0.0, 1.0))
-            .collect(),
-    )
+    let (sw, sh) = (fs.width as usize, fs.height as usize);
+    let alpha = |p: &[f32; 4]| {
+        if p[3].is_finite() {
+            p[3].clamp(0.0, 1.0)
+        } else {
+            0.0
+        }
+    };
+    // area-averaged row by row, as `area_resize_luma` does: no full-size alpha plane
+    let small = resize_with(sw, sh, w, h, |y, wt, out| {
+        for (o, p) in out.iter_mut().zip(&frame.data()[y * sw..(y + 1) * sw]) {
+            *o += alpha(p) * wt;
+        }
+    });
+    Some(small.data.into_iter().map(|a| a.clamp(0.0, 1.0)).collect())
 }
 
 /// `f` with each vector kept in proportion to its `weight` (0..=1, one a pixel) and the
@@ -164,11 +161,10 @@ fn fill_weighted(f: &FlowField, weight: Vec<f32>) -> FlowField {
     };
     top.weight[0] = 1.0;
     while levels.len() > 1 {
-        let coarse = levels.pop().expect("more than one").field();
+        let coarse = levels.pop().expect("more than one").into_field();
         levels.last_mut().expect("non-empty").push(&coarse);
     }
-    let base = levels.pop().expect("the finest level");
-    FlowField::from_parts(size, base.value)
+    levels.pop().expect("the finest level").into_field()
 }
 
 #[cfg(test)]
