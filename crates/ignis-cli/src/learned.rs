@@ -309,9 +309,21 @@ pub fn train(a: &TrainArgs, g: &Global) -> Result<FlameModel> {
     ));
     let regressors = m.n_state() * m.arp.order() + 1;
     if s.run_len < 2 * regressors {
+        // frames skipped for a second flame (a reflection in a glass, sparks) cut the runs
+        // the dynamics are learned on; keeping them models each one's brightest flame
+        let why = if s.skipped_multiple > 0 && !a.keep_multiple {
+            format!(
+                "; {} frames were skipped for showing several flames (a reflection, sparks, a \
+                 second flame) and broke the runs: --keep-multiple models each one's brightest \
+                 flame instead, or --crop leaves the others out",
+                s.skipped_multiple
+            )
+        } else {
+            String::new()
+        };
         g.say(format!(
             "warning: the dynamics were learned on {} frames for {regressors} coefficients per parameter; \
-             synthesis may drift — train on at least {} consecutive frames",
+             synthesis may drift — train on at least {} consecutive frames{why}",
             s.run_len,
             2 * regressors
         ));

@@ -2180,6 +2180,52 @@ mod learned {
         Some((dir, model))
     }
 
+    /// Frames skipped for a second flame (candle.mp4's reflection in its glass) cut the
+    /// runs the dynamics are learned on: the warning about too short a run says so and
+    /// names the fixes; with `--keep-multiple` the whole range is one run and no warning.
+    #[test]
+    fn a_run_cut_by_skipped_frames_names_keep_multiple() {
+        let Some(clip) = data("candle.mp4") else {
+            return;
+        };
+        let dir = tempfile::tempdir().unwrap();
+        let model = dir.path().join("c.flame");
+        let train = |extra: &[&str]| {
+            let mut a = vec![
+                "learned",
+                "train",
+                clip.to_str().unwrap(),
+                "-o",
+                model.to_str().unwrap(),
+                "--range",
+                "0..120",
+                "--particles",
+                "30",
+                "--max-iterations",
+                "3",
+            ];
+            a.extend_from_slice(extra);
+            said_ok(&a)
+        };
+        let said = train(&[]);
+        let warning = said
+            .lines()
+            .find(|l| l.starts_with("warning: the dynamics were learned on"))
+            .unwrap_or_else(|| panic!("no short-run warning in:\n{said}"));
+        assert!(
+            warning.contains("skipped for showing several flames")
+                && warning.contains("--keep-multiple")
+                && warning.contains("--crop"),
+            "{warning}"
+        );
+        let said = train(&["--keep-multiple"]);
+        assert!(
+            said.contains("dynamics learned on frames 0..120 (120 frames)")
+                && !said.contains("warning: the dynamics"),
+            "{said}"
+        );
+    }
+
     /// A model trained on a close crop draws its tall states through the frame's top at
     /// `--scale 1` (the footage's framing); by default `synth` scales the flame so they
     /// stay inside (`ignis_learned::fit_scale`), says so, and every chunk gets that scale;
