@@ -2151,32 +2151,31 @@ mod realism {
 mod learned {
     use super::*;
 
-    /// A model of 90 frames of candle.mp4 cropped as the demo crops it (the flame's box,
-    /// the wax glow below a black level), trained briefly, in a new temporary directory;
-    /// `None` (the test skips) without ../shared/data.
-    fn candle_model() -> Option<(tempfile::TempDir, PathBuf)> {
+    /// Trains a brief model (30 particles, 3 EM iterations) of `range` of candle.mp4 into
+    /// `dir/c.flame` with `extra` arguments; what it said and the model's path. `None` (the
+    /// test skips) without ../shared/data.
+    fn train_candle(dir: &Path, range: &str, extra: &[&str]) -> Option<(String, PathBuf)> {
         let clip = data("candle.mp4")?;
+        let model = dir.join("c.flame");
+        let (clip_s, model_s) = (clip.to_str().unwrap(), model.to_str().unwrap());
+        let mut a = vec!["learned", "train", clip_s, "-o", model_s, "--range", range];
+        a.extend_from_slice(&["--particles", "30", "--max-iterations", "3"]);
+        a.extend_from_slice(extra);
+        Some((said_ok(&a), model))
+    }
+
+    /// A model of 90 frames of candle.mp4 cropped as the demo crops it (the flame's box,
+    /// the wax glow below a black level), trained briefly, in a new temporary directory.
+    fn candle_model() -> Option<(tempfile::TempDir, PathBuf)> {
         let dir = tempfile::tempdir().unwrap();
-        let model = dir.path().join("c.flame");
-        ignis_ok(&[
-            "learned",
-            "train",
-            clip.to_str().unwrap(),
-            "-o",
-            model.to_str().unwrap(),
-            "--range",
-            "0..90",
+        let demo = [
             "--crop",
             "190,200,100,130",
             "--black-level",
             "0.7",
             "--keep-multiple",
-            "--particles",
-            "30",
-            "--max-iterations",
-            "3",
-            "-q",
-        ]);
+        ];
+        let (_, model) = train_candle(dir.path(), "0..90", &demo)?;
         Some((dir, model))
     }
 
@@ -2185,29 +2184,10 @@ mod learned {
     /// names the fixes; with `--keep-multiple` the whole range is one run and no warning.
     #[test]
     fn a_run_cut_by_skipped_frames_names_keep_multiple() {
-        let Some(clip) = data("candle.mp4") else {
+        let dir = tempfile::tempdir().unwrap();
+        let Some((said, _)) = train_candle(dir.path(), "0..120", &[]) else {
             return;
         };
-        let dir = tempfile::tempdir().unwrap();
-        let model = dir.path().join("c.flame");
-        let train = |extra: &[&str]| {
-            let mut a = vec![
-                "learned",
-                "train",
-                clip.to_str().unwrap(),
-                "-o",
-                model.to_str().unwrap(),
-                "--range",
-                "0..120",
-                "--particles",
-                "30",
-                "--max-iterations",
-                "3",
-            ];
-            a.extend_from_slice(extra);
-            said_ok(&a)
-        };
-        let said = train(&[]);
         let warning = said
             .lines()
             .find(|l| l.starts_with("warning: the dynamics were learned on"))
@@ -2218,7 +2198,7 @@ mod learned {
                 && warning.contains("--crop"),
             "{warning}"
         );
-        let said = train(&["--keep-multiple"]);
+        let (said, _) = train_candle(dir.path(), "0..120", &["--keep-multiple"]).unwrap();
         assert!(
             said.contains("dynamics learned on frames 0..120 (120 frames)")
                 && !said.contains("warning: the dynamics"),

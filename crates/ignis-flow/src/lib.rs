@@ -12,7 +12,8 @@
 //!   [`morph_gray_with`] / [`morph_rgba_with`] add optional occlusion-aware weights from
 //!   forward–backward consistency ([`MorphParams`]).
 //! - [`fill_unseen`]: a field's vectors where its frame's alpha is 0 (a matted frame's
-//!   empty background, where DIS has nothing to match) filled smoothly from where it is seen.
+//!   empty background, where DIS has nothing to match) filled smoothly from where it is seen;
+//!   [`flow_pair_matted_rgba`]: both flows of a matted pair, filled so.
 //! - [`luma`]: the grey input for flow from a colour frame; [`flow_pair_reduced_rgba`] takes
 //!   it inside the resize to the working size.
 //! - [`motion_vector_pair`]: both flows of a pair kept only where they are reliable
@@ -310,6 +311,21 @@ pub fn flow_pair_reduced_rgba(
     })
 }
 
+/// [`flow_pair_reduced_rgba`] of two matted frames, each field then filled over its own
+/// frame's keyed-out background ([`fill_unseen`]): where a frame's alpha is 0 DIS has
+/// nothing to match, and a morph along the raw vectors would drag the flame's fringe over
+/// the empty background in the patch grid's blocks. Fully opaque frames give
+/// [`flow_pair_reduced_rgba`]'s fields bit for bit. The flow of the loop closings' and the
+/// transitions' morphs.
+pub fn flow_pair_matted_rgba(
+    a: &RgbaFrame,
+    b: &RgbaFrame,
+    p: &FlowParams,
+) -> Result<(FlowField, FlowField)> {
+    let (f, g) = flow_pair_reduced_rgba(a, b, p)?;
+    Ok(rayon::join(|| fill_unseen(&f, a), || fill_unseen(&g, b)))
+}
+
 /// Both directions `(a→b, b→a)` at `a`'s size, computed in parallel.
 pub fn flow_pair(a: &GrayFrame, b: &GrayFrame, p: &FlowParams) -> Result<(FlowField, FlowField)> {
     let (f, g) = flow_pair_reduced(a, b, p)?;
@@ -492,5 +508,62 @@ mod tests {
             flow(&flat, &other, &p),
             Err(FlowError::SizeMismatch(_))
         ));
+    }
+
+    /// A textured flame moving 4 px over a keyed-out surround (alpha 0, noise colours that
+    /// the flow cannot match): the matted pair's flow over the surround moves with the
+    /// flame, the flame's own vectors are DIS's, and an opaque pair keeps DIS's fields bit
+    /// for bit. Without the fill the surround reads 0.
+    #[test]
+    fn a_matted_pairs_flow_over_a_keyed_out_background_follows_the_flame() {
+        let size = Size::new(160, 120).unwrap();
+        let mut state = 7u32;
+        let mut noise = move || {
+            state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (state >> 8) as f32 / (1u32 << 24) as f32
+        };
+        let inside =
+            |x: f32, y: f32, dx: f32| (x - 60.0 - dx).abs() < 24.0 && (y - 60.0).abs() < 30.0;
+        let frame = |dx: f32, surround_alpha: f32, noise: &mut dyn FnMut() -> f32| {
+            let data = (0..size.pixels())
+                .map(|i| {
+                    let (x, y) = ((i % 160) as f32, (i / 160) as f32);
+                    if inside(x, y, dx) {
+                        let t = 0.5 + 0.4 * ((x - dx) * 0.45).sin() * (y * 0.37).cos();
+                        [t, 0.6 * t, 0.2 * t, 1.0]
+                    } else {
+                        [noise(), noise(), noise(), surround_alpha]
+                    }
+                })
+                .collect();
+            RgbaFrame::from_vec(size, data).unwrap()
+        };
+        let params = FlowParams::default();
+        let (a, b) = (frame(0.0, 0.0, &mut noise), frame(4.0, 0.0, &mut noise));
+        let (f, _) = flow_pair_matted_rgba(&a, &b, &params).unwrap();
+        let raw = flow_pair_reduced_rgba(&a, &b, &params).unwrap().0;
+        assert_eq!(f.size(), size, "a small frame's flow is at its own size");
+        let mut far = 0;
+        for (i, (v, r)) in f.data().iter().zip(raw.data()).enumerate() {
+            let (x, y) = ((i % 160) as f32, (i / 160) as f32);
+            let (ex, ey) = ((x - 60.0).abs(), (y - 60.0).abs());
+            if ex < 23.0 && ey < 29.0 {
+                assert_eq!(v, r, "a seen vector is DIS's own at ({x}, {y})");
+            } else if ex >= 26.0 || ey >= 32.0 {
+                far += 1;
+                assert!(
+                    (v[0] - 4.0).abs() < 1.0 && v[1].abs() < 1.0,
+                    "the keyed-out surround at ({x}, {y}) moves by {v:?}, not with the flame"
+                );
+            }
+        }
+        assert!(far > 10_000);
+        let (a, b) = (frame(0.0, 1.0, &mut noise), frame(4.0, 1.0, &mut noise));
+        let (f, g) = flow_pair_matted_rgba(&a, &b, &params).unwrap();
+        let (rf, rg) = flow_pair_reduced_rgba(&a, &b, &params).unwrap();
+        assert!(
+            f == rf && g == rg,
+            "an opaque pair's fields are DIS's, bit for bit"
+        );
     }
 }
