@@ -19,7 +19,7 @@ use rayon::prelude::*;
 use crate::animate::has_stored_frames;
 use crate::colour::{
     original_colouring_matted, original_colouring_src_then, synthetic_smoke, warp_rgba, AlphaMatte,
-    Destination, OriginalColour,
+    Destination, MaskMode, OriginalColour,
 };
 use crate::db::{ClipEntry, EigenfireDb};
 use crate::error::{EigenError, Result};
@@ -699,14 +699,15 @@ pub(crate) fn render_frames(
             .collect::<Result<Vec<_>>>()?
             .into_iter()
             .flatten();
-        let mut greys: Vec<(Cow<GrayFrame>, Option<&GrayFrame>)> = Vec::with_capacity(frames.len());
+        let mut greys: Vec<(Cow<GrayFrame>, Option<&GrayFrame>, Option<GrayFrame>)> =
+            Vec::with_capacity(frames.len());
         for (j, f) in frames.iter().enumerate() {
             if let Some(r) = from_source(f) {
                 let (g, m) = &layers.grey[&r];
-                greys.push((Cow::Borrowed(g), Some(m)));
+                greys.push((Cow::Borrowed(g), Some(m), None));
             } else if let Some((clip, fr)) = stored_frame(f) {
                 let g = db.preprocessed_frame(&clip, fr)?;
-                greys.push((Cow::Owned(view_gray(&g, frame, view, out)), None));
+                greys.push((Cow::Owned(view_gray(&g, frame, view, out)), None, None));
             } else {
                 let r = recon.next().expect("one reconstruction per slow frame");
                 let mut g = view_gray(&r, frame, view, out);
@@ -715,22 +716,27 @@ pub(crate) fn render_frames(
                 } else {
                     colour_row(db, f, plan.e_detect)
                 };
-                if let Some((real, _)) = layers.grey.get(&near) {
+                let mut copy = None;
+                if let Some((real, m)) = layers.grey.get(&near) {
                     add_detail(&mut g, real, db.train_size(), geo);
+                    if original && g.size() == m.size() {
+                        copy = Some(copy_mask(&g, m));
+                    }
                 }
-                greys.push((Cow::Owned(g), None));
+                greys.push((Cow::Owned(g), None, copy));
             }
         }
         let batch: Vec<Result<RgbaFrame>> = greys
             .into_par_iter()
             .enumerate()
-            .map(|(j, (g, m))| {
+            .map(|(j, (g, m, copy))| {
                 let row = if original {
                     Some(rows[start + j])
                 } else {
                     None
                 };
-                finish_frame(&g, m, row, look, &frame_tint(db, look, row), &layers)
+                let tint = frame_tint(db, look, row);
+                finish_frame(&g, m, copy.as_ref(), row, look, &tint, &layers)
             })
             .collect();
         for f in batch {
@@ -760,6 +766,7 @@ fn frame_tint<'a>(db: &EigenfireDb, look: &'a Look, row: Option<usize>) -> Cow<'
 fn finish_frame(
     grey: &GrayFrame,
     matte: Option<&GrayFrame>,
+    copy: Option<&GrayFrame>,
     row: Option<usize>,
     look: &Look,
     tint: &Tint,
@@ -788,7 +795,7 @@ fn finish_frame(
             &layers.original[&r],
             Destination::SolidTintRows(&rows, *tint),
             smoke,
-            layers.mask.get(&r).map(|m| (m, look.mask_mode)),
+            custom_mask(layers, r, look, copy),
             &params,
             alpha,
         );
@@ -837,7 +844,7 @@ fn finish_frame(
                 &layers.original[&r],
                 dest,
                 smoke,
-                layers.mask.get(&r).map(|m| (m, look.mask_mode)),
+                custom_mask(layers, r, look, copy),
                 &params,
                 &|start, band| matte_band(band, start, w, grey, lit, matte, look.matte),
             );
@@ -845,6 +852,36 @@ fn finish_frame(
     };
     apply_matte(&mut out, grey, lit, matte, look.matte)?;
     Ok(out)
+}
+
+/// Algorithm 2's mask of a frame coloured from row `r`: the scenario's custom mask for
+/// it (§6.4), else a reconstruction's `copy` mask ([`copy_mask`]) in place of its grey
+/// image, else none (the grey image is the mask).
+fn custom_mask<'a>(
+    layers: &'a Layers,
+    r: usize,
+    look: &Look,
+    copy: Option<&'a GrayFrame>,
+) -> Option<(&'a GrayFrame, MaskMode)> {
+    match layers.mask.get(&r) {
+        Some(m) => Some((m, look.mask_mode)),
+        None => copy.map(|c| (c, MaskMode::Replace)),
+    }
+}
+
+/// The mask by which Algorithm 2 copies a reconstructed frame's colours from the footage
+/// frame it is coloured from: its grey image where that frame shows flame (its
+/// pre-processing `matte`), 0 elsewhere. A reconstruction (a transition's frame, a blend
+/// of weights) has light where the footage frame has none — a low-pass blend of two
+/// clips, PCA's ringing — and copying the footage there drew its background (a candle's
+/// glass, a campfire's dark logs) as flame; there the frame is coloured like the glow.
+fn copy_mask(grey: &GrayFrame, matte: &GrayFrame) -> GrayFrame {
+    let d = grey
+        .data()
+        .iter()
+        .zip(matte.data())
+        .map(|(&g, &m)| g * m.clamp(0.0, 1.0));
+    GrayFrame::from_vec(grey.size(), d.collect()).expect("the grey frame's size")
 }
 
 /// The sizes [`apply_matte`] needs: the grey frame, its bloom, the coloured frame
@@ -1091,6 +1128,37 @@ mod tests {
                 assert_eq!(bits(&got), bits(&want));
             }
         }
+    }
+
+    /// A reconstruction coloured from a footage frame copies the footage only where that
+    /// frame shows flame (its matte, [`copy_mask`]): where the reconstruction has light the
+    /// footage frame lacks (blue "glass" there), it takes the glow's colour instead of the
+    /// glass's, which Algorithm 2 alone copies; inside the matte it is unchanged.
+    #[test]
+    fn a_reconstruction_copies_the_footage_only_where_it_shows_flame() {
+        let sz = Size {
+            width: 24,
+            height: 16,
+        };
+        let grey = GrayFrame::from_fn(sz, |_, _| 0.05);
+        let matte = GrayFrame::from_fn(sz, |x, _| if x < 12 { 1.0 } else { 0.0 });
+        let px = |i: usize| match i % 24 < 12 {
+            true => [0.9, 0.5, 0.1, 1.0],
+            false => [0.1, 0.2, 0.9, 1.0],
+        };
+        let orig = RgbaFrame::from_vec(sz, (0..sz.pixels()).map(px).collect()).unwrap();
+        let mut layers = Layers::default();
+        let orig = crate::footage::SourceFrame::Linear(orig);
+        layers.original.insert(3, Arc::new(orig));
+        let (look, tint) = (Look::default(), Tint::Solid([1.0, 0.42, 0.08]));
+        let copy = copy_mask(&grey, &matte);
+        let finish = |copy| finish_frame(&grey, None, copy, Some(3), &look, &tint, &layers);
+        let (new, old) = (finish(Some(&copy)).unwrap(), finish(None).unwrap());
+        let at = |f: &RgbaFrame, x: usize| f.data()[8 * 24 + x];
+        assert_eq!(at(&new, 3), at(&old, 3), "inside the matte: as before");
+        let (n, o) = (at(&new, 20), at(&old, 20));
+        assert!(o[2] > o[0], "Algorithm 2 alone copies the glass: {o:?}");
+        assert!(n[0] > n[2] && n[3] > 0.0, "{n:?} is not the glow's colour");
     }
 
     /// `shift_pixels` is the per-pixel rule of `shift_only`: output (u, v) = source
