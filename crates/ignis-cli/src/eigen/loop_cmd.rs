@@ -1556,9 +1556,9 @@ fn closing_frame_on(
 /// computes it: on their luma, at most [`RENDER_FLOW_SIDE`] pixels on the longest side
 /// (`ignis_flow::flow_pair_reduced_rgba`: the luma taken inside the resize, no full-size
 /// grey frames). Where a frame is keyed out (its matte's alpha 0: nothing for the flow to
-/// match) its field is filled from where it is seen (`ignis_flow::flow_pair_matted_rgba`), so the
-/// morph does not drag the flame's fringe over the empty background along the patch grid's
-/// vectors; opaque frames keep their fields as computed.
+/// match) its field is filled from where it is seen (`ignis_flow::flow_pair_matted_rgba`),
+/// so the morph does not drag the flame's fringe over the empty background along the patch
+/// grid's vectors; opaque frames keep their fields as computed.
 fn render_flow(
     a: &RgbaFrame,
     b: &RgbaFrame,

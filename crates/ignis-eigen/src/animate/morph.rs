@@ -642,9 +642,10 @@ pub(crate) fn render_with_morphs(
 
 /// The flows between a run's two end frames (forward, backward), at [`MORPH_FLOW_SIDE`].
 /// Where an end frame is keyed out (the matte's alpha 0: nothing for the flow to match),
-/// its field is filled from where it is seen (`ignis_flow::flow_pair_matted_rgba`), as `ignis loop`'s
-/// morph closings do, so the in-betweens do not drag the flame's fringe over the empty
-/// background along the patch grid's vectors; opaque frames keep their fields as computed.
+/// its field is filled from where it is seen (`ignis_flow::flow_pair_matted_rgba`), as
+/// `ignis loop`'s morph closings do, so the in-betweens do not drag the flame's fringe over
+/// the empty background along the patch grid's vectors; opaque frames keep their fields as
+/// computed.
 fn end_flows(
     fa: &RgbaFrame,
     fb: &RgbaFrame,
