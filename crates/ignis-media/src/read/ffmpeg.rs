@@ -169,10 +169,37 @@ pub(crate) fn file_url(path: &Path) -> Result<std::ffi::OsString> {
 /// no nested protocols from playlists or concat lists).
 pub(crate) const PROTOCOL_WHITELIST: [&str; 2] = ["-protocol_whitelist", "file"];
 
-/// [`probe`], as the reader's [`Probed`](super::Probed).
+/// [`probe`], as the reader's [`Probed`](super::Probed), remembered for the process: a
+/// command reads a clip in many ranged reads (`ignis loop` on a 4-s loop of a 720p clip
+/// opened it 13 times), and each used to start its own `ffprobe` (≈ 70 ms). Keyed by the
+/// path, the file's length and modification time, so a file written since is probed
+/// again; errors are not kept, and the memo is emptied past [`PROBE_MEMO`] files.
 pub(crate) fn probed(path: &Path) -> Result<super::Probed> {
-    probe(path, None).map(|(info, plan)| super::Probed::Ffmpeg(info, plan))
+    type Key = (std::path::PathBuf, u64, std::time::SystemTime);
+    static SEEN: OnceLock<Mutex<HashMap<Key, (SourceInfo, Plan)>>> = OnceLock::new();
+    let key = std::fs::metadata(path)
+        .ok()
+        .and_then(|m| Some((path.to_path_buf(), m.len(), m.modified().ok()?)));
+    let seen = SEEN.get_or_init(Default::default);
+    let kept = key.as_ref().and_then(|k| seen.lock().ok()?.get(k).cloned());
+    let (info, plan) = match kept {
+        Some(v) => v,
+        None => {
+            let v = probe(path, None)?;
+            if let (Some(k), Ok(mut m)) = (key, seen.lock()) {
+                if m.len() >= PROBE_MEMO {
+                    m.clear();
+                }
+                m.insert(k, v.clone());
+            }
+            v
+        }
+    };
+    Ok(super::Probed::Ffmpeg(info, plan))
 }
+
+/// Most files [`probed`] remembers at once.
+const PROBE_MEMO: usize = 256;
 
 /// Probes `path` with `ffprobe` (container headers only): what the source is, and the
 /// [`Plan`] that make its frames ordinary SDR progressive pictures.
@@ -894,5 +921,38 @@ mod tests {
         let e = probe(Path::new("http://127.0.0.1:9/none.gif"), None).unwrap_err();
         assert!(e.to_string().contains("ffprobe"), "{e}");
         assert!(!tmp.path().join("-report.log").exists());
+    }
+
+    /// A file probed twice gives the same answer (the second from the memo), and a file
+    /// written again since is probed again.
+    #[test]
+    fn a_rewritten_file_is_probed_again() {
+        if !ffmpeg_available() {
+            println!("skipped: ffmpeg/ffprobe not on PATH");
+            return;
+        }
+        let tmp = tempfile::tempdir().unwrap();
+        let p = tmp.path().join("clip.gif");
+        let write = |size: Size, frames: usize| {
+            let opts = crate::WriteOptions {
+                format: Some(crate::Format::Gif),
+                ..Default::default()
+            };
+            let mut w = crate::write::create(&p, size, &opts).unwrap();
+            for _ in 0..frames {
+                w.push(&RgbaFrame::new(size)).unwrap();
+            }
+            w.finish().unwrap();
+        };
+        let info = |p: &Path| match probed(p).unwrap() {
+            super::super::Probed::Ffmpeg(info, _) => info,
+            _ => unreachable!("ffmpeg's probe"),
+        };
+        write(Size::new(8, 6).unwrap(), 2);
+        let first = info(&p);
+        assert_eq!(first.size, Size::new(8, 6).unwrap());
+        assert_eq!(info(&p), first);
+        write(Size::new(10, 4).unwrap(), 3);
+        assert_eq!(info(&p).size, Size::new(10, 4).unwrap());
     }
 }
