@@ -881,6 +881,19 @@ mod tests {
         assert_eq!(parse_rate(None), None);
     }
 
+    /// Writes `frames` transparent frames of `size` as a GIF at `path`.
+    fn write_gif(path: &Path, size: Size, frames: usize) {
+        let opts = crate::WriteOptions {
+            format: Some(crate::Format::Gif),
+            ..Default::default()
+        };
+        let mut w = crate::write::create(path, size, &opts).unwrap();
+        for _ in 0..frames {
+            w.push(&RgbaFrame::new(size)).unwrap();
+        }
+        w.finish().unwrap();
+    }
+
     /// Issue 18 defect 3: names that look like URLs, protocols or options are local files.
     #[test]
     fn odd_file_names_are_local_files_never_urls_or_options() {
@@ -890,16 +903,8 @@ mod tests {
         }
         let tmp = tempfile::tempdir().unwrap();
         let size = Size::new(8, 6).unwrap();
-        let opts = crate::WriteOptions {
-            format: Some(crate::Format::Gif),
-            ..Default::default()
-        };
         let src = tmp.path().join("src.gif");
-        let mut w = crate::write::create(&src, size, &opts).unwrap();
-        for _ in 0..2 {
-            w.push(&RgbaFrame::new(size)).unwrap();
-        }
-        w.finish().unwrap();
+        write_gif(&src, size, 2);
         std::fs::create_dir_all(tmp.path().join("http:/127.0.0.1:9")).unwrap();
         for name in ["-report.gif", "my:clip.gif", "http:/127.0.0.1:9/x.gif"] {
             let p = tmp.path().join(name);
@@ -933,17 +938,7 @@ mod tests {
         }
         let tmp = tempfile::tempdir().unwrap();
         let p = tmp.path().join("clip.gif");
-        let write = |size: Size, frames: usize| {
-            let opts = crate::WriteOptions {
-                format: Some(crate::Format::Gif),
-                ..Default::default()
-            };
-            let mut w = crate::write::create(&p, size, &opts).unwrap();
-            for _ in 0..frames {
-                w.push(&RgbaFrame::new(size)).unwrap();
-            }
-            w.finish().unwrap();
-        };
+        let write = |size: Size, frames: usize| write_gif(&p, size, frames);
         let info = |p: &Path| match probed(p).unwrap() {
             super::super::Probed::Ffmpeg(info, _) => info,
             _ => unreachable!("ffmpeg's probe"),
