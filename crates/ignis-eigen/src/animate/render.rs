@@ -699,7 +699,10 @@ pub(crate) fn render_frames(
             .collect::<Result<Vec<_>>>()?
             .into_iter()
             .flatten();
-        let mut greys: Vec<(Cow<GrayFrame>, Option<&GrayFrame>, Option<GrayFrame>)> =
+        // Each frame's grey, its footage matte (frames made from the footage) and, for a
+        // reconstruction, the matte of the footage frame it is coloured from (its copy
+        // mask is made in the parallel pass below, not held for the whole batch).
+        let mut greys: Vec<(Cow<GrayFrame>, Option<&GrayFrame>, Option<&GrayFrame>)> =
             Vec::with_capacity(frames.len());
         for (j, f) in frames.iter().enumerate() {
             if let Some(r) = from_source(f) {
@@ -716,26 +719,25 @@ pub(crate) fn render_frames(
                 } else {
                     colour_row(db, f, plan.e_detect)
                 };
-                let mut copy = None;
+                let mut near_matte = None;
                 if let Some((real, m)) = layers.grey.get(&near) {
                     add_detail(&mut g, real, db.train_size(), geo);
-                    if original && g.size() == m.size() {
-                        copy = Some(copy_mask(&g, m));
-                    }
+                    near_matte = Some(m).filter(|m| original && g.size() == m.size());
                 }
-                greys.push((Cow::Owned(g), None, copy));
+                greys.push((Cow::Owned(g), None, near_matte));
             }
         }
         let batch: Vec<Result<RgbaFrame>> = greys
             .into_par_iter()
             .enumerate()
-            .map(|(j, (g, m, copy))| {
+            .map(|(j, (g, m, near_matte))| {
                 let row = if original {
                     Some(rows[start + j])
                 } else {
                     None
                 };
                 let tint = frame_tint(db, look, row);
+                let copy = near_matte.map(|nm| copy_mask(&g, nm));
                 finish_frame(&g, m, copy.as_ref(), row, look, &tint, &layers)
             })
             .collect();
