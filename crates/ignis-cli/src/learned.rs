@@ -118,10 +118,11 @@ pub struct SynthArgs {
     #[arg(long, default_value_t = 1.0)]
     pub width: f64,
     /// Scale multiplier of the whole flame (0.1–10; 1 = the training footage's framing).
-    /// Default: the largest up to 1 at which the model's flame keeps its tip inside the
-    /// frame in 99 % of its states, so a model trained on a close crop does not draw its
-    /// tall flames through the top edge; --height and --wind act within that framing (a
-    /// note gives the scale that fits them). Printed unless -q.
+    /// Default: the largest up to 1 at which the model's flame stays inside the frame (its
+    /// tip below the top, its sides within the edges) in 99 % of its states, so a model
+    /// trained on a close crop does not draw its tall flames through the top edge nor its
+    /// wide ones through the sides of a narrow frame; --height, --width and --wind act
+    /// within that framing (a note gives the scale that fits them). Printed unless -q.
     #[arg(long)]
     pub scale: Option<f64>,
     /// Intensity multiplier before the palette.
@@ -373,18 +374,24 @@ pub fn synth(a: &SynthArgs, g: &Global) -> Result<Vec<PathBuf>> {
         None => {
             // the model's own flame framed; --height and --wind then act within it
             let s = ignis_learned::fit_scale(&model, &Controls::default(), a.size)?;
-            if s < 1.0 {
+            if s <= ignis_learned::synth::MIN_SCALE {
                 g.say(format!(
-                    "scale {s:.3}: at that scale the model's flame keeps its tip inside the \
-                     frame in 99 % of its states; --scale 1 keeps the footage's framing"
+                    "scale {s:.3}, the smallest: even at that scale the model's flame leaves a \
+                     frame of this shape in more than 1 % of its states; a frame closer to \
+                     the footage's shape, or --width below 1, keeps it inside"
+                ));
+            } else if s < 1.0 {
+                g.say(format!(
+                    "scale {s:.3}: at that scale the model's flame stays inside the frame (tip \
+                     and sides) in 99 % of its states; --scale 1 keeps the footage's framing"
                 ));
             }
-            if controls.height != 1.0 || controls.wind != Wind::default() {
+            if controls.height != 1.0 || controls.width != 1.0 || controls.wind != Wind::default() {
                 let as_given = ignis_learned::fit_scale(&model, &controls, a.size)?;
                 if as_given < 0.95 * s {
                     g.say(format!(
-                        "with --height and --wind as given the tip leaves the frame in more \
-                         than 1 % of the states; --scale {as_given:.3} keeps it inside"
+                        "with --height, --width and --wind as given the flame leaves the frame \
+                         in more than 1 % of the states; --scale {as_given:.3} keeps it inside"
                     ));
                 }
             }

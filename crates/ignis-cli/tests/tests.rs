@@ -2209,7 +2209,8 @@ mod learned {
     /// A model trained on a close crop draws its tall states through the frame's top at
     /// `--scale 1` (the footage's framing); by default `synth` scales the flame so they
     /// stay inside (`ignis_learned::fit_scale`), says so, and every chunk gets that scale;
-    /// `--height 1.5` acts within that framing and is told the scale that would fit it.
+    /// `--height 1.5` acts within that framing and is told the scale that would fit it; a
+    /// 2-pixel-wide frame, which no scale fits, is told so.
     #[test]
     fn a_closely_cropped_flame_is_scaled_to_stay_inside_the_frame() {
         let Some((dir, model)) = candle_model() else {
@@ -2256,6 +2257,24 @@ mod learned {
         let text = String::from_utf8_lossy(&taller.stderr).to_string()
             + &String::from_utf8_lossy(&taller.stdout);
         assert!(text.contains("keeps it inside"), "{text}");
+        // a frame too narrow for any scale says so instead of claiming a fit
+        let sliver = ignis_ok(&[
+            "learned",
+            "synth",
+            model.to_str().unwrap(),
+            "--frames",
+            "1",
+            "--size",
+            "2x256",
+            "-o",
+            dir.path().join("sliver.png").to_str().unwrap(),
+        ]);
+        let text = String::from_utf8_lossy(&sliver.stderr).to_string()
+            + &String::from_utf8_lossy(&sliver.stdout);
+        assert!(
+            text.contains("scale 0.100, the smallest") && !text.contains("stays inside"),
+            "{text}"
+        );
         let (c_fit, c_one) = (cut(&fitted), cut(&framed));
         assert!(c_one >= 10, "{c_one} of 150 frames cut at --scale 1");
         assert!(c_fit <= 3, "{c_fit} of 150 frames cut at the fitted scale");

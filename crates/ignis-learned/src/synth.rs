@@ -625,58 +625,104 @@ const FIT_SEED: u64 = 0x6669_745f_7363_616c;
 /// edge.
 pub const FIT_LEVEL: f32 = 0.05;
 
-/// The largest scale (at most 1, at least 0.1) at which the flame stays inside a frame of
-/// `size` in 99 % of its states: a model trained on footage cropped close to the flame
-/// draws its taller states through the frame's top edge at scale 1 (the footage's own
-/// framing), a flipbook cell with a flat top. A flame is drawn with its base where the
-/// mean flame has it ([`FlameModel::placement_for`]) and grows up from there, so its reach
-/// above the base scales with the scale. [`FIT_FRAMES`] frames of the model's process
-/// (seed fixed, one step a frame) are rendered with `controls` on a frame of `size`'s
-/// shape 192 pixels tall, at scale 1/3 so that no state leaves it; each one's reach at
-/// scale 1 is three times the distance from the base to its highest pixel brighter than
-/// [`FIT_LEVEL`]; the scale returned puts the 99th percentile of those reaches at the
-/// placement's margin (4 % of the frame height) below the top. 1 when the flame fits as
-/// it is (or shows nothing).
+/// The smallest `scale` a flame is drawn at (see [`Controls::validate`]) and the smallest
+/// [`fit_scale`] returns.
+pub const MIN_SCALE: f64 = 0.1;
+
+/// The largest scale (at most 1, at least [`MIN_SCALE`]) at which the flame stays inside
+/// a frame of `size` in 99 % of its states: a model trained on footage cropped close to the
+/// flame draws its taller states through the frame's top edge at scale 1 (the footage's
+/// own framing), a flipbook cell with a flat top, and its wider ones through the sides of a
+/// narrow frame (a tall torch cell), a cell with a straight edge. A flame is drawn with
+/// its base where the mean flame has it ([`FlameModel::placement_for`], centred across the
+/// frame) and grows from there, so its reach above the base and to either side of it
+/// scales with the scale. [`FIT_FRAMES`] frames of the model's process (seed fixed, one
+/// step a frame) are rendered with `controls` at scale 1/3, 192 pixels tall and at least
+/// twice as wide (so that no state leaves it, whatever the frame's shape); each one's
+/// reach at scale 1 above, left and right of the base is three times the distance from
+/// the base to its outermost pixel that way brighter than [`FIT_LEVEL`]. A state is inside
+/// at every scale up to the one that puts one of its reaches at a margin of `size`'s frame
+/// (4 % of its height below the top, 4 % of its shorter side inside each side), and the
+/// scale returned keeps all but 1 % of the states inside. 1 when the flame fits as it is
+/// (or shows nothing).
 pub fn fit_scale(model: &FlameModel, controls: &Controls, size: Size) -> Result<f64> {
     const SHRINK: f64 = 1.0 / 3.0;
     let h = 192u32;
+    let hf = f64::from(h);
+    // the frame's width at 192 px tall (its shape), and the wider frame rendered: widened
+    // by an even number of pixels, so the flame's pixels sample the same places as in a
+    // frame of the shape itself (its centre moves by whole pixels)
     let w = ((u64::from(size.width) * u64::from(h) + u64::from(size.height) / 2)
         / u64::from(size.height).max(1))
-    .clamp(8, 4 * u64::from(h)) as u32;
-    let small = Size::new(w, h).map_err(|e| LearnedError::bad("size", e.to_string()))?;
+    .clamp(1, 8 * u64::from(h)) as u32;
+    let wide = w + 2 * (2 * h).saturating_sub(w).div_ceil(2);
+    let w = f64::from(w);
+    let small = Size::new(wide, h).map_err(|e| LearnedError::bad("size", e.to_string()))?;
     let mut c = controls.clone();
     c.scale = SHRINK;
     let mut synth = Synthesiser::new(model, c, FIT_SEED)?;
     let (below, above) = model.mean_extent();
     let place = model.placement_within(small, (below, above));
     let i = model.shape.n_path + model.shape.n_width;
-    let hf = f64::from(h);
-    let base = place.cy + below * model.state_mean[i] * hf * place.tilt.cos();
+    // the base, fixed as the flame grows (`Synthesiser::place`), in the rendered frame
+    let sv = below * model.state_mean[i] * hf;
+    let base_y = place.cy + sv * place.tilt.cos();
+    let base_x = place.cx - sv * place.tilt.sin();
+    // the room from the base to each margin of `size`'s frame, in frame heights: the
+    // vertical placement depends on the height only, and the base lies as far from the
+    // frame's centre across in both frames
+    let margin_x = 0.04 * w.min(hf) / hf;
+    let off_x = (base_x - 0.5 * f64::from(wide)) / hf;
+    let room = [
+        base_y / hf - 0.04,
+        0.5 * w / hf + off_x - margin_x,
+        0.5 * w / hf - off_x - margin_x,
+    ];
     let mut frame = GrayFrame::new(small);
-    let mut reach = Vec::with_capacity(FIT_FRAMES);
+    let mut fits = Vec::with_capacity(FIT_FRAMES);
+    let stride = wide as usize;
     for k in 0..FIT_WARM_UP + FIT_FRAMES {
         synth.next_frame_into(&mut frame);
         if k < FIT_WARM_UP {
             continue;
         }
-        let top = frame
-            .data()
-            .chunks(w as usize)
-            .position(|row| row.iter().any(|&v| v > FIT_LEVEL));
-        if let Some(top) = top {
-            reach.push((base - top as f64) / hf / SHRINK);
+        let (mut top, mut left, mut right) = (None, usize::MAX, 0usize);
+        for (y, row) in frame.data().chunks(stride).enumerate() {
+            let Some(l) = row.iter().position(|&v| v > FIT_LEVEL) else {
+                continue;
+            };
+            let r = row.iter().rposition(|&v| v > FIT_LEVEL).unwrap_or(l);
+            top.get_or_insert(y);
+            left = left.min(l);
+            right = right.max(r + 1);
         }
+        let Some(top) = top else {
+            continue;
+        };
+        let reach = [
+            base_y - top as f64,
+            base_x - left as f64,
+            right as f64 - base_x,
+        ];
+        // the largest scale at which this state is inside on every side
+        let fit = reach
+            .iter()
+            .zip(room)
+            .filter(|(r, _)| **r > 0.0)
+            .map(|(r, room)| room / (r / hf / SHRINK))
+            .fold(f64::INFINITY, f64::min);
+        fits.push(fit);
     }
-    if reach.is_empty() {
+    if fits.is_empty() {
         return Ok(1.0);
     }
-    reach.sort_by(f64::total_cmp);
-    let p99 = reach[((reach.len() as f64 * 0.99).ceil() as usize).clamp(1, reach.len()) - 1];
-    let room = base / hf - 0.04;
-    if !(p99 > 0.0 && room.is_finite()) {
+    fits.sort_by(f64::total_cmp);
+    let k = fits.len() - ((fits.len() as f64 * 0.99).ceil() as usize).clamp(1, fits.len());
+    let fit = fits[k];
+    if fit.is_nan() {
         return Ok(1.0);
     }
-    Ok((room / p99).clamp(0.1, 1.0))
+    Ok(fit.clamp(MIN_SCALE, 1.0))
 }
 
 /// Convenience: the default placement of a model for an output size (re-exported for

@@ -474,6 +474,53 @@ mod flame {
         );
     }
 
+    /// A flame too wide for a narrow frame at scale 1 (a 20×96 cell, `--width 2`) is
+    /// fitted by its sides as well as its tip: at [`fit_scale`] at most a few frames light
+    /// the frame's first or last column, where many do at scale 1, and the fit depends on
+    /// the frame's shape, not its resolution.
+    #[test]
+    fn wide_flames_are_scaled_to_stay_inside_a_narrow_frame() {
+        let (_, t) = trained(60, 9);
+        let size = Size::new(20, 96).unwrap();
+        let side_lit = |c: &Controls| {
+            let frames = Synthesiser::new(&t.model, c.clone(), 5)
+                .unwrap()
+                .frames(size, 300)
+                .unwrap();
+            let lit = |f: &GrayFrame, x: u32| {
+                (0..96).any(|y| f.get(x, y) > ignis_learned::synth::FIT_LEVEL)
+            };
+            frames
+                .iter()
+                .skip(50)
+                .filter(|f| lit(f, 0) || lit(f, 19))
+                .count()
+        };
+        let wide = Controls {
+            width: 2.0,
+            ..Controls::default()
+        };
+        let fit = ignis_learned::fit_scale(&t.model, &wide, size).unwrap();
+        assert!(fit < 0.9, "fit {fit}");
+        let unfitted = side_lit(&wide);
+        let fitted = side_lit(&Controls {
+            scale: fit,
+            ..wide.clone()
+        });
+        assert!(unfitted > 50, "{unfitted} of 250 frames cut at scale 1");
+        assert!(fitted <= 8, "{fitted} of 250 frames cut at scale {fit}");
+        let twice = ignis_learned::fit_scale(&t.model, &wide, Size::new(40, 192).unwrap()).unwrap();
+        eprintln!(
+            "fit {fit} ({twice} at 40x192): {unfitted} → {fitted} of 250 frames cut at a side"
+        );
+        assert!((twice - fit).abs() < 0.02, "{twice} vs {fit}");
+        // the same flame in a square frame keeps its scale: its sides are inside
+        assert_eq!(
+            ignis_learned::fit_scale(&t.model, &wide, Size::new(96, 96).unwrap()).unwrap(),
+            1.0
+        );
+    }
+
     #[test]
     fn wind_bends_the_flame_to_the_right() {
         let (_, t) = trained(60, 9);
