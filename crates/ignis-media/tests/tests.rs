@@ -1271,6 +1271,20 @@ mod roundtrip {
             e.contains("-i ") && e.contains("sh010.%04d.dpx -start_number 1001"),
             "{e}"
         );
+        // a scan's levels and log colours are DPX's (and Cineon's) concern, not WebP's
+        assert!(e.contains("keeps a 10- or 12-bit scan's levels"), "{e}");
+        let web = dir.path().join("web");
+        std::fs::create_dir(&web).unwrap();
+        for n in [1, 2] {
+            std::fs::write(web.join(format!("f{n:02}.webp")), b"RIFF").unwrap();
+        }
+        let e = probe(&web.join("f%02d.webp")).unwrap_err().to_string();
+        assert!(
+            e.contains("unsupported .webp frames")
+                && e.contains("`ffmpeg -i ")
+                && !e.contains("12-bit"),
+            "{e}"
+        );
         // not frames at all: nothing to convert
         let notes = dir.path().join("notes");
         std::fs::create_dir(&notes).unwrap();

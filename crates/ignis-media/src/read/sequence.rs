@@ -404,9 +404,14 @@ fn unread_frames(path: &Path, ext: &str, convert: &str, gap: Option<&str>) -> Me
         what: format!(".{ext} frames"),
         fix: format!(
             "Ignis reads PNG, JPEG, TIFF and EXR frames; convert these with ffmpeg first: \
-             `{convert}`{} (a 16-bit PNG keeps a 10- or 12-bit DPX's levels, and the colours \
-             stay as they are, log or not)",
-            gap.unwrap_or_default()
+             `{convert}`{}{}",
+            gap.unwrap_or_default(),
+            match ext.to_ascii_lowercase().as_str() {
+                "dpx" | "cin" =>
+                    " (a 16-bit PNG keeps a 10- or 12-bit scan's levels, and the \
+                                  colours stay as they are, log or not)",
+                _ => "",
+            }
         ),
     }
 }
