@@ -432,41 +432,55 @@ mod flame {
         assert!(s.measure_loop_through(vec![0.0, f32::NAN, 1.0]).is_err());
     }
 
-    /// A flame too tall for its frame at scale 1 (here `--height 2.5`) is fitted: at
-    /// [`fit_scale`] at most a few frames (the 99th percentile's tail, on another seed
-    /// than the fit's) light the top row, where many do at scale 1; a flame that fits
-    /// keeps scale 1, and the fit depends on the frame's shape, not its resolution.
+    /// Checks [`fit_scale`] for `controls` on a frame of `size`, where the flame does not
+    /// fit at scale 1: below 0.9; of 250 frames (after 50, on another seed than the fit's)
+    /// more than 50 are `cut` at scale 1 and at most a few (the 99th percentile's tail) at
+    /// the fit; the same fit within 0.02 on a frame of the same shape, `twice` the size.
+    /// Returns the fit.
+    fn fits_inside(
+        model: &ignis_learned::FlameModel,
+        controls: &Controls,
+        size: Size,
+        twice: Size,
+        cut: impl Fn(&GrayFrame) -> bool,
+    ) -> f64 {
+        let cut_frames = |c: &Controls| {
+            let frames = Synthesiser::new(model, c.clone(), 5)
+                .unwrap()
+                .frames(size, 300)
+                .unwrap();
+            frames.iter().skip(50).filter(|f| cut(f)).count()
+        };
+        let fit = ignis_learned::fit_scale(model, controls, size).unwrap();
+        assert!(fit < 0.9, "fit {fit}");
+        let unfitted = cut_frames(controls);
+        let fitted = cut_frames(&Controls {
+            scale: fit,
+            ..controls.clone()
+        });
+        let at_twice = ignis_learned::fit_scale(model, controls, twice).unwrap();
+        eprintln!(
+            "fit {fit} ({at_twice} at twice the size): {unfitted} → {fitted} of 250 frames cut"
+        );
+        assert!(unfitted > 50, "{unfitted} of 250 frames cut at scale 1");
+        assert!(fitted <= 8, "{fitted} of 250 frames cut at scale {fit}");
+        assert!((at_twice - fit).abs() < 0.02, "{at_twice} vs {fit}");
+        fit
+    }
+
+    /// A flame too tall for its frame at scale 1 (here `--height 2.5`) is fitted so that
+    /// few frames light the top row ([`fits_inside`]); a flame that fits keeps scale 1.
     #[test]
     fn tall_flames_are_scaled_to_stay_inside_the_frame() {
         let (_, t) = trained(60, 9);
         let size = Size::new(96, 96).unwrap();
-        let top_lit = |c: &Controls| {
-            let frames = Synthesiser::new(&t.model, c.clone(), 5)
-                .unwrap()
-                .frames(size, 300)
-                .unwrap();
-            frames
-                .iter()
-                .skip(50)
-                .filter(|f| (0..96).any(|x| f.get(x, 0) > ignis_learned::synth::FIT_LEVEL))
-                .count()
-        };
         let tall = Controls {
             height: 2.5,
             ..Controls::default()
         };
-        let fit = ignis_learned::fit_scale(&t.model, &tall, size).unwrap();
-        assert!(fit < 0.9, "fit {fit}");
-        let unfitted = top_lit(&tall);
-        let fitted = top_lit(&Controls {
-            scale: fit,
-            ..tall.clone()
-        });
-        assert!(unfitted > 50, "{unfitted} of 250 frames cut at scale 1");
-        assert!(fitted <= 8, "{fitted} of 250 frames cut at scale {fit}");
-        let twice =
-            ignis_learned::fit_scale(&t.model, &tall, Size::new(192, 192).unwrap()).unwrap();
-        assert!((twice - fit).abs() < 0.02, "{twice} vs {fit}");
+        let top_lit =
+            |f: &GrayFrame| (0..96).any(|x| f.get(x, 0) > ignis_learned::synth::FIT_LEVEL);
+        fits_inside(&t.model, &tall, size, Size::new(192, 192).unwrap(), top_lit);
         assert_eq!(
             ignis_learned::fit_scale(&t.model, &Controls::default(), size).unwrap(),
             1.0,
@@ -475,46 +489,21 @@ mod flame {
     }
 
     /// A flame too wide for a narrow frame at scale 1 (a 20×96 cell, `--width 2`) is
-    /// fitted by its sides as well as its tip: at [`fit_scale`] at most a few frames light
-    /// the frame's first or last column, where many do at scale 1, and the fit depends on
-    /// the frame's shape, not its resolution.
+    /// fitted by its sides as well as its tip: few frames light the frame's first or last
+    /// column ([`fits_inside`]); in a square frame its sides are inside and it keeps
+    /// scale 1.
     #[test]
     fn wide_flames_are_scaled_to_stay_inside_a_narrow_frame() {
         let (_, t) = trained(60, 9);
-        let size = Size::new(20, 96).unwrap();
-        let side_lit = |c: &Controls| {
-            let frames = Synthesiser::new(&t.model, c.clone(), 5)
-                .unwrap()
-                .frames(size, 300)
-                .unwrap();
-            let lit = |f: &GrayFrame, x: u32| {
-                (0..96).any(|y| f.get(x, y) > ignis_learned::synth::FIT_LEVEL)
-            };
-            frames
-                .iter()
-                .skip(50)
-                .filter(|f| lit(f, 0) || lit(f, 19))
-                .count()
-        };
         let wide = Controls {
             width: 2.0,
             ..Controls::default()
         };
-        let fit = ignis_learned::fit_scale(&t.model, &wide, size).unwrap();
-        assert!(fit < 0.9, "fit {fit}");
-        let unfitted = side_lit(&wide);
-        let fitted = side_lit(&Controls {
-            scale: fit,
-            ..wide.clone()
-        });
-        assert!(unfitted > 50, "{unfitted} of 250 frames cut at scale 1");
-        assert!(fitted <= 8, "{fitted} of 250 frames cut at scale {fit}");
-        let twice = ignis_learned::fit_scale(&t.model, &wide, Size::new(40, 192).unwrap()).unwrap();
-        eprintln!(
-            "fit {fit} ({twice} at 40x192): {unfitted} → {fitted} of 250 frames cut at a side"
-        );
-        assert!((twice - fit).abs() < 0.02, "{twice} vs {fit}");
-        // the same flame in a square frame keeps its scale: its sides are inside
+        let lit =
+            |f: &GrayFrame, x: u32| (0..96).any(|y| f.get(x, y) > ignis_learned::synth::FIT_LEVEL);
+        let side_lit = |f: &GrayFrame| lit(f, 0) || lit(f, 19);
+        let (size, twice) = (Size::new(20, 96).unwrap(), Size::new(40, 192).unwrap());
+        fits_inside(&t.model, &wide, size, twice, side_lit);
         assert_eq!(
             ignis_learned::fit_scale(&t.model, &wide, Size::new(96, 96).unwrap()).unwrap(),
             1.0
