@@ -2258,19 +2258,18 @@ mod learned {
             + &String::from_utf8_lossy(&taller.stdout);
         assert!(text.contains("keeps it inside"), "{text}");
         // a frame too narrow for any scale says so instead of claiming a fit
-        let sliver = ignis_ok(&[
+        let sliver = dir.path().join("sliver.png");
+        let text = said_ok(&[
             "learned",
             "synth",
             model.to_str().unwrap(),
-            "--frames",
-            "1",
             "--size",
             "2x256",
+            "--frames",
+            "1",
             "-o",
-            dir.path().join("sliver.png").to_str().unwrap(),
+            sliver.to_str().unwrap(),
         ]);
-        let text = String::from_utf8_lossy(&sliver.stderr).to_string()
-            + &String::from_utf8_lossy(&sliver.stdout);
         assert!(
             text.contains("scale 0.100, the smallest") && !text.contains("stays inside"),
             "{text}"
