@@ -74,11 +74,13 @@ fn encoder_args(format: Format, size: Size, fps: f64) -> Vec<String> {
             .to_string()
     } else {
         // VP8 keeps alpha (a second stream inside WebM) only without alt-ref frames;
-        // constant quality 10 (0–63) under the bitrate ceiling.
+        // constant quality 10 (0–63) under the bitrate ceiling. The WebM muxer draws its
+        // segment and track UIDs at random unless bit-exact: the same frames would give
+        // different bytes on every run.
         let ceiling = (size.pixels() as f64 * fps * VP8_BITS_PER_PIXEL).clamp(2e5, 1e8);
         format!(
             "-c:v libvpx -pix_fmt yuva420p -auto-alt-ref 0 -crf 10 -b:v {} -deadline good \
-             -cpu-used 2 -f webm",
+             -cpu-used 2 -fflags +bitexact -f webm",
             ceiling as u64
         )
     };
