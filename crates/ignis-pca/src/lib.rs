@@ -505,18 +505,22 @@ pub(crate) fn column_mean(data: MatRef<'_, f32>) -> Vec<f32> {
     mean
 }
 
-/// `aᵀ b` for tall `a` (K×p) and `b` (K×q): K (the pixels) is split into one contiguous range per
-/// rayon thread, each a sequential faer GEMM, and the p×q partial products are added. faer's
-/// GEMM does not split K across threads (figures: `benches/README.md`).
+/// Row ranges [`at_b`] splits K into, at most: a fixed number (not one per thread, as before:
+/// the partial products' f32 sum then depended on the thread count), enough for the cores of
+/// a workstation; each holds a p×q partial product.
+const AT_B_GROUPS: usize = 8;
+
+/// `aᵀ b` for tall `a` (K×p) and `b` (K×q): K (the pixels) is split into contiguous ranges of
+/// at least 8,192 rows, at most [`AT_B_GROUPS`], each a sequential faer GEMM on rayon's pool,
+/// and the p×q partial products are added in order. faer's GEMM does not split K across
+/// threads (figures: `benches/README.md`).
 pub(crate) fn at_b(a: MatRef<'_, f32>, b: MatRef<'_, f32>) -> Mat<f32> {
     use rayon::prelude::*;
     const MIN_ROWS: usize = 8192;
     let (k, p, q) = (a.nrows(), a.ncols(), b.ncols());
     assert_eq!(k, b.nrows());
-    let groups = rayon::current_num_threads()
-        .min(k.div_ceil(MIN_ROWS))
-        .max(1);
-    (0..groups)
+    let groups = AT_B_GROUPS.min(k.div_ceil(MIN_ROWS)).max(1);
+    let parts: Vec<Mat<f32>> = (0..groups)
         .into_par_iter()
         .map(|g| {
             let r0 = g * k / groups;
@@ -532,8 +536,10 @@ pub(crate) fn at_b(a: MatRef<'_, f32>, b: MatRef<'_, f32>) -> Mat<f32> {
             );
             acc
         })
-        .reduce_with(|x, y| x + y)
-        .unwrap_or_else(|| Mat::zeros(p, q))
+        .collect();
+    let mut parts = parts.into_iter();
+    let first = parts.next().unwrap_or_else(|| Mat::zeros(p, q));
+    parts.fold(first, |x, y| x + y)
 }
 
 /// `dst ← accum(dst) + alpha·lhs·rhs` for a tall `lhs` (and `dst`), split into row chunks that
@@ -544,7 +550,11 @@ pub(crate) fn at_b(a: MatRef<'_, f32>, b: MatRef<'_, f32>) -> Mat<f32> {
 /// and the components). faer's own `Par::Rayon` mode hands work to its spin-waiting worker pool,
 /// which burns the CPU on a loaded machine while rayon's idle workers sleep
 /// (`benches/README.md`).
-/// Only the M×M eigendecomposition and the QR/SVD of thin sketches use faer's global setting.
+/// The M×M eigendecomposition runs sequentially and the thin sketches' QR/SVD on a one-thread
+/// pool: faer splits those by the thread count, and the split changes the rounding. Every
+/// reduction over blocks adds a fixed grouping in a fixed order, so a fit's bits do not
+/// depend on the thread count (tests `in_memory_fits_do_not_depend_on_the_thread_count`,
+/// `streaming_fit_does_not_depend_on_the_thread_count`).
 pub(crate) fn rows_gemm(
     dst: faer::MatMut<'_, f32>,
     accum: faer::Accum,

@@ -6,7 +6,7 @@
 
 use faer::Mat;
 
-use crate::snapshot::GRAM_BLOCK;
+use crate::snapshot::{GRAM_BLOCK, GRAM_GROUPS};
 use crate::{Method, PcaError};
 
 const F32: u64 = 4;
@@ -34,16 +34,18 @@ pub(crate) fn workspace_bytes(n: usize, m: usize, method: &Method) -> u64 {
     };
     let sq = |x: u64| x.saturating_mul(x);
     match method {
-        // Gram f64 + f32 block + eigenvectors f64 + eigen scratch (≈ one more M² f64) +
-        // selected eigenvectors + W f32 + weights f32 + the b×k block + Ψ.
+        // The larger of: while the Gram is summed, one f64 accumulator and one f32 block
+        // per group of row blocks; after, Gram f64 + eigenvectors f64 + eigen scratch (≈ one
+        // more M² f64) + selected eigenvectors + W f32 + weights f32. Then the b×k block + Ψ.
         Method::Snapshot | Method::Auto => sq(m64)
-            .saturating_mul(4 * F64 + 3 * F32)
+            .saturating_mul((GRAM_GROUPS as u64 * (F64 + F32)).max(4 * F64 + 3 * F32))
             .saturating_add((GRAM_BLOCK as u64).min(n64).saturating_mul(m64) * F32)
             .saturating_add(n64 * F32),
-        // Centred copy + N² Gram f64 + f32 block + eigenvectors + scratch + components f32.
+        // Centred copy + the larger of the Gram's groups (as above, N×N) and N² Gram f64 +
+        // eigenvectors + scratch + components f32.
         Method::Covariance => data_bytes(n, m).saturating_add(
             sq(n64)
-                .saturating_mul(3 * F64 + 2 * F32)
+                .saturating_mul((GRAM_GROUPS as u64 * (F64 + F32)).max(3 * F64 + 2 * F32))
                 .saturating_add(n64 * F32),
         ),
         // Y, Q, product buffers (N×l, three of them), M×l sketches, l×M B, SVD of B.

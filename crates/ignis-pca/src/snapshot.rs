@@ -15,8 +15,11 @@
 //! block of A is read whole into a b×k GEMM result before its first k columns are overwritten),
 //! so no second N×M buffer exists; afterwards the matrix is truncated to N×k.
 
+use faer::diag::Diag;
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::linalg::evd;
 use faer::linalg::matmul::triangular::{self, BlockStructure};
-use faer::{Accum, Mat, MatRef, Par, Side};
+use faer::{Accum, Mat, MatRef, Par};
 use rayon::prelude::*;
 
 use crate::{check_finite_mean, column_mean, fix_signs, resolve_keep, Keep, Pca, PcaError};
@@ -45,14 +48,33 @@ pub(crate) fn centre_in_place(a: &mut Mat<f32>) -> Result<Vec<f32>, PcaError> {
     Ok(mean)
 }
 
+/// Row-block groups of [`gram_lower`]: a fixed number, so the sums do not depend on the
+/// thread count. Each holds an M×M f64 accumulator while the Gram is summed; two keep that
+/// within the snapshot method's workspace ([`crate::memory`]) and the two cores of a
+/// modest machine busy, the grouping its two-thread runs always had.
+pub(crate) const GRAM_GROUPS: usize = 2;
+
 /// Lower triangle of AᵀA (M×M, f64), from f32 GEMMs over row blocks. The row blocks are split
-/// into one contiguous range per rayon thread, each with its own f64 accumulator (M²·12 bytes
-/// per thread), summed at the end.
+/// into at most [`GRAM_GROUPS`] contiguous ranges, each summed in order into its own f64
+/// accumulator (M²·8 bytes each) on rayon's pool, and the ranges' sums are added in order:
+/// the same additions in the same order at any thread count. (With one range per thread, as
+/// before, a two-thread Gram could differ from a one-thread one in its last bits wherever
+/// the f64 sums of the f32 blocks rounded.)
 pub(crate) fn gram_lower(a: MatRef<'_, f32>) -> Mat<f64> {
     let (n, m) = (a.nrows(), a.ncols());
     let blocks = n.div_ceil(GRAM_BLOCK);
-    let groups = rayon::current_num_threads().min(blocks).max(1);
-    (0..groups)
+    let groups = GRAM_GROUPS.min(blocks).max(1);
+    let add_lower = |x: &mut Mat<f64>, y: &Mat<f64>| {
+        for j in 0..m {
+            for (p, q) in x.col_as_slice_mut(j)[j..]
+                .iter_mut()
+                .zip(&y.col_as_slice(j)[j..])
+            {
+                *p += *q;
+            }
+        }
+    };
+    let sums: Vec<Mat<f64>> = (0..groups)
         .into_par_iter()
         .map(|gi| {
             let mut g = Mat::<f64>::zeros(m, m);
@@ -82,29 +104,20 @@ pub(crate) fn gram_lower(a: MatRef<'_, f32>) -> Mat<f64> {
             }
             g
         })
-        .reduce_with(|mut x, y| {
-            for j in 0..m {
-                for (p, q) in x.col_as_slice_mut(j)[j..]
-                    .iter_mut()
-                    .zip(&y.col_as_slice(j)[j..])
-                {
-                    *p += *q;
-                }
-            }
-            x
-        })
-        .unwrap_or_else(|| Mat::zeros(m, m))
+        .collect();
+    let mut sums = sums.into_iter();
+    let mut g = sums.next().unwrap_or_else(|| Mat::zeros(m, m));
+    for y in sums {
+        add_lower(&mut g, &y);
+    }
+    g
 }
 
 /// Descending (eigenvalue, eigenvector index) pairs of a symmetric matrix given by its lower
 /// triangle, dropping numerically zero ones and keeping at most `max_k`.
 fn sorted_eigen(g: &Mat<f64>, max_k: usize) -> Result<(Vec<f64>, Mat<f64>), PcaError> {
-    let evd = g.self_adjoint_eigen(Side::Lower).map_err(|e| {
-        PcaError::Numerical(format!(
-            "eigendecomposition failed: {e:?} (NaN or infinite input?)"
-        ))
-    })?;
-    let s = evd.S().column_vector();
+    let (s, u) = self_adjoint_evd_seq(g)?;
+    let s = s.column_vector();
     let n = s.nrows();
     let largest = if n > 0 { s[n - 1].max(0.0) } else { 0.0 };
     let tol = zero_tol(largest);
@@ -117,9 +130,42 @@ fn sorted_eigen(g: &Mat<f64>, max_k: usize) -> Result<(Vec<f64>, Mat<f64>), PcaE
         vals.push(s[i]);
         idx.push(i);
     }
-    let u = evd.U();
     let v = Mat::<f64>::from_fn(u.nrows(), idx.len(), |r, c| u[(r, idx[c])]);
     Ok((vals, v))
+}
+
+/// The eigendecomposition of a symmetric matrix given by its lower triangle (eigenvalues
+/// ascending, eigenvectors as columns), computed sequentially. faer's `self_adjoint_eigen`
+/// splits its tridiagonalisation by the global parallelism (rayon's current thread count)
+/// above a few hundred rows, and the split changes the rounding: a database trained on two
+/// threads differed from one trained on one in the last bits of every eigenvalue and weight.
+/// Sequential, the result does not depend on the caller's thread count; the M×M problem is
+/// small beside the Gram matrix and the components.
+fn self_adjoint_evd_seq(g: &Mat<f64>) -> Result<(Diag<f64>, Mat<f64>), PcaError> {
+    let n = g.nrows();
+    let mut u = Mat::<f64>::zeros(n, n);
+    let mut s = Diag::<f64>::zeros(n);
+    let par = Par::Seq;
+    let scratch = evd::self_adjoint_evd_scratch::<f64>(
+        n,
+        evd::ComputeEigenvectors::Yes,
+        par,
+        Default::default(),
+    );
+    evd::self_adjoint_evd(
+        g.as_ref(),
+        s.as_mut(),
+        Some(u.as_mut()),
+        par,
+        MemStack::new(&mut MemBuffer::new(scratch)),
+        Default::default(),
+    )
+    .map_err(|e| {
+        PcaError::Numerical(format!(
+            "eigendecomposition failed: {e:?} (NaN or infinite input?)"
+        ))
+    })?;
+    Ok((s, u))
 }
 
 /// Snapshot PCA, consuming `a` (N×M) and reusing its buffer for the components.

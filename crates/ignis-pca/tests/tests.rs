@@ -310,6 +310,57 @@ fn streaming_fit_does_not_depend_on_the_thread_count() {
     }
 }
 
+/// The in-memory fits give the same bits whatever the thread count: the snapshot fit's Gram
+/// matrix sums many row blocks (here 11 blocks of 2,048 pixels, as a 175×98 colour
+/// training size has 26), its and the covariance fit's eigendecompositions are larger
+/// than faer's parallel thresholds, and the randomized fit's products `aᵀ b` split 20,000
+/// pixels into ranges.
+#[test]
+fn in_memory_fits_do_not_depend_on_the_thread_count() {
+    let pool = |n| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build()
+            .unwrap()
+    };
+    for (method, n, m) in [
+        (Method::Snapshot, 11 * 2048 - 300, 90),
+        (Method::Snapshot, 3000, 400),
+        (Method::Covariance, 300, 2000),
+        (
+            Method::Randomized {
+                k: 10,
+                oversample: 8,
+                power_iters: 2,
+                seed: 4,
+            },
+            20_000,
+            60,
+        ),
+    ] {
+        let a = decaying(n, m, 12, 5);
+        let fit = || {
+            Pca::fit_owned_with_weights(
+                a.clone(),
+                &PcaOptions {
+                    method,
+                    ..Default::default()
+                },
+            )
+            .unwrap()
+        };
+        let (one, w1) = pool(1).install(fit);
+        for threads in [2, 3] {
+            let (p, w) = pool(threads).install(fit);
+            let what = format!("{method:?} {n}x{m} at {threads} threads");
+            assert_eq!(p.eigenvalues, one.eigenvalues, "{what}");
+            assert_eq!(p.mean, one.mean, "{what}");
+            assert!(p.components == one.components, "{what}");
+            assert!(w == w1, "{what}");
+        }
+    }
+}
+
 /// Issue 18 defect 5: an address-space limit (`ulimit -v`) caps the memory the checks see.
 #[cfg(target_os = "linux")]
 #[test]
