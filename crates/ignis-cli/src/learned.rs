@@ -372,7 +372,7 @@ pub fn synth(a: &SynthArgs, g: &Global) -> Result<Vec<PathBuf>> {
     controls.scale = match a.scale {
         Some(s) => s,
         None => {
-            // the model's own flame framed; --height and --wind then act within it
+            // the model's own flame framed; --height, --width and --wind then act within it
             let s = ignis_learned::fit_scale(&model, &Controls::default(), a.size)?;
             if s <= ignis_learned::synth::MIN_SCALE {
                 g.say(format!(

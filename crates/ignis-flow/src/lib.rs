@@ -290,10 +290,7 @@ pub fn flow_pair_reduced(
     p: &FlowParams,
 ) -> Result<(FlowField, FlowField)> {
     let (ws, imgs) = prepare(a, b, p)?;
-    Ok(match imgs {
-        Some((ia, ib)) => rayon::join(|| dis_field(&ia, &ib, ws, p), || dis_field(&ib, &ia, ws, p)),
-        None => (FlowField::zero(ws), FlowField::zero(ws)),
-    })
+    Ok(dis_pair(ws, imgs, p))
 }
 
 /// [`flow_pair_reduced`] of two colour frames' luminance ([`luma`]): the same fields, bit
@@ -305,10 +302,16 @@ pub fn flow_pair_reduced_rgba(
     p: &FlowParams,
 ) -> Result<(FlowField, FlowField)> {
     let (ws, imgs) = prepare_rgba(a, b, p)?;
-    Ok(match imgs {
+    Ok(dis_pair(ws, imgs, p))
+}
+
+/// Both directions of DIS between two prepared working images, in parallel; the zero fields
+/// when [`prepare`] found no texture.
+fn dis_pair(ws: Size, imgs: Option<(Img, Img)>, p: &FlowParams) -> (FlowField, FlowField) {
+    match imgs {
         Some((ia, ib)) => rayon::join(|| dis_field(&ia, &ib, ws, p), || dis_field(&ib, &ia, ws, p)),
         None => (FlowField::zero(ws), FlowField::zero(ws)),
-    })
+    }
 }
 
 /// [`flow_pair_reduced_rgba`] of two matted frames, each field then filled over its own

@@ -395,10 +395,12 @@ fn still_extension(name: &str) -> String {
         .unwrap_or_default()
 }
 
-/// A sequence of `.ext` frames, a format this crate does not decode (DPX, Cineon, TGA, …),
-/// with the ffmpeg command `convert` that turns them into frames it reads; `gap`: what to
-/// add about a missing frame, where ffmpeg stops.
+/// A sequence of `.ext` frames (`ext` lower-case, [`still_extension`]), a format this crate
+/// does not decode (DPX, Cineon, TGA, …), with the ffmpeg command `convert` that turns them
+/// into frames it reads; `gap`: what to add about a missing frame, where ffmpeg stops.
 fn unread_frames(path: &Path, ext: &str, convert: &str, gap: Option<&str>) -> MediaError {
+    const LEVELS_NOTE: &str = " (a 16-bit PNG keeps a 10- or 12-bit scan's levels, and the \
+                               colours stay as they are, log or not)";
     MediaError::Unsupported {
         path: path.to_path_buf(),
         what: format!(".{ext} frames"),
@@ -406,10 +408,8 @@ fn unread_frames(path: &Path, ext: &str, convert: &str, gap: Option<&str>) -> Me
             "Ignis reads PNG, JPEG, TIFF and EXR frames; convert these with ffmpeg first: \
              `{convert}`{}{}",
             gap.unwrap_or_default(),
-            match ext.to_ascii_lowercase().as_str() {
-                "dpx" | "cin" =>
-                    " (a 16-bit PNG keeps a 10- or 12-bit scan's levels, and the \
-                                  colours stay as they are, log or not)",
+            match ext {
+                "dpx" | "cin" => LEVELS_NOTE,
                 _ => "",
             }
         ),
