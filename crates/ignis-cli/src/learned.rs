@@ -19,8 +19,10 @@ pub enum Command {
     /// Fit the flame model to a video and learn its dynamics (EM with condensation);
     /// prints the likelihood of every iteration and a fit summary.
     #[command(
-        after_help = "Examples:\n  ignis learned train candle.mp4 --range 0..300 -o candle.flame\n  \
-ignis learned train candle.mp4 --particles 300 --order 3 --seed 2 -o candle.flame"
+        after_help = "Examples:\n  ignis learned train flame.mp4 --range 0..300 -o flame.flame       # one flame on a dark background\n  \
+# candle.mp4 (../shared/data): the flame only, not the wax glowing around it in its jar\n  \
+ignis learned train candle.mp4 --crop 190,200,100,130 --black-level 0.7 --keep-multiple -o c.flame\n  \
+ignis learned train flame.mp4 --particles 300 --order 3 --seed 2 -o flame.flame"
     )]
     Train(TrainArgs),
     /// Synthesise a new flame of any length from a model, with wind, height, width and
