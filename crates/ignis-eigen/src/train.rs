@@ -440,7 +440,9 @@ fn plan_clip(
             return Err(EigenError::clip(
                 name,
                 format!(
-                    "the range {start}..{end} goes past the end of {} (only {} frames decoded)",
+                    "the range {start}..{end} goes past the end of {} (only {} frames decoded; \
+                     if its header promised more, the file may be truncated or damaged, e.g. an \
+                     incomplete download or copy: copy it again, or end the range there)",
                     c.footage.info().source,
                     start + (count - 1) * c.spec.stride + 1
                 ),

@@ -729,6 +729,50 @@ mod probing {
         }
     }
 
+    /// A clip read through ffmpeg whose data stops before the frame count its header
+    /// promises (an incomplete download: the index at the front, the frames cut off) fails
+    /// at the frame where it ends, and the error says the file may be cut short and what
+    /// to do, not only that a range was not reached (the user asked for none).
+    #[test]
+    fn a_clip_cut_short_says_it_may_be_truncated() {
+        if !have_ffmpeg() {
+            return;
+        }
+        let dir = tempfile::tempdir().unwrap();
+        let inputs = ["-f", "lavfi", "-i", "testsrc=size=64x48:rate=25"];
+        let args = [
+            "-frames:v",
+            "40",
+            "-pix_fmt",
+            "yuv420p",
+            "-c:v",
+            "libx264",
+            "-profile:v",
+            "high",
+            "-movflags",
+            "+faststart",
+        ];
+        let Some(whole) = make_from(dir.path(), "whole.mp4", &inputs, &args) else {
+            return;
+        };
+        assert_eq!(probe(&whole).unwrap().decoder, Decoder::Ffmpeg);
+        let bytes = std::fs::read(&whole).unwrap();
+        // cut in its header, in its first frames (ffmpeg fails on a partial packet) and
+        // near its end (the frames stop early)
+        for percent in [20, 40, 60, 80, 95, 99] {
+            let cut = dir.path().join(format!("cut{percent}.mp4"));
+            std::fs::write(&cut, &bytes[..bytes.len() * percent / 100]).unwrap();
+            let e = open(&cut, &ReadOptions::default())
+                .and_then(|r| r.collect::<Result<Vec<_>, _>>())
+                .expect_err("a clip cut short must not read as whole");
+            let m = e.to_string();
+            assert!(
+                m.contains("may be truncated") && m.contains("copy it again"),
+                "{percent} %: {m}"
+            );
+        }
+    }
+
     /// Copies the clip `from` to `to` with a quarter-turn display rotation, as a phone
     /// records a portrait clip (the stream copy's display matrix, ffmpeg ≥ 5); false if
     /// this ffmpeg cannot.

@@ -230,7 +230,11 @@ pub(crate) fn probe(path: &Path, _hint: Option<&str>) -> Result<(SourceInfo, Pla
         return Err(MediaError::decode(
             path,
             None,
-            format!("ffprobe cannot read it: {}", msg.trim()),
+            format!(
+                "ffprobe cannot read it: {}{}",
+                msg.trim(),
+                damage_hint(&[msg.to_string()])
+            ),
         ));
     }
     let parsed: ProbeOut = serde_json::from_slice(&out.stdout)
@@ -722,10 +726,41 @@ impl FfmpegSource {
             Ok(status) => Some(Err(MediaError::decode(
                 &self.info.path,
                 None,
-                format!("ffmpeg failed ({status}): {}", self.errors.join("; ")),
+                match damage_hint(&self.errors) {
+                    hint if hint.is_empty() => {
+                        format!("ffmpeg failed ({status}): {}", self.errors.join("; "))
+                    }
+                    hint => format!(
+                        "ffmpeg failed ({status}){hint}. ffmpeg said: {}",
+                        self.errors.join("; ")
+                    ),
+                },
             ))),
             Err(e) => Some(Err(MediaError::io(&self.info.path, e))),
         }
+    }
+}
+
+/// What to do when ffmpeg's errors say the file's data is cut short or corrupt (the MP4
+/// demuxer's "partial file" at the end of an incomplete download, or its "moov atom not
+/// found" where the index, written last, never arrived; a bitstream whose NAL units
+/// overrun it): empty when they do not.
+fn damage_hint(errors: &[String]) -> String {
+    const SIGNS: [&str; 5] = [
+        "partial file",
+        "moov atom not found",
+        "truncat",
+        "invalid nal unit size",
+        "invalid data found",
+    ];
+    let damaged = errors.iter().any(|e| {
+        let e = e.to_ascii_lowercase();
+        SIGNS.iter().any(|s| e.contains(s))
+    });
+    if damaged {
+        format!(" — {}", super::DAMAGED)
+    } else {
+        String::new()
     }
 }
 
@@ -741,6 +776,24 @@ impl Drop for FfmpegSource {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn damage_hints_follow_ffmpeg_truncation_messages() {
+        let said = |m: &[&str]| damage_hint(&m.iter().map(|s| s.to_string()).collect::<Vec<_>>());
+        for m in [
+            "[mov,mp4,m4a,3gp,3g2,mj2 @ 0x1] stream 0, offset 0xaa9: partial file",
+            "[h264 @ 0x1] Invalid NAL unit size (689 > 528).",
+            "file.mkv: Invalid data found when processing input",
+            "[mov,mp4,m4a,3gp,3g2,mj2 @ 0x1] moov atom not found",
+        ] {
+            assert!(
+                said(&["something else", m]).contains("copy it again"),
+                "{m}"
+            );
+        }
+        assert_eq!(said(&[]), "");
+        assert_eq!(said(&["Conversion failed!", "unknown encoder"]), "");
+    }
 
     #[test]
     fn conversions_follow_the_stream_and_the_filters_at_hand() {

@@ -60,12 +60,12 @@ fn read_header(path: &Path, len: u64) -> Result<Mp4File> {
         Ok(Err(e)) => Err(MediaError::decode(
             path,
             None,
-            format!("not a readable MP4 ({e}); the file may be truncated or damaged"),
+            format!("not a readable MP4 ({e}); {}", super::DAMAGED),
         )),
         Err(_) => Err(MediaError::decode(
             path,
             None,
-            "malformed MP4 header; the file may be truncated or damaged",
+            format!("malformed MP4 header; {}", super::DAMAGED),
         )),
     }
 }

@@ -46,8 +46,13 @@ pub use h264::avc_profile_name;
 #[doc(hidden)]
 pub use h264::decode_rgba8_count;
 pub(crate) use sequence::Pattern;
+
 pub use sequence::{sequence_fps, set_sequence_fps, DEFAULT_SEQUENCE_FPS, SEQUENCE_FPS_RANGE};
 pub use timing::{frame_timing, FrameTiming};
+
+/// What a reader says of a file whose data ends early or does not parse, and what to do.
+pub(crate) const DAMAGED: &str = "the file may be truncated or damaged (an incomplete \
+     download or copy): copy it again, or export it again from its source";
 
 /// Unit of a [`FrameRange`].
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -701,8 +706,9 @@ impl FrameReader {
                         path,
                         Some(self.index),
                         format!(
-                            "the stream ended at frame {} before the end of the range ({end})",
-                            self.index
+                            "the stream ended at frame {i} before the end of the range ({end}); \
+                             {DAMAGED}, or use only its first {i} frames",
+                            i = self.index
                         ),
                     ))),
                     None => None,
