@@ -28,6 +28,12 @@ pub fn run(args: &Args) -> Result<()> {
     // a header that reads but a first frame that does not (a cut-off download) is said,
     // after what the header says
     let see_through = first_frame_see_through(&args.input);
+    // a file cut short after its index (an incomplete download) lists frames it lacks
+    let short = ignis_media::frames_in_data(&args.input)
+        .ok()
+        .flatten()
+        .zip(info.frame_count)
+        .filter(|&(present, listed)| present < listed);
     let book = flipbook_meta(&info);
     // a sequence's first and last files: frames count from 0 in the order read, and a
     // compositor's numbers (shot.1001.exr) are not those
@@ -68,6 +74,7 @@ pub fn run(args: &Args) -> Result<()> {
                 "alpha": m.alpha,
             })),
             "first_frame_error": see_through.as_ref().err().map(|e| format!("{e:#}")),
+            "frames_in_data": short.map(|s| s.0),
             "variable_frame_rate": variable.as_ref().map(|v| serde_json::json!({
                 "nominal_fps": v.nominal_fps,
                 "average_fps": v.average_fps,
@@ -129,6 +136,13 @@ pub fn run(args: &Args) -> Result<()> {
         }
         outln!("codec:   {}", info.codec)?;
         outln!("decoder: {}", info.decoder)?;
+        if let Some((present, listed)) = short {
+            outln!(
+                "warning: its data holds at most {present} of the {listed} frames its header lists: \
+                 the file may be truncated (an incomplete download or copy); copy it again, or \
+                 use only its first frames"
+            )?;
+        }
         if let Some(m) = &book {
             match (&m.loop_quality, m.loop_) {
                 (Some(q), true) => outln!(

@@ -924,6 +924,63 @@ mod footage {
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     }
 
+    /// `info` on a clip cut short after its index (an incomplete download of an MP4 written
+    /// for streaming) says its data holds fewer frames than its header lists, in text and
+    /// JSON; on the whole clip it says nothing of the kind.
+    #[test]
+    fn info_warns_of_a_clip_cut_short() {
+        if !has_ffmpeg() {
+            return;
+        }
+        let t = tempfile::tempdir().unwrap();
+        let whole = t.path().join("whole.mp4");
+        let o = Command::new("ffmpeg")
+            .args(["-v", "error", "-y", "-f", "lavfi", "-i"])
+            .arg("testsrc2=size=64x48:rate=10:duration=4")
+            .args([
+                "-pix_fmt",
+                "yuv420p",
+                "-c:v",
+                "libx264",
+                "-profile:v",
+                "high",
+            ])
+            .args(["-movflags", "+faststart"])
+            .arg(&whole)
+            .output()
+            .unwrap();
+        if !o.status.success() {
+            println!("skipped: this ffmpeg cannot encode H.264 High");
+            return;
+        }
+        let bytes = std::fs::read(&whole).unwrap();
+        let cut = t.path().join("cut.mp4");
+        std::fs::write(&cut, &bytes[..bytes.len() * 17 / 20]).unwrap();
+        let json = |p: &Path| -> serde_json::Value {
+            let o = ignis_ok(&["info", p.to_str().unwrap(), "--json"]);
+            serde_json::from_slice(&o.stdout).unwrap()
+        };
+        let (w, c) = (json(&whole), json(&cut));
+        assert_eq!(w["frames"], 40, "{w}");
+        assert!(w["frames_in_data"].is_null(), "{w}");
+        assert_eq!(c["frames"], 40, "{c}");
+        let present = c["frames_in_data"]
+            .as_u64()
+            .expect("a count for the cut clip");
+        assert!((20..40).contains(&present), "{c}");
+        let text = String::from_utf8_lossy(&ignis_ok(&["info", cut.to_str().unwrap()]).stdout)
+            .into_owned();
+        assert!(
+            text.contains(&format!("at most {present} of the 40 frames"))
+                && text.contains("may be truncated"),
+            "{text}"
+        );
+        let whole_text =
+            String::from_utf8_lossy(&ignis_ok(&["info", whole.to_str().unwrap()]).stdout)
+                .into_owned();
+        assert!(!whole_text.contains("truncated"), "{whole_text}");
+    }
+
     fn json_size(p: &Path) -> (u64, u64) {
         let v = read_json(p);
         (

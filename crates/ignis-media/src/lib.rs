@@ -26,9 +26,9 @@ pub use error::{MediaError, Result};
 pub use fingerprint::source_fingerprint;
 pub use ignis_core::{RgbaFrame, Size};
 pub use read::{
-    file_numbers_hint, frame_timing, open, open_keeping_8bit, probe, read_image, source_files,
-    Anamorphic, DecodedFrame, Decoder, FrameRange, FrameReader, FrameTiming, RangeUnit,
-    ReadOptions, Rect, SourceInfo, DEFAULT_SEQUENCE_FPS,
+    file_numbers_hint, frame_timing, frames_in_data, open, open_keeping_8bit, probe, read_image,
+    source_files, Anamorphic, DecodedFrame, Decoder, FrameRange, FrameReader, FrameTiming,
+    RangeUnit, ReadOptions, Rect, SourceInfo, DEFAULT_SEQUENCE_FPS,
 };
 pub use read::{sequence_fps, set_sequence_fps, SEQUENCE_FPS_RANGE};
 pub use write::{

@@ -729,6 +729,43 @@ mod probing {
         }
     }
 
+    /// An AVI's header count is an estimate: `ffmpeg -shortest` writes one that states a
+    /// frame more than the file holds. Its frames are counted from its packets, so the
+    /// whole clip reads (it used to fail at its end, "the stream ended at frame 60 before
+    /// the end of the range (61)"), and the count is the frames read.
+    #[test]
+    fn an_avi_whose_header_overstates_its_frames_reads_whole() {
+        if !have_ffmpeg() {
+            return;
+        }
+        let dir = tempfile::tempdir().unwrap();
+        let inputs = [
+            "-f",
+            "lavfi",
+            "-i",
+            "testsrc=size=64x48:rate=30",
+            "-f",
+            "lavfi",
+            "-i",
+            "sine=frequency=440:sample_rate=48000",
+            "-t",
+            "2",
+            "-shortest",
+        ];
+        // MP3 sound, the AVI muxer's default (with PCM the count comes out right)
+        let args = ["-c:v", "mpeg4", "-c:a", "libmp3lame"];
+        let Some(avi) = make_from(dir.path(), "clip.avi", &inputs, &args) else {
+            return;
+        };
+        let info = probe(&avi).unwrap();
+        assert_eq!(info.decoder, Decoder::Ffmpeg);
+        let frames = open(&avi, &ReadOptions::default())
+            .and_then(|r| r.collect::<Result<Vec<_>, _>>())
+            .expect("the whole AVI reads");
+        assert_eq!(Some(frames.len() as u64), info.frame_count);
+        assert!((55..=61).contains(&frames.len()), "{}", frames.len());
+    }
+
     /// A clip read through ffmpeg whose data stops before the frame count its header
     /// promises (an incomplete download: the index at the front, the frames cut off) fails
     /// at the frame where it ends, and the error says the file may be cut short and what

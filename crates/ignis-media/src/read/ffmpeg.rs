@@ -92,6 +92,13 @@ fn fps_mode_known(text: &str) -> bool {
 struct ProbeOut {
     #[serde(default)]
     streams: Vec<ProbeStream>,
+    format: Option<ProbeFormat>,
+}
+
+/// The container, as ffprobe names its demuxer (`mov,mp4,m4a,3gp,3g2,mj2`, `avi`, ...).
+#[derive(serde::Deserialize)]
+struct ProbeFormat {
+    format_name: Option<String>,
 }
 
 #[derive(serde::Deserialize)]
@@ -211,7 +218,7 @@ pub(crate) fn probe(path: &Path, _hint: Option<&str>) -> Result<(SourceInfo, Pla
             "stream=index,codec_name,profile,width,height,avg_frame_rate,r_frame_rate,nb_frames,\
              sample_aspect_ratio,color_transfer,color_primaries,color_space,color_range,\
              field_order\
-             :stream_side_data=rotation:stream_tags=rotate,alpha_mode",
+             :stream_side_data=rotation:stream_tags=rotate,alpha_mode:format=format_name",
         )
         .args(["-of", "json"])
         .args(PROTOCOL_WHITELIST)
@@ -296,9 +303,23 @@ pub(crate) fn probe(path: &Path, _hint: Option<&str>) -> Result<(SourceInfo, Pla
         decoder,
         stream,
     };
-    let frame_count = match s.nb_frames.and_then(|n| n.parse().ok()).filter(|&n| n > 0) {
-        Some(n) => Some(n),
-        None => counted_packets(path, stream)?,
+    // The stated count only where the container indexes every frame (MP4 and MOV: one
+    // sample-table entry per frame). Other headers' counts are estimates: an AVI written by
+    // `ffmpeg -shortest` states one frame more than it holds, and reading to the stated
+    // count then fails at its end. Elsewhere the packets are counted (demuxing only).
+    let indexed = parsed
+        .format
+        .as_ref()
+        .and_then(|f| f.format_name.as_deref())
+        .is_some_and(|n| n.split(',').any(|n| n == "mov" || n == "mp4"));
+    let stated = s
+        .nb_frames
+        .as_deref()
+        .and_then(|n| n.parse().ok())
+        .filter(|&n| n > 0);
+    let frame_count = match stated {
+        Some(n) if indexed => Some(n),
+        _ => counted_packets(path, stream)?.or(stated),
     };
     let info = SourceInfo {
         size,
@@ -490,6 +511,11 @@ fn counted_packets(path: &Path, stream: u32) -> Result<Option<u64>> {
 /// `k / fps`: a seek by the average rate landed up to several frames off.
 fn frame_times(path: &Path, stream: u32) -> Result<Option<Arc<Vec<f64>>>> {
     Ok(packets(path, stream)?.and_then(|p| p.times.clone()))
+}
+
+/// The packets of the video stream ffmpeg reads from `path` ([`counted_packets`]).
+pub(crate) fn planned_packets(path: &Path, plan: &Plan) -> Result<Option<u64>> {
+    counted_packets(path, plan.stream)
 }
 
 /// The presentation times of the frames ffmpeg reads from `path` ([`frame_times`]), when

@@ -48,7 +48,7 @@ pub use h264::decode_rgba8_count;
 pub(crate) use sequence::Pattern;
 
 pub use sequence::{sequence_fps, set_sequence_fps, DEFAULT_SEQUENCE_FPS, SEQUENCE_FPS_RANGE};
-pub use timing::{frame_timing, FrameTiming};
+pub use timing::{frame_timing, frames_in_data, FrameTiming};
 
 /// What a reader says of a file whose data ends early or does not parse, and what to do.
 pub(crate) const DAMAGED: &str = "the file may be truncated or damaged (an incomplete \

@@ -317,6 +317,18 @@ pub fn frame_timing(path: &Path) -> Result<Option<FrameTiming>> {
     Ok(times.and_then(FrameTiming::new))
 }
 
+/// How many frames the data of a video read through ffmpeg holds: its stream's packets
+/// (demuxing only, cached with the frame times), which fall short of the count its header
+/// states when the file is cut short (an incomplete download whose index came first).
+/// `None` for everything else: the built-in MP4 reader refuses a file whose data is cut
+/// short, and sequences, images, GIFs and flipbooks are counted from what is there.
+pub fn frames_in_data(path: &Path) -> Result<Option<u64>> {
+    match super::probe_inner(path, super::ffmpeg_available())? {
+        super::Probed::Ffmpeg(_, plan) => super::ffmpeg::planned_packets(path, &plan),
+        _ => Ok(None),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
