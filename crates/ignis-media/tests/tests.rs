@@ -766,6 +766,87 @@ mod probing {
         assert!((55..=61).contains(&frames.len()), "{}", frames.len());
     }
 
+    /// A clip trimmed without re-encoding (`ffmpeg -ss … -c copy`, as lossless cutters do)
+    /// keeps the frames from the keyframe before the cut in its sample table, with an edit
+    /// list that leaves them out: ffmpeg decodes them but shows none. Its frame count is
+    /// the frames shown (it used to be the table's, and reading failed at the shown frames'
+    /// end), and a range starting anywhere gives the frames a sequential read gives there.
+    #[test]
+    fn a_clip_trimmed_without_re_encoding_reads_its_shown_frames() {
+        if !have_ffmpeg() {
+            return;
+        }
+        let dir = tempfile::tempdir().unwrap();
+        let inputs = ["-f", "lavfi", "-i", "testsrc=size=64x48:rate=25"];
+        // High with B-frames (ffmpeg's path) and Baseline (the built-in decoder's, which
+        // hands a trimmed clip to ffmpeg)
+        for profile in ["high", "baseline"] {
+            let args = [
+                "-frames:v",
+                "100",
+                "-pix_fmt",
+                "yuv420p",
+                "-c:v",
+                "libx264",
+                "-profile:v",
+                profile,
+                "-g",
+                "25",
+            ];
+            let Some(whole) = make_from(dir.path(), &format!("{profile}.mp4"), &inputs, &args)
+            else {
+                return;
+            };
+            let trimmed = dir.path().join(format!("{profile}-trimmed.mp4"));
+            let ok = std::process::Command::new("ffmpeg")
+                .args(["-nostdin", "-y", "-v", "error", "-ss", "1.5", "-i"])
+                .arg(&whole)
+                .args(["-t", "2", "-c", "copy"])
+                .arg(&trimmed)
+                .status()
+                .is_ok_and(|s| s.success());
+            if !ok {
+                println!("skipped: this ffmpeg cannot stream-copy the clip");
+                return;
+            }
+            let info = probe(&trimmed).unwrap();
+            assert_eq!(info.decoder, Decoder::Ffmpeg, "{profile}");
+            let frames = open(&trimmed, &ReadOptions::default())
+                .and_then(|r| r.collect::<Result<Vec<_>, _>>())
+                .expect("the trimmed clip reads whole");
+            assert_eq!(Some(frames.len() as u64), info.frame_count);
+            // about 2 s at 25 fps, not the ~12 more frames of pre-roll its table lists
+            assert!((48..=56).contains(&frames.len()), "{}", frames.len());
+            // its first frame is the whole clip's first at or after 1.5 s (frame 38, 1.52 s),
+            // not the keyframe at 1 s the pre-roll starts from
+            let source = read_all(&whole);
+            let at = |f: &RgbaFrame| {
+                (0..source.len())
+                    .min_by(|&a, &b| mae_srgb8(f, &source[a]).total_cmp(&mae_srgb8(f, &source[b])))
+                    .unwrap()
+            };
+            assert_eq!(at(&frames[0]), 38, "{profile}: the first frame shown");
+            for start in [1u64, 9, 30] {
+                let opts = ReadOptions {
+                    range: Some(FrameRange::frames(start, Some(start + 4))),
+                    ..Default::default()
+                };
+                let got: Vec<_> = open(&trimmed, &opts)
+                    .unwrap()
+                    .collect::<Result<_, _>>()
+                    .unwrap();
+                assert_eq!(got.len(), 4, "{profile} from {start}");
+                for (i, f) in got.iter().enumerate() {
+                    let k = start as usize + i;
+                    assert!(
+                    mae_srgb8(f, &frames[k]) < 0.01,
+                    "{profile}: frame {k} read from {start} is not frame {k} of a sequential read"
+                );
+                }
+            }
+        }
+    }
+
     /// A clip read through ffmpeg whose data stops before the frame count its header
     /// promises (an incomplete download: the index at the front, the frames cut off) fails
     /// at the frame where it ends, and the error says the file may be cut short and what

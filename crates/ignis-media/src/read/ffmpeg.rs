@@ -306,7 +306,8 @@ pub(crate) fn probe(path: &Path, _hint: Option<&str>) -> Result<(SourceInfo, Pla
     // The stated count only where the container indexes every frame (MP4 and MOV: one
     // sample-table entry per frame). Other headers' counts are estimates: an AVI written by
     // `ffmpeg -shortest` states one frame more than it holds, and reading to the stated
-    // count then fails at its end. Elsewhere the packets are counted (demuxing only).
+    // count then fails at its end. Elsewhere the packets are counted (demuxing only, once
+    // per file: the frame times and seeks list them anyway).
     let indexed = parsed
         .format
         .as_ref()
@@ -315,11 +316,16 @@ pub(crate) fn probe(path: &Path, _hint: Option<&str>) -> Result<(SourceInfo, Pla
     let stated = s
         .nb_frames
         .as_deref()
-        .and_then(|n| n.parse().ok())
+        .and_then(|n| n.parse::<u64>().ok())
         .filter(|&n| n > 0);
-    let frame_count = match stated {
-        Some(n) if indexed => Some(n),
-        _ => counted_packets(path, stream)?.or(stated),
+    // An edit list's pre-roll is in the index but not shown (its packets are marked
+    // discarded): a clip trimmed without re-encoding states more frames than it plays.
+    let listed = packets(path, stream)?;
+    let frame_count = match (stated, &listed) {
+        (Some(n), Some(p)) if indexed => Some(n.saturating_sub(p.discarded)).filter(|&n| n > 0),
+        (Some(n), None) if indexed => Some(n),
+        (_, Some(p)) => Some(p.count).filter(|&n| n > 0).or(stated),
+        (_, None) => stated,
     };
     let info = SourceInfo {
         size,
@@ -530,10 +536,15 @@ pub(crate) fn timed_frames(
         .map(|t| t.to_vec()))
 }
 
-/// What the read video stream's packets say: how many, and their presentation times
-/// ([`frame_times`]).
+/// What the read video stream's packets say: how many frames they show, how many they
+/// do not, and the shown ones' presentation times ([`frame_times`]).
 struct Packets {
+    /// Packets shown: one per frame ffmpeg outputs.
     count: u64,
+    /// Packets marked to be discarded (`D`): the pre-roll an MP4's edit list leaves out, as
+    /// in a clip trimmed without re-encoding (`ffmpeg -ss … -c copy`, lossless cutters),
+    /// which ffmpeg decodes from the keyframe before the cut but never outputs.
+    discarded: u64,
     times: Option<Arc<Vec<f64>>>,
 }
 
@@ -554,7 +565,7 @@ fn packets(path: &Path, stream: u32) -> Result<Option<Arc<Packets>>> {
         .args(["-v", "error", "-select_streams", &stream.to_string()])
         .args([
             "-show_entries",
-            "packet=pts_time:format=start_time",
+            "packet=pts_time,flags:format=start_time",
             "-of",
             "json",
         ])
@@ -575,8 +586,9 @@ fn packets(path: &Path, stream: u32) -> Result<Option<Arc<Packets>>> {
     Ok(v)
 }
 
-/// [`Packets`] from ffprobe's JSON: their number, and the packets' `pts_time` sorted
-/// (packets come in decoding order) less the format's `start_time`.
+/// [`Packets`] from ffprobe's JSON: the number shown and discarded, and the shown
+/// packets' `pts_time` sorted (packets come in decoding order) less the format's
+/// `start_time`.
 fn parse_packets(json: &[u8]) -> Option<Packets> {
     #[derive(serde::Deserialize)]
     struct Out {
@@ -587,6 +599,7 @@ fn parse_packets(json: &[u8]) -> Option<Packets> {
     #[derive(serde::Deserialize)]
     struct Packet {
         pts_time: Option<String>,
+        flags: Option<String>,
     }
     #[derive(serde::Deserialize)]
     struct Format {
@@ -596,6 +609,7 @@ fn parse_packets(json: &[u8]) -> Option<Packets> {
     if out.packets.is_empty() {
         return None;
     }
+    let shown = |p: &&Packet| !p.flags.as_deref().is_some_and(|f| f.contains('D'));
     let start = out
         .format
         .and_then(|f| f.start_time)
@@ -605,6 +619,7 @@ fn parse_packets(json: &[u8]) -> Option<Packets> {
     let times = out
         .packets
         .iter()
+        .filter(shown)
         .map(|p| {
             p.pts_time
                 .as_deref()?
@@ -617,8 +632,10 @@ fn parse_packets(json: &[u8]) -> Option<Packets> {
             t.sort_by(f64::total_cmp);
             Arc::new(t.into_iter().map(|x| x - start).collect())
         });
+    let count = out.packets.iter().filter(shown).count() as u64;
     Some(Packets {
-        count: out.packets.len() as u64,
+        count,
+        discarded: out.packets.len() as u64 - count,
         times,
     })
 }
@@ -935,6 +952,15 @@ mod tests {
         let p = parse_packets(br#"{"packets": [{"pts_time": "0.1"}, {}]}"#).unwrap();
         assert_eq!((p.count, p.times.is_none()), (2, true));
         assert!(parse_packets(br#"{"packets": []}"#).is_none());
+        // An edit list's pre-roll (flags `D`) is neither counted nor timed.
+        let p = parse_packets(
+            br#"{"packets": [{"pts_time": "-0.08", "flags": "KD"}, {"pts_time": "-0.04", "flags": "_D"},
+                {"pts_time": "0.04", "flags": "__"}, {"pts_time": "0.0", "flags": "K_"}],
+                "format": {"start_time": "0.000000"}}"#,
+        )
+        .unwrap();
+        assert_eq!((p.count, p.discarded), (2, 2));
+        assert_eq!(p.times.unwrap().as_slice(), &[0.0, 0.04]);
     }
 
     #[test]

@@ -122,6 +122,15 @@ pub(crate) fn probe_mp4(path: &Path, len: u64, have_ffmpeg: bool) -> Result<Prob
              INPUT -c:v libx264 upright.mp4",
         ));
     }
+    // A clip trimmed without re-encoding (`ffmpeg -ss … -c copy`, lossless cutters) keeps
+    // the frames from the keyframe before the cut, with an edit list that starts the clip
+    // after them: ffmpeg shows what a player shows, the built-in decoder would give every
+    // sample (without ffmpeg the clip is read so, its first frames the ones before the cut).
+    let edits = track.trak.edts.as_ref().and_then(|e| e.elst.as_ref());
+    let edits = edits.map(|l| (l.version, l.entries.iter().map(|e| e.media_time).collect()));
+    if have_ffmpeg && edits.is_some_and(|(v, t): (u8, Vec<u64>)| edit_list_skips_samples(v, &t)) {
+        return ffmpeg::probed(path);
+    }
     if !baseline || track.trak.mdia.minf.stbl.stsd.avc1.is_none() {
         if have_ffmpeg {
             return ffmpeg::probed(path);
@@ -179,6 +188,24 @@ pub(crate) fn probe_mp4(path: &Path, len: u64, have_ffmpeg: bool) -> Result<Prob
             signal: vui.map_or(Signal::default(), |v| v.signal),
         },
     ))
+}
+
+/// Whether a track's edit list (its `elst` box's `version` and its entries' media times)
+/// shows less than all of its samples from the first: an entry that starts later in the
+/// media than its start, or more than one piece. Empty edits (a delay before the clip,
+/// media time −1) show no sample and skip none.
+fn edit_list_skips_samples(version: u8, media_times: &[u64]) -> bool {
+    let empty = if version == 1 {
+        u64::MAX
+    } else {
+        u32::MAX as u64
+    };
+    let shown: Vec<u64> = media_times
+        .iter()
+        .copied()
+        .filter(|&t| t != empty)
+        .collect();
+    shown.len() > 1 || shown.iter().any(|&t| t > 0)
 }
 
 /// The presentation times (seconds, in sample order) of the probed track's samples, from
@@ -829,6 +856,26 @@ impl Bits<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn edit_lists_that_skip_samples_are_told_from_those_that_do_not() {
+        // none, one from the start (what encoders write), a delay then the start
+        for (v, t) in [
+            (0, vec![]),
+            (0, vec![0]),
+            (1, vec![0]),
+            (0, vec![u32::MAX as u64, 0]),
+        ] {
+            assert!(!edit_list_skips_samples(v, &t), "{v} {t:?}");
+        }
+        assert!(!edit_list_skips_samples(1, &[u64::MAX, 0]));
+        // a trim (starts 15000 units in), a delay then a trim, two pieces
+        for (v, t) in [(0, vec![15000]), (1, vec![u64::MAX, 7680]), (0, vec![0, 0])] {
+            assert!(edit_list_skips_samples(v, &t), "{v} {t:?}");
+        }
+        // version 0's −1 is not an empty edit in version 1 (a real, if huge, media time)
+        assert!(edit_list_skips_samples(1, &[u32::MAX as u64]));
+    }
 
     #[test]
     fn avcc_conversion() {
