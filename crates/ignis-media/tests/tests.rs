@@ -643,14 +643,15 @@ mod probing {
     /// frame once, in order. Before `-fps_mode passthrough`, ffmpeg filled the half frame
     /// the accurate seek starts early with a copy of the first frame (5, 5, 6, 7); before
     /// seeking by the frames' own timestamps, a variable-rate clip's reads started frames
-    /// off.
+    /// off; before containers without an index were read from their start, an MPEG-TS read
+    /// no frame or started at the next keyframe, and an AVI with B-frames two frames early.
     #[test]
     fn a_range_of_a_clip_with_sound_gives_each_frame_once() {
         if !have_ffmpeg() {
             return;
         }
         let dir = tempfile::tempdir().unwrap();
-        let cases: [(&str, &[&str]); 4] = [
+        let cases: [(&str, &[&str]); 6] = [
             (
                 "main.mp4",
                 &[
@@ -666,6 +667,26 @@ mod probing {
             ),
             ("clip.webm", &["-c:v", "libvpx", "-c:a", "libvorbis"]),
             ("clip.mov", &["-c:v", "mjpeg", "-c:a", "pcm_s16le"]),
+            // MPEG-TS (a camcorder's .mts, a screen recording) has no index: ffmpeg's seek
+            // found no frame after the single keyframe, or a keyframe after the time
+            (
+                "clip.ts",
+                &[
+                    "-pix_fmt", "yuv420p", "-c:v", "libx264", "-c:a", "aac", "-f", "mpegts",
+                ],
+            ),
+            // H.264 with B-frames in AVI: no presentation times, frames two behind the rate
+            (
+                "clip.avi",
+                &[
+                    "-pix_fmt",
+                    "yuv420p",
+                    "-c:v",
+                    "libx264",
+                    "-c:a",
+                    "libmp3lame",
+                ],
+            ),
             // Variable frame rate, as phones record in low light: 25 fps, then from frame 6
             // each frame held twice as long (frame k is not at k / the average rate).
             (

@@ -298,21 +298,24 @@ pub(crate) fn probe(path: &Path, _hint: Option<&str>) -> Result<(SourceInfo, Pla
         .iter()
         .chain(&notes)
         .fold(codec, |c, n| format!("{c}, {n}"));
+    let demuxers = parsed
+        .format
+        .as_ref()
+        .and_then(|f| f.format_name.clone())
+        .unwrap_or_default();
+    let demuxer = |names: &[&str]| demuxers.split(',').any(|n| names.contains(&n));
     let plan = Plan {
         filters,
         decoder,
         stream,
+        index_seek: demuxer(&["mov", "mp4", "matroska", "webm"]),
     };
     // The stated count only where the container indexes every frame (MP4 and MOV: one
     // sample-table entry per frame). Other headers' counts are estimates: an AVI written by
     // `ffmpeg -shortest` states one frame more than it holds, and reading to the stated
     // count then fails at its end. Elsewhere the packets are counted (demuxing only, once
     // per file: the frame times and seeks list them anyway).
-    let indexed = parsed
-        .format
-        .as_ref()
-        .and_then(|f| f.format_name.as_deref())
-        .is_some_and(|n| n.split(',').any(|n| n == "mov" || n == "mp4"));
+    let indexed = demuxer(&["mov", "mp4"]);
     let stated = s
         .nb_frames
         .as_deref()
@@ -349,6 +352,14 @@ pub(crate) struct Plan {
     decoder: Option<&'static str>,
     /// The index of the video stream read (`-map 0:N`).
     stream: u32,
+    /// The container seeks through an index to the keyframe before a time (MP4, MOV,
+    /// Matroska, WebM), so a read from frame `k` can start there ([`seek_seconds`]).
+    /// Others are decoded from their start and their first `k` frames left out: an MPEG-TS
+    /// (a camcorder's AVCHD `.mts`, a broadcast or screen recording) has no index, and
+    /// ffmpeg's seek in it lands on a keyframe after the time or finds no frame at all; an
+    /// AVI's packets carry no presentation times, and with B-frames its frames' times run
+    /// the decoder's delay behind the rate's.
+    index_seek: bool,
 }
 
 /// Whether this ffmpeg has the decoder `name` (`ffmpeg -decoders`, once per process).
@@ -664,8 +675,10 @@ pub(crate) struct FfmpegSource {
 }
 
 impl FfmpegSource {
-    /// Starts `ffmpeg` at frame `start` (an accurate seek: ffmpeg decodes from the previous
-    /// keyframe and drops frames before the seek time), stopping after `end` if given.
+    /// Starts `ffmpeg` at frame `start` (an accurate seek where the container has an index
+    /// and the frames their own times: ffmpeg decodes from the previous keyframe and drops
+    /// frames before the seek time; otherwise decoding from the start, the first `start`
+    /// frames left out by count: [`Plan::index_seek`]), stopping after `end` if given.
     pub(crate) fn start(
         info: &SourceInfo,
         plan: &Plan,
@@ -675,18 +688,28 @@ impl FfmpegSource {
     ) -> Result<FfmpegSource> {
         let mut cmd = FfmpegCommand::new();
         cmd.hide_banner();
-        if start > 0 {
-            let times = frame_times(&info.path, plan.stream)?;
-            let at = seek_seconds(times.as_deref().map(|t| &t[..]), start, info.fps);
+        let times = match start > 0 && plan.index_seek {
+            true => frame_times(&info.path, plan.stream)?,
+            false => None,
+        };
+        if let Some(t) = &times {
+            let at = seek_seconds(Some(t), start, info.fps);
             cmd.seek(format!("{:.6}", at.max(0.0)));
         }
+        // by count, after the conversions (a deinterlacer sees the frames before, as in
+        // a read from the start)
+        let skip = (start > 0 && times.is_none()).then(|| format!("select=gte(n\\,{start})"));
         cmd.args(PROTOCOL_WHITELIST);
         if let Some(decoder) = plan.decoder {
             cmd.args(["-c:v", decoder]);
         }
         cmd.input(file_url(&info.path)?);
         cmd.args(["-map", &format!("0:{}", plan.stream), "-an", "-sn", "-dn"]);
-        if let Some(chain) = &plan.filters {
+        let chain = match (&plan.filters, skip) {
+            (Some(f), Some(s)) => Some(format!("{f},{s}")),
+            (f, s) => f.clone().or(s),
+        };
+        if let Some(chain) = &chain {
             cmd.args(["-vf", chain]);
         }
         cmd.args(passthrough_args());
