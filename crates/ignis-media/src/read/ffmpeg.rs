@@ -512,13 +512,13 @@ fn parse_aspect(r: Option<&str>) -> Option<(u32, u32)> {
     Some((n.parse().ok()?, d.parse().ok()?))
 }
 
-/// The video frames of a file whose container does not say how many it holds (Matroska
-/// and WebM never do; some MOV and AVI files do not): video stream `stream`'s packets
-/// ([`packets`]). One packet is one frame for the video codecs ffmpeg muxes (H.264, HEVC,
-/// ProRes, VP8 with alt-ref frames, VP9 superframes, AV1 temporal units; checked against
+/// The video frames the data of the stream `plan` reads holds: its shown packets
+/// ([`packets`]; the probe counts a container's frames by them too, except MP4/MOV's).
+/// One packet is one frame for the video codecs ffmpeg muxes (H.264, HEVC, ProRes, VP8
+/// with alt-ref frames, VP9 superframes, AV1 temporal units; checked against
 /// `-count_frames` on each). `None` when ffprobe lists none.
-fn counted_packets(path: &Path, stream: u32) -> Result<Option<u64>> {
-    Ok(packets(path, stream)?.map(|p| p.count))
+pub(crate) fn counted_packets(path: &Path, plan: &Plan) -> Result<Option<u64>> {
+    Ok(packets(path, plan.stream)?.map(|p| p.count))
 }
 
 /// Presentation times of the frames of video stream `stream` (the one read), in order, in seconds from the
@@ -528,11 +528,6 @@ fn counted_packets(path: &Path, stream: u32) -> Result<Option<u64>> {
 /// `k / fps`: a seek by the average rate landed up to several frames off.
 fn frame_times(path: &Path, stream: u32) -> Result<Option<Arc<Vec<f64>>>> {
     Ok(packets(path, stream)?.and_then(|p| p.times.clone()))
-}
-
-/// The packets of the video stream ffmpeg reads from `path` ([`counted_packets`]).
-pub(crate) fn planned_packets(path: &Path, plan: &Plan) -> Result<Option<u64>> {
-    counted_packets(path, plan.stream)
 }
 
 /// The presentation times of the frames ffmpeg reads from `path` ([`frame_times`]), when
@@ -688,9 +683,10 @@ impl FfmpegSource {
     ) -> Result<FfmpegSource> {
         let mut cmd = FfmpegCommand::new();
         cmd.hide_banner();
-        let times = match start > 0 && plan.index_seek {
-            true => frame_times(&info.path, plan.stream)?,
-            false => None,
+        let times = if start > 0 && plan.index_seek {
+            frame_times(&info.path, plan.stream)?
+        } else {
+            None
         };
         if let Some(t) = &times {
             let at = seek_seconds(Some(t), start, info.fps);

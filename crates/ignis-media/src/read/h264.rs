@@ -126,9 +126,16 @@ pub(crate) fn probe_mp4(path: &Path, len: u64, have_ffmpeg: bool) -> Result<Prob
     // the frames from the keyframe before the cut, with an edit list that starts the clip
     // after them: ffmpeg shows what a player shows, the built-in decoder would give every
     // sample (without ffmpeg the clip is read so, its first frames the ones before the cut).
-    let edits = track.trak.edts.as_ref().and_then(|e| e.elst.as_ref());
-    let edits = edits.map(|l| (l.version, l.entries.iter().map(|e| e.media_time).collect()));
-    if have_ffmpeg && edits.is_some_and(|(v, t): (u8, Vec<u64>)| edit_list_skips_samples(v, &t)) {
+    let skips = track
+        .trak
+        .edts
+        .as_ref()
+        .and_then(|e| e.elst.as_ref())
+        .is_some_and(|l| {
+            let times: Vec<u64> = l.entries.iter().map(|e| e.media_time).collect();
+            edit_list_skips_samples(l.version, &times)
+        });
+    if have_ffmpeg && skips {
         return ffmpeg::probed(path);
     }
     if !baseline || track.trak.mdia.minf.stbl.stsd.avc1.is_none() {

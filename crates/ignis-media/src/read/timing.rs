@@ -324,7 +324,7 @@ pub fn frame_timing(path: &Path) -> Result<Option<FrameTiming>> {
 /// short, and sequences, images, GIFs and flipbooks are counted from what is there.
 pub fn frames_in_data(path: &Path) -> Result<Option<u64>> {
     match super::probe_inner(path, super::ffmpeg_available())? {
-        super::Probed::Ffmpeg(_, plan) => super::ffmpeg::planned_packets(path, &plan),
+        super::Probed::Ffmpeg(_, plan) => super::ffmpeg::counted_packets(path, &plan),
         _ => Ok(None),
     }
 }
