@@ -81,6 +81,7 @@ pub fn seconds_range(s: &str) -> Result<(f64, Option<f64>), String> {
 /// and without blocking ([`ignis_core::textfile::read_text`]); a path that is not there
 /// says so, and `instead`, what to give instead.
 pub fn read_user_text(path: &std::path::Path, what: &str, instead: &str) -> anyhow::Result<String> {
+    ignis_core::atomic::record_input(path);
     ignis_core::textfile::read_text(path).map_err(|e| {
         if e.kind() == std::io::ErrorKind::NotFound {
             anyhow::anyhow!(

@@ -190,6 +190,9 @@ pub fn train(a: &TrainArgs, g: &Global) -> Result<FlameModel> {
     };
     let reader =
         ignis_media::open(path, &opts).with_context(|| format!("reading {}", path.display()))?;
+    // Before training, not after: an output that is the footage, or a device, is refused.
+    ignis_core::atomic::check_regular_target(&a.output)
+        .with_context(|| format!("writing {}", a.output.display()))?;
     let total = reader.info().frame_count;
     let mut footage_fps = reader.info().fps;
     // a variable frame rate: the process steps once per frame, as if they were evenly

@@ -113,6 +113,11 @@ pub(crate) fn parse_sub<T: clap::Args + FromArgMatches>(argv: &[&str]) -> Result
 
 fn run(cli: Cli) -> Result<()> {
     let g = Global { quiet: cli.quiet };
+    // A command's outputs never replace what it reads (its footage, a database's source
+    // video, a model, a settings file): `-o` naming the input by mistake is refused. The
+    // demo and the benchmarks write only into directories of their own.
+    let _inputs =
+        (!matches!(cli.cmd, Cmd::Demo(_) | Cmd::Bench(_))).then(ignis_core::atomic::guard_inputs);
     match cli.cmd {
         Cmd::Classic(a) => classic::run(&a, &g).map(|_| ()),
         Cmd::Info(a) => info::run(&a),

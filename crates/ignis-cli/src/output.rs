@@ -510,6 +510,7 @@ fn move_into(from: &std::path::Path, to: &std::path::Path) -> Result<()> {
         if both_dirs {
             move_into(&e.path(), &dst)?;
         } else {
+            ignis_core::atomic::check_not_an_input(&dst)?;
             std::fs::rename(e.path(), &dst)
                 .with_context(|| format!("writing {}", dst.display()))?;
         }

@@ -1432,6 +1432,101 @@ mod hardening {
             assert_fails(&o, "standard output");
         }
     }
+
+    /// `-o` naming what the command reads — the clip itself (by its name, another spelling
+    /// or a hard link), the frames of the sequence it reads, a flipbook's sidecar, the
+    /// footage a model is trained from, a database's source video, the fire file — is
+    /// refused, and the input is left as it was (ffmpeg refuses "Output same as Input"
+    /// too). Before this check, `convert f/%04d.png -o f/%04d.png` left a sequence of
+    /// mixed sizes, `learned train clip.mp4 -o clip.mp4` replaced the footage with the
+    /// model and `eigen loop` over the database's source broke the database.
+    #[test]
+    fn an_output_never_replaces_what_the_command_reads() {
+        let t = tempfile::tempdir().unwrap();
+        let p = |s: &str| t.path().join(s);
+        let s = |s: &str| p(s).to_str().unwrap().to_string();
+        let frames = classic_frames(t.path(), "24");
+        let frames = frames.to_str().unwrap();
+        ignis_ok(&["convert", frames, "-q", "-o", &s("clip.gif")]);
+        ignis_ok(&["convert", frames, "-q", "-o", &s("book.png")]);
+        std::fs::hard_link(p("clip.gif"), p("link.gif")).unwrap();
+        std::fs::write(
+            p("fire.toml"),
+            "[render]\nsize = \"32x32\"\n[[fire]]\ncurve = { points = [[0,0,0,1], [0,0,1,0.9], [0,0,2,0.7], [0,0,3,0.4]] }\n",
+        )
+        .unwrap();
+        let contents = || {
+            let mut all = Vec::new();
+            for dir in [t.path().to_path_buf(), p("f")] {
+                for name in files_in(&dir) {
+                    let f = dir.join(&name);
+                    if f.is_file() {
+                        all.push((name, std::fs::read(f).unwrap()));
+                    }
+                }
+            }
+            all
+        };
+        let before = contents();
+        let (gif, dot, link) = (
+            s("clip.gif"),
+            format!("{}/./clip.gif", t.path().display()),
+            s("link.gif"),
+        );
+        let (dir, book, json, fire) = (s("f"), s("book.png"), s("book.json"), s("fire.toml"));
+        let reads = "is a file this command reads";
+        let same = "is the same file as";
+        let frame = "named like this sequence's frames";
+        let cases: [(&[&str], &str); 11] = [
+            (&["convert", &gif, "-o", &gif], reads),
+            (&["convert", &gif, "-o", &dot], reads),
+            (&["convert", &gif, "-o", &link], same),
+            (&["convert", frames, "-o", frames], frame),
+            (&["convert", &dir, "-o", &dir], frame),
+            (&["convert", &book, "-o", &book], reads),
+            (&["convert", &book, "--format", "gif", "-o", &json], reads),
+            (&["loop", &gif, "--length", "12", "-o", &gif], reads),
+            (&["loop", frames, "--length", "12", "-o", frames], frame),
+            (&["learned", "train", &gif, "-o", &gif], reads),
+            (
+                &[
+                    "volume", "render", &fire, "--frames", "2", "--format", "gif", "-o", &fire,
+                ],
+                reads,
+            ),
+        ];
+        for (args, needle) in cases {
+            assert_fails(&ignis(&[args, &["-q"]].concat()), needle);
+        }
+        ignis_ok(&["eigen", "train", &gif, "-q", "-o", &s("fire.db")]);
+        let o = ignis(&[
+            "eigen",
+            "loop",
+            &s("fire.db"),
+            "--clip",
+            "clip",
+            "--range",
+            "0..12",
+            "-q",
+            "-o",
+            &gif,
+        ]);
+        assert_fails(&o, reads);
+        // Nothing was replaced or added, and no temporary is left.
+        let _ = std::fs::remove_dir_all(p("fire.db"));
+        assert!(before == contents(), "{:?}", files_in(t.path()));
+        // The same commands write anywhere else.
+        ignis_ok(&["convert", &gif, "-q", "-o", &s("copy.gif")]);
+        ignis_ok(&[
+            "convert",
+            frames,
+            "-q",
+            "-o",
+            &s("f/half.%04d.png"),
+            "--scale",
+            "24x20",
+        ]);
+    }
 }
 
 /// `ignis loop` refuses lengths that do not fit before doing any work, and writes nothing.

@@ -5,10 +5,12 @@
 //! flushed, synced, and renamed over the target. Readers see the old file or the new one,
 //! never a half-written one. This module knows no file formats: callers fill the bytes.
 
+use std::collections::{HashMap, HashSet};
 use std::fs::File;
 use std::io::{self, BufWriter, Write};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Mutex;
 
 /// A temporary file beside its target, renamed into place by [`AtomicFile::commit`] and
 /// deleted on drop otherwise.
@@ -81,8 +83,11 @@ impl AtomicFile {
         w.get_ref().sync_all()
     }
 
-    /// Flushes, syncs and renames the temporary over the target.
+    /// Flushes, syncs and renames the temporary over the target — unless the target is now
+    /// a file the running command reads ([`check_not_an_input`]; a reader opened after the
+    /// writer was made), when the temporary is removed instead.
     pub fn commit(mut self) -> io::Result<()> {
+        check_not_an_input(&self.target)?;
         let w = self.file.take().expect("AtomicFile committed twice");
         let f = w.into_inner().map_err(|e| e.into_error())?;
         f.sync_all()?;
@@ -128,6 +133,7 @@ pub fn commit_all(files: Vec<AtomicFile>) -> io::Result<()> {
                 ),
             ));
         }
+        check_not_an_input(&f.target)?;
         f.sync()?;
         let name = |p: &Path| p.file_name().map(|n| n.to_string_lossy().into_owned());
         let (Some(t), Some(n)) = (name(&f.tmp), name(&f.target)) else {
@@ -242,12 +248,14 @@ pub fn parent_dir(path: &Path) -> PathBuf {
 
 /// Refuses an output path that exists and is not a regular file (a device, FIFO, socket
 /// or directory): renaming over it would replace e.g. `/dev/null` rather than write to it.
+/// While a command guards its inputs ([`guard_inputs`]), also refuses a file it reads
+/// ([`check_not_an_input`]).
 pub fn check_regular_target(path: &Path) -> io::Result<()> {
     let Ok(m) = std::fs::metadata(path) else {
         return Ok(());
     };
     if m.is_file() {
-        return Ok(());
+        return check_not_an_input_id(path, &m);
     }
     let ft = m.file_type();
     let kind = {
@@ -283,9 +291,211 @@ pub fn check_regular_target(path: &Path) -> io::Result<()> {
     ))
 }
 
+/// A file's identity: the same for every path that leads to it (hard links, symbolic
+/// links, `./` and `..` spellings).
+#[cfg(unix)]
+type FileId = (u64, u64);
+#[cfg(not(unix))]
+type FileId = PathBuf;
+
+#[cfg(unix)]
+fn file_id(_path: &Path, m: &std::fs::Metadata) -> Option<FileId> {
+    use std::os::unix::fs::MetadataExt;
+    Some((m.dev(), m.ino()))
+}
+
+#[cfg(not(unix))]
+fn file_id(path: &Path, _m: &std::fs::Metadata) -> Option<FileId> {
+    std::fs::canonicalize(path).ok()
+}
+
+/// The files a command reads, by identity, with the path each was read by.
+#[derive(Default)]
+struct Inputs {
+    /// Paths already recorded (a clip is probed several times; a sequence is thousands of
+    /// files): each file is looked at once.
+    seen: HashSet<PathBuf>,
+    ids: HashMap<FileId, PathBuf>,
+}
+
+impl Inputs {
+    /// Records the file at `path` (`m`: its metadata, when the reader has it); a path that
+    /// is missing or not a regular file is not recorded.
+    fn record(&mut self, path: &Path, m: Option<&std::fs::Metadata>) {
+        if self.seen.contains(path) {
+            return;
+        }
+        let found = match m {
+            Some(m) => Some(m.clone()),
+            None => std::fs::metadata(path).ok(),
+        };
+        if let Some(id) = found
+            .filter(|m| m.is_file())
+            .and_then(|m| file_id(path, &m))
+        {
+            self.ids.entry(id).or_insert_with(|| path.to_path_buf());
+            self.seen.insert(path.to_path_buf());
+        }
+    }
+
+    /// The path by which the file `target` (whose metadata is `m`) was read, if it was.
+    fn read_as(&self, target: &Path, m: &std::fs::Metadata) -> Option<&PathBuf> {
+        file_id(target, m).and_then(|id| self.ids.get(&id))
+    }
+}
+
+/// The inputs of the running command while it guards them: how many guards are alive,
+/// and what they have recorded (`None` when none is).
+struct Guarded {
+    depth: usize,
+    inputs: Option<Inputs>,
+}
+
+static READING: Mutex<Guarded> = Mutex::new(Guarded {
+    depth: 0,
+    inputs: None,
+});
+
+fn reading() -> std::sync::MutexGuard<'static, Guarded> {
+    READING.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// While alive, the files recorded by [`record_input`] (the footage, models, settings a
+/// command reads) are refused as outputs by every writer ([`check_regular_target`], so
+/// [`AtomicFile::create`] and the output checks): `ignis convert clip.mp4 -o clip.mp4`,
+/// a loop written over the clip it loops, frames written over the sequence they are read
+/// from, or a render over a database's source video would replace the user's footage.
+/// An application turns it on for a command that takes paths from a user; a library
+/// (and its tests, which may read a file and then rewrite it on purpose) leaves it off.
+/// Dropping the last guard forgets the inputs.
+#[must_use = "inputs are guarded only while the guard is alive"]
+pub struct InputGuard(());
+
+/// Starts guarding the running command's inputs ([`InputGuard`]).
+pub fn guard_inputs() -> InputGuard {
+    let mut r = reading();
+    r.depth += 1;
+    r.inputs.get_or_insert_with(Inputs::default);
+    InputGuard(())
+}
+
+impl Drop for InputGuard {
+    fn drop(&mut self) {
+        let mut r = reading();
+        r.depth -= 1;
+        if r.depth == 0 {
+            r.inputs = None;
+        }
+    }
+}
+
+/// Records `path` as a file the running command reads, while it guards its inputs
+/// ([`guard_inputs`]; otherwise nothing is done). Paths that are not regular files
+/// (directories, missing paths) are ignored.
+pub fn record_input(path: &Path) {
+    if let Some(inputs) = reading().inputs.as_mut() {
+        inputs.record(path, None);
+    }
+}
+
+/// [`record_input`] for a file whose metadata the reader already has.
+pub fn record_input_with(path: &Path, m: &std::fs::Metadata) {
+    if let Some(inputs) = reading().inputs.as_mut() {
+        inputs.record(path, Some(m));
+    }
+}
+
+/// The path by which the running command read the file at `target` (by identity: hard
+/// and symbolic links too; [`record_input`]), if it did. `None` while inputs are not
+/// guarded, or when `target` is not an existing file.
+pub fn input_at(target: &Path) -> Option<PathBuf> {
+    let m = std::fs::metadata(target).ok().filter(|m| m.is_file())?;
+    read_as(target, &m)
+}
+
+fn read_as(target: &Path, m: &std::fs::Metadata) -> Option<PathBuf> {
+    reading().inputs.as_ref()?.read_as(target, m).cloned()
+}
+
+/// Refuses `target` when it is a file the running command reads ([`input_at`]): writing
+/// it would replace the input.
+pub fn check_not_an_input(target: &Path) -> io::Result<()> {
+    match input_at(target) {
+        None => Ok(()),
+        Some(input) => Err(input_error(target, &input)),
+    }
+}
+
+fn check_not_an_input_id(target: &Path, m: &std::fs::Metadata) -> io::Result<()> {
+    match read_as(target, m) {
+        None => Ok(()),
+        Some(input) => Err(input_error(target, &input)),
+    }
+}
+
+fn input_error(target: &Path, input: &Path) -> io::Error {
+    let what = if input == target {
+        "a file this command reads".to_string()
+    } else {
+        format!(
+            "the same file as {}, which this command reads",
+            input.display()
+        )
+    };
+    io::Error::new(
+        io::ErrorKind::InvalidInput,
+        format!(
+            "{} is {what}: the output would replace it. Choose another output path",
+            target.display()
+        ),
+    )
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A recorded input is found by any path that leads to it — as read, spelt another
+    /// way, through a hard or a symbolic link — and nothing else is: another file, a new
+    /// path, or a path recorded when it was missing or a directory.
+    #[test]
+    fn inputs_are_known_by_identity_not_by_name() {
+        let d = tempfile::tempdir().unwrap();
+        let p = |s: &str| d.path().join(s);
+        for f in ["clip.mp4", "other.mp4"] {
+            std::fs::write(p(f), b"frames").unwrap();
+        }
+        std::fs::create_dir(p("frames")).unwrap();
+        let mut inputs = Inputs::default();
+        for f in ["clip.mp4", "frames", "later.mp4"] {
+            inputs.record(&p(f), None);
+        }
+        std::fs::write(p("later.mp4"), b"made after it was read").unwrap();
+        std::fs::hard_link(p("clip.mp4"), p("hard.mp4")).unwrap();
+        #[cfg(unix)]
+        std::os::unix::fs::symlink(p("clip.mp4"), p("soft.mp4")).unwrap();
+        let read_as = |t: PathBuf| {
+            let m = std::fs::metadata(&t).unwrap();
+            inputs.read_as(&t, &m).cloned()
+        };
+        let mut same = vec![p("clip.mp4"), p("frames/../clip.mp4"), p("hard.mp4")];
+        if cfg!(unix) {
+            same.push(p("soft.mp4"));
+        }
+        for t in same {
+            assert_eq!(read_as(t.clone()), Some(p("clip.mp4")), "{}", t.display());
+        }
+        for t in ["other.mp4", "later.mp4", "frames"] {
+            assert_eq!(read_as(p(t)), None, "{t}");
+        }
+        let e = input_error(&p("hard.mp4"), &p("clip.mp4")).to_string();
+        assert!(
+            e.contains("the same file as") && e.contains("another output path"),
+            "{e}"
+        );
+        let e = input_error(&p("clip.mp4"), &p("clip.mp4")).to_string();
+        assert!(e.contains("is a file this command reads"), "{e}");
+    }
 
     #[test]
     fn read_at_most_reads_up_to_its_limit_only() {

@@ -438,6 +438,7 @@ impl FlameModel {
             path: path.to_path_buf(),
             source,
         };
+        ignis_core::atomic::record_input(path);
         // Only a regular file, opened without blocking (a FIFO would hang a read), and of
         // a bounded size.
         let bytes = ignis_core::textfile::read_bytes(path, MAX_MODEL_BYTES).map_err(|e| {

@@ -205,6 +205,10 @@ impl EigenfireDb {
         manifest
             .validate()
             .map_err(|r| dberr("manifest.json", format!("invalid: {r}")))?;
+        // Renders read the clips' source videos: no output of this command may replace one.
+        for c in &manifest.clips {
+            ignis_core::atomic::record_input(Path::new(&c.source));
+        }
         let n = manifest.train_size.pixels();
         let (m, k) = (manifest.frames, manifest.components);
         let load = |e: &FileEntry, shape: &[usize]| -> Result<Mapped> {

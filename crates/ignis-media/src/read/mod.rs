@@ -36,6 +36,7 @@ use std::fmt;
 use std::io::Read;
 use std::path::{Path, PathBuf};
 
+use ignis_core::atomic::record_input;
 use ignis_core::{RgbaFrame, Size};
 
 use crate::convert;
@@ -426,7 +427,23 @@ fn is_pattern(path: &Path) -> bool {
     })
 }
 
+/// Probes `path` ([`probe_kind`]) and records the files it reads as the running command's
+/// inputs, which no output of that command may then replace
+/// ([`ignis_core::atomic::guard_inputs`]).
 pub(crate) fn probe_inner(path: &Path, have_ffmpeg: bool) -> Result<Probed> {
+    let probed = probe_kind(path, have_ffmpeg)?;
+    match &probed {
+        Probed::Sequence(_, files, _) => files.iter().for_each(|f| record_input(f)),
+        Probed::Flipbook(..) => flipbook_src::files(path)
+            .unwrap_or_else(|| vec![path.to_path_buf()])
+            .iter()
+            .for_each(|f| record_input(f)),
+        _ => record_input(path),
+    }
+    Ok(probed)
+}
+
+fn probe_kind(path: &Path, have_ffmpeg: bool) -> Result<Probed> {
     if is_pattern(path) {
         return sequence::probe_pattern(path);
     }
@@ -788,6 +805,7 @@ impl Iterator for FrameReader {
 /// straight-alpha frame.
 pub fn read_image(path: &Path) -> Result<RgbaFrame> {
     let meta = std::fs::metadata(path).map_err(|e| MediaError::io(path, e))?;
+    ignis_core::atomic::record_input_with(path, &meta);
     if meta.len() == 0 {
         return Err(MediaError::decode(
             path,

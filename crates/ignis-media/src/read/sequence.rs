@@ -262,7 +262,7 @@ impl Pattern {
     pub(crate) fn format(&self, n: u64) -> String {
         format!("{}{:0w$}{}", self.prefix, n, self.suffix, w = self.width)
     }
-    fn matches(&self, name: &str) -> Option<u64> {
+    pub(crate) fn matches(&self, name: &str) -> Option<u64> {
         let mid = name
             .strip_prefix(&self.prefix)?
             .strip_suffix(&self.suffix)?;

@@ -88,7 +88,40 @@ pub(crate) fn destination(path: &Path, exr: bool) -> Result<(PathBuf, Pattern)> 
             ));
         }
     }
+    check_existing_frames(&final_dir, &pattern)?;
     Ok((final_dir, pattern))
+}
+
+/// Refuses a destination whose existing files named like its frames include one that
+/// cannot be replaced ([`super::check_regular_target`]): a device, or a frame the running
+/// command reads — a sequence converted or looped onto itself.
+fn check_existing_frames(final_dir: &Path, pattern: &Pattern) -> Result<()> {
+    let Ok(rd) = std::fs::read_dir(final_dir) else {
+        return Ok(());
+    };
+    for e in rd.flatten() {
+        let name = e.file_name();
+        if name.to_str().is_some_and(|n| pattern.matches(n).is_some()) {
+            if let Some(input) = ignis_core::atomic::input_at(&e.path()) {
+                return Err(MediaError::bad(
+                    "output",
+                    format!(
+                        "{} is named like this sequence's frames and is {} this command \
+                         reads: the frames would be written over it. Write them to another \
+                         directory or pattern",
+                        e.path().display(),
+                        if input == e.path() {
+                            "a frame".to_string()
+                        } else {
+                            format!("the same file as {}, which", input.display())
+                        }
+                    ),
+                ));
+            }
+            super::check_regular_target(&e.path())?;
+        }
+    }
+    Ok(())
 }
 
 impl SequenceSink {
@@ -163,6 +196,7 @@ impl Sink for SequenceSink {
                 ))
             }
         };
+        super::check_regular_target(&final_path)?;
         // Record first so that a half-written file is cleaned up on drop.
         self.written.push((staged.clone(), final_path));
         self.write_frame(frame, &staged)
@@ -176,6 +210,10 @@ impl Sink for SequenceSink {
                 "the writer has finished",
             ));
         };
+        // A reader opened after the frames were named may have made one an input.
+        for (_, fin) in &self.written {
+            super::check_regular_target(fin)?;
+        }
         // Dropping `t` removes what commit_sequence left of the staged directory.
         t.into_place();
         commit_sequence(t.path(), &self.final_dir, &self.written)?;

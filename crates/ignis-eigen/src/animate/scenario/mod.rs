@@ -252,6 +252,7 @@ impl Default for Look {
 impl Scenario {
     /// Reads and parses a scenario file.
     pub fn from_file(path: &Path) -> Result<Scenario> {
+        ignis_core::atomic::record_input(path);
         let text = ignis_core::textfile::read_text(path).map_err(|e| {
             let why = "there is no such scenario; check the path \
                        (`ignis eigen scenario DB > scene.toml` writes one for a database)";
