@@ -1529,6 +1529,65 @@ mod hardening {
     }
 }
 
+/// `ignis loop` works where its cache cannot be kept — no cache directory at all (no
+/// `HOME`: a service account), or one it cannot write (here `/sys`, as on a read-only or
+/// full disk) — building the clip's database for this run only, in the temporary
+/// directory, and saying so. The loop is the same bytes as with a cache, and nothing is
+/// left in the temporary directory. (Before, both were errors.)
+#[test]
+fn a_loop_is_made_where_no_cache_can_be_kept() {
+    let t = tempfile::tempdir().unwrap();
+    let p = |s: &str| t.path().join(s);
+    let frames = classic_frames(t.path(), "30");
+    let frames = frames.to_str().unwrap();
+    let cached = p("cached.gif");
+    ignis_ok(&[
+        "loop",
+        frames,
+        "--length",
+        "20",
+        "-q",
+        "-o",
+        cached.to_str().unwrap(),
+    ]);
+    std::fs::create_dir(p("tmp")).unwrap();
+    let run = |name: &str, extra: &[&str], home: bool| {
+        let out = p(name);
+        let mut c = ignis_cmd();
+        if !home {
+            c.env_remove("XDG_CACHE_HOME").env_remove("HOME");
+        }
+        let o = c
+            .env("TMPDIR", p("tmp"))
+            .args([
+                "loop",
+                frames,
+                "--length",
+                "20",
+                "-o",
+                out.to_str().unwrap(),
+            ])
+            .args(extra)
+            .output()
+            .unwrap();
+        let said = String::from_utf8_lossy(&o.stdout).into_owned();
+        assert!(
+            o.status.success(),
+            "{name}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        assert!(said.contains("kept for this run only"), "{said}");
+        assert!(std::fs::read(&out).unwrap() == std::fs::read(&cached).unwrap());
+        assert!(files_in(&p("tmp")).is_empty(), "{:?}", files_in(&p("tmp")));
+        said
+    };
+    assert!(run("no-home.gif", &[], false).contains("no cache directory"));
+    if cfg!(target_os = "linux") && std::fs::create_dir("/sys/ignis-cache").is_err() {
+        let said = run("unwritable.gif", &["--cache", "/sys/ignis-cache"], true);
+        assert!(said.contains("/sys/ignis-cache"), "{said}");
+    }
+}
+
 /// `ignis loop` refuses lengths that do not fit before doing any work, and writes nothing.
 #[test]
 fn loop_bad_lengths() {

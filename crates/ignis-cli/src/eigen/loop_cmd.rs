@@ -67,7 +67,9 @@ pub struct Args {
     /// Candidates to print.
     #[arg(long, default_value_t = 5)]
     pub top: usize,
-    /// Cache directory (default $XDG_CACHE_HOME/ignis or ~/.cache/ignis).
+    /// Cache directory (default $XDG_CACHE_HOME/ignis or ~/.cache/ignis). Where it cannot be
+    /// written (a read-only or full disk, no HOME), the clip's database is built for this
+    /// run only, in the temporary directory.
     #[arg(long)]
     pub cache: Option<PathBuf>,
     /// Loop only this rectangle X,Y,WIDTH,HEIGHT of the frame (source pixels, top-left
@@ -210,6 +212,10 @@ pub struct Cached {
     pub crop: Option<ignis_media::Rect>,
     /// Whether the footage has its own alpha (a keyed element) in the window.
     pub translucent: bool,
+    /// When the cache could not hold the entry ([`cached_or_scratch`]): the scratch
+    /// directory it was built in for this run (removed when this is dropped; last, so the
+    /// database is closed first) and why the cache could not hold it.
+    pub scratch: Option<(ignis_core::atomic::StagingDir, String)>,
 }
 
 /// The default cache directory.
@@ -388,6 +394,57 @@ pub fn seconds_window(path: &Path, start: f64, end: Option<f64>) -> Result<Range
     Ok(a..b.min(n))
 }
 
+/// [`cached`] in `cache_dir`; or, when that cannot hold the entry — no cache directory
+/// (`Err`: no `HOME`), or one that cannot be written (no permission, a read-only or full
+/// disk, a quota: a render-farm node, a locked-down container) — built for this run only
+/// in a hidden scratch directory in the system's temporary directory (removed when the
+/// result is dropped, on an interrupt, or by the next run there if this one is killed).
+/// The cache only saves the next run's time, so it is never a reason to fail.
+pub fn cached_or_scratch(
+    clip: Clip,
+    window: Range<usize>,
+    train_size: Size,
+    keep: usize,
+    cache_dir: Result<PathBuf>,
+    g: &Global,
+) -> Result<Cached> {
+    let why = match cache_dir {
+        Ok(dir) => match cached(clip, window.clone(), train_size, keep, &dir, g) {
+            Err(e) if cannot_be_written(&e) => format!("{e:#}"),
+            r => return r,
+        },
+        Err(e) => format!("{e:#}"),
+    };
+    let scratch = ignis_core::atomic::StagingDir::create(&std::env::temp_dir().join("ignis-loop"))
+        .with_context(|| {
+            format!(
+                "the cache cannot hold the clip's database ({why}), nor can a scratch directory"
+            )
+        })?;
+    let mut c = cached(clip, window, train_size, keep, scratch.path(), g).with_context(|| {
+        format!(
+            "the cache cannot hold the clip's database ({why}), so it was built in {}",
+            scratch.path().display()
+        )
+    })?;
+    c.scratch = Some((scratch, why));
+    Ok(c)
+}
+
+/// Whether `e` comes from a directory that cannot be written: no permission, a read-only
+/// or full disk, a quota.
+fn cannot_be_written(e: &anyhow::Error) -> bool {
+    use std::io::ErrorKind as K;
+    e.chain()
+        .filter_map(|c| c.downcast_ref::<std::io::Error>())
+        .any(|e| {
+            matches!(
+                e.kind(),
+                K::PermissionDenied | K::ReadOnlyFilesystem | K::StorageFull | K::QuotaExceeded
+            )
+        })
+}
+
 /// Opens (verifying) or builds the cache entry of `path` over `window`. An image
 /// sequence's entry plays at the rate the sequence is read at now (`--sequence-fps`): its
 /// files hold pictures, not times, so one entry serves every rate.
@@ -537,6 +594,7 @@ fn open_entry(dir: &Path, sha: &str, settings: &CacheSettings) -> Result<Cached>
         built: false,
         crop: settings.crop.map(crate::eigen::rect),
         translucent: meta.translucent,
+        scratch: None,
     })
 }
 
@@ -2413,12 +2471,17 @@ pub fn run(a: &Args, g: &Global) -> Result<()> {
     }
     check_output_early(&a.out, fps)?;
     let cache_dir = match &a.cache {
-        Some(d) => d.clone(),
-        None => default_cache_dir()?,
+        Some(d) => Ok(d.clone()),
+        None => default_cache_dir(),
     };
-    let c = cached(clip, window.clone(), a.train_size, a.keep, &cache_dir, g)?;
-    if c.built {
-        g.say(format!("cached the clip's database in {}", c.dir.display()));
+    let c = cached_or_scratch(clip, window.clone(), a.train_size, a.keep, cache_dir, g)?;
+    match &c.scratch {
+        Some((_, why)) => g.say(format!(
+            "note: the clip's database is kept for this run only, as the cache cannot hold it \
+             ({why}); give --cache DIR on a writable disk to keep it for the next run"
+        )),
+        None if c.built => g.say(format!("cached the clip's database in {}", c.dir.display())),
+        None => {}
     }
     let ask = LoopAsk {
         length,
