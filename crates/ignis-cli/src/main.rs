@@ -300,8 +300,39 @@ fn main() -> ExitCode {
             for cause in causes_to_print(&e) {
                 eprintln!("  caused by: {cause}");
             }
+            if let Some(h) = disk_hint(&e) {
+                eprintln!("  hint: {h}");
+            }
             ExitCode::FAILURE
         }
+    }
+}
+
+/// What to do when `e` comes from the disk rather than the command: full or over quota
+/// (mid-write, after the output checks passed; a read-only disk is refused by those
+/// checks, with its own message). Encoders and ffmpeg pass the system's words on as text,
+/// so the text counts as well as an I/O error's kind.
+fn disk_hint(e: &anyhow::Error) -> Option<&'static str> {
+    use std::io::ErrorKind as K;
+    let text = format!("{e:#}");
+    let kind = |k: K, words: &str| {
+        text.contains(words)
+            || e.chain()
+                .filter_map(|c| c.downcast_ref::<std::io::Error>())
+                .any(|io| io.kind() == k)
+    };
+    if kind(K::StorageFull, "No space left on device") {
+        Some(
+            "the disk is full: free some space on it, or write to another disk, and run the \
+             command again (nothing half-written was left)",
+        )
+    } else if kind(K::QuotaExceeded, "Disk quota exceeded") {
+        Some(
+            "your disk quota is used up: free some of your space, or write to another disk, \
+             and run the command again (nothing half-written was left)",
+        )
+    } else {
+        None
     }
 }
 
@@ -338,6 +369,28 @@ mod tests {
         assert_eq!(
             super::causes_to_print(&e),
             vec!["the size is wrong".to_string()]
+        );
+    }
+
+    /// A full or over-quota disk gets its own hint, whether the system's error
+    /// arrives as an I/O error or as an encoder's or ffmpeg's text; other errors get none.
+    #[test]
+    fn disk_errors_get_a_hint() {
+        use std::io::{Error, ErrorKind};
+        let io = |k: ErrorKind| anyhow::Error::new(Error::from(k)).context("writing a.png");
+        let text = |t: &str| anyhow::anyhow!("cannot encode a.mov: ffmpeg failed: {t}");
+        let hint = |e: anyhow::Error| super::disk_hint(&e).unwrap_or("none");
+        assert!(hint(io(ErrorKind::StorageFull)).starts_with("the disk is full"));
+        assert!(hint(text(
+            "av_interleaved_write_frame(): No space left on device"
+        ))
+        .starts_with("the disk is full"));
+        assert!(hint(text("Disk quota exceeded")).starts_with("your disk quota"));
+        assert_eq!(hint(io(ErrorKind::ReadOnlyFilesystem)), "none");
+        assert_eq!(hint(io(ErrorKind::NotFound)), "none");
+        assert_eq!(
+            hint(text("Invalid data found when processing input")),
+            "none"
         );
     }
 
