@@ -692,6 +692,62 @@ mod eigen {
         db
     }
 
+    /// `ignis eigen scenario` keeps each clip's motions to its frames that show fire: a
+    /// clip that starts and ends black (a burst, a fade) gets motions inside its burning
+    /// stretch and a comment saying so, and the scenario renders without frames the matte
+    /// keys out entirely. (It took the first and last thirds of the clip, black frames and
+    /// all, and `animate` warned of fully transparent frames.)
+    #[test]
+    fn the_scenario_template_keeps_to_frames_that_show_fire() {
+        let t = tempfile::tempdir().unwrap();
+        let dir = t.path().join("burst");
+        std::fs::create_dir(&dir).unwrap();
+        // 12 black frames, 30 of a flickering orange flame, 12 black frames
+        for i in 0..54u32 {
+            let img = image::RgbImage::from_fn(48, 64, |x, y| {
+                let h = 24.0 + 8.0 * (f64::from(i) * 0.9).sin();
+                let w = 9.0 - f64::from(y).min(60.0) * 0.1;
+                let on = (12..42).contains(&i)
+                    && f64::from(y) > 60.0 - h
+                    && (f64::from(x) - 24.0).abs() < w;
+                image::Rgb(if on { [255, 190, 70] } else { [0, 0, 0] })
+            });
+            img.save(dir.join(format!("f{i:03}.png"))).unwrap();
+        }
+        let db = t.path().join("burst.db");
+        let (src, dbs) = (dir.to_str().unwrap(), db.to_str().unwrap());
+        ignis_ok(&["eigen", "train", src, "-q", "-o", dbs]);
+        let scene = said_ok(&["eigen", "scenario", dbs]);
+        assert!(
+            scene.contains("# burst: the matte shows fire in frames 12..42 only"),
+            "{scene}"
+        );
+        let field = |key: &str| -> Vec<usize> {
+            scene
+                .lines()
+                .filter_map(|l| l.strip_prefix(key))
+                .map(|v| v.split_whitespace().next().unwrap().parse().unwrap())
+                .collect()
+        };
+        assert_eq!(field("start = "), [12, 32]);
+        assert_eq!(field("end = "), [22, 42]);
+        let toml = t.path().join("scene.toml");
+        std::fs::write(&toml, &scene).unwrap();
+        let out = t.path().join("burst.gif");
+        let plan = said_ok(&[
+            "eigen",
+            "animate",
+            toml.to_str().unwrap(),
+            "--dry-run",
+            "-o",
+            out.to_str().unwrap(),
+        ]);
+        assert!(
+            plan.contains("burst-a → burst-b") && !plan.contains("keys out all the fire"),
+            "{plan}"
+        );
+    }
+
     #[test]
     fn loop_synth_scenario_and_animate() {
         let t = tempfile::tempdir().unwrap();

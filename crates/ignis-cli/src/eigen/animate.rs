@@ -645,15 +645,32 @@ pub fn template(db: &EigenfireDb, db_path: &str) -> String {
     s.push_str(&format!("database = {db_path:?}\n"));
     let clips = db.clips();
     let mut names = Vec::new();
+    let mut notes = Vec::new();
     for c in clips {
-        // The first and last thirds of each clip, so every join has a gap to bridge.
-        let third = (c.frames / 3).max(1);
-        let at = |j: usize| c.start + j * c.stride;
-        names.push((format!("{}-a", c.name), c, c.start, at(third)));
-        if c.frames >= 3 {
-            names.push((format!("{}-b", c.name), c, at(c.frames - third), c.end));
+        // The first and last thirds of each clip's fire, so every join has a gap to bridge.
+        let (lit, n) = burning(db, c);
+        if (lit, n) != (0, c.frames) {
+            let frame = |j: usize| c.start + j * c.stride;
+            notes.push(format!(
+                "# {}: the matte shows fire in frames {}..{} only (the longest such stretch); its motions keep to them\n",
+                c.name,
+                frame(lit),
+                frame(lit + n - 1) + 1
+            ));
+        }
+        let third = (n / 3).max(1);
+        let at = |j: usize| c.start + (lit + j) * c.stride;
+        names.push((format!("{}-a", c.name), c, at(0), at(third)));
+        if n >= 3 {
+            let end = if lit + n == c.frames {
+                c.end
+            } else {
+                at(n - 1) + 1
+            };
+            names.push((format!("{}-b", c.name), c, at(n - third), end));
         }
     }
+    s.extend(notes);
     let seq: Vec<String> = names.iter().map(|n| format!("{:?}", n.0)).collect();
     s.push_str(&format!("sequence = [{}]\n", seq.join(", ")));
     s.push_str("loop = true                 # join the last motion back to the first\n");
@@ -681,6 +698,34 @@ pub fn template(db: &EigenfireDb, db_path: &str) -> String {
     }
     s.push_str("\n# [masks]                   # custom masks per clip, numbered like the clip's frames\n# candle = \"masks/%04d.png\"\n");
     s
+}
+
+/// The longest stretch of `c`'s training frames whose matte shows fire, as (first frame,
+/// frames) counted in training frames: a motion over frames the matte keys out entirely
+/// renders nothing (a fireball's dark start and end). The whole clip when none is keyed
+/// out, when none shows fire, or when the database stores no masks.
+fn burning(db: &EigenfireDb, c: &ignis_eigen::db::ClipEntry) -> (usize, usize) {
+    let rows: Vec<usize> = (c.first_row..c.first_row + c.frames).collect();
+    let dark: std::collections::HashSet<usize> =
+        match ignis_eigen::animate::keyed_out_rows(db, &rows) {
+            Ok(d) => d.into_iter().collect(),
+            Err(_) => return (0, c.frames),
+        };
+    let mut best = (0, 0);
+    let mut run_start = 0;
+    for j in 0..=c.frames {
+        if j == c.frames || dark.contains(&(c.first_row + j)) {
+            if j - run_start > best.1 {
+                best = (run_start, j - run_start);
+            }
+            run_start = j + 1;
+        }
+    }
+    if best.1 == 0 {
+        (0, c.frames)
+    } else {
+        best
+    }
 }
 
 pub fn scenario_cmd(a: &ScenarioArgs) -> Result<()> {
