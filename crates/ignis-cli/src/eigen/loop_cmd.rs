@@ -2690,6 +2690,7 @@ fn longest_hint(n: usize, fps: f64, wider: &str) -> String {
             crate::args::fps_text(fps)
         ),
         Some(l) => format!("the longest that fits is --length {l}; ask for that or less, or use {wider}"),
+        None if n == 1 => format!("1 frame is too few for any loop; use {wider}"),
         None => format!("{n} frames are too few for any loop; use {wider}"),
     }
 }
