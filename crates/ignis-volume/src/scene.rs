@@ -229,10 +229,17 @@ fn within(prefix: &str, e: VolumeError) -> VolumeError {
     }
 }
 
+/// The frame's shorter side, in pixels: the side the camera's field of view spans.
+fn shorter_side(size: Size) -> f32 {
+    size.width.min(size.height) as f32
+}
+
+/// The bloom's default: its radius 6 % of the frame's shorter side, so the glow keeps its
+/// size relative to the fire.
 fn default_bloom(size: Size) -> BloomParams {
     BloomParams {
         passes: 2,
-        radius: (size.height as f32 * 0.06).max(1.0),
+        radius: (shorter_side(size) * 0.06).max(1.0),
         radius_falloff: 0.5,
         strength: 0.3,
     }
@@ -489,10 +496,11 @@ impl FireScene {
         }
     }
 
-    /// Sets the output size (and rescales the default bloom radius with it).
+    /// Sets the output size (and rescales the bloom radius with its shorter side, which
+    /// the camera's field of view spans).
     pub fn with_size(mut self, size: Size) -> FireScene {
-        let r = self.bloom.radius / self.size.height as f32;
-        self.bloom.radius = (r * size.height as f32).max(1.0);
+        let r = self.bloom.radius / shorter_side(self.size);
+        self.bloom.radius = (r * shorter_side(size)).max(1.0);
         self.size = size;
         self
     }

@@ -189,7 +189,7 @@ impl FireScene {
             &mut o,
             "fov",
             &num(self.camera.fov),
-            "vertical field of view, degrees",
+            "field of view across the frame's shorter side, degrees",
         );
 
         o.push_str("\n[render]\n");

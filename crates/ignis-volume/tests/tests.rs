@@ -219,6 +219,42 @@ mod render {
             assert!(f.image.luminance().max() > 0.01, "{}", p.name());
         }
     }
+
+    /// A preset in a tall cell (a portrait flipbook, a phone video) shows what a square
+    /// frame of its width shows, with more above and below: a fire the square frame holds
+    /// whole is not cut at the sides. The field of view spans the shorter side; before, it
+    /// spanned the height, and the campfire ran out of a 40×120 frame's sides (opaque edge
+    /// columns). The tall frame's middle is the square frame.
+    #[test]
+    fn a_tall_frame_shows_the_whole_fire() {
+        let alpha = |p: ignis_volume::Preset, w: u32, h: u32| {
+            let mut s = FireScene::preset(p).with_size(Size::new(w, h).unwrap());
+            s.seed = 3;
+            s.animator().unwrap().next_frame().unwrap().image
+        };
+        let sides = |f: &ignis_core::RgbaFrame| {
+            let (w, h) = (f.width(), f.height());
+            (0..h)
+                .flat_map(|y| [f.get(0, y)[3], f.get(w - 1, y)[3]])
+                .fold(0.0f32, f32::max)
+        };
+        let mut held = 0;
+        for p in ignis_volume::Preset::ALL {
+            let (tall, square) = (alpha(p, 40, 120), alpha(p, 40, 40));
+            // the wall is a wall of fire: it runs past the sides of any frame
+            if sides(&square) < 0.05 {
+                held += 1;
+                let edge = sides(&tall);
+                assert!(edge < 0.05, "{}: alpha {edge} at the sides", p.name());
+            }
+            let moved = (0..40)
+                .flat_map(|y| (0..40).map(move |x| (x, y)))
+                .map(|(x, y)| (tall.get(x, y + 40)[3] - square.get(x, y)[3]).abs())
+                .fold(0.0f32, f32::max);
+            assert!(moved < 0.02, "{}: {moved}", p.name());
+        }
+        assert_eq!(held, ignis_volume::Preset::ALL.len() - 1);
+    }
 }
 
 mod fire_file {

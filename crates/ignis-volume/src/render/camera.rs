@@ -12,7 +12,10 @@ pub struct Camera {
     pub position: [f32; 3],
     /// Point looked at. Default `[0, 0, 1.5]`.
     pub target: [f32; 3],
-    /// Vertical field of view, degrees (0, 170). Default 40.
+    /// Field of view across the frame's shorter side, degrees (0, 170): the vertical one
+    /// in a landscape or square frame, the horizontal one in a portrait frame, so a tall
+    /// frame shows what a square one does with more above and below, and a fire framed
+    /// for a square is not cut at the sides of a tall cell. Default 40.
     pub fov: f32,
 }
 
@@ -54,6 +57,18 @@ impl Camera {
         (f, r, u)
     }
 
+    /// Half the view's height at unit distance in a `size` image: `tan(fov / 2)`, times
+    /// height ÷ width in a portrait frame (where `fov` spans the width).
+    pub(crate) fn half_height(&self, size: ignis_core::Size) -> f32 {
+        let tan = (self.fov.to_radians() * 0.5).tan();
+        let (w, h) = (size.width as f32, size.height as f32);
+        if h > w {
+            tan * h / w
+        } else {
+            tan
+        }
+    }
+
     /// Where world point `p` appears in a `size` image, in pixels from the top-left
     /// corner (pixel `(x, y)`'s centre is at `(x + 0.5, y + 0.5)`, as the renderer's rays
     /// go); `None` at or behind the camera plane.
@@ -64,7 +79,7 @@ impl Camera {
         if !(z > 1e-6) {
             return None;
         }
-        let tan = (self.fov.to_radians() * 0.5).tan();
+        let tan = self.half_height(size);
         let (w, h) = (size.width as f32, size.height as f32);
         let sx = crate::lattice::dot(d, r) / z / (tan * (w / h));
         let sy = crate::lattice::dot(d, u) / z / tan;

@@ -290,7 +290,7 @@ fn prepare<'a, 'b>(
     params.validate()?;
     let (w, h) = (params.size.width, params.size.height);
     let (forward, right, up) = camera.basis();
-    let tan = (camera.fov.to_radians() * 0.5).tan();
+    let tan = camera.half_height(params.size);
     let aspect = w as f32 / h as f32;
     let bins = bin_cells(
         fires,

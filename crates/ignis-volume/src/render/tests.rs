@@ -254,7 +254,7 @@ fn batched_shading_equals_scalar_shading_and_culls_only_invisible_samples() {
             forward,
             right,
             up,
-            tan: (scene.camera.fov.to_radians() * 0.5).tan(),
+            tan: scene.camera.half_height(size),
             aspect: size.width as f32 / size.height as f32,
             time: 1.25,
             simd: true,
