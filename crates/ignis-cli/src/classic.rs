@@ -18,7 +18,8 @@ ignis classic --frames 1000 --chunk 0..100 -o frames/%04d.png          # job 1 o
 ignis classic --size 128x128 --frames 32 --variants 4 -o rows.png      # 4 different loops, one per row\n  \
 ignis classic --cell 1 --puff 0 -o article.mp4                         # the 1999 article's fire exactly\n  \
 ignis classic --frames 64 --every 2 --motion-vectors --engine unity -o sheet.png\n                       # 32 cells at 15 fps; the engine's motion-vector blend fills in\n\n\
-Realism: by default the fire is a 1 m fire bed simulated on 6-px cells that puffs at 1.5/√D Hz\n\
+Realism: by default the fire is a 1 m fire bed simulated on 6-px cells (on a 320x200 frame; larger\n\
+frames scale them, so the fire looks the same at any size) that puffs at 1.5/√D Hz\n\
 (--diameter D); `ignis bench realism` measures it against that law and campfire footage.\n\n\
 Loops (the default for GIFs and flipbooks): the source line and sparklies repeat every N frames and the\n\
 fire is stepped until its buffer repeats exactly, so frame N equals frame 0 byte for byte. With cells\n\
@@ -68,7 +69,9 @@ pub struct Args {
     /// Simulation cell size in pixels: the buffer is SIZE / CELL, interpolated smoothly to
     /// SIZE. 6 (the default) gives real flames' large-scale structure; 1 is the article's
     /// per-pixel buffer (with --puff 0: the article's fire exactly).
-    /// [default: 6, fewer on frames under 96 px so the buffer keeps 16 cells a side]
+    /// [default: 6 up to 216 px on the shorter side, then 6 per 200 px of it (1920x1080:
+    /// 32), so a larger render shows the same fire, not shorter flames; fewer on frames
+    /// under 96 px so the buffer keeps 16 cells a side]
     #[arg(long)]
     pub cell: Option<u32>,
     /// Puffing depth 0–1 (0 = off): the source heat rises and falls at 1.5/√DIAMETER Hz, the
@@ -138,11 +141,15 @@ impl Args {
     }
 }
 
-/// `--cell`'s default for frames of `size`: [`ignis_classic::PRESET_CELL`], fewer on
-/// frames under 96 px so the buffer keeps 16 cells a side.
+/// `--cell`'s default for frames of `size`: [`ignis_classic::PRESET_CELL`] on the default
+/// 320×200 frame, scaled with the shorter side above it (`PRESET_CELL` per 200 px,
+/// rounded), so the buffer keeps about the same cells and a larger render is the same
+/// fire at more pixels — with 6-px cells a 1080p frame held 5× the cells and flames a
+/// fifth of its height; fewer on frames under 96 px so the buffer keeps 16 cells a side.
 pub(crate) fn default_cell(size: Size) -> u32 {
     let side = size.width.min(size.height);
-    ignis_classic::PRESET_CELL.min(side / 16).max(1)
+    let scaled = (f64::from(ignis_classic::PRESET_CELL) * f64::from(side) / 200.0).round() as u32;
+    ignis_classic::PRESET_CELL.max(scaled).min(side / 16).max(1)
 }
 
 /// Runs `ignis classic`; returns the files written.

@@ -181,6 +181,40 @@ fn files_in(dir: &Path) -> Vec<String> {
 mod classic {
     use super::*;
 
+    /// The default fire looks the same at larger sizes: rendered at 3× the default frame
+    /// (320×200), its flames reach about as far up the frame (the default cell grows with
+    /// the frame's shorter side). With 6-px cells at every size, the 960×600 flames reached
+    /// a third as high.
+    #[test]
+    fn a_larger_render_is_the_same_fire_at_more_pixels() {
+        let t = tempfile::tempdir().unwrap();
+        // how far up the frame the flames reach (alpha over a quarter), mean over 8 frames
+        let reach = |size: &str| {
+            let dir = t.path().join(size);
+            classic_ok(
+                size,
+                "8",
+                &["--seed", "5", "--no-loop"],
+                &dir.join("%04d.png"),
+            );
+            let mut sum = 0.0;
+            for name in files_in(&dir) {
+                let img = image::open(dir.join(name)).unwrap().into_rgba8();
+                let top = (0..img.height())
+                    .find(|&y| (0..img.width()).any(|x| img.get_pixel(x, y)[3] > 64))
+                    .unwrap();
+                sum += 1.0 - f64::from(top) / f64::from(img.height());
+            }
+            sum / 8.0
+        };
+        let (small, large) = (reach("320x200"), reach("960x600"));
+        assert!(small > 0.3, "{small}");
+        assert!(
+            (large / small - 1.0).abs() < 0.15,
+            "320x200: {small}, 960x600: {large}"
+        );
+    }
+
     #[test]
     fn writes_every_format_and_same_seed_same_bytes() {
         let t = tempfile::tempdir().unwrap();
