@@ -1117,6 +1117,18 @@ mod footage {
         let o = lp(&["--size", "32x24"], &out2);
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
         assert_eq!(json_size(&t.path().join("small.json")), (32, 24));
+        // Another aspect: the 64x48 view fitted inside 64x24 at 32x24, centred, with
+        // transparent columns either side (it was stretched).
+        let cells = t.path().join("cells");
+        let o = lp(&["--size", "64x24"], &cells.join("%04d.png"));
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        for name in files_in(&cells) {
+            let img = image::open(cells.join(&name)).unwrap().into_rgba8();
+            assert_eq!(img.dimensions(), (64, 24));
+            let lit = |x: u32| (0..24).any(|y| img.get_pixel(x, y)[3] > 0);
+            assert!((0..16).chain(48..64).all(|x| !lit(x)), "{name}");
+            assert!((16..48).any(lit), "{name}");
+        }
         let bad = t.path().join("bad.png");
         assert_fails(&lp(&["--size", "0x0"], &bad), "zero side");
         assert_fails(&lp(&["--size", "90000x10"], &bad), "beyond the limits");
@@ -1616,6 +1628,55 @@ mod hardening {
             "--scale",
             "24x20",
         ]);
+    }
+}
+
+/// `--size` of another aspect than the footage fits the loop inside the cell, centred,
+/// with transparent borders, instead of stretching it: a 48×40 clip looped into 96×40 and
+/// 48×80 cells shows exactly the frames of the loop at its own size, with empty columns or
+/// rows around them. (The frames were resized to the cell, a fire squashed or stretched.)
+#[test]
+fn a_loop_sized_to_another_aspect_is_fitted_not_stretched() {
+    let t = tempfile::tempdir().unwrap();
+    let p = |s: &str| t.path().join(s);
+    let frames = classic_frames(t.path(), "30");
+    let lp = |dir: &str, extra: &[&str]| {
+        let out = p(dir).join("%04d.png");
+        let a = [
+            &[
+                "loop",
+                frames.to_str().unwrap(),
+                "--length",
+                "20",
+                "-q",
+                "-o",
+                out.to_str().unwrap(),
+            ][..],
+            extra,
+        ]
+        .concat();
+        ignis_ok(&a);
+        files_in(&p(dir))
+            .iter()
+            .map(|n| image::open(p(dir).join(n)).unwrap().into_rgba8())
+            .collect::<Vec<_>>()
+    };
+    let own = lp("own", &[]);
+    assert!(!own.is_empty() && own[0].dimensions() == (48, 40));
+    for (dir, size, (x0, y0)) in [("wide", "96x40", (24, 0)), ("tall", "48x80", (0, 20))] {
+        let cells = lp(dir, &["--size", size]);
+        assert_eq!(cells.len(), own.len(), "{size}");
+        for (c, o) in cells.iter().zip(&own) {
+            assert_eq!(format!("{}x{}", c.width(), c.height()), size);
+            for (x, y, px) in c.enumerate_pixels() {
+                let inside = (x0..x0 + 48).contains(&x) && (y0..y0 + 40).contains(&y);
+                if inside {
+                    assert_eq!(px, o.get_pixel(x - x0, y - y0), "{size} at {x},{y}");
+                } else {
+                    assert_eq!(px[3], 0, "{size}: border at {x},{y}");
+                }
+            }
+        }
     }
 }
 

@@ -48,6 +48,30 @@ impl Size {
     pub fn pixels(self) -> usize {
         self.width as usize * self.height as usize
     }
+
+    /// The largest size with this size's aspect that fits inside `frame` (each side
+    /// rounded, at least 1): what a picture of this size is scaled to when it is fitted
+    /// into `frame` without stretching. `frame` itself when the aspects differ by less than
+    /// a pixel.
+    pub fn fitted_inside(self, frame: Size) -> Size {
+        let (w, h) = (f64::from(self.width), f64::from(self.height));
+        let (fw, fh) = (f64::from(frame.width), f64::from(frame.height));
+        let (iw, ih) = if fw * h <= fh * w {
+            (fw, fw * h / w)
+        } else {
+            (fh * w / h, fh)
+        };
+        let side = |v: f64, max: u32| (v.round() as u32).clamp(1, max);
+        let inner = Size {
+            width: side(iw, frame.width),
+            height: side(ih, frame.height),
+        };
+        if frame.width - inner.width <= 1 && frame.height - inner.height <= 1 {
+            frame
+        } else {
+            inner
+        }
+    }
 }
 
 impl std::fmt::Display for Size {
@@ -219,6 +243,24 @@ impl RgbaFrame {
             data: vec![c; size.pixels()],
         }
     }
+    /// This frame centred in a transparent frame of `size` (which must be at least as
+    /// large on both sides; otherwise, or at the same size, the frame is returned as it
+    /// is): the borders of a picture fitted inside a frame of another aspect
+    /// ([`Size::fitted_inside`]).
+    pub fn centred_in(&self, size: Size) -> RgbaFrame {
+        let (w, h) = (self.width as usize, self.height as usize);
+        let (fw, fh) = (size.width as usize, size.height as usize);
+        if fw < w || fh < h || (fw, fh) == (w, h) {
+            return self.clone();
+        }
+        let (x0, y0) = ((fw - w) / 2, (fh - h) / 2);
+        let mut out = RgbaFrame::new(size);
+        for (y, row) in self.data.chunks_exact(w).enumerate() {
+            let at = (y0 + y) * fw + x0;
+            out.data[at..at + w].copy_from_slice(row);
+        }
+        out
+    }
     /// Wraps row-major data; fails if `data.len() != width * height`.
     pub fn from_vec(size: Size, data: Vec<[f32; 4]>) -> Result<RgbaFrame> {
         if data.len() != size.pixels() {
@@ -319,6 +361,29 @@ impl RgbaFrame {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A 16:9 picture fitted into a square keeps its aspect (a band across the middle),
+    /// a tall one into a wide frame a column; a frame of the same aspect, or within a
+    /// pixel of it, is taken whole. Centred with transparent borders, the picture's pixels
+    /// are unchanged.
+    #[test]
+    fn a_picture_fitted_inside_another_aspect_keeps_its_own() {
+        let s = |w, h| Size::new(w, h).unwrap();
+        assert_eq!(s(640, 360).fitted_inside(s(256, 256)), s(256, 144));
+        assert_eq!(s(304, 540).fitted_inside(s(512, 256)), s(144, 256));
+        assert_eq!(s(640, 360).fitted_inside(s(320, 180)), s(320, 180));
+        assert_eq!(s(640, 360).fitted_inside(s(320, 181)), s(320, 181));
+        assert_eq!(s(1000, 1).fitted_inside(s(10, 10)), s(10, 1));
+        let mut small = RgbaFrame::new(s(3, 2));
+        small.data[4] = [0.5, 0.25, 0.125, 1.0];
+        let big = small.centred_in(s(7, 4));
+        assert_eq!(big.size(), s(7, 4));
+        // the picture's (1, 1) lands at (2 + 1, 1 + 1)
+        assert_eq!(big.get(3, 2), [0.5, 0.25, 0.125, 1.0]);
+        let lit = big.data().iter().filter(|p| p[3] > 0.0).count();
+        assert_eq!(lit, 1);
+        assert_eq!(small.centred_in(s(3, 2)), small);
+    }
 
     #[test]
     fn size_parses_and_checks() {

@@ -91,6 +91,11 @@ pub fn write_plan_chunk(
             return Ok(());
         }
         bar.inc(1);
+        let f = if f.size() == size {
+            f
+        } else {
+            f.centred_in(size)
+        };
         w.push(&f).map_err(|e| EigenError::BadParameter {
             name: "output".into(),
             reason: format!("{}: {e}", out.output.display()),
@@ -157,9 +162,10 @@ fn fit_plan_size(
     out: &crate::output::OutputArgs,
     g: &Global,
 ) -> Result<Size> {
+    let natural = render::output_size(db, plan);
     let (size, explicit) = match opts.size {
         Some(s) => (s, true),
-        None => (render::output_size(db, plan), false),
+        None => (natural, false),
     };
     let n = if explicit {
         emit.iter().filter(|&&e| e).count()
@@ -170,6 +176,17 @@ fn fit_plan_size(
     if let Some(note) = fitted.note() {
         g.say(note);
         opts.size = Some(fitted.size);
+    }
+    // A --size of another aspect than the footage's view: rendered to fit inside it and
+    // centred with transparent borders (write_plan_chunk's sink), never stretched.
+    let inside = natural.fitted_inside(fitted.size);
+    if explicit && inside != fitted.size {
+        g.say(format!(
+            "size: the {natural} view fitted inside {} at {inside}, centred, with transparent \
+             borders (never stretched)",
+            fitted.size
+        ));
+        opts.size = Some(inside);
     }
     Ok(fitted.size)
 }
@@ -259,7 +276,9 @@ fn chunk_plan(db: &EigenfireDb, plan: &Plan, range: std::ops::Range<usize>) -> (
 #[derive(clap::Args, Debug, Clone, Default)]
 pub struct FootageArgs {
     /// Output size WIDTHxHEIGHT (default: the source clip's own size; a database of
-    /// clips of different sizes shown together: the common frame). Example: --size 1280x720
+    /// clips of different sizes shown together: the common frame). A size of another aspect
+    /// gets the view fitted inside it, centred, with transparent borders (never stretched).
+    /// Example: --size 1280x720
     #[arg(long, value_parser = parse_size)]
     pub size: Option<Size>,
     /// The source video of CLIP is now at PATH (repeatable): CLIP=PATH. It must have the

@@ -88,7 +88,8 @@ pub struct Args {
     pub keep: usize,
     /// Output frame size WIDTHxHEIGHT (default: the footage's own, or --crop's; for a .png flipbook
     /// whose full-size cells do not fit the sheet limit, the largest size with the
-    /// footage's aspect that fits). Example: --size 960x540
+    /// footage's aspect that fits). A size of another aspect gets the footage fitted inside
+    /// it, centred, with transparent borders (never stretched). Example: --size 960x540
     #[arg(long, value_parser = crate::eigen::animate::parse_size)]
     pub size: Option<Size>,
     /// Alpha: `auto` (default: the footage's own alpha when it has one, a keyed element
@@ -2252,8 +2253,15 @@ pub fn make_loop_sized(
     let fit = |n: usize, opts: &mut ignis_media::WriteOptions| {
         out.fit_flipbook(n, size.unwrap_or(info.size), size.is_some(), opts)
     };
+    // A --size of another aspect than the footage: the frames are scaled to fit inside it
+    // and centred, with transparent borders, never stretched. (A size fitted to the sheet
+    // limit has the footage's aspect, to the 4-px blocks its cells are rounded to.)
+    let inner = |fitted: Size| match size {
+        Some(_) => info.size.fitted_inside(fitted),
+        None => fitted,
+    };
     let mut fitted = fit(planned_frames(&chosen.best) / every, &mut opts.clone())?;
-    let scale = (fitted.size != info.size).then_some(fitted.size);
+    let scale = (inner(fitted.size) != info.size).then_some(inner(fitted.size));
     verify_closings(
         &mut chosen,
         clip,
@@ -2278,7 +2286,16 @@ pub fn make_loop_sized(
     if let Some(note) = fitted.note() {
         g.say(note);
     }
-    let scale = (fitted.size != info.size).then_some(fitted.size);
+    let inside = inner(fitted.size);
+    if inside != fitted.size {
+        g.say(format!(
+            "size: the {} footage fitted inside {} at {inside}, centred, with transparent \
+             borders (never stretched; --crop a part of the frame with the cell's aspect to \
+             fill it)",
+            info.size, fitted.size
+        ));
+    }
+    let scale = (inside != info.size).then_some(inside);
     // the chosen loop is written centred on the middle of its own frames' views and zoomed only
     // as far as they need (the search and the checks used the window's)
     let c = chosen.best.candidate;
@@ -2304,6 +2321,13 @@ pub fn make_loop_sized(
         &mut |f| {
             pb.inc(1);
             i += 1;
+            let padded;
+            let f = if f.size() == fitted.size {
+                f
+            } else {
+                padded = f.centred_in(fitted.size);
+                &padded
+            };
             // the frame as written (with --alpha emissive, its light as alpha), made only for
             // the frames written or kept as in-between frames
             let written = |f: &RgbaFrame| if light_alpha { emissive(f) } else { f.clone() };
