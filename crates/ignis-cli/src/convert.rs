@@ -69,12 +69,33 @@ impl Args {
     }
 }
 
+/// When `--scale` gives the (cropped) picture another aspect: a note that it is stretched,
+/// with the size that keeps its aspect (as ffmpeg's `scale`, `--scale` resizes to exactly
+/// the size given).
+fn stretch_note(read: &ReadOptions, source: Size) -> Option<String> {
+    let scale = read.scale?;
+    let picture = read.crop.map_or(source, |r| Size {
+        width: r.width,
+        height: r.height,
+    });
+    let kept = picture.fitted_inside(scale);
+    (kept != scale).then(|| {
+        format!(
+            "note: --scale {scale} stretches the {picture} picture to another aspect; --scale \
+             {kept} keeps its aspect (or --crop a part of it with the new aspect first)"
+        )
+    })
+}
+
 pub fn run(args: &Args, g: &Global) -> Result<Vec<PathBuf>> {
     let input = &args.input;
     args.sequence.apply(&[input])?;
     let mut read = args.read_options()?;
     let info = ignis_media::probe(input).with_context(|| format!("reading {}", input.display()))?;
     if let Some(note) = args.sequence.default_rate_note(&info) {
+        g.say(note);
+    }
+    if let Some(note) = stretch_note(&read, info.size) {
         g.say(note);
     }
     // timestamps that cannot be read: every frame once, at the probe's average rate

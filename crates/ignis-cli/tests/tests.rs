@@ -589,6 +589,32 @@ mod info {
 mod convert {
     use super::*;
 
+    /// `--scale` resizes to exactly the size given (as ffmpeg's `scale`); one of another
+    /// aspect says that it stretches the picture and which size keeps its aspect, counting
+    /// a `--crop` first. The same aspect, or within a pixel of it, says nothing.
+    #[test]
+    fn a_scale_that_stretches_the_picture_says_so() {
+        let t = tempfile::tempdir().unwrap();
+        let frames = classic_frames(t.path(), "4");
+        let f = frames.to_str().unwrap();
+        let run = |extra: &[&str], out: &str| {
+            let out = t.path().join(out);
+            said_ok(&[&["convert", f, "-o", out.to_str().unwrap()][..], extra].concat())
+        };
+        let said = run(&["--scale", "48x48"], "a.gif");
+        assert!(
+            said.contains("--scale 48x48 stretches the 48x40 picture")
+                && said.contains("--scale 48x40 keeps its aspect"),
+            "{said}"
+        );
+        let said = run(&["--crop", "0,0,24,40", "--scale", "48x40"], "b.gif");
+        assert!(said.contains("--scale 24x40 keeps its aspect"), "{said}");
+        for scale in ["96x80", "24x21"] {
+            let said = run(&["--scale", scale], "c.gif");
+            assert!(!said.contains("stretches"), "{scale}: {said}");
+        }
+    }
+
     #[test]
     fn candle_range_to_flipbook() {
         let Some(p) = data("candle.mp4") else { return };
