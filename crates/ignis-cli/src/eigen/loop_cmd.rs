@@ -411,7 +411,7 @@ pub fn cached_or_scratch(
 ) -> Result<Cached> {
     let why = match cache_dir {
         Ok(dir) => match cached(clip, window.clone(), train_size, keep, &dir, g) {
-            Err(e) if cannot_be_written(&e) => format!("{e:#}"),
+            Err(e) if cannot_be_written(&e, &dir) => format!("{e:#}"),
             r => return r,
         },
         Err(e) => format!("{e:#}"),
@@ -432,18 +432,25 @@ pub fn cached_or_scratch(
     Ok(c)
 }
 
-/// Whether `e` comes from a directory that cannot be written: no permission, a read-only
-/// or full disk, a quota.
-fn cannot_be_written(e: &anyhow::Error) -> bool {
+/// Whether `e` comes from the cache directory `dir` that cannot be written: a full disk or
+/// a quota, or no permission or a read-only disk where a file cannot be made in `dir` (the
+/// footage itself may be what could not be read).
+fn cannot_be_written(e: &anyhow::Error, dir: &Path) -> bool {
     use std::io::ErrorKind as K;
-    e.chain()
+    let kinds: Vec<K> = e
+        .chain()
         .filter_map(|c| c.downcast_ref::<std::io::Error>())
-        .any(|e| {
-            matches!(
-                e.kind(),
-                K::PermissionDenied | K::ReadOnlyFilesystem | K::StorageFull | K::QuotaExceeded
-            )
-        })
+        .map(std::io::Error::kind)
+        .collect();
+    let unwritable =
+        || std::fs::create_dir_all(dir).is_err() || tempfile::tempfile_in(dir).is_err();
+    kinds
+        .iter()
+        .any(|k| matches!(k, K::StorageFull | K::QuotaExceeded))
+        || (kinds
+            .iter()
+            .any(|k| matches!(k, K::PermissionDenied | K::ReadOnlyFilesystem))
+            && unwritable())
 }
 
 /// Opens (verifying) or builds the cache entry of `path` over `window`. An image
