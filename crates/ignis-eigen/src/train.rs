@@ -579,6 +579,8 @@ pub fn train(
     out: &Path,
     progress: &mut dyn Progress,
 ) -> Result<TrainReport> {
+    // before the clips are scanned: an output the database may not replace is refused
+    db::check_replaceable(out)?;
     let (pre, framing, plans) = plan_training(clips, pre, p, progress)?;
     let n = pre.training_size().pixels();
     let m: usize = plans.iter().map(|q| q.frames).sum();

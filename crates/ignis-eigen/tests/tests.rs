@@ -338,6 +338,30 @@ mod roundtrip {
             .collect();
         assert_eq!(leftovers.len(), 1, "{leftovers:?}");
     }
+
+    /// An output that a database may not replace — a file (footage named as the output),
+    /// a directory of other files — is refused before any frame is decoded, not after the
+    /// whole training, and is left as it was.
+    #[test]
+    fn an_output_that_is_not_a_database_is_refused_before_training() {
+        let dir = tempfile::tempdir().unwrap();
+        let clip = dir.path().join("clip.mp4");
+        std::fs::write(&clip, b"footage").unwrap();
+        let frames = dir.path().join("frames");
+        std::fs::create_dir(&frames).unwrap();
+        std::fs::write(frames.join("0001.png"), b"a frame").unwrap();
+        for out in [&clip, &frames] {
+            let mut seen = ignis_core::progress::CountingProgress::default();
+            let e = train(&two_clips(8), &small_pre(), &params(), out, &mut seen).unwrap_err();
+            assert!(
+                e.to_string().contains("is not an Eigenfire database"),
+                "{e}"
+            );
+            assert!(seen.stages.is_empty(), "{:?}", seen.stages);
+        }
+        assert_eq!(std::fs::read(&clip).unwrap(), b"footage");
+        assert_eq!(std::fs::read(frames.join("0001.png")).unwrap(), b"a frame");
+    }
 }
 
 mod options {

@@ -29,7 +29,7 @@ mod read;
 mod write;
 
 pub use read::{open_regular, EigenfireDb};
-pub use write::{commit_dir, file_entry, temp_dir_for, DbWriter};
+pub use write::{check_replaceable, commit_dir, file_entry, temp_dir_for, DbWriter};
 
 use crate::error::{EigenError, Result};
 use crate::pose::ClipPose;

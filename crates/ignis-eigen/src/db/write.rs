@@ -25,6 +25,8 @@ impl DbWriter {
     /// Starts a database that will replace `target` (see [`commit_dir`] for what may be
     /// replaced).
     pub fn create(target: &Path) -> Result<DbWriter> {
+        // refused now, not after the training: a target the commit would not replace
+        check_replaceable(target)?;
         let tmp = temp_dir_for(target)?;
         let live = Some(ignis_core::tempfiles::track(&tmp, true));
         Ok(DbWriter {
@@ -151,6 +153,14 @@ pub fn file_entry(dir: &Path, rel: &str) -> Result<FileEntry> {
 /// [`ignis_core::tempfiles::replace_dir`]. Refuses to replace a non-empty directory that
 /// is not an Eigenfire database, and anything that is not a directory.
 pub fn commit_dir(tmp: &Path, target: &Path) -> Result<()> {
+    check_replaceable(target)?;
+    ignis_core::tempfiles::replace_dir(tmp, target).map_err(|e| EigenError::io(target, e))
+}
+
+/// Refuses a `target` that a database may not replace: a non-empty directory that is not
+/// an Eigenfire database, or anything that is not a directory (footage named as the
+/// output, say).
+pub fn check_replaceable(target: &Path) -> Result<()> {
     if let Ok(md) = std::fs::symlink_metadata(target) {
         let not_db = !md.is_dir()
             || (!target.join("manifest.json").exists()
@@ -169,7 +179,7 @@ pub fn commit_dir(tmp: &Path, target: &Path) -> Result<()> {
             ));
         }
     }
-    ignis_core::tempfiles::replace_dir(tmp, target).map_err(|e| EigenError::io(target, e))
+    Ok(())
 }
 
 /// A temporary directory beside `target` for an atomic write
