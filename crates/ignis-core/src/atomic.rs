@@ -325,14 +325,18 @@ impl Inputs {
         if self.seen.contains(path) {
             return;
         }
-        let found = match m {
-            Some(m) => Some(m.clone()),
-            None => std::fs::metadata(path).ok(),
+        let read;
+        let m = match m {
+            Some(m) => m,
+            None => match std::fs::metadata(path) {
+                Ok(found) => {
+                    read = found;
+                    &read
+                }
+                Err(_) => return,
+            },
         };
-        if let Some(id) = found
-            .filter(|m| m.is_file())
-            .and_then(|m| file_id(path, &m))
-        {
+        if let Some(id) = m.is_file().then(|| file_id(path, m)).flatten() {
             self.ids.entry(id).or_insert_with(|| path.to_path_buf());
             self.seen.insert(path.to_path_buf());
         }

@@ -196,7 +196,6 @@ impl Sink for SequenceSink {
                 ))
             }
         };
-        super::check_regular_target(&final_path)?;
         // Record first so that a half-written file is cleaned up on drop.
         self.written.push((staged.clone(), final_path));
         self.write_frame(frame, &staged)
@@ -210,7 +209,8 @@ impl Sink for SequenceSink {
                 "the writer has finished",
             ));
         };
-        // A reader opened after the frames were named may have made one an input.
+        // Frames named since `destination` checked the directory, and inputs a
+        // reader opened since then: nothing the commit would replace may be one.
         for (_, fin) in &self.written {
             super::check_regular_target(fin)?;
         }
